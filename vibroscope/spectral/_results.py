@@ -1,0 +1,296 @@
+"""Result containers of the spectral analysis: small frozen dataclasses that carry their axis and
+their settings, unpack as tuples, and plot lazily."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Iterator, Literal
+
+import numpy as np
+
+__all__ = ["Spectrum", "CrossSpectralMatrix", "FRF", "Spectrogram", "FRF_KINDS"]
+
+#: FRF kinds by response quantity per unit force (Ewins, *Modal Testing*, 2000, §1.3)
+FRF_KINDS = ("accelerance", "mobility", "receptance")
+_POWER_OF_JW = {"receptance": 0, "mobility": 1, "accelerance": 2}
+_KIND_UNITS = {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}
+
+
+def _ro(a: Any, dtype=None) -> np.ndarray:
+    a = np.array(a, dtype=dtype, copy=True)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class Spectrum:
+    """Real spectra of several channels on one frequency axis.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Frequency axis in Hz.
+    values : ndarray, shape (n_channels, n_freqs)
+        Power spectral density (unit²/Hz, ``scaling='density'``), power spectrum (unit²,
+        ``'spectrum'``) or peak amplitude spectrum (unit, ``'amplitude'``).
+    channels : tuple of str
+        Channel names (message paths).
+    units : tuple of str
+        Units of `values`, one per channel (e.g. ``"(m/s^2)^2/Hz"``).
+    scaling : {'density', 'spectrum', 'amplitude'}
+        What `values` are.
+    settings : dict
+        ``fs``, ``nperseg``, ``noverlap``, ``nfft``, ``window``, ``detrend``, ``n_averages``.
+
+    Examples
+    --------
+    >>> f, p = spectrum   # unpacks like scipy's (f, Pxx)  # doctest: +SKIP
+    """
+
+    frequencies: np.ndarray
+    values: np.ndarray
+    channels: tuple[str, ...]
+    units: tuple[str, ...]
+    scaling: Literal["density", "spectrum", "amplitude"]
+    settings: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
+        object.__setattr__(self, "values", _ro(np.atleast_2d(self.values), float))
+        object.__setattr__(self, "channels", tuple(self.channels))
+        object.__setattr__(self, "units", tuple(self.units))
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter((self.frequencies, self.values))
+
+    def __getitem__(self, channel: str | int) -> np.ndarray:
+        """Values of one channel, shape (n_freqs,)."""
+        i = channel if isinstance(channel, (int, np.integer)) else self.channels.index(channel)
+        return self.values[i]
+
+    @property
+    def df(self) -> float:
+        """Frequency resolution in Hz."""
+        return float(self.frequencies[1] - self.frequencies[0])
+
+    def rms(self) -> np.ndarray:
+        """RMS of each channel from the integral of a density, shape (n_channels,).
+
+        Raises
+        ------
+        ValueError
+            If the spectrum is not a density.
+        """
+        if self.scaling != "density":
+            raise ValueError(f"RMS by integration needs scaling='density', not {self.scaling=}")
+        return np.sqrt(np.sum(self.values, axis=-1) * self.df)
+
+    def plot(self, ax=None, *, db: bool = False, channels=None):
+        """Plot on a log (or dB) axis; imports matplotlib lazily. Returns the Axes."""
+        from vibroscope.viewers.figures import plot_spectrum
+
+        return plot_spectrum(self, ax=ax, db=db, channels=channels)
+
+
+@dataclass(frozen=True, eq=False)
+class CrossSpectralMatrix:
+    """The one-sided cross-spectral matrix of several channels.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Frequency axis in Hz.
+    G : ndarray, complex, shape (n_freqs, n_channels, n_channels)
+        ``G[f, i, j]`` = one-sided cross-spectrum of channels i and j with scipy's convention
+        ``conj(X_i)·X_j`` (so ``G[:, i, j]`` equals ``scipy.signal.csd(x_i, x_j)``); Hermitian in
+        (i, j); the diagonal is the auto-spectra (real, ≥ 0).
+    channels, units : tuple of str
+        Channel names and units; ``G[f, i, j]`` has unit ``units[i]·units[j]/Hz`` (density).
+    scaling : {'density', 'spectrum'}
+    settings : dict
+        ``fs``, ``nperseg``, ``noverlap``, ``nfft``, ``window``, ``detrend``, ``n_averages``.
+    """
+
+    frequencies: np.ndarray
+    G: np.ndarray
+    channels: tuple[str, ...]
+    units: tuple[str, ...]
+    scaling: Literal["density", "spectrum"]
+    settings: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
+        object.__setattr__(self, "G", _ro(self.G, complex))
+        object.__setattr__(self, "channels", tuple(self.channels))
+        object.__setattr__(self, "units", tuple(self.units))
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter((self.frequencies, self.G))
+
+    @property
+    def n_channels(self) -> int:
+        """Number of channels."""
+        return self.G.shape[1]
+
+    def index(self, channel: str | int) -> int:
+        """Index of a channel given by name or position.
+
+        Raises
+        ------
+        KeyError
+            If the name is not one of `channels`.
+        """
+        if isinstance(channel, (int, np.integer)):
+            return int(channel)
+        try:
+            return self.channels.index(channel)
+        except ValueError:
+            raise KeyError(f"no channel {channel!r}; channels are {list(self.channels)}") from None
+
+    def psd(self) -> Spectrum:
+        """The auto-spectra (diagonal) as a :class:`Spectrum`."""
+        vals = np.real(np.einsum("fii->if", self.G))
+        units = tuple(f"({u})^2/Hz" if self.scaling == "density" else f"({u})^2" for u in self.units)
+        return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings))
+
+    def select(self, channels) -> "CrossSpectralMatrix":
+        """The sub-matrix of `channels` (names or indices), in that order."""
+        idx = [self.index(c) for c in channels]
+        return CrossSpectralMatrix(
+            self.frequencies,
+            self.G[:, idx][:, :, idx],
+            [self.channels[i] for i in idx],
+            [self.units[i] for i in idx],
+            self.scaling,
+            dict(self.settings),
+        )
+
+    def band(self, fmin: float, fmax: float) -> "CrossSpectralMatrix":
+        """The matrix restricted to ``fmin <= f <= fmax`` (Hz)."""
+        m = (self.frequencies >= fmin) & (self.frequencies <= fmax)
+        return CrossSpectralMatrix(
+            self.frequencies[m], self.G[m], self.channels, self.units, self.scaling, dict(self.settings)
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class FRF:
+    """Frequency response function estimate ``H[f, output, input]``.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Frequency axis in Hz.
+    H : ndarray, complex, shape (n_freqs, n_outputs, n_inputs)
+        The FRF: output spectrum per unit input spectrum.
+    coherence : ndarray, shape (n_freqs, n_outputs)
+        Ordinary coherence γ² with the input for one input; multiple coherence with all inputs
+        otherwise. NaN where undefined.
+    inputs, outputs : tuple of str
+        Channel names.
+    estimator : {'H1', 'H2', 'Hv', 'analytic'}
+    kind : {'accelerance', 'mobility', 'receptance'} or None
+        The response quantity per unit force when known (outputs accelerations / velocities /
+        displacements and inputs forces); None for a generic output/input ratio.
+    units : str
+        Units of `H` (e.g. ``"m/s^2/N"``).
+    settings : dict
+        The spectral settings it was estimated with.
+    """
+
+    frequencies: np.ndarray
+    H: np.ndarray
+    coherence: np.ndarray
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    estimator: str
+    kind: str | None = None
+    units: str = ""
+    settings: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
+        object.__setattr__(self, "H", _ro(self.H, complex))
+        object.__setattr__(self, "coherence", _ro(self.coherence, float))
+        object.__setattr__(self, "inputs", tuple(self.inputs))
+        object.__setattr__(self, "outputs", tuple(self.outputs))
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter((self.frequencies, self.H, self.coherence))
+
+    @property
+    def magnitude_db(self) -> np.ndarray:
+        """``20 log10 |H|`` (dB re 1 unit), shape like `H`."""
+        with np.errstate(divide="ignore"):
+            return 20 * np.log10(np.abs(self.H))
+
+    @property
+    def phase_deg(self) -> np.ndarray:
+        """Phase of `H` in degrees, wrapped to (−180, 180]."""
+        return np.degrees(np.angle(self.H))
+
+    def to(self, kind: str) -> "FRF":
+        """Convert between accelerance, mobility and receptance by powers of ``jω``.
+
+        ``mobility = accelerance / (jω)``, ``receptance = accelerance / (jω)²``; the 0 Hz bin of a
+        division becomes NaN.
+
+        Raises
+        ------
+        ValueError
+            If this FRF's kind is unknown (None) or `kind` is not one of :data:`FRF_KINDS`.
+        """
+        from vibroscope.spectral._engine import check_option
+
+        check_option("kind", kind, FRF_KINDS)
+        if self.kind is None:
+            raise ValueError("this FRF has no known kind (accelerance/mobility/receptance) to convert from")
+        p = _POWER_OF_JW[kind] - _POWER_OF_JW[self.kind]
+        jw = 2j * np.pi * self.frequencies
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fac = jw**p
+            if p < 0:
+                fac[self.frequencies == 0] = np.nan
+        H = self.H * fac[:, None, None]
+        return FRF(self.frequencies, H, self.coherence, self.inputs, self.outputs, self.estimator, kind,
+                   _KIND_UNITS[kind], dict(self.settings))
+
+    def plot(self, *, output=0, input=0, fig=None):
+        """Bode-style figure (magnitude dB, phase, coherence); imports matplotlib lazily. Returns the Figure."""
+        from vibroscope.viewers.figures import plot_frf
+
+        return plot_frf(self, output=output, input=input, fig=fig)
+
+
+@dataclass(frozen=True, eq=False)
+class Spectrogram:
+    """Short-time spectra of several channels.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Hz.
+    times : ndarray, shape (n_times,)
+        Segment centres in s from the record start.
+    values : ndarray, shape (n_channels, n_freqs, n_times)
+        PSD (unit²/Hz) or power spectrum (unit²) per segment.
+    channels, units : tuple of str
+    scaling : {'density', 'spectrum'}
+    settings : dict
+    """
+
+    frequencies: np.ndarray
+    times: np.ndarray
+    values: np.ndarray
+    channels: tuple[str, ...]
+    units: tuple[str, ...]
+    scaling: str
+    settings: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
+        object.__setattr__(self, "times", _ro(self.times, float))
+        object.__setattr__(self, "values", _ro(self.values, float))
+
+    def __iter__(self) -> Iterator[np.ndarray]:
+        return iter((self.frequencies, self.times, self.values))

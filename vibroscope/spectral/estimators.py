@@ -1,0 +1,491 @@
+"""Spectral estimators: Welch PSD, the cross-spectral matrix, amplitude spectrum, FRF (H1, H2, Hv),
+ordinary and multiple coherence, spectrogram.
+
+Conventions are scipy's (``scipy.signal.welch/csd/coherence``): ``Pxy = conj(X)·Y``, one-sided and
+doubled, ``scaling='density'`` (unit²/Hz) or ``'spectrum'`` (unit²), periodic Hann window by default,
+``noverlap = nperseg // 2``, per-segment ``detrend='constant'``.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Literal, Sequence
+
+import numpy as np
+import scipy.fft
+import scipy.signal
+
+from vibroscope.signals import Signals
+from vibroscope.spectral._engine import CrossSpectralAccumulator, check_option, segment_settings
+from vibroscope.spectral._results import FRF, CrossSpectralMatrix, Spectrogram, Spectrum
+
+__all__ = [
+    "welch",
+    "csd_matrix",
+    "amplitude_spectrum",
+    "frf",
+    "coherence",
+    "multiple_coherence",
+    "spectrogram",
+    "frf_kind",
+]
+
+Channel = str | int
+
+
+def _unpack(x: Signals | np.ndarray, fs: float | None) -> tuple[np.ndarray, float, tuple, tuple]:
+    """(data (n_ch, n), fs, channels, units) from Signals or an array (1-D = one channel)."""
+    if isinstance(x, Signals):
+        if fs is not None and float(fs) != x.fs:
+            raise ValueError(f"{fs=} contradicts the Signals' fs={x.fs}")
+        return x.data, x.fs, x.channels, x.units
+    a = np.asarray(x, dtype=float)
+    if a.ndim == 1:
+        a = a[np.newaxis]
+    if a.ndim != 2:
+        raise ValueError(f"x must be 1-D or 2-D (n_channels, n_samples), got {a.shape=}")
+    fs = 1.0 if fs is None else float(fs)
+    if not np.isfinite(fs) or fs <= 0:
+        raise ValueError(f"{fs=} must be a positive sampling frequency in Hz")
+    return a, fs, tuple(str(i) for i in range(a.shape[0])), ("",) * a.shape[0]
+
+
+def _accumulate(data, fs, st, *, cross: bool, workers: int) -> CrossSpectralAccumulator:
+    n_ch, n = data.shape
+    n_seg = (n - st.nperseg) // st.step + 1
+    workers = max(1, min(int(workers), n_seg // 64 or 1))
+    if workers == 1:
+        return CrossSpectralAccumulator(n_ch, fs, st, cross=cross).update(data)
+    # contiguous ranges of whole segments; each range is fed with its own overlap
+    bounds = np.linspace(0, n_seg, workers + 1).astype(int)
+
+    def part(k: int) -> CrossSpectralAccumulator:
+        s0, s1 = bounds[k], bounds[k + 1]
+        acc = CrossSpectralAccumulator(n_ch, fs, st, cross=cross)
+        return acc.update(data[:, s0 * st.step : (s1 - 1) * st.step + st.nperseg])
+
+    with ThreadPoolExecutor(workers) as pool:
+        parts = list(pool.map(part, range(workers)))
+    for p in parts[1:]:
+        parts[0].merge(p)
+    return parts[0]
+
+
+def _settings_dict(fs, st, n_avg) -> dict:
+    win = st.window_spec if isinstance(st.window_spec, (str, tuple)) else "custom"
+    return dict(fs=fs, nperseg=st.nperseg, noverlap=st.noverlap, nfft=st.nfft, window=win,
+                detrend=st.detrend, n_averages=n_avg)
+
+
+def csd_matrix(
+    x: Signals | np.ndarray,
+    fs: float | None = None,
+    *,
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    window: str | tuple | np.ndarray = "hann",
+    detrend: Literal["constant", "linear", False] = "constant",
+    nfft: int | None = None,
+    scaling: Literal["density", "spectrum"] = "density",
+    workers: int = 1,
+) -> CrossSpectralMatrix:
+    """Cross-spectral matrix of all channel pairs by Welch's method, in one pass.
+
+    Parameters
+    ----------
+    x : Signals or array_like, shape (n_channels, n_samples)
+        The record. With an array, channels are named ``"0"``, ``"1"``, ...
+    fs : float, optional
+        Sampling frequency in Hz (taken from `x` when it is a :class:`~vibroscope.Signals`;
+        default 1.0 for an array).
+    nperseg : int, optional
+        Segment length in samples; default ``min(256, n_samples)`` as scipy.
+    noverlap : int, optional
+        Overlap in samples; default ``nperseg // 2``.
+    window : str, tuple or array_like, optional
+        Window (scipy.signal.get_window spec, periodic) or its samples; default ``'hann'``.
+    detrend : {'constant', 'linear', False}, optional
+        Per-segment detrending; default ``'constant'``.
+    nfft : int, optional
+        FFT length (zero padding); default `nperseg`.
+    scaling : {'density', 'spectrum'}, optional
+        unit²/Hz (default) or unit².
+    workers : int, optional
+        Threads splitting the segments (FFT and products release the GIL); default 1.
+
+    Returns
+    -------
+    CrossSpectralMatrix
+        ``G[f, i, j]`` with ``G[:, i, j] == scipy.signal.csd(x[i], x[j], ...)[1]``.
+
+    Raises
+    ------
+    ValueError
+        If `nperseg` exceeds the record length, `noverlap` ∉ [0, nperseg), or an option is unknown.
+
+    Notes
+    -----
+    With segments ``x_s`` of length N, window w and ``X_i,s = FFT(w·x_i,s)``:
+    ``G_ij(f_k) = (2 / (K fs Σw²)) Σ_s conj(X_i,s(f_k)) X_j,s(f_k)`` for ``0 < f_k < fs/2`` (no
+    doubling at DC and Nyquist); ``scaling='spectrum'`` uses ``(Σw)²`` in place of ``fs Σw²``
+    (Welch 1967; Bendat & Piersol 2010, §11.5). Every segment is transformed once for all pairs.
+
+    References
+    ----------
+    .. [1] P. D. Welch, IEEE Trans. Audio Electroacoust. AU-15, 70–73, 1967.
+    .. [2] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> x = rng.standard_normal((2, 100_000))
+    >>> G = csd_matrix(x, fs=1000.0, nperseg=1000)
+    >>> round(float(G.G[1:-1, 0, 0].real.mean()), 1)  # white noise of unit variance: 2/fs per Hz
+    0.002
+    """
+    data, fs, channels, units = _unpack(x, fs)
+    check_option("scaling", scaling, ("density", "spectrum"))
+    st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
+                          detrend=detrend, nfft=nfft)
+    acc = _accumulate(data, fs, st, cross=True, workers=workers)
+    return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), channels, units, scaling,
+                               _settings_dict(fs, st, acc.n_segments))
+
+
+def welch(
+    x: Signals | np.ndarray,
+    fs: float | None = None,
+    *,
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    window: str | tuple | np.ndarray = "hann",
+    detrend: Literal["constant", "linear", False] = "constant",
+    nfft: int | None = None,
+    scaling: Literal["density", "spectrum"] = "density",
+    workers: int = 1,
+) -> Spectrum:
+    """Power spectral density of every channel by Welch's averaged modified periodograms.
+
+    Parameters are those of :func:`csd_matrix` (scipy's names and defaults).
+
+    Returns
+    -------
+    Spectrum
+        ``values`` shape (n_channels, nfft // 2 + 1), equal to ``scipy.signal.welch`` row by row;
+        unit²/Hz (density) or unit² (spectrum).
+
+    Raises
+    ------
+    ValueError
+        As :func:`csd_matrix`.
+
+    Notes
+    -----
+    ``P(f_k) = (2 / (K fs Σw²)) Σ_s |X_s(f_k)|²``. With ``scaling='spectrum'`` a sine of amplitude
+    A, centred on a bin, peaks at ``A²/2`` for any window; with ``'density'`` the integral
+    ``Σ P df`` is the mean square (Parseval).
+
+    References
+    ----------
+    .. [1] P. D. Welch, IEEE Trans. Audio Electroacoust. AU-15, 70–73, 1967.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> fs, A = 1000.0, 2.0
+    >>> t = np.arange(10_000) / fs
+    >>> s = welch(A * np.sin(2 * np.pi * 100.0 * t), fs, nperseg=1000, scaling="spectrum")
+    >>> round(float(s.values[0].max()), 6)   # A²/2
+    2.0
+    """
+    data, fs, channels, units = _unpack(x, fs)
+    check_option("scaling", scaling, ("density", "spectrum"))
+    st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
+                          detrend=detrend, nfft=nfft)
+    acc = _accumulate(data, fs, st, cross=False, workers=workers)
+    u = tuple(f"({un})^2/Hz" if scaling == "density" else f"({un})^2" for un in units)
+    return Spectrum(acc.frequencies(), acc.result(scaling), channels, u, scaling,
+                    _settings_dict(fs, st, acc.n_segments))
+
+
+def amplitude_spectrum(
+    x: Signals | np.ndarray,
+    fs: float | None = None,
+    *,
+    window: str | tuple = "hann",
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+) -> Spectrum:
+    """Peak amplitude spectrum with window amplitude correction.
+
+    Parameters
+    ----------
+    x : Signals or array_like, shape (n_channels, n_samples)
+    fs : float, optional
+        Hz.
+    window : str or tuple, optional
+        Default ``'hann'`` (periodic); ``'flattop'`` gives amplitudes accurate between bins.
+    nperseg : int, optional
+        Default: the whole record (one FFT). Otherwise the RMS average over Welch segments.
+    noverlap : int, optional
+        Default ``nperseg // 2``.
+
+    Returns
+    -------
+    Spectrum
+        ``scaling='amplitude'``; a sine of amplitude A on a bin reads A (signal units).
+
+    Notes
+    -----
+    ``A(f_k) = 2 |X(f_k)| / Σw`` (DC and Nyquist not doubled), the amplitude ("coherent gain")
+    correction; computed as the square root of the ``'spectrum'``-scaled Welch estimate, which is
+    that value for one segment and its RMS average for several (Brandt, *Noise and Vibration
+    Analysis*, Wiley 2011, §9.3).
+
+    References
+    ----------
+    .. [1] A. Brandt, *Noise and Vibration Analysis: Signal Analysis and Experimental Procedures*,
+       Wiley, 2011.
+    """
+    data, fs, channels, units = _unpack(x, fs)
+    n = data.shape[1]
+    nperseg = n if nperseg is None else nperseg
+    sp = welch(data, fs, nperseg=nperseg, noverlap=noverlap, window=window, scaling="spectrum")
+    return Spectrum(sp.frequencies, np.sqrt(sp.values), channels, units, "amplitude", dict(sp.settings))
+
+
+def _resolve(G: CrossSpectralMatrix, chans: Sequence[Channel] | Channel) -> list[int]:
+    if isinstance(chans, (str, int, np.integer)):
+        chans = [chans]
+    return [G.index(c) for c in chans]
+
+
+def frf_kind(input_units: Sequence[str], output_units: Sequence[str]) -> tuple[str | None, str]:
+    """FRF kind and unit string from channel units (``N`` in, ``m/s^2`` | ``m/s`` | ``m`` out)."""
+    ins, outs = set(input_units), set(output_units)
+    if ins == {"N"} and len(outs) == 1:
+        kind = {"m/s^2": "accelerance", "m/s": "mobility", "m": "receptance"}.get(outs.pop())
+        if kind:
+            return kind, {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}[kind]
+    if len(ins) == 1 and len(outs) == 1:
+        i, o = ins.pop(), outs.pop()
+        return None, (f"{o}/{i}" if i or o else "")
+    return None, ""
+
+
+def frf(
+    x: Signals | np.ndarray | CrossSpectralMatrix,
+    inputs: Sequence[Channel] | Channel,
+    outputs: Sequence[Channel] | Channel | None = None,
+    *,
+    estimator: Literal["H1", "H2", "Hv"] = "H1",
+    fs: float | None = None,
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    window: str | tuple | np.ndarray = "hann",
+    detrend: Literal["constant", "linear", False] = "constant",
+    nfft: int | None = None,
+    kind: str | None = None,
+) -> FRF:
+    """Frequency response function estimate between input and output channels.
+
+    Parameters
+    ----------
+    x : Signals, array_like (n_channels, n_samples) or CrossSpectralMatrix
+        The record, or its cross-spectral matrix computed once for several estimates.
+    inputs : channel or sequence of channels
+        Input (excitation, ``exc``) channel names or indices, e.g. a force in N.
+    outputs : channel or sequence of channels, optional
+        Response (``resp``) channels; default all channels that are not inputs.
+    estimator : {'H1', 'H2', 'Hv'}, optional
+        ``H1 = Gyx Gxx⁻¹`` (least squares, unbiased by output noise), ``H2 = Gyy Gxy⁻¹`` (unbiased
+        by input noise; one input, or as many inputs as outputs) or ``Hv`` (total least squares,
+        the smallest eigenvector of the ``[inputs, output]`` spectral matrix per output).
+    fs, nperseg, noverlap, window, detrend, nfft
+        Welch settings as :func:`csd_matrix` (ignored when `x` is a CrossSpectralMatrix).
+    kind : {'accelerance', 'mobility', 'receptance'}, optional
+        Declare the FRF kind; default inferred from the channel units (N in; m/s², m/s or m out).
+
+    Returns
+    -------
+    FRF
+        ``H[f, output, input]`` and the ordinary (one input) or multiple (several inputs)
+        coherence ``[f, output]``.
+
+    Raises
+    ------
+    ValueError
+        If a channel is both input and output, H2 is asked with more inputs than outputs, or an
+        option is unknown.
+    KeyError
+        If a channel name is not in the record.
+
+    Notes
+    -----
+    With ``Sxx[a, b] = E[conj(X_a) X_b]``, ``Sxy[a, o] = E[conj(X_a) Y_o]`` and ``Y = H X``:
+    H1 solves ``Sxx Hᵀ = Sxy``. For one input, H1 = Gxy/Gxx, H2 = Gyy/Gyx and
+    ``Hv = (Gyy − Gxx + sqrt((Gxx − Gyy)² + 4|Gxy|²)) / (2 Gyx)``, with ``|H1| ≤ |Hv| ≤ |H2|``
+    (Bendat & Piersol 2010, §6.1.4, §9.1; Rocklin, Crowley & Vold 1985 for Hv).
+
+    References
+    ----------
+    .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
+    .. [2] G. T. Rocklin, J. Crowley and H. Vold, "A comparison of H1, H2, and Hv frequency response
+       functions", Proc. 3rd IMAC, 1985.
+    """
+    check_option("estimator", estimator, ("H1", "H2", "Hv"))
+    G = x if isinstance(x, CrossSpectralMatrix) else csd_matrix(
+        x, fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend, nfft=nfft)
+    ii = _resolve(G, inputs)
+    oo = [i for i in range(G.n_channels) if i not in ii] if outputs is None else _resolve(G, outputs)
+    if set(ii) & set(oo):
+        raise ValueError(f"channels {[G.channels[i] for i in set(ii) & set(oo)]} are both input and output")
+    if not oo:
+        raise ValueError("no output channel")
+    Sxx = G.G[:, ii][:, :, ii]  # (f, a, b)
+    Sxy = G.G[:, ii][:, :, oo]  # (f, a, o)
+    Syy = np.real(np.einsum("foo->fo", G.G[:, oo][:, :, oo]))  # (f, o)
+    nf, ni, no = Sxx.shape[0], len(ii), len(oo)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        if estimator == "H1":
+            H = _batched_solve(Sxx, Sxy).transpose(0, 2, 1)
+        elif estimator == "H2":
+            if ni == 1:
+                H = (Syy / np.conj(Sxy[:, 0, :]))[:, :, None]
+            elif ni == no:
+                Syx = G.G[:, oo][:, :, ii]
+                Syy_full = G.G[:, oo][:, :, oo]
+                H = _batched_solve(Syx, Syy_full).transpose(0, 2, 1)
+            else:
+                raise ValueError(f"H2 needs one input or as many inputs as outputs, got {ni=} and {no=}")
+        else:  # Hv: total least squares per output
+            H = np.empty((nf, no, ni), complex)
+            for k, o in enumerate(oo):
+                idx = ii + [o]
+                Ga = G.G[:, idx][:, :, idx]
+                Ga = 0.5 * (Ga + np.conj(Ga.transpose(0, 2, 1)))
+                _, V = np.linalg.eigh(Ga)
+                v = V[:, :, 0]  # smallest eigenvalue's eigenvector
+                H[:, k, :] = -(v[:, :ni] / v[:, ni : ni + 1])
+        coh = _multiple_coherence(Sxx, Sxy, Syy)
+    in_units = [G.units[i] for i in ii]
+    out_units = [G.units[o] for o in oo]
+    k_inf, unit = frf_kind(in_units, out_units)
+    if kind is not None:
+        from vibroscope.spectral._results import FRF_KINDS, _KIND_UNITS
+
+        check_option("kind", kind, FRF_KINDS)
+        k_inf, unit = kind, _KIND_UNITS[kind]
+    return FRF(G.frequencies, H, coh, [G.channels[i] for i in ii], [G.channels[o] for o in oo],
+               estimator, k_inf, unit, dict(G.settings))
+
+
+def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Solve ``A[f] X[f] = B[f]``; singular frequencies (e.g. no excitation) give NaN."""
+    out = np.full(np.broadcast_shapes(A.shape[:-1] + (B.shape[-1],), B.shape), np.nan + 0j)
+    if A.shape[-1] == 1:
+        return B / A
+    try:
+        return np.linalg.solve(A, B)
+    except np.linalg.LinAlgError:
+        for f in range(A.shape[0]):
+            try:
+                out[f] = np.linalg.solve(A[f], B[f])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def _multiple_coherence(Sxx: np.ndarray, Sxy: np.ndarray, Syy: np.ndarray) -> np.ndarray:
+    """γ²_{y:x} = Sxyᴴ Sxx⁻¹ Sxy / Syy per output, shape (f, o)."""
+    sol = _batched_solve(Sxx, Sxy)  # (f, a, o)
+    num = np.real(np.einsum("fao,fao->fo", np.conj(Sxy), sol))
+    coh = num / Syy
+    return np.clip(coh, 0.0, 1.0, out=coh, where=np.isfinite(coh))
+
+
+def coherence(
+    x: Signals | np.ndarray | CrossSpectralMatrix,
+    fs: float | None = None,
+    *,
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    window: str | tuple | np.ndarray = "hann",
+    detrend: Literal["constant", "linear", False] = "constant",
+    nfft: int | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ordinary coherence of every channel pair.
+
+    Parameters are those of :func:`csd_matrix`.
+
+    Returns
+    -------
+    frequencies : ndarray, shape (n_freqs,)
+        Hz.
+    gamma2 : ndarray, shape (n_freqs, n_channels, n_channels)
+        ``γ²_ij = |G_ij|² / (G_ii G_jj)`` ∈ [0, 1]; ``gamma2[:, i, j]`` equals
+        ``scipy.signal.coherence(x[i], x[j])``.
+
+    References
+    ----------
+    .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §5.2.5.
+    """
+    G = x if isinstance(x, CrossSpectralMatrix) else csd_matrix(
+        x, fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend, nfft=nfft)
+    d = np.real(np.einsum("fii->fi", G.G))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g2 = np.abs(G.G) ** 2 / (d[:, :, None] * d[:, None, :])
+    return G.frequencies, g2
+
+
+def multiple_coherence(
+    x: Signals | np.ndarray | CrossSpectralMatrix,
+    inputs: Sequence[Channel] | Channel,
+    outputs: Sequence[Channel] | Channel | None = None,
+    **welch_kw: Any,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Multiple coherence of each output with all `inputs` together.
+
+    Returns
+    -------
+    frequencies : ndarray, shape (n_freqs,)
+        Hz.
+    gamma2 : ndarray, shape (n_freqs, n_outputs)
+        ``γ²_{y:x} = Gyxᴴ Gxx⁻¹ Gyx / Gyy`` ∈ [0, 1]; equals the ordinary coherence for one input.
+
+    References
+    ----------
+    .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §7.3.
+    """
+    h = frf(x, inputs, outputs, **welch_kw)
+    return h.frequencies, h.coherence
+
+
+def spectrogram(
+    x: Signals | np.ndarray,
+    fs: float | None = None,
+    *,
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    window: str | tuple = "hann",
+    detrend: Literal["constant", "linear", False] = "constant",
+    scaling: Literal["density", "spectrum"] = "density",
+) -> Spectrogram:
+    """Short-time spectra of every channel (``scipy.signal.spectrogram``, one-sided).
+
+    Parameters are scipy's; `noverlap` defaults to ``nperseg // 2`` here (scipy: ``nperseg // 8``)
+    for consistency with :func:`welch`.
+
+    Returns
+    -------
+    Spectrogram
+        ``values`` shape (n_channels, n_freqs, n_times).
+    """
+    data, fs, channels, units = _unpack(x, fs)
+    st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
+                          detrend=detrend)
+    f, t, S = scipy.signal.spectrogram(data, fs, window=st.window, nperseg=st.nperseg,
+                                       noverlap=st.noverlap, detrend=detrend, scaling=scaling, axis=-1)
+    u = tuple(f"({un})^2/Hz" if scaling == "density" else f"({un})^2" for un in units)
+    return Spectrogram(f, t, S, channels, u, scaling, _settings_dict(fs, st, S.shape[-1]))
