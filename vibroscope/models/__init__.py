@@ -1,1 +1,48 @@
-"""vibroscope.models"""
+"""Models: lumped multi-DOF structures, nonlinear elements, excitations, time simulation
+and model files.
+
+``vibroscope.models`` imports nothing of vibroscope's but :mod:`vibroscope.signals` and
+:mod:`vibroscope.errors`.
+"""
+
+from vibroscope.models.elements import (
+    Backlash,
+    BoucWen,
+    CubicSpring,
+    Damper,
+    Element,
+    Friction,
+    MRDamper,
+    Spring,
+    make_element,
+)
+from vibroscope.models.lumped import Dof, Input, LumpedModel, Modes, Output, demo_model, demo_model_5dof
+
+__all__ = [
+    "Dof",
+    "Input",
+    "Output",
+    "Modes",
+    "LumpedModel",
+    "demo_model",
+    "demo_model_5dof",
+    "Element",
+    "Spring",
+    "Damper",
+    "CubicSpring",
+    "Backlash",
+    "Friction",
+    "BoucWen",
+    "MRDamper",
+    "make_element",
+]
+
+
+def __getattr__(name):  # lazy: simulate / excitation / modelfile load on first use
+    import importlib
+
+    for mod in ("simulate", "excitation", "modelfile"):
+        m = importlib.import_module(f"vibroscope.models.{mod}")
+        if name in getattr(m, "__all__", ()):
+            return getattr(m, name)
+    raise AttributeError(f"module 'vibroscope.models' has no attribute {name!r}")
