@@ -91,7 +91,7 @@ def test_frf_peaks_at_modes():
     peaks = f[1:-1][(mag[1:-1] > mag[:-2]) & (mag[1:-1] > mag[2:])]
     assert len(peaks) == 5
     # damped peak of receptance at w_n sqrt(1 - 2 zeta^2) (approximately, coupled modes)
-    np.testing.assert_allclose(peaks, md.natural_frequencies, rtol=2e-3)
+    np.testing.assert_allclose(peaks, md.natural_frequencies, rtol=3e-3)
 
 
 def test_demo_models():
