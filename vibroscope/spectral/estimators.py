@@ -239,7 +239,7 @@ def amplitude_spectrum(
     Notes
     -----
     ``A(f_k) = 2 |X(f_k)| / Σw`` (DC and Nyquist not doubled), the amplitude ("coherent gain")
-    correction; computed as the square root of the ``'spectrum'``-scaled Welch estimate, which is
+    correction; computed as ``sqrt(2 P)`` from the ``'spectrum'``-scaled Welch estimate P, which is
     that value for one segment and its RMS average for several (Brandt, *Noise and Vibration
     Analysis*, Wiley 2011, §9.3).
 
@@ -252,7 +252,10 @@ def amplitude_spectrum(
     n = data.shape[1]
     nperseg = n if nperseg is None else nperseg
     sp = welch(data, fs, nperseg=nperseg, noverlap=noverlap, window=window, scaling="spectrum")
-    return Spectrum(sp.frequencies, np.sqrt(sp.values), channels, units, "amplitude", dict(sp.settings))
+    amp = np.sqrt(sp.values)  # RMS of each line; peak = sqrt(2) RMS except at DC and Nyquist
+    last = None if sp.settings["nfft"] % 2 else -1
+    amp[:, 1:last] *= np.sqrt(2.0)
+    return Spectrum(sp.frequencies, amp, channels, units, "amplitude", dict(sp.settings))
 
 
 def _resolve(G: CrossSpectralMatrix, chans: Sequence[Channel] | Channel) -> list[int]:
