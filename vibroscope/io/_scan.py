@@ -1,0 +1,299 @@
+"""Record-level MCAP scanning that survives damage.
+
+One linear pass over the file, record by record, with every chunk's CRC checked
+(``mcap.stream_reader`` checks CRCs only when asked; we always ask). A chunk that fails to
+decompress or whose CRC does not match is skipped whole and reported with its byte offset;
+a record cut off by the end of the file stops the scan and is reported. Everything before
+the damage is kept. Message records are not decoded here: they are indexed as arrays
+(channel id, log time, payload offset and length) into their chunk's bytes, so that the
+decoders can work on whole blocks with numpy.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Header, Schema
+
+from vibroscope.errors import LogFormatError
+
+MAGIC = b"\x89MCAP0\r\n"
+_MSG_HDR = struct.Struct("<HIQQ")  # channel_id, sequence, log_time, publish_time
+_REC_HDR = struct.Struct("<BQ")
+
+try:  # optional codecs of mcap
+    import zstandard as _zstd
+except ImportError:  # pragma: no cover
+    _zstd = None
+try:
+    import lz4.frame as _lz4
+except ImportError:  # pragma: no cover
+    _lz4 = None
+
+
+def _opname(op: int) -> str:
+    try:
+        return Opcode(op).name
+    except ValueError:
+        return f"opcode 0x{op:02x}"
+
+
+@dataclass
+class Block:
+    """Messages found in one container (a chunk, or the loose messages of the data section)."""
+
+    buf: bytes
+    file_offset: int  # byte offset of the chunk record (or -1 for loose messages)
+    channel_id: np.ndarray  # uint16 (n,)
+    log_time: np.ndarray  # uint64 (n,)
+    start: np.ndarray  # int64 (n,), payload offset in buf
+    length: np.ndarray  # int64 (n,)
+
+    @property
+    def n(self) -> int:
+        return int(self.channel_id.size)
+
+
+@dataclass
+class ScanResult:
+    path: Path
+    file_size: int
+    header: Header | None = None
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    blocks: list[Block] = field(default_factory=list)
+    skipped: list[tuple[int, str]] = field(default_factory=list)  # (byte offset, reason)
+    warnings: list[str] = field(default_factory=list)
+    complete: bool = False  # footer and closing magic seen
+
+
+def _parse(cls: Any, body: bytes) -> Any:
+    return cls.read(ReadDataStream(BytesIO(body)))
+
+
+def _decompress(chunk: Chunk) -> bytes:
+    if chunk.compression == "":
+        return chunk.data
+    if chunk.compression == "zstd":
+        if _zstd is None:
+            raise ValueError("zstd compression but the zstandard module is not installed")
+        return _zstd.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+    if chunk.compression == "lz4":
+        if _lz4 is None:
+            raise ValueError("lz4 compression but the lz4 module is not installed")
+        return _lz4.decompress(chunk.data)
+    raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+
+
+def _index_messages(buf: bytes, pos: int, end: int, out_records: list) -> tuple[np.ndarray, ...]:
+    """Index the records of `buf[pos:end]`; Schema/Channel records go to `out_records`.
+
+    Message records of one equal length laid end to end (the usual case for a sensor
+    topic) are indexed with numpy in one step; anything else record by record.
+    """
+    cids: list[np.ndarray] = []
+    logs: list[np.ndarray] = []
+    starts: list[np.ndarray] = []
+    lens: list[np.ndarray] = []
+    py_c: list[int] = []
+    py_l: list[int] = []
+    py_s: list[int] = []
+    py_n: list[int] = []
+
+    def flush_py() -> None:
+        if py_c:
+            cids.append(np.array(py_c, np.uint16))
+            logs.append(np.array(py_l, np.uint64))
+            starts.append(np.array(py_s, np.int64))
+            lens.append(np.array(py_n, np.int64))
+            py_c.clear(), py_l.clear(), py_s.clear(), py_n.clear()
+
+    unpack_rec = _REC_HDR.unpack_from
+    unpack_msg = _MSG_HDR.unpack_from
+    tried_periodic = False
+    while pos < end:
+        if pos + 9 > end:
+            raise ValueError(f"record header cut off at {pos} of {end} bytes")
+        op, length = unpack_rec(buf, pos)
+        if pos + 9 + length > end:
+            raise ValueError(f"{_opname(op)} record at {pos} needs {length} bytes, {end - pos - 9} left")
+        if op == Opcode.MESSAGE:
+            if not tried_periodic:
+                tried_periodic = True
+                stride = 9 + length
+                rest = end - pos
+                if length >= 22 and rest % stride == 0 and rest // stride > 8:
+                    a = np.frombuffer(buf, np.uint8, count=rest, offset=pos).reshape(-1, stride)
+                    if (a[:, 0] == Opcode.MESSAGE).all() and (a[:, 1:9] == a[0, 1:9]).all():
+                        flush_py()
+                        m = a.shape[0]
+                        cids.append(a[:, 9:11].copy().view("<u2").ravel().astype(np.uint16))
+                        logs.append(a[:, 15:23].copy().view("<u8").ravel().astype(np.uint64))
+                        starts.append(pos + 31 + stride * np.arange(m, dtype=np.int64))
+                        lens.append(np.full(m, length - 22, np.int64))
+                        pos = end
+                        break
+            cid, _seq, log_time, _pub = unpack_msg(buf, pos + 9)
+            py_c.append(cid)
+            py_l.append(log_time)
+            py_s.append(pos + 31)
+            py_n.append(length - 22)
+        elif op == Opcode.SCHEMA:
+            out_records.append(_parse(Schema, buf[pos + 9 : pos + 9 + length]))
+        elif op == Opcode.CHANNEL:
+            out_records.append(_parse(Channel, buf[pos + 9 : pos + 9 + length]))
+        pos += 9 + length
+    flush_py()
+    if not cids:
+        e = np.empty(0, np.int64)
+        return np.empty(0, np.uint16), np.empty(0, np.uint64), e, e.copy()
+    return (np.concatenate(cids), np.concatenate(logs), np.concatenate(starts), np.concatenate(lens))
+
+
+def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False) -> ScanResult:
+    """Scan an MCAP file record by record.
+
+    Parameters
+    ----------
+    path : str or Path
+        The MCAP file.
+    validate_crcs : bool, optional
+        Check every chunk's CRC-32 of its uncompressed data (and the data section CRC).
+    progress : bool, optional
+        Show a tqdm bar over the bytes of the file.
+
+    Returns
+    -------
+    ScanResult
+        Schemas, channels, indexed message blocks, and the damage skipped (byte offsets).
+
+    Raises
+    ------
+    LogFormatError
+        If the file cannot be opened, does not start with the MCAP magic, or ends before
+        the header record.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read ({exc})") from exc
+    res = ScanResult(path=path, file_size=len(data))
+    n = len(data)
+    if data[:8] != MAGIC:
+        raise LogFormatError(f"{path}: not an MCAP file (bad magic at byte offset 0)")
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=n, unit="B", unit_scale=True, desc=path.name)
+    pos = 8
+    loose = ([], [], [], [])
+    pending_loss: list[int] = []  # messages lost in the last skipped chunk (from its message indexes)
+    last_skipped_chunk = False
+    try:
+        while pos < n:
+            if pos + 9 > n:
+                res.skipped.append((pos, f"file ends inside a record header ({n - pos} of 9 bytes)"))
+                break
+            op, length = _REC_HDR.unpack_from(data, pos)
+            body, end = pos + 9, pos + 9 + length
+            if end > n:
+                res.skipped.append(
+                    (pos, f"{_opname(op)} record cut off by the end of the file: needs {length} bytes, {n - body} left")
+                )
+                break
+            if op == Opcode.CHUNK:
+                try:
+                    chunk = _parse(Chunk, data[body:end])
+                    raw = _decompress(chunk)
+                    if len(raw) != chunk.uncompressed_size:
+                        raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
+                    if validate_crcs and chunk.uncompressed_crc != 0:
+                        crc = zlib.crc32(raw)
+                        if crc != chunk.uncompressed_crc:
+                            raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
+                    recs: list = []
+                    cid, lt, st, ln = _index_messages(raw, 0, len(raw), recs)
+                except Exception as exc:  # noqa: BLE001 - any failure skips this chunk only
+                    res.skipped.append((pos, f"chunk skipped: {type(exc).__name__}: {exc}"))
+                    last_skipped_chunk = True
+                    pending_loss.append(len(res.skipped) - 1)
+                else:
+                    last_skipped_chunk = False
+                    for r in recs:
+                        (res.schemas if isinstance(r, Schema) else res.channels)[r.id] = r
+                    if cid.size:
+                        res.blocks.append(Block(raw, pos, cid, lt, st, ln))
+            elif op == Opcode.MESSAGE_INDEX:
+                if last_skipped_chunk and length >= 6:
+                    # channel_id u16, records length u32, then (u64 log_time, u64 offset) pairs
+                    nrec = struct.unpack_from("<I", data, body + 2)[0] // 16
+                    i = pending_loss[-1]
+                    off, reason = res.skipped[i]
+                    lost = int(reason.rsplit("(", 1)[1].split()[0]) if reason.endswith("messages lost)") else 0
+                    base = reason.rsplit(" (", 1)[0] if reason.endswith("messages lost)") else reason
+                    res.skipped[i] = (off, f"{base} ({lost + nrec} messages lost)")
+            elif op == Opcode.MESSAGE:
+                if length < 22:
+                    res.skipped.append((pos, f"message record too short ({length} bytes)"))
+                else:
+                    cid, _s, lt, _p = _MSG_HDR.unpack_from(data, body)
+                    loose[0].append(cid), loose[1].append(lt), loose[2].append(body + 22), loose[3].append(length - 22)
+            elif op == Opcode.SCHEMA:
+                s = _parse(Schema, data[body:end])
+                res.schemas.setdefault(s.id, s)
+            elif op == Opcode.CHANNEL:
+                c = _parse(Channel, data[body:end])
+                res.channels.setdefault(c.id, c)
+            elif op == Opcode.HEADER:
+                res.header = _parse(Header, data[body:end])
+            elif op == Opcode.DATA_END:
+                stored = struct.unpack_from("<I", data, body)[0] if length >= 4 else 0
+                if validate_crcs and stored != 0:
+                    crc = zlib.crc32(data[:pos])
+                    if crc != stored:
+                        res.warnings.append(
+                            f"{path}: data section CRC-32 mismatch (stored {stored:#010x}, computed {crc:#010x}; "
+                            f"data section ends at byte offset {pos})"
+                        )
+            elif op == Opcode.FOOTER:
+                if data[end : end + 8] != MAGIC:
+                    res.skipped.append((end, "closing magic missing after the footer"))
+                else:
+                    res.complete = True
+                pos = end
+                break
+            if op != Opcode.MESSAGE_INDEX:
+                last_skipped_chunk = last_skipped_chunk and op == Opcode.CHUNK
+            if bar is not None:
+                bar.update(end - pos)
+            pos = end
+    finally:
+        if bar is not None:
+            bar.close()
+    if loose[0]:
+        res.blocks.append(
+            Block(
+                data,
+                -1,
+                np.array(loose[0], np.uint16),
+                np.array(loose[1], np.uint64),
+                np.array(loose[2], np.int64),
+                np.array(loose[3], np.int64),
+            )
+        )
+    if res.header is None and not res.blocks:
+        off = res.skipped[0][0] if res.skipped else 8
+        raise LogFormatError(f"{path}: nothing readable (damaged at byte offset {off})")
+    if not res.complete and not res.skipped:
+        res.skipped.append((pos, "file ends without a footer (log not closed?)"))
+    return res

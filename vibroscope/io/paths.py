@@ -1,0 +1,159 @@
+"""Foxglove-style message paths: ``/topic.field.subfield`` and ``/topic.array[2]``.
+
+A message path names one scalar inside the messages of one topic. The topic is everything
+before the first ``.`` that follows it; when the file's topics are known the longest known
+topic that prefixes the string wins (topics may contain dots in principle).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any, Iterable, Sequence
+
+from vibroscope.errors import ChannelError
+
+__all__ = ["MessagePath", "parse_path", "get_field", "format_path"]
+
+_FIELD = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[-?\d+\])*)$")
+_INDEX = re.compile(r"\[(-?\d+)\]")
+
+
+@dataclass(frozen=True)
+class MessagePath:
+    """A parsed message path.
+
+    Attributes
+    ----------
+    topic : str
+        The topic name (``/imu/m1``).
+    fields : tuple of (str or int)
+        Field names and integer array indices, in order
+        (``("linear_acceleration", "x")`` or ``("data", 2)``).
+    """
+
+    topic: str
+    fields: tuple[str | int, ...]
+
+    def __str__(self) -> str:
+        return format_path(self.topic, self.fields)
+
+
+def format_path(topic: str, fields: Sequence[str | int]) -> str:
+    """The string form of `topic` and `fields` (inverse of :func:`parse_path`)."""
+    out = topic
+    for f in fields:
+        out += f"[{f}]" if isinstance(f, int) else f".{f}"
+    return out
+
+
+def _parse_fields(s: str, whole: str) -> tuple[str | int, ...]:
+    if s == "":
+        return ()
+    fields: list[str | int] = []
+    for part in s.split("."):
+        m = _FIELD.match(part)
+        if not m:
+            raise ChannelError(f"message path {whole!r}: cannot parse field {part!r}")
+        fields.append(m.group(1))
+        fields.extend(int(i) for i in _INDEX.findall(m.group(2)))
+    return tuple(fields)
+
+
+def parse_path(s: str, topics: Iterable[str] | None = None) -> MessagePath:
+    """Parse a message path.
+
+    Parameters
+    ----------
+    s : str
+        ``/topic.field.subfield`` or ``/topic.array[2].x``.
+    topics : iterable of str, optional
+        The topics known to exist (a file's topics). When given, the longest topic that is
+        followed by ``.``, ``[`` or the end of `s` is taken; otherwise the topic ends at the
+        first ``.`` or ``[``.
+
+    Returns
+    -------
+    MessagePath
+
+    Raises
+    ------
+    ChannelError
+        If `s` is empty, names no topic, or a field does not parse, or `topics` is given and
+        none of them prefixes `s`.
+
+    Examples
+    --------
+    >>> parse_path("/imu/m1.linear_acceleration.x")
+    MessagePath(topic='/imu/m1', fields=('linear_acceleration', 'x'))
+    >>> parse_path("/joints.position[2]")
+    MessagePath(topic='/joints', fields=('position', 2))
+    """
+    s = str(s).strip()
+    if not s:
+        raise ChannelError("empty message path")
+    if topics is not None:
+        best = None
+        for t in topics:
+            if s.startswith(t) and (len(s) == len(t) or s[len(t)] in ".["):
+                if best is None or len(t) > len(best):
+                    best = t
+        if best is None:
+            raise ChannelError(f"message path {s!r}: no topic of the file prefixes it")
+        topic, rest = best, s[len(best):]
+    else:
+        m = re.match(r"([^.\[]+)(.*)$", s)
+        if not m:
+            raise ChannelError(f"message path {s!r}: no topic")
+        topic, rest = m.group(1), m.group(2)
+    if rest.startswith("["):  # /topic[3].x: an index right after the topic is not allowed
+        raise ChannelError(f"message path {s!r}: an array index needs a field before it")
+    if rest.startswith("."):
+        rest = rest[1:]
+    elif rest:
+        raise ChannelError(f"message path {s!r}: expected '.' after topic {topic!r}")
+    return MessagePath(topic, _parse_fields(rest, s))
+
+
+def get_field(msg: Any, fields: Sequence[str | int], *, topic: str = "") -> Any:
+    """Walk `fields` into a decoded message.
+
+    Works on ROS 2 dynamic messages and protobuf messages (attributes), JSON messages
+    (dicts) and sequences (integer indices).
+
+    Parameters
+    ----------
+    msg : object
+        A decoded message.
+    fields : sequence of (str or int)
+        As in :attr:`MessagePath.fields`.
+    topic : str, optional
+        The topic, used only in error messages.
+
+    Returns
+    -------
+    object
+        The value found.
+
+    Raises
+    ------
+    ChannelError
+        Naming the topic and the field path up to the failing element.
+    """
+    cur = msg
+    for i, f in enumerate(fields):
+        try:
+            if isinstance(f, int):
+                cur = cur[f]
+            elif isinstance(cur, dict):
+                cur = cur[f]
+            else:
+                if not hasattr(cur, f):
+                    raise AttributeError(f)
+                cur = getattr(cur, f)
+        except (KeyError, IndexError, AttributeError, TypeError) as exc:
+            where = format_path(topic or "<topic>", fields[: i + 1])
+            raise ChannelError(
+                f"topic {topic!r}: field {where!r} not found in the message ({type(exc).__name__}: {exc})"
+            ) from None
+    return cur

@@ -1,0 +1,183 @@
+"""Time bases of logged topics: rate, jitter, gaps, duplicates, reordering; resampling
+topics of different rates onto one uniform grid.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["TimebaseReport", "analyse_stamps", "resample_to_grid"]
+
+
+@dataclass(frozen=True)
+class TimebaseReport:
+    """What the time stamps of one topic look like and what was done to them.
+
+    Attributes
+    ----------
+    topic : str
+        Topic name.
+    n_messages : int
+        Messages read (before dropping duplicates).
+    fs_est : float
+        Estimated sample rate in Hz, ``1 / median(dt)`` (``nan`` with fewer than 2 stamps).
+    jitter_s : float
+        Standard deviation of the stamp increments dt in s (gaps excluded).
+    max_dev_s : float
+        Largest ``|dt - median(dt)|`` in s (gaps excluded).
+    gaps : int
+        Increments longer than 1.5 median periods.
+    gap_time_s : float
+        Time missing in gaps, ``sum(dt - median)`` over gaps, in s.
+    gap_where_s : tuple of (float, float)
+        (start time relative to the first stamp in s, gap length in s) of the first 20 gaps.
+    duplicates : int
+        Messages dropped because their stamp equals the previous one.
+    out_of_order : int
+        Stamps earlier than the one logged before them (they were sorted).
+    time_source : str
+        ``"header.stamp"`` or ``"log_time"``.
+    resampled : bool
+        Whether the samples were interpolated onto the output grid (False: taken as they are).
+    """
+
+    topic: str
+    n_messages: int
+    fs_est: float
+    jitter_s: float
+    max_dev_s: float
+    gaps: int
+    gap_time_s: float
+    gap_where_s: tuple[tuple[float, float], ...]
+    duplicates: int
+    out_of_order: int
+    time_source: str = "log_time"
+    resampled: bool = False
+
+    def as_dict(self) -> dict[str, Any]:
+        """A plain dict (JSON-serialisable)."""
+        d = asdict(self)
+        d["gap_where_s"] = [list(g) for g in self.gap_where_s]
+        return d
+
+
+def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log_time"):
+    """Sort stamps, drop duplicates and describe the time base.
+
+    Parameters
+    ----------
+    topic : str
+        Topic name (for the report).
+    stamps_ns : ndarray of int64, shape (n,)
+        Stamps in ns, in the order the messages were logged.
+    time_source : str, optional
+        Where the stamps came from, recorded in the report.
+
+    Returns
+    -------
+    order : ndarray of int, shape (m,)
+        Indices into `stamps_ns` of the kept messages, in increasing stamp order.
+    report : TimebaseReport
+    """
+    t = np.asarray(stamps_ns, np.int64)
+    n = t.size
+    out_of_order = int(np.count_nonzero(np.diff(t) < 0)) if n > 1 else 0
+    order = np.argsort(t, kind="stable")
+    ts = t[order]
+    keep = np.ones(n, bool)
+    if n > 1:
+        keep[1:] = ts[1:] != ts[:-1]
+    duplicates = int(n - keep.sum())
+    order, ts = order[keep], ts[keep]
+    fs_est = jitter = max_dev = gap_time = float("nan")
+    gaps = 0
+    where: tuple[tuple[float, float], ...] = ()
+    if ts.size >= 2:
+        dt = np.diff(ts).astype(np.float64) * 1e-9
+        med = float(np.median(dt))
+        fs_est = 1.0 / med
+        isgap = dt > 1.5 * med
+        gaps = int(isgap.sum())
+        gap_time = float(np.sum(dt[isgap] - med))
+        idx = np.flatnonzero(isgap)[:20]
+        where = tuple((float((ts[i] - ts[0]) * 1e-9), float(dt[i])) for i in idx)
+        reg = dt[~isgap]
+        jitter = float(np.std(reg)) if reg.size else 0.0
+        max_dev = float(np.max(np.abs(reg - med))) if reg.size else 0.0
+    rep = TimebaseReport(
+        topic, n, fs_est, jitter, max_dev, gaps, gap_time, where, duplicates, out_of_order, time_source
+    )
+    return order, rep
+
+
+def _lowpass_uniform(y: np.ndarray, fs_src: float, fs: float) -> np.ndarray:
+    """Zero-phase Butterworth low-pass (order 8, cut-off 0.4 fs) before decimating to `fs`."""
+    from scipy import signal
+
+    sos = signal.butter(8, 0.4 * fs, fs=fs_src, output="sos")
+    return signal.sosfiltfilt(sos, y, axis=-1)
+
+
+def resample_to_grid(
+    t_s: np.ndarray, y: np.ndarray, grid_s: np.ndarray, *, fs: float, fs_src: float
+) -> np.ndarray:
+    """Anti-aliased interpolation of samples at times `t_s` onto `grid_s`.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n,)
+        Increasing sample times in s (possibly irregular).
+    y : ndarray, shape (n_channels, n)
+        Samples.
+    grid_s : ndarray, shape (m,)
+        Output times in s, within ``[t_s[0], t_s[-1]]``.
+    fs : float
+        Output rate in Hz.
+    fs_src : float
+        Estimated source rate in Hz.
+
+    Returns
+    -------
+    ndarray, shape (n_channels, m)
+
+    Notes
+    -----
+    Downsampling (``fs_src > fs``): the samples are first put on a uniform grid at `fs_src`
+    (cubic spline), low-passed (8th-order Butterworth at 0.4 `fs`, forward-backward so with
+    no phase shift), then interpolated. Otherwise a cubic spline through the samples
+    (interpolation error O(h^4) for band-limited signals; linear interpolation would
+    attenuate a sine at 5 % of the rate by about 1 %).
+    """
+    from scipy.interpolate import CubicSpline
+
+    y = np.atleast_2d(np.asarray(y, float))
+    if t_s.size < 4:
+        return np.vstack([np.interp(grid_s, t_s, row) for row in y])
+    if fs_src > fs * 1.0001:
+        n_u = int(np.floor((t_s[-1] - t_s[0]) * fs_src)) + 1
+        tu = t_s[0] + np.arange(n_u) / fs_src
+        yu = CubicSpline(t_s, y, axis=1)(tu)
+        yu = _lowpass_uniform(yu, fs_src, fs)
+        return CubicSpline(tu, yu, axis=1)(np.clip(grid_s, tu[0], tu[-1]))
+    return CubicSpline(t_s, y, axis=1)(grid_s)
+
+
+def on_grid(t_ns: np.ndarray, start_ns: int, fs: float, tol: float = 0.01) -> bool:
+    """Whether stamps `t_ns` are samples ``start + k / fs`` (k = 0, 1, ...) within `tol` periods."""
+    k = np.arange(t_ns.size)
+    ideal = (k / fs) * 1e9
+    dev = np.abs((t_ns - start_ns).astype(np.float64) - ideal)
+    return bool(dev.max(initial=0.0) <= tol * 1e9 / fs)
+
+
+def grid_for(spans: Sequence[tuple[int, int]], fs: float) -> tuple[int, int]:
+    """(start_ns, n_samples) of the grid at `fs` over the common overlap of `spans` (ns)."""
+    start = max(s for s, _ in spans)
+    stop = min(e for _, e in spans)
+    if stop < start:
+        return start, 0
+    n = int(np.floor((stop - start) * 1e-9 * fs + 1e-6)) + 1
+    return start, n
