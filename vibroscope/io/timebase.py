@@ -23,7 +23,9 @@ class TimebaseReport:
     n_messages : int
         Messages read (before dropping duplicates).
     fs_est : float
-        Estimated sample rate in Hz, ``1 / median(dt)`` (``nan`` with fewer than 2 stamps).
+        Estimated sample rate in Hz: 1 / mean of the increments dt outside gaps, rounded to
+        the fewest decimals that stay within the ns rounding of the stamps (``nan`` with
+        fewer than 2 stamps).
     jitter_s : float
         Standard deviation of the stamp increments dt in s (gaps excluded).
     max_dev_s : float
@@ -98,8 +100,8 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
     if ts.size >= 2:
         dt = np.diff(ts).astype(np.float64) * 1e-9
         med = float(np.median(dt))
-        fs_est = 1.0 / med
         isgap = dt > 1.5 * med
+        fs_est = _rate(dt[~isgap], med)
         gaps = int(isgap.sum())
         gap_time = float(np.sum(dt[isgap] - med))
         idx = np.flatnonzero(isgap)[:20]
@@ -111,6 +113,21 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
         topic, n, fs_est, jitter, max_dev, gaps, gap_time, where, duplicates, out_of_order, time_source
     )
     return order, rep
+
+
+def _rate(dt_reg: np.ndarray, med: float) -> float:
+    """1 / mean period of the regular increments, snapped to a round number when the
+    difference is below the ns rounding of the stamps."""
+    if dt_reg.size == 0:
+        return 1.0 / med
+    span = float(dt_reg.sum())
+    fs = dt_reg.size / span
+    tol = 1.5e-9 / span  # relative error of the mean period from stamps rounded to 1 ns
+    for d in range(0, 7):
+        r = round(fs, d)
+        if r > 0 and abs(r - fs) <= tol * fs:
+            return r
+    return fs
 
 
 def _lowpass_uniform(y: np.ndarray, fs_src: float, fs: float) -> np.ndarray:
