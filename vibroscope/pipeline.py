@@ -137,6 +137,12 @@ def analyse_signals(
 
     warnings = list(signals.meta.get("warnings", []))
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
+    flat = [c for c in outputs if np.ptp(signals[c]) == 0]
+    if flat:  # e.g. the unused axes of a one-axis IMU: no information, singular spectra
+        warnings.append(f"constant channels skipped (no vibration): {flat}")
+        outputs = [c for c in outputs if c not in flat]
+    if not outputs:
+        raise ValueError("no non-constant response channel to analyse")
     chans = ([input] if input else []) + outputs
     sig = signals.select(chans)
     if fmax is not None and fmax < 0.4 * sig.fs:

@@ -1,0 +1,137 @@
+"""``vibroscope analyse LOG.mcap``: spectra, FRFs, coherence and modal vectors of a log."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+__all__ = ["add_parser", "run", "analyse_log"]
+
+
+def add_parser(sub) -> None:
+    """Register ``analyse`` on the CLI's sub-parsers."""
+    p = sub.add_parser(
+        "analyse",
+        aliases=["analyze"],
+        help="spectra, FRFs, coherence and modal vectors of an MCAP log",
+        description=(
+            "Read an MCAP log (ROS 2 CDR, JSON, protobuf), put the channels on one time grid, and "
+            "compute PSDs, the cross-spectral matrix, FRFs with coherence (with --input) and modal "
+            "vectors (peak picking with a force input, FDD without). Writes a rerun recording, "
+            "PNG figures and, with --json, a machine-readable summary."
+        ),
+    )
+    p.add_argument("log", type=Path, help="the MCAP log")
+    p.add_argument("--input", help="force channel (message path), e.g. /actuator/force.wrench.force.x")
+    p.add_argument("--outputs", nargs="+", metavar="PATH",
+                   help="response channels (default: every Imu linear_acceleration field)")
+    p.add_argument("--coords", type=Path, help="sensor coordinates CSV (channel or sensor number, x, y, z, direction)")
+    p.add_argument("--json", type=Path, metavar="SUMMARY.json", help="write the machine-readable summary")
+    p.add_argument("--rrd", type=Path, help="rerun recording to write (default: LOG.rrd beside the log)")
+    p.add_argument("--no-rrd", action="store_true", help="write no rerun recording")
+    p.add_argument("--spawn", action="store_true", help="open a rerun viewer")
+    p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: LOG_figures/ beside the log)")
+    p.add_argument("--fs", type=float, help="resample to this rate (Hz); default the highest topic rate")
+    p.add_argument("--nperseg", type=int, help="Welch segment length (default: ~16 averages, fine enough for --fmin)")
+    p.add_argument("--fmin", type=float, help="lowest frequency searched for modes (Hz)")
+    p.add_argument("--fmax", type=float, help="highest frequency analysed (Hz); decimates when well below fs/2")
+    p.add_argument("--n-modes", type=int, help="number of modes to report")
+    p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
+    p.add_argument("--progress", action="store_true", help="progress bar while reading")
+    p.set_defaults(func=run)
+
+
+def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False, **kw):
+    """Read `log` and run :func:`vibroscope.pipeline.analyse_signals`; returns the Analysis.
+
+    With `input` and no `outputs`, the outputs are the log's acceleration channels.
+    """
+    from vibroscope.io import mcap_info, read_mcap, select_acceleration_channels
+    from vibroscope.pipeline import analyse_signals
+
+    notes = []
+    if outputs is None:
+        sel, skipped = select_acceleration_channels(mcap_info(log))
+        for path, reason in skipped:
+            if not reason.startswith("not an IMU"):
+                notes.append(f"{path}: skipped: {reason}")
+        outputs = sel or None
+    channels = None if (input is None and outputs is None) else ([input] if input else []) + list(outputs or [])
+    sig = read_mcap(log, channels, fs=fs, progress=progress)
+    if notes:
+        sig = sig.with_meta(warnings=list(sig.meta.get("warnings", [])) + notes)
+    return analyse_signals(sig, input=input, **kw)
+
+
+def run(args) -> int:
+    """Run ``vibroscope analyse``; prints the modes found and where the outputs went."""
+    from vibroscope.pipeline import summary_dict
+
+    an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
+                     nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
+                     estimator=args.estimator)
+    print(report_text(an, source=str(args.log)))
+    write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=None if args.no_rrd else (args.rrd or args.log.with_suffix(".rrd")),
+                  figures=args.figures or args.log.parent / f"{args.log.stem}_figures", spawn=args.spawn)
+    return 0
+
+
+def report_text(an, *, source: str = "", true_modes=None) -> str:
+    """Human-readable report: record, warnings, and the modes (beside true ones when given)."""
+    sig = an.signals
+    lines = [f"{source}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
+             f"({sig.duration:.2f} s); nperseg={an.settings['nperseg']} "
+             f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {an.settings['n_averages']} averages)"]
+    if an.settings.get("input"):
+        lines.append(f"input {an.settings['input']} -> {len(an.settings['outputs'])} outputs, "
+                     f"{an.settings['estimator']} FRF, modes by peak picking")
+    else:
+        lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by FDD")
+    for w in an.warnings:
+        lines.append(f"  warning: {w}")
+    mm = an.modal
+    lines.append(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9}" + (f" {'true f_n':>10} {'err [%]':>8} {'true zeta':>9}" if true_modes is not None else "") + "  method")
+    for k in range(len(mm.natural_frequencies)):
+        f, z = mm.natural_frequencies[k], mm.damping_ratios[k]
+        row = f"{k + 1:>4} {f:>10.3f} {100 * z:>9.3f}"
+        if true_modes is not None:
+            tf = true_modes.natural_frequencies
+            j = int(abs(tf - f).argmin())
+            row += f" {tf[j]:>10.3f} {100 * (f - tf[j]) / tf[j]:>8.3f} {100 * true_modes.damping_ratios[j]:>8.3f}%"
+        lines.append(row + f"  {mm.method}")
+    return "\n".join(lines)
+
+
+def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,
+                  true_modes=None) -> dict:
+    """Write the summary JSON, the rerun recording and the figures of an analysis."""
+    from vibroscope.io.coords import line_coords, read_coords
+    from vibroscope.pipeline import summary_dict
+
+    outs = an.settings["outputs"]
+    sc = read_coords(coords, outs) if coords else line_coords(outs)
+    written = {}
+    if json_path:
+        d = summary_dict(an, source=str(log), true_modes=true_modes)
+        json_path.parent.mkdir(parents=True, exist_ok=True)
+        json_path.write_text(json.dumps(d, indent=2))
+        written["json"] = json_path
+        print(f"summary: {json_path}")
+    if figures:
+        from vibroscope.viewers.figures import summary_figures
+
+        figures.mkdir(parents=True, exist_ok=True)
+        paths = summary_figures(figures, signals=an.signals, psd=an.psd, frf=an.frf, modal=an.modal,
+                                sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes)
+        written["figures"] = paths
+        print(f"figures: {', '.join(str(p) for p in paths)}")
+    if rrd or spawn:
+        from vibroscope.viewers.rerun_view import log_analysis
+
+        path = log_analysis(signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf, modal=an.modal,
+                            coords=sc.as_mapping(), rrd_path=rrd, spawn=spawn,
+                            recording_name=Path(log).stem)
+        written["rrd"] = path
+        if rrd:
+            print(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+    return written
