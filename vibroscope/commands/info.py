@@ -1,0 +1,44 @@
+"""``vibroscope info LOG.mcap [--json]``: topics, types, counts, rates and time span of a log."""
+
+from __future__ import annotations
+
+import json
+import math
+
+
+def add_parser(sub) -> None:
+    """Register the ``info`` sub-command."""
+    p = sub.add_parser("info", help="list the topics of an MCAP log (type, count, rate, span, decodable)")
+    p.add_argument("log", metavar="LOG.mcap", help="the MCAP file")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.set_defaults(func=run)
+
+
+def _fmt_rate(r: float) -> str:
+    return "-" if not math.isfinite(r) else f"{r:.4g}"
+
+
+def run(args) -> int:
+    """Print the log's summary; returns the exit status."""
+    from vibroscope.io import mcap_info
+
+    info = mcap_info(args.log)
+    if args.json:
+        d = info.as_dict()
+        print(json.dumps(d, indent=2, default=lambda o: None if isinstance(o, float) and not math.isfinite(o) else str(o)))
+        return 0
+    print(f"{info.path}: {info.message_count} messages, {len(info.topics)} topics, {info.duration_s:.3f} s"
+          f"{' (profile ' + info.profile + ')' if info.profile else ''}")
+    rows = [("topic", "type", "enc", "messages", "rate Hz", "span s", "decodable")]
+    for t in info.topics:
+        span = (t.end_ns - t.start_ns) * 1e-9 if t.message_count else 0.0
+        rows.append((t.topic, t.schema_name or "-", t.message_encoding, str(t.message_count), _fmt_rate(t.rate_hz),
+                     f"{span:.3f}", "yes" if t.decodable else f"no: {t.reason}"))
+    w = [max(len(r[i]) for r in rows) for i in range(6)]
+    for r in rows:
+        print("  ".join(c.ljust(w[i]) if i in (0, 1, 2) else c.rjust(w[i]) for i, c in enumerate(r[:6])) + "  " + r[6])
+    for off, reason in info.skipped:
+        print(f"skipped at byte offset {off}: {reason}")
+    for wmsg in info.warnings:
+        print(f"warning: {wmsg}")
+    return 0
