@@ -291,7 +291,7 @@ def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False
                 np.array(loose[3], np.int64),
             )
         )
-    if res.header is None and not res.blocks:
+    if not res.blocks and (res.header is None or res.skipped):
         off = res.skipped[0][0] if res.skipped else 8
         raise LogFormatError(f"{path}: nothing readable (damaged at byte offset {off})")
     if not res.complete and not res.skipped:
