@@ -170,8 +170,8 @@ def resonance_frequency(sys) -> float:
 
 
 def critical_frequency(sys, level_db: float = -3.0) -> float:
-    """Critical (cut-off) frequency nu_c, Hz: first frequency above the peak where |G| falls
-    `level_db` (default -3 dB) below its DC value."""
+    """Critical (cut-off) frequency nu_c, Hz: the first frequency where |G| falls `level_db`
+    (default -3 dB) below its DC value (the bandwidth of ``control.bandwidth``)."""
     num, den = _num_den(sys)
     g0 = _mag(num, den, np.array([0.0]))[0]
     target = g0 * 10 ** (level_db / 20.0)
@@ -179,11 +179,10 @@ def critical_frequency(sys, level_db: float = -3.0) -> float:
     wmax = 100.0 * max(np.max(np.abs(p)), 1e-6)
     w = np.logspace(np.log10(wmax) - 8, np.log10(wmax), 8000)
     m = _mag(num, den, w)
-    k0 = int(np.argmax(m))
-    below = np.flatnonzero(m[k0:] < target)
-    if below.size == 0:
+    below = np.flatnonzero(m < target)
+    if below.size == 0 or below[0] == 0:
         return float("nan")
-    k = k0 + below[0]
+    k = below[0]
     wc = optimize.brentq(lambda x: _mag(num, den, np.array([x]))[0] - target, w[k - 1], w[k], xtol=1e-14, rtol=1e-13)
     return float(wc / (2 * np.pi))
 
