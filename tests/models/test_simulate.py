@@ -1,0 +1,239 @@
+"""Time simulation against truth: closed-form SDOF responses, the analytic FRF (H1 from
+scipy.signal.csd/welch), eigenfrequencies in the PSD, and the integrator's convergence order."""
+
+import numpy as np
+import pytest
+from scipy import integrate, signal
+
+from vibroscope.models.elements import BoucWen, CubicSpring, Damper, Spring
+from vibroscope.models.excitation import band_limited_random, multisine
+from vibroscope.models.lumped import Dof, Input, LumpedModel, Output, demo_model
+from vibroscope.models.simulate import (
+    _Integrator,
+    decimate_fir,
+    simulate,
+    simulate_periodic,
+    upsample,
+)
+
+
+def sdof(m=1.0, k=4e4, c=8.0, quantity="displacement", **kw):
+    return LumpedModel.chain([m], [k], [c], output_quantity=quantity, **kw)
+
+
+@pytest.mark.parametrize("oversample", [1, 8])
+def test_step_response_closed_form(oversample):
+    # constant force F from t = 0: x = F/k (1 - e^{-zeta wn t} (cos wd t + zeta/sqrt(1-zeta^2) sin wd t))
+    m, k, c, F, fs = 1.0, 4e4, 8.0, 3.0, 1000.0
+    model = sdof(m, k, c)
+    s = simulate(model, np.full(3000, F), fs, oversample=oversample, upsampling="linear")
+    t = s.time
+    wn = np.sqrt(k / m)
+    z = c / (2 * np.sqrt(k * m))
+    wd = wn * np.sqrt(1 - z * z)
+    x = F / k * (1 - np.exp(-z * wn * t) * (np.cos(wd * t) + z / np.sqrt(1 - z * z) * np.sin(wd * t)))
+    np.testing.assert_allclose(s.data[1], x, atol=1e-12 * F / k * 1e3)
+    assert s.channels == ("/actuator/force.wrench.force.x", "/imu/m1.displacement.x")
+    assert s.units == ("N", "m")
+
+
+def test_ramp_is_exact_with_foh_and_no_delay():
+    # u = a t (linear between samples: FOH is exact); x = a/k (t - 2 zeta/wn) + transient
+    m, k, c, a, fs = 1.0, 4e4, 8.0, 50.0, 200.0
+    model = sdof(m, k, c)
+    n = 400
+    t = np.arange(n) / fs
+    s = simulate(model, a * t, fs, oversample=1)
+    ref = integrate.solve_ivp(
+        lambda tt, q: [q[1], (a * tt - c * q[1] - k * q[0]) / m], (0, t[-1]), [0, 0], t_eval=t,
+        method="DOP853", rtol=1e-12, atol=1e-16,
+    ).y[0]
+    np.testing.assert_allclose(s.data[1], ref, atol=1e-9 * np.max(np.abs(ref)))
+
+
+def test_sine_steady_state_matches_frf_amplitude_and_phase():
+    model = demo_model()
+    fs, f0 = 1000.0, 123.0
+    n = 20000
+    t = np.arange(n) / fs
+    u = np.sin(2 * np.pi * f0 * t)
+    s = simulate(model, u, fs)
+    H = model.frf([f0])[0, :, 0]
+    expected = np.imag(H[:, None] * np.exp(2j * np.pi * f0 * t)[None])
+    tail = slice(n // 2, n - 200)
+    np.testing.assert_allclose(s.data[1:, tail], expected[:, tail], atol=2e-3 * np.abs(H).max())
+
+
+def test_h1_from_simulation_matches_analytic_frf():
+    model = demo_model()
+    fs, nps = 500.0, 4096
+    u = band_limited_random(fs, 200_000, f_lo=1, f_hi=200, rms=10, seed=0)
+    s = simulate(model, u, fs)
+    f, Pxx = signal.welch(u, fs, nperseg=nps)
+    _, Pxy = signal.csd(u, s.data[1:], fs, nperseg=nps)
+    _, coh = signal.coherence(u, s.data[1:], fs, nperseg=nps)
+    H1 = Pxy / Pxx
+    H = model.frf(f)[:, :, 0].T
+    ok = (coh > 0.999) & (f > 2) & (f < 200)
+    assert ok.sum() > 0.6 * ok.size * 198 / 250
+    err = np.abs(H1[ok] / H[ok] - 1)
+    assert err.max() < 0.01, err.max()
+    # PSD peaks of the response of a lightly damped model at its eigenfrequencies, within one bin
+    light = LumpedModel.chain([2.0, 1.5, 1.0], [1e5, 8e4, 5e4], 2.0, input_dof=2)
+    model = light
+    _, Pyy = signal.welch(simulate(light, u, fs).data[1:], fs, nperseg=nps)
+    df = f[1] - f[0]
+    for fn in model.modes().natural_frequencies:
+        band = (f > fn - 3) & (f < fn + 3)
+        peaks = f[band][np.argmax(Pyy[:, band], axis=1)]
+        assert np.any(np.abs(peaks - fn) <= df), (fn, peaks)
+
+
+def test_periodic_linear_equals_frf_on_multisine_lines():
+    model = demo_model()
+    fs, n = 500.0, 4096
+    u, k = multisine(fs, n, f_lo=2, f_hi=150, rms=5, seed=1)
+    s = simulate_periodic(model, u, fs, n_periods=8)
+    Y = np.fft.rfft(s.data[1:], axis=1)[:, k]
+    U = np.fft.rfft(u)[k]
+    H = model.frf(k * fs / n)[:, :, 0].T
+    np.testing.assert_allclose(Y / U, H, rtol=2e-4)
+
+
+def test_input_delay_and_saturation():
+    base = demo_model()
+    fs = 1000.0
+    u = band_limited_random(fs, 5000, f_lo=1, f_hi=100, rms=10, seed=2)
+    u[0] = 0.0  # so that the delayed input (zero before its start) is an exact shift
+    delayed = base.replace(inputs=(Input("m3", channel="/actuator/force.wrench.force.x", delay=0.01),))
+    # linear reconstruction: a 10-sample delay is then an exact shift
+    s0 = simulate(base, u, fs, upsampling="linear")
+    s1 = simulate(delayed, u, fs, upsampling="linear")
+    np.testing.assert_allclose(s1.data[:, 10:], s0.data[:, :-10], atol=1e-9 * np.abs(s0.data).max())
+    sat = base.replace(inputs=(Input("m3", channel="/actuator/force.wrench.force.x", saturation=5.0),))
+    s2 = simulate(sat, u, fs)
+    assert np.abs(s2.data[0]).max() == pytest.approx(5.0)
+    np.testing.assert_allclose(s2.data[1:], simulate(base, np.clip(u, -5, 5), fs).data[1:])
+
+
+def test_noise_is_relative_to_rms_and_seeded():
+    model = demo_model()
+    u = band_limited_random(1000.0, 20000, f_lo=1, f_hi=100, rms=10, seed=2)
+    clean = simulate(model, u, 1000.0)
+    noisy = simulate(model, u, 1000.0, noise=0.1, seed=4)
+    d = noisy.data[1:] - clean.data[1:]
+    rms = np.sqrt(np.mean(clean.data[1:] ** 2, axis=1))
+    np.testing.assert_allclose(np.std(d, axis=1), 0.1 * rms, rtol=0.05)
+    np.testing.assert_array_equal(noisy.data, simulate(model, u, 1000.0, noise=0.1, seed=4).data)
+    np.testing.assert_array_equal(noisy.data[0], clean.data[0])
+
+
+def test_nonlinear_path_on_linear_model_agrees_with_exact():
+    # a cubic spring with k3 = 0 forces the nonlinear integrator on a linear system
+    lin = LumpedModel(
+        (Dof("m1", 1.0),),
+        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0)),
+        (Input("m1"),),
+        (Output("m1", "acceleration"), Output("m1", "displacement")),
+    )
+    m = lin.replace(elements=lin.elements + (CubicSpring(("m1", "ground"), k3=0.0),))
+    fs = 1000.0
+    u = band_limited_random(fs, 4000, f_lo=1, f_hi=150, rms=10, seed=5)
+    exact = simulate(lin, u, fs, method="linear").data[1:]
+    nl = simulate(m, u, fs, method="nonlinear", oversample=20).data[1:]
+    inner = slice(50, -50)
+    for i in range(2):
+        err = np.sqrt(np.mean((nl[i, inner] - exact[i, inner]) ** 2)) / np.sqrt(np.mean(exact[i] ** 2))
+        assert err < 2e-3, err
+
+
+def _duffing_reference(model, t_grid, uf):
+    m = model.dofs[0].mass
+    k, c = model.K[0, 0], model.C[0, 0]
+    el = model.nonlinear_elements[0]
+
+    def rhs(t, q):
+        return [q[1], (uf(t) - k * q[0] - c * q[1] - el.force(q[0], q[1], None)) / m]
+
+    return integrate.solve_ivp(rhs, (0, t_grid[-1]), [0, 0], t_eval=t_grid, method="DOP853", rtol=1e-12, atol=1e-15).y
+
+
+@pytest.mark.parametrize("general", [False, True])
+def test_trapezoidal_converges_with_second_order(general):
+    """Error vs step size of the nonlinear integrator on a hardening Duffing oscillator with a
+    smooth input: halving the step divides the error by 4 (order 2, Newmark 1959)."""
+    model = LumpedModel(
+        (Dof("m1", 1.0),),
+        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0), CubicSpring(("m1", "ground"), k3=4e9)),
+        (Input("m1"),),
+        (Output("m1", "displacement"),),
+    )
+    uf = lambda t: 30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 47 * t)  # noqa: E731
+    T = 0.4
+    t_ref = np.linspace(0, T, 41)
+    ref = _duffing_reference(model, t_ref, uf)[0]
+    assert np.max(np.abs(ref)) > 2e-3  # cubic force 4e9 x^3 ~ 30 N: strongly nonlinear
+    errs = []
+    for nsub in (100, 200, 400):
+        n = 40 * nsub + 1
+        t = np.linspace(0, T, n)
+        integ = _Integrator(model, T / (n - 1))
+        run = integ._run_general if general else integ._run_scalar
+        Q, _ = run(uf(t)[None], None, None)
+        errs.append(np.max(np.abs(Q[0, ::nsub] - ref)))
+    ratios = np.array(errs[:-1]) / np.array(errs[1:])
+    np.testing.assert_allclose(ratios, 4.0, rtol=0.1)
+
+
+def test_bouc_wen_general_and_scalar_kernels_agree_and_converge():
+    """The non-smooth Bouc-Wen element (|v|, |z|): both kernels give the same answer, and the
+    error against a 4x finer step still falls about 4x per halving."""
+    model = LumpedModel(
+        (Dof("m", 2.0),),
+        (Spring(("m", "ground"), k=5e4), Damper(("m", "ground"), c=10.0), BoucWen(("m", "ground"))),
+        (Input("m"),),
+        (Output("m", "displacement"),),
+    )
+    T = 0.5
+    uf = lambda t: 60 * np.sin(2 * np.pi * 20 * t) + 40 * np.sin(2 * np.pi * 33 * t)  # noqa: E731
+    sols = {}
+    for nsub in (25, 50, 100, 400):
+        n = 40 * nsub + 1
+        t = np.linspace(0, T, n)
+        sols[nsub] = _Integrator(model, T / (n - 1))._run_scalar(uf(t)[None], None, None)[0][0, ::nsub]
+    ref = sols[400]
+    e = [np.max(np.abs(sols[s] - ref)) for s in (25, 50, 100)]
+    assert e[0] / e[1] > 3.0 and e[1] / e[2] > 3.0, e
+    n = 40 * 25 + 1
+    t = np.linspace(0, T, n)
+    Qg, Gg = _Integrator(model, T / (n - 1))._run_general(uf(t)[None], None, None)
+    np.testing.assert_allclose(Qg[0, ::25], sols[25], atol=1e-12 * np.abs(ref).max() + 1e-14)
+
+
+def test_upsample_and_decimate_roundtrip():
+    fs, n = 100.0, 1000
+    t = np.arange(n) / fs
+    x = np.sin(2 * np.pi * 3 * t) + 0.5 * np.cos(2 * np.pi * 11 * t)
+    for method in ("fft", "poly"):
+        up = upsample(x, 5, method=method, periodic=True)
+        assert up.shape == (5000,)
+        tf = np.arange(5000) / 500.0
+        xf = np.sin(2 * np.pi * 3 * tf) + 0.5 * np.cos(2 * np.pi * 11 * tf)
+        tol = 1e-12 if method == "fft" else 1e-4
+        np.testing.assert_allclose(up, xf, atol=tol)
+        np.testing.assert_allclose(up[::5], x, atol=tol)
+    y = decimate_fir(xf, 20 // 4, periodic=True)
+    np.testing.assert_allclose(y, x, atol=1e-3)
+    y2 = decimate_fir(xf, 5)
+    assert y2.shape == (1000,)
+    np.testing.assert_allclose(y2[20:-20], x[20:-20], atol=1e-3)
+
+
+def test_bad_arguments():
+    m = demo_model()
+    with pytest.raises(ValueError, match="shape"):
+        simulate(m, np.zeros((2, 100)), 100.0)
+    with pytest.raises(ValueError, match="fs"):
+        simulate(m, np.zeros(100), 0.0)
+    with pytest.raises(ValueError, match="method"):
+        simulate(m, np.zeros(100), 100.0, method="magic")
