@@ -228,7 +228,7 @@ def _fast_extract(log: _Log, cid: int, names: list[str]) -> tuple[np.ndarray, np
 def _generic_extract(
     log: _Log, cid: int, fields: list[tuple[str | int, ...]], skipped: list[dict]
 ) -> tuple[np.ndarray, np.ndarray, str]:
-    """(stamps ns, values (k, n), time source) by decoding every message."""
+    """(stamps ns, values (k, n), time source, log times ns) by decoding every message."""
     ch = log.scan.channels[cid]
     dec, reason = log.decoders.get(ch, log.schema(cid))
     if dec is None:
@@ -265,7 +265,7 @@ def _generic_extract(
             vals[k, i] = float(v)
     if bad > 5:
         skipped.append({"topic": ch.topic, "offset": None, "reason": f"{bad} messages in all do not decode"})
-    return stamps[keep], vals[:, keep], "header.stamp" if use_header else "log_time"
+    return stamps[keep], vals[:, keep], "header.stamp" if use_header else "log_time", logt[keep]
 
 
 # -- info ----------------------------------------------------------------------------------
@@ -526,7 +526,9 @@ def read_mcap(
     channels : sequence of str, optional
         Message paths, ``/topic.field.sub`` or ``/topic.array[i]``. Default: the
         ``linear_acceleration.{x,y,z}`` of every ``sensor_msgs/msg/Imu`` topic
-        (:func:`select_acceleration_channels`).
+        (:func:`select_acceleration_channels`); of these, an axis that is 0 in every
+        message of a topic whose other axes are not is left out (a single-axis sensor
+        published as an Imu) and listed in ``meta["skipped"]``.
     fs : float, optional
         Output rate in Hz. Default: the highest estimated rate among the selected topics.
     progress : bool, optional
@@ -567,6 +569,7 @@ def read_mcap(
     warnings: list[str] = list(log.scan.warnings)
     for o, r in log.scan.skipped:
         warnings.append(f"{log.path}: skipped at byte offset {o}: {r}")
+    auto = channels is None
     if channels is None:
         info = _info(log)
         sel, skip = select_acceleration_channels(info)
@@ -607,10 +610,17 @@ def read_mcap(
         if res is not None:
             stamps, vals = res
             source = "header.stamp"
+            logt = log.log_times(cid)
             fast_used[topic] = True
         else:
-            stamps, vals, source = _generic_extract(log, cid, fields, skipped)
+            stamps, vals, source, logt = _generic_extract(log, cid, fields, skipped)
             fast_used[topic] = False
+        if source == "header.stamp" and stamps.size > 1 and np.unique(stamps).size < 0.5 * stamps.size:
+            warnings.append(
+                f"topic {topic!r}: header.stamp unusable ({np.unique(stamps).size} distinct stamps in "
+                f"{stamps.size} messages, e.g. {int(stamps[0])} ns); using log_time"
+            )
+            stamps, source = logt, "log_time"
         # stamps are in file (logging) order: out-of-order counts refer to that order
         order, rep = analyse_stamps(topic, stamps, time_source=source)
         if stamps.size == 0:
@@ -629,6 +639,14 @@ def read_mcap(
                 f"topic {topic!r}: {rep.gaps} gaps, {rep.gap_time_s:.6g} s missing in all "
                 f"(first at {rep.gap_where_s[0][0]:.6g} s after the start); interpolated across"
             )
+    if auto:  # an axis that is 0 in every message of a topic whose other axes move was not measured
+        for topic, idxs in by_topic.items():
+            zero = [i for i in idxs if i in rows and not np.any(rows[i])]
+            if zero and len(zero) < len(idxs):
+                for i in zero:
+                    del rows[i]
+                    skipped.append({"topic": topic, "channel": str(parsed[i]),
+                                    "reason": "identically zero in every message (axis not measured)"})
     keep = [i for i in range(len(parsed)) if i in rows]
     if not keep:
         raise ChannelError(

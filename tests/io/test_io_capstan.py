@@ -1,0 +1,69 @@
+"""Real ROS 2 (Humble) recordings from mcap-bag-parser 0.3.1 (MIT): info on all; automatic
+selection reports that there is no acceleration field; chosen numeric fields read; the
+``ros2idl`` channel is reported by name and skipped."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vibroscope.cli import main
+from vibroscope.errors import ChannelError
+from vibroscope.io import discover_fields, mcap_info, read_mcap
+
+FILES = ["alternate_bagfile_0", "bagfile_0", "controlled_data_0", "torque_ripple_data_0", "uncontrolled_data_0"]
+COUNTS = {"alternate_bagfile_0": 129300, "bagfile_0": 25387, "controlled_data_0": 1356,
+          "torque_ripple_data_0": 409150, "uncontrolled_data_0": 1594}
+
+
+@pytest.fixture(scope="module")
+def capstan(shared_data):
+    return shared_data / "mcap" / "capstan"
+
+
+@pytest.mark.parametrize("name", FILES)
+def test_info_and_reading(capstan, name):
+    p = capstan / f"{name}.mcap"
+    info = mcap_info(p)
+    assert info.message_count == COUNTS[name] and info.skipped == ()
+    js = info.topic("/robot/joint_state")
+    assert js.decodable and js.message_count > 100 and js.schema_name == "capstan/msg/RobotJointState"
+    with pytest.raises(ChannelError, match="no acceleration field"):
+        read_mcap(p)
+    fields = discover_fields(p)["/robot/joint_state"]
+    chosen = [f for f in fields if ".position[" in f][:2]
+    assert chosen
+    r = read_mcap(p, chosen)
+    assert r.n_channels == 2 and r.n_samples > 100 and np.isfinite(r.data).all()
+    tb = r.meta["timebase"]["/robot/joint_state"]
+    assert tb["n_messages"] == js.message_count
+    if name == "bagfile_0":  # this recording's header stamps are all 0: log time is used, and said so
+        assert tb["time_source"] == "log_time"
+        assert any("header.stamp unusable" in w for w in r.meta["warnings"])
+    else:
+        assert tb["time_source"] == "header.stamp"
+    assert 1 < r.fs < 1100
+
+
+def test_ros2idl_channel_reported_and_skipped(capstan):
+    p = capstan / "alternate_bagfile_0.mcap"
+    t = mcap_info(p).topic("/robot/joint_override")
+    assert not t.decodable and "ros2idl" in t.reason and t.message_count == 3796
+    r = read_mcap(p, ["/robot/joint_override.position[0]", "/robot/joint_state.position[0]"])
+    assert r.channels == ("/robot/joint_state.position[0]",)
+    sk = [s for s in r.meta["skipped"] if s.get("topic") == "/robot/joint_override"]
+    assert sk and sk[0]["schema"] == "capstan/msg/RobotJointOverride" and "ros2idl" in sk[0]["reason"]
+    assert any("/robot/joint_override" in w and "ros2idl" in w for w in r.meta["warnings"])
+    with pytest.raises(ChannelError, match="joint_override.*ros2idl"):
+        read_mcap(p, ["/robot/joint_override.position[0]"])
+
+
+def test_info_command(capstan, capsys):
+    assert main(["info", str(capstan / "alternate_bagfile_0.mcap")]) == 0
+    out = capsys.readouterr().out
+    assert "/robot/joint_override" in out and "ros2idl" in out and "129300 messages" in out
+    assert main(["info", "--json", str(capstan / "controlled_data_0.mcap")]) == 0
+    import json
+
+    d = json.loads(capsys.readouterr().out)
+    assert d["message_count"] == 1356
