@@ -26,7 +26,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 import math
 from typing import ClassVar
 
@@ -104,7 +104,7 @@ class Element:
 
     def params(self) -> dict:
         """The element's parameters as a dict (model-file keys), without ``between``."""
-        return {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "between"}
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "between"}
 
 
 @dataclass(frozen=True)
@@ -345,7 +345,7 @@ ELEMENT_TYPES: dict[str, tuple[type, dict[str, str], tuple[str, ...]]] = {
     ),
     "mr_damper": (
         MRDamper,
-        {k: k for k in MRDamper.__dataclass_fields__ if k != "between"} | {"i": "current"},
+        {"i": "current"} | {f.name: f.name for f in fields(MRDamper) if f.name not in ("between", "current")},
         (),
     ),
 }

@@ -1,0 +1,399 @@
+"""Model files (TOML): lumped models and SISO transfer functions.
+
+Schema (fixed)::
+
+    kind = "lumped"
+    [[dof]]
+    name = "m1"
+    mass = 2.0                      # kg
+    [[element]]
+    type = "spring"                 # spring | damper | cubic_spring | backlash | friction | bouc_wen | mr_damper
+    between = ["m1", "ground"]      # two DOF names, or a DOF and "ground"
+    k = 5.0e4                       # N/m
+    [[input]]
+    channel = "/actuator/force_cmd.wrench.force.x"
+    dof = "m1"
+    quantity = "force"              # N; optional: saturation = N, delay = s
+    [[output]]
+    channel = "/imu/m1.linear_acceleration.x"
+    dof = "m1"
+    quantity = "acceleration"       # acceleration | velocity | displacement
+
+Element parameters: spring ``k``; damper ``c``; cubic_spring ``k3`` (``k`` optional);
+backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional); bouc_wen ``alpha``,
+``beta``, ``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A)
+and optionally the Spencer et al. (1997) coefficients (see
+:class:`vibroscope.models.elements.MRDamper`).
+
+``kind = "transfer_function"``: ``num`` and ``den`` (coefficients of s, highest power
+first), one ``[[input]]`` and one ``[[output]]`` (``channel``, ``quantity``).
+
+Every fault raises :class:`vibroscope.errors.ModelFileError` naming the file, the line and
+the key.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from vibroscope.errors import ModelFileError
+from vibroscope.models.elements import ELEMENT_TYPES, GROUND, Element, make_element
+from vibroscope.models.lumped import QUANTITIES, UNITS, Dof, Input, LumpedModel, Output
+
+__all__ = ["TransferFunctionModel", "load_model", "dump_model", "loads_model", "dumps_model"]
+
+
+@dataclass(frozen=True)
+class TransferFunctionModel:
+    """A SISO transfer function ``H(s) = num(s) / den(s)`` between two log channels.
+
+    Parameters
+    ----------
+    num, den : tuple of float
+        Polynomial coefficients in s, highest power first (proper: ``len(num) <= len(den)``).
+    input : Input
+        Input channel (``dof`` is a label, ``quantity`` "force").
+    output : Output
+        Output channel and quantity.
+    name : str
+        Free label.
+    """
+
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+    input: Input
+    output: Output
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        num = np.trim_zeros(np.atleast_1d(np.asarray(self.num, float)), "f")
+        den = np.trim_zeros(np.atleast_1d(np.asarray(self.den, float)), "f")
+        if den.size == 0:
+            raise ValueError("den must have a nonzero coefficient")
+        if num.size > den.size:
+            raise ValueError(f"improper transfer function: {len(num)=} > {len(den)=}")
+        if not (np.all(np.isfinite(num)) and np.all(np.isfinite(den))):
+            raise ValueError("num and den must be finite")
+        object.__setattr__(self, "num", tuple(num.tolist()) or (0.0,))
+        object.__setattr__(self, "den", tuple(den.tolist()))
+
+    # the interface simulate() uses
+    @property
+    def inputs(self) -> tuple[Input, ...]:
+        return (self.input,)
+
+    @property
+    def outputs(self) -> tuple[Output, ...]:
+        return (self.output,)
+
+    @property
+    def elements(self) -> tuple:
+        return ()
+
+    @property
+    def is_linear(self) -> bool:
+        return self.input.saturation is None
+
+    def input_channels(self) -> list[str]:
+        return [self.input.channel or "/input.x"]
+
+    def output_channels(self) -> list[str]:
+        return [self.output.channel or "/output.x"]
+
+    def state_matrices(self):
+        """Controllable canonical state space ``(A, B, C, D)`` of ``num/den``."""
+        from scipy import signal
+
+        return signal.tf2ss(self.num, self.den)
+
+    def tf(self):
+        """The :class:`control.TransferFunction`."""
+        import control
+
+        return control.tf(list(self.num), list(self.den))
+
+    def frf(self, frequencies_hz) -> np.ndarray:
+        """``H(j 2 pi f)``, shape (n_f, 1, 1), times the input delay factor."""
+        s = 2j * np.pi * np.atleast_1d(np.asarray(frequencies_hz, float))
+        H = np.polyval(self.num, s) / np.polyval(self.den, s) * np.exp(-s * self.input.delay)
+        return H[:, None, None]
+
+
+# ---------------------------------------------------------------------------------------------
+# locating keys in the text
+# ---------------------------------------------------------------------------------------------
+_HEADER = re.compile(r"^\s*\[\[?\s*([A-Za-z0-9_.\-]+)\s*\]\]?")
+
+
+def _locate(text: str, table: str | None, index: int, key: str | None) -> int:
+    """1-based line of `key` in the `index`-th ``[[table]]`` block (``table=None``: top level);
+    the block's header line if the key is not written there."""
+    counts: dict[str, int] = {}
+    current, cur_idx = None, 0
+    header_line = 1
+    for lineno, line in enumerate(text.splitlines(), 1):
+        m = _HEADER.match(line)
+        if m and not line.strip().startswith("#"):
+            current = m.group(1)
+            cur_idx = counts.get(current, 0)
+            counts[current] = cur_idx + 1
+            if current == table and cur_idx == index:
+                header_line = lineno
+            continue
+        if current == table and (table is None or cur_idx == index) and key is not None:
+            if re.match(rf"^\s*[\"']?{re.escape(key)}[\"']?\s*=", line):
+                return lineno
+    return header_line
+
+
+class _Ctx:
+    def __init__(self, path: str, text: str):
+        self.path, self.text = path, text
+
+    def error(self, msg: str, table: str | None = None, index: int = 0, key: str | None = None) -> ModelFileError:
+        line = _locate(self.text, table, index, key)
+        where = f"[[{table}]] #{index + 1}" if table else "top level"
+        keytxt = f" key {key!r}" if key else ""
+        return ModelFileError(f"{self.path}:{line}: {where}{keytxt}: {msg}")
+
+
+def _number(ctx, tbl, table, i, key, *, positive=False, nonneg=False, required=True, default=None):
+    if key not in tbl:
+        if required:
+            raise ctx.error(f"missing required key {key!r}", table, i, None)
+        return default
+    v = tbl[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ctx.error(f"{key}={v!r} must be a finite number", table, i, key)
+    if positive and v <= 0:
+        raise ctx.error(f"{key}={v!r} must be > 0", table, i, key)
+    if nonneg and v < 0:
+        raise ctx.error(f"{key}={v!r} must be >= 0", table, i, key)
+    return float(v)
+
+
+def _string(ctx, tbl, table, i, key, required=True, default=None):
+    if key not in tbl:
+        if required:
+            raise ctx.error(f"missing required key {key!r}", table, i, None)
+        return default
+    v = tbl[key]
+    if not isinstance(v, str) or not v:
+        raise ctx.error(f"{key}={v!r} must be a non-empty string", table, i, key)
+    return v
+
+
+def _unknown(ctx, tbl, table, i, allowed):
+    for key in tbl:
+        if key not in allowed:
+            raise ctx.error(f"unknown key {key!r}; allowed: {sorted(allowed)}", table, i, key)
+
+
+def _tables(ctx, doc, table):
+    v = doc.get(table, [])
+    if not isinstance(v, list) or not all(isinstance(t, dict) for t in v):
+        raise ctx.error(f"{table!r} must be an array of tables [[{table}]]", None, 0, table)
+    return v
+
+
+_NONNEG = {"k", "c", "gap", "force", "k0", "k1"}
+_POSITIVE = {"v_eps", "nu", "n"}
+
+
+def _parse_io(ctx, doc, dof_names):
+    inputs, outputs = [], []
+    for i, t in enumerate(_tables(ctx, doc, "input")):
+        _unknown(ctx, t, "input", i, {"channel", "dof", "quantity", "saturation", "delay"})
+        ch = _string(ctx, t, "input", i, "channel")
+        dof = _string(ctx, t, "input", i, "dof", required=dof_names is not None, default="u")
+        if dof_names is not None and dof not in dof_names:
+            raise ctx.error(f"unknown DOF {dof!r}; DOFs are {sorted(dof_names)}", "input", i, "dof")
+        q = _string(ctx, t, "input", i, "quantity", required=False, default="force")
+        if q != "force":
+            raise ctx.error(f"quantity={q!r} must be 'force'", "input", i, "quantity")
+        sat = _number(ctx, t, "input", i, "saturation", positive=True, required=False)
+        delay = _number(ctx, t, "input", i, "delay", nonneg=True, required=False, default=0.0)
+        inputs.append(Input(dof, q, ch, sat, delay))
+    for i, t in enumerate(_tables(ctx, doc, "output")):
+        _unknown(ctx, t, "output", i, {"channel", "dof", "quantity"})
+        ch = _string(ctx, t, "output", i, "channel")
+        dof = _string(ctx, t, "output", i, "dof", required=dof_names is not None, default="y")
+        if dof_names is not None and dof not in dof_names:
+            raise ctx.error(f"unknown DOF {dof!r}; DOFs are {sorted(dof_names)}", "output", i, "dof")
+        q = _string(ctx, t, "output", i, "quantity", required=False, default="acceleration")
+        if q not in QUANTITIES:
+            raise ctx.error(f"quantity={q!r} must be one of {QUANTITIES}", "output", i, "quantity")
+        outputs.append(Output(dof, q, ch))
+    chans = [x.channel for x in inputs + outputs]
+    for c in chans:
+        if chans.count(c) > 1:
+            raise ctx.error(f"channel {c!r} is used twice", None, 0, None)
+    return inputs, outputs
+
+
+def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunctionModel:
+    """Parse a model file's text; see :func:`load_model`."""
+    ctx = _Ctx(path, text)
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise ModelFileError(f"{path}:{m.group(1) if m else '?'}: invalid TOML: {exc}") from None
+    kind = doc.get("kind")
+    if kind is None:
+        raise ctx.error("missing required key 'kind' ('lumped' or 'transfer_function')")
+    if kind == "lumped":
+        _unknown(ctx, doc, None, 0, {"kind", "name", "dof", "element", "input", "output"})
+        dofs = []
+        for i, t in enumerate(_tables(ctx, doc, "dof")):
+            _unknown(ctx, t, "dof", i, {"name", "mass"})
+            name = _string(ctx, t, "dof", i, "name")
+            if name == GROUND:
+                raise ctx.error(f"{GROUND!r} is reserved", "dof", i, "name")
+            if name in [d.name for d in dofs]:
+                raise ctx.error(f"DOF {name!r} defined twice", "dof", i, "name")
+            dofs.append(Dof(name, _number(ctx, t, "dof", i, "mass", positive=True)))
+        if not dofs:
+            raise ctx.error("a lumped model needs at least one [[dof]]")
+        names = {d.name for d in dofs}
+        elements: list[Element] = []
+        for i, t in enumerate(_tables(ctx, doc, "element")):
+            etype = _string(ctx, t, "element", i, "type")
+            if etype not in ELEMENT_TYPES:
+                raise ctx.error(f"unknown element type {etype!r}; known: {sorted(ELEMENT_TYPES)}", "element", i, "type")
+            _, keys, required = ELEMENT_TYPES[etype]
+            _unknown(ctx, t, "element", i, {"type", "between"} | set(keys))
+            if "between" not in t:
+                raise ctx.error("missing required key 'between'", "element", i, None)
+            between = t["between"]
+            if not (isinstance(between, list) and len(between) == 2 and all(isinstance(b, str) for b in between)):
+                raise ctx.error(f"between={between!r} must be two names", "element", i, "between")
+            for b in between:
+                if b != GROUND and b not in names:
+                    raise ctx.error(f"unknown DOF {b!r}; DOFs are {sorted(names)} or {GROUND!r}", "element", i, "between")
+            if between[0] == between[1]:
+                raise ctx.error(f"between={between!r} joins an end to itself", "element", i, "between")
+            params = {}
+            for key in keys:
+                if key in t or key in required:
+                    params[key] = _number(
+                        ctx, t, "element", i, key, nonneg=key in _NONNEG, positive=key in _POSITIVE
+                    )
+            try:
+                elements.append(make_element(etype, between, **params))
+            except ValueError as exc:
+                m = re.match(r"^(\w+)=", str(exc))
+                key = m.group(1) if m else None
+                key = {"force_": "force", "current": "i"}.get(key, key)
+                raise ctx.error(str(exc), "element", i, key) from None
+        inputs, outputs = _parse_io(ctx, doc, names)
+        return LumpedModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs), str(doc.get("name", "")))
+    if kind == "transfer_function":
+        _unknown(ctx, doc, None, 0, {"kind", "name", "num", "den", "input", "output"})
+        coeffs = {}
+        for key in ("num", "den"):
+            v = doc.get(key)
+            if v is None:
+                raise ctx.error(f"missing required key {key!r}")
+            if not (isinstance(v, list) and v and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)):
+                raise ctx.error(f"{key}={v!r} must be a list of numbers", None, 0, key)
+            coeffs[key] = v
+        inputs, outputs = _parse_io(ctx, doc, None)
+        if len(inputs) != 1 or len(outputs) != 1:
+            raise ctx.error(f"a transfer function needs one [[input]] and one [[output]], got {len(inputs)} and {len(outputs)}")
+        try:
+            return TransferFunctionModel(tuple(coeffs["num"]), tuple(coeffs["den"]), inputs[0], outputs[0], str(doc.get("name", "")))
+        except ValueError as exc:
+            raise ctx.error(str(exc), None, 0, "den") from None
+    raise ctx.error(f"kind={kind!r} must be 'lumped' or 'transfer_function'", None, 0, "kind")
+
+
+def load_model(path) -> LumpedModel | TransferFunctionModel:
+    """Load a model from a TOML model file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The ``.toml`` file (schema in the module docstring).
+
+    Returns
+    -------
+    LumpedModel or TransferFunctionModel
+
+    Raises
+    ------
+    ModelFileError
+        For invalid TOML, unknown keys, missing keys or DOFs, and non-physical values
+        (negative mass or stiffness, ...); the message names ``file:line`` and the key.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot read model file: {exc}") from None
+    return loads_model(text, str(path))
+
+
+def _fmt(v) -> str:
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    return repr(float(v))
+
+
+def _io_lines(inputs, outputs, with_dof=True) -> list[str]:
+    out = []
+    for i in inputs:
+        out += ["", "[[input]]", f"channel = {_fmt(i.channel or '/input.x')}"]
+        if with_dof:
+            out.append(f"dof = {_fmt(i.dof)}")
+        out.append(f"quantity = {_fmt(i.quantity)}")
+        if i.saturation is not None:
+            out.append(f"saturation = {_fmt(i.saturation)}")
+        if i.delay:
+            out.append(f"delay = {_fmt(i.delay)}")
+    for o in outputs:
+        out += ["", "[[output]]", f"channel = {_fmt(o.channel or '/output.x')}"]
+        if with_dof:
+            out.append(f"dof = {_fmt(o.dof)}")
+        out.append(f"quantity = {_fmt(o.quantity)}")
+    return out
+
+
+def dumps_model(model: LumpedModel | TransferFunctionModel) -> str:
+    """The TOML text of `model` (inverse of :func:`loads_model`)."""
+    if isinstance(model, TransferFunctionModel):
+        lines = ['kind = "transfer_function"']
+        if model.name:
+            lines.append(f"name = {_fmt(model.name)}")
+        lines += [f"num = {_fmt(model.num)}", f"den = {_fmt(model.den)}"]
+        lines += _io_lines(model.inputs, model.outputs, with_dof=False)
+        return "\n".join(lines) + "\n"
+    lines = ['kind = "lumped"']
+    if model.name:
+        lines.append(f"name = {_fmt(model.name)}")
+    for d in model.dofs:
+        lines += ["", "[[dof]]", f"name = {_fmt(d.name)}", f"mass = {_fmt(d.mass)}  # kg"]
+    for e in model.elements:
+        _, keys, _ = ELEMENT_TYPES[e.type]
+        lines += ["", "[[element]]", f"type = {_fmt(e.type)}", f"between = {_fmt(list(e.between))}"]
+        seen = set()
+        for fkey, attr in keys.items():
+            if attr in seen:
+                continue
+            seen.add(attr)
+            lines.append(f"{fkey} = {_fmt(getattr(e, attr))}")
+    lines += _io_lines(model.inputs, model.outputs)
+    return "\n".join(lines) + "\n"
+
+
+def dump_model(model: LumpedModel | TransferFunctionModel, path) -> None:
+    """Write `model` as a TOML model file that :func:`load_model` reads back equal."""
+    Path(path).write_text(dumps_model(model), encoding="utf-8")
