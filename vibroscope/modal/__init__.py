@@ -1,1 +1,16 @@
-"""vibroscope.modal"""
+"""Modal identification: peak picking on FRFs, output-only FDD/EFDD, MAC and mode pairing.
+
+Imports nothing of vibroscope's but :mod:`vibroscope.spectral` and :mod:`vibroscope.signals`.
+"""
+
+from vibroscope.modal._results import ModalModel, Mode, mpc, normalize_shapes
+from vibroscope.modal.fdd import efdd_damping, fdd, singular_values
+from vibroscope.modal.mac import ModeMatch, mac, mac_matrix, match_modes
+from vibroscope.modal.peak_picking import fit_sdof, half_power_bandwidth, peak_picking
+
+__all__ = [
+    "ModalModel", "Mode", "normalize_shapes", "mpc",
+    "peak_picking", "half_power_bandwidth", "fit_sdof",
+    "fdd", "singular_values", "efdd_damping",
+    "mac", "mac_matrix", "match_modes", "ModeMatch",
+]

@@ -1,0 +1,193 @@
+"""Result containers of modal identification: :class:`ModalModel` and :class:`Mode`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Iterator
+
+import numpy as np
+
+__all__ = ["Mode", "ModalModel", "normalize_shapes", "mpc"]
+
+
+def _ro(a, dtype) -> np.ndarray:
+    a = np.array(a, dtype=dtype)
+    a.flags.writeable = False
+    return a
+
+
+def normalize_shapes(shapes: np.ndarray) -> np.ndarray:
+    """Scale each mode shape to unit maximum modulus with a real positive reference entry.
+
+    Parameters
+    ----------
+    shapes : array_like, complex, shape (n_modes, n_points) or (n_points,)
+        Mode shapes, one per row.
+
+    Returns
+    -------
+    ndarray, complex, shape like `shapes`
+        Each row divided by its largest-modulus entry, which thereby becomes exactly ``1 + 0j``.
+        Rows that are all zero are returned unchanged.
+    """
+    s = np.array(shapes, dtype=complex)
+    one = s.ndim == 1
+    s = np.atleast_2d(s)
+    for r in range(s.shape[0]):
+        k = int(np.argmax(np.abs(s[r])))
+        if s[r, k] != 0:
+            s[r] = s[r] / s[r, k]
+    return s[0] if one else s
+
+
+def mpc(shapes: np.ndarray) -> np.ndarray:
+    """Modal phase collinearity of complex shapes (Pappa, Elliott & Schenk 1993).
+
+    ``MPC = |φᵀφ|² / (φᴴφ)²``: 1 for a real (monophase) mode, 0 for a circularly complex one.
+
+    Parameters
+    ----------
+    shapes : array_like, complex, shape (n_modes, n_points) or (n_points,)
+
+    Returns
+    -------
+    ndarray, shape (n_modes,)
+        Dimensionless, in [0, 1].
+
+    References
+    ----------
+    .. [1] R. S. Pappa, K. B. Elliott and A. Schenk, "Consistent-mode indicator for the eigensystem
+       realization algorithm", J. Guidance, Control, and Dynamics 16(5), 852–858, 1993.
+    """
+    s = np.atleast_2d(np.asarray(shapes, dtype=complex))
+    num = np.abs(np.sum(s * s, axis=1)) ** 2
+    den = np.sum(np.abs(s) ** 2, axis=1) ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return num / den
+
+
+@dataclass(frozen=True, eq=False)
+class Mode:
+    """One identified mode (an item of :class:`ModalModel`).
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Natural frequency in Hz.
+    damping_ratio : float
+        Viscous damping ratio ζ (dimensionless, e.g. 0.01 for 1 %); NaN when not estimated.
+    shape : ndarray, complex, shape (n_points,)
+        Mode shape at `points`, normalised to unit maximum modulus (real positive reference).
+    points : tuple of str
+        Measurement point (channel) names.
+    index : int
+        Position in the parent model.
+    method : str
+        Identification method.
+    """
+
+    frequency_hz: float
+    damping_ratio: float
+    shape: np.ndarray
+    points: tuple[str, ...]
+    index: int = 0
+    method: str = ""
+
+    def to_dict(self) -> dict:
+        """JSON-ready entry ``{"frequency_hz", "damping_ratio", "shape": {point: [re, im]}, "method"}``."""
+        return {
+            "frequency_hz": float(self.frequency_hz),
+            "damping_ratio": None if not np.isfinite(self.damping_ratio) else float(self.damping_ratio),
+            "shape": {p: [float(v.real), float(v.imag)] for p, v in zip(self.points, self.shape)},
+            "method": self.method,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class ModalModel:
+    """Identified modal parameters of a structure.
+
+    Attributes
+    ----------
+    natural_frequencies : ndarray, shape (n_modes,)
+        Natural frequencies in Hz, ascending.
+    damping_ratios : ndarray, shape (n_modes,)
+        Viscous damping ratios ζ (dimensionless); NaN where not estimated.
+    shapes : ndarray, complex, shape (n_modes, n_points)
+        Mode shapes, one per row, at `points`; normalised to unit maximum modulus with a real
+        positive reference entry (see :func:`normalize_shapes`).
+    points : tuple of str
+        Channel names of the measurement points (the columns of `shapes`).
+    method : str
+        How they were identified (``"peak_picking"``, ``"fdd"``, ``"efdd"``, ``"ssi_cov"``).
+    extra : dict
+        Per-mode diagnostics as arrays of shape (n_modes,) (e.g. ``"mpc"``, ``"peak_value"``,
+        ``"damping_half_power"``) and the settings used.
+
+    Examples
+    --------
+    >>> m = ModalModel([10.0], [0.02], [[1.0, 0.5]], ["a", "b"], "peak_picking")
+    >>> len(m), m[0].frequency_hz
+    (1, 10.0)
+    """
+
+    natural_frequencies: np.ndarray
+    damping_ratios: np.ndarray
+    shapes: np.ndarray
+    points: tuple[str, ...]
+    method: str
+    extra: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        f = np.atleast_1d(np.asarray(self.natural_frequencies, dtype=float))
+        z = np.atleast_1d(np.asarray(self.damping_ratios, dtype=float))
+        s = np.asarray(self.shapes, dtype=complex)
+        if s.ndim == 1 and s.size == 0:
+            s = s.reshape(0, len(self.points))
+        s = np.atleast_2d(s)
+        if f.ndim != 1 or z.shape != f.shape or s.shape[0] != f.size:
+            raise ValueError(
+                f"inconsistent sizes: {f.shape=} frequencies, {z.shape=} damping ratios, {s.shape=} shapes"
+            )
+        if s.shape[1] != len(self.points):
+            raise ValueError(f"{s.shape=} shapes for {len(self.points)} points")
+        object.__setattr__(self, "natural_frequencies", _ro(f, float))
+        object.__setattr__(self, "damping_ratios", _ro(z, float))
+        object.__setattr__(self, "shapes", _ro(s, complex))
+        object.__setattr__(self, "points", tuple(str(p) for p in self.points))
+        object.__setattr__(self, "extra", dict(self.extra))
+
+    def __len__(self) -> int:
+        return int(self.natural_frequencies.size)
+
+    def __getitem__(self, r: int) -> Mode:
+        r = range(len(self))[r]
+        return Mode(float(self.natural_frequencies[r]), float(self.damping_ratios[r]), self.shapes[r],
+                    self.points, r, self.method)
+
+    def __iter__(self) -> Iterator[Mode]:
+        return (self[r] for r in range(len(self)))
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary.
+
+        Returns
+        -------
+        dict
+            ``{"method": str, "points": [str], "modes": [entry, ...]}`` where each entry is
+            :meth:`Mode.to_dict`: ``{"frequency_hz", "damping_ratio", "shape": {point: [re, im]},
+            "method"}`` (a NaN damping ratio becomes ``None``).
+        """
+        return {"method": self.method, "points": list(self.points), "modes": [m.to_dict() for m in self]}
+
+    def plot(self, *args: Any, **kwargs: Any):
+        """Plot the mode shapes; imports matplotlib lazily through
+        :func:`vibroscope.viewers.figures.plot_mode_shapes` (arguments passed on)."""
+        from vibroscope.viewers.figures import plot_mode_shapes
+
+        return plot_mode_shapes(self, *args, **kwargs)
+
+    def __repr__(self) -> str:
+        fs = ", ".join(f"{f:.4g}" for f in self.natural_frequencies[:6])
+        return (f"ModalModel({len(self)} modes by {self.method!r} at {len(self.points)} points; "
+                f"f = [{fs}{', ...' if len(self) > 6 else ''}] Hz)")
