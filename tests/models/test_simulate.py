@@ -237,3 +237,40 @@ def test_bad_arguments():
         simulate(m, np.zeros(100), 0.0)
     with pytest.raises(ValueError, match="method"):
         simulate(m, np.zeros(100), 100.0, method="magic")
+
+
+def _sdof_with(element, k=4e4, c=8.0):
+    return LumpedModel(
+        (Dof("m1", 1.0),),
+        (Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c), element),
+        (Input("m1"),),
+        (Output("m1", "displacement"),),
+    )
+
+
+def test_backlash_with_large_gap_is_linear_and_friction_dissipates():
+    from vibroscope.models.elements import Backlash, Friction
+
+    fs = 1000.0
+    u = band_limited_random(fs, 2000, f_lo=1, f_hi=100, rms=5, seed=8)
+    lin = simulate(LumpedModel.chain([1.0], [4e4], [8.0], output_quantity="displacement"), u, fs, upsampling="poly").data[1]
+    gap = 10 * np.abs(lin).max()
+    bl = simulate(_sdof_with(Backlash(("m1", "ground"), k=1e6, gap=gap)), u, fs).data[1]
+    assert np.sqrt(np.mean((bl - lin) ** 2)) < 2e-3 * np.sqrt(np.mean(lin**2))
+    tight = simulate(_sdof_with(Backlash(("m1", "ground"), k=1e6, gap=0.1 * np.abs(lin).max())), u, fs).data[1]
+    assert np.sqrt(np.mean(tight**2)) < 0.5 * np.sqrt(np.mean(lin**2))  # stiffened
+    fr = simulate(_sdof_with(Friction(("m1", "ground"), force_=2.0, v_eps=1e-3)), u, fs).data[1]
+    assert np.sqrt(np.mean(fr**2)) < np.sqrt(np.mean(lin**2))
+
+
+def test_mr_damper_general_kernel_runs_and_damps():
+    from vibroscope.models.elements import MRDamper
+
+    fs = 1000.0
+    u = band_limited_random(fs, 500, f_lo=1, f_hi=100, rms=50, seed=9)
+    lin = simulate(LumpedModel.chain([1.0], [4e4], [8.0], output_quantity="displacement"), u, fs).data[1]
+    y0 = simulate(_sdof_with(MRDamper(("m1", "ground"), current=0.0)), u, fs).data[1]
+    y1 = simulate(_sdof_with(MRDamper(("m1", "ground"), current=2.0)), u, fs).data[1]
+    assert np.all(np.isfinite(y1))
+    r = lambda x: np.sqrt(np.mean(x**2))  # noqa: E731
+    assert r(y1) < r(y0) < r(lin)  # more current, more damping

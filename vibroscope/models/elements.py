@@ -279,7 +279,10 @@ class MRDamper(Element):
     The current-dependent coefficients follow the paper's linear laws in the coil current
     `current` (A): ``alpha = alpha_a + alpha_b i``, ``c0 = c0_a + c0_b i``,
     ``c1 = c1_a + c1_b i``. Defaults are the values identified in Spencer et al. (1997),
-    Table 1 (voltage there, taken here per ampere: a documented approximation).
+    Table 1, converted to SI (N/cm -> 1e2 N/m, N s/cm -> 1e2 N s/m, cm^-2 -> 1e4 m^-2);
+    the paper's laws are per volt of the current driver's command (with a first-order
+    filter ``udot = -eta (u - v)``, eta = 190 1/s, left out here: the current is taken as
+    constant), taken here per ampere.
 
     Note
     ----
@@ -288,14 +291,14 @@ class MRDamper(Element):
     """
 
     current: float = 0.0
-    alpha_a: float = 140.0e3
-    alpha_b: float = 695.0e3
-    c0_a: float = 21.0e3
-    c0_b: float = 3.50e3
-    c1_a: float = 283.0e3
-    c1_b: float = 2.95e6
-    k0: float = 46.9e3
-    k1: float = 5.0e3
+    alpha_a: float = 140.0e2
+    alpha_b: float = 695.0e2
+    c0_a: float = 21.0e2
+    c0_b: float = 3.50e2
+    c1_a: float = 283.0e2
+    c1_b: float = 2.95e2
+    k0: float = 46.9e2
+    k1: float = 5.0e2
     gamma: float = 363.0e4
     beta: float = 363.0e4
     A: float = 301.0
