@@ -11,6 +11,8 @@ decoders can work on whole blocks with numpy.
 
 from __future__ import annotations
 
+import mmap
+import os
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -77,6 +79,20 @@ class ScanResult:
 
 def _parse(cls: Any, body: bytes) -> Any:
     return cls.read(ReadDataStream(BytesIO(body)))
+
+
+def _read_chunk(mv: memoryview, body: int, end: int) -> Chunk:
+    """Parse a Chunk record without copying its (possibly large) data."""
+    start_t, end_t, usize, crc, clen = struct.unpack_from("<QQQII", mv, body)
+    p = body + 32
+    comp = bytes(mv[p : p + clen]).decode()
+    p += clen
+    (dlen,) = struct.unpack_from("<Q", mv, p)
+    p += 8
+    if p + dlen > end:
+        raise ValueError(f"chunk data length {dlen} runs past the record end")
+    return Chunk(compression=comp, data=mv[p : p + dlen], message_end_time=end_t, message_start_time=start_t,
+                 uncompressed_crc=crc, uncompressed_size=usize)
 
 
 def _decompress(chunk: Chunk) -> bytes:
@@ -183,18 +199,22 @@ def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False
     """
     path = Path(path)
     try:
-        data = path.read_bytes()
-    except OSError as exc:
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            # a read-only map: chunk data and loose payloads are sliced without copying
+            data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if size else b""
+    except (OSError, ValueError) as exc:
         raise LogFormatError(f"{path}: cannot read ({exc})") from exc
     res = ScanResult(path=path, file_size=len(data))
     n = len(data)
-    if data[:8] != MAGIC:
+    if bytes(data[:8]) != MAGIC:
         raise LogFormatError(f"{path}: not an MCAP file (bad magic at byte offset 0)")
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=n, unit="B", unit_scale=True, desc=path.name)
+    mview = memoryview(data)
     pos = 8
     loose = ([], [], [], [])
     pending_loss: list[int] = []  # messages lost in the last skipped chunk (from its message indexes)
@@ -213,7 +233,7 @@ def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False
                 break
             if op == Opcode.CHUNK:
                 try:
-                    chunk = _parse(Chunk, data[body:end])
+                    chunk = _read_chunk(mview, body, end)
                     raw = _decompress(chunk)
                     if len(raw) != chunk.uncompressed_size:
                         raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
@@ -259,14 +279,14 @@ def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False
             elif op == Opcode.DATA_END:
                 stored = struct.unpack_from("<I", data, body)[0] if length >= 4 else 0
                 if validate_crcs and stored != 0:
-                    crc = zlib.crc32(data[:pos])
+                    crc = zlib.crc32(memoryview(data)[:pos])
                     if crc != stored:
                         res.warnings.append(
                             f"{path}: data section CRC-32 mismatch (stored {stored:#010x}, computed {crc:#010x}; "
                             f"data section ends at byte offset {pos})"
                         )
             elif op == Opcode.FOOTER:
-                if data[end : end + 8] != MAGIC:
+                if bytes(data[end : end + 8]) != MAGIC:
                     res.skipped.append((end, "closing magic missing after the footer"))
                 else:
                     res.complete = True
