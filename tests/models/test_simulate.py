@@ -274,3 +274,18 @@ def test_mr_damper_general_kernel_runs_and_damps():
     assert np.all(np.isfinite(y1))
     r = lambda x: np.sqrt(np.mean(x**2))  # noqa: E731
     assert r(y1) < r(y0) < r(lin)  # more current, more damping
+
+
+def test_mr_damper_element_matches_mr_damper_module():
+    """The element's eq.-5 force and state derivatives equal vibroscope.models.mr_damper's."""
+    mr = pytest.importorskip("vibroscope.models.mr_damper")
+    from vibroscope.models.elements import MRDamper
+
+    coeffs = mr.MRDamperParams.spencer1997().at_current(1.0)
+    el = MRDamper.from_coefficients(("m1", "ground"), coeffs)
+    rng = np.random.default_rng(0)
+    for x, v, y, z in rng.normal(scale=[0.01, 0.1, 0.01, 0.005], size=(20, 4)):
+        ydot, zdot = mr.mr_damper_rhs((y, z), x, v, coeffs)
+        np.testing.assert_allclose(el.state_derivative(x, v, (z, y)), [zdot, ydot], rtol=1e-12)
+        f_ref = mr.mr_damper_force(x, v, y, z, coeffs) + coeffs.k1 * coeffs.x0  # element drops the preload
+        assert el.force(x, v, (z, y)) == pytest.approx(f_ref, rel=1e-12)

@@ -284,10 +284,12 @@ class MRDamper(Element):
     filter ``udot = -eta (u - v)``, eta = 190 1/s, left out here: the current is taken as
     constant), taken here per ampere.
 
-    Note
-    ----
+    Notes
+    -----
     Implemented here because ``vibroscope.models.mr_damper`` did not exist when this module
-    was written; the offset ``x0`` force ``k1 x0`` is omitted (static preload).
+    was written; :meth:`from_coefficients` builds the element from that module's
+    ``MRDamperParams.at_current(i)`` (its cubic current laws and A/V mapping). The offset
+    force ``-k1 x0`` is omitted (a static preload). State order: ``(z, y)``.
     """
 
     current: float = 0.0
@@ -305,6 +307,28 @@ class MRDamper(Element):
     n: float = 2.0
     type: ClassVar[str] = "mr_damper"
     n_states: ClassVar[int] = 2
+
+    @classmethod
+    def from_coefficients(cls, between, coeffs) -> "MRDamper":
+        """An element with fixed coefficients taken from any object with attributes
+        ``alpha, c0, c1, k0, k1, gamma, beta, A, n`` (e.g.
+        :meth:`vibroscope.models.mr_damper.MRDamperParams.at_current`); ``x0`` is dropped."""
+        return cls(
+            between,
+            current=0.0,
+            alpha_a=coeffs.alpha,
+            alpha_b=0.0,
+            c0_a=coeffs.c0,
+            c0_b=0.0,
+            c1_a=coeffs.c1,
+            c1_b=0.0,
+            k0=coeffs.k0,
+            k1=coeffs.k1,
+            gamma=coeffs.gamma,
+            beta=coeffs.beta,
+            A=coeffs.A,
+            n=coeffs.n,
+        )
 
     def _coeffs(self):
         i = self.current
