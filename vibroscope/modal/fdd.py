@@ -176,6 +176,7 @@ def fdd(
     max_level: float = 0.9,
     min_level: float = 0.1,
     window_correction: bool = True,
+    n_singular: int = 1,
 ) -> ModalModel:
     """Output-only modal parameters by Frequency Domain Decomposition, damping by EFDD.
 
@@ -216,12 +217,18 @@ def fdd(
     window_correction : bool, optional
         Divide the correlation function by the Welch window's normalised autocorrelation (from
         ``csd.settings``) before the decay fit; default True.
+    n_singular : int, optional
+        Number of singular values searched for peaks (default 1, classic FDD). With 2, peaks of
+        ``s2`` are candidates too (shape ``u2`` at the peak), which separates two close modes
+        that share one peak of ``s1`` (e.g. the two bending directions of a tower); they are
+        taken after all ``s1`` candidates and pass the same duplicate test.
 
     Returns
     -------
     ModalModel
         ``method='efdd'`` (or ``'fdd'``); points are the csd channels. ``extra`` holds per-mode
-        arrays ``"frequency_peak"`` (Hz, parabolic peak of s1), ``"peak_value"`` (s1 at the peak, dB),
+        arrays ``"frequency_peak"`` (Hz, parabolic peak), ``"peak_value"`` (singular value at the peak,
+        dB), ``"singular_value"`` (0 for s1, 1 for s2),
         ``"prominence"`` (dB), ``"bell_bins"``, ``"n_extrema"``, ``"mpc"`` and the settings.
 
     Raises
@@ -231,8 +238,9 @@ def fdd(
 
     Notes
     -----
-    Where EFDD cannot fit (fewer than 3 usable extrema, e.g. a bell of a few bins or a decay longer
-    than the segment), the FDD peak frequency is kept and the damping is NaN; a warning says so.
+    Where EFDD cannot fit (fewer than 3 usable extrema, e.g. a bell of a few bins, a decay longer
+    than the segment giving a non-positive decay rate, or a frequency outside the bell), the FDD
+    peak frequency is kept and the damping is NaN; a warning says so.
 
     References
     ----------
@@ -256,10 +264,16 @@ def fdd(
         raise ValueError(f"the band {fmin=} .. {fmax=} Hz holds {idx.size} bins; at least 5 are needed")
     tiny = np.finfo(float).tiny
     db_all = 10 * np.log10(np.maximum(s1, tiny))
-    pk, props = scipy.signal.find_peaks(db_all[idx], prominence=prominence)
-    cand = idx[pk]
-    prom = props["prominences"]
-    order = np.argsort(prom)[::-1]
+    cand_l, prom_l, sv_l = [], [], []
+    for q in range(min(int(n_singular), S.shape[1])):
+        dbq = 10 * np.log10(np.maximum(S[:, q], tiny))
+        pk, props = scipy.signal.find_peaks(dbq[idx], prominence=prominence)
+        o = np.argsort(props["prominences"])[::-1]
+        cand_l += list(idx[pk][o])
+        prom_l += list(props["prominences"][o])
+        sv_l += [q] * len(o)
+    cand, prom, sv = np.array(cand_l, dtype=int), np.array(prom_l), np.array(sv_l, dtype=int)
+    order = np.arange(len(cand))
     u1 = U[:, :, 0]
 
     def bell_of(k: int, phi: np.ndarray) -> tuple[np.ndarray, int, int]:
@@ -287,30 +301,35 @@ def fdd(
 
     accepted: list[int] = []
     acc_prom: list[float] = []
-    bells: dict[int, tuple[np.ndarray, int, int]] = {}
+    acc_shape: list[np.ndarray] = []
+    acc_sv: list[int] = []
+    bells: list[tuple[np.ndarray, int, int]] = []
     for o in order:
         k = int(cand[o])
-        phi = u1[k]
+        phi = U[k, :, sv[o]]
         dup = False
-        for a in accepted:
-            if mac(phi, u1[a])[0, 0] > mac_reject:
-                _, lo, hi = bells[a]
-                if lo <= k <= hi:
-                    dup = True
-                    break
-        if dup:
+        for a, (_, lo, hi) in enumerate(bells):
+            if mac(phi, acc_shape[a])[0, 0] > mac_reject and lo <= k <= hi:
+                dup = True
+                break
+        if dup or (sv[o] > 0 and k in accepted):
             continue
         accepted.append(k)
         acc_prom.append(float(prom[o]))
-        bells[k] = bell_of(k, phi)
+        acc_shape.append(phi)
+        acc_sv.append(int(sv[o]))
+        bells.append(bell_of(k, phi))
         if n_modes is not None and len(accepted) >= n_modes:
             break
     if n_modes is not None and len(accepted) < n_modes:
         warnings.warn(f"found {len(accepted)} distinct peaks above {prominence=} dB, fewer than {n_modes=}",
                       stacklevel=2)
-    srt = np.argsort(accepted)
+    srt = np.argsort(accepted, kind="stable")
     accepted = [accepted[i] for i in srt]
     acc_prom = [acc_prom[i] for i in srt]
+    acc_shape = [acc_shape[i] for i in srt]
+    acc_sv = [acc_sv[i] for i in srt]
+    bells = [bells[i] for i in srt]
 
     fs = float((csd.settings or {}).get("fs", 2 * f_all[-1]))
     nfft = (csd.settings or {}).get("nfft")
@@ -318,42 +337,44 @@ def fdd(
     lagw = _window_lag_weights(csd, nfft // 2) if window_correction else None
     fn_l, z_l, fpk, pkv, nb, nex = [], [], [], [], [], []
     failed = []
-    for k in accepted:
+    for m_i, k in enumerate(accepted):
         f_peak = float(f_all[k])
+        dbq = 10 * np.log10(np.maximum(S[:, acc_sv[m_i]], tiny))
         if 0 < k < len(s1) - 1:
-            a, b, c = db_all[k - 1], db_all[k], db_all[k + 1]
+            a, b, c = dbq[k - 1], dbq[k], dbq[k + 1]
             den = a - 2 * b + c
             if den < 0:
                 f_peak = float(f_all[k] + np.clip(0.5 * (a - c) / den, -0.5, 0.5) * (f_all[1] - f_all[0]))
-        bell, lo, hi = bells[k]
+        bell, lo, hi = bells[m_i]
         fn, zeta, n_ext = f_peak, np.nan, 0
         if efdd:
             fe, ze, n_ext = efdd_damping(f_all, bell, fs, nfft=nfft, lag_weights=lagw,
                                          max_level=max_level, min_level=min_level)
-            if np.isfinite(fe) and f_all[lo] - (f_all[1] - f_all[0]) <= fe <= f_all[hi] + (f_all[1] - f_all[0]):
+            if np.isfinite(fe) and ze > 0 and f_all[lo] - (f_all[1] - f_all[0]) <= fe <= f_all[hi] + (f_all[1] - f_all[0]):
                 fn, zeta = fe, ze
             else:
                 failed.append(f_peak)
         fn_l.append(fn)
         z_l.append(zeta)
         fpk.append(f_peak)
-        pkv.append(db_all[k])
+        pkv.append(dbq[k])
         nb.append(hi - lo + 1)
         nex.append(n_ext)
     if failed:
         warnings.warn(f"EFDD could not fit the modes at {np.round(failed, 4).tolist()} Hz "
                       "(bell too narrow or decay longer than the segment); FDD peak kept, damping NaN",
                       stacklevel=2)
-    shapes = normalize_shapes(u1[accepted].reshape(len(accepted), -1))
+    shapes = normalize_shapes(np.array(acc_shape).reshape(len(accepted), U.shape[1]))
     extra = {
         "frequency_peak": np.array(fpk),
         "peak_value": np.array(pkv),
         "prominence": np.array(acc_prom),
         "bell_bins": np.array(nb, dtype=int),
+        "singular_value": np.array(acc_sv, dtype=int),
         "n_extrema": np.array(nex, dtype=int),
         "mpc": mpc(shapes) if len(accepted) else np.zeros(0),
         "settings": dict(fmin=fmin, fmax=fmax, prominence=prominence, mac_threshold=mac_threshold,
                          mac_reject=mac_reject, efdd=efdd, max_level=max_level, min_level=min_level,
-                         window_correction=window_correction, csd=dict(csd.settings or {})),
+                         window_correction=window_correction, n_singular=n_singular, csd=dict(csd.settings or {})),
     }
     return ModalModel(np.array(fn_l), np.array(z_l), shapes, csd.channels, "efdd" if efdd else "fdd", extra)
