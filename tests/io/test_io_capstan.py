@@ -67,3 +67,18 @@ def test_info_command(capstan, capsys):
 
     d = json.loads(capsys.readouterr().out)
     assert d["message_count"] == 1356
+
+
+def test_chunk_index_skips_unwanted_chunks(capstan, monkeypatch):
+    p = capstan / "torque_ripple_data_0.mcap"
+    ch = ["/robot/joint_state.position[0]"]
+    fast = read_mcap(p, ch)
+    assert fast.meta["indexed"] is True
+    from vibroscope.io import _scan
+
+    real = _scan._read_summary
+    monkeypatch.setattr(_scan, "_read_summary", lambda *a: None)  # as if the summary were damaged
+    full = read_mcap(p, ch)
+    assert full.meta["indexed"] is False and full.meta["chunks_skipped_by_index"] == 0
+    assert np.array_equal(fast.data, full.data) and fast.t0 == full.t0
+    assert real is not None

@@ -143,3 +143,21 @@ def test_progress_bar(tmp_path, mixed_signals, capsys):
     p = write_ros2_mcap(tmp_path / "a.mcap", mixed_signals)
     r = read_mcap(p, ["/imu/m1.linear_acceleration.x"], progress=True)
     assert r.n_samples == 777
+
+
+def test_chunk_index_skips_chunks_of_other_topics(tmp_path, monkeypatch):
+    from vibroscope.io import _scan
+
+    n = 2000
+    st = 1_000_000_000 + np.arange(n, dtype=np.int64) * 1_000_000
+    ax = np.random.default_rng(8).standard_normal(n)
+    p = tmp_path / "seq.mcap"
+    # /b logged entirely after /a: separate chunks
+    write_imu_log(p, {"/a": (st, ax), "/b": (st, -ax)}, chunk_size=16_000,
+                  log_times={"/b": st + n * 1_000_000})
+    r = read_mcap(p, ["/a.linear_acceleration.x"])
+    assert r.meta["indexed"] and r.meta["chunks_skipped_by_index"] > 3
+    assert np.array_equal(r.data[0], ax)
+    monkeypatch.setattr(_scan, "_read_summary", lambda *a: None)
+    full = read_mcap(p, ["/a.linear_acceleration.x"])
+    assert full.meta["chunks_skipped_by_index"] == 0 and np.array_equal(full.data, r.data)

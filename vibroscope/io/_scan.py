@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Header, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, Footer, Header, Schema
 
 from vibroscope.errors import LogFormatError
 
@@ -75,6 +75,45 @@ class ScanResult:
     skipped: list[tuple[int, str]] = field(default_factory=list)  # (byte offset, reason)
     warnings: list[str] = field(default_factory=list)
     complete: bool = False  # footer and closing magic seen
+    indexed: bool = False  # a valid summary (chunk indexes) was used
+    chunks_skipped_by_index: int = 0  # chunks not decompressed: none of the wanted topics in them
+
+
+def _read_summary(data: Any, n: int) -> tuple[dict, dict, dict[int, set[int]]] | None:
+    """Schemas, channels and {chunk offset: channel ids} from the summary section, or None
+    when there is none or it fails any check (the caller then scans everything)."""
+    fsize = 1 + 8 + 20
+    if n < 8 + fsize + 8 or bytes(data[n - 8 : n]) != MAGIC:
+        return None
+    fpos = n - 8 - fsize
+    op, length = _REC_HDR.unpack_from(data, fpos)
+    if op != Opcode.FOOTER or length != 20:
+        return None
+    summary_start, _sos, summary_crc = struct.unpack_from("<QQI", data, fpos + 9)
+    if summary_start == 0 or not 8 <= summary_start <= fpos:
+        return None
+    if summary_crc != 0 and zlib.crc32(memoryview(data)[summary_start : fpos + 9 + 16]) != summary_crc:
+        return None
+    schemas, channels, chunks = {}, {}, {}
+    pos = summary_start
+    while pos < fpos:
+        op, length = _REC_HDR.unpack_from(data, pos)
+        body, end = pos + 9, pos + 9 + length
+        if end > fpos:
+            return None
+        if op == Opcode.SCHEMA:
+            sc = _parse(Schema, data[body:end])
+            schemas[sc.id] = sc
+        elif op == Opcode.CHANNEL:
+            ch = _parse(Channel, data[body:end])
+            channels[ch.id] = ch
+        elif op == Opcode.CHUNK_INDEX:
+            ci = _parse(ChunkIndex, data[body:end])
+            if ci.chunk_start_offset >= summary_start or data[ci.chunk_start_offset] != Opcode.CHUNK:
+                return None
+            chunks[ci.chunk_start_offset] = set(ci.message_index_offsets)
+        pos = end
+    return schemas, channels, chunks
 
 
 def _parse(cls: Any, body: bytes) -> Any:
@@ -174,7 +213,9 @@ def _index_messages(buf: bytes, pos: int, end: int, out_records: list) -> tuple[
     return (np.concatenate(cids), np.concatenate(logs), np.concatenate(starts), np.concatenate(lens))
 
 
-def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False) -> ScanResult:
+def scan(
+    path: str | Path, *, validate_crcs: bool = True, progress: bool = False, topics: Any = None
+) -> ScanResult:
     """Scan an MCAP file record by record.
 
     Parameters
@@ -185,6 +226,11 @@ def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False
         Check every chunk's CRC-32 of its uncompressed data (and the data section CRC).
     progress : bool, optional
         Show a tqdm bar over the bytes of the file.
+    topics : set of str, optional
+        Only these topics are wanted: when the summary section is intact (its CRC checks
+        out and its chunk indexes point at chunks), chunks whose message indexes list none
+        of their channels are passed over undecompressed. A damaged or missing summary
+        falls back to decoding every chunk.
 
     Returns
     -------
@@ -215,6 +261,15 @@ def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False
 
         bar = tqdm(total=n, unit="B", unit_scale=True, desc=path.name)
     mview = memoryview(data)
+    skip_chunks: dict[int, set[int]] = {}
+    summ = _read_summary(data, n)
+    if summ is not None:
+        res.indexed = True
+        res.schemas.update(summ[0])
+        res.channels.update(summ[1])
+        if topics is not None:
+            wanted = {cid for cid, ch in summ[1].items() if ch.topic in topics}
+            skip_chunks = {off: ids for off, ids in summ[2].items() if ids and not ids & wanted}
     pos = 8
     loose = ([], [], [], [])
     pending_loss: list[int] = []  # messages lost in the last skipped chunk (from its message indexes)
@@ -231,7 +286,9 @@ def scan(path: str | Path, *, validate_crcs: bool = True, progress: bool = False
                     (pos, f"{_opname(op)} record cut off by the end of the file: needs {length} bytes, {n - body} left")
                 )
                 break
-            if op == Opcode.CHUNK:
+            if op == Opcode.CHUNK and pos in skip_chunks:
+                res.chunks_skipped_by_index += 1
+            elif op == Opcode.CHUNK:
                 try:
                     chunk = _read_chunk(mview, body, end)
                     raw = _decompress(chunk)

@@ -103,9 +103,9 @@ class _Decoders:
 class _Log:
     """A scanned log with per-channel message access."""
 
-    def __init__(self, path: str | Path, *, progress: bool = False) -> None:
+    def __init__(self, path: str | Path, *, progress: bool = False, topics: Any = None) -> None:
         self.path = Path(path)
-        self.scan: ScanResult = scan(self.path, progress=progress)
+        self.scan: ScanResult = scan(self.path, progress=progress, topics=topics)
         self.decoders = _Decoders()
         self.by_topic: dict[str, list[int]] = defaultdict(list)
         for cid, ch in sorted(self.scan.channels.items()):
@@ -564,7 +564,10 @@ def read_mcap(
     it is interpolated (cubic spline) within the common time span of all topics, after an
     anti-alias low-pass when its rate exceeds `fs` (:func:`~vibroscope.io.timebase.resample_to_grid`).
     """
-    log = _Log(path, progress=progress)
+    wanted = None
+    if channels is not None:  # every prefix that could be the topic (matched exactly after the scan)
+        wanted = {c[:i] for c in channels for i in range(1, len(c) + 1) if i == len(c) or c[i] in ".["}
+    log = _Log(path, progress=progress, topics=wanted)
     skipped: list[dict] = [{"offset": o, "reason": r} for o, r in log.scan.skipped]
     warnings: list[str] = list(log.scan.warnings)
     for o, r in log.scan.skipped:
@@ -710,5 +713,7 @@ def read_mcap(
         "skipped": skipped,
         "fast_path": fast_used,
         "t0_ns": int(start),
+        "indexed": log.scan.indexed,
+        "chunks_skipped_by_index": log.scan.chunks_skipped_by_index,
     }
     return Signals(np.vstack(data), fs, names, units, start * 1e-9, meta)
