@@ -1,0 +1,102 @@
+"""MAC, mode pairing and the ModalModel container."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from vibroscope.modal import ModalModel, Mode, mac, mac_matrix, match_modes, mpc, normalize_shapes
+
+
+def test_mac_identical_orthogonal_scaled():
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal(6) + 1j * rng.standard_normal(6)
+    assert mac(a, a)[0, 0] == pytest.approx(1.0)
+    # complex scale invariance
+    assert mac(a, (-2.5 + 4j) * a)[0, 0] == pytest.approx(1.0)
+    # orthogonal (Hermitian inner product zero)
+    b = rng.standard_normal(6) + 1j * rng.standard_normal(6)
+    b_orth = b - (a.conj() @ b) / (a.conj() @ a) * a
+    assert mac(a, b_orth)[0, 0] == pytest.approx(0.0, abs=1e-15)
+    assert mac([1, 0, 0], [0, 1, 0])[0, 0] == 0.0
+
+
+def test_mac_matrix_shape_and_values():
+    A = np.eye(4)[:3]
+    B = np.eye(4)[[2, 0]]
+    M = mac_matrix(A, B)
+    assert M.shape == (3, 2)
+    assert np.array_equal(M, [[0, 1], [0, 0], [1, 0]])
+    # auto-MAC is symmetric with a unit diagonal
+    rng = np.random.default_rng(1)
+    S = rng.standard_normal((5, 8))
+    auto = mac(S)
+    assert np.allclose(auto, auto.T) and np.allclose(np.diag(auto), 1)
+    # known value: MAC([1,1],[1,0]) = 1/2
+    assert mac([1, 1], [1, 0])[0, 0] == pytest.approx(0.5)
+
+
+def test_mac_errors_and_zero():
+    with pytest.raises(ValueError, match="points"):
+        mac(np.ones(3), np.ones(4))
+    assert np.isnan(mac(np.zeros(3), np.ones(3))[0, 0])
+
+
+def test_match_modes_permuted():
+    rng = np.random.default_rng(2)
+    shapes = np.linalg.qr(rng.standard_normal((5, 5)))[0].T  # orthonormal rows
+    f = np.array([3.0, 7.0, 12.0, 20.0, 31.0])
+    perm = [3, 0, 4, 1]  # a subset, shuffled
+    est = ModalModel(f[perm] * 1.01, np.full(4, 0.01), shapes[perm] * 2j, list("abcde"), "test")
+    m = match_modes(est, (f, shapes))
+    assert m.pairs.tolist() == [[1, 0], [3, 1], [0, 3], [2, 4]]
+    assert np.allclose(m.frequency_errors, 0.01)
+    assert np.allclose(m.mac, 1)
+    assert len(match_modes(est, (f, shapes), max_frequency_error=0.005).pairs) == 0
+
+
+def test_normalize_and_mpc():
+    s = normalize_shapes([[0.5j, -2j, 1j]])
+    assert np.allclose(s, [[-0.25, 1, -0.5]])
+    assert mpc(s)[0] == pytest.approx(1.0)
+    assert mpc([1, 1j])[0] == pytest.approx(0.0)
+
+
+def test_modal_model_container():
+    m = ModalModel([2.0, 5.0], [0.01, np.nan], [[1, 0.5j], [-0.3, 1]], ["/a.x", "/b.x"], "fdd",
+                   {"mpc": np.ones(2)})
+    assert len(m) == 2
+    modes = list(m)
+    assert all(isinstance(x, Mode) for x in modes)
+    assert modes[1].frequency_hz == 5.0 and modes[1].index == 1 and modes[1].method == "fdd"
+    assert m[-1].frequency_hz == 5.0
+    d = m.to_dict()
+    json.dumps(d)  # JSON-ready
+    assert d["method"] == "fdd" and d["points"] == ["/a.x", "/b.x"]
+    e = d["modes"][0]
+    assert set(e) == {"frequency_hz", "damping_ratio", "shape", "method"}
+    assert e["shape"] == {"/a.x": [1.0, 0.0], "/b.x": [0.0, 0.5]}
+    assert d["modes"][1]["damping_ratio"] is None
+    assert not m.shapes.flags.writeable
+    with pytest.raises(ValueError):
+        ModalModel([1.0], [0.1, 0.2], [[1, 2]], ["a", "b"], "x")
+    with pytest.raises(ValueError):
+        ModalModel([1.0], [0.1], [[1, 2, 3]], ["a", "b"], "x")
+    assert "2 modes" in repr(m)
+
+
+def test_import_boundaries():
+    """``vibroscope.modal`` imports only spectral and signals of vibroscope, and no plotting."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, vibroscope.modal; "
+        "bad = [m for m in sys.modules if m.startswith(('vibroscope.io', 'vibroscope.viewers', "
+        "'vibroscope.models', 'vibroscope.gap', 'matplotlib', 'rerun', 'mcap', 'dask'))]; "
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stdout + r.stderr
