@@ -94,21 +94,46 @@ def test_flipped_byte_in_chunk(tmp_path, log, which):
     assert info.skipped and info.skipped[0][0] == off
 
 
-def test_crc_damage_detected_in_uncompressed_chunk(tmp_path, log):
-    p, data, x, chunks = log
-    if b"zstd" in data[chunks[0][0] : chunks[0][0] + 64]:
-        pytest.skip("the CRC case is the uncompressed chunk")
-    off, end, n = chunks[2]
-    # flip a byte inside a float of a message payload: only the CRC can tell
-    pos = end - 40
+def test_crc_damage_detected_in_uncompressed_chunk(tmp_path):
+    """A flipped bit inside a float of an uncompressed chunk: only the CRC can tell. The
+    mcap library's reader (validate_crcs off by default) returns the altered number; ours
+    drops the chunk and says where."""
+    from mcap.reader import make_reader
+
+    x = np.random.default_rng(9).standard_normal((1, N))
+    p = write_ros2_mcap(tmp_path / "u.mcap", Signals(x, 1000.0, [CH], t0=50.0), chunk_size=32_000,
+                        compression="none")
+    data = p.read_bytes()
+    blocks = scan(p).blocks
+    b = blocks[2]
+    end = b.file_offset + 9 + struct.unpack_from("<Q", data, b.file_offset + 1)[0]
+    pos = end - 40  # inside the last message's linear_acceleration_covariance... or a float before it
     bad = bytearray(data)
     bad[pos] ^= 0x01
     q = tmp_path / "crc.mcap"
     q.write_bytes(bytes(bad))
     r = _read(q)
-    sk = [s for s in r.meta["skipped"] if s.get("offset") == off]
-    assert sk and "CRC-32 mismatch" in sk[0]["reason"]
-    assert np.isin(r.data[0], x).all() and r.n_samples == N - n
-    # the mcap library itself would have returned the altered number without validate_crcs
-    raw = iter_raw_messages(p)
-    assert len(raw) == N
+    sk = [s for s in r.meta["skipped"] if s.get("offset") == b.file_offset]
+    assert sk and "CRC-32 mismatch" in sk[0]["reason"] and f"({b.n} messages lost)" in sk[0]["reason"]
+    assert r.n_samples == N - b.n and np.isin(r.data[0], x[0]).all()
+    with open(q, "rb") as fh:  # the library without CRC checks hands back the altered payload
+        payloads = [m.data for _, _, m in make_reader(fh).iter_messages()]
+    with open(p, "rb") as fh:
+        original = [m.data for _, _, m in make_reader(fh).iter_messages()]
+    assert len(payloads) == N and sum(a != o for a, o in zip(payloads, original)) == 1
+    # the summary is intact, so the reader still knows every topic; the data section CRC is wrong
+    assert any("data section CRC-32 mismatch" in w for w in r.meta["warnings"])
+
+
+def test_info_command_on_damaged_log(tmp_path, log, capsys):
+    from vibroscope.cli import main
+
+    p, data, x, chunks = log
+    q = tmp_path / "cut.mcap"
+    q.write_bytes(data[: chunks[2][0] + 100])
+    assert main(["info", str(q)]) == 0
+    out = capsys.readouterr().out
+    assert f"skipped at byte offset {chunks[2][0]}" in out
+    q.write_bytes(data[:20])
+    assert main(["info", str(q)]) == 1
+    assert "byte offset" in capsys.readouterr().err

@@ -1,7 +1,11 @@
 """Record-level MCAP scanning that survives damage.
 
-One linear pass over the file, record by record, with every chunk's CRC checked
-(``mcap.stream_reader`` checks CRCs only when asked; we always ask). A chunk that fails to
+The summary section is used when it is intact (its CRC checks out and its chunk indexes
+point at chunk records): its channels are known up front and chunks holding none of the
+wanted topics are passed over. The data section is then read in one linear pass, record by
+record, with every chunk's CRC-32 checked (``mcap.reader``/``mcap.stream_reader`` check
+CRCs only with ``validate_crcs=True``; here always), and the data section CRC when the
+writer stored one. A damaged summary, or none, just means every chunk is read. A chunk that fails to
 decompress or whose CRC does not match is skipped whole and reported with its byte offset;
 a record cut off by the end of the file stops the scan and is reported. Everything before
 the damage is kept. Message records are not decoded here: they are indexed as arrays

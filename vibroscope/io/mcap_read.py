@@ -42,10 +42,19 @@ ACCELERATION_TYPES = ("sensor_msgs/msg/Imu", "sensor_msgs/Imu")
 
 
 def unit_for(fields: Sequence[str | int]) -> str:
-    """SI unit of a message field by its name (``""`` when unknown).
+    """SI unit of a message field by its name.
 
-    ``linear_acceleration`` -> ``m/s^2``, ``angular_velocity`` -> ``rad/s``,
-    ``wrench.force``/``force`` -> ``N``, ``wrench.torque``/``torque`` -> ``N m``.
+    Parameters
+    ----------
+    fields : sequence of (str or int)
+        A field path, as in :attr:`MessagePath.fields`.
+
+    Returns
+    -------
+    str
+        ``linear_acceleration`` -> ``m/s^2``, ``angular_velocity`` -> ``rad/s``,
+        ``wrench.force``/``force`` -> ``N``, ``wrench.torque``/``torque`` -> ``N m``,
+        otherwise ``""``.
     """
     names = [f for f in fields if isinstance(f, str)]
     if "linear_acceleration" in names:
@@ -226,8 +235,8 @@ def _fast_extract(log: _Log, cid: int, names: list[str]) -> tuple[np.ndarray, np
 
 
 def _generic_extract(
-    log: _Log, cid: int, fields: list[tuple[str | int, ...]], skipped: list[dict]
-) -> tuple[np.ndarray, np.ndarray, str]:
+    log: _Log, cid: int, fields: list[tuple[str | int, ...]], skipped: list[dict], progress: bool = False
+) -> tuple[np.ndarray, np.ndarray, str, np.ndarray]:
     """(stamps ns, values (k, n), time source, log times ns) by decoding every message."""
     ch = log.scan.channels[cid]
     dec, reason = log.decoders.get(ch, log.schema(cid))
@@ -240,7 +249,12 @@ def _generic_extract(
     keep = np.ones(n, bool)
     use_header: bool | None = None
     bad = 0
-    for i, (off, p) in enumerate(log.payloads(cid)):
+    it = log.payloads(cid)
+    if progress and n > 10_000:
+        from tqdm.auto import tqdm
+
+        it = tqdm(it, total=n, unit="msg", desc=f"decoding {ch.topic}")
+    for i, (off, p) in enumerate(it):
         try:
             msg = dec(bytes(p))
         except Exception as exc:  # noqa: BLE001 - one bad message does not stop the read
@@ -404,9 +418,23 @@ def mcap_info(path: str | Path) -> LogInfo:
 
 
 def iter_raw_messages(path: str | Path) -> list[tuple[str, int, int, bytes]]:
-    """Every intact message, undecoded: (topic, channel id, log time in ns, payload bytes).
+    """Every intact message, undecoded.
 
-    In file order. Damage is skipped as in :func:`read_mcap`.
+    Parameters
+    ----------
+    path : str or Path
+        The MCAP file.
+
+    Returns
+    -------
+    list of (str, int, int, bytes)
+        (topic, channel id, log time in ns, payload) in file order; messages outside
+        chunks come after the chunked ones. Damage is skipped as in :func:`read_mcap`.
+
+    Raises
+    ------
+    LogFormatError
+        If nothing of the file can be read.
     """
     log = _Log(path)
     out = []
@@ -616,7 +644,7 @@ def read_mcap(
             logt = log.log_times(cid)
             fast_used[topic] = True
         else:
-            stamps, vals, source, logt = _generic_extract(log, cid, fields, skipped)
+            stamps, vals, source, logt = _generic_extract(log, cid, fields, skipped, progress)
             fast_used[topic] = False
         if source == "header.stamp" and stamps.size > 1 and np.count_nonzero(np.diff(stamps) == 0) > 0.5 * (stamps.size - 1):
             warnings.append(

@@ -140,7 +140,7 @@ def _write(path, signals: Signals, plan, *, frame_id: str, chunk_size: int, comp
         raise ValueError("stamps beyond 2038 do not fit builtin_interfaces/Time.sec (int32)")
     n = signals.n_samples
     with open(path, "wb") as fh:
-        w = Writer(fh, chunk_size=chunk_size, compression=comp[compression], enable_crcs=True)
+        w = Writer(fh, chunk_size=chunk_size, compression=comp[compression], enable_crcs=True, enable_data_crcs=True)
         ros = any(k != "json" for k, _ in plan.values())
         w.start(profile="ros2" if ros else "", library="vibroscope")
         schema_ids: dict[str, int] = {}
