@@ -17,7 +17,18 @@ _ACC_UNITS = {"m/s^2", "m/s2", "m/s**2", "m s^-2", "m s-2", "m/s/s"}
 
 
 def normalize_unit(u: str) -> str:
-    """Normalise unit spellings (``m/s2`` -> ``m/s^2``; ``NONE`` -> ``""``)."""
+    """Normalise a unit spelling.
+
+    Parameters
+    ----------
+    u : str
+        A unit as found in a file (``m/s2``, ``NONE``).
+
+    Returns
+    -------
+    str
+        ``m/s^2`` for the spellings of an acceleration, ``""`` for ``NONE``, else `u`.
+    """
     u = (u or "").strip()
     if u.upper() == "NONE":
         return ""
@@ -25,7 +36,23 @@ def normalize_unit(u: str) -> str:
 
 
 def parse_columns(spec: str | Sequence[int] | None) -> list[int] | None:
-    """``"0-17"``, ``"0,2,5-7"`` or a sequence of ints -> list of 0-based column indices."""
+    """Parse a column selection.
+
+    Parameters
+    ----------
+    spec : str or sequence of int or None
+        ``"0-17"``, ``"0,2,5-7"`` (inclusive ranges, 0-based) or indices.
+
+    Returns
+    -------
+    list of int or None
+        The column indices (None for None).
+
+    Raises
+    ------
+    ValueError
+        If a part does not parse or a range runs backwards.
+    """
     if spec is None:
         return None
     if not isinstance(spec, str):
@@ -270,8 +297,25 @@ def read_uff58(path: str | Path) -> Signals:
 
 
 def read_any(path: str | Path, **kw) -> Signals:
-    """Dispatch on the suffix: ``.csv``/``.txt`` -> :func:`read_csv`, ``.mat`` -> :func:`read_mat`,
-    ``.uff``/``.unv`` -> :func:`read_uff58` (keyword arguments that apply are passed on)."""
+    """Read a CSV, .mat or UFF 58 file by its suffix.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.csv``/``.txt``/``.tsv`` -> :func:`read_csv`, ``.mat`` -> :func:`read_mat`,
+        ``.uff``/``.unv`` -> :func:`read_uff58`.
+    **kw
+        Keyword arguments of the reader (those that do not apply to .mat/.uff are dropped).
+
+    Returns
+    -------
+    Signals
+
+    Raises
+    ------
+    LogFormatError
+        For an unknown suffix.
+    """
     path = Path(path)
     suf = path.suffix.lower()
     if suf in (".csv", ".txt", ".tsv"):

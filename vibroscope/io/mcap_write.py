@@ -22,7 +22,18 @@ WRENCH = "geometry_msgs/msg/WrenchStamped"
 
 
 def stamps_ns(signals: Signals) -> np.ndarray:
-    """Sample stamps ``t0 + k / fs`` as int64 ns, shape (n_samples,)."""
+    """Sample stamps of `signals` as written to MCAP.
+
+    Parameters
+    ----------
+    signals : Signals
+        Uses `t0` (s) and `fs` (Hz).
+
+    Returns
+    -------
+    ndarray of int64, shape (n_samples,)
+        ``round(t0 * 1e9) + round(k * 1e9 / fs)`` in ns.
+    """
     t0 = int(round(signals.t0 * 1e9))
     return t0 + np.round(np.arange(signals.n_samples) * (1e9 / signals.fs)).astype(np.int64)
 

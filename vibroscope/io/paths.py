@@ -40,7 +40,20 @@ class MessagePath:
 
 
 def format_path(topic: str, fields: Sequence[str | int]) -> str:
-    """The string form of `topic` and `fields` (inverse of :func:`parse_path`)."""
+    """The string form of a message path (inverse of :func:`parse_path`).
+
+    Parameters
+    ----------
+    topic : str
+        Topic name; ``""`` gives the bare field path with a leading ``.``.
+    fields : sequence of (str or int)
+        Field names and array indices.
+
+    Returns
+    -------
+    str
+        ``topic.a.b[2]``.
+    """
     out = topic
     for f in fields:
         out += f"[{f}]" if isinstance(f, int) else f".{f}"
