@@ -289,3 +289,17 @@ def test_mr_damper_element_matches_mr_damper_module():
         np.testing.assert_allclose(el.state_derivative(x, v, (z, y)), [zdot, ydot], rtol=1e-12)
         f_ref = mr.mr_damper_force(x, v, y, z, coeffs) + coeffs.k1 * coeffs.x0  # element drops the preload
         assert el.force(x, v, (z, y)) == pytest.approx(f_ref, rel=1e-12)
+
+
+def test_kernels_agree_on_multi_dof():
+    """The fast single-element kernel (numpy state update for n > 1) and the generic one."""
+    model = LumpedModel.chain([1.0, 0.5], [4e4, 2e4], [8.0, 3.0], nonlinear=(CubicSpring(("m2", "m1"), k3=5e9),))
+    n = 4001
+    t = np.linspace(0, 0.4, n)
+    U = (30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 61 * t))[None]
+    integ = _Integrator(model, t[1])
+    Qs, Gs = integ._run_scalar(U, None, None)
+    Qg, Gg = integ._run_general(U, None, None)
+    for a, b in zip(Qs, Qg):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(a).max())
+    np.testing.assert_allclose(Gs, Gg, rtol=0, atol=1e-9 * np.abs(Gs).max())

@@ -264,94 +264,112 @@ class _Integrator:
 
     def run(self, U: np.ndarray, q0=None, s0=None):
         """Integrate over the fine-grid input U (n_in, N); returns q (2n, N), g (n_e, N)."""
-        if len(self.els) == 1 and self.n == 1 and self.els[0].n_states <= 1:
+        if len(self.els) == 1 and self.els[0].n_states <= 1:
             return self._run_scalar(U, q0, s0)
         return self._run_general(U, q0, s0)
 
-    # generic, numpy per step
+    # generic: several elements and/or several internal states; residuals in Python floats,
+    # Newton with a forward-difference Jacobian
     def _run_general(self, U, q0, s0):
         n_e, n_s, dt = len(self.els), self.n_s, self.dt
         N = U.shape[1]
-        w = self.Gu @ (U[:, :-1] + U[:, 1:])
+        wT = np.ascontiguousarray((self.Gu @ (U[:, :-1] + U[:, 1:])).T)
         q = np.zeros(2 * self.n) if q0 is None else np.array(q0, float)
-        s = np.zeros(n_s) if s0 is None else np.array(s0, float)
+        s = [0.0] * n_s if s0 is None else [float(v) for v in np.ravel(s0)]
         Q = np.empty((2 * self.n, N))
         G = np.empty((n_e, N))
         Q[:, 0] = q
-        els, sl = self.els, self.state_slices
+        els = self.els
+        # per element: (element, state start, n_states, linear k, linear c, S rows for d and v)
+        info = []
+        for i, e in enumerate(els):
+            st0 = self.state_slices[i].start
+            info.append((e, st0, e.n_states, e.linear_stiffness, e.linear_damping,
+                         self.S[2 * i].tolist(), self.S[2 * i + 1].tolist()))
+        m = n_e + n_s
+        half = 0.5 * dt
+        P, Gf, E = self.P, self.Gf, self.E
 
-        def forces(ev, s):
-            g = np.empty(n_e)
-            sd = np.empty(n_s)
-            for i, e in enumerate(els):
+        def forces(ev, x):
+            """remainder forces g (n_e) and state derivatives (n_s) at kinematics ev given
+            unknowns x = [g (ignored here), states]"""
+            g = [0.0] * n_e
+            sd = [0.0] * n_s
+            for i, (e, st0, ns, kl, cl, _, _) in enumerate(info):
                 d, v = ev[2 * i], ev[2 * i + 1]
-                st = s[sl[i]] if e.n_states else None
-                g[i] = self.remainder(e, d, v, st)
-                if e.n_states:
-                    sd[sl[i]] = e.state_derivative(d, v, st)
+                st = x[n_e + st0 : n_e + st0 + ns] if ns else None
+                g[i] = e.force(d, v, st) - kl * d - cl * v
+                if ns == 1:
+                    sd[st0] = float(e.state_derivative(d, v, st))
+                elif ns:
+                    sd[st0 : st0 + ns] = [float(c) for c in e.state_derivative(d, v, st)]
             return g, sd
 
-        ev = self.E @ q
-        g, sd = forces(ev, s)
+        def kin(ep, x):
+            ev = list(ep)
+            for i, (_, _, _, _, _, Sd, Sv) in enumerate(info):
+                ev[2 * i] += sum(a * b for a, b in zip(Sd, x[:n_e]))
+                ev[2 * i + 1] += sum(a * b for a, b in zip(Sv, x[:n_e]))
+            return ev
+
+        ev = (E @ q).tolist()
+        g, sd = forces(ev, [0.0] * n_e + s)
         G[:, 0] = g
-        m = n_e + n_s
         for k in range(N - 1):
-            qp = self.P @ q + w[:, k] + self.Gf @ g
-            ep = self.E @ qp
-            base_s = s + 0.5 * dt * sd
-            x = np.concatenate([g, s])  # unknowns [g+, s+], predictor = previous
+            qp = P @ q + wT[k] + Gf @ np.asarray(g)
+            ep = (E @ qp).tolist()
+            base = [s[j] + half * sd[j] for j in range(n_s)]
 
             def resid(x):
-                ee = ep + self.S @ x[:n_e]
-                gg, ss = forces(ee, x[n_e:])
-                return np.concatenate([x[:n_e] - gg, x[n_e:] - base_s - 0.5 * dt * ss]), gg, ss
+                gg, ss = forces(kin(ep, x), x)
+                return [x[i] - gg[i] for i in range(n_e)] + [x[n_e + j] - base[j] - half * ss[j] for j in range(n_s)]
 
+            x = list(g) + list(s)
             for _ in range(50):
-                r, gg, ss = resid(x)
+                r = resid(x)
                 J = np.empty((m, m))
                 for j in range(m):
                     hstep = 1e-7 * max(1.0, abs(x[j]))
-                    xx = x.copy()
+                    xx = list(x)
                     xx[j] += hstep
-                    J[:, j] = (resid(xx)[0] - r) / hstep
+                    rj = resid(xx)
+                    J[:, j] = [(a - b) / hstep for a, b in zip(rj, r)]
                 dx = np.linalg.solve(J, r)
-                x = x - dx
-                if np.all(np.abs(dx) <= 1e-13 * np.maximum(1.0, np.abs(x))):
+                x = [a - b for a, b in zip(x, dx.tolist())]
+                if all(abs(b) <= 1e-13 * max(1.0, abs(a)) for a, b in zip(x, dx.tolist())):
                     break
             g = x[:n_e]
             s = x[n_e:]
-            q = qp + self.Gf @ g
-            ev = self.E @ q
-            g, sd = forces(ev, s)
+            q = qp + Gf @ np.asarray(g)
+            ev = (E @ q).tolist()
+            g, sd = forces(ev, x)
             Q[:, k + 1] = q
             G[:, k + 1] = g
         return Q, G
 
-    # one DOF, one nonlinear element with <= 1 state: pure-float loop (fast)
+    # one nonlinear element with <= 1 state: scalar Newton in Python floats (fast); the
+    # linear state update in floats for one DOF, in numpy otherwise
     def _run_scalar(self, U, q0, s0):
         e = self.els[0]
         dt = self.dt
-        (p11, p12), (p21, p22) = self.P
-        gf1, gf2 = self.Gf[:, 0]
-        lv = self.L[0, 0]
+        n2 = 2 * self.n
         s_d, s_v = self.S[0, 0], self.S[1, 0]
         w = self.Gu @ (U[:, :-1] + U[:, 1:])
-        w1, w2 = w[0].tolist(), w[1].tolist()
         N = U.shape[1]
-        x1, x2 = (0.0, 0.0) if q0 is None else (float(q0[0]), float(q0[1]))
+        q = np.zeros(n2) if q0 is None else np.array(q0, float)
         kl, cl = e.linear_stiffness, e.linear_damping
         has_state = e.n_states == 1
         z = 0.0 if s0 is None else float(np.ravel(s0)[0])
-        X1 = [0.0] * N
-        X2 = [0.0] * N
+        Q = np.empty((n2, N))
+        Q[:, 0] = q
         Gl = [0.0] * N
-        X1[0], X2[0] = x1, x2
         f, sdot = e.force, e.state_derivative
         bw = type(e).__name__ == "BoucWen" and e.nu == 1.0
         if bw:
             al, be, ga, de = e.alpha, e.beta, e.gamma, e.delta
         half = 0.5 * dt
-        d, v = lv * x1, lv * x2
+        E0, E1 = self.E[0], self.E[1]
+        d, v = float(E0 @ q), float(E1 @ q)
         if has_state:
             g = f(d, v, (z,)) - kl * d - cl * v
             zd = sdot(d, v, (z,))
@@ -359,10 +377,8 @@ class _Integrator:
             g = f(d, v, None) - kl * d - cl * v
             zd = 0.0
         Gl[0] = g
-        for k in range(N - 1):
-            qp1 = p11 * x1 + p12 * x2 + w1[k] + gf1 * g
-            qp2 = p21 * x1 + p22 * x2 + w2[k] + gf2 * g
-            dp, vp = lv * qp1, lv * qp2
+
+        def newton(dp, vp, g, z, zd):
             if bw:
                 # unknown z+ (= g+): r(z) = z - zb - h/2 zdot(v(z), z), v = vp + s_v z
                 zb = z + half * zd
@@ -380,50 +396,69 @@ class _Integrator:
                     zz -= dz
                     if abs(dz) <= 1e-15 * (1.0 + abs(zz)) + 1e-300:
                         break
-                z = zz
-                g = z
-                zd = al * (vp + s_v * z) - be * (ga * abs(vp + s_v * z) * z + de * (vp + s_v * z) * abs(z))
-            else:
-                gg = g
-                zz = z
-                for _ in range(60):
-                    dd, vv = dp + s_d * gg, vp + s_v * gg
-                    if has_state:
-                        r1 = gg - (f(dd, vv, (zz,)) - kl * dd - cl * vv)
-                        r2 = zz - z - half * (zd + sdot(dd, vv, (zz,)))
-                        hs = 1e-7 * max(1.0, abs(gg))
-                        hz = 1e-7 * max(1.0, abs(zz))
-                        d1, v1 = dp + s_d * (gg + hs), vp + s_v * (gg + hs)
-                        a11 = 1.0 - ((f(d1, v1, (zz,)) - kl * d1 - cl * v1) - (gg - r1)) / hs
-                        a21 = -half * (sdot(d1, v1, (zz,)) - sdot(dd, vv, (zz,))) / hs
-                        a12 = -((f(dd, vv, (zz + hz,)) - kl * dd - cl * vv) - (gg - r1)) / hz
-                        a22 = 1.0 - half * (sdot(dd, vv, (zz + hz,)) - sdot(dd, vv, (zz,))) / hz
-                        det = a11 * a22 - a12 * a21
-                        dg = (a22 * r1 - a12 * r2) / det
-                        dz = (a11 * r2 - a21 * r1) / det
-                        gg -= dg
-                        zz -= dz
-                        if abs(dg) <= 1e-13 * (1.0 + abs(gg)) and abs(dz) <= 1e-13 * (1.0 + abs(zz)):
-                            break
-                    else:
-                        r1 = gg - (f(dd, vv, None) - kl * dd - cl * vv)
-                        hs = 1e-7 * max(1.0, abs(gg))
-                        d1, v1 = dp + s_d * (gg + hs), vp + s_v * (gg + hs)
-                        a11 = 1.0 - ((f(d1, v1, None) - kl * d1 - cl * v1) - (gg - r1)) / hs
-                        dg = r1 / a11
-                        gg -= dg
-                        if abs(dg) <= 1e-13 * (1.0 + abs(gg)):
-                            break
-                g, z = gg, zz
+                vv = vp + s_v * zz
+                return zz, zz, al * vv - be * (ga * abs(vv) * zz + de * vv * abs(zz))
+            gg = g
+            zz = z
+            for _ in range(60):
+                dd, vv = dp + s_d * gg, vp + s_v * gg
                 if has_state:
-                    dd, vv = dp + s_d * g, vp + s_v * g
-                    zd = sdot(dd, vv, (z,))
-            x1 = qp1 + gf1 * g
-            x2 = qp2 + gf2 * g
-            X1[k + 1] = x1
-            X2[k + 1] = x2
-            Gl[k + 1] = g
-        return np.array([X1, X2]), np.array([Gl])
+                    r1 = gg - (f(dd, vv, (zz,)) - kl * dd - cl * vv)
+                    r2 = zz - z - half * (zd + sdot(dd, vv, (zz,)))
+                    hs = 1e-7 * max(1.0, abs(gg))
+                    hz = 1e-7 * max(1.0, abs(zz))
+                    d1, v1 = dp + s_d * (gg + hs), vp + s_v * (gg + hs)
+                    a11 = 1.0 - ((f(d1, v1, (zz,)) - kl * d1 - cl * v1) - (gg - r1)) / hs
+                    a21 = -half * (sdot(d1, v1, (zz,)) - sdot(dd, vv, (zz,))) / hs
+                    a12 = -((f(dd, vv, (zz + hz,)) - kl * dd - cl * vv) - (gg - r1)) / hz
+                    a22 = 1.0 - half * (sdot(dd, vv, (zz + hz,)) - sdot(dd, vv, (zz,))) / hz
+                    det = a11 * a22 - a12 * a21
+                    dg = (a22 * r1 - a12 * r2) / det
+                    dz = (a11 * r2 - a21 * r1) / det
+                    gg -= dg
+                    zz -= dz
+                    if abs(dg) <= 1e-13 * (1.0 + abs(gg)) and abs(dz) <= 1e-13 * (1.0 + abs(zz)):
+                        break
+                else:
+                    r1 = gg - (f(dd, vv, None) - kl * dd - cl * vv)
+                    hs = 1e-7 * max(1.0, abs(gg))
+                    d1, v1 = dp + s_d * (gg + hs), vp + s_v * (gg + hs)
+                    a11 = 1.0 - ((f(d1, v1, None) - kl * d1 - cl * v1) - (gg - r1)) / hs
+                    dg = r1 / a11
+                    gg -= dg
+                    if abs(dg) <= 1e-13 * (1.0 + abs(gg)):
+                        break
+            zdn = sdot(dp + s_d * gg, vp + s_v * gg, (zz,)) if has_state else 0.0
+            return gg, zz, zdn
+
+        if self.n == 1:
+            (p11, p12), (p21, p22) = self.P
+            gf1, gf2 = self.Gf[:, 0]
+            lv = self.L[0, 0]
+            w1, w2 = w[0].tolist(), w[1].tolist()
+            x1, x2 = float(q[0]), float(q[1])
+            X1 = [x1] * N
+            X2 = [x2] * N
+            for k in range(N - 1):
+                qp1 = p11 * x1 + p12 * x2 + w1[k] + gf1 * g
+                qp2 = p21 * x1 + p22 * x2 + w2[k] + gf2 * g
+                g, z, zd = newton(lv * qp1, lv * qp2, g, z, zd)
+                x1 = qp1 + gf1 * g
+                x2 = qp2 + gf2 * g
+                X1[k + 1] = x1
+                X2[k + 1] = x2
+                Gl[k + 1] = g
+            Q = np.array([X1, X2])
+        else:
+            P, gf = self.P, self.Gf[:, 0]
+            wT = np.ascontiguousarray(w.T)
+            for k in range(N - 1):
+                qp = P @ q + wT[k] + gf * g
+                g, z, zd = newton(float(E0 @ qp), float(E1 @ qp), g, z, zd)
+                q = qp + gf * g
+                Q[:, k + 1] = q
+                Gl[k + 1] = g
+        return Q, np.array([Gl])
 
 
 def _outputs_from_states(model: LumpedModel, Q, G, U):
