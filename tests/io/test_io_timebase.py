@@ -58,6 +58,8 @@ def test_faulty_log_reported(tmp_path):
     assert 1e-5 < tb["jitter_s"] < 1e-4 and tb["max_dev_s"] <= 2.0e-4 + 1e-9
     assert tb["fs_est"] == pytest.approx(500.0, rel=1e-3)
     assert tb["resampled"] is True
+    rep = r.meta["timebase_reports"]["/imu"]
+    assert rep.resampled and rep.duplicates == 1 and rep.time_source == "header.stamp"
     w = " ".join(r.meta["warnings"])
     assert "duplicate" in w and "out-of-order" in w and "gaps" in w and "resampled" in w
 

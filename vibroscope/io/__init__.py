@@ -14,6 +14,8 @@ from vibroscope.io.mcap_read import (
     select_acceleration_channels,
     unit_for,
 )
+from vibroscope.io.convert import convert_to_mcap, read_csv, read_mat, read_uff58
+from vibroscope.io.mcap_write import write_json_mcap, write_ros2_mcap
 from vibroscope.io.paths import MessagePath, get_field, parse_path
 from vibroscope.io.timebase import TimebaseReport
 
@@ -23,6 +25,12 @@ __all__ = [
     "discover_fields",
     "select_acceleration_channels",
     "iter_raw_messages",
+    "write_ros2_mcap",
+    "write_json_mcap",
+    "read_csv",
+    "read_mat",
+    "read_uff58",
+    "convert_to_mcap",
     "unit_for",
     "LogInfo",
     "TopicInfo",

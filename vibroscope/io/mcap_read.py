@@ -572,7 +572,8 @@ def read_mcap(
         ``data`` shape (n_channels, n_samples) in the fields' units (``units``: m/s^2,
         rad/s, N, N m or ""), ``t0`` the first grid time in s (header stamps, else log
         time). ``meta`` holds ``source``, ``timebase`` (per topic a
-        :meth:`TimebaseReport.as_dict`), ``warnings`` (list of str), ``skipped`` (list of
+        :meth:`TimebaseReport.as_dict`), ``timebase_reports`` (the
+        :class:`~vibroscope.io.timebase.TimebaseReport` objects), ``warnings`` (list of str), ``skipped`` (list of
         dicts: damage with ``offset`` and ``reason``, undecodable channels with ``topic``,
         ``schema``, ``reason``), ``fast_path`` (per topic).
 
@@ -732,11 +733,15 @@ def read_mcap(
     timebase = {
         t: {**reports[t].as_dict(), "resampled": resampled.get(t, False)} for t in topics
     }
+    from dataclasses import replace
+
+    reports_out = {t: replace(reports[t], resampled=resampled.get(t, False)) for t in topics}
     names = [str(parsed[i]) for i in keep]
     units = [unit_for(parsed[i].fields) for i in keep]
     meta = {
         "source": str(log.path),
         "timebase": timebase,
+        "timebase_reports": reports_out,
         "warnings": warnings,
         "skipped": skipped,
         "fast_path": fast_used,
