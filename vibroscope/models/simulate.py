@@ -198,29 +198,41 @@ def _triangle_hold_compensation(U: np.ndarray) -> np.ndarray:
 
 
 def _dlsim_modal(Ad, Bd, Cd, Dd, G2, u, D, u_direct, step):
-    """Outputs ``C x[k step] + D u_direct[k]`` of the FOH recursion driven by `u` from rest
-    (``x(0) = 0``, so ``xi[0] = -G2 u[0]``), via the eigen-decomposition of Ad (each mode a
-    first-order recursion run by lfilter); falls back to a loop if ill-conditioned.
-    ``x = xi + G2 u``; the feedthrough uses `u_direct` (the un-pre-emphasised input)."""
-    n_s, n = Ad.shape[0], u.shape[1]
+    """Outputs ``C x[k step] + D u_direct[k]`` of the FOH recursion ``xi[m+1] = Ad xi[m] + Bd u[m]``
+    driven by the fine-grid `u` from rest (``x(0) = 0``, so ``xi[0] = -G2 u[0]``), with
+    ``x = xi + G2 u``; the feedthrough uses `u_direct` (the coarse, un-pre-emphasised input).
+
+    Diagonalising ``Ad = V diag(lam) V^-1``, each mode is a first-order recursion; over one
+    coarse step of `step` fine steps it is ``eta[k+1] = lam^step eta[k] + sum_j
+    lam^(step-1-j) (W u)[k step + j]``, the inner sum a block product, the outer one
+    :func:`scipy.signal.lfilter` at the coarse rate: memory O(n_modes x n_coarse).
+    Falls back to a loop if the eigenvectors are ill-conditioned.
+    """
+    n_s = Ad.shape[0]
+    n_fine = u.shape[1]
+    n = u_direct.shape[1]
     xi0 = -G2 @ u[:, 0]
     lam, V = np.linalg.eig(Ad)
     if np.linalg.cond(V) < 1e8:
         W = np.linalg.solve(V, Bd)  # (n_s, n_in)
-        drive = W @ u  # (n_s, n)
         eta0 = np.linalg.solve(V, xi0.astype(complex))
+        blocks = u[:, : (n - 1) * step].reshape(u.shape[0], n - 1, step)  # (n_in, n-1, step)
+        powers = lam[:, None] ** np.arange(step - 1, -1, -1)[None, :]  # (n_s, step)
         eta = np.empty((n_s, n), dtype=complex)
         for r in range(n_s):
-            # eta[k+1] = lam eta[k] + drive[k], eta[0] = eta0
+            a = (blocks @ powers[r]).T @ W[r]  # (n-1,)
+            lr = lam[r] ** step
             eta[r, 0] = eta0[r]
-            eta[r, 1:] = signal.lfilter([1.0], [1.0, -lam[r]], drive[r, :-1], zi=[lam[r] * eta0[r]])[0]
+            if n > 1:
+                eta[r, 1:] = signal.lfilter([1.0], [1.0, -lr], a, zi=[lr * eta0[r]])[0]
         x = (V @ eta).real
     else:  # pragma: no cover - defective/ill-conditioned systems
-        x = np.zeros((n_s, n))
-        x[:, 0] = xi0
-        for k in range(n - 1):
-            x[:, k + 1] = Ad @ x[:, k] + Bd @ u[:, k]
-    x = x[:, ::step] + G2 @ u[:, ::step]
+        xf = np.zeros((n_s, n_fine))
+        xf[:, 0] = xi0
+        for k in range(n_fine - 1):
+            xf[:, k + 1] = Ad @ xf[:, k] + Bd @ u[:, k]
+        x = xf[:, ::step][:, :n]
+    x = x + G2 @ u[:, ::step][:, :n]
     return Cd @ x + D @ u_direct
 
 
