@@ -88,3 +88,25 @@ def test_peak_picking_band_too_small(forced):
         peak_picking(H, fmin=10.0, fmax=10.1)
     with pytest.raises(ValueError, match="refine"):
         peak_picking(H, refine="circle")
+
+
+def test_ssi_cov_output_only(ambient):
+    name, model, sig, nperseg = ambient
+    from vibroscope.modal import ssi_cov
+
+    st = ssi_cov(sig, n_lags=30, orders=range(2, 41, 2))
+    assert set(np.unique(st.stable)) <= {0, 1, 2, 3}
+    assert st.shapes.shape == (len(st.frequency), model.n_dofs)
+    est = st.modal_model(fmin=1.0)
+    assert est.method == "ssi_cov"
+    _check(est, model, zeta_tol=0.2)
+
+
+def test_ssi_cov_errors(ambient):
+    name, model, sig, nperseg = ambient
+    from vibroscope.modal import ssi_cov
+
+    with pytest.raises(ValueError, match="orders"):
+        ssi_cov(sig, n_lags=4, orders=[2, 100])
+    with pytest.raises(ValueError, match="fs"):
+        ssi_cov(sig.data, n_lags=10, orders=[4])
