@@ -1,15 +1,16 @@
-"""Sensor coordinates files: where each measurement point sits and which way it measures."""
+"""Sensor coordinates: where each channel measures, and along which direction."""
 
 from __future__ import annotations
 
 import csv
+import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
-from vibroscope.errors import VibroscopeError
+from vibroscope.errors import ChannelError, LogFormatError
 
 __all__ = ["SensorCoords", "read_coords", "line_coords"]
 
@@ -17,49 +18,88 @@ _AXES = {"1": (1.0, 0.0, 0.0), "2": (0.0, 1.0, 0.0), "3": (0.0, 0.0, 1.0),
          "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SensorCoords:
-    """Positions (m) and measuring directions (unit vectors) of measurement points.
+    """Positions and measuring directions of channels.
 
     Attributes
     ----------
     points : tuple of str
-        Channel names (message paths), in the order of `positions`.
-    positions : ndarray, shape (n_points, 3)
-        x, y, z in m.
+        Channel names (message paths), one per row.
+    xyz : ndarray, shape (n_points, 3)
+        Positions in m.
     directions : ndarray, shape (n_points, 3)
-        Unit vector of each sensor's measuring axis.
+        Unit measuring directions.
+    from_file : bool
+        False for the default layout on a line (:func:`line_coords`).
     source : str
-        The file they came from ("line" when laid out on a line).
+        The file read, or ``""``.
     """
 
     points: tuple[str, ...]
-    positions: np.ndarray
+    xyz: np.ndarray
     directions: np.ndarray
+    from_file: bool = True
     source: str = ""
 
-    def as_mapping(self) -> dict[str, dict]:
-        """``{point: {"xyz": (x, y, z), "direction": (dx, dy, dz)}}``."""
-        return {p: {"xyz": tuple(map(float, x)), "direction": tuple(map(float, d))}
-                for p, x, d in zip(self.points, self.positions, self.directions)}
+    def as_mapping(self) -> dict[str, dict[str, Any]] | None:
+        """``{point: {"xyz": (x, y, z), "direction": (dx, dy, dz)}}``, or None for the
+        default line layout (so viewers lay the points out themselves)."""
+        if not self.from_file:
+            return None
+        return {p: {"xyz": tuple(map(float, self.xyz[k])), "direction": tuple(map(float, self.directions[k]))}
+                for k, p in enumerate(self.points)}
+
+
+def line_coords(channels: Sequence[str], spacing: float = 1.0) -> SensorCoords:
+    """Channels laid out on the x axis, `spacing` m apart, measuring along z.
+
+    Parameters
+    ----------
+    channels : sequence of str
+        Channel names.
+    spacing : float, optional
+        Distance between points in m.
+
+    Returns
+    -------
+    SensorCoords
+        With ``from_file=False``.
+    """
+    n = len(channels)
+    xyz = np.zeros((n, 3))
+    xyz[:, 0] = spacing * np.arange(n)
+    return SensorCoords(tuple(channels), xyz, np.tile([0.0, 0.0, 1.0], (n, 1)), False, "")
+
+
+def _direction(v: str, path: Path, line: int) -> np.ndarray:
+    key = v.strip().lower().lstrip("+")
+    if key in _AXES:
+        return np.array(_AXES[key])
+    if key.startswith("-") and key[1:] in _AXES:
+        return -np.array(_AXES[key[1:]])
+    raise LogFormatError(f"{path}: line {line}: direction {v!r} is not 1/2/3 or x/y/z")
+
+
+def _sensor_number(channel: str) -> int | None:
+    m = re.search(r"/s(\d+)(?:[./\[]|$)", channel) or re.search(r"(\d+)(?!.*\d)", channel)
+    return int(m.group(1)) if m else None
 
 
 def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
-    """Read a sensor coordinates CSV and match its rows to `channels`.
-
-    Accepted layouts (header row required, comma separated):
-
-    - a ``channel`` column naming the message path, with ``x, y, z`` (m) and optional
-      ``direction`` (``1``/``2``/``3`` or ``x``/``y``/``z``) or ``dx, dy, dz``;
-    - a ``sensor number`` column (1-based), as in the LUMO data set's ``coords_lumo.csv``: sensor k
-      is the k-th of `channels`; rows with direction 0 (reference nodes) are ignored.
+    """Read sensor coordinates from a CSV file and match them to channels.
 
     Parameters
     ----------
     path : str or Path
-        The CSV file.
+        CSV with a header naming ``x``, ``y``, ``z`` (m), optionally ``direction``
+        (1/2/3 or x/y/z, a sign allowed) and either ``channel`` (names) or
+        ``sensor``/``sensor number`` (1-based numbers), e.g. the LUMO ``coords_lumo.csv``.
     channels : sequence of str
-        The analysed response channels.
+        The channels to place. With a ``channel`` column they are matched by name; with
+        sensor numbers by the number in the channel name (``/lumo/s07.linear_acceleration.x``
+        -> 7) when every channel has a distinct one in the table, else in order (the k-th
+        channel is the k-th row).
 
     Returns
     -------
@@ -67,58 +107,61 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
 
     Raises
     ------
-    VibroscopeError
-        If the file lacks x, y, z columns, a value does not parse (names file, line and column),
-        or a channel has no coordinates.
+    LogFormatError
+        If the file lacks x/y/z columns or a value does not parse (names file and line).
+    ChannelError
+        If a channel has no row.
     """
     path = Path(path)
-    with path.open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read ({exc})") from exc
     if not rows:
-        raise VibroscopeError(f"{path}: no rows")
-    cols = {c.strip().lower(): c for c in rows[0].keys() if c}
-    for c in ("x", "y", "z"):
-        if c not in cols:
-            raise VibroscopeError(f"{path}: no {c!r} column (columns: {list(rows[0].keys())})")
-    key = cols.get("channel") or cols.get("sensor number") or cols.get("sensor")
-    if key is None:
-        raise VibroscopeError(f"{path}: needs a 'channel' or 'sensor number' column")
-    found: dict[str, tuple] = {}
-    for line, r in enumerate(rows, start=2):
+        raise LogFormatError(f"{path}: empty coordinates file")
+    head = [h.strip().lower() for h in rows[0]]
+
+    def col(*names: str) -> int | None:
+        for nm in names:
+            if nm in head:
+                return head.index(nm)
+        return None
+
+    ix, iy, iz = col("x"), col("y"), col("z")
+    if None in (ix, iy, iz):
+        raise LogFormatError(f"{path}: line 1: header needs x, y, z columns, got {rows[0]}")
+    idir = col("direction", "dir")
+    ich = col("channel", "name", "path")
+    isn = col("sensor number", "sensor", "sensor_number")
+    table: list[tuple[str, int | None, np.ndarray, np.ndarray]] = []
+    for ln, r in enumerate(rows[1:], start=2):
+        if not r or all(not c.strip() for c in r):
+            continue
         try:
-            xyz = tuple(float(r[cols[c]]) for c in ("x", "y", "z"))
-            if "dx" in cols:
-                d = np.array([float(r[cols[c]]) for c in ("dx", "dy", "dz")])
-            else:
-                dv = (r.get(cols.get("direction", ""), "") or "3").strip().lower()
-                if dv in ("0", ""):
-                    continue
-                if dv not in _AXES:
-                    raise ValueError(f"direction {dv!r}")
-                d = np.array(_AXES[dv])
-        except (ValueError, TypeError) as exc:
-            raise VibroscopeError(f"{path}: line {line}: {exc}") from None
-        ident = r[key].strip()
-        if key == cols.get("channel"):
-            name = ident
+            xyz = np.array([float(r[ix]), float(r[iy]), float(r[iz])])
+            sn = int(float(r[isn])) if isn is not None else None
+        except (ValueError, IndexError) as exc:
+            raise LogFormatError(f"{path}: line {ln}: {exc}") from None
+        if idir is not None and idir < len(r) and r[idir].strip() == "0":
+            continue  # a node without a sensor (e.g. LUMO's base node, direction 0)
+        d = _direction(r[idir], path, ln) if idir is not None and idir < len(r) and r[idir].strip() else np.array([0.0, 0.0, 1.0])
+        table.append((r[ich].strip() if ich is not None else "", sn, xyz, d))
+    chosen: list[tuple] = []
+    if ich is not None:
+        by = {t[0]: t for t in table}
+        missing = [c for c in channels if c not in by]
+        if missing:
+            raise ChannelError(f"{path}: no coordinates for channels {missing}")
+        chosen = [by[c] for c in channels]
+    else:
+        nums = [_sensor_number(c) for c in channels]
+        by_sn = {t[1]: t for t in table if t[1] is not None}
+        if all(n in by_sn for n in nums) and len(set(nums)) == len(nums):
+            chosen = [by_sn[n] for n in nums]
+        elif len(table) >= len(channels):
+            chosen = table[: len(channels)]
         else:
-            k = int(float(ident)) - 1
-            if not 0 <= k < len(channels):
-                continue
-            name = channels[k]
-        found[name] = (xyz, d / np.linalg.norm(d))
-    missing = [c for c in channels if c not in found]
-    if missing:
-        raise VibroscopeError(f"{path}: no coordinates for channels {missing}")
-    pos = np.array([found[c][0] for c in channels], float)
-    dirs = np.array([found[c][1] for c in channels], float)
-    return SensorCoords(tuple(channels), pos, dirs, str(path))
-
-
-def line_coords(channels: Sequence[str], spacing: float = 1.0) -> SensorCoords:
-    """Points laid out on the x axis, `spacing` m apart, measuring along z (no coordinates file)."""
-    n = len(channels)
-    pos = np.zeros((n, 3))
-    pos[:, 0] = spacing * np.arange(n)
-    dirs = np.tile([0.0, 0.0, 1.0], (n, 1))
-    return SensorCoords(tuple(channels), pos, dirs, "line")
+            raise ChannelError(f"{path}: {len(table)} coordinate rows for {len(channels)} channels")
+    return SensorCoords(tuple(channels), np.array([t[2] for t in chosen]).reshape(-1, 3),
+                        np.array([t[3] for t in chosen]).reshape(-1, 3), True, str(path))
