@@ -1,0 +1,440 @@
+"""Matplotlib figures of the analysis results: PSD, FRF (Bode + coherence), mode shapes, FDD
+singular values, and a one-call writer of the summary PNGs.
+
+matplotlib is imported inside the functions (the Agg backend is chosen when there is no
+display), so importing this module costs nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from vibroscope.viewers._common import match_modes, mode_label, real_shape, sensor_geometry
+
+__all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
+           "summary_figures"]
+
+#: resolution of the written PNGs (dots per inch)
+DPI = 110
+_MAX_LEGEND = 12
+
+
+def _pyplot():
+    """Import pyplot, choosing Agg when no display is available and no backend was chosen."""
+    import matplotlib
+
+    if "matplotlib.pyplot" not in sys.modules and sys.platform.startswith("linux") \
+            and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) \
+            and "MPLBACKEND" not in os.environ:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _short(name: str, n: int = 38) -> str:
+    return name if len(name) <= n else "…" + name[-(n - 1):]
+
+
+def _legend(ax, n: int) -> None:
+    if n == 0:
+        return
+    if n > _MAX_LEGEND:
+        ax.legend(fontsize=6, ncol=3, loc="best", title=f"{n} channels", title_fontsize=7)
+    else:
+        ax.legend(fontsize=7 if n > 4 else 8, ncol=2 if n > 6 else 1, loc="best")
+
+
+def _spectrum_ylabel(spectrum, db: bool) -> str:
+    u = set(spectrum.units)
+    unit = u.pop() if len(u) == 1 else ""
+    what = {"density": "PSD", "spectrum": "power spectrum", "amplitude": "amplitude"}.get(spectrum.scaling, "value")
+    if db:
+        return f"{what} [dB re 1 {unit}]" if unit else f"{what} [dB]"
+    return f"{what} [{unit}]" if unit else what
+
+
+def plot_spectrum(spectrum, ax=None, *, db: bool = False, channels: Sequence[str | int] | None = None):
+    """Plot spectra of several channels against frequency.
+
+    Parameters
+    ----------
+    spectrum : Spectrum
+        ``frequencies`` (Hz), ``values`` (n_channels, n_freqs), ``channels``, ``units``, ``scaling``.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on; a new figure is made when None.
+    db : bool, optional
+        Plot ``10 log10`` of a power quantity (``20 log10`` of an amplitude spectrum) on a linear
+        axis instead of the values on a logarithmic axis.
+    channels : sequence of str or int, optional
+        Channels to plot (names or indices); all when None.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if ax is None:
+        plt = _pyplot()
+        _, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
+    idx = range(len(spectrum.channels)) if channels is None else [
+        c if isinstance(c, (int, np.integer)) else spectrum.channels.index(c) for c in channels]
+    f = np.asarray(spectrum.frequencies)
+    fac = 20.0 if spectrum.scaling == "amplitude" else 10.0
+    n = 0
+    for i in idx:
+        v = np.asarray(spectrum.values[i], dtype=float)
+        label = _short(spectrum.channels[i])
+        if len(set(spectrum.units)) > 1 and spectrum.units[i]:
+            label += f" [{spectrum.units[i]}]"
+        if db:
+            with np.errstate(divide="ignore"):
+                ax.plot(f, fac * np.log10(v), lw=1, label=label)
+        else:
+            pos = v > 0
+            ax.semilogy(f[pos], v[pos], lw=1, label=label)
+        n += 1
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel(_spectrum_ylabel(spectrum, db))
+    st = spectrum.settings or {}
+    bits = [f"Δf = {spectrum.df:.3g} Hz"] if f.size > 1 else []
+    if st.get("nperseg"):
+        bits.append(f"nperseg = {st['nperseg']}")
+    if st.get("n_averages"):
+        bits.append(f"{st['n_averages']} averages")
+    if st.get("window"):
+        bits.append(f"window = {st['window']}")
+    title = {"density": "Power spectral density", "spectrum": "Power spectrum",
+             "amplitude": "Amplitude spectrum"}.get(spectrum.scaling, "Spectrum")
+    ax.set_title(title + (f" ({', '.join(bits)})" if bits else ""), fontsize=10)
+    if f.size:
+        ax.set_xlim(f[0], f[-1])
+    ax.grid(True, which="major", alpha=0.4)
+    ax.grid(True, which="minor", alpha=0.12)
+    _legend(ax, n)
+    return ax
+
+
+def plot_frf(frf, *, output: str | int = 0, input: str | int = 0, fig=None):
+    """Bode-style plot of one FRF with its coherence.
+
+    Three stacked axes share the frequency axis: magnitude in dB re 1 unit of `H`, phase in
+    degrees, coherence γ².
+
+    Parameters
+    ----------
+    frf : FRF
+        ``frequencies`` (Hz), ``H[f, output, input]``, ``coherence[f, output]``, ``inputs``,
+        ``outputs``, ``estimator``, ``kind``, ``units``.
+    output, input : str or int, optional
+        Which response and which excitation (names or indices).
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    o = output if isinstance(output, (int, np.integer)) else frf.outputs.index(output)
+    i = input if isinstance(input, (int, np.integer)) else frf.inputs.index(input)
+    if fig is None:
+        plt = _pyplot()
+        fig = plt.figure(figsize=(8, 7), layout="constrained")
+    else:
+        fig.clf()
+    axm, axp, axc = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [2.2, 1.3, 1]})
+    f = np.asarray(frf.frequencies)
+    h = np.asarray(frf.H)[:, o, i]
+    with np.errstate(divide="ignore"):
+        mag = 20 * np.log10(np.abs(h))
+    unit = frf.units or "unit"
+    axm.plot(f, mag, lw=1.1, color="C0", label=f"{frf.estimator}")
+    axm.set_ylabel(f"|H| [dB re 1 {unit}]")
+    axm.legend(fontsize=8, loc="best")
+    axp.plot(f, np.degrees(np.angle(h)), lw=1.0, color="C1")
+    axp.set_ylabel("phase [deg]")
+    axp.set_ylim(-185, 185)
+    axp.set_yticks([-180, -90, 0, 90, 180])
+    coh = np.asarray(frf.coherence)
+    if coh.ndim == 2 and coh.shape[1] > o:
+        axc.plot(f, coh[:, o], lw=1.0, color="C2")
+    axc.set_ylabel("coherence γ² [-]")
+    axc.set_ylim(-0.02, 1.05)
+    axc.set_xlabel("frequency [Hz]")
+    for a in (axm, axp, axc):
+        a.grid(True, alpha=0.4)
+    if f.size:
+        axc.set_xlim(f[0], f[-1])
+    kind = f" {frf.kind}" if frf.kind else ""
+    axm.set_title(f"FRF{kind} ({frf.estimator}): {_short(frf.outputs[o], 34)} / {_short(frf.inputs[i], 34)}",
+                  fontsize=10)
+    return fig
+
+
+def plot_mode_shapes(modal, coords: Mapping[str, Any] | None = None, *, fig=None, true_modes=None):
+    """One panel per mode: the real (in-phase) mode shape at the measurement points.
+
+    With `coords`, the amplitude along each sensor's measuring direction is drawn against the
+    coordinate in which the points spread most (vertically when that is the height z, as for
+    a tower); without, against the point index along a line with the point names as ticks.
+
+    Parameters
+    ----------
+    modal : ModalModel
+        Anything with ``natural_frequencies`` (Hz), ``damping_ratios``, ``shapes`` (complex,
+        (n_modes, n_points)), ``points`` and ``method``.
+    coords : mapping, optional
+        ``point -> {"xyz": (x, y, z), "direction": ...}`` or ``point -> (x, y, z[, direction])``
+        (see :func:`vibroscope.viewers._common.sensor_geometry`).
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+    true_modes : ModalModel, optional
+        Reference modes (e.g. a model's); the nearest in frequency is named in each title, and
+        its shape is drawn dashed when it has the same points.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    fn = np.asarray(modal.natural_frequencies, dtype=float)
+    zeta = np.asarray(modal.damping_ratios, dtype=float)
+    shapes = np.atleast_2d(np.asarray(modal.shapes, dtype=complex))
+    points = list(modal.points)
+    n_modes = fn.size
+    pos, _, from_coords = sensor_geometry(points, coords)
+    if from_coords and len(points) > 1:
+        axis = int(np.argmax(np.ptp(pos, axis=0)))
+        xcoord = pos[:, axis]
+        vertical = axis == 2
+        coord_label = f"{'xyz'[axis]} [m]"
+    else:
+        xcoord = np.arange(len(points), dtype=float)
+        vertical = False
+        coord_label = "measurement point"
+    order = np.argsort(xcoord, kind="stable")
+    ncols = min(max(n_modes, 1), 5 if vertical else 3)
+    nrows = int(np.ceil(max(n_modes, 1) / ncols))
+    if fig is None:
+        plt = _pyplot()
+        w = 2.6 * ncols + 0.8 if vertical else 4.0 * ncols + 0.6
+        h = 4.2 * nrows + 0.6 if vertical else 2.9 * nrows + 0.7
+        fig = plt.figure(figsize=(min(w, 16), min(h, 14)), layout="constrained")
+    else:
+        fig.clf()
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
+    tm_idx = None
+    if true_modes is not None:
+        tm_idx = match_modes(fn, np.asarray(true_modes.natural_frequencies, dtype=float))
+        same_points = list(getattr(true_modes, "points", [])) == points
+    for r, ax in enumerate(axes):
+        if r >= n_modes:
+            ax.set_visible(False)
+            continue
+        phi = real_shape(shapes[r])
+        mod = np.abs(shapes[r]) / (np.max(np.abs(shapes[r])) or 1.0)
+        x, y = xcoord[order], phi[order]
+        ref = None
+        if tm_idx is not None and tm_idx[r] >= 0 and same_points:
+            ref = real_shape(np.asarray(true_modes.shapes)[tm_idx[r]])
+            ref = ref / (np.max(np.abs(ref)) or 1.0)
+            if np.dot(ref, phi) < 0:
+                ref = -ref
+            ref = ref[order]
+        if vertical:
+            ax.axvline(0, color="0.5", lw=0.8)
+            ax.plot(y, x, "o-", color="C0", lw=1.4, ms=4, label="identified (real part)")
+            ax.plot(mod[order], x, ":", color="C0", lw=0.9, alpha=0.6, label="|φ|")
+            if ref is not None:
+                ax.plot(ref, x, "s--", color="C3", lw=1.0, ms=3, label="true")
+            ax.set_xlabel("amplitude [-]")
+            ax.set_ylabel(coord_label)
+            ax.set_xlim(-1.15, 1.15)
+        else:
+            ax.axhline(0, color="0.5", lw=0.8)
+            ax.plot(x, y, "o-", color="C0", lw=1.4, ms=4, label="identified (real part)")
+            ax.plot(x, mod[order], ":", color="C0", lw=0.9, alpha=0.6, label="|φ|")
+            if ref is not None:
+                ax.plot(x, ref, "s--", color="C3", lw=1.0, ms=3, label="true")
+            ax.set_ylabel("amplitude [-]")
+            ax.set_ylim(-1.15, 1.15)
+            ax.set_xlabel(coord_label)
+            if not from_coords and len(points) <= 12:
+                ax.set_xticks(x, [_short(points[k], 14) for k in order], rotation=30, ha="right", fontsize=7)
+        title = f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}"
+        if tm_idx is not None and tm_idx[r] >= 0:
+            ft = float(np.asarray(true_modes.natural_frequencies)[tm_idx[r]])
+            title += f"\ntrue {ft:.4g} Hz ({100 * (fn[r] - ft) / ft:+.2f} %)"
+        ax.set_title(title, fontsize=9)
+        ax.grid(True, alpha=0.4)
+        if r == 0:
+            ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"Mode shapes ({getattr(modal, 'method', '')}, {len(points)} points)", fontsize=11)
+    return fig
+
+
+def plot_singular_values(frequencies, S, modes=None, *, ax=None, n_sv: int = 3, true_frequencies=None):
+    """FDD singular value spectra in dB with the picked modes marked.
+
+    Parameters
+    ----------
+    frequencies : array_like, shape (n_freqs,)
+        Hz.
+    S : array_like, shape (n_freqs, n_sv_total) or (n_freqs,)
+        Singular values of the cross-spectral matrix per frequency, descending (unit²/Hz).
+    modes : ModalModel or array_like, optional
+        Picked modes (anything with ``natural_frequencies``) or their frequencies in Hz; each
+        is marked on the first singular value.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on; a new figure when None.
+    n_sv : int, optional
+        How many singular values to draw.
+    true_frequencies : array_like, optional
+        Reference natural frequencies in Hz, drawn as dotted vertical lines.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    if ax is None:
+        plt = _pyplot()
+        _, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
+    f = np.asarray(frequencies, dtype=float)
+    S = np.asarray(S, dtype=float)
+    if S.ndim == 1:
+        S = S[:, None]
+    with np.errstate(divide="ignore"):
+        sdb = 10 * np.log10(S)
+    for k in range(min(n_sv, S.shape[1])):
+        ax.plot(f, sdb[:, k], lw=1.2 if k == 0 else 0.8, alpha=1.0 if k == 0 else 0.7, label=f"$s_{k + 1}$")
+    if true_frequencies is not None:
+        for j, ft in enumerate(np.atleast_1d(np.asarray(true_frequencies, dtype=float))):
+            ax.axvline(ft, color="0.4", ls=":", lw=1.0, label="true modes" if j == 0 else None)
+    if modes is not None:
+        fm = np.atleast_1d(np.asarray(getattr(modes, "natural_frequencies", modes), dtype=float))
+        ok = np.isfinite(fm)
+        y = np.interp(fm[ok], f, sdb[:, 0])
+        ax.plot(fm[ok], y, "v", color="C3", ms=8, label="picked modes")
+        for fi, yi in zip(fm[ok], y):
+            ax.annotate(f"{fi:.3g} Hz", (fi, yi), textcoords="offset points", xytext=(0, 8), ha="center",
+                        fontsize=7, color="C3")
+    finite = sdb[:, : min(n_sv, S.shape[1])][np.isfinite(sdb[:, : min(n_sv, S.shape[1])])]
+    if finite.size:
+        lo, hi = float(finite.min()), float(finite.max())
+        pad = 0.06 * (hi - lo or 1.0)
+        ax.set_ylim(lo - pad, hi + 2.5 * pad)
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("singular value [dB re 1 unit²/Hz]")
+    ax.set_title("Frequency domain decomposition: singular values of the CSD matrix", fontsize=10)
+    if f.size:
+        ax.set_xlim(f[0], f[-1])
+    ax.grid(True, alpha=0.4)
+    ax.legend(fontsize=8, loc="best")
+    return ax
+
+
+def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 4000):
+    """Time series of the first channels, one panel each, min/max-decimated for size.
+
+    Parameters
+    ----------
+    signals : Signals
+        ``data`` (n_channels, n_samples), ``fs`` (Hz), ``channels``, ``units``, ``t0`` (s).
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+    max_channels : int, optional
+        At most this many channels are drawn (the title says how many there are).
+    max_points : int, optional
+        Longer records are drawn as their per-bin minimum and maximum envelope.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    n = min(signals.n_channels, max_channels)
+    if fig is None:
+        plt = _pyplot()
+        fig = plt.figure(figsize=(8, 1.5 + 1.35 * n), layout="constrained")
+    else:
+        fig.clf()
+    axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False).ravel())
+    t = np.arange(signals.n_samples) / signals.fs
+    for k, ax in enumerate(axes):
+        x = np.asarray(signals.data[k])
+        if x.size > max_points:
+            nb = max_points // 2
+            edges = np.linspace(0, x.size, nb + 1).astype(int)
+            lo = np.minimum.reduceat(x, edges[:-1])
+            hi = np.maximum.reduceat(x, edges[:-1])
+            tb = t[edges[:-1]]
+            ax.fill_between(tb, lo, hi, color=f"C{k % 10}", lw=0.5)
+        else:
+            ax.plot(t, x, lw=0.8, color=f"C{k % 10}")
+        u = signals.units[k]
+        ax.set_ylabel(f"[{u}]" if u else "[-]", fontsize=8)
+        ax.set_title(_short(signals.channels[k], 60), fontsize=8, loc="left")
+        ax.grid(True, alpha=0.4)
+    axes[-1].set_xlabel(f"time since t0 = {signals.t0:.6g} s [s]")
+    more = f" (first {n} of {signals.n_channels})" if signals.n_channels > n else ""
+    fig.suptitle(f"Time series, fs = {signals.fs:g} Hz{more}", fontsize=10)
+    return fig
+
+
+def _save(fig, path: Path) -> Path:
+    fig.savefig(path, dpi=DPI)
+    plt = _pyplot()
+    plt.close(fig)
+    return path
+
+
+def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=None, sv=None,
+                    coords: Mapping[str, Any] | None = None, true_modes=None) -> list[Path]:
+    """Write the summary PNGs of an analysis, those whose inputs are given.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Folder to write into (created if missing).
+    signals : Signals, optional
+        Writes ``signals.png`` (time series of the first channels).
+    psd : Spectrum, optional
+        Writes ``psd.png``.
+    frf : FRF, optional
+        Writes ``frf.png`` (first output and input).
+    modal : ModalModel, optional
+        Writes ``modes.png``; its frequencies are marked in ``singular_values.png``.
+    sv : tuple (frequencies, S), optional
+        FDD singular values, ``S`` of shape (n_freqs, n); writes ``singular_values.png``.
+    coords : mapping, optional
+        Sensor coordinates for the mode shapes (see :func:`plot_mode_shapes`).
+    true_modes : ModalModel, optional
+        Reference modes, marked in the mode and singular value figures.
+
+    Returns
+    -------
+    list of Path
+        The files written, in the order above.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    plt = _pyplot()
+    written: list[Path] = []
+    if signals is not None:
+        written.append(_save(plot_signals(signals), out / "signals.png"))
+    if psd is not None:
+        ax = plot_spectrum(psd)
+        written.append(_save(ax.figure, out / "psd.png"))
+    if frf is not None:
+        written.append(_save(plot_frf(frf), out / "frf.png"))
+    if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
+        written.append(_save(plot_mode_shapes(modal, coords, true_modes=true_modes), out / "modes.png"))
+    if sv is not None:
+        f, S = sv
+        ft = None if true_modes is None else true_modes.natural_frequencies
+        ax = plot_singular_values(f, S, modal, true_frequencies=ft)
+        written.append(_save(ax.figure, out / "singular_values.png"))
+    del plt
+    return written
