@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, ChunkIndex, Footer, Header, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, Header, Schema
 
 from vibroscope.errors import LogFormatError
 
