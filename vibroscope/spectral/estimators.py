@@ -32,6 +32,26 @@ __all__ = [
 
 Channel = str | int
 
+_WELCH_PARAMS = """fs : float, optional
+        Sampling frequency in Hz (taken from `x` when it is a :class:`~vibroscope.Signals`;
+        default 1.0 for an array).
+    nperseg : int, optional
+        Segment length in samples; default ``min(256, n_samples)`` as scipy.
+    noverlap : int, optional
+        Overlap in samples; default ``nperseg // 2``.
+    window : str, tuple or array_like, optional
+        Window (scipy.signal.get_window spec, periodic) or its samples; default ``'hann'``.
+    detrend : {'constant', 'linear', False}, optional
+        Per-segment detrending; default ``'constant'``.
+    nfft : int, optional
+        FFT length (zero padding); default `nperseg`."""
+
+
+def _fill_doc(fn):
+    """Substitute the shared Welch parameter block into `fn`'s docstring (scipy's doccer idea)."""
+    fn.__doc__ = fn.__doc__.replace("{welch_params}", _WELCH_PARAMS)
+    return fn
+
 
 def _unpack(x: Signals | np.ndarray, fs: float | None) -> tuple[np.ndarray, float, tuple, tuple]:
     """(data (n_ch, n), fs, channels, units) from Signals or an array (1-D = one channel)."""
@@ -77,6 +97,7 @@ def _settings_dict(fs, st, n_avg) -> dict:
                 detrend=st.detrend, n_averages=n_avg)
 
 
+@_fill_doc
 def csd_matrix(
     x: Signals | np.ndarray,
     fs: float | None = None,
@@ -95,19 +116,7 @@ def csd_matrix(
     ----------
     x : Signals or array_like, shape (n_channels, n_samples)
         The record. With an array, channels are named ``"0"``, ``"1"``, ...
-    fs : float, optional
-        Sampling frequency in Hz (taken from `x` when it is a :class:`~vibroscope.Signals`;
-        default 1.0 for an array).
-    nperseg : int, optional
-        Segment length in samples; default ``min(256, n_samples)`` as scipy.
-    noverlap : int, optional
-        Overlap in samples; default ``nperseg // 2``.
-    window : str, tuple or array_like, optional
-        Window (scipy.signal.get_window spec, periodic) or its samples; default ``'hann'``.
-    detrend : {'constant', 'linear', False}, optional
-        Per-segment detrending; default ``'constant'``.
-    nfft : int, optional
-        FFT length (zero padding); default `nperseg`.
+    {welch_params}
     scaling : {'density', 'spectrum'}, optional
         unit²/Hz (default) or unit².
     workers : int, optional
@@ -141,7 +150,7 @@ def csd_matrix(
     >>> rng = np.random.default_rng(0)
     >>> x = rng.standard_normal((2, 100_000))
     >>> G = csd_matrix(x, fs=1000.0, nperseg=1000)
-    >>> round(float(G.G[1:-1, 0, 0].real.mean()), 1)  # white noise of unit variance: 2/fs per Hz
+    >>> round(float(G.G[1:-1, 0, 0].real.mean()), 4)  # white noise of unit variance: 2/fs per Hz
     0.002
     """
     data, fs, channels, units = _unpack(x, fs)
@@ -153,6 +162,7 @@ def csd_matrix(
                                _settings_dict(fs, st, acc.n_segments))
 
 
+@_fill_doc
 def welch(
     x: Signals | np.ndarray,
     fs: float | None = None,
@@ -167,7 +177,15 @@ def welch(
 ) -> Spectrum:
     """Power spectral density of every channel by Welch's averaged modified periodograms.
 
-    Parameters are those of :func:`csd_matrix` (scipy's names and defaults).
+    Parameters
+    ----------
+    x : Signals or array_like, shape (n_channels, n_samples)
+        The record (1-D: one channel).
+    {welch_params}
+    scaling : {'density', 'spectrum'}, optional
+        unit²/Hz (default) or unit².
+    workers : int, optional
+        Threads splitting the segments; default 1.
 
     Returns
     -------
@@ -277,6 +295,7 @@ def frf_kind(input_units: Sequence[str], output_units: Sequence[str]) -> tuple[s
     return None, ""
 
 
+@_fill_doc
 def frf(
     x: Signals | np.ndarray | CrossSpectralMatrix,
     inputs: Sequence[Channel] | Channel,
@@ -305,8 +324,8 @@ def frf(
         ``H1 = Gyx Gxx⁻¹`` (least squares, unbiased by output noise), ``H2 = Gyy Gxy⁻¹`` (unbiased
         by input noise; one input, or as many inputs as outputs) or ``Hv`` (total least squares,
         the smallest eigenvector of the ``[inputs, output]`` spectral matrix per output).
-    fs, nperseg, noverlap, window, detrend, nfft
-        Welch settings as :func:`csd_matrix` (ignored when `x` is a CrossSpectralMatrix).
+    {welch_params}
+        (The Welch settings are ignored when `x` is a CrossSpectralMatrix.)
     kind : {'accelerance', 'mobility', 'receptance'}, optional
         Declare the FRF kind; default inferred from the channel units (N in; m/s², m/s or m out).
 
@@ -408,6 +427,7 @@ def _multiple_coherence(Sxx: np.ndarray, Sxy: np.ndarray, Syy: np.ndarray) -> np
     return np.clip(coh, 0.0, 1.0, out=coh, where=np.isfinite(coh))
 
 
+@_fill_doc
 def coherence(
     x: Signals | np.ndarray | CrossSpectralMatrix,
     fs: float | None = None,
@@ -420,7 +440,11 @@ def coherence(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Ordinary coherence of every channel pair.
 
-    Parameters are those of :func:`csd_matrix`.
+    Parameters
+    ----------
+    x : Signals, array_like (n_channels, n_samples) or CrossSpectralMatrix
+        The record, or its cross-spectral matrix.
+    {welch_params}
 
     Returns
     -------
@@ -450,6 +474,17 @@ def multiple_coherence(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Multiple coherence of each output with all `inputs` together.
 
+    Parameters
+    ----------
+    x : Signals, array_like (n_channels, n_samples) or CrossSpectralMatrix
+        The record or its cross-spectral matrix.
+    inputs : channel or sequence of channels
+        Input channels (names or indices).
+    outputs : channel or sequence of channels, optional
+        Output channels; default every other channel.
+    **welch_kw
+        Welch settings passed to :func:`frf` (``fs``, ``nperseg``, ...).
+
     Returns
     -------
     frequencies : ndarray, shape (n_freqs,)
@@ -477,8 +512,22 @@ def spectrogram(
 ) -> Spectrogram:
     """Short-time spectra of every channel (``scipy.signal.spectrogram``, one-sided).
 
-    Parameters are scipy's; `noverlap` defaults to ``nperseg // 2`` here (scipy: ``nperseg // 8``)
-    for consistency with :func:`welch`.
+    Parameters
+    ----------
+    x : Signals or array_like, shape (n_channels, n_samples)
+        The record.
+    fs : float, optional
+        Sampling frequency in Hz (from `x` when it is Signals).
+    nperseg : int, optional
+        Segment length; default ``min(256, n_samples)``.
+    noverlap : int, optional
+        Overlap; default ``nperseg // 2`` (scipy's spectrogram: ``nperseg // 8``), as :func:`welch`.
+    window : str or tuple, optional
+        Default ``'hann'`` (scipy's spectrogram: Tukey 0.25).
+    detrend : {'constant', 'linear', False}, optional
+        Per-segment detrending.
+    scaling : {'density', 'spectrum'}, optional
+        unit²/Hz or unit².
 
     Returns
     -------
