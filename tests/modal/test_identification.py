@@ -110,3 +110,28 @@ def test_ssi_cov_errors(ambient):
         ssi_cov(sig, n_lags=4, orders=[2, 100])
     with pytest.raises(ValueError, match="fs"):
         ssi_cov(sig.data, n_lags=10, orders=[4])
+
+
+@pytest.mark.parametrize("kind", ["accelerance", None])
+def test_peak_picking_analytic_frf(kind):
+    """Noise-free analytic FRFs of the 5-DOF chain driven at m1 (0.01 Hz grid): the SDOF fit
+    recovers frequencies within 0.2 % and damping within 5 % (measured: ≤ 0.1 % and ≤ 1.1 %; the
+    overlapping top modes bias a single-mode fit most), quadrature shapes MAC ≥ 0.99; works for an
+    FRF of unknown kind too."""
+    from vibroscope.models import Input, demo_model_5dof
+    from vibroscope.spectral import FRF
+
+    model = demo_model_5dof()
+    model = model.replace(inputs=(Input("m1", channel="/f"),))
+    f = np.arange(0, 200.0, 0.01)
+    H = model.frf(f, "acceleration")
+    H[0] = 0.0
+    frf_ = FRF(f, H, np.ones(H.shape[:2]), ["/f"], [f"/a{k}" for k in range(5)], "analytic", kind)
+    est = peak_picking(frf_, n_modes=5, fmin=5.0, prominence=1.0)
+    ref = model.modes()
+    m = match_modes(est, ref)
+    assert len(m.pairs) == 5
+    assert np.all(np.abs(m.frequency_errors) < 2e-3), m.frequency_errors
+    assert np.all(m.mac >= 0.99), m.mac
+    rel = est.damping_ratios[m.pairs[:, 0]] / ref.damping_ratios[m.pairs[:, 1]] - 1
+    assert np.all(np.abs(rel) < 0.05), rel

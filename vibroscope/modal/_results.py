@@ -28,13 +28,16 @@ def normalize_shapes(shapes: np.ndarray) -> np.ndarray:
     -------
     ndarray, complex, shape like `shapes`
         Each row divided by its largest-modulus entry, which thereby becomes exactly ``1 + 0j``.
-        Rows that are all zero are returned unchanged.
+        Rows that are all zero or all NaN are returned unchanged; NaN entries are ignored.
     """
     s = np.array(shapes, dtype=complex)
     one = s.ndim == 1
     s = np.atleast_2d(s)
     for r in range(s.shape[0]):
-        k = int(np.argmax(np.abs(s[r])))
+        a = np.abs(s[r])
+        if not np.any(np.isfinite(a)):
+            continue
+        k = int(np.nanargmax(a))
         if s[r, k] != 0:
             s[r] = s[r] / s[r, k]
     return s[0] if one else s

@@ -72,9 +72,10 @@ def half_power_bandwidth(f: np.ndarray, power: np.ndarray, k: int) -> tuple[floa
 def fit_sdof(f: np.ndarray, H: np.ndarray, fn0: float, zeta0: float) -> tuple[float, float, np.ndarray, float]:
     """Least-squares single-DOF fit of receptances around one resonance, all channels together.
 
-    Each column ``k`` of `H` is modelled as ``A_k / (ωr² − ω² + 2jζωrω) + R_k`` with a complex modal
-    constant ``A_k`` and a complex residual ``R_k`` standing for the out-of-band modes (Ewins 2000,
-    §4.3–4.5, the SDOF methods). ``A`` and ``R`` enter linearly and are eliminated (variable
+    Each column ``k`` of `H` is modelled as ``A_k / (ωr² − ω² + 2jζωrω) + R_k + M_k / ω²`` with a
+    complex modal constant ``A_k`` and the complex upper (stiffness-like, ``R_k``) and lower
+    (mass-like, ``M_k / ω²``) residuals standing for the out-of-band modes (Ewins 2000,
+    ch. 4: the SDOF methods and residual terms). ``A``, ``R`` and ``M`` enter linearly and are eliminated (variable
     projection); ``(fr, ζ)`` are found by :func:`scipy.optimize.least_squares`. Columns are weighted
     to equal peak magnitude.
 
@@ -108,7 +109,7 @@ def fit_sdof(f: np.ndarray, H: np.ndarray, fn0: float, zeta0: float) -> tuple[fl
 
     def basis(p):
         wr, z = 2 * np.pi * p[0], p[1]
-        return np.column_stack([1.0 / (wr**2 - w**2 + 2j * z * wr * w), np.ones_like(w)])
+        return np.column_stack([1.0 / (wr**2 - w**2 + 2j * z * wr * w), np.ones_like(w), 1.0 / w**2])
 
     def solve(p):
         Phi = basis(p)
@@ -137,7 +138,7 @@ def peak_picking(
     n_modes: int | None = None,
     fmin: float | None = None,
     fmax: float | None = None,
-    min_coherence: float = 0.5,
+    min_coherence: float = 0.8,
     prominence: float = 6.0,
     refine: Literal["sdof", None] = "sdof",
     input: int | str | None = None,
@@ -152,8 +153,8 @@ def peak_picking(
     2. **Damping** by the half-power (−3 dB) bandwidth of the indicator, crossings interpolated
        between bins (in dB): ``ζ = (f2 − f1) / (2 fn)`` (Ewins 2000, §4.3; exact for the mobility
        of a single viscously damped mode), then, with ``refine='sdof'``, a least-squares
-       single-DOF fit (modal constant + residual per channel) of all receptances over ``fn ± 2·(f2 −
-       f1)`` (:func:`fit_sdof`, Ewins 2000, §4.4–4.5), which removes the bias of coarse resolution and
+       single-DOF fit (modal constant + upper and lower residuals per channel) of all receptances
+       over ``fn ± (f2 − f1)`` (at least ± 4 bins; :func:`fit_sdof`, Ewins 2000, §4.4–4.5), which removes the bias of coarse resolution and
        of neighbouring modes. The fit result is used when it converges inside the band.
     3. **Shapes** by quadrature picking: the imaginary part of the accelerance at the natural
        frequency, sign kept, for every output (``Im α_acc ∝ φ_o φ_in / (2 ζ)`` for a lightly damped
@@ -172,7 +173,8 @@ def peak_picking(
     fmin, fmax : float, optional
         Frequency band in Hz (default the whole axis above 0 Hz).
     min_coherence : float, optional
-        Smallest mean coherence (over outputs) of a bin eligible as a peak; default 0.5.
+        Smallest mean coherence (over outputs) of a bin eligible as a peak; default 0.8 (keeps
+        noise peaks of badly excited bands out; lower it for noisy but genuine resonances).
     prominence : float, optional
         Smallest peak prominence of the indicator in dB; default 6 dB.
     refine : {'sdof', None}, optional
@@ -262,7 +264,7 @@ def peak_picking(
         resid = np.nan
         if refine == "sdof":
             bw = (f2 - f1) if np.isfinite(z_hp) else 2 * 0.01 * f_peak
-            half = max(2.0 * bw, 3 * df)
+            half = max(1.0 * bw, 4 * df)
             sel = (f >= f_peak - half) & (f <= f_peak + half)
             if np.count_nonzero(sel) >= 5:
                 z0 = z_hp if np.isfinite(z_hp) and z_hp > 0 else 0.01
