@@ -1,1 +1,34 @@
-"""vibroscope.viewers"""
+"""Viewers: matplotlib figures and rerun recordings of analysis results.
+
+An edge adapter: importing :mod:`vibroscope.viewers` imports neither matplotlib nor rerun; the
+functions below load their modules (and those libraries) on first use.
+
+- :mod:`vibroscope.viewers.figures`: :func:`plot_spectrum`, :func:`plot_frf`,
+  :func:`plot_mode_shapes`, :func:`plot_singular_values`, :func:`plot_signals`,
+  :func:`summary_figures` (PNGs).
+- :mod:`vibroscope.viewers.rerun_view`: :func:`log_analysis` (one ``.rrd`` recording with a
+  blueprint, or a spawned viewer) and :func:`read_rrd` (read one back with rerun's reader).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+_LAZY = {
+    "plot_spectrum": "figures", "plot_frf": "figures", "plot_mode_shapes": "figures",
+    "plot_singular_values": "figures", "plot_signals": "figures", "summary_figures": "figures",
+    "log_analysis": "rerun_view", "read_rrd": "rerun_view",
+}
+
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(import_module(f"vibroscope.viewers.{_LAZY[name]}"), name)
+    raise AttributeError(f"module 'vibroscope.viewers' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(list(globals()) + list(_LAZY))

@@ -1,0 +1,493 @@
+"""Log an analysis to one rerun recording (``.rrd`` file and/or a spawned viewer), and read a
+recording back.
+
+rerun is imported inside the functions: importing this module never imports it.
+
+Timelines
+---------
+``time`` (duration)
+    The time series, in s since the first sample (``Signals.t0`` is written in the ``about``
+    document). Stored by rerun as int64 ns.
+``frequency_mHz`` (sequence)
+    Spectra, FRF and coherence. rerun 0.41's :class:`~rerun.blueprint.TimeSeriesView` plots
+    against a timeline only (no free x axis, no log axes), and timelines hold integers
+    (sequences) or times; a sequence whose index is the frequency in **millihertz**
+    (``round(1000 f)``) keeps the axis a plain linear frequency axis whose numbers read
+    directly as mHz (1000 = 1 Hz), without the ``s``/``min`` formatting a duration timeline
+    would put on frequencies taken as seconds. When the resolution is finer than 1 mHz
+    (rounded bins would collide) the timeline is ``frequency_uHz`` (µHz) instead. Power
+    quantities are logged in dB (``10 log10``), since the view has no logarithmic y axis.
+``animation`` (sequence)
+    Mode shape animation frames, `frames` per cycle of every mode.
+
+The viewer shows one timeline at a time: each tab of the blueprint names the timeline its views
+need; the time panel starts on ``animation`` (playing, looped) when there are modes, else on
+``time``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from vibroscope.viewers._common import mode_label, sensor_geometry
+
+__all__ = ["log_analysis", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
+           "mode_frames"]
+
+#: animation frames per cycle of a mode
+FRAMES = 40
+
+
+def _esc(part: str) -> str:
+    import rerun as rr
+
+    return rr.escape_entity_path_part(part)
+
+
+def channel_entity(prefix: str, channel: str) -> str:
+    """Entity path of a channel under `prefix`: its message path split on ``/``, each part escaped.
+
+    Parameters
+    ----------
+    prefix : str
+        E.g. ``"signals"``, ``"psd"``, ``"frf/magnitude_db"``.
+    channel : str
+        Channel name, e.g. ``"/imu/wrist.linear_acceleration.z"``.
+
+    Returns
+    -------
+    str
+        E.g. ``"/signals/imu/wrist.linear_acceleration.z"`` (as rerun writes it back).
+    """
+    parts = [p for p in str(channel).split("/") if p] or ["_"]
+    return "/" + "/".join([*(p for p in prefix.split("/") if p), *(_esc(p) for p in parts)])
+
+
+def mode_entity(r: int, f: float) -> str:
+    """Entity path of mode `r` (0-based) at `f` Hz: ``/modes/mode_1_2.82Hz``."""
+    return "/modes/" + _esc(f"mode_{r + 1}_{f:.3g}Hz")
+
+
+def frequency_index(frequencies: np.ndarray) -> tuple[str, np.ndarray]:
+    """The frequency timeline used for spectra: its name and integer index values.
+
+    Parameters
+    ----------
+    frequencies : array_like, shape (n_freqs,)
+        Hz, ascending.
+
+    Returns
+    -------
+    name : str
+        ``"frequency_mHz"``, or ``"frequency_uHz"`` when mHz rounding would merge bins.
+    index : ndarray of int64
+        ``round(1000 f)`` (or ``round(1e6 f)``).
+    """
+    f = np.asarray(frequencies, dtype=float)
+    idx = np.round(f * 1e3).astype(np.int64)
+    if f.size > 1 and np.any(np.diff(idx) <= 0):
+        return "frequency_uHz", np.round(f * 1e6).astype(np.int64)
+    return "frequency_mHz", idx
+
+
+def mode_frames(shape: np.ndarray, positions: np.ndarray, directions: np.ndarray, scale: float,
+                frames: int = FRAMES) -> np.ndarray:
+    """Displaced point positions over one cycle of a mode.
+
+    ``x_k = positions + scale · Re(φ̂ · exp(j 2π k / frames)) · directions`` for
+    ``k = 0 … frames − 1``, with ``φ̂ = φ / max|φ|``.
+
+    Parameters
+    ----------
+    shape : array_like, complex, shape (n_points,)
+    positions, directions : ndarray, shape (n_points, 3)
+    scale : float
+        Largest displacement in m.
+    frames : int, optional
+
+    Returns
+    -------
+    ndarray, shape (frames, n_points, 3)
+    """
+    phi = np.asarray(shape, dtype=complex)
+    m = np.max(np.abs(phi)) if phi.size else 0.0
+    phi = phi / m if m > 0 else phi
+    ph = np.exp(2j * np.pi * np.arange(frames) / frames)
+    amp = np.real(phi[None, :] * ph[:, None])  # (frames, n_points)
+    return positions[None, :, :] + scale * amp[:, :, None] * directions[None, :, :]
+
+
+def _db(v: np.ndarray, fac: float = 10.0) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    out = np.full(v.shape, np.nan)
+    pos = v > 0
+    out[pos] = fac * np.log10(v[pos])
+    return out
+
+
+def _mode_table(modal) -> str:
+    fn = np.asarray(modal.natural_frequencies, dtype=float)
+    z = np.asarray(modal.damping_ratios, dtype=float)
+    extra = getattr(modal, "extra", {}) or {}
+    mpc = extra.get("mpc")
+    lines = [f"# Modes ({getattr(modal, 'method', '')})", "",
+             f"{len(modal.points)} points: " + ", ".join(f"`{p}`" for p in modal.points), "",
+             "| # | f [Hz] | ζ [%] |" + (" MPC |" if mpc is not None else ""),
+             "|---|---|---|" + ("---|" if mpc is not None else "")]
+    for r in range(fn.size):
+        zs = f"{100 * z[r]:.3f}" if np.isfinite(z[r]) else "n/a"
+        row = f"| {r + 1} | {fn[r]:.4f} | {zs} |"
+        if mpc is not None:
+            row += f" {float(np.asarray(mpc)[r]):.3f} |"
+        lines.append(row)
+    return "\n".join(lines)
+
+
+def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal, ftl):
+    import rerun.blueprint as rrb
+
+    tabs = []
+    active = None
+    if signals is not None:
+        views = [rrb.TimeSeriesView(origin=channel_entity("signals", c), name=f"{c} [{u or '-'}]")
+                 for c, u in zip(signals.channels, signals.units)]
+        tabs.append(rrb.Grid(*views, grid_columns=1 if len(views) <= 4 else 2,
+                             name="Time series (timeline: time)"))
+    if spec_entities:
+        views = [rrb.TimeSeriesView(origin="/psd", name=f"PSD [dB re 1 unit²/Hz] vs frequency ({ftl})")]
+        if csd_present:
+            views.append(rrb.TimeSeriesView(origin="/csd/singular_values",
+                                            name=f"CSD singular values (FDD) [dB] vs frequency ({ftl})"))
+        tabs.append(rrb.Vertical(*views, name=f"Spectra (timeline: {ftl})"))
+    if frf_present:
+        tabs.append(rrb.Vertical(
+            rrb.TimeSeriesView(origin="/frf/magnitude_db", name=f"FRF magnitude [dB] vs frequency ({ftl})"),
+            rrb.TimeSeriesView(origin="/frf/phase_deg", name=f"FRF phase [deg] vs frequency ({ftl})",
+                               axis_y=rrb.ScalarAxis(range=(-180.0, 180.0))),
+            rrb.TimeSeriesView(origin="/frf/coherence", name=f"coherence γ² [-] vs frequency ({ftl})",
+                               axis_y=rrb.ScalarAxis(range=(0.0, 1.05))),
+            row_shares=[2, 1.3, 1], name=f"FRF (timeline: {ftl})"))
+    if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
+        fn = np.asarray(modal.natural_frequencies, dtype=float)
+        z = np.asarray(modal.damping_ratios, dtype=float)
+        views3d = [rrb.Spatial3DView(origin=mode_entity(r, fn[r]), name=f"Mode {r + 1}: {mode_label(fn[r], z[r])}")
+                   for r in range(fn.size)]
+        tabs.append(rrb.Horizontal(
+            rrb.Grid(*views3d, grid_columns=min(3, len(views3d))),
+            rrb.TextDocumentView(origin="/modes/table", name="Mode table"),
+            column_shares=[3, 1], name="Mode shapes (timeline: animation)"))
+        active = len(tabs) - 1
+    tabs.append(rrb.TextDocumentView(origin="/about", name="About this recording"))
+    if active is not None:
+        panel = rrb.TimePanel(timeline="animation", play_state="playing", loop_mode="all", fps=20.0)
+    elif signals is not None:
+        panel = rrb.TimePanel(timeline="time")
+    else:
+        panel = rrb.TimePanel(timeline=ftl)
+        active = 0
+    return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=active or 0), panel, collapse_panels=False)
+
+
+def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
+                 coords: Mapping[str, Any] | None = None, rrd_path: str | Path | None = None,
+                 spawn: bool = False, application_id: str = "vibroscope",
+                 recording_name: str | None = None, frames: int = FRAMES,
+                 recording_id: str | None = None) -> Path | None:
+    """Log the results of one analysis to one rerun recording, with a blueprint.
+
+    Entities (channel names are split on ``/`` into entity path parts):
+
+    - ``/signals/<channel>``: the samples, one ``send_columns`` per channel on the ``time``
+      timeline (duration, s since the first sample), :class:`rerun.Scalars` (float64, exact).
+    - ``/psd/<channel>``: ``10 log10`` of the PSD on the frequency timeline (see the module
+      docstring: ``frequency_mHz``, index ``round(1000 f)``); NaN where the PSD is 0.
+    - ``/csd/singular_values/s1..s3``: ``10 log10`` of the first singular values of `csd`.
+    - ``/frf/{magnitude_db,phase_deg,coherence}/<output>`` (``.../in<k>/<output>`` with several
+      inputs): ``20 log10 |H|``, phase in degrees, γ².
+    - ``/modes/mode_<r>_<f>Hz``: :class:`rerun.Points3D` and :class:`rerun.LineStrips3D` of the
+      displaced points over the ``animation`` timeline (`frames` per cycle, see
+      :func:`mode_frames`), the undeformed structure under ``.../undeformed`` (static, grey);
+      ``/modes/table``: a markdown :class:`rerun.TextDocument` of the modes.
+    - ``/about``: what the timelines mean and the settings.
+
+    Parameters
+    ----------
+    signals : Signals, optional
+    psd : Spectrum, optional
+        When None and `csd` is given, the diagonal of `csd` is logged.
+    csd : CrossSpectralMatrix, optional
+    frf : FRF, optional
+    modal : ModalModel, optional
+        Anything with ``natural_frequencies`` (Hz), ``damping_ratios``, ``shapes``
+        (complex, (n_modes, n_points)), ``points``, ``method``.
+    coords : mapping, optional
+        Sensor positions and directions (see
+        :func:`vibroscope.viewers._common.sensor_geometry`); points on a line when None.
+    rrd_path : str or Path, optional
+        Write the recording (and its blueprint) to this ``.rrd`` file.
+    spawn : bool, optional
+        Open a rerun viewer and stream the recording to it.
+    application_id : str, optional
+    recording_name : str, optional
+        Shown in the viewer as the recording's name.
+    frames : int, optional
+        Animation frames per mode cycle.
+    recording_id : str, optional
+        Fixed recording id (a random one when None).
+
+    Returns
+    -------
+    Path or None
+        `rrd_path` once written and closed, None when only spawned.
+
+    Raises
+    ------
+    ValueError
+        If neither `rrd_path` nor `spawn` is given.
+    """
+    if rrd_path is None and not spawn:
+        raise ValueError("log_analysis needs rrd_path or spawn=True")
+    import rerun as rr
+
+    if psd is None and csd is not None:
+        psd = csd.psd()
+    ftl, fidx = None, None
+    for src in (psd, frf, csd):
+        if src is not None:
+            ftl, fidx = frequency_index(src.frequencies)
+            break
+    bp = _build_blueprint(signals=signals, spec_entities=psd is not None, frf_present=frf is not None,
+                          csd_present=csd is not None, modal=modal, ftl=ftl or "frequency_mHz")
+
+    rec = rr.RecordingStream(application_id, recording_id=recording_id)
+    if recording_name:
+        rec.send_recording_name(recording_name)
+    path = Path(rrd_path) if rrd_path is not None else None
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    if spawn and path is not None:
+        rr.spawn(connect=False)
+        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(), default_blueprint=bp)
+    elif spawn:
+        rec.spawn(default_blueprint=bp)
+    else:
+        rec.save(str(path), default_blueprint=bp)
+
+    try:
+        _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl)
+        if signals is not None:
+            t = np.arange(signals.n_samples) / signals.fs
+            for k, ch in enumerate(signals.channels):
+                ent = channel_entity("signals", ch)
+                rec.log(ent, rr.SeriesLines(names=f"{ch} [{signals.units[k] or '-'}]"), static=True)
+                rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t)],
+                                 columns=rr.Scalars.columns(scalars=np.asarray(signals.data[k], dtype=np.float64)))
+        if psd is not None:
+            ftl_p, fidx_p = frequency_index(psd.frequencies)
+            fac = 20.0 if psd.scaling == "amplitude" else 10.0
+            for k, ch in enumerate(psd.channels):
+                ent = channel_entity("psd", ch)
+                rec.log(ent, rr.SeriesLines(names=f"{ch} [dB re 1 {psd.units[k] or 'unit'}]"), static=True)
+                rec.send_columns(ent, indexes=[rr.TimeColumn(ftl_p, sequence=fidx_p)],
+                                 columns=rr.Scalars.columns(scalars=_db(psd.values[k], fac)))
+        if csd is not None:
+            _log_singular_values(rec, csd)
+        if frf is not None:
+            _log_frf(rec, frf)
+        if modal is not None:
+            _log_modes(rec, modal, coords, frames)
+        rec.flush()
+    finally:
+        rec.disconnect()
+    return path
+
+
+def _log_about(rec, *, signals, psd, frf, ftl) -> None:
+    import rerun as rr
+
+    lines = ["# vibroscope analysis", "",
+             "Timelines (the viewer shows one at a time; each tab names the one its views need):", "",
+             "- `time` — time series, seconds since the first sample"
+             + (f" (t0 = {signals.t0:.9g} s)" if signals is not None else "") + ";",
+             f"- `{ftl or 'frequency_mHz'}` — spectra and FRF; the index is the frequency in "
+             + ("µHz (1 000 000 = 1 Hz)" if ftl == "frequency_uHz" else "millihertz (1000 = 1 Hz)")
+             + "; power quantities in dB;",
+             "- `animation` — mode shape frames, one cycle per mode.", ""]
+    if psd is not None:
+        lines.append(f"PSD settings: `{dict(psd.settings)}` (scaling: {psd.scaling})")
+    if frf is not None:
+        lines.append(f"FRF: estimator {frf.estimator}, kind {frf.kind}, units {frf.units or '-'}")
+    rec.log("about", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
+
+
+def _log_singular_values(rec, csd, n_sv: int = 3) -> None:
+    import rerun as rr
+
+    ftl, fidx = frequency_index(csd.frequencies)
+    G = np.asarray(csd.G)
+    S = np.linalg.svd(G, compute_uv=False)  # descending, (n_freqs, n)
+    for k in range(min(n_sv, S.shape[1])):
+        ent = f"/csd/singular_values/s{k + 1}"
+        rec.log(ent, rr.SeriesLines(names=f"s{k + 1} [dB]"), static=True)
+        rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],
+                         columns=rr.Scalars.columns(scalars=_db(S[:, k])))
+
+
+def _log_frf(rec, frf) -> None:
+    import rerun as rr
+
+    ftl, fidx = frequency_index(frf.frequencies)
+    H = np.asarray(frf.H)
+    coh = np.asarray(frf.coherence)
+    n_in = H.shape[2]
+    for i in range(n_in):
+        for o, out in enumerate(frf.outputs):
+            tag = out if n_in == 1 else f"in{i}/{out}"
+            h = H[:, o, i]
+            for what, vals, name in (
+                    ("frf/magnitude_db", _db(np.abs(h), 20.0), f"|H| {out} / {frf.inputs[i]} [dB re 1 {frf.units or 'unit'}]"),
+                    ("frf/phase_deg", np.degrees(np.angle(h)), f"∠H {out} / {frf.inputs[i]} [deg]")):
+                ent = channel_entity(what, tag)
+                rec.log(ent, rr.SeriesLines(names=name), static=True)
+                rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],
+                                 columns=rr.Scalars.columns(scalars=vals))
+            if i == 0 and coh.ndim == 2 and coh.shape[1] > o:
+                ent = channel_entity("frf/coherence", out)
+                rec.log(ent, rr.SeriesLines(names=f"γ² {out}"), static=True)
+                rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],
+                                 columns=rr.Scalars.columns(scalars=coh[:, o].astype(np.float64)))
+
+
+def _structure_scale(positions: np.ndarray) -> float:
+    ext = float(np.max(np.ptp(positions, axis=0))) if len(positions) > 1 else 0.0
+    return 0.15 * ext if ext > 0 else 0.2
+
+
+def _log_modes(rec, modal, coords, frames: int) -> None:
+    import rerun as rr
+
+    fn = np.atleast_1d(np.asarray(modal.natural_frequencies, dtype=float))
+    zeta = np.atleast_1d(np.asarray(modal.damping_ratios, dtype=float))
+    shapes = np.atleast_2d(np.asarray(modal.shapes, dtype=complex))
+    points = list(modal.points)
+    pos, dirs, _ = sensor_geometry(points, coords)
+    scale = _structure_scale(pos)
+    axis = int(np.argmax(np.ptp(pos, axis=0))) if len(points) > 1 else 0
+    order = np.argsort(pos[:, axis], kind="stable")  # the line strip joins the points along the structure
+    labels = [p.split("/")[-1] or p for p in points]
+    rec.log("modes/table", rr.TextDocument(_mode_table(modal), media_type=rr.MediaType.MARKDOWN), static=True)
+    n = len(points)
+    frame_idx = np.arange(frames)
+    for r in range(fn.size):
+        ent = mode_entity(r, fn[r])
+        rec.log(ent + "/undeformed", rr.Points3D(pos, radii=0.01 * (scale / 0.15 if scale else 1), colors=[150, 150, 150],
+                                                 labels=labels),
+                rr.LineStrips3D([pos[order]], colors=[150, 150, 150], radii=0.004 * scale / 0.15), static=True)
+        rec.log(ent, rr.TextDocument(f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}; "
+                                     f"displacement scale {scale:.3g} m"), static=True)
+        X = mode_frames(shapes[r], pos, dirs, scale, frames)  # (frames, n, 3)
+        colour = np.array([220, 80, 40], dtype=np.uint8)
+        rec.send_columns(
+            ent,
+            indexes=[rr.TimeColumn("animation", sequence=frame_idx)],
+            columns=[
+                *rr.Points3D.columns(positions=X.reshape(-1, 3), colors=np.tile(colour, (frames * n, 1)),
+                                     radii=np.full(frames * n, 0.015 * scale / 0.15, dtype=np.float32)
+                                     ).partition(lengths=np.full(frames, n)),
+                *rr.LineStrips3D.columns(strips=[X[k][order] for k in range(frames)]),
+            ],
+        )
+
+
+def read_rrd(path: str | Path, *, blueprint: bool = False) -> dict[str, dict[str, Any]]:
+    """Read a recording back with rerun's own reader (:class:`rerun.chunk.RrdReader`).
+
+    Parameters
+    ----------
+    path : str or Path
+        An ``.rrd`` file.
+    blueprint : bool, optional
+        Read the (first) blueprint store of the file instead of the recording.
+
+    Returns
+    -------
+    dict
+        ``{entity_path: {column: values}}``, entity paths as rerun writes them
+        (``"/signals/acc/s1.z"``). Columns are named as rerun names them: timelines by their
+        name (int64 values: ns for durations, the index for sequences) and components as
+        ``"Archetype:field"`` (``"Scalars:scalars"``, ``"Points3D:positions"``). Rows of the
+        temporal chunks of an entity are concatenated in file order; a component with one
+        value per row becomes a 1-D (or (n, k)) array, otherwise a list with one array per row.
+        Static data are under the key ``"static"`` as ``{component: value of its last row}``.
+
+    Raises
+    ------
+    ValueError
+        If the file holds no such store.
+    """
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(str(path))
+    store = None
+    if blueprint:
+        bps = reader.blueprints()
+        if not bps:
+            raise ValueError(f"{path}: no blueprint store")
+        store = bps[0]
+    parts: dict[str, dict[str, list]] = {}
+    out: dict[str, dict[str, Any]] = {}
+    for chunk in reader.stream(store=store):
+        ent = chunk.entity_path
+        rb = chunk.to_record_batch()
+        d = out.setdefault(ent, {})
+        for name, col in zip(rb.schema.names, rb.columns):
+            if name == "rerun.controls.RowId":
+                continue
+            vals = _rows(col)
+            if chunk.is_static:
+                d.setdefault("static", {})[name] = vals[-1] if len(vals) else None
+            else:
+                parts.setdefault(ent, {}).setdefault(name, []).extend(vals)
+    for ent, cols in parts.items():
+        for name, rows in cols.items():
+            out[ent][name] = _stack(rows)
+    return out
+
+
+def _rows(col) -> list:
+    """One value per row of an arrow column: numpy arrays for lists (fixed-size lists reshaped to
+    (n, k)), int64 for durations and timestamps (ns), str for strings."""
+    import pyarrow as pa
+
+    if pa.types.is_duration(col.type) or pa.types.is_timestamp(col.type):
+        return list(np.asarray(col.cast(pa.int64()).to_numpy(zero_copy_only=False)))
+    return list(_flat(col))
+
+
+def _flat(arr):
+    import pyarrow as pa
+
+    t = arr.type
+    if pa.types.is_fixed_size_list(t):
+        return np.asarray(_flat(arr.flatten())).reshape(len(arr), t.list_size)
+    if pa.types.is_list(t) or pa.types.is_large_list(t):
+        offsets = np.asarray(arr.offsets.to_numpy(zero_copy_only=False), dtype=np.int64)
+        inner = _flat(arr.values)
+        valid = arr.is_valid().to_numpy(zero_copy_only=False)
+        return [inner[offsets[k]:offsets[k + 1]] if valid[k] else None for k in range(len(arr))]
+    if pa.types.is_primitive(t):
+        return arr.to_numpy(zero_copy_only=False)
+    return arr.to_pylist()
+
+
+def _stack(rows: list):
+    if rows and all(r is not None and not isinstance(r, str) and np.ndim(r) >= 1 and len(r) == 1 for r in rows):
+        if all(isinstance(r, np.ndarray) for r in rows):
+            return np.concatenate(rows)
+        return [r[0] for r in rows]
+    if rows and all(np.ndim(r) == 0 for r in rows):
+        return np.asarray(rows)
+    return rows
