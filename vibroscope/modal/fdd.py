@@ -263,7 +263,6 @@ def fdd(
     if idx.size < 5:
         raise ValueError(f"the band {fmin=} .. {fmax=} Hz holds {idx.size} bins; at least 5 are needed")
     tiny = np.finfo(float).tiny
-    db_all = 10 * np.log10(np.maximum(s1, tiny))
     cand_l, prom_l, sv_l = [], [], []
     for q in range(min(int(n_singular), S.shape[1])):
         dbq = 10 * np.log10(np.maximum(S[:, q], tiny))
@@ -274,12 +273,11 @@ def fdd(
         sv_l += [q] * len(o)
     cand, prom, sv = np.array(cand_l, dtype=int), np.array(prom_l), np.array(sv_l, dtype=int)
     order = np.arange(len(cand))
-    u1 = U[:, :, 0]
 
-    def bell_of(k: int, phi: np.ndarray) -> tuple[np.ndarray, int, int]:
-        """Bell values over the full axis and its index range [lo, hi]."""
+    def bell_of(k: int, q: int, phi: np.ndarray) -> tuple[np.ndarray, int, int]:
+        """Bell values over the full axis and its index range [lo, hi] (peak of singular value q)."""
         b = np.zeros_like(s1)
-        b[k] = s1[k]
+        b[k] = S[k, q]
         lo = hi = k
         for step in (-1, 1):
             j = k + step
@@ -318,7 +316,7 @@ def fdd(
         acc_prom.append(float(prom[o]))
         acc_shape.append(phi)
         acc_sv.append(int(sv[o]))
-        bells.append(bell_of(k, phi))
+        bells.append(bell_of(k, int(sv[o]), phi))
         if n_modes is not None and len(accepted) >= n_modes:
             break
     if n_modes is not None and len(accepted) < n_modes:
