@@ -280,10 +280,11 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl)
         if signals is not None:
             t = np.arange(signals.n_samples) / signals.fs
+            t_ns = np.round(t * 1e9).astype(np.int64).astype("timedelta64[ns]")  # rounded, not truncated
             for k, ch in enumerate(signals.channels):
                 ent = channel_entity("signals", ch)
                 rec.log(ent, rr.SeriesLines(names=f"{ch} [{signals.units[k] or '-'}]"), static=True)
-                rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t)],
+                rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
                                  columns=rr.Scalars.columns(scalars=np.asarray(signals.data[k], dtype=np.float64)))
         if psd is not None:
             ftl_p, fidx_p = frequency_index(psd.frequencies)
