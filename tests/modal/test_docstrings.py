@@ -52,3 +52,14 @@ def test_modal_model_plot(tmp_path):
     fig.savefig(tmp_path / "modes.png")
     assert (tmp_path / "modes.png").stat().st_size > 0
     assert np.isfinite(m.natural_frequencies).all()
+
+
+@pytest.mark.parametrize("module", ["_results", "mac", "peak_picking", "fdd", "ssi"])
+def test_doctests(module):
+    """The Examples of vibroscope.modal run (the package is not in pytest's doctest paths)."""
+    import doctest
+    import importlib
+
+    mod = importlib.import_module(f"vibroscope.modal.{module}")
+    res = doctest.testmod(mod, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    assert res.failed == 0
