@@ -119,7 +119,7 @@ def test_plot_mode_shapes_along_a_line_without_coords(results):
     x, amp = ax.get_lines()[1].get_data()
     np.testing.assert_array_equal(x, np.arange(len(modal.points)))
     np.testing.assert_allclose(amp, real_shape(modal.shapes[0]))
-    assert [t.get_text() for t in ax.get_xticklabels()][0].endswith("s1.z")
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["s1", "s2", "s3", "s4"]  # shared parts cut
 
 
 def test_plot_mode_shapes_of_a_real_modal_model(results):
@@ -131,6 +131,19 @@ def test_plot_mode_shapes_of_a_real_modal_model(results):
     mm = ModalModel(fake.natural_frequencies, fake.damping_ratios, fake.shapes, fake.points, "fdd")
     fig = mm.plot(syn.coords())
     assert len([a for a in fig.axes if a.get_visible()]) == 3
+
+
+def test_plot_mode_shapes_one_line_per_direction(results):
+    modal = results["modal"]
+    # two sensors per height, measuring along x and y (as on the LUMO tower)
+    coords = {p: {"xyz": (0.0, 0.0, float(1 + k // 2)), "direction": "x" if k % 2 == 0 else "y"}
+              for k, p in enumerate(modal.points)}
+    fig = figures.plot_mode_shapes(modal, coords)
+    ax = fig.axes[0]
+    solid = [ln for ln in ax.get_lines() if ln.get_linestyle() == "-" and ln.get_marker() == "o"]
+    assert [ln.get_label() for ln in solid] == ["along x (real part)", "along y (real part)"]
+    np.testing.assert_allclose(solid[0].get_data()[0], real_shape(modal.shapes[0])[[0, 2]])
+    np.testing.assert_array_equal(solid[1].get_data()[1], [1.0, 2.0])
 
 
 def test_plot_singular_values_marks_the_modes(results):

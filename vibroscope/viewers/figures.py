@@ -41,6 +41,23 @@ def _short(name: str, n: int = 38) -> str:
     return name if len(name) <= n else "…" + name[-(n - 1):]
 
 
+def _distinct_labels(names: Sequence[str], n: int = 16) -> list[str]:
+    """Short tick labels: the names less the prefix and suffix they all share (cut at ``/`` or
+    ``.``), e.g. ``/imu/m1.linear_acceleration.x`` -> ``m1``."""
+    names = [str(x) for x in names]
+    if len(names) < 2:
+        return [_short(x, n) for x in names]
+    pre = os.path.commonprefix(names)
+    cut = max(pre.rfind("/"), pre.rfind(".")) + 1
+    rev = [x[::-1] for x in names]
+    suf = os.path.commonprefix(rev)
+    cut_s = max(suf.rfind("/"), suf.rfind(".")) + 1
+    out = [x[cut:len(x) - cut_s] if len(x) - cut_s > cut else x for x in names]
+    if len(set(out)) < len(out) or not all(out):
+        out = names
+    return [_short(x, n) for x in out]
+
+
 def _legend(ax, n: int) -> None:
     if n == 0:
         return
@@ -55,8 +72,8 @@ def _spectrum_ylabel(spectrum, db: bool) -> str:
     unit = u.pop() if len(u) == 1 else ""
     what = {"density": "PSD", "spectrum": "power spectrum", "amplitude": "amplitude"}.get(spectrum.scaling, "value")
     if db:
-        return f"{what} [dB re 1 {unit}]" if unit else f"{what} [dB]"
-    return f"{what} [{unit}]" if unit else what
+        return f"{what} [dB re 1 {unit}]" if unit else f"{what} [dB re 1 unit, see legend]"
+    return f"{what} [{unit}]" if unit else f"{what} [units in legend]"
 
 
 def plot_spectrum(spectrum, ax=None, *, db: bool = False, channels: Sequence[str | int] | None = None):
@@ -216,6 +233,17 @@ def plot_mode_shapes(modal, coords: Mapping[str, Any] | None = None, *, fig=None
         vertical = False
         coord_label = "measurement point"
     order = np.argsort(xcoord, kind="stable")
+    # one line per measuring direction (e.g. the two horizontal axes of a tower at each height)
+    groups: list[tuple[str, np.ndarray]] = []
+    if from_coords:
+        _, dirs, _ = sensor_geometry(points, coords)
+        keys = [tuple(np.round(d, 3)) for d in dirs]
+        for key in dict.fromkeys(keys):
+            members = np.array([k for k, kk in enumerate(keys) if kk == key])
+            axis_names = {(1.0, 0.0, 0.0): "along x", (0.0, 1.0, 0.0): "along y", (0.0, 0.0, 1.0): "along z"}
+            groups.append((axis_names.get(tuple(float(v) for v in key), f"along {key}"), members))
+    else:
+        groups.append(("", np.arange(len(points))))
     ncols = min(max(n_modes, 1), 5 if vertical else 3)
     nrows = int(np.ceil(max(n_modes, 1) / ncols))
     if fig is None:
@@ -236,34 +264,43 @@ def plot_mode_shapes(modal, coords: Mapping[str, Any] | None = None, *, fig=None
             continue
         phi = real_shape(shapes[r])
         mod = np.abs(shapes[r]) / (np.max(np.abs(shapes[r])) or 1.0)
-        x, y = xcoord[order], phi[order]
         ref = None
         if tm_idx is not None and tm_idx[r] >= 0 and same_points:
             ref = real_shape(np.asarray(true_modes.shapes)[tm_idx[r]])
             ref = ref / (np.max(np.abs(ref)) or 1.0)
             if np.dot(ref, phi) < 0:
                 ref = -ref
-            ref = ref[order]
-        if vertical:
-            ax.axvline(0, color="0.5", lw=0.8)
-            ax.plot(y, x, "o-", color="C0", lw=1.4, ms=4, label="identified (real part)")
-            ax.plot(mod[order], x, ":", color="C0", lw=0.9, alpha=0.6, label="|φ|")
+        (ax.axvline if vertical else ax.axhline)(0, color="0.5", lw=0.8)
+        for g, (gname, members) in enumerate(groups):
+            sel = order[np.isin(order, members)]  # this direction's points along the structure
+            x, y = xcoord[sel], phi[sel]
+            col = f"C{g % 10}" if len(groups) > 1 else "C0"
+            lab = f"{gname} (real part)" if len(groups) > 1 else "identified (real part)"
+            lines = [(y, "o-", dict(color=col, lw=1.4, ms=4, label=lab)),
+                     (mod[sel], ":", dict(color=col, lw=0.9, alpha=0.6, label="|φ|" if g == 0 else None))]
             if ref is not None:
-                ax.plot(ref, x, "s--", color="C3", lw=1.0, ms=3, label="true")
+                lines.append((ref[sel], "s--", dict(color="C3" if len(groups) == 1 else col, lw=1.0, ms=3,
+                                                    alpha=0.8, label="true" if g == 0 else None)))
+            for vals, fmt, kw in lines:
+                if vertical:
+                    ax.plot(vals, x, fmt, **kw)
+                else:
+                    ax.plot(x, vals, fmt, **kw)
+        if vertical:
             ax.set_xlabel("amplitude [-]")
             ax.set_ylabel(coord_label)
             ax.set_xlim(-1.15, 1.15)
         else:
-            ax.axhline(0, color="0.5", lw=0.8)
-            ax.plot(x, y, "o-", color="C0", lw=1.4, ms=4, label="identified (real part)")
-            ax.plot(x, mod[order], ":", color="C0", lw=0.9, alpha=0.6, label="|φ|")
-            if ref is not None:
-                ax.plot(x, ref, "s--", color="C3", lw=1.0, ms=3, label="true")
             ax.set_ylabel("amplitude [-]")
             ax.set_ylim(-1.15, 1.15)
             ax.set_xlabel(coord_label)
-            if not from_coords and len(points) <= 12:
-                ax.set_xticks(x, [_short(points[k], 14) for k in order], rotation=30, ha="right", fontsize=7)
+            xs = xcoord[order]
+            if len(points) <= 12 and np.all(np.diff(xs) > 0):
+                short = _distinct_labels(points)
+                ax.set_xticks(xs, [short[k] for k in order], rotation=30 if len(points) > 5 else 0,
+                              ha="right" if len(points) > 5 else "center", fontsize=7)
+                if from_coords:
+                    ax.set_xlabel(coord_label + " (sensor names as ticks)")
         title = f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}"
         if tm_idx is not None and tm_idx[r] >= 0:
             ft = float(np.asarray(true_modes.natural_frequencies)[tm_idx[r]])
@@ -318,14 +355,28 @@ def plot_singular_values(frequencies, S, modes=None, *, ax=None, n_sv: int = 3, 
         ok = np.isfinite(fm)
         y = np.interp(fm[ok], f, sdb[:, 0])
         ax.plot(fm[ok], y, "v", color="C3", ms=8, label="picked modes")
-        for fi, yi in zip(fm[ok], y):
-            ax.annotate(f"{fi:.3g} Hz", (fi, yi), textcoords="offset points", xytext=(0, 8), ha="center",
-                        fontsize=7, color="C3")
+        span = (f[-1] - f[0]) if f.size > 1 else 1.0
+        pts = sorted(zip(fm[ok], y))
+        clusters: list[list[tuple[float, float]]] = []
+        for fi, yi in pts:  # modes closer than 5 % of the span share a column of stacked labels
+            if clusters and fi - clusters[-1][-1][0] < 0.05 * span:
+                clusters[-1].append((fi, yi))
+            else:
+                clusters.append([(fi, yi)])
+        from matplotlib.transforms import offset_copy
+
+        for cl in clusters:
+            base = max(yi for _, yi in cl)
+            for k, (fi, yi) in enumerate(cl):
+                tr = offset_copy(ax.transData, fig=ax.figure, x=0, y=8 + 10 * k, units="points")
+                ax.annotate(f"{fi:.4g} Hz", (fi, yi), xytext=(fi, base), textcoords=tr, ha="center",
+                            fontsize=7, color="C3",
+                            arrowprops=dict(arrowstyle="-", color="C3", lw=0.5, alpha=0.5, shrinkA=0, shrinkB=4))
     finite = sdb[:, : min(n_sv, S.shape[1])][np.isfinite(sdb[:, : min(n_sv, S.shape[1])])]
     if finite.size:
         lo, hi = float(finite.min()), float(finite.max())
         pad = 0.06 * (hi - lo or 1.0)
-        ax.set_ylim(lo - pad, hi + 2.5 * pad)
+        ax.set_ylim(lo - pad, hi + 4 * pad)
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("singular value [dB re 1 unit²/Hz]")
     ax.set_title("Frequency domain decomposition: singular values of the CSD matrix", fontsize=10)
@@ -336,7 +387,7 @@ def plot_singular_values(frequencies, S, modes=None, *, ax=None, n_sv: int = 3, 
     return ax
 
 
-def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 4000):
+def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 1600):
     """Time series of the first channels, one panel each, min/max-decimated for size.
 
     Parameters
@@ -370,23 +421,37 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
             lo = np.minimum.reduceat(x, edges[:-1])
             hi = np.maximum.reduceat(x, edges[:-1])
             tb = t[edges[:-1]]
-            ax.fill_between(tb, lo, hi, color=f"C{k % 10}", lw=0.5)
+            ax.fill_between(tb, lo, hi, color=f"C{k % 10}", lw=0)
         else:
             ax.plot(t, x, lw=0.8, color=f"C{k % 10}")
         u = signals.units[k]
         ax.set_ylabel(f"[{u}]" if u else "[-]", fontsize=8)
         ax.set_title(_short(signals.channels[k], 60), fontsize=8, loc="left")
         ax.grid(True, alpha=0.4)
-    axes[-1].set_xlabel(f"time since t0 = {signals.t0:.6g} s [s]")
+    t0 = f"{signals.t0:.3f}" if abs(signals.t0) >= 1e6 else f"{signals.t0:g}"
+    axes[-1].set_xlabel(f"time since t0 = {t0} s [s]")
     more = f" (first {n} of {signals.n_channels})" if signals.n_channels > n else ""
     fig.suptitle(f"Time series, fs = {signals.fs:g} Hz{more}", fontsize=10)
     return fig
 
 
 def _save(fig, path: Path) -> Path:
-    fig.savefig(path, dpi=DPI)
+    """Write `fig` as a PNG at :data:`DPI`, palette-quantised (256 colours) to stay small."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=DPI, format="png")
     plt = _pyplot()
     plt.close(fig)
+    try:
+        from PIL import Image
+
+        buf.seek(0)
+        with Image.open(buf) as im:
+            im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) \
+                .save(path, format="PNG", optimize=True)
+    except ImportError:  # pragma: no cover - pillow comes with matplotlib
+        Path(path).write_bytes(buf.getvalue())
     return path
 
 
