@@ -168,3 +168,18 @@ def test_frequency_index_falls_back_to_microhertz():
 def test_needs_a_sink():
     with pytest.raises(ValueError, match="rrd_path or spawn"):
         log_analysis(signals=syn.signals())
+
+
+def test_two_sensors_at_one_location_move_one_strip_vertex(tmp_path, analysis):
+    modal = analysis["modal"]
+    # sensors 1, 2 at height 1 m (x and y), sensors 3, 4 at 2 m (x and y)
+    coords = {p: {"xyz": (0.0, 0.0, float(1 + k // 2)), "direction": "xy"[k % 2]}
+              for k, p in enumerate(modal.points)}
+    d = read_rrd(log_analysis(modal=modal, coords=coords, rrd_path=tmp_path / "xy.rrd"))
+    ent = d[mode_entity(0, modal.natural_frequencies[0])]
+    phi = modal.shapes[0] / np.abs(modal.shapes[0]).max()
+    scale = 0.15 * 1.0
+    disp = scale * np.real(phi)  # frame 0
+    expected = np.array([[disp[0], disp[1], 1.0], [disp[2], disp[3], 2.0]], dtype=np.float32)
+    np.testing.assert_array_equal(ent["LineStrips3D:strips"][0], expected)
+    np.testing.assert_array_equal(ent["Points3D:positions"][0][1], np.float32([0.0, disp[1], 1.0]))

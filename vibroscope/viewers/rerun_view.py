@@ -35,7 +35,7 @@ import numpy as np
 from vibroscope.viewers._common import mode_label, sensor_geometry
 
 __all__ = ["log_analysis", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
-           "mode_frames"]
+           "mode_frames", "node_frames"]
 
 #: animation frames per cycle of a mode
 FRAMES = 40
@@ -207,9 +207,11 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     - ``/csd/singular_values/s1..s3``: ``10 log10`` of the first singular values of `csd`.
     - ``/frf/{magnitude_db,phase_deg,coherence}/<output>`` (``.../in<k>/<output>`` with several
       inputs): ``20 log10 |H|``, phase in degrees, γ².
-    - ``/modes/mode_<r>_<f>Hz``: :class:`rerun.Points3D` and :class:`rerun.LineStrips3D` of the
-      displaced points over the ``animation`` timeline (`frames` per cycle, see
-      :func:`mode_frames`), the undeformed structure under ``.../undeformed`` (static, grey);
+    - ``/modes/mode_<r>_<f>Hz``: :class:`rerun.Points3D` of the sensors displaced along their
+      measuring directions over the ``animation`` timeline (`frames` per cycle, see
+      :func:`mode_frames`; the largest displacement is 15 % of the structure's size) and a
+      :class:`rerun.LineStrips3D` joining the deformed locations (:func:`node_frames`); the
+      undeformed sensors and structure under ``.../undeformed`` (static, grey);
       ``/modes/table``: a markdown :class:`rerun.TextDocument` of the modes.
     - ``/about``: what the timelines mean and the settings.
 
@@ -376,31 +378,71 @@ def _log_modes(rec, modal, coords, frames: int) -> None:
     points = list(modal.points)
     pos, dirs, _ = sensor_geometry(points, coords)
     scale = _structure_scale(pos)
-    axis = int(np.argmax(np.ptp(pos, axis=0))) if len(points) > 1 else 0
-    order = np.argsort(pos[:, axis], kind="stable")  # the line strip joins the points along the structure
+    ext = scale / 0.15  # the structure's size (m), for radii
+    node_pos, members = _nodes(pos)
     labels = [p.split("/")[-1] or p for p in points]
     rec.log("modes/table", rr.TextDocument(_mode_table(modal), media_type=rr.MediaType.MARKDOWN), static=True)
     n = len(points)
     frame_idx = np.arange(frames)
+    grey = [150, 150, 150]
     for r in range(fn.size):
         ent = mode_entity(r, fn[r])
-        rec.log(ent + "/undeformed", rr.Points3D(pos, radii=0.01 * (scale / 0.15 if scale else 1), colors=[150, 150, 150],
-                                                 labels=labels),
-                rr.LineStrips3D([pos[order]], colors=[150, 150, 150], radii=0.004 * scale / 0.15), static=True)
+        rec.log(ent + "/undeformed", rr.Points3D(pos, radii=0.01 * ext, colors=grey, labels=labels),
+                rr.LineStrips3D([node_pos], colors=grey, radii=0.004 * ext), static=True)
         rec.log(ent, rr.TextDocument(f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}; "
-                                     f"displacement scale {scale:.3g} m"), static=True)
+                                     f"largest displacement drawn {scale:.3g} m"), static=True)
         X = mode_frames(shapes[r], pos, dirs, scale, frames)  # (frames, n, 3)
+        strips = node_frames(X, pos, node_pos, members)  # (frames, n_nodes, 3)
         colour = np.array([220, 80, 40], dtype=np.uint8)
         rec.send_columns(
             ent,
             indexes=[rr.TimeColumn("animation", sequence=frame_idx)],
             columns=[
                 *rr.Points3D.columns(positions=X.reshape(-1, 3), colors=np.tile(colour, (frames * n, 1)),
-                                     radii=np.full(frames * n, 0.015 * scale / 0.15, dtype=np.float32)
+                                     radii=np.full(frames * n, 0.015 * ext, dtype=np.float32)
                                      ).partition(lengths=np.full(frames, n)),
-                *rr.LineStrips3D.columns(strips=[X[k][order] for k in range(frames)]),
+                *rr.LineStrips3D.columns(strips=list(strips)),
             ],
         )
+
+
+def _nodes(pos: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Distinct sensor locations along the structure's longest extent, and the sensors at each."""
+    if len(pos) == 0:
+        return pos.reshape(0, 3), []
+    axis = int(np.argmax(np.ptp(pos, axis=0)))
+    keys = [tuple(np.round(p, 6)) for p in pos]
+    uniq = list(dict.fromkeys(keys))
+    node_pos = np.array(uniq, dtype=float)
+    members = [np.array([k for k, kk in enumerate(keys) if kk == u]) for u in uniq]
+    order = np.argsort(node_pos[:, axis], kind="stable")
+    return node_pos[order], [members[i] for i in order]
+
+
+def node_frames(X: np.ndarray, positions: np.ndarray, node_pos: np.ndarray, members: list) -> np.ndarray:
+    """Deformed locations: each node moved by the sum of its sensors' displacements.
+
+    Sensors at one location measuring along different axes (a tower's two horizontal axes)
+    together give that location's displacement vector; the line strip of the deformed
+    structure joins these.
+
+    Parameters
+    ----------
+    X : ndarray, shape (frames, n_points, 3)
+        Displaced sensor positions (:func:`mode_frames`).
+    positions : ndarray, shape (n_points, 3)
+        Undeformed sensor positions.
+    node_pos : ndarray, shape (n_nodes, 3)
+        Distinct locations, in strip order.
+    members : list of ndarray
+        Indices of the sensors at each location.
+
+    Returns
+    -------
+    ndarray, shape (frames, n_nodes, 3)
+    """
+    D = X - positions[None]
+    return np.stack([node_pos[j][None, :] + D[:, m, :].sum(axis=1) for j, m in enumerate(members)], axis=1)
 
 
 def read_rrd(path: str | Path, *, blueprint: bool = False) -> dict[str, dict[str, Any]]:
