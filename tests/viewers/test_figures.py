@@ -168,3 +168,22 @@ def test_sensor_geometry_forms():
     pos, d, from_coords = sensor_geometry(pts)
     np.testing.assert_array_equal(pos[:, 0], [0, 1])
     assert not from_coords
+
+
+@pytest.mark.parametrize("qualname", [
+    "figures.plot_spectrum", "figures.plot_frf", "figures.plot_mode_shapes", "figures.plot_singular_values",
+    "figures.plot_signals", "figures.summary_figures", "rerun_view.log_analysis", "rerun_view.read_rrd",
+    "rerun_view.mode_frames", "rerun_view.node_frames", "rerun_view.frequency_index",
+    "rerun_view.channel_entity",
+])
+def test_public_viewer_functions_document_every_parameter(qualname):
+    import importlib
+    import inspect
+    import re
+
+    mod, name = qualname.split(".")
+    fn = getattr(importlib.import_module(f"vibroscope.viewers.{mod}"), name)
+    doc = inspect.getdoc(fn) or ""
+    assert "Returns" in doc
+    for p in inspect.signature(fn).parameters.values():
+        assert re.search(rf"^\s*{p.name}\b|[ ,]{p.name}\b.*:", doc, re.M), f"{qualname}: {p.name!r} undocumented"
