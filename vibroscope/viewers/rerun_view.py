@@ -249,6 +249,24 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     ------
     ValueError
         If neither `rrd_path` nor `spawn` is given.
+
+    Notes
+    -----
+    Frequency axis: rerun 0.41 plots scalars only against a timeline, and a timeline holds
+    integers (sequence) or times (duration/timestamp). Spectra therefore go on the sequence
+    timeline ``frequency_mHz`` whose index is ``round(1000 f)``: a linear frequency axis whose
+    numbers read as millihertz (``frequency_uHz`` when bins are finer than 1 mHz). A duration
+    timeline in "seconds = Hz" was rejected because the viewer formats durations as times
+    (``1m 10s`` for 70 Hz). The viewer shows one timeline at a time; the tabs say which.
+
+    The recording is an explicit :class:`rerun.RecordingStream` (never the global one); the
+    blueprint is sent as its default blueprint; the stream is flushed and disconnected before
+    returning, so the ``.rrd`` file is complete (it carries rerun's footer/manifest).
+
+    Examples
+    --------
+    >>> log_analysis(signals=sig, psd=psd, modal=mm, rrd_path="run.rrd")  # doctest: +SKIP
+    >>> read_rrd("run.rrd")["/psd/imu/wrist.linear_acceleration.z"]["Scalars:scalars"]  # doctest: +SKIP
     """
     if rrd_path is None and not spawn:
         raise ValueError("log_analysis needs rrd_path or spawn=True")
