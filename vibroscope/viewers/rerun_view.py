@@ -13,7 +13,7 @@ Timelines
     against a timeline only (no free x axis, no log axes), and timelines hold integers
     (sequences) or times; a sequence whose index is the frequency in **millihertz**
     (``round(1000 f)``) keeps the axis a plain linear frequency axis whose numbers read
-    directly as mHz (1000 = 1 Hz), without the ``s``/``min`` formatting a duration timeline
+    directly as mHz (1000 = 1 Hz), without the time formatting (s, min) a duration timeline
     would put on frequencies taken as seconds. When the resolution is finer than 1 mHz
     (rounded bins would collide) the timeline is ``frequency_uHz`` (µHz) instead. Power
     quantities are logged in dB (``10 log10``), since the view has no logarithmic y axis.
@@ -256,8 +256,8 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     integers (sequence) or times (duration/timestamp). Spectra therefore go on the sequence
     timeline ``frequency_mHz`` whose index is ``round(1000 f)``: a linear frequency axis whose
     numbers read as millihertz (``frequency_uHz`` when bins are finer than 1 mHz). A duration
-    timeline in "seconds = Hz" was rejected because the viewer formats durations as times
-    (``1m 10s`` for 70 Hz). The viewer shows one timeline at a time; the tabs say which.
+    timeline in "seconds = Hz" was not used because the viewer labels durations as times
+    (seconds, minutes), not as plain numbers. The viewer shows one timeline at a time; the tabs say which.
 
     The recording is an explicit :class:`rerun.RecordingStream` (never the global one); the
     blueprint is sent as its default blueprint; the stream is flushed and disconnected before
