@@ -61,6 +61,7 @@ def test_larger_area_raises_natural_frequency():
     assert w[0] < w[1] < w[2]
 
 
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")  # control.damp on the integrator pole
 def test_hydraulic_natural_frequency_formula():
     p = HYDRAULIC_NOMINAL
     wh = hydraulic_natural_frequency(p["beta_e"], p["A"], p["V_t"], p["m_t"])

@@ -323,6 +323,18 @@ def hydraulic_closed_loop(k_p: float, k_d: float = 0.0, k_a: float = 0.0, **plan
     kick the valve): ``u = k_p (r - x) - k_d x' - k_a x''``; units: k_p in 1/m, k_d in s/m,
     k_a in s^2/m (u is dimensionless valve command).
 
+    Parameters
+    ----------
+    k_p : float
+        Proportional position gain, 1/m.
+    k_d : float
+        Velocity (derivative) feedback gain, s/m.
+    k_a : float
+        Acceleration (second-derivative) feedback gain, s^2/m.
+    **plant
+        Overrides of :data:`HYDRAULIC_NOMINAL` (``beta_e`` Pa, ``A`` m^2, ``V_t`` m^3,
+        ``m_t`` kg, ``zeta_h``, ``K_q`` m^3/s).
+
     Returns
     -------
     control.TransferFunction
