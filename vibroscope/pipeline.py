@@ -99,6 +99,7 @@ def analyse_signals(
     fmax: float | None = None,
     n_modes: int | None = None,
     estimator: str = "H1",
+    prominence: float = 10.0,
 ) -> Analysis:
     """Spectra, FRFs, coherence and modal vectors of a record.
 
@@ -121,6 +122,11 @@ def analyse_signals(
         Number of modes to report (default: every clear peak).
     estimator : {'H1', 'H2', 'Hv'}, optional
         FRF estimator with an input.
+    prominence : float, optional
+        Smallest prominence (dB) of a peak of the first singular values for output-only FDD;
+        default 10 dB (ambient records average few segments at the resolution modes need, and
+        their singular values fluctuate by several dB). Peak picking with a force uses its own
+        3 dB default on the far smoother FRFs.
 
     Returns
     -------
@@ -159,7 +165,9 @@ def analyse_signals(
         h = frf(G, input, outputs, estimator=estimator)
         mm = modal.peak_picking(h, n_modes=n_modes, fmin=fmin, fmax=fmax_eff)
     else:
-        mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=fmax_eff)
+        # two singular values: close modes (e.g. a tower's two bending directions) both show
+        mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=fmax_eff, n_singular=min(2, len(outputs)),
+                       prominence=prominence)
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
                     input=input, outputs=list(outputs))
     return Analysis(sig, psd, Gout, h, mm, sv, settings, warnings)
@@ -197,7 +205,8 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
         "input": analysis.settings.get("input"),
         "outputs": analysis.settings.get("outputs"),
         "warnings": list(analysis.warnings),
-        "modes": analysis.modal.to_dict(),
+        "modal_method": analysis.modal.method,
+        "modes": analysis.modal.to_dict()["modes"],
         "settings": {k: v for k, v in analysis.settings.items() if k not in ("outputs",)},
     }
     for key in ("timebase", "skipped", "decimated", "resampled"):

@@ -177,6 +177,8 @@ def fdd(
     min_level: float = 0.1,
     window_correction: bool = True,
     n_singular: int = 1,
+    min_bell_bins: int = 3,
+    sv_ratio_db: float = 20.0,
 ) -> ModalModel:
     """Output-only modal parameters by Frequency Domain Decomposition, damping by EFDD.
 
@@ -222,6 +224,14 @@ def fdd(
         ``s2`` are candidates too (shape ``u2`` at the peak), which separates two close modes
         that share one peak of ``s1`` (e.g. the two bending directions of a tower); they are
         taken after all ``s1`` candidates and pass the same duplicate test.
+    min_bell_bins : int, optional
+        A peak is a mode only if its singular vector keeps MAC > `mac_threshold` over at least
+        this many bins (default 3: a Hann window spreads even the lightest-damped mode over its
+        main lobe, while a noise peak's singular vector is random from bin to bin).
+    sv_ratio_db : float, optional
+        A peak of ``s_q`` (q > 0) is a candidate only if ``s_q ≥ s1 · 10^(−sv_ratio_db/10)`` there
+        (default 20 dB): with a single source the higher singular values are the noise floor,
+        whose bumps under each mode are not modes.
 
     Returns
     -------
@@ -267,6 +277,9 @@ def fdd(
     for q in range(min(int(n_singular), S.shape[1])):
         dbq = 10 * np.log10(np.maximum(S[:, q], tiny))
         pk, props = scipy.signal.find_peaks(dbq[idx], prominence=prominence)
+        if q > 0:  # higher singular values: only peaks comparable with s1 there
+            ok = dbq[idx[pk]] >= 10 * np.log10(np.maximum(s1[idx[pk]], tiny)) - sv_ratio_db
+            pk, props = pk[ok], {k: v[ok] for k, v in props.items()}
         o = np.argsort(props["prominences"])[::-1]
         cand_l += list(idx[pk][o])
         prom_l += list(props["prominences"][o])
@@ -312,11 +325,14 @@ def fdd(
                 break
         if dup or (sv[o] > 0 and k in accepted):
             continue
+        bell = bell_of(k, int(sv[o]), phi)
+        if bell[2] - bell[1] + 1 < min_bell_bins:  # incoherent from bin to bin: noise, not a mode
+            continue
         accepted.append(k)
         acc_prom.append(float(prom[o]))
         acc_shape.append(phi)
         acc_sv.append(int(sv[o]))
-        bells.append(bell_of(k, int(sv[o]), phi))
+        bells.append(bell)
         if n_modes is not None and len(accepted) >= n_modes:
             break
     if n_modes is not None and len(accepted) < n_modes:
