@@ -46,3 +46,24 @@ def test_compare_errors(tmp_path, capsys):
     sweep.write_text("A\nxyz\n")
     assert main(["compare", "pneumatic", "--sweep", str(sweep), "--out", str(tmp_path)]) == 1
     assert main(["compare", "pneumatic", "--sweep", str(tmp_path / "missing.csv"), "--out", str(tmp_path)]) == 1
+
+
+def test_compare_toml_model(tmp_path, capsys):
+    pytest.importorskip("vibroscope.models.modelfile")
+    model = tmp_path / "m.toml"
+    model.write_text(
+        'kind = "lumped"\n[[dof]]\nname = "m1"\nmass = 2.0\n'
+        '[[element]]\ntype = "spring"\nbetween = ["m1", "ground"]\nk = 5.0e4\n'
+        '[[element]]\ntype = "damper"\nbetween = ["m1", "ground"]\nc = 20.0\n'
+        '[[input]]\nchannel = "/f.x"\ndof = "m1"\nquantity = "force"\n'
+        '[[output]]\nchannel = "/x.x"\ndof = "m1"\nquantity = "displacement"\n'
+    )
+    sweep = tmp_path / "s.csv"
+    sweep.write_text("dof.m1.mass,element.0.k\n2,5e4\n4,5e4\n2,1e5\n")
+    assert main(["compare", str(model), "--sweep", str(sweep), "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "compare_m.png").exists()
+    # initial acceleration of a force step is F/m: a_max = 1/2 m/s^2 per N
+    assert "| dof.m1.mass=2, element.0.k=50000 |" in out and "| 0.5 |" in out
+    sweep.write_text("dof.m9.mass\n2\n")
+    assert main(["compare", str(model), "--sweep", str(sweep), "--out", str(tmp_path)]) == 1

@@ -69,43 +69,95 @@ def _builtin(name: str):
     raise KeyError(name)
 
 
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def _toml_dumps(doc: dict) -> str:
+    """Minimal TOML writer for model files: scalars, lists, tables and arrays of tables."""
+    lines = [f"{k} = {_toml_value(v)}" for k, v in doc.items() if not isinstance(v, (dict, list)) or
+             (isinstance(v, list) and not (v and isinstance(v[0], dict)))]
+    for k, v in doc.items():
+        if isinstance(v, dict):
+            lines += ["", f"[{k}]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items()]
+        elif isinstance(v, list) and v and isinstance(v[0], dict):
+            for item in v:
+                lines += ["", f"[[{k}]]"] + [f"{kk} = {_toml_value(vv)}" for kk, vv in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _set_dotted(doc: dict, key: str, value: float, path: Path) -> None:
+    """Set ``key`` (``mass`` / ``dof.m1.mass`` / ``element.0.k`` / ``num.1``) in the parsed TOML."""
+    parts = key.split(".")
+    cur = doc
+    for i, part in enumerate(parts):
+        last = i == len(parts) - 1
+        if isinstance(cur, list):
+            if part.lstrip("-").isdigit():
+                idx = int(part)
+            else:  # array of tables addressed by its "name"
+                names = [t.get("name") if isinstance(t, dict) else None for t in cur]
+                if part not in names:
+                    raise VibroscopeError(f"{path}: sweep column {key!r}: no entry named {part!r}")
+                idx = names.index(part)
+            if not -len(cur) <= idx < len(cur):
+                raise VibroscopeError(f"{path}: sweep column {key!r}: index {idx} out of range")
+            if last:
+                cur[idx] = value
+            else:
+                cur = cur[idx]
+        elif isinstance(cur, dict):
+            if part not in cur:
+                raise VibroscopeError(f"{path}: sweep column {key!r}: no key {part!r} in the model file")
+            if last:
+                cur[part] = value
+            else:
+                cur = cur[part]
+        else:
+            raise VibroscopeError(f"{path}: sweep column {key!r}: {part!r} is below a value")
+
+
 def _toml_model(path: Path):
+    """A model-file factory: sweep columns are dotted TOML keys overriding the file's values.
+
+    Examples of columns: ``dof.m1.mass`` (array of tables addressed by ``name``),
+    ``element.0.k`` (by index), ``den.2`` (a list entry).  The system compared is the
+    first-input / first-output transfer function (the linear part of a lumped model).
+    """
+    import copy
+    import tomllib
+
     try:
-        from vibroscope.models.modelfile import load_model
+        from vibroscope.models.modelfile import load_model, loads_model
     except ImportError as exc:
         raise VibroscopeError(
             f"{path}: TOML model files need vibroscope.models.modelfile, which is not available ({exc})"
         ) from None
-
-    base = load_model(path)
+    load_model(path)  # validate once, with the file's own error messages
+    doc = tomllib.loads(path.read_text())
 
     def factory(**overrides):
-        import dataclasses
-
         import control
 
-        m = base
-        if overrides:
-            if hasattr(m, "with_params"):
-                m = m.with_params(**overrides)
-            elif dataclasses.is_dataclass(m):
-                m = dataclasses.replace(m, **overrides)
-            else:
-                raise ModelFileError(f"{path}: the model cannot take parameter overrides {sorted(overrides)}")
-        for attr in ("transfer_function", "to_tf", "tf", "lti", "to_lti"):
-            f = getattr(m, attr, None)
-            if f is not None:
-                g = f() if callable(f) else f
-                return control.tf(g) if not isinstance(g, control.TransferFunction) else g
-        if isinstance(m, control.LTI):
-            return control.tf(m)
-        raise ModelFileError(f"{path}: the loaded model offers no transfer function")
+        from vibroscope.models.lti import clean_tf
 
-    nominal = {}
-    for attr in ("params", "parameters"):
-        if isinstance(getattr(base, attr, None), dict):
-            nominal = dict(getattr(base, attr))
-    return factory, nominal, 2, ("output per input", "")
+        d = copy.deepcopy(doc)
+        for k, v in overrides.items():
+            _set_dotted(d, k, v, path)
+        m = loads_model(_toml_dumps(d), path=str(path))
+        if hasattr(m, "state_space"):
+            return clean_tf(m.state_space()[0, 0])
+        return control.tf(m.tf())
+
+    return factory, {}, 2, ("output per input", "")
 
 
 def _read_sweep(path: Path) -> tuple[list[str], list[dict[str, float]]]:
