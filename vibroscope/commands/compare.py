@@ -11,7 +11,9 @@ MODEL is a built-in name -- ``pneumatic`` (velocity per air flow of the pneumati
 ``hydraulic`` (P position loop of the valve-controlled cylinder, parameters of
 ``HYDRAULIC_NOMINAL`` plus ``k_p``), ``block-schema`` (closed loop y/r of the PI + PT1
 correction schema with a PT2 plant, parameters ``K``, ``omega_n``, ``zeta``) -- or a TOML
-model file read by :func:`vibroscope.models.modelfile.load_model`.
+model file read by :func:`vibroscope.models.modelfile.load_model`, whose sweep columns are
+dotted keys into the file (``dof.m1.mass``, ``element.0.k``, ``den.2``); the system
+compared is then its first-input / first-output transfer function (linear part).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ def add_parser(sub) -> None:
     )
     p.add_argument("model", metavar="MODEL", help=f"built-in model ({', '.join(BUILTINS)}) or a TOML model file")
     p.add_argument("--sweep", required=True, metavar="PARAMS.csv",
-                   help="CSV with a header of parameter names (SI units) and one row per case")
+                   help="CSV with a header of parameter names (SI units; dotted TOML keys for a model file) and one row per case")
     p.add_argument("--out", default=".", metavar="DIR", help="folder for compare_<model>.png (default: .)")
     p.add_argument("--rrd", default=None, metavar="FILE", help="also save a rerun recording (needs rerun-sdk)")
     p.set_defaults(func=run)
