@@ -145,7 +145,8 @@ def analyse_signals(
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     flat = [c for c in outputs if np.ptp(signals[c]) == 0]
     if flat:  # e.g. the unused axes of a one-axis IMU: no information, singular spectra
-        warnings.append(f"constant channels skipped (no vibration): {flat}")
+        more = f" and {len(flat) - 3} more" if len(flat) > 3 else ""
+        warnings.append(f"{len(flat)} constant channels skipped (no vibration): {flat[:3]}{more}")
         outputs = [c for c in outputs if c not in flat]
     if not outputs:
         raise ValueError("no non-constant response channel to analyse")

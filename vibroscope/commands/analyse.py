@@ -5,7 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 __all__ = ["add_parser", "run", "analyse_log"]
+
+#: most channels an automatic (non-IMU) selection analyses
+MAX_AUTO_CHANNELS = 32
 
 
 def add_parser(sub) -> None:
@@ -44,22 +49,30 @@ def add_parser(sub) -> None:
 def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False, **kw):
     """Read `log` and run :func:`vibroscope.pipeline.analyse_signals`; returns the Analysis.
 
-    With `input` and no `outputs`, the outputs are the log's acceleration channels.
+    Without `outputs`, the responses are chosen by :func:`vibroscope.io.select.auto_channels`
+    (Imu accelerations; else the measurement fields of the busiest topic), and the choice and
+    what was skipped (undecodable channels by name) go into the warnings.
     """
-    from vibroscope.io import mcap_info, read_mcap, select_acceleration_channels
+    from vibroscope.io import read_mcap
+    from vibroscope.io.select import auto_channels
     from vibroscope.pipeline import analyse_signals
 
     notes = []
     if outputs is None:
-        sel, skipped = select_acceleration_channels(mcap_info(log))
-        for path, reason in skipped:
-            if not reason.startswith("not an IMU"):
-                notes.append(f"{path}: skipped: {reason}")
-        outputs = sel or None
-    channels = None if (input is None and outputs is None) else ([input] if input else []) + list(outputs or [])
-    sig = read_mcap(log, channels, fs=fs, progress=progress)
+        sel = auto_channels(log)
+        notes.append(f"channels chosen automatically: {sel.reason}")
+        notes += [f"{what}: skipped: {why}" for what, why in sel.skipped]
+        outputs = list(sel.channels)
+    sig = read_mcap(log, [input, *outputs] if input else list(outputs), fs=fs, progress=progress)
+    if notes and len(outputs) > MAX_AUTO_CHANNELS:  # automatic fallback: keep the fields that move
+        moving = [c for c in outputs if np.ptp(sig[c]) > 0]
+        if len(moving) > MAX_AUTO_CHANNELS:
+            notes.append(f"{len(moving) - MAX_AUTO_CHANNELS} varying fields beyond the first {MAX_AUTO_CHANNELS} "
+                         f"not analysed (from {moving[MAX_AUTO_CHANNELS]}); choose with --outputs")
+        notes.append(f"{len(outputs) - len(moving)} constant fields not analysed")
+        sig = sig.select(([input] if input else []) + moving[:MAX_AUTO_CHANNELS])
     if notes:
-        sig = sig.with_meta(warnings=list(sig.meta.get("warnings", [])) + notes)
+        sig = sig.with_meta(warnings=notes + list(sig.meta.get("warnings", [])))
     return analyse_signals(sig, input=input, **kw)
 
 
@@ -99,6 +112,8 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
             j = int(abs(tf - f).argmin())
             row += f" {tf[j]:>10.3f} {100 * (f - tf[j]) / tf[j]:>8.3f} {100 * true_modes.damping_ratios[j]:>8.3f}%"
         lines.append(row + f"  {mm.method}")
+    if len(mm.natural_frequencies) == 0:
+        lines.append("   (no mode: no peak above the prominence threshold in the band)")
     return "\n".join(lines)
 
 

@@ -1,0 +1,96 @@
+"""Automatic choice of the channels to analyse in a log."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from vibroscope.io.mcap_read import discover_fields, mcap_info, select_acceleration_channels
+
+__all__ = ["AutoSelection", "auto_channels", "is_bookkeeping"]
+
+#: fields that count messages, stamp them or name things: never vibration data
+_BOOKKEEPING = re.compile(
+    r"(^|\.)(header|stamp|goal_info)(\.|$)|(^|\.)(seq|sec|nanosec|index_id|id|level|line|status|type)(\[\d+\])?$"
+    r"|_counter$|(^|\.)id\[\d+\]$|severity$"
+)
+
+
+def is_bookkeeping(path: str) -> bool:
+    """True for a message path whose field is bookkeeping (header, stamps, sequence, ids, counters)."""
+    fields = path.split(".", 1)[1] if "." in path else ""
+    return bool(_BOOKKEEPING.search(fields))
+
+
+@dataclass(frozen=True)
+class AutoSelection:
+    """Channels chosen for analysis, and why.
+
+    Attributes
+    ----------
+    channels : tuple of str
+        Message paths to read.
+    reason : str
+        How they were chosen.
+    skipped : tuple of (str, str)
+        (topic or path, reason) of what was left out and could matter (undecodable channels,
+        fields beyond the cap).
+    """
+
+    channels: tuple[str, ...]
+    reason: str
+    skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+
+
+def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int = 32) -> AutoSelection:
+    """Choose what to analyse in a log with no channel given.
+
+    1. Every ``linear_acceleration.{x,y,z}`` of the ``sensor_msgs/msg/Imu`` topics.
+    2. Else (no IMU, e.g. a robot's joint-state log): the numeric measurement fields of the
+       decodable topic with the largest ``messages × min(fields, max_channels)`` (at least
+       `min_messages` messages), leaving out bookkeeping (:func:`is_bookkeeping`). All its fields
+       are returned; the caller drops constant ones and keeps at most `max_channels`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The MCAP log.
+    min_messages : int, optional
+        Fewest messages a fallback topic needs (default 64).
+    max_channels : int, optional
+        Field count beyond which a topic scores no higher (default 32).
+
+    Returns
+    -------
+    AutoSelection
+
+    Raises
+    ------
+    vibroscope.errors.ChannelError
+        If no topic qualifies (names the file).
+    """
+    from vibroscope.errors import ChannelError
+
+    info = mcap_info(path)
+    undecodable = tuple((t.topic, f"{t.schema_name}: {t.reason}") for t in info.topics
+                        if not t.decodable and t.message_count > 0)
+    acc, _ = select_acceleration_channels(info)
+    if acc:
+        return AutoSelection(tuple(acc), "linear_acceleration of every sensor_msgs/msg/Imu topic", undecodable)
+    counts = {t.topic: t.message_count for t in info.topics if t.decodable}
+    fields = discover_fields(path)
+    best, best_key = None, None
+    for topic, paths in fields.items():
+        meas = [p for p in paths if not is_bookkeeping(p)]
+        n = counts.get(topic, 0)
+        score = n * min(len(meas), max_channels)
+        if meas and n >= min_messages and (best_key is None or score > best_key):
+            best, best_key = (topic, meas), score
+    if best is None:
+        raise ChannelError(f"{path}: no acceleration field and no decodable topic with {min_messages}+ messages "
+                           "and numeric measurement fields; name channels with --outputs")
+    topic, meas = best
+    return AutoSelection(tuple(meas),
+                         f"no Imu acceleration in the log: the {len(meas)} measurement fields of {topic} "
+                         f"({counts[topic]} messages)", undecodable)
