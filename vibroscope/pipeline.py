@@ -88,6 +88,21 @@ def decimate(signals: Signals, fmax: float) -> Signals:
     return Signals(data, fs, signals.channels, signals.units, signals.t0, meta)
 
 
+def _identify(sig, input, outputs, nperseg, window, fmin, fmax, n_modes, estimator, prominence):
+    """One identification pass at one resolution: (CSD of all channels, FRF or None, modal model)."""
+    from vibroscope import modal
+
+    G = csd_matrix(sig, nperseg=nperseg, window=window)
+    Gout = G.select(outputs)
+    if input:
+        h = frf(G, input, outputs, estimator=estimator)
+        return G, h, modal.peak_picking(h, n_modes=n_modes, fmin=fmin, fmax=fmax)
+    # two singular values: close modes (e.g. a tower's two bending directions) both show
+    mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=fmax, n_singular=min(2, len(outputs)),
+                   prominence=prominence)
+    return G, None, mm
+
+
 def analyse_signals(
     signals: Signals,
     *,
@@ -113,7 +128,9 @@ def analyse_signals(
     outputs : sequence of str, optional
         Response channels; default every channel but the input.
     nperseg : int, optional
-        Welch segment length; default :func:`default_nperseg`.
+        Welch segment length; default :func:`default_nperseg`, then, with an input, doubled while an
+        identified mode's half-power band ``2 ζ f_n`` spans fewer than 8 bins and at least 5
+        averages remain (the damping needs the resolution; a warning says so).
     window : str, optional
         Welch window (default Hann).
     fmin, fmax : float, optional
@@ -155,20 +172,27 @@ def analyse_signals(
     if fmax is not None and fmax < 0.4 * sig.fs:
         sig = decimate(sig, fmax)
     fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
-    if nperseg is None:
+    auto = nperseg is None
+    if auto:
         nperseg = default_nperseg(sig.n_samples, sig.fs, fmin=fmin)
-    G = csd_matrix(sig, nperseg=nperseg, window=window)
+    refinements = []
+    while True:
+        G, h, mm = _identify(sig, input, outputs, nperseg, window, fmin, fmax_eff, n_modes, estimator, prominence)
+        # half-power bands should span several bins for the damping to be resolved (Brandt 2011,
+        # §14.3): refine the resolution while that is not so and >= 5 averages remain. FRFs only:
+        # output-only FDD loses more to the fewer averages than it gains in resolution
+        bw = 2 * np.asarray(mm.damping_ratios) * np.asarray(mm.natural_frequencies)
+        df = sig.fs / nperseg
+        if not auto or not input or not np.any(np.isfinite(bw) & (bw < 8 * df)) or 2 * nperseg > 2 * sig.n_samples / 6:
+            break
+        refinements.append(nperseg)
+        nperseg *= 2
+    if refinements:
+        warnings.append(f"resolution refined for the damping: nperseg {refinements[0]} -> {nperseg} "
+                        f"(df {sig.fs / refinements[0]:.4g} -> {sig.fs / nperseg:.4g} Hz)")
     psd = G.psd()
     Gout = G.select(outputs)
     sv = modal.singular_values(Gout)
-    h = None
-    if input:
-        h = frf(G, input, outputs, estimator=estimator)
-        mm = modal.peak_picking(h, n_modes=n_modes, fmin=fmin, fmax=fmax_eff)
-    else:
-        # two singular values: close modes (e.g. a tower's two bending directions) both show
-        mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=fmax_eff, n_singular=min(2, len(outputs)),
-                       prominence=prominence)
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
                     input=input, outputs=list(outputs))
     return Analysis(sig, psd, Gout, h, mm, sv, settings, warnings)

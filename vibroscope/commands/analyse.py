@@ -57,14 +57,14 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     from vibroscope.io.select import auto_channels
     from vibroscope.pipeline import analyse_signals
 
-    notes = []
+    notes, fallback = [], False
     if outputs is None:
         sel = auto_channels(log)
         notes.append(f"channels chosen automatically: {sel.reason}")
         notes += [f"{what}: skipped: {why}" for what, why in sel.skipped]
-        outputs = list(sel.channels)
+        outputs, fallback = list(sel.channels), sel.fallback
     sig = read_mcap(log, [input, *outputs] if input else list(outputs), fs=fs, progress=progress)
-    if notes and len(outputs) > MAX_AUTO_CHANNELS:  # automatic fallback: keep the fields that move
+    if fallback:  # automatic non-IMU choice: keep the fields that move, at most MAX_AUTO_CHANNELS
         moving = [c for c in outputs if np.ptp(sig[c]) > 0]
         if len(moving) > MAX_AUTO_CHANNELS:
             notes.append(f"{len(moving) - MAX_AUTO_CHANNELS} varying fields beyond the first {MAX_AUTO_CHANNELS} "

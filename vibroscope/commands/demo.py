@@ -64,12 +64,16 @@ def run(args) -> int:
     print("true modes: " + ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in
                                      zip(truth.natural_frequencies, truth.damping_ratios)))
     force = model.input_channels()[0]
-    an = analyse_log(log, input=force, fmax=0.3 * args.fs, fmin=5.0)
+    # band: 2.5x the highest mode of the model (60 Hz); decimated to 500 Hz for the analysis
+    an = analyse_log(log, input=force, fmax=150.0, fmin=5.0)
     print()
     print(report_text(an, source=str(log), true_modes=truth))
-    an_oo = analyse_log(log, fmax=0.3 * args.fs, fmin=5.0)
+    an_oo = analyse_log(log, fmax=150.0, fmin=5.0)
     print()
     print(report_text(an_oo, source=f"{log} (output-only)", true_modes=truth))
+    print("  note: FDD assumes broadband inputs at every DOF; this log has one force, so the response is\n"
+          "  rank one and the EFDD bell of the broad third mode is biased (the force-based estimate above is\n"
+          "  the reference).")
     print()
     write_outputs(an, log, json_path=out / "demo_summary.json", rrd=out / "demo.rrd",
                   figures=out / "figures", spawn=args.spawn, true_modes=truth)

@@ -34,13 +34,15 @@ class AutoSelection:
     reason : str
         How they were chosen.
     skipped : tuple of (str, str)
-        (topic or path, reason) of what was left out and could matter (undecodable channels,
-        fields beyond the cap).
+        (topic or path, reason) of what was left out and could matter (undecodable channels).
+    fallback : bool
+        True when the log had no Imu acceleration and a topic's measurement fields were taken.
     """
 
     channels: tuple[str, ...]
     reason: str
     skipped: tuple[tuple[str, str], ...] = field(default_factory=tuple)
+    fallback: bool = False
 
 
 def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int = 32) -> AutoSelection:
@@ -93,4 +95,4 @@ def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int
     topic, meas = best
     return AutoSelection(tuple(meas),
                          f"no Imu acceleration in the log: the {len(meas)} measurement fields of {topic} "
-                         f"({counts[topic]} messages)", undecodable)
+                         f"({counts[topic]} messages)", undecodable, fallback=True)
