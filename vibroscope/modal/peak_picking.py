@@ -174,7 +174,7 @@ def peak_picking(
     fmin, fmax : float, optional
         Frequency band in Hz (default the whole axis above 0 Hz).
     min_coherence : float, optional
-        Smallest mean coherence (over outputs) near a peak (best within ±3 bins, since leakage
+        Smallest mean coherence (over outputs) near a peak (median within ±3 bins, since leakage
         dips the coherence at a lightly damped resonance); default 0.8 (keeps noise peaks of
         badly excited bands out; lower it for noisy but genuine resonances).
     prominence : float, optional
@@ -253,9 +253,9 @@ def peak_picking(
     coh_mean = np.nanmean(coh, axis=1) if coh.size else np.ones(n_f)
     peaks, props = scipy.signal.find_peaks(ind_db, prominence=prominence)
     prom = props["prominences"]
-    # leakage dips the coherence right at a lightly damped resonance: judge a peak by the best
-    # coherence within ±3 bins (a noise peak has low coherence all around)
-    coh_near = scipy.ndimage.maximum_filter1d(np.nan_to_num(coh_mean, nan=1.0), size=7, mode="nearest")
+    # leakage dips the coherence right at a lightly damped resonance (one or two bins): judge a
+    # peak by the median coherence within ±3 bins, low all around a noise peak
+    coh_near = scipy.ndimage.median_filter(np.nan_to_num(coh_mean, nan=1.0), size=7, mode="nearest")
     ok = coh_near[peaks] >= min_coherence
     peaks, prom = peaks[ok], prom[ok]
     if n_modes is not None:
