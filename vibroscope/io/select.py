@@ -13,7 +13,7 @@ __all__ = ["AutoSelection", "auto_channels", "is_bookkeeping"]
 #: fields that count messages, stamp them or name things: never vibration data
 _BOOKKEEPING = re.compile(
     r"(^|\.)(header|stamp|goal_info)(\.|$)|(^|\.)(seq|sec|nanosec|index_id|id|level|line|status|type)(\[\d+\])?$"
-    r"|_counter$|(^|\.)id\[\d+\]$|severity$"
+    r"|_count(er)?$|(^|\.)id\[\d+\]$|severity$"
 )
 
 

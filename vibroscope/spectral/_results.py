@@ -150,7 +150,9 @@ class CrossSpectralMatrix:
     def psd(self) -> Spectrum:
         """The auto-spectra (diagonal) as a :class:`Spectrum`."""
         vals = np.real(np.einsum("fii->if", self.G))
-        units = tuple(f"({u})^2/Hz" if self.scaling == "density" else f"({u})^2" for u in self.units)
+        from vibroscope.spectral.estimators import _power_units
+
+        units = _power_units(self.units, self.scaling)
         return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings))
 
     def select(self, channels) -> "CrossSpectralMatrix":

@@ -70,6 +70,12 @@ def _unpack(x: Signals | np.ndarray, fs: float | None) -> tuple[np.ndarray, floa
     return a, fs, tuple(str(i) for i in range(a.shape[0])), ("",) * a.shape[0]
 
 
+def _power_units(units, scaling: str) -> tuple[str, ...]:
+    """Units of auto-spectra: ``(u)^2/Hz`` or ``(u)^2``; dimensionless channels give ``1/Hz`` or ``1``."""
+    return tuple((f"({u})^2" if u else "1") + ("/Hz" if scaling == "density" else "") if (u or scaling == "spectrum")
+                 else "1/Hz" for u in units)
+
+
 def _accumulate(data, fs, st, *, cross: bool, workers: int) -> CrossSpectralAccumulator:
     n_ch, n = data.shape
     n_seg = (n - st.nperseg) // st.step + 1
@@ -222,7 +228,7 @@ def welch(
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
                           detrend=detrend, nfft=nfft)
     acc = _accumulate(data, fs, st, cross=False, workers=workers)
-    u = tuple(f"({un})^2/Hz" if scaling == "density" else f"({un})^2" for un in units)
+    u = _power_units(units, scaling)
     return Spectrum(acc.frequencies(), acc.result(scaling), channels, u, scaling,
                     _settings_dict(fs, st, acc.n_segments))
 
@@ -539,5 +545,5 @@ def spectrogram(
                           detrend=detrend)
     f, t, S = scipy.signal.spectrogram(data, fs, window=st.window, nperseg=st.nperseg,
                                        noverlap=st.noverlap, detrend=detrend, scaling=scaling, axis=-1)
-    u = tuple(f"({un})^2/Hz" if scaling == "density" else f"({un})^2" for un in units)
+    u = _power_units(units, scaling)
     return Spectrogram(f, t, S, channels, u, scaling, _settings_dict(fs, st, S.shape[-1]))
