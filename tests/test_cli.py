@@ -84,6 +84,24 @@ def test_lumo_first_modes_match_published(lumo_mcap, shared_data, tmp_path):
     assert np.allclose(moved[:, 2], 0, atol=1e-6) and np.abs(moved[:, :2]).max() > 0  # sway, not heave
 
 
+def test_lumo_ssi_finds_published_modes_and_light_damping(lumo_mcap, tmp_path):
+    """`--method ssi`: the published SSI-COV modes 2.82, 13.55, 15.99, 16.33 Hz within 1 % and the
+    light damping (published ~0.2–0.3 %) of the 2.82 and 15.99 Hz modes between 0.1 and 0.5 %;
+    the stabilization diagram is drawn."""
+    js = tmp_path / "s.json"
+    assert main(["analyse", str(lumo_mcap), "--fmin", "1", "--fmax", "50", "--method", "ssi", "--json", str(js),
+                 "--no-rrd", "--figures", str(tmp_path / "f")]) == 0
+    s = json.loads(js.read_text())
+    f = np.array([m["frequency_hz"] for m in s["modes"]])
+    z = np.array([m["damping_ratio"] for m in s["modes"]])
+    for f_pub in (2.82, 13.55, 15.99, 16.33):
+        k = np.argmin(np.abs(f - f_pub))
+        assert abs(f[k] / f_pub - 1) < 0.01, (f_pub, f)
+        if f_pub in (2.82, 15.99):
+            assert 0.001 < z[k] < 0.005, (f_pub, z[k])
+    assert (tmp_path / "f" / "stabilization.png").stat().st_size > 10_000
+
+
 CAPSTAN = ["alternate_bagfile_0", "bagfile_0", "controlled_data_0", "torque_ripple_data_0", "uncontrolled_data_0"]
 
 

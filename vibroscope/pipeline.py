@@ -88,7 +88,7 @@ def decimate(signals: Signals, fmax: float) -> Signals:
     return Signals(data, fs, signals.channels, signals.units, signals.t0, meta)
 
 
-def _identify(sig, input, outputs, nperseg, window, fmin, fmax, n_modes, estimator, prominence):
+def _identify(sig, input, outputs, nperseg, window, fmin, fmax, n_modes, estimator, prominence, method):
     """One identification pass at one resolution: (CSD of all channels, FRF or None, modal model)."""
     from vibroscope import modal
 
@@ -97,6 +97,20 @@ def _identify(sig, input, outputs, nperseg, window, fmin, fmax, n_modes, estimat
     if input:
         h = frf(G, input, outputs, estimator=estimator)
         return G, h, modal.peak_picking(h, n_modes=n_modes, fmin=fmin, fmax=fmax)
+    if method == "ssi":
+        # 60 block rows (or fewer for short records) and orders 10..120: Peeters & De Roeck 1999
+        n_lags = int(min(60, sig.n_samples // 20))
+        orders = range(10, int(min(120, n_lags * len(outputs))) + 1, 4)
+        st = modal.ssi_cov(sig.select(outputs), n_lags=n_lags, orders=orders)
+        mm = st.modal_model(fmin=fmin, fmax=fmax)
+        mm = type(mm)(**{**{f: getattr(mm, f) for f in mm.__dataclass_fields__},
+                         "extra": {**mm.extra, "stabilization": st}})
+        if n_modes is not None and len(mm) > n_modes:
+            import warnings as _w
+
+            _w.warn(f"SSI-COV found {len(mm)} modes; all are reported (n_modes={n_modes} applies to FDD)",
+                    stacklevel=3)
+        return G, None, mm
     # two singular values: close modes (e.g. a tower's two bending directions) both show
     mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=fmax, n_singular=min(2, len(outputs)),
                    prominence=prominence)
@@ -115,6 +129,7 @@ def analyse_signals(
     n_modes: int | None = None,
     estimator: str = "H1",
     prominence: float = 10.0,
+    method: str = "fdd",
 ) -> Analysis:
     """Spectra, FRFs, coherence and modal vectors of a record.
 
@@ -144,6 +159,10 @@ def analyse_signals(
         default 10 dB (ambient records average few segments at the resolution modes need, and
         their singular values fluctuate by several dB). Peak picking with a force uses its own
         3 dB default on the far smoother FRFs.
+    method : {'fdd', 'ssi'}, optional
+        Output-only identification: FDD with EFDD damping (default; Brincker et al. 2001) or
+        covariance-driven SSI with clustering of stable poles (Peeters & De Roeck 1999), which
+        resolves light damping that the FDD bell cannot at the resolution a short record allows.
 
     Returns
     -------
@@ -157,7 +176,9 @@ def analyse_signals(
         If the record is too short for the segment length.
     """
     from vibroscope import modal
+    from vibroscope.spectral._engine import check_option
 
+    check_option("method", method, ("fdd", "ssi"))
     warnings = list(signals.meta.get("warnings", []))
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     flat = [c for c in outputs if np.ptp(signals[c]) == 0]
@@ -177,7 +198,8 @@ def analyse_signals(
         nperseg = default_nperseg(sig.n_samples, sig.fs, fmin=fmin)
     refinements = []
     while True:
-        G, h, mm = _identify(sig, input, outputs, nperseg, window, fmin, fmax_eff, n_modes, estimator, prominence)
+        G, h, mm = _identify(sig, input, outputs, nperseg, window, fmin, fmax_eff, n_modes, estimator, prominence,
+                             method)
         # half-power bands should span several bins for the damping to be resolved (Brandt 2011,
         # §14.3): refine the resolution while that is not so and >= 5 averages remain. FRFs only:
         # output-only FDD loses more to the fewer averages than it gains in resolution

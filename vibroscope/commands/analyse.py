@@ -42,6 +42,8 @@ def add_parser(sub) -> None:
     p.add_argument("--fmax", type=float, help="highest frequency analysed (Hz); decimates when well below fs/2")
     p.add_argument("--n-modes", type=int, help="number of modes to report")
     p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
+    p.add_argument("--method", default="fdd", choices=["fdd", "ssi"],
+                   help="output-only identification: fdd (FDD/EFDD, default) or ssi (SSI-COV)")
     p.add_argument("--progress", action="store_true", help="progress bar while reading")
     p.set_defaults(func=run)
 
@@ -82,7 +84,7 @@ def run(args) -> int:
 
     an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
                      nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
-                     estimator=args.estimator)
+                     estimator=args.estimator, method=args.method)
     print(report_text(an, source=str(args.log)))
     write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=None if args.no_rrd else (args.rrd or args.log.with_suffix(".rrd")),
                   figures=args.figures or args.log.parent / f"{args.log.stem}_figures", spawn=args.spawn)
@@ -99,7 +101,8 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
         lines.append(f"input {an.settings['input']} -> {len(an.settings['outputs'])} outputs, "
                      f"{an.settings['estimator']} FRF, modes by peak picking")
     else:
-        lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by FDD")
+        how = "SSI-COV" if an.modal.method == "ssi_cov" else "FDD"
+        lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by {how}")
     for w in an.warnings:
         lines.append(f"  warning: {w}")
     mm = an.modal
@@ -137,7 +140,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
 
         figures.mkdir(parents=True, exist_ok=True)
         paths = summary_figures(figures, signals=an.signals, psd=an.psd, frf=an.frf, modal=an.modal,
-                                sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes)
+                                sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
+                                stabilization=an.modal.extra.get("stabilization"))
         written["figures"] = paths
         print(f"figures: {', '.join(str(p) for p in paths)}")
     if rrd or spawn:

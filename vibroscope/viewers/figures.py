@@ -435,6 +435,58 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
     return fig
 
 
+def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
+    """Stabilization diagram: SSI poles (frequency vs model order), coloured by stability.
+
+    Parameters
+    ----------
+    stabilization : Stabilization
+        From :func:`vibroscope.modal.ssi_cov` (``order``, ``frequency``, ``stable`` 0–3).
+    sv : tuple (frequencies, S), optional
+        First singular value of the CSD drawn behind the poles (dB, right axis), as is customary.
+    modes : ModalModel, optional
+        Selected modes, marked by vertical lines.
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib Axes
+        The axes of the poles.
+
+    References
+    ----------
+    .. [1] B. Peeters and G. De Roeck, "Reference-based stochastic subspace identification for
+       output-only modal analysis", Mech. Syst. Signal Process. 13(6), 855–878, 1999.
+    """
+    plt = _pyplot()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(9, 5), layout="constrained")
+    st = stabilization
+    styles = {0: ("new pole", "x", "0.6"), 1: ("stable f", ".", "tab:orange"),
+              2: ("stable f, ζ", "+", "tab:blue"), 3: ("stable f, ζ, MAC", "o", "tab:green")}
+    for code, (label, marker, color) in styles.items():
+        m = st.stable == code
+        if m.any():
+            ax.scatter(st.frequency[m], st.order[m], marker=marker, s=14 if marker != "o" else 10,
+                       color=color, label=label, linewidths=0.8)
+    if sv is not None:
+        f, S = sv
+        ax2 = ax.twinx()
+        ax2.plot(f, 10 * np.log10(np.maximum(S[:, 0], np.finfo(float).tiny)), color="0.3", lw=0.8)
+        ax2.set_ylabel("first singular value [dB]")
+        fmax = max(float(np.max(st.frequency)) if st.frequency.size else f[-1], 1e-9)
+        ax.set_xlim(0, min(f[-1], 1.05 * fmax))
+    if modes is not None:
+        for fn in np.atleast_1d(modes.natural_frequencies):
+            ax.axvline(fn, color="tab:red", lw=0.6, ls="--")
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("model order")
+    ax.set_title(f"Stabilization diagram (SSI-COV, {st.settings.get('n_lags', '?')} block rows)")
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.9)
+    ax.grid(alpha=0.3)
+    return ax
+
+
 def _save(fig, path: Path) -> Path:
     """Write `fig` as a PNG at :data:`DPI`, palette-quantised (256 colours) to stay small."""
     import io
@@ -456,7 +508,8 @@ def _save(fig, path: Path) -> Path:
 
 
 def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=None, sv=None,
-                    coords: Mapping[str, Any] | None = None, true_modes=None) -> list[Path]:
+                    coords: Mapping[str, Any] | None = None, true_modes=None,
+                    stabilization=None) -> list[Path]:
     """Write the summary PNGs of an analysis, those whose inputs are given.
 
     Parameters
@@ -477,6 +530,8 @@ def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, mo
         Sensor coordinates for the mode shapes (see :func:`plot_mode_shapes`).
     true_modes : ModalModel, optional
         Reference modes, marked in the mode and singular value figures.
+    stabilization : Stabilization, optional
+        SSI poles; writes ``stabilization.png``.
 
     Returns
     -------
@@ -501,5 +556,8 @@ def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, mo
         ft = None if true_modes is None else true_modes.natural_frequencies
         ax = plot_singular_values(f, S, modal, true_frequencies=ft)
         written.append(_save(ax.figure, out / "singular_values.png"))
+    if stabilization is not None:
+        ax = plot_stabilization(stabilization, sv, modal)
+        written.append(_save(ax.figure, out / "stabilization.png"))
     del plt
     return written
