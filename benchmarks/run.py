@@ -118,8 +118,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--quick", action="store_true", help="small sizes (seconds)")
     p.add_argument("--json", type=Path, help="write the results as JSON")
+    p.add_argument("--samples", type=float, help="samples per channel of the CSD cases (default 1e6; 1e5 with --quick)")
     a = p.parse_args(argv)
-    n = 10**5 if a.quick else 10**6
+    n = int(a.samples) if a.samples else (10**5 if a.quick else 10**6)
     rows = bench_csd(10, n)
     rows += bench_mcap(20_000 if a.quick else 200_000)
     for r in rows:
