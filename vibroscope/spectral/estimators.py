@@ -103,6 +103,16 @@ def _settings_dict(fs, st, n_avg) -> dict:
                 detrend=st.detrend, n_averages=n_avg)
 
 
+def _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling, workers, *, cross: bool):
+    """Validate, then one pass of the engine: (accumulator, channels, units, settings dict)."""
+    data, fs, channels, units = _unpack(x, fs)
+    check_option("scaling", scaling, ("density", "spectrum"))
+    st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
+                          detrend=detrend, nfft=nfft)
+    acc = _accumulate(data, fs, st, cross=cross, workers=workers)
+    return acc, channels, units, _settings_dict(fs, st, acc.n_segments)
+
+
 @_fill_doc
 def csd_matrix(
     x: Signals | np.ndarray,
@@ -159,13 +169,9 @@ def csd_matrix(
     >>> round(float(G.G[1:-1, 0, 0].real.mean()), 4)  # white noise of unit variance: 2/fs per Hz
     0.002
     """
-    data, fs, channels, units = _unpack(x, fs)
-    check_option("scaling", scaling, ("density", "spectrum"))
-    st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
-                          detrend=detrend, nfft=nfft)
-    acc = _accumulate(data, fs, st, cross=True, workers=workers)
-    return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), channels, units, scaling,
-                               _settings_dict(fs, st, acc.n_segments))
+    acc, channels, units, settings = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
+                                                 workers, cross=True)
+    return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), channels, units, scaling, settings)
 
 
 @_fill_doc
@@ -223,14 +229,10 @@ def welch(
     >>> round(float(s.values[0].max()), 6)   # A²/2
     2.0
     """
-    data, fs, channels, units = _unpack(x, fs)
-    check_option("scaling", scaling, ("density", "spectrum"))
-    st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
-                          detrend=detrend, nfft=nfft)
-    acc = _accumulate(data, fs, st, cross=False, workers=workers)
-    u = _power_units(units, scaling)
-    return Spectrum(acc.frequencies(), acc.result(scaling), channels, u, scaling,
-                    _settings_dict(fs, st, acc.n_segments))
+    acc, channels, units, settings = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
+                                                 workers, cross=False)
+    return Spectrum(acc.frequencies(), acc.result(scaling), channels, _power_units(units, scaling), scaling,
+                    settings)
 
 
 def amplitude_spectrum(
