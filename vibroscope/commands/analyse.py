@@ -80,8 +80,6 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
 
 def run(args) -> int:
     """Run ``vibroscope analyse``; prints the modes found and where the outputs went."""
-    from vibroscope.pipeline import summary_dict
-
     an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
                      nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
                      estimator=args.estimator, method=args.method)

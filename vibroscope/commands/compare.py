@@ -22,7 +22,7 @@ import csv
 import math
 from pathlib import Path
 
-from vibroscope.errors import ModelFileError, VibroscopeError
+from vibroscope.errors import VibroscopeError
 
 BUILTINS = ("pneumatic", "hydraulic", "block-schema")
 

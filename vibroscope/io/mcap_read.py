@@ -18,7 +18,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from vibroscope.errors import ChannelError, LogFormatError
+from vibroscope.errors import ChannelError
 from vibroscope.io import _ros2
 from vibroscope.io._scan import ScanResult, scan
 from vibroscope.io.paths import MessagePath, format_path, get_field, parse_path

@@ -22,7 +22,7 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Sequence
 
 import control
 import numpy as np

@@ -44,7 +44,7 @@ import numpy as np
 
 from vibroscope.errors import ModelFileError
 from vibroscope.models.elements import ELEMENT_TYPES, GROUND, Element, make_element
-from vibroscope.models.lumped import QUANTITIES, UNITS, Dof, Input, LumpedModel, Output
+from vibroscope.models.lumped import QUANTITIES, Dof, Input, LumpedModel, Output
 
 __all__ = ["TransferFunctionModel", "load_model", "dump_model", "loads_model", "dumps_model"]
 
