@@ -44,7 +44,13 @@ class Spectrum:
 
     Examples
     --------
-    >>> f, p = spectrum   # unpacks like scipy's (f, Pxx)  # doctest: +SKIP
+    It unpacks like scipy's ``(f, Pxx)``:
+
+    >>> import numpy as np
+    >>> from vibroscope.spectral import welch
+    >>> f, p = welch(np.random.default_rng(0).standard_normal(4096), fs=100.0, nperseg=256)
+    >>> f.shape, p.shape
+    ((129,), (1, 129))
     """
 
     frequencies: np.ndarray
