@@ -146,37 +146,74 @@ def _mode_table(modal) -> str:
     return "\n".join(lines)
 
 
-def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal, ftl):
+def _whole(rrb, timeline: str, start: dict, end: dict):
+    """Axis showing [start, end] of `timeline` and every datum of it (not a window at the cursor)."""
+    axis = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(**start),
+                                                 end=rrb.TimeRangeBoundary.absolute(**end)))
+    ranges = rrb.VisibleTimeRange(timeline, start=rrb.TimeRangeBoundary.infinite(),
+                                  end=rrb.TimeRangeBoundary.infinite())
+    return dict(axis_x=axis, time_ranges=ranges)
+
+
+def _eye(rrb, positions: np.ndarray):
+    """A camera that frames the whole structure from the side, slightly above, z up."""
+    pos = np.asarray(positions, dtype=float).reshape(-1, 3)
+    target = pos.mean(axis=0) if pos.size else np.zeros(3)
+    ptp = np.ptp(pos, axis=0) if len(pos) > 1 else np.ones(3)
+    ext = float(ptp.max()) or 1.0
+    tall = int(np.argmax(ptp)) == 2  # a tower: narrow tall views; else a beam or chain: wide views
+    d = np.array([1.0, -1.0, 0.3]) if tall else np.array([0.1, -1.0, 0.35])
+    eye = target + (1.6 if tall else 0.8) * ext * d / np.linalg.norm(d)
+    return rrb.EyeControls3D(position=eye.tolist(), look_target=target.tolist(), eye_up=[0.0, 0.0, 1.0])
+
+
+def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal, ftl, f_range=None,
+                     positions=None):
     import rerun.blueprint as rrb
 
     tabs = []
     active = None
+    fx = {} if f_range is None else _whole(rrb, ftl, dict(seq=int(f_range[0])), dict(seq=int(f_range[1])))
+    # resonances sit low in the band: keep the legends out of their way
+    legend = rrb.PlotLegend(corner=rrb.Corner2D.RightTop)
     if signals is not None:
-        views = [rrb.TimeSeriesView(origin=channel_entity("signals", c), name=f"{c} [{u or '-'}]")
+        tx = _whole(rrb, "time", dict(seconds=0.0), dict(seconds=float(signals.duration)))
+        views = [rrb.TimeSeriesView(origin=channel_entity("signals", c), name=f"{c} [{u or '-'}]", **tx)
                  for c, u in zip(signals.channels, signals.units)]
         tabs.append(rrb.Grid(*views, grid_columns=1 if len(views) <= 4 else 2,
                              name="Time series (timeline: time)"))
     if spec_entities:
-        views = [rrb.TimeSeriesView(origin="/psd", name=f"PSD [dB re 1 unit²/Hz] vs frequency ({ftl})")]
+        views = [rrb.TimeSeriesView(origin="/psd", name=f"PSD [dB re 1 unit²/Hz] vs frequency ({ftl})",
+                                    plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop,
+                                                               visible=len(signals.channels) <= 8 if signals
+                                                               else True), **fx)]
         if csd_present:
             views.append(rrb.TimeSeriesView(origin="/csd/singular_values",
-                                            name=f"CSD singular values (FDD) [dB] vs frequency ({ftl})"))
+                                            name=f"CSD singular values (FDD) [dB] vs frequency ({ftl})",
+                                            plot_legend=legend, **fx))
         tabs.append(rrb.Vertical(*views, name=f"Spectra (timeline: {ftl})"))
     if frf_present:
         tabs.append(rrb.Vertical(
-            rrb.TimeSeriesView(origin="/frf/magnitude_db", name=f"FRF magnitude [dB] vs frequency ({ftl})"),
+            rrb.TimeSeriesView(origin="/frf/magnitude_db", name=f"FRF magnitude [dB] vs frequency ({ftl})",
+                               plot_legend=legend, **fx),
             rrb.TimeSeriesView(origin="/frf/phase_deg", name=f"FRF phase [deg] vs frequency ({ftl})",
-                               axis_y=rrb.ScalarAxis(range=(-180.0, 180.0))),
+                               axis_y=rrb.ScalarAxis(range=(-180.0, 180.0)), plot_legend=legend, **fx),
             rrb.TimeSeriesView(origin="/frf/coherence", name=f"coherence γ² [-] vs frequency ({ftl})",
-                               axis_y=rrb.ScalarAxis(range=(0.0, 1.05))),
+                               axis_y=rrb.ScalarAxis(range=(0.0, 1.05)), plot_legend=legend, **fx),
             row_shares=[2, 1.3, 1], name=f"FRF (timeline: {ftl})"))
     if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
         fn = np.asarray(modal.natural_frequencies, dtype=float)
         z = np.asarray(modal.damping_ratios, dtype=float)
-        views3d = [rrb.Spatial3DView(origin=mode_entity(r, fn[r]), name=f"Mode {r + 1}: {mode_label(fn[r], z[r])}")
+        eye = _eye(rrb, positions) if positions is not None else None
+        views3d = [rrb.Spatial3DView(origin=mode_entity(r, fn[r]), line_grid=rrb.LineGrid3D(visible=False),
+                                     eye_controls=eye,
+                                     name=f"{r + 1}: {fn[r]:.4g} Hz, " + (f"{100 * z[r]:.2f} %" if np.isfinite(z[r])
+                                                                         else "ζ n/a"))
                    for r in range(fn.size)]
+        # tall views side by side for a tower (extent along z), wide views stacked for a beam or chain
+        tall = positions is not None and len(positions) > 1 and int(np.argmax(np.ptp(positions, axis=0))) == 2
         tabs.append(rrb.Horizontal(
-            rrb.Grid(*views3d, grid_columns=min(3, len(views3d))),
+            rrb.Grid(*views3d, grid_columns=min(8, len(views3d)) if tall else 1),
             rrb.TextDocumentView(origin="/modes/table", name="Mode table"),
             column_shares=[3, 1], name="Mode shapes (timeline: animation)"))
         active = len(tabs) - 1
@@ -279,8 +316,12 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         if src is not None:
             ftl, fidx = frequency_index(src.frequencies)
             break
+    positions = None
+    if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
+        positions = sensor_geometry(list(modal.points), coords)[0]
     bp = _build_blueprint(signals=signals, spec_entities=psd is not None, frf_present=frf is not None,
-                          csd_present=csd is not None, modal=modal, ftl=ftl or "frequency_mHz")
+                          csd_present=csd is not None, modal=modal, ftl=ftl or "frequency_mHz",
+                          f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions)
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
     if recording_name:
@@ -398,14 +439,15 @@ def _log_modes(rec, modal, coords, frames: int) -> None:
     scale = _structure_scale(pos)
     ext = scale / 0.15  # the structure's size (m), for radii
     node_pos, members = _nodes(pos)
-    labels = [p.split("/")[-1] or p for p in points]
+    labels = [p.split(".")[0].split("/")[-1] or p for p in points]  # the topic's last name: "m1", "s01"
     rec.log("modes/table", rr.TextDocument(_mode_table(modal), media_type=rr.MediaType.MARKDOWN), static=True)
     n = len(points)
     frame_idx = np.arange(frames)
     grey = [150, 150, 150]
     for r in range(fn.size):
         ent = mode_entity(r, fn[r])
-        rec.log(ent + "/undeformed", rr.Points3D(pos, radii=0.01 * ext, colors=grey, labels=labels),
+        rec.log(ent + "/undeformed", rr.Points3D(pos, radii=0.01 * ext, colors=grey,
+                                                 labels=labels if n <= 8 else None),
                 rr.LineStrips3D([node_pos], colors=grey, radii=0.004 * ext), static=True)
         rec.log(ent, rr.TextDocument(f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}; "
                                      f"largest displacement drawn {scale:.3g} m"), static=True)
