@@ -7,6 +7,8 @@ adds the edges (reading MCAP, writing rerun recordings and figures).
 
 from __future__ import annotations
 
+import dataclasses
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -103,13 +105,10 @@ def _identify(sig, input, outputs, nperseg, window, fmin, fmax, n_modes, estimat
         orders = range(10, int(min(120, n_lags * len(outputs))) + 1, 4)
         st = modal.ssi_cov(sig.select(outputs), n_lags=n_lags, orders=orders)
         mm = st.modal_model(fmin=fmin, fmax=fmax)
-        mm = type(mm)(**{**{f: getattr(mm, f) for f in mm.__dataclass_fields__},
-                         "extra": {**mm.extra, "stabilization": st}})
+        mm = dataclasses.replace(mm, extra={**mm.extra, "stabilization": st})
         if n_modes is not None and len(mm) > n_modes:
-            import warnings as _w
-
-            _w.warn(f"SSI-COV found {len(mm)} modes; all are reported (n_modes={n_modes} applies to FDD)",
-                    stacklevel=3)
+            warnings.warn(f"SSI-COV found {len(mm)} modes; all are reported (n_modes={n_modes} applies to FDD)",
+                          stacklevel=3)
         return G, None, mm
     # two singular values: close modes (e.g. a tower's two bending directions) both show
     mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=fmax, n_singular=min(2, len(outputs)),
@@ -179,12 +178,12 @@ def analyse_signals(
     from vibroscope.spectral._engine import check_option
 
     check_option("method", method, ("fdd", "ssi"))
-    warnings = list(signals.meta.get("warnings", []))
+    notes = list(signals.meta.get("warnings", []))
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     flat = [c for c in outputs if np.ptp(signals[c]) == 0]
     if flat:  # e.g. the unused axes of a one-axis IMU: no information, singular spectra
         more = f" and {len(flat) - 3} more" if len(flat) > 3 else ""
-        warnings.append(f"{len(flat)} constant channels skipped (no vibration): {flat[:3]}{more}")
+        notes.append(f"{len(flat)} constant channels skipped (no vibration): {flat[:3]}{more}")
         outputs = [c for c in outputs if c not in flat]
     if not outputs:
         raise ValueError("no non-constant response channel to analyse")
@@ -210,14 +209,14 @@ def analyse_signals(
         refinements.append(nperseg)
         nperseg *= 2
     if refinements:
-        warnings.append(f"resolution refined for the damping: nperseg {refinements[0]} -> {nperseg} "
+        notes.append(f"resolution refined for the damping: nperseg {refinements[0]} -> {nperseg} "
                         f"(df {sig.fs / refinements[0]:.4g} -> {sig.fs / nperseg:.4g} Hz)")
     psd = G.psd()
     Gout = G.select(outputs)
     sv = modal.singular_values(Gout)
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
                     input=input, outputs=list(outputs))
-    return Analysis(sig, psd, Gout, h, mm, sv, settings, warnings)
+    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes)
 
 
 def _jsonable(v: Any) -> Any:

@@ -6,7 +6,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from vibroscope.io.mcap_read import discover_fields, mcap_info, select_acceleration_channels
+from vibroscope.io.mcap_read import _discover, _info, _Log, select_acceleration_channels
 
 __all__ = ["AutoSelection", "auto_channels", "is_bookkeeping"]
 
@@ -74,14 +74,15 @@ def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int
     """
     from vibroscope.errors import ChannelError
 
-    info = mcap_info(path)
+    log = _Log(path)  # one scan serves the topic table and, for the fallback, the field discovery
+    info = _info(log)
     undecodable = tuple((t.topic, f"{t.schema_name}: {t.reason}") for t in info.topics
                         if not t.decodable and t.message_count > 0)
     acc, _ = select_acceleration_channels(info)
     if acc:
         return AutoSelection(tuple(acc), "linear_acceleration of every sensor_msgs/msg/Imu topic", undecodable)
     counts = {t.topic: t.message_count for t in info.topics if t.decodable}
-    fields = discover_fields(path)
+    fields = _discover(log)
     best, best_key = None, None
     for topic, paths in fields.items():
         meas = [p for p in paths if not is_bookkeeping(p)]
