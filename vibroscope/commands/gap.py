@@ -1,0 +1,87 @@
+"""``vibroscope gap MODEL.toml LOG.mcap [LOG2.mcap ...]``: where a model and the real machine
+disagree, which unmodelled effect explains it, and how far the gap shrinks once it is added.
+
+    vibroscope gap MODEL.toml LOG.mcap [LOG2.mcap ...] --json REPORT.json [--rrd FILE]
+                   [--figures DIR] [--export-model FILE] [--effects E1,E2] [--transient S]
+
+The model's ``[[input]]`` channels are read from each log as the command applied to the
+system, its ``[[output]]`` channels as the measured responses. With one log the fit and the
+held-out validation are a time split; with several, the last log is held out.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(sub) -> None:
+    """Register ``gap`` on the CLI's sub-parsers."""
+    p = sub.add_parser(
+        "gap",
+        help="diagnose the sim-to-real gap of a model file against logs",
+        description=__doc__.split("\n\n")[0],
+    )
+    p.add_argument("model", type=Path, metavar="MODEL.toml", help="nominal model file (kind = lumped | transfer_function)")
+    p.add_argument("logs", type=Path, nargs="+", metavar="LOG.mcap", help="log(s) of the real machine; the last of several is held out")
+    p.add_argument("--json", type=Path, metavar="REPORT.json", help="write the report")
+    p.add_argument("--rrd", type=Path, metavar="FILE", help="write a rerun recording of the diagnosis")
+    p.add_argument("--figures", type=Path, metavar="DIR", help="write PNG figures there")
+    p.add_argument("--export-model", type=Path, metavar="FILE", help="write the augmented model file")
+    p.add_argument("--effects", help="comma-separated effects to try (default: the whole vocabulary)")
+    p.add_argument("--transient", type=float, metavar="S", help="seconds left out at the start of each log")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    """Run ``vibroscope gap``; returns the exit status."""
+    from vibroscope.errors import ModelFileError
+    from vibroscope.gap import diagnose
+    from vibroscope.gap.report import EFFECTS
+    from vibroscope.io import read_mcap
+    from vibroscope.models.modelfile import load_model
+
+    model = load_model(args.model)
+    effects = None
+    if args.effects:
+        effects = [e.strip() for e in args.effects.split(",") if e.strip()]
+        bad = [e for e in effects if e not in EFFECTS]
+        if bad:
+            raise ModelFileError(f"--effects: unknown effect(s) {bad}; known: {list(EFFECTS)}")
+    outs = [p.resolve() for p in (args.json, args.rrd, args.export_model) if p is not None]
+    for log in args.logs:
+        if log.resolve() in outs or log.resolve() == args.model.resolve():
+            raise ModelFileError(f"{log}: an output would overwrite an input")
+    channels = list(model.input_channels()) + list(model.output_channels())
+    sigs = [read_mcap(log, channels, progress=not args.no_progress).with_meta(source=str(log)) for log in args.logs]
+    try:
+        report = diagnose(model, sigs, effects=effects, transient_s=args.transient, progress=not args.no_progress)
+    except ValueError as exc:
+        raise ModelFileError(f"{args.model}: cannot diagnose: {exc}") from None
+    print(report.summary())
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+        print(f"wrote {args.json}")
+    if args.export_model:
+        args.export_model.parent.mkdir(parents=True, exist_ok=True)
+        args.export_model.write_text(report.augmented_model_toml, encoding="utf-8")
+        print(f"wrote {args.export_model}")
+    if args.figures:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        args.figures.mkdir(parents=True, exist_ok=True)
+        report.plot(out_dir=args.figures)
+        print(f"wrote figures to {args.figures}")
+    if args.rrd:
+        from vibroscope.viewers.rerun_gap import log_gap_report
+
+        log_gap_report(report, path=args.rrd)
+        print(f"wrote {args.rrd}")
+    sys.stdout.flush()
+    return 0

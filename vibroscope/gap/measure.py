@@ -1,0 +1,379 @@
+"""Measuring the gap: the fit/validation split, nrmse, the noise floor, bands and regimes.
+
+References
+----------
+.. [1] J. S. Bendat, A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010 (Welch estimates,
+   coherence, noise on the output).
+.. [2] R. Pintelon, J. Schoukens, *System Identification: A Frequency Domain Approach*,
+   2nd ed., Wiley-IEEE, 2012 (best linear approximation, noise floor from repeated periods
+   and from non-excited frequency lines).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import signal
+
+from vibroscope.gap.report import Band, RegimeGap
+
+__all__ = ["nrmse", "Split", "make_split", "input_levels", "NoiseFloor", "noise_floor", "locate_bands",
+           "masked_csd", "regime_gaps"]
+
+
+def nrmse(measured, simulated, mask=None) -> float:
+    """Pooled normalised RMS error ``sqrt(sum (y - yhat)^2 / sum y^2)``.
+
+    Parameters
+    ----------
+    measured, simulated : ndarray, shape (n_outputs, n_samples) or lists of those (one per log)
+    mask : ndarray of bool, shape (n_samples,), or a list of those, optional
+        Samples to pool (default all).
+
+    Returns
+    -------
+    float (NaN when the measured energy is 0)
+    """
+    if isinstance(measured, (list, tuple)):
+        masks = mask if mask is not None else [None] * len(measured)
+        num = den = 0.0
+        for y, yh, m in zip(measured, simulated, masks):
+            sl = slice(None) if m is None else m
+            num += float(np.sum((y[:, sl] - yh[:, sl]) ** 2))
+            den += float(np.sum(y[:, sl] ** 2))
+        return float(np.sqrt(num / den)) if den > 0 else float("nan")
+    return nrmse([measured], [simulated], None if mask is None else [mask])
+
+
+def input_levels(u: np.ndarray, fs: float, *, window_s: float = 0.5, max_levels: int = 5):
+    """Excitation levels of an input record: windowed RMS clustered on a log scale.
+
+    Returns
+    -------
+    labels : ndarray of int, shape (n_samples,)
+        Level index per sample (0 = lowest RMS); -1 for a silent tail.
+    rms : ndarray, shape (n_levels,)
+        Median RMS (N) of each level.
+    """
+    u = np.atleast_2d(u)[0]
+    n = u.size
+    w = max(int(round(window_s * fs)), 8)
+    nw = max(n // w, 1)
+    r = np.sqrt(np.mean(u[: nw * w].reshape(nw, w) ** 2, axis=1)) if n >= w else np.array([np.sqrt(np.mean(u**2))])
+    lr = np.log10(np.maximum(r, 1e-300))
+    order = np.sort(lr)
+    # split the sorted log-RMS at gaps wider than a factor 1.5 (0.176 decades)
+    cuts = np.nonzero(np.diff(order) > 0.176)[0]
+    edges = [order[0] - 1] + [0.5 * (order[c] + order[c + 1]) for c in cuts] + [order[-1] + 1]
+    if len(edges) - 1 > max_levels:
+        edges = [order[0] - 1, order[-1] + 1]
+    lab_w = np.searchsorted(edges, lr) - 1
+    labels = np.repeat(lab_w, w)
+    if labels.size < n:
+        labels = np.concatenate([labels, np.full(n - labels.size, lab_w[-1])])
+    levels = np.array([np.median(r[lab_w == i]) for i in range(len(edges) - 1) if np.any(lab_w == i)])
+    # renumber to consecutive
+    uniq = np.unique(lab_w)
+    remap = {int(v): i for i, v in enumerate(uniq)}
+    labels = np.vectorize(remap.get)(labels) if len(uniq) < len(edges) - 1 else labels
+    return labels[:n], levels
+
+
+@dataclass(frozen=True)
+class Split:
+    """Which samples of which log fit, which validate.
+
+    Attributes
+    ----------
+    fit : list of ndarray of bool
+        Per log, the fitting samples (all False for a validation-only log).
+    validation : list of ndarray of bool
+        Per log, the held-out samples.
+    fit_prefix : list of int
+        Per log, the samples that must be simulated to evaluate the fit residual (a
+        contiguous fitting part needs only its prefix).
+    screen_prefix : list of int
+        Per log, a shorter prefix (all levels present) for the fast screening fits.
+    description : str
+    levels : list of int
+        Number of excitation levels found per log.
+    """
+
+    fit: list
+    validation: list
+    fit_prefix: list
+    screen_prefix: list
+    description: str
+    levels: list
+
+
+def make_split(us: list, fs: float, *, skip: list | None = None, validation_fraction: float = 1 / 3,
+               screen_s: float = 12.0) -> Split:
+    """The fit/validation split.
+
+    One log: the last `validation_fraction` of the record is held out when every input level
+    occurs on both sides (levels: :func:`input_levels`); otherwise blocks of 2 s alternate
+    (two fitting, one held out) so that every level is on both sides. Several logs: the last
+    log is held out, the others fit.
+
+    Parameters
+    ----------
+    us : list of ndarray, shape (n_inputs, n_samples)
+        The logged inputs.
+    fs : float
+        Hz.
+    skip : list of int, optional
+        Samples at the start of each log left out of every metric (initial transient).
+    """
+    skip = skip or [0] * len(us)
+    n_logs = len(us)
+    fit, val, fpre, spre, nlev = [], [], [], [], []
+    if n_logs >= 2:
+        for i, u in enumerate(us):
+            n = u.shape[1]
+            m = np.zeros(n, bool)
+            m[skip[i]:] = True
+            labels, lv = input_levels(u, fs)
+            nlev.append(len(lv))
+            if i < n_logs - 1:
+                fit.append(m)
+                val.append(np.zeros(n, bool))
+                fpre.append(n)
+                spre.append(_screen_prefix(labels, n, fs, screen_s, skip[i]))
+            else:
+                fit.append(np.zeros(n, bool))
+                val.append(m)
+                fpre.append(0)
+                spre.append(0)
+        desc = (f"held-out log: the model is fitted on log(s) 1..{n_logs - 1} and every gap is measured "
+                f"on log {n_logs}")
+        return Split(fit, val, fpre, spre, desc, nlev)
+    u = us[0]
+    n = u.shape[1]
+    labels, lv = input_levels(u, fs)
+    nlev.append(len(lv))
+    cut = int(round(n * (1 - validation_fraction)))
+    m_fit = np.zeros(n, bool)
+    m_fit[skip[0]:cut] = True
+    m_val = np.zeros(n, bool)
+    m_val[cut:] = True
+    ok = all(np.any(labels[m_fit] == k) and np.any(labels[m_val] == k) for k in range(len(lv)))
+    if ok:
+        desc = (f"time split: samples {skip[0]}..{cut - 1} fit, the last {n - cut} samples "
+                f"({(n - cut) / fs:.1f} s) held out; {len(lv)} input level(s), each on both sides")
+        return Split([m_fit], [m_val], [cut], [_screen_prefix(labels, cut, fs, screen_s, skip[0])], desc, nlev)
+    b = int(round(2.0 * fs))
+    blk = (np.arange(n) // b) % 3 == 2
+    m_val = blk.copy()
+    m_fit = ~blk
+    m_fit[: skip[0]] = False
+    m_val[: skip[0]] = False
+    desc = (f"interleaved time split: 2 s blocks, every third held out ({m_val.sum() / fs:.1f} s); "
+            f"{len(lv)} input level(s), each on both sides")
+    return Split([m_fit], [m_val], [n], [min(n, max(int(screen_s * fs), 3 * b))], desc, nlev)
+
+
+def _screen_prefix(labels, n_fit, fs, screen_s, skip):
+    """Shortest prefix of at least `screen_s` seconds (after `skip`) holding every level."""
+    need = set(np.unique(labels[:n_fit]).tolist())
+    start = min(n_fit, skip + int(screen_s * fs))
+    seen = set(np.unique(labels[skip:start]).tolist())
+    if seen >= need:
+        return start
+    for k in range(start, n_fit, int(fs)):
+        seen |= set(np.unique(labels[k : k + int(fs)]).tolist())
+        if seen >= need:
+            return min(n_fit, k + int(fs))
+    return n_fit
+
+
+def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int):
+    """Welch auto/cross spectra over the segments that lie wholly inside `mask`.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n_channels, n_samples)
+    mask : ndarray of bool, shape (n_samples,)
+    fs : float
+    nperseg : int
+
+    Returns
+    -------
+    f : ndarray, shape (n_f,)
+    G : ndarray of complex, shape (n_f, n_channels, n_channels)
+        One-sided ``G[f, i, j] = 2 conj(X_i) X_j / (fs sum w^2)`` averaged (scipy's
+        convention, ``scaling='density'``); Hann window, 50 % overlap, mean removed.
+    n_avg : int
+        Segments averaged.
+    """
+    n = x.shape[1]
+    step = nperseg // 2
+    win = signal.get_window("hann", nperseg)
+    scale = 1.0 / (fs * np.sum(win**2))
+    starts = [s for s in range(0, n - nperseg + 1, step) if mask[s : s + nperseg].all()]
+    nf = nperseg // 2 + 1
+    G = np.zeros((nf, x.shape[0], x.shape[0]), complex)
+    for s in starts:
+        seg = x[:, s : s + nperseg]
+        seg = (seg - seg.mean(axis=1, keepdims=True)) * win
+        X = np.fft.rfft(seg, axis=1)
+        G += np.einsum("if,jf->fij", X.conj(), X)
+    if starts:
+        G *= scale / len(starts)
+        G[1:-1] *= 2.0 if nperseg % 2 == 0 else 1.0
+        if nperseg % 2:
+            G[1:] *= 2.0
+    return np.fft.rfftfreq(nperseg, 1 / fs), G, len(starts)
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """Noise estimate: per-channel noise PSD level and the pooled nrmse it implies."""
+
+    nrmse: float
+    method: str
+    psd_level: np.ndarray  # per output channel, unit^2/Hz (white)
+    excited_band: tuple[float, float]
+
+
+def excited_band(u: np.ndarray, fs: float, nperseg: int) -> tuple[float, float]:
+    """Band (Hz) where the input PSD is within 30 dB of its maximum (lines smoothed)."""
+    f, P = signal.welch(np.atleast_2d(u)[0], fs=fs, nperseg=min(nperseg, np.atleast_2d(u).shape[1]))
+    Ps = np.convolve(P, np.ones(5) / 5, mode="same")
+    Ps = np.maximum(Ps, P)
+    on = Ps > 1e-3 * Ps[1:].max()
+    on[0] = False
+    idx = np.nonzero(on)[0]
+    if idx.size == 0:
+        return (0.0, fs / 2)
+    return (float(f[idx[0]]), float(f[idx[-1]]))
+
+
+def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> NoiseFloor:
+    """The measurement-noise floor in nrmse, estimated from the data.
+
+    Method: the outputs' PSD beyond the excited band of the input (above 1.15 times its
+    upper edge, below 0.95 Nyquist) holds only noise for a band-limited input (nonlinear
+    distortion there makes the estimate an upper bound); its median level, taken as white
+    over the whole band, gives the noise variance per channel [2]_. When fewer than 16
+    such lines exist, the noise is the non-coherent output power ``(1 - gamma^2) Gyy``
+    (noise plus nonlinear distortion, an upper bound).
+    """
+    fb = excited_band(np.concatenate([u for u in us], axis=1), fs, nperseg)
+    num = den = 0.0
+    levels = []
+    methods = set()
+    for y, u, m in zip(ys, us, masks):
+        if not m.any():
+            continue
+        x = np.vstack([u[:1], y])
+        f, G, n_avg = masked_csd(x, m, fs, nperseg)
+        if n_avg == 0:
+            continue
+        sel = (f > 1.15 * fb[1]) & (f < 0.95 * fs / 2)
+        lev = []
+        for c in range(y.shape[0]):
+            Gyy = G[:, c + 1, c + 1].real
+            if sel.sum() >= 16:
+                level = float(np.median(Gyy[sel]))
+                methods.add(f"out-of-band residual ({f[sel][0]:.0f}-{f[sel][-1]:.0f} Hz, beyond the excited "
+                            f"band {fb[0]:.1f}-{fb[1]:.1f} Hz), white noise assumed")
+                var = level * fs / 2
+            else:
+                Guu = G[:, 0, 0].real
+                coh = np.abs(G[:, 0, c + 1]) ** 2 / np.maximum(Guu * Gyy, 1e-300)
+                inb = (f >= fb[0]) & (f <= fb[1])
+                var = float(np.sum(((1 - coh) * Gyy)[inb]) * (f[1] - f[0]))
+                level = var / (fs / 2)
+                methods.add("non-coherent output power (1 - coherence) Gyy in the excited band")
+            lev.append(level)
+            num += var * m.sum()
+            den += float(np.sum(y[c, m] ** 2))
+        levels.append(lev)
+    nr = float(np.sqrt(num / den)) if den > 0 else float("nan")
+    lv = np.mean(np.array(levels), axis=0) if levels else np.zeros(ys[0].shape[0])
+    return NoiseFloor(nr, "; ".join(sorted(methods)), lv, fb)
+
+
+def locate_bands(f: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray, *, energy: float = 0.8,
+                 min_share: float = 0.05, max_bands: int = 4) -> tuple[Band, ...]:
+    """Frequency bands holding the gap energy above the noise.
+
+    Parameters
+    ----------
+    f : ndarray, shape (n_f,)
+    residual_psd : ndarray, shape (n_f,)
+        Pooled (normalised) PSD of measured - nominal.
+    noise_psd : ndarray, shape (n_f,)
+        The noise floor's PSD on the same scale.
+
+    Returns
+    -------
+    tuple of Band, by share, largest first: the fewest contiguous bands holding `energy` of the
+    excess residual energy, each with at least `min_share`.
+    """
+    ex = np.maximum(residual_psd - noise_psd, 0.0)
+    ex = np.convolve(ex, np.ones(3) / 3, mode="same")
+    tot = ex.sum()
+    if tot <= 0:
+        return ()
+    order = np.argsort(ex)[::-1]
+    keep = np.zeros(f.size, bool)
+    acc = 0.0
+    for i in order:
+        keep[i] = True
+        acc += ex[i]
+        if acc >= energy * tot:
+            break
+    # close small holes (<= 3 bins)
+    idx = np.nonzero(keep)[0]
+    for a, b in zip(idx[:-1], idx[1:]):
+        if b - a <= 4:
+            keep[a:b] = True
+    bands = []
+    i = 0
+    while i < f.size:
+        if keep[i]:
+            j = i
+            while j + 1 < f.size and keep[j + 1]:
+                j += 1
+            share = float(ex[i : j + 1].sum() / tot)
+            if share >= min_share:
+                df = f[1] - f[0]
+                bands.append(Band(float(max(f[i] - df / 2, 0)), float(f[j] + df / 2), share))
+            i = j + 1
+        else:
+            i += 1
+    bands.sort(key=lambda b: -b.share)
+    return tuple(bands[:max_bands])
+
+
+def regime_gaps(y, yhat, mask, states: dict, u, level_labels) -> tuple[RegimeGap, ...]:
+    """nrmse of the nominal model per state regime and per excitation level.
+
+    Regimes (from the nominal model's simulated states): ``near_zero_velocity`` (some DOF's
+    |velocity| below 10 % of its RMS), ``large_displacement`` (some DOF's |displacement| above
+    twice its RMS), ``input_peaks`` (|u| above twice its RMS).
+    """
+    out = []
+    v = states.get("velocity")
+    x = states.get("displacement")
+    regs = {}
+    if v is not None:
+        vr = np.abs(v) / np.maximum(np.sqrt(np.mean(v**2, axis=1, keepdims=True)), 1e-300)
+        regs["near_zero_velocity"] = np.any(vr < 0.1, axis=0)
+    if x is not None:
+        xr = np.abs(x) / np.maximum(np.sqrt(np.mean(x**2, axis=1, keepdims=True)), 1e-300)
+        regs["large_displacement"] = np.any(xr > 2.0, axis=0)
+    ua = np.abs(np.atleast_2d(u)[0])
+    regs["input_peaks"] = ua > 2.0 * np.sqrt(np.mean(ua**2))
+    for name, r in regs.items():
+        mm = mask & r
+        if mm.sum() > 10:
+            out.append(RegimeGap("regime", name, nrmse(y, yhat, mm), float(mm.sum() / max(mask.sum(), 1))))
+    for k in np.unique(level_labels[mask]):
+        mm = mask & (level_labels == k)
+        if k >= 0 and mm.sum() > 10:
+            out.append(RegimeGap("level", f"level_{int(k) + 1}", nrmse(y, yhat, mm), float(mm.sum() / max(mask.sum(), 1))))
+    return tuple(out)

@@ -1,0 +1,405 @@
+"""Result objects of the sim-to-real gap diagnosis (:func:`vibroscope.gap.diagnose`).
+
+All are small frozen dataclasses; arrays are read-only. :class:`GapReport` carries the
+fixed report keys (:meth:`GapReport.to_dict`) and the traces and spectra its figures need
+(:meth:`GapReport.plot`, :func:`vibroscope.viewers.gap_figures.plot_gap_report`).
+
+Metric
+------
+``nrmse = RMS(measured - simulated) / RMS(measured)``, pooled over the output channels:
+``sqrt(sum_c sum_k (y_ck - yhat_ck)^2 / sum_c sum_k y_ck^2)``, evaluated on held-out
+(validation) samples only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+__all__ = [
+    "EFFECTS",
+    "Band",
+    "ChannelGap",
+    "RegimeGap",
+    "Candidate",
+    "SignatureTest",
+    "GapTraces",
+    "GapSpectrum",
+    "GapReport",
+]
+
+#: the fixed effect vocabulary
+EFFECTS = (
+    "none",
+    "parameter_mismatch",
+    "extra_mode",
+    "time_delay",
+    "coulomb_friction",
+    "backlash",
+    "hysteresis",
+    "cubic_stiffness",
+    "saturation",
+)
+
+
+def _ro(a) -> np.ndarray:
+    a = np.array(a)
+    a.flags.writeable = False
+    return a
+
+
+def _num(x):
+    """JSON-friendly float (None for NaN/inf)."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class Band:
+    """A frequency band holding a share of the gap energy.
+
+    Attributes
+    ----------
+    f_lo_hz, f_hi_hz : float
+        Band edges in Hz.
+    share : float
+        Fraction (0..1) of the residual (measured - nominal) energy in the band.
+    """
+
+    f_lo_hz: float
+    f_hi_hz: float
+    share: float
+
+    def to_dict(self) -> dict:
+        return {"f_lo_hz": _num(self.f_lo_hz), "f_hi_hz": _num(self.f_hi_hz), "share": _num(self.share)}
+
+
+@dataclass(frozen=True)
+class ChannelGap:
+    """Gap (nrmse) of one output channel: nominal model, and after the verdict's model."""
+
+    channel: str
+    gap: float
+    gap_after: float = float("nan")
+
+    def to_dict(self) -> dict:
+        return {"channel": self.channel, "gap": _num(self.gap), "gap_after": _num(self.gap_after)}
+
+
+@dataclass(frozen=True)
+class RegimeGap:
+    """Gap restricted to a state regime or an excitation level.
+
+    Attributes
+    ----------
+    kind : {"regime", "level"}
+    name : str
+        ``near_zero_velocity``, ``large_displacement``, ``input_peaks``, ``rest`` or
+        ``level_1`` (lowest input RMS) ... ``level_n``.
+    gap : float
+        nrmse of the nominal model on those samples.
+    fraction : float
+        Fraction of the samples in the regime.
+    """
+
+    kind: str
+    name: str
+    gap: float
+    fraction: float
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "name": self.name, "gap": _num(self.gap), "fraction": _num(self.fraction)}
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One candidate effect, fitted and scored on held-out data.
+
+    Attributes
+    ----------
+    effect : str
+        One of :data:`EFFECTS`.
+    where : dict
+        ``{"between": [a, b]}``, ``{"dof": name, "frequency_hz": f}``, ``{"side": "input"}``
+        or ``{"parameters": [...]}``.
+    parameters : dict
+        Fitted effect parameters in SI units (``delay_s``, ``limit_N``, ``Fc_N``, ``gap_m``,
+        ``k3_N_per_m3``, ``alpha_N_per_m`` ...).
+    gap_after : float
+        Held-out nrmse of the model augmented with this effect (linear parameters refitted).
+    score : float
+        Ranking score: the held-out share of the nominal model's excess gap (above the
+        noise floor) that the candidate explains, minus a complexity penalty.
+    gap_fit : float
+        nrmse on the fitting data.
+    n_parameters : int
+        Number of effect parameters fitted (besides the linear ones).
+    model_toml : str
+        The augmented model as a model file.
+    """
+
+    effect: str
+    where: Mapping[str, Any]
+    parameters: Mapping[str, float]
+    gap_after: float
+    score: float
+    gap_fit: float = float("nan")
+    n_parameters: int = 0
+    model_toml: str = ""
+
+    def to_dict(self) -> dict:
+        return {
+            "effect": self.effect,
+            "where": dict(self.where),
+            "parameters": {k: _num(v) for k, v in self.parameters.items()},
+            "gap_after": _num(self.gap_after),
+            "score": _num(self.score),
+            "gap_fit": _num(self.gap_fit),
+            "n_parameters": int(self.n_parameters),
+        }
+
+
+@dataclass(frozen=True)
+class SignatureTest:
+    """One signature test on the residual of the refitted linear model.
+
+    Attributes
+    ----------
+    name : str
+        ``level_dependence``, ``coherence_drop``, ``phase_slope``, ``residual_vs_velocity``,
+        ``residual_vs_displacement``, ``residual_vs_input``, ``extra_poles``,
+        ``residual_whiteness``, ``input_cross_correlation`` ...
+    value : float
+        The test statistic.
+    threshold : float
+        The value beyond which the test flags.
+    flagged : bool
+    points_to : tuple of str
+        Effects the test points to when flagged.
+    detail : str
+        One line for people.
+    x, y : ndarray, optional
+        Evidence curve for the figure (e.g. binned velocity vs mean residual).
+    x_label, y_label : str
+    """
+
+    name: str
+    value: float
+    threshold: float
+    flagged: bool
+    points_to: tuple[str, ...] = ()
+    detail: str = ""
+    x: np.ndarray | None = None
+    y: np.ndarray | None = None
+    x_label: str = ""
+    y_label: str = ""
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "value": _num(self.value),
+            "threshold": _num(self.threshold),
+            "flagged": bool(self.flagged),
+            "points_to": list(self.points_to),
+            "detail": self.detail,
+        }
+
+
+@dataclass(frozen=True)
+class GapTraces:
+    """Time traces for the figures: measured, nominal, refitted and augmented outputs.
+
+    Attributes
+    ----------
+    fs : float
+        Sampling frequency in Hz.
+    t0 : float
+        Time of the first sample in s.
+    channels : tuple of str
+        Output channels (rows).
+    units : tuple of str
+    measured, nominal, refit, augmented : ndarray, shape (n_outputs, n_samples)
+        In the channels' units.
+    validation : ndarray of bool, shape (n_samples,)
+        True on held-out samples.
+    input : ndarray, shape (n_samples,)
+        The (first) input channel, N.
+    log : str
+        Which log (file name) the traces come from.
+    """
+
+    fs: float
+    t0: float
+    channels: tuple[str, ...]
+    units: tuple[str, ...]
+    measured: np.ndarray
+    nominal: np.ndarray
+    refit: np.ndarray
+    augmented: np.ndarray
+    validation: np.ndarray
+    input: np.ndarray
+    log: str = ""
+
+    def __post_init__(self) -> None:
+        for name in ("measured", "nominal", "refit", "augmented", "validation", "input"):
+            object.__setattr__(self, name, _ro(getattr(self, name)))
+
+    @property
+    def time(self) -> np.ndarray:
+        """Sample times in s from the first sample, shape (n_samples,)."""
+        return np.arange(self.measured.shape[1]) / self.fs
+
+
+@dataclass(frozen=True)
+class GapSpectrum:
+    """Spectra of the gap (Welch, ``scaling='density'``), per output channel.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_f,)
+        Hz.
+    measured : ndarray, shape (n_outputs, n_f)
+        PSD of the measured outputs (unit^2/Hz).
+    residual_before, residual_refit, residual_after : ndarray, shape (n_outputs, n_f)
+        PSD of measured - nominal / refitted / augmented.
+    noise : ndarray, shape (n_outputs, n_f)
+        Estimated noise-floor PSD.
+    frf_frequencies : ndarray, shape (n_ff,)
+    frf_measured, frf_nominal, frf_augmented : ndarray of complex, shape (n_ff, n_outputs)
+        H1 estimate from the log and the models' simulated H1 (first input).
+    coherence : ndarray, shape (n_ff, n_outputs)
+    """
+
+    frequencies: np.ndarray
+    measured: np.ndarray
+    residual_before: np.ndarray
+    residual_refit: np.ndarray
+    residual_after: np.ndarray
+    noise: np.ndarray
+    frf_frequencies: np.ndarray
+    frf_measured: np.ndarray
+    frf_nominal: np.ndarray
+    frf_augmented: np.ndarray
+    coherence: np.ndarray
+
+    def __post_init__(self) -> None:
+        for f in self.__dataclass_fields__:
+            object.__setattr__(self, f, _ro(getattr(self, f)))
+
+
+@dataclass(frozen=True)
+class GapReport:
+    """The sim-to-real gap diagnosis of a model against one or more logs.
+
+    Attributes
+    ----------
+    metric : str
+        ``"nrmse"``.
+    validation : str
+        Which data the gaps are measured on (never used for fitting).
+    noise_floor : float
+        nrmse that measurement noise alone gives, estimated from the data.
+    noise_floor_method : str
+        How it was estimated.
+    gap_before, gap_refit, gap_after : float
+        Held-out nrmse of the nominal model, of the nominal structure with re-estimated
+        linear parameters, and of the model augmented with the verdict's effect.
+    shrink : float
+        ``1 - gap_after / gap_before``.
+    bands : tuple of Band
+    channels : tuple of ChannelGap
+    regimes : tuple of RegimeGap
+    candidates : tuple of Candidate
+        Every effect tried, best first.
+    signatures : tuple of SignatureTest
+    verdict : str
+        The winning effect, ``"none"`` when no candidate beats the noise floor.
+    model_name : str
+    augmented_model_toml : str
+        The augmented (verdict) model as a model file (``--export-model``).
+    traces : GapTraces or None
+    spectrum : GapSpectrum or None
+    timings : dict
+        Seconds per stage.
+    meta : dict
+        Settings and provenance.
+    """
+
+    metric: str
+    validation: str
+    noise_floor: float
+    noise_floor_method: str
+    gap_before: float
+    gap_refit: float
+    gap_after: float
+    shrink: float
+    bands: tuple[Band, ...]
+    channels: tuple[ChannelGap, ...]
+    regimes: tuple[RegimeGap, ...]
+    candidates: tuple[Candidate, ...]
+    signatures: tuple[SignatureTest, ...]
+    verdict: str
+    model_name: str = ""
+    augmented_model_toml: str = ""
+    traces: GapTraces | None = None
+    spectrum: GapSpectrum | None = None
+    timings: Mapping[str, float] = field(default_factory=dict)
+    meta: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def best(self) -> Candidate | None:
+        """The top-ranked candidate (None when no candidate was tried)."""
+        return self.candidates[0] if self.candidates else None
+
+    def to_dict(self) -> dict:
+        """The report as JSON-ready dict (fixed keys first; arrays left out)."""
+        return {
+            "metric": self.metric,
+            "validation": self.validation,
+            "noise_floor": _num(self.noise_floor),
+            "noise_floor_method": self.noise_floor_method,
+            "gap_before": _num(self.gap_before),
+            "gap_refit": _num(self.gap_refit),
+            "gap_after": _num(self.gap_after),
+            "shrink": _num(self.shrink),
+            "bands": [b.to_dict() for b in self.bands],
+            "channels": [c.to_dict() for c in self.channels],
+            "regimes": [r.to_dict() for r in self.regimes],
+            "candidates": [c.to_dict() for c in self.candidates],
+            "signatures": [s.to_dict() for s in self.signatures],
+            "verdict": self.verdict,
+            "model": self.model_name,
+            "timings_s": {k: _num(v) for k, v in self.timings.items()},
+            "meta": dict(self.meta),
+        }
+
+    def summary(self) -> str:
+        """A few lines for people: verdict, gaps, bands, the top candidates."""
+        lines = [
+            f"verdict: {self.verdict}",
+            f"gap (nrmse, {self.validation}): nominal {self.gap_before:.4f}, refit {self.gap_refit:.4f}, "
+            f"augmented {self.gap_after:.4f} (shrink {100 * self.shrink:.1f} %), noise floor {self.noise_floor:.4f}",
+        ]
+        if self.bands:
+            lines.append("bands: " + ", ".join(f"{b.f_lo_hz:.1f}-{b.f_hi_hz:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
+        for i, c in enumerate(self.candidates[:5], 1):
+            where = ", ".join(f"{k}={v}" for k, v in c.where.items())
+            par = ", ".join(f"{k}={v:.4g}" for k, v in c.parameters.items())
+            lines.append(f"  {i}. {c.effect:<18} gap {c.gap_after:.4f}  score {c.score:+.3f}  [{where}] {par}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return f"GapReport(verdict={self.verdict!r}, gap_before={self.gap_before:.4g}, gap_after={self.gap_after:.4g})"
+
+    def plot(self, out_dir=None):
+        """Figures of the diagnosis (lazy matplotlib, :mod:`vibroscope.viewers.gap_figures`).
+
+        Returns a dict name -> matplotlib Figure; with `out_dir`, also writes ``NAME.png`` there.
+        """
+        from vibroscope.viewers.gap_figures import plot_gap_report
+
+        return plot_gap_report(self, out_dir=out_dir)

@@ -1,0 +1,161 @@
+"""Signature tests on the residual of the refitted linear model.
+
+Each test returns a :class:`~vibroscope.gap.report.SignatureTest` with its statistic, the
+threshold, the effects it points to, and an evidence curve for the figures.
+
+References
+----------
+.. [1] L. Ljung, *System Identification: Theory for the User*, 2nd ed., 1999, sec. 16.6
+   (residual analysis: whiteness and cross-correlation with past inputs).
+.. [2] K. Worden, G. R. Tomlinson, *Nonlinearity in Structural Dynamics*, IOP, 2001
+   (level dependence of FRFs, coherence drop, restoring-force surface).
+.. [3] R. Pintelon, J. Schoukens, *System Identification: A Frequency Domain Approach*,
+   2nd ed., 2012 (BLA level dependence).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vibroscope.gap.report import SignatureTest
+
+__all__ = ["run_signatures"]
+
+_NONLIN = ("coulomb_friction", "backlash", "hysteresis", "cubic_stiffness", "saturation")
+
+
+def _binned(x, y, nb=25):
+    """Mean of y in `nb` quantile bins of x (evidence curves)."""
+    q = np.quantile(x, np.linspace(0.01, 0.99, nb + 1))
+    q = np.unique(q)
+    idx = np.clip(np.searchsorted(q, x) - 1, 0, len(q) - 2)
+    xs = np.array([x[idx == i].mean() if np.any(idx == i) else np.nan for i in range(len(q) - 1)])
+    ys = np.array([y[idx == i].mean() if np.any(idx == i) else np.nan for i in range(len(q) - 1)])
+    ok = np.isfinite(xs) & np.isfinite(ys)
+    return xs[ok], ys[ok]
+
+
+def _corr(a, b) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    d = np.sqrt(np.sum(a * a) * np.sum(b * b))
+    return float(np.sum(a * b) / d) if d > 0 else 0.0
+
+
+def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, resid, u, states, fs,
+                   out_channels) -> tuple[SignatureTest, ...]:
+    """The signature tests.
+
+    Parameters
+    ----------
+    f : ndarray, shape (n_f,)
+        Hz (excited band only).
+    H_levels : list of ndarray of complex, shape (n_f, n_outputs)
+        H1 per input level (lowest first); may be a single entry.
+    level_rms : sequence of float
+    H_meas, H_refit : ndarray of complex, shape (n_f, n_outputs)
+        Measured H1 (all fitting data) and the refitted linear model's FRF.
+    coh : ndarray, shape (n_f, n_outputs)
+        Ordinary coherence.
+    noise_coh : ndarray, shape (n_f, n_outputs)
+        Coherence expected from the noise floor alone.
+    resid : ndarray, shape (n_outputs, n)
+        Measured minus refitted-model outputs on the fitting samples.
+    u : ndarray, shape (n,)
+    states : dict
+        ``displacement``, ``velocity``: ndarray, shape (n_dofs, n) of the refitted model,
+        ``relative``: dict pair -> (d, v).
+    fs : float
+    out_channels : list of str
+    """
+    tests = []
+    # 1. level dependence of the BLA
+    if len(H_levels) >= 2:
+        lo, hi = H_levels[0], H_levels[-1]
+        w = np.clip(np.mean(coh, axis=1), 0, 1)
+        ratio_db = 20 * np.log10(np.maximum(np.abs(hi), 1e-300) / np.maximum(np.abs(lo), 1e-300))
+        rd = np.sum(w[:, None] * np.abs(ratio_db), axis=0) / max(np.sum(w), 1e-12)
+        val = float(np.max(rd))
+        tests.append(SignatureTest(
+            "level_dependence", val, 0.5, val > 0.5, _NONLIN,
+            f"mean |H(level {len(H_levels)}) / H(level 1)| = {val:.2f} dB (input RMS {level_rms[0]:.3g} -> "
+            f"{level_rms[-1]:.3g} N)",
+            f, np.mean(ratio_db, axis=1), "frequency [Hz]", "H1 high / low level [dB]"))
+    # 2. coherence drop beyond the noise
+    drop = float(np.mean(np.clip(noise_coh - coh, 0, 1)))
+    tests.append(SignatureTest(
+        "coherence_drop", drop, 0.02, drop > 0.02, _NONLIN,
+        f"mean coherence deficit against the noise-only expectation: {drop:.3f}",
+        f, np.mean(coh, axis=1), "frequency [Hz]", "coherence"))
+    # 3. phase slope of measured / refitted
+    ratio = H_meas / np.where(np.abs(H_refit) > 0, H_refit, 1)
+    wgt = np.mean(coh, axis=1)
+    ph = np.unwrap(np.angle(np.sum(ratio * coh, axis=1)))
+    if f.size > 3 and np.sum(wgt) > 0:
+        A = np.vstack([f, np.ones_like(f)]).T * np.sqrt(wgt)[:, None]
+        sl, _ = np.linalg.lstsq(A, ph * np.sqrt(wgt), rcond=None)[0]
+        tau = float(-sl / (2 * np.pi))
+    else:
+        tau = 0.0
+    tests.append(SignatureTest(
+        "phase_slope", tau, 2e-4, tau > 2e-4, ("time_delay",),
+        f"phase of measured / refitted FRF falls like a delay of {1e3 * tau:.2f} ms",
+        f, np.degrees(ph), "frequency [Hz]", "phase(measured / refit) [deg]"))
+    # 4. extra poles: peaks of |measured / refitted|
+    mag = 20 * np.log10(np.maximum(np.mean(np.abs(ratio), axis=1), 1e-300))
+    pk = float(np.max(np.abs(mag - np.median(mag)))) if mag.size else 0.0
+    tests.append(SignatureTest(
+        "extra_poles", pk, 3.0, pk > 3.0, ("extra_mode",),
+        f"largest local deviation of |measured / refitted FRF|: {pk:.1f} dB",
+        f, mag, "frequency [Hz]", "|measured / refit| [dB]"))
+    # 5-7. residual versus state
+    r = resid[0] if resid.ndim == 2 else resid
+    rel = states.get("relative", {})
+    if rel:
+        best = max(rel.items(), key=lambda kv: abs(_corr(r, np.tanh(kv[1][1] / (0.05 * np.std(kv[1][1]) + 1e-300)))))
+        pair, (d, v) = best
+        c = _corr(r, np.tanh(v / (0.05 * np.std(v) + 1e-300)))
+        xs, ys = _binned(v, r)
+        tests.append(SignatureTest(
+            "residual_vs_velocity", abs(c), 0.1, abs(c) > 0.1, ("coulomb_friction", "hysteresis"),
+            f"residual correlates with sign(v) across {pair}: r = {c:+.2f}",
+            xs, ys, f"relative velocity {pair} [m/s]", f"residual {out_channels[0]}"))
+        best = max(rel.items(), key=lambda kv: abs(_corr(r, kv[1][0] ** 3)))
+        pair, (d, v) = best
+        c3 = _corr(r, d**3)
+        xs, ys = _binned(d, r)
+        tests.append(SignatureTest(
+            "residual_vs_displacement", abs(c3), 0.1, abs(c3) > 0.1, ("cubic_stiffness", "backlash"),
+            f"residual correlates with d^3 across {pair}: r = {c3:+.2f}",
+            xs, ys, f"relative displacement {pair} [m]", f"residual {out_channels[0]}"))
+    ua = u - u.mean()
+    q = np.quantile(np.abs(ua), 0.9)
+    exc = np.sign(ua) * np.maximum(np.abs(ua) - q, 0)
+    ci = _corr(r, exc)
+    xs, ys = _binned(ua, r)
+    tests.append(SignatureTest(
+        "residual_vs_input", abs(ci), 0.1, abs(ci) > 0.1, ("saturation",),
+        f"residual correlates with the input beyond its 90 % quantile: r = {ci:+.2f}",
+        xs, ys, "input [N]", f"residual {out_channels[0]}"))
+    # 8. whiteness (Ljung): fraction of autocorrelation lags 1..50 outside +-2.58/sqrt(N)
+    n = r.size
+    rr = r - r.mean()
+    lags = np.arange(1, 51)
+    den = float(np.sum(rr * rr)) or 1.0
+    ac = np.array([np.sum(rr[:-k] * rr[k:]) / den for k in lags])
+    frac = float(np.mean(np.abs(ac) > 2.58 / np.sqrt(n)))
+    tests.append(SignatureTest(
+        "residual_whiteness", frac, 0.2, frac > 0.2, (),
+        f"{100 * frac:.0f} % of residual autocorrelation lags 1-50 outside the 99 % band",
+        lags / fs, ac, "lag [s]", "residual autocorrelation"))
+    # 9. cross-correlation residual / past input (Ljung)
+    uu = ua / (np.std(ua) or 1.0)
+    rn = rr / (np.std(rr) or 1.0)
+    lags2 = np.arange(0, 51)
+    cc = np.array([np.mean(rn[k:] * uu[: n - k]) for k in lags2])
+    fr2 = float(np.mean(np.abs(cc) > 2.58 / np.sqrt(n)))
+    tests.append(SignatureTest(
+        "input_cross_correlation", fr2, 0.2, fr2 > 0.2, ("time_delay", "extra_mode", "parameter_mismatch"),
+        f"{100 * fr2:.0f} % of residual / past-input cross-correlation lags 0-50 outside the 99 % band",
+        lags2 / fs, cc, "lag [s]", "cross-correlation residual / input"))
+    return tuple(tests)
