@@ -113,7 +113,12 @@ def test_input_delay_and_saturation():
     sat = base.replace(inputs=(Input("m3", channel="/actuator/force.wrench.force.x", saturation=5.0),))
     s2 = simulate(sat, u, fs)
     assert np.abs(s2.data[0]).max() == pytest.approx(5.0)
-    np.testing.assert_allclose(s2.data[1:], simulate(base, np.clip(u, -5, 5), fs).data[1:])
+    # the actuator clips the continuous (reconstructed) force, not the samples: close to, but not
+    # the same as, clipping the logged samples (exact fine-grid check in test_integrate.py)
+    y_sat, y_samples = s2.data[1:], simulate(base, np.clip(u, -5, 5), fs).data[1:]
+    rel = np.sqrt(np.sum((y_sat - y_samples) ** 2) / np.sum(y_samples**2))
+    assert 1e-4 < rel < 0.1
+    assert np.std(y_sat) < np.std(simulate(base, u, fs).data[1:])
 
 
 def test_noise_is_relative_to_rms_and_seeded():

@@ -12,11 +12,11 @@ __all__ = ["diagnose", "fit_linear_model", "GapReport", "EFFECTS"]
 
 def __getattr__(name):
     if name in ("diagnose", "fit_linear_model"):
-        from vibroscope.gap import diagnose as _d
+        import importlib
 
-        return getattr(_d, name)
+        return getattr(importlib.import_module("vibroscope.gap.diagnosis"), name)
     if name in ("GapReport", "EFFECTS"):
-        from vibroscope.gap import report as _r
+        import importlib
 
-        return getattr(_r, name)
+        return getattr(importlib.import_module("vibroscope.gap.report"), name)
     raise AttributeError(f"module 'vibroscope.gap' has no attribute {name!r}")

@@ -240,7 +240,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
 
         specs.append(EffectSpec(
             "coulomb_friction", where, 1,
-            [np.array([math.log(f_ref * r)]) for r in (0.02, 0.08, 0.3)],
+            [np.array([math.log(f_ref * r)]) for r in (0.01, 0.03, 0.1, 0.3)],
             np.array([math.log(f_ref * 1e-4)]), np.array([math.log(max(f_ref, u_max) * 3)]),
             build_fric, lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": FRICTION_V_EPS},
         ))
@@ -256,7 +256,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
 
             specs.append(EffectSpec(
                 "backlash", where, 1,
-                [np.array([math.log(d_rms * r)]) for r in (0.05, 0.2, 0.6)],
+                [np.array([math.log(d_rms * r)]) for r in (0.03, 0.1, 0.3, 1.0)],
                 np.array([math.log(d_rms * 1e-4)]), np.array([math.log(d_rms * 5)]),
                 build_bl, lambda p: {"gap_m": float(math.exp(p[0]))},
             ))
@@ -267,7 +267,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
 
         specs.append(EffectSpec(
             "cubic_stiffness", where, 1,
-            [np.array([q]) for q in (0.05, 0.3, -0.03, -0.1)],
+            [np.array([q]) for q in (0.003, 0.01, 0.03, 0.1, 0.3, -0.003, -0.01, -0.03)],
             np.array([-0.5]), np.array([50.0]),
             build_cubic, lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
         ))

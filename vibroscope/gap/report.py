@@ -80,14 +80,20 @@ class Band:
 
 @dataclass(frozen=True)
 class ChannelGap:
-    """Gap (nrmse) of one output channel: nominal model, and after the verdict's model."""
+    """Gap of one output channel on the held-out samples: nrmse of the nominal model
+    (`gap`) and of the verdict's model (`gap_after`), and the RMS simulation errors in the
+    channel's unit (`rms_error`, `rms_error_after`)."""
 
     channel: str
     gap: float
     gap_after: float = float("nan")
+    rms_error: float = float("nan")
+    rms_error_after: float = float("nan")
+    unit: str = ""
 
     def to_dict(self) -> dict:
-        return {"channel": self.channel, "gap": _num(self.gap), "gap_after": _num(self.gap_after)}
+        return {"channel": self.channel, "gap": _num(self.gap), "gap_after": _num(self.gap_after),
+                "rms_error": _num(self.rms_error), "rms_error_after": _num(self.rms_error_after), "unit": self.unit}
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,9 @@ Procedure
    then the best location of the leading classes fitted jointly with the linear parameters
    in the time domain (:func:`scipy.optimize.least_squares`).
 6. **Score**: every candidate simulated on the held-out data; with ``e(g) = sqrt(g^2 -
-   floor^2)`` the excess over the noise floor, ``score = 1 - e(gap_after) / e(gap_before) -
-   0.02 n_effect_parameters``. The verdict is ``none`` when the nominal gap is within
+   floor^2)`` the excess over the noise floor, ``score = 1 - e(gap_after (1 + 0.03 n)) /
+   e(gap_before)`` with ``n`` the number of effect parameters (a relative, AIC-like
+   complexity penalty). The verdict is ``none`` when the nominal gap is within
    1.3 times the noise floor, else the best candidate.
 
 References
@@ -70,8 +71,8 @@ __all__ = ["diagnose", "fit_linear_model", "as_lumped"]
 
 #: the nominal gap must exceed the noise floor by this factor before any effect is named
 NONE_FACTOR = 1.3
-#: score penalty per effect parameter
-PENALTY = 0.02
+#: complexity penalty: the held-out gap is scored as gap * (1 + PENALTY * n_effect_parameters)
+PENALTY = 0.03
 
 
 def as_lumped(model) -> LumpedModel:
@@ -422,19 +423,34 @@ def diagnose(
     sp = split.screen_prefix
 
     def screen(s):
-        def build(p, s=s):
-            return s.apply(refit, p)
+        # from the refitted and from the nominal linear parameters (a nonlinearity shifts the
+        # BLA, so the refit can be the wrong base for it): the best start of each base is
+        # refined, the better result kept
+        out = None
+        for base in (refit, model):
+            best = None
+            for p0 in s.starts:
+                try:
+                    m0 = s.apply(base, p0)
+                except ValueError:
+                    continue
+                yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
+                g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
+                          [m[:n] for m, n in zip(split.fit, sp) if n])
+                g = g if np.isfinite(g) else 1e9
+                if best is None or g < best[1]:
+                    best = (p0, g)
+            if best is None:
+                continue
 
-        best = None
-        for p0 in s.starts:
-            yh = [sim.run(build(p0), n, fast=True) if n else None for sim, n in zip(sims, sp)]
-            g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
-                      [m[:n] for m, n in zip(split.fit, sp) if n])
-            g = g if np.isfinite(g) else 1e9
-            if best is None or g < best[1]:
-                best = (p0, g)
-        p, g, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True, max_nfev=8)
-        return s, p, g
+            def build(p, s=s, base=base):
+                return s.apply(base, p)
+
+            p, g, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
+                                      max_nfev=6 + 3 * s.n)
+            if out is None or g < out[2]:
+                out = (s, p, g, base)
+        return out
 
     screened = []
     with ThreadPoolExecutor(max(1, workers)) as ex:
@@ -443,21 +459,21 @@ def diagnose(
             bar.update(1)
     # best location per class, then the best classes fitted jointly with the linear parameters
     per_class: dict[str, tuple] = {}
-    for s, p, g in screened:
+    for s, p, g, base in screened:
         if s.effect not in per_class or g < per_class[s.effect][2]:
-            per_class[s.effect] = (s, p, g)
+            per_class[s.effect] = (s, p, g, base)
     ranked = sorted(per_class.values(), key=lambda r: r[2])
     full = ranked[:n_full]
     joint_n = [min(n, max(s_, int(20 * fs))) if n else 0 for n, s_ in zip(ns_fit, sp)]
 
     def joint(item):
-        s, p, _ = item
+        s, p, _, base = item
         nl = len(lin)
 
         def build(x, s=s):
-            return s.apply(lin.apply(refit, x[:nl]), x[nl:])
+            return s.apply(lin.apply(model, x[:nl]), x[nl:])
 
-        x0 = np.concatenate([np.zeros(nl), p])
+        x0 = np.concatenate([theta if base is refit else np.zeros(nl), p])
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
         x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, joint_n, fast=True, max_nfev=6)
@@ -468,9 +484,9 @@ def diagnose(
             results.append(res)
             bar.update(1)
     done = {r[0].effect for r in results}
-    for s, p, g in screened:  # the other classes and locations as screened
+    for s, p, g, base in screened:  # the other classes and locations as screened
         if s.effect not in done or s is not per_class[s.effect][0]:
-            results.append((s, s.apply(refit, p), p, g))
+            results.append((s, s.apply(base, p), p, g))
     bar.close()
     timings["candidates"] = time.perf_counter() - t
 
@@ -491,10 +507,10 @@ def diagnose(
     e_before = _excess(gap_before, floor)
     cands = []
     for s, m_aug, p, gfit, g, yh in evaluated:
-        expl = 1.0 - _excess(g, floor) / e_before if e_before > 0 else 0.0
+        expl = 1.0 - _excess(g * (1 + PENALTY * s.n), floor) / e_before if e_before > 0 else 0.0
         cands.append((Candidate(s.effect, s.where | ({"frequency_hz": s.describe(p).get("frequency_hz")}
                                                       if s.effect == "extra_mode" else {}),
-                                s.describe(p), g, expl - PENALTY * s.n, gfit, s.n,
+                                s.describe(p), g, expl, gfit, s.n,
                                 _dumps(m_aug)), m_aug, yh))
     changed = lin.changed(theta)
     pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
@@ -521,8 +537,12 @@ def diagnose(
     tr = val_logs[-1] if val_logs else 0
     vmask = split.validation[tr]
     y_aug_full = best_y.get(tr) if best_y.get(tr) is not None else sims[tr].run(best_m)
+    def _rms(a):
+        return float(np.sqrt(np.mean(a[vmask] ** 2))) if vmask.any() else float("nan")
+
     channels = tuple(
-        ChannelGap(ch, nrmse(ys[tr][c:c + 1], y_nom[tr][c:c + 1], vmask), nrmse(ys[tr][c:c + 1], y_aug_full[c:c + 1], vmask))
+        ChannelGap(ch, nrmse(ys[tr][c:c + 1], y_nom[tr][c:c + 1], vmask), nrmse(ys[tr][c:c + 1], y_aug_full[c:c + 1], vmask),
+                   _rms(ys[tr][c] - y_nom[tr][c]), _rms(ys[tr][c] - y_aug_full[c]), units[c])
         for c, ch in enumerate(out_ch))
     # bands: residual of the nominal on every (non-transient) sample of every log, normalised per channel
     fr, Gm, _ = masked_csd(np.vstack([ys[tr], ys[tr] - y_nom[tr], ys[tr] - y_ref[tr], ys[tr] - y_aug_full]),
