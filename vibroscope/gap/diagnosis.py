@@ -26,7 +26,7 @@ Procedure
 6. **Score**: every candidate simulated on the held-out data; with ``e(g) = sqrt(g^2 -
    floor^2)`` the excess over the noise floor, ``score = 1 - e(gap_after (1 + 0.03 n)) /
    e(gap_before)`` with ``n`` the number of effect parameters (a relative, AIC-like
-   complexity penalty). The verdict is ``none`` when the nominal gap is within
+   complexity penalty); candidates are ranked by ``gap_after (1 + 0.03 n)``. The verdict is ``none`` when the nominal gap is within
    1.3 times the noise floor, else the best candidate.
 
 References
@@ -518,7 +518,8 @@ def diagnose(
     cands.append((Candidate("parameter_mismatch", {"parameters": changed}, pm_params, gap_refit, expl_pm,
                             float("nan"), 0, _dumps(refit)), refit, {i: y_ref[i] for i in val_logs}))
     # keep the best location per effect first, then the rest (every effect tried is listed)
-    cands.sort(key=lambda c: -c[0].score)
+    # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
+    cands.sort(key=lambda c: (c[0].gap_after * (1 + PENALTY * c[0].n_parameters), -c[0].score))
     none_ok = gap_before <= NONE_FACTOR * floor
     none_c = (Candidate("none", {}, {}, gap_before, 0.0, float("nan"), 0, _dumps(model)), model,
               {i: y_nom[i] for i in val_logs})

@@ -163,13 +163,21 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
         desc = (f"time split: samples {skip[0]}..{cut - 1} fit, the last {n - cut} samples "
                 f"({(n - cut) / fs:.1f} s) held out; {len(lv)} input level(s), each on both sides")
         return Split([m_fit], [m_val], [cut], [_screen_prefix(labels, cut, fs, screen_s, skip[0])], desc, nlev)
+    # blocks of 2 s; within each level's blocks (in time order) every third is held out
     b = int(round(2.0 * fs))
-    blk = (np.arange(n) // b) % 3 == 2
+    nb = int(np.ceil(n / b))
+    blk_level = [int(np.bincount(labels[i * b:(i + 1) * b].clip(0)).argmax()) for i in range(nb)]
+    held = np.zeros(nb, bool)
+    for k in set(blk_level):
+        idx = [i for i, lv_ in enumerate(blk_level) if lv_ == k]
+        pick = idx[2::3] if len(idx) >= 3 else idx[-1:] if len(idx) == 2 else []
+        held[pick] = True
+    blk = np.repeat(held, b)[:n]
     m_val = blk.copy()
     m_fit = ~blk
     m_fit[: skip[0]] = False
     m_val[: skip[0]] = False
-    desc = (f"interleaved time split: 2 s blocks, every third held out ({m_val.sum() / fs:.1f} s); "
+    desc = (f"interleaved time split: 2 s blocks, every third block of each level held out ({m_val.sum() / fs:.1f} s); "
             f"{len(lv)} input level(s), each on both sides")
     return Split([m_fit], [m_val], [n], [min(n, max(int(screen_s * fs), 3 * b))], desc, nlev)
 

@@ -8,6 +8,10 @@ functions below load their modules (and those libraries) on first use.
   :func:`summary_figures` (PNGs).
 - :mod:`vibroscope.viewers.rerun_view`: :func:`log_analysis` (one ``.rrd`` recording with a
   blueprint, or a spawned viewer) and :func:`read_rrd` (read one back with rerun's reader).
+- :mod:`vibroscope.viewers.gap_figures`: :func:`plot_gap_report` (the figures of a sim-to-real
+  gap diagnosis, :class:`vibroscope.gap.report.GapReport`).
+- :mod:`vibroscope.viewers.rerun_gap`: :func:`log_gap_report` (a gap diagnosis as one ``.rrd``
+  recording with a blueprint).
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ _LAZY = {
     "plot_spectrum": "figures", "plot_frf": "figures", "plot_mode_shapes": "figures",
     "plot_singular_values": "figures", "plot_signals": "figures", "summary_figures": "figures",
     "log_analysis": "rerun_view", "read_rrd": "rerun_view",
+    "plot_gap_report": "gap_figures", "log_gap_report": "rerun_gap",
 }
 
 __all__ = sorted(_LAZY)
