@@ -62,22 +62,39 @@ def input_levels(u: np.ndarray, fs: float, *, window_s: float = 0.5, max_levels:
     nw = max(n // w, 1)
     r = np.sqrt(np.mean(u[: nw * w].reshape(nw, w) ** 2, axis=1)) if n >= w else np.array([np.sqrt(np.mean(u**2))])
     lr = np.log10(np.maximum(r, 1e-300))
-    order = np.sort(lr)
-    # split the sorted log-RMS at gaps wider than a factor 1.5 (0.176 decades)
-    cuts = np.nonzero(np.diff(order) > 0.176)[0]
-    edges = [order[0] - 1] + [0.5 * (order[c] + order[c + 1]) for c in cuts] + [order[-1] + 1]
-    if len(edges) - 1 > max_levels:
-        edges = [order[0] - 1, order[-1] + 1]
-    lab_w = np.searchsorted(edges, lr) - 1
+    lab_w = _cluster_levels(lr, max_levels)
     labels = np.repeat(lab_w, w)
     if labels.size < n:
         labels = np.concatenate([labels, np.full(n - labels.size, lab_w[-1])])
-    levels = np.array([np.median(r[lab_w == i]) for i in range(len(edges) - 1) if np.any(lab_w == i)])
-    # renumber to consecutive
-    uniq = np.unique(lab_w)
-    remap = {int(v): i for i, v in enumerate(uniq)}
-    labels = np.vectorize(remap.get)(labels) if len(uniq) < len(edges) - 1 else labels
+    levels = np.array([np.median(r[lab_w == i]) for i in range(int(lab_w.max()) + 1)])
     return labels[:n], levels
+
+
+def _cluster_levels(lr: np.ndarray, max_levels: int) -> np.ndarray:
+    """Cluster window log-RMS values into levels (1-D k-means, k from `max_levels` down):
+    accept the largest k whose centres are at least a factor 1.5 apart, each holding at least
+    8 % of the windows, with a within-level spread below a quarter of the closest separation.
+    Windows that straddle a level change fall between the centres and join the nearest."""
+    n = lr.size
+    if n < 4:
+        return np.zeros(n, int)
+    for k in range(min(max_levels, n // 4), 1, -1):
+        c = np.quantile(lr, (np.arange(k) + 0.5) / k)
+        for _ in range(50):
+            lab = np.argmin(np.abs(lr[:, None] - c[None, :]), axis=1)
+            new = np.array([np.median(lr[lab == i]) if np.any(lab == i) else c[i] for i in range(k)])
+            if np.allclose(new, c):
+                break
+            c = new
+        order = np.argsort(c)
+        c = c[order]
+        lab = np.argsort(order)[lab]
+        sep = np.min(np.diff(c))
+        share = np.bincount(lab, minlength=k) / n
+        spread = np.median(np.abs(lr - c[lab]))
+        if sep > np.log10(1.5) and share.min() >= 0.08 and spread < 0.25 * sep:
+            return lab
+    return np.zeros(n, int)
 
 
 @dataclass(frozen=True)
@@ -109,7 +126,7 @@ class Split:
 
 
 def make_split(us: list, fs: float, *, skip: list | None = None, validation_fraction: float = 1 / 3,
-               screen_s: float = 12.0) -> Split:
+               screen_s: float = 8.0) -> Split:
     """The fit/validation split.
 
     One log: the last `validation_fraction` of the record is held out when every input level

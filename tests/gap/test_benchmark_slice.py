@@ -1,0 +1,221 @@
+"""The withheld-effect benchmark (benchmarks/gap): its generator, its scorer, and the fast
+CI slice (one case per class through :func:`vibroscope.gap.diagnose`)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vibroscope.io import read_mcap
+from vibroscope.models.elements import Damper, Spring
+from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
+from vibroscope.models.modelfile import load_model, loads_model
+
+REPO = Path(__file__).resolve().parents[2]
+BENCH = REPO / "benchmarks" / "gap"
+
+
+def _load(stem: str):
+    """benchmarks/gap/<stem>.py as a module (the scorer loads file paths under the same names)."""
+    name = f"_gapbench_{stem}"
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, BENCH / f"{stem}.py")
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules[name]
+
+
+gen = _load("generate")
+score = _load("score")
+
+
+# ---------------------------------------------------------------------------------------------
+# truth integrator vs the analytic linear response
+# ---------------------------------------------------------------------------------------------
+def _one_dof(delay=0.0):
+    m, f, zeta = 1.3, 23.0, 0.03
+    k = m * (2 * np.pi * f) ** 2
+    c = 2 * zeta * np.sqrt(k * m)
+    return LumpedModel(
+        (Dof("m1", m),),
+        (Spring(("m1", "ground"), k), Damper(("m1", "ground"), c)),
+        (Input("m1", "force", gen.INPUT_CHANNEL, None, delay),),
+        (Output("m1", "acceleration", gen.output_channel("m1")),),
+    )
+
+
+def _two_dof():
+    base = gen._chain_model([1.2, 0.6], [3.0e4, 5.0e4], [40.0, 15.0], "m2")
+    assert all(base.modes().damping_ratios > 0.015)  # transients die within the 6 s run-in
+    return base
+
+
+def _steady_state(model, u: "gen.ContinuousInput", period_s: float):
+    """The periodic steady-state outputs over one period, from ``LumpedModel.frf``: exact for
+    a multisine band-limited below fs/2."""
+    n = int(round(period_s * u.fs))
+    x = u.coarse[:n]
+    f = np.fft.rfftfreq(n, 1.0 / u.fs)
+    H = model.frf(f)[:, :, 0]  # (n_f, n_out), includes the input delay
+    return np.fft.irfft(H * np.fft.rfft(x)[:, None], n, axis=0).T
+
+
+@pytest.mark.parametrize("case", ["1dof", "1dof_delay", "2dof"])
+def test_truth_integrator_matches_analytic_linear_response(case):
+    model = {"1dof": lambda: _one_dof(), "1dof_delay": lambda: _one_dof(7e-3), "2dof": _two_dof}[case]()
+    rng = np.random.default_rng(1)
+    period = 1.0
+    u = gen.make_input(rng, 6.0, kind="multisine", f_hi=280.0, levels=False, period_s=period)
+    run = gen.simulate_truth(model, u)
+    ref = _steady_state(model, u, period)
+    n = int(period * gen.FS)
+    last = run.outputs[:, -2 * n :]
+    err = gen.nrmse(np.hstack([ref, ref]), last)
+    assert err < 1e-4, err
+
+
+def test_input_is_band_limited_and_exactly_sampled():
+    rng = np.random.default_rng(2)
+    u = gen.make_input(rng, 20.0, kind="random", f_hi=200.0)
+    # no content at or above 300 Hz on the fine grid
+    X = np.abs(np.fft.rfft(u.fine))
+    f = np.fft.rfftfreq(u.fine.size, 1.0 / u.fs_fine)
+    assert X[f >= gen.F_BAND_EDGE].max() < 1e-9 * X.max()
+    # the logged samples are samples of the continuous force
+    t = np.arange(u.coarse.size) / u.fs
+    np.testing.assert_allclose(u(t), u.coarse, rtol=0, atol=1e-12 * np.abs(u.coarse).max())
+    # three levels 1 : 2.5 : 6
+    assert sorted({b["level"] for b in u.info["blocks"]}) == [1.0, 2.5, 6.0]
+
+
+def test_random_chain_model_ranges():
+    for i in range(20):
+        m = gen.random_chain_model(np.random.default_rng(i))
+        modes = m.modes()
+        assert 1 <= m.n_dofs <= 3 and len(modes) == m.n_dofs
+        assert np.all((modes.natural_frequencies >= 8) & (modes.natural_frequencies <= 120))
+        assert np.all((modes.damping_ratios >= 0.01) & (modes.damping_ratios <= 0.04))
+        assert all(0.5 <= d.mass <= 5 for d in m.dofs)
+        assert [list(e.between) for e in m.elements][::2] == [["m1", "ground"], ["m2", "m1"], ["m3", "m2"]][: m.n_dofs]
+
+
+# ---------------------------------------------------------------------------------------------
+# generated cases
+# ---------------------------------------------------------------------------------------------
+def test_generated_case_reads_back(tmp_path):
+    case = gen.make_case("backlash", gen.case_rng(0, "backlash", 0), duration=20.0)
+    gen.write_case(tmp_path, "case_000", case)
+    cdir = tmp_path / "cases" / "case_000"
+    assert sorted(p.name for p in cdir.iterdir()) == ["log.mcap", "nominal.toml"]
+    model = load_model(cdir / "nominal.toml")
+    chans = model.input_channels() + model.output_channels()
+    assert chans[0] == gen.INPUT_CHANNEL
+    assert chans[1:] == [f"/imu/m{i + 1}.linear_acceleration.x" for i in range(model.n_dofs)]
+    sig = read_mcap(cdir / "log.mcap", channels=chans)
+    assert sig.channels == tuple(chans)
+    assert sig.fs == pytest.approx(1000.0)
+    assert sig.n_samples == 20000
+    np.testing.assert_allclose(sig.data, case.signals().data, rtol=1e-9, atol=1e-9 * np.abs(sig.data).max())
+    truth = json.loads((tmp_path / "truth" / "case_000.json").read_text())
+    assert truth["effect"] == "backlash"
+    assert truth["gap_nominal_noise_free"] >= 0.05
+    assert 0.01 <= truth["noise"]["relative_rms"] <= 0.03
+    truth_model = loads_model(truth["truth_model"])
+    assert "backlash" in [e.type for e in truth_model.elements]
+    assert set(truth["where"]["between"]) <= set(model.dof_names) | {"ground"}
+    # the log holds the truth plus noise: the nominal gap of the noisy log is close to the noise-free one
+    assert truth["gap_nominal_noisy"] == pytest.approx(truth["gap_nominal_noise_free"], abs=0.04)
+
+
+@pytest.mark.parametrize("effect", [e for e in gen.EFFECTS if e != "none"])
+def test_every_effect_has_a_gap_and_a_consistent_truth_model(effect):
+    case = gen.make_case(effect, gen.case_rng(5, effect, 0), duration=16.0)
+    t = case.truth
+    assert t["gap_nominal_noise_free"] >= 0.05
+    tm = loads_model(t["truth_model"])
+    w = t["where"]
+    if effect in gen.ELEMENT_EFFECTS:
+        typ = {"coulomb_friction": "friction", "backlash": "backlash", "hysteresis": "bouc_wen",
+               "cubic_stiffness": "cubic_spring"}[effect]
+        el = [e for e in tm.elements if e.type == typ]
+        assert len(el) == 1 and list(el[0].between) == w["between"]
+    elif effect == "extra_mode":
+        assert tm.n_dofs == case.nominal.n_dofs + 1
+        assert w["dof"] in case.nominal.dof_names
+        fn = case.nominal.modes().natural_frequencies
+        assert np.all(np.abs(w["frequency_hz"] - fn) >= 0.1 * fn - 1e-9)
+    elif effect == "time_delay":
+        assert 1e-3 <= tm.inputs[0].delay <= 15e-3 and w == {"side": "input"}
+    elif effect == "saturation":
+        assert tm.inputs[0].saturation == pytest.approx(t["parameters"]["limit_N"])
+    elif effect == "parameter_mismatch":
+        assert 1 <= len(w["parameters"]) <= 2
+        for name, r in t["details"]["ratio"].items():
+            assert 0.15 - 1e-9 <= abs(r - 1) <= 0.40 + 1e-9
+    # the nominal model file is the truth without the effect
+    assert t["truth_model"] != gen.dumps_model(case.nominal)
+
+
+def test_generate_is_deterministic_and_keeps_truth_apart(tmp_path):
+    a = gen.make_case("none", gen.case_rng(3, "none", 0), duration=6.0)
+    b = gen.make_case("none", gen.case_rng(3, "none", 0), duration=6.0)
+    np.testing.assert_array_equal(a.outputs, b.outputs)
+    assert a.truth["gap_nominal_noise_free"] == 0.0
+    gen.generate(tmp_path, per_class=1, classes=["none", "time_delay"], seed=0, duration=16.0)
+    assert sorted(p.name for p in (tmp_path / "truth").iterdir()) == ["case_000.json", "case_001.json"]
+    under_cases = [p for p in (tmp_path / "cases").rglob("*") if p.is_file()]
+    assert sorted(p.name for p in under_cases) == ["log.mcap", "log.mcap", "nominal.toml", "nominal.toml"]
+    # the scorer: the oracle stub scores 100 %, "always none" only the none case
+    s = score.score(tmp_path, diagnose=str(BENCH / "stubs.py") + ":oracle")
+    assert s["overall"]["top1"] == 1.0 and s["overall"]["top2"] == 1.0 and s["overall"]["false_alarm"] == 0.0
+    assert (tmp_path / "reports" / "case_001.json").is_file()
+    s = score.score(tmp_path, diagnose=str(BENCH / "stubs.py") + ":always_none")
+    assert s["overall"]["top1"] == 0.5 and s["classes"]["time_delay"]["top1"] == 0.0
+    assert "| class |" in score.table(s, markdown=True)
+
+
+def test_scorer_location_rules():
+    t_el = {"effect": "backlash", "where": {"between": ["m2", "m1"]}}
+    rep = {"verdict": "hysteresis", "shrink": 0.5,
+           "candidates": [{"effect": "hysteresis", "where": {"between": ["m1", "m2"]}},
+                          {"effect": "backlash", "where": {"between": ["m1", "m2"]}}]}
+    m = score.score_case(rep, t_el)
+    assert not m["top1"] and m["top2"] and m["location"]
+    t_em = {"effect": "extra_mode", "where": {"dof": "m1", "frequency_hz": 50.0}}
+    ok = {"verdict": "extra_mode", "candidates": [{"effect": "extra_mode", "where": {"dof": "m1", "frequency_hz": 54.0}}]}
+    bad = {"verdict": "extra_mode", "candidates": [{"effect": "extra_mode", "where": {"dof": "m1", "frequency_hz": 56.0}}]}
+    assert score.score_case(ok, t_em)["location"] and not score.score_case(bad, t_em)["location"]
+    t_none = {"effect": "none", "where": {}}
+    assert score.score_case({"verdict": "none", "candidates": [{"effect": "backlash"}]}, t_none)["top2"]
+    m = score.score_case({"verdict": "backlash", "candidates": [{"effect": "backlash"}, {"effect": "none"}]}, t_none)
+    assert not m["top1"] and m["top2"]
+
+
+# ---------------------------------------------------------------------------------------------
+# the CI slice: one case per class through the diagnoser
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_benchmark_slice(tmp_path):
+    from vibroscope.gap import diagnose
+
+    out = tmp_path / "bench"
+    gen.generate(out, per_class=1, classes=gen.EFFECTS, seed=0, duration=30.0)
+    cases = out / "cases"
+    assert not any(p.suffix == ".json" for p in cases.rglob("*"))
+    assert not (cases / "truth").exists() and (out / "truth").is_dir()
+    wrong = []
+    for cdir in sorted(cases.iterdir()):
+        truth = json.loads((out / "truth" / f"{cdir.name}.json").read_text())
+        model = load_model(cdir / "nominal.toml")
+        sig = read_mcap(cdir / "log.mcap", channels=model.input_channels() + model.output_channels())
+        rep = diagnose(model, sig).to_dict()
+        if rep["verdict"] != truth["effect"]:
+            wrong.append(f"{cdir.name}: truth {truth['effect']}, verdict {rep['verdict']}")
+    assert not wrong, "; ".join(wrong)
