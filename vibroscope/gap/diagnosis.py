@@ -24,10 +24,11 @@ Procedure
    then the best location of the leading classes fitted jointly with the linear parameters
    in the time domain (:func:`scipy.optimize.least_squares`).
 6. **Score**: every candidate simulated on the held-out data; with ``e(g) = sqrt(g^2 -
-   floor^2)`` the excess over the noise floor, ``score = 1 - e(gap_after (1 + 0.03 n)) /
-   e(gap_before)`` with ``n`` the number of effect parameters (a relative, AIC-like
-   complexity penalty); candidates are ranked by ``gap_after (1 + 0.03 n)``. The verdict is ``none`` when the nominal gap is within
-   1.3 times the noise floor, else the best candidate.
+   floor^2)`` the excess over the noise floor, candidates are ranked by
+   ``max(e(gap_after), 0.15 floor) (1 + 0.1 n)`` with ``n`` the number of effect parameters
+   (fewer parameters win once gaps reach the noise floor) and ``score = 1 - that /
+   e(gap_before)``. The verdict is ``none`` when the nominal gap is within 1.3 times the
+   noise floor (then no effect is fitted), else the best candidate.
 
 References
 ----------
@@ -71,8 +72,8 @@ __all__ = ["diagnose", "fit_linear_model", "as_lumped"]
 
 #: the nominal gap must exceed the noise floor by this factor before any effect is named
 NONE_FACTOR = 1.3
-#: complexity penalty: the held-out gap is scored as gap * (1 + PENALTY * n_effect_parameters)
-PENALTY = 0.03
+#: complexity penalty: the held-out excess gap is scored as e * (1 + PENALTY * n_effect_parameters)
+PENALTY = 0.1
 
 
 def as_lumped(model) -> LumpedModel:
@@ -370,11 +371,20 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     }
     f_s, H_s, coh_s = f[sel], H[sel], coh[sel]
     H_refit = refit.frf(f_s, quantity=None)[:, :, 0]
-    ratio = H_s / np.where(np.abs(H_refit) > 0, H_refit, 1)
-    dev = np.mean(np.abs(20 * np.log10(np.maximum(np.abs(ratio), 1e-300))), axis=1)
-    pk, props = sps.find_peaks(dev, prominence=0.5)
-    order = np.argsort(props["prominences"])[::-1] if pk.size else []
-    scales["f_extra"] = [float(f_s[pk[i]]) for i in order[:3]]
+    # start frequencies of an extra mode: where measured / model deviates most significantly
+    # (deviation in dB times the coherence weight), against the refitted and the nominal model
+    starts: list[float] = []
+    for ref_m in (refit, model):
+        Hr = ref_m.frf(f_s, quantity=None)[:, :, 0]
+        rt = H_s / np.where(np.abs(Hr) > 0, Hr, 1)
+        dev = np.mean(np.abs(20 * np.log10(np.maximum(np.abs(rt), 1e-300))) * w[sel], axis=1)
+        pk, props = sps.find_peaks(dev, prominence=0.05 * max(float(dev.max()), 1e-12))
+        order = np.argsort(props["prominences"])[::-1] if pk.size else []
+        for i in order[:3]:
+            fc = float(f_s[pk[i]])
+            if all(abs(fc - o) > 0.03 * o for o in starts):
+                starts.append(fc)
+    scales["f_extra"] = starts
     # levels and level-wise H1
     labels, lv_rms = input_levels(us[fit_log], fs)
     runs = np.diff(np.nonzero(np.diff(np.concatenate([[-9], labels, [-9]])) != 0)[0])
@@ -521,20 +531,25 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         evaluated = list(ex.map(evaluate, results))
     e_before = _excess(gap_before, floor)
     cands = []
+    def key(g, n):
+        """Penalised held-out excess gap (lower is better)."""
+        return max(_excess(g, floor), 0.15 * floor) * (1 + PENALTY * n)
+
+    k_before = key(gap_before, 0)
     for s, m_aug, p, gfit, g, yh in evaluated:
-        expl = 1.0 - _excess(g * (1 + PENALTY * s.n), floor) / e_before if e_before > 0 else 0.0
+        expl = 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0
         cands.append((Candidate(s.effect, s.where | ({"frequency_hz": s.describe(p).get("frequency_hz")}
                                                       if s.effect == "extra_mode" else {}),
                                 s.describe(p), g, expl, gfit, s.n,
                                 _dumps(m_aug)), m_aug, yh))
     changed = lin.changed(theta)
     pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
-    expl_pm = 1.0 - _excess(gap_refit, floor) / e_before if e_before > 0 else 0.0
+    expl_pm = 1.0 - key(gap_refit, 0) / k_before if k_before > 0 else 0.0
     cands.append((Candidate("parameter_mismatch", {"parameters": changed}, pm_params, gap_refit, expl_pm,
                             float("nan"), 0, _dumps(refit)), refit, {i: y_ref[i] for i in val_logs}))
     # keep the best location per effect first, then the rest (every effect tried is listed)
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
-    cands.sort(key=lambda c: (c[0].gap_after * (1 + PENALTY * c[0].n_parameters), -c[0].score))
+    cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
     none_ok = gap_before <= NONE_FACTOR * floor
     none_c = (Candidate("none", {}, {}, gap_before, 0.0, float("nan"), 0, _dumps(model)), model,
               {i: y_nom[i] for i in val_logs})
@@ -602,7 +617,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         traces=traces,
         spectrum=spectrum,
         timings=timings,
-        meta={"fs_hz": fs, "nperseg": nps, "n_logs": len(sigs), "transient_samples": skips,
+        meta={"fs_hz": fs, "nperseg": nps, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs), "transient_samples": skips,
               "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "localisation": "bands, channels and regimes of the nominal model on the held-out log "
                               "(the nominal model is fitted on nothing)"},

@@ -240,7 +240,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
 
         specs.append(EffectSpec(
             "coulomb_friction", where, 1,
-            [np.array([math.log(f_ref * r)]) for r in (0.01, 0.03, 0.1, 0.3)],
+            [np.array([math.log(f_ref * r)]) for r in (0.01, 0.03, 0.1, 0.3, 1.0)],
             np.array([math.log(f_ref * 1e-4)]), np.array([math.log(max(f_ref, u_max) * 3)]),
             build_fric, lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": FRICTION_V_EPS},
         ))
@@ -256,7 +256,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
 
             specs.append(EffectSpec(
                 "backlash", where, 1,
-                [np.array([math.log(d_rms * r)]) for r in (0.03, 0.1, 0.3, 1.0)],
+                [np.array([math.log(d_rms * r)]) for r in (0.03, 0.1, 0.3, 1.0, 2.0)],
                 np.array([math.log(d_rms * 1e-4)]), np.array([math.log(d_rms * 5)]),
                 build_bl, lambda p: {"gap_m": float(math.exp(p[0]))},
             ))
@@ -267,8 +267,8 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
 
         specs.append(EffectSpec(
             "cubic_stiffness", where, 1,
-            [np.array([q]) for q in (0.003, 0.01, 0.03, 0.1, 0.3, -0.003, -0.01, -0.03)],
-            np.array([-0.5]), np.array([50.0]),
+            [np.array([q]) for q in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, -0.01, -0.03, -0.1)],
+            np.array([-0.5]), np.array([300.0]),
             build_cubic, lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
         ))
 
@@ -296,7 +296,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
         ))
 
     # -- extra mode on each DOF -----------------------------------------------------------------
-    for f0 in scales.get("f_extra", [])[:3]:
+    for f0 in scales.get("f_extra", [])[:6]:
         for d in model.dofs:
             def build_em(m, p, dof=d.name):
                 md = m.dofs[m.dof_index(dof)].mass
