@@ -73,17 +73,7 @@ __all__ = [
 ]
 
 #: the effect vocabulary (fixed)
-EFFECTS = (
-    "none",
-    "parameter_mismatch",
-    "extra_mode",
-    "time_delay",
-    "coulomb_friction",
-    "backlash",
-    "hysteresis",
-    "cubic_stiffness",
-    "saturation",
-)
+from vibroscope.gap.report import EFFECTS  # noqa: E402 - the fixed vocabulary, one definition
 #: effects that sit on a connection (``where = {"between": [a, b]}``)
 ELEMENT_EFFECTS = ("coulomb_friction", "backlash", "hysteresis", "cubic_stiffness")
 

@@ -41,17 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-EFFECTS = (
-    "none",
-    "parameter_mismatch",
-    "extra_mode",
-    "time_delay",
-    "coulomb_friction",
-    "backlash",
-    "hysteresis",
-    "cubic_stiffness",
-    "saturation",
-)
+from vibroscope.gap.report import EFFECTS  # noqa: E402 - the fixed vocabulary, one definition
 ELEMENT_EFFECTS = ("coulomb_friction", "backlash", "hysteresis", "cubic_stiffness")
 LOCATED = ELEMENT_EFFECTS + ("extra_mode",)
 DEFAULT_DIAGNOSE = "vibroscope.gap:diagnose"
