@@ -64,7 +64,7 @@ from vibroscope.gap.measure import (
 )
 from vibroscope.gap.report import Candidate, ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.gap.signatures import run_signatures
-from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
+from vibroscope.models.lumped import Dof, LumpedModel, Output
 from vibroscope.models.elements import Damper, Spring
 from vibroscope.signals import Signals
 
@@ -396,12 +396,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         if d is not None:
             H_lv.append(np.array([np.interp(f_s, d[0], d[1][:, c].real) + 1j * np.interp(f_s, d[0], d[1][:, c].imag)
                                   for c in range(len(out_ch))]).T)
-    snr = np.abs(H_s) ** 2 * 1.0
-    Gyy_noise = nf.psd_level[None, :]
-    fdd = _frf_data(us, ys, split.fit, fs, nps)
-    Gyy = fdd[3][sel]
-    noise_coh = np.clip(1 - Gyy_noise / np.maximum(Gyy, 1e-300), 0, 1)
-    del snr
+    # coherence that the noise floor alone would leave (output PSDs of the fitting data, fd[3])
+    noise_coh = np.clip(1 - nf.psd_level[None, :] / np.maximum(fd[3][sel], 1e-300), 0, 1)
     resid = ys[fit_log][:, : ns_fit[fit_log]] - y_ref[fit_log][:, : ns_fit[fit_log]]
     mfit = split.fit[fit_log][: ns_fit[fit_log]]
     rel_fit = {k: (d[mfit], v[mfit]) for k, (d, v) in rel.items()}
@@ -529,7 +525,6 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # the other screened locations are evaluated too, they are cheap at this size
     with ThreadPoolExecutor(max(1, workers)) as ex:
         evaluated = list(ex.map(evaluate, results))
-    e_before = _excess(gap_before, floor)
     spec_of: dict = {}
     cands = []
     def key(g, n):

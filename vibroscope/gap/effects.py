@@ -32,7 +32,6 @@ from typing import Callable
 import numpy as np
 
 from vibroscope.models.elements import (
-    GROUND,
     Backlash,
     BoucWen,
     CubicSpring,
@@ -197,8 +196,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
         start frequencies in Hz for extra modes), ``delay0`` (start delay, s).
     """
     specs: list[EffectSpec] = []
-    u_rms, u_max = scales["u_rms"], scales["u_max"]
-    inp = model.inputs
+    u_max = scales["u_max"]
 
     # -- input side ---------------------------------------------------------------------------
     def build_delay(m, p):
@@ -228,7 +226,6 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
     for pair in connections(model):
         key = pair_name(pair)
         d_rms = max(scales["d_rms"].get(key, 1e-6), 1e-12)
-        v_rms = max(scales["v_rms"].get(key, 1e-6), 1e-12)
         k_loc = _k_at(model, pair)
         where = {"between": [pair[0], pair[1]]}
 

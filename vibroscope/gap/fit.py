@@ -19,7 +19,6 @@ References
 
 from __future__ import annotations
 
-import inspect
 import math
 import warnings
 
@@ -27,25 +26,21 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from vibroscope.models.lumped import LumpedModel
+from vibroscope.models.simulate import default_oversample, reconstruct_input
 from vibroscope.models.simulate import simulate as _sim
 
 __all__ = ["LogSimulator", "fit_linear_frf", "fit_time_domain", "frf_residual"]
 
-try:  # the compiled path's fast re-entry (reconstruct the input once)
-    from vibroscope.models.simulate import reconstruct_input as _reconstruct  # type: ignore
-except ImportError:  # pragma: no cover
-    _reconstruct = None
-_HAS_FINE = "fine_input" in inspect.signature(_sim).parameters
-
 
 def _oversample_for(model: LumpedModel, fs: float, fast: bool) -> int:
+    """The simulator's default sub-steps, or a coarser ``max(8, 16 f_max / fs)`` for screening."""
+    if not fast:
+        return default_oversample(model, fs)
     try:
         fmax = float(np.max(model.modes().natural_frequencies))
     except Exception:  # noqa: BLE001 - no modes (free body)
         fmax = 0.0
-    if fast:
-        return max(8, int(math.ceil(16.0 * fmax / fs)))
-    return max(20, int(math.ceil(40.0 * fmax / fs)))
+    return max(8, int(math.ceil(16.0 * fmax / fs)))
 
 
 class LogSimulator:
@@ -75,13 +70,10 @@ class LogSimulator:
         kw = {}
         # linear models: the exact FOH path at 8 sub-steps; nonlinear: the trapezoidal kernel
         R = 8 if linear else _oversample_for(model, self.fs, fast)
-        if _HAS_FINE and _reconstruct is not None:
-            key = (R, n)
-            if key not in self._fine:
-                self._fine[key] = _reconstruct(u, self.fs, R)
-            kw["fine_input"] = self._fine[key]
-        else:  # pragma: no cover
-            kw["oversample"] = R
+        key = (R, n)
+        if key not in self._fine:
+            self._fine[key] = reconstruct_input(u, self.fs, R)
+        kw["fine_input"] = self._fine[key]
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -126,7 +118,6 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
     (model, theta, p, cost)
     """
     nl = len(lin)
-    npar = spec.n if spec is not None else 0
     scale = math.sqrt(max(w.size, 1))
 
     def build(x):
