@@ -292,6 +292,9 @@ def diagnose(
         # candidates far from the truth can make the kernel's Newton steps struggle; their
         # (bad) held-out gap is what counts, so the per-simulation warning is not repeated
         warnings.filterwarnings("ignore", message="Newton's iteration did not converge", category=RuntimeWarning)
+        # a trial step of a far-off candidate can overflow least_squares' reduction ratio; the
+        # optimiser rejects that step by itself
+        warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"scipy\.optimize")
         return _diagnose(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg,
                          workers=workers, n_full=n_full, progress=progress)
 
