@@ -24,7 +24,7 @@ def add_parser(sub) -> None:
         help="simulate a model file (TOML) under an excitation or a logged input, write a ROS 2 MCAP",
         description=__doc__.split("\n\n")[0],
     )
-    p.add_argument("model", type=Path, metavar="MODEL.toml", help="model file (kind = lumped | transfer_function)")
+    p.add_argument("model", type=Path, metavar="MODEL.toml", help="model file (kind = lumped | transfer_function | modal)")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument(
         "--excitation",

@@ -17,6 +17,7 @@ from vibroscope.models.elements import (
     make_element,
 )
 from vibroscope.models.lumped import Dof, Input, LumpedModel, Modes, Output, demo_model, demo_model_5dof
+from vibroscope.models.modal_model import PoleResidueModel
 
 __all__ = [
     "Dof",
@@ -24,6 +25,7 @@ __all__ = [
     "Output",
     "Modes",
     "LumpedModel",
+    "PoleResidueModel",
     "demo_model",
     "demo_model_5dof",
     "Element",

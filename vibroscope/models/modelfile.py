@@ -1,4 +1,4 @@
-"""Model files (TOML): lumped models and SISO transfer functions.
+"""Model files (TOML): lumped models, SISO transfer functions and pole-residue (modal) models.
 
 Schema (fixed)::
 
@@ -28,6 +28,32 @@ and optionally the Spencer et al. (1997) coefficients (see
 ``kind = "transfer_function"``: ``num`` and ``den`` (coefficients of s, highest power
 first), one ``[[input]]`` and one ``[[output]]`` (``channel``, ``quantity``).
 
+``kind = "modal"``: a pole-residue model (:class:`vibroscope.models.modal_model.PoleResidueModel`),
+e.g. an identified LSCF + LSFD model::
+
+    kind = "modal"
+    name = "frame, identified by LSCF"
+    [[input]]
+    channel = "/actuator/force.wrench.force.x"
+    quantity = "force"                  # optional: saturation = N, delay = s
+    [[output]]
+    channel = "/imu/m1.linear_acceleration.x"
+    quantity = "acceleration"           # the quantity the residues refer to
+    [[mode]]
+    frequency_hz = 18.39                # > 0, undamped natural frequency
+    damping_ratio = 0.0102              # 0 <= zeta < 1
+    residues = [[[1.2e-3, -4.5e-2]]]    # [re, im] per (output, input): (n_outputs, n_inputs, 2)
+    [residual]                          # optional table; both keys optional
+    lower = [[[0.0, 0.0]]]              # (n_outputs, n_inputs, 2), multiplies (jw)^(p-2)
+    upper = [[[0.0, 0.0]]]              # (n_outputs, n_inputs, 2), multiplies (jw)^p
+
+with ``H_oi(jw) = sum_r [R_r,oi / (jw - lambda_r) + conj(R_r,oi) / (jw - conj(lambda_r))]
++ LR_oi (jw)^(p-2) + UR_oi (jw)^p``, ``lambda_r = -zeta_r w_r + j w_r sqrt(1 - zeta_r^2)``,
+``w_r = 2 pi f_r``, and ``p`` = 0, 1, 2 for displacement, velocity, acceleration outputs.
+Residue rows follow the ``[[output]]`` tables, columns the ``[[input]]`` tables, in file
+order; ``[[input]]``/``[[output]]`` may carry a free ``dof`` label. At least one
+``[[mode]]``.
+
 Every fault raises :class:`vibroscope.errors.ModelFileError` naming the file, the line and
 the key.
 """
@@ -45,8 +71,14 @@ import numpy as np
 from vibroscope.errors import ModelFileError
 from vibroscope.models.elements import ELEMENT_TYPES, GROUND, Element, make_element
 from vibroscope.models.lumped import QUANTITIES, Dof, Input, LumpedModel, Output
+from vibroscope.models.modal_model import PoleResidueModel
 
 __all__ = ["TransferFunctionModel", "load_model", "dump_model", "loads_model", "dumps_model"]
+
+#: the ``kind`` values a model file may have
+KINDS = ("lumped", "transfer_function", "modal")
+#: tables written ``[name]`` (one), not ``[[name]]`` (array of tables)
+_SINGLE_TABLES = {"residual"}
 
 
 @dataclass(frozen=True)
@@ -158,7 +190,10 @@ class _Ctx:
 
     def error(self, msg: str, table: str | None = None, index: int = 0, key: str | None = None) -> ModelFileError:
         line = _locate(self.text, table, index, key)
-        where = f"[[{table}]] #{index + 1}" if table else "top level"
+        if table in _SINGLE_TABLES:
+            where = f"[{table}]"
+        else:
+            where = f"[[{table}]] #{index + 1}" if table else "top level"
         keytxt = f" key {key!r}" if key else ""
         return ModelFileError(f"{self.path}:{line}: {where}{keytxt}: {msg}")
 
@@ -237,7 +272,73 @@ def _parse_io(ctx, doc, dof_names):
     return inputs, outputs
 
 
-def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunctionModel:
+def _shape_of(v):
+    """Shape of a regular nested list (numbers at the leaves), or None if ragged / not numeric."""
+    if isinstance(v, list):
+        shapes = [_shape_of(x) for x in v]
+        if any(s is None for s in shapes) or len(set(shapes)) > 1:
+            return None
+        return (len(v),) + (shapes[0] if shapes else ())
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return ()
+    return None
+
+
+def _pairs(ctx, tbl, table, i, key, shape):
+    """The ``[re, im]`` array `key` of `tbl` as a complex array of `shape` (n_outputs, n_inputs)."""
+    v = tbl[key]
+    want = shape + (2,)
+    got = _shape_of(v)
+    if got != want:
+        got_txt = "a ragged or non-numeric array" if got is None else ("a number" if got == () else f"shape {got}")
+        raise ctx.error(
+            f"must be an array of shape (n_outputs={shape[0]}, n_inputs={shape[1]}, 2) "
+            f"([re, im] per [[output]] and [[input]] in file order), got {got_txt}",
+            table, i, key,
+        )
+    a = np.array(v, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise ctx.error("values must be finite", table, i, key)
+    return a[..., 0] + 1j * a[..., 1]
+
+
+def _parse_modal(ctx, doc) -> PoleResidueModel:
+    _unknown(ctx, doc, None, 0, {"kind", "name", "input", "output", "mode", "residual"})
+    inputs, outputs = _parse_io(ctx, doc, None)
+    if not inputs or not outputs:
+        raise ctx.error(
+            f"a modal model needs at least one [[input]] and one [[output]], got {len(inputs)} and {len(outputs)}"
+        )
+    shape = (len(outputs), len(inputs))
+    freqs, zetas, residues = [], [], []
+    for i, t in enumerate(_tables(ctx, doc, "mode")):
+        _unknown(ctx, t, "mode", i, {"frequency_hz", "damping_ratio", "residues"})
+        freqs.append(_number(ctx, t, "mode", i, "frequency_hz", positive=True))
+        z = _number(ctx, t, "mode", i, "damping_ratio", nonneg=True)
+        if z >= 1:
+            raise ctx.error(f"damping_ratio={z!r} must be < 1 (an oscillatory mode)", "mode", i, "damping_ratio")
+        zetas.append(z)
+        if "residues" not in t:
+            raise ctx.error("missing required key 'residues'", "mode", i, None)
+        residues.append(_pairs(ctx, t, "mode", i, "residues", shape))
+    if not freqs:
+        raise ctx.error("a modal model needs at least one [[mode]]")
+    res = {}
+    if "residual" in doc:
+        r = doc["residual"]
+        if not isinstance(r, dict):
+            raise ctx.error("'residual' must be a table [residual]", None, 0, "residual")
+        _unknown(ctx, r, "residual", 0, {"lower", "upper"})
+        for key in ("lower", "upper"):
+            if key in r:
+                res[key] = _pairs(ctx, r, "residual", 0, key, shape)
+    return PoleResidueModel.from_poles_residues(
+        freqs, zetas, np.array(residues), inputs=inputs, outputs=outputs,
+        lower=res.get("lower"), upper=res.get("upper"), name=str(doc.get("name", "")),
+    )  # fmt: skip
+
+
+def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunctionModel | PoleResidueModel:
     """Parse a model file's text; see :func:`load_model`."""
     ctx = _Ctx(path, text)
     try:
@@ -247,7 +348,7 @@ def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunc
         raise ModelFileError(f"{path}:{m.group(1) if m else '?'}: invalid TOML: {exc}") from None
     kind = doc.get("kind")
     if kind is None:
-        raise ctx.error("missing required key 'kind' ('lumped' or 'transfer_function')")
+        raise ctx.error(f"missing required key 'kind' (one of {', '.join(map(repr, KINDS))})")
     if kind == "lumped":
         _unknown(ctx, doc, None, 0, {"kind", "name", "dof", "element", "input", "output"})
         dofs = []
@@ -311,10 +412,12 @@ def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunc
             return TransferFunctionModel(tuple(coeffs["num"]), tuple(coeffs["den"]), inputs[0], outputs[0], str(doc.get("name", "")))
         except ValueError as exc:
             raise ctx.error(str(exc), None, 0, "den") from None
-    raise ctx.error(f"kind={kind!r} must be 'lumped' or 'transfer_function'", None, 0, "kind")
+    if kind == "modal":
+        return _parse_modal(ctx, doc)
+    raise ctx.error(f"kind={kind!r} must be one of {', '.join(map(repr, KINDS))}", None, 0, "kind")
 
 
-def load_model(path) -> LumpedModel | TransferFunctionModel:
+def load_model(path) -> LumpedModel | TransferFunctionModel | PoleResidueModel:
     """Load a model from a TOML model file.
 
     Parameters
@@ -324,13 +427,16 @@ def load_model(path) -> LumpedModel | TransferFunctionModel:
 
     Returns
     -------
-    LumpedModel or TransferFunctionModel
+    LumpedModel, TransferFunctionModel or PoleResidueModel
+        By the file's ``kind``: ``"lumped"``, ``"transfer_function"`` or ``"modal"``.
 
     Raises
     ------
     ModelFileError
         For invalid TOML, unknown keys, missing keys or DOFs, and non-physical values
-        (negative mass or stiffness, ...); the message names ``file:line`` and the key.
+        (negative mass or stiffness, frequency <= 0, damping ratio outside [0, 1), residue
+        arrays whose shape is not (n_outputs, n_inputs, 2), ...); the message names
+        ``file:line`` and the key.
     """
     path = Path(path)
     try:
@@ -349,10 +455,12 @@ def _fmt(v) -> str:
 
 
 def _io_lines(inputs, outputs, with_dof=True) -> list[str]:
+    """``[[input]]``/``[[output]]`` tables; ``with_dof="label"`` writes a ``dof`` only where it
+    is not the label's default (``"u"``, ``"y"``)."""
     out = []
     for i in inputs:
         out += ["", "[[input]]", f"channel = {_fmt(i.channel or '/input.x')}"]
-        if with_dof:
+        if with_dof is True or (with_dof == "label" and i.dof != "u"):
             out.append(f"dof = {_fmt(i.dof)}")
         out.append(f"quantity = {_fmt(i.quantity)}")
         if i.saturation is not None:
@@ -361,14 +469,36 @@ def _io_lines(inputs, outputs, with_dof=True) -> list[str]:
             out.append(f"delay = {_fmt(i.delay)}")
     for o in outputs:
         out += ["", "[[output]]", f"channel = {_fmt(o.channel or '/output.x')}"]
-        if with_dof:
+        if with_dof is True or (with_dof == "label" and o.dof != "y"):
             out.append(f"dof = {_fmt(o.dof)}")
         out.append(f"quantity = {_fmt(o.quantity)}")
     return out
 
 
-def dumps_model(model: LumpedModel | TransferFunctionModel) -> str:
-    """The TOML text of `model` (inverse of :func:`loads_model`)."""
+def _pairs_fmt(a) -> str:
+    """A complex array (n_outputs, n_inputs) as nested ``[re, im]`` pairs."""
+    a = np.asarray(a, dtype=complex)
+    return _fmt([[[z.real, z.imag] for z in row] for row in a])
+
+
+def dumps_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel) -> str:
+    """The TOML text of `model` (inverse of :func:`loads_model`; floats written by ``repr``,
+    so a round trip is exact)."""
+    if isinstance(model, PoleResidueModel):
+        lines = ['kind = "modal"']
+        if model.name:
+            lines.append(f"name = {_fmt(model.name)}")
+        lines += _io_lines(model.inputs, model.outputs, with_dof="label")
+        for f, z, R in zip(model.natural_frequencies, model.damping_ratios, model.residues):
+            lines += ["", "[[mode]]", f"frequency_hz = {_fmt(f)}", f"damping_ratio = {_fmt(z)}",
+                      f"residues = {_pairs_fmt(R)}"]  # fmt: skip
+        if np.any(model.lower_residual != 0) or np.any(model.upper_residual != 0):
+            lines += ["", "[residual]"]
+            if np.any(model.lower_residual != 0):
+                lines.append(f"lower = {_pairs_fmt(model.lower_residual)}")
+            if np.any(model.upper_residual != 0):
+                lines.append(f"upper = {_pairs_fmt(model.upper_residual)}")
+        return "\n".join(lines) + "\n"
     if isinstance(model, TransferFunctionModel):
         lines = ['kind = "transfer_function"']
         if model.name:
@@ -394,6 +524,6 @@ def dumps_model(model: LumpedModel | TransferFunctionModel) -> str:
     return "\n".join(lines) + "\n"
 
 
-def dump_model(model: LumpedModel | TransferFunctionModel, path) -> None:
+def dump_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel, path) -> None:
     """Write `model` as a TOML model file that :func:`load_model` reads back equal."""
     Path(path).write_text(dumps_model(model), encoding="utf-8")

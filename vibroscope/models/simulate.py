@@ -275,8 +275,12 @@ def simulate(
 
     Parameters
     ----------
-    model : LumpedModel
+    model : LumpedModel, TransferFunctionModel or PoleResidueModel
         The model; its inputs are the rows of `u`, its outputs the simulated channels.
+        Transfer-function and pole-residue models (no elements) take the linear path
+        through their ``state_matrices()`` (a pole-residue model's realisation leaves out
+        the residual terms it cannot realise, with a warning:
+        :meth:`~vibroscope.models.modal_model.PoleResidueModel.state_matrices`).
     u : array_like, shape (n_inputs, n_samples) or (n_samples,)
         Input forces in N sampled at `fs`.
     fs : float
@@ -338,7 +342,8 @@ def simulate(
     ------
     ValueError
         If `u` has the wrong shape or non-finite values, `fs` is not positive,
-        ``method="linear"`` is asked for a nonlinear model, `oversample` < 1, or
+        ``method="linear"`` is asked for a nonlinear model, ``method="nonlinear"`` for a
+        model that is not a :class:`LumpedModel`, `oversample` < 1, or
         `fine_input` has the wrong shape, non-finite values or disagrees with `oversample`.
 
     Warns
@@ -368,6 +373,8 @@ def simulate(
         raise ValueError(f"{method=} must be 'auto', 'linear' or 'nonlinear'")
     if method == "linear" and not linear:
         raise ValueError("method='linear' needs a model with only linear elements")
+    if method == "nonlinear" and not isinstance(model, LumpedModel):
+        raise ValueError(f"method='nonlinear' needs a LumpedModel; a {type(model).__name__} runs on the linear path")
     if fine_input is not None:
         U = np.asarray(fine_input, dtype=float)
         if U.ndim == 1:
