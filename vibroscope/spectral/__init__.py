@@ -15,9 +15,13 @@ from vibroscope.spectral.estimators import (
     spectrogram,
     welch,
 )
+from vibroscope.spectral.integration import OperatingShape, Severity, integrate, ods, vibration_severity
+from vibroscope.spectral.periodic import Periodicity, detect_period, frf_periodic
 
 __all__ = [
     "welch", "csd_matrix", "amplitude_spectrum", "frf", "coherence", "multiple_coherence",
     "spectrogram", "frf_kind", "Spectrum", "CrossSpectralMatrix", "FRF", "Spectrogram", "FRF_KINDS",
     "CrossSpectralAccumulator", "segment_settings",
 ]
+__all__ += ["integrate", "vibration_severity", "ods", "Severity", "OperatingShape"]
+__all__ += ["detect_period", "frf_periodic", "Periodicity"]

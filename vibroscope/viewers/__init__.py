@@ -5,9 +5,12 @@ functions below load their modules (and those libraries) on first use.
 
 - :mod:`vibroscope.viewers.figures`: :func:`plot_spectrum`, :func:`plot_frf`,
   :func:`plot_mode_shapes`, :func:`plot_singular_values`, :func:`plot_signals`,
-  :func:`summary_figures` (PNGs).
+  :func:`plot_stabilization`, :func:`plot_frf_synthesis`, :func:`summary_figures` (PNGs).
 - :mod:`vibroscope.viewers.rerun_view`: :func:`log_analysis` (one ``.rrd`` recording with a
   blueprint, or a spawned viewer) and :func:`read_rrd` (read one back with rerun's reader).
+- :mod:`vibroscope.viewers.acquisition`: :func:`plot_kinematics` (acceleration, velocity and
+  displacement versus time), :func:`plot_ods` / :func:`log_ods` (operating deflection shapes, drawn
+  and animated like modes).
 - :mod:`vibroscope.viewers.gap_figures`: :func:`plot_gap_report` (the figures of a sim-to-real
   gap diagnosis, :class:`vibroscope.gap.report.GapReport`).
 - :mod:`vibroscope.viewers.rerun_gap`: :func:`log_gap_report` (a gap diagnosis as one ``.rrd``
@@ -24,6 +27,9 @@ _LAZY = {
     "plot_singular_values": "figures", "plot_signals": "figures", "summary_figures": "figures",
     "log_analysis": "rerun_view", "read_rrd": "rerun_view",
     "plot_gap_report": "gap_figures", "log_gap_report": "rerun_gap",
+    "plot_stabilization": "figures", "plot_frf_synthesis": "figures",
+    "plot_kinematics": "acquisition", "plot_ods": "acquisition", "ods_as_modal_model": "acquisition",
+    "log_ods": "acquisition",
 }
 
 __all__ = sorted(_LAZY)
