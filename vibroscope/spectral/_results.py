@@ -196,7 +196,7 @@ class FRF:
         otherwise. NaN where undefined.
     inputs, outputs : tuple of str
         Channel names.
-    estimator : {'H1', 'H2', 'Hv', 'analytic'}
+    estimator : {'H1', 'H2', 'Hv', 'periodic', 'lsfd', 'analytic', 'unknown'}
     kind : {'accelerance', 'mobility', 'receptance'} or None
         The response quantity per unit force when known (outputs accelerations / velocities /
         displacements and inputs forces); None for a generic output/input ratio.
