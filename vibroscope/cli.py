@@ -13,7 +13,7 @@ import sys
 from vibroscope.errors import VibroscopeError
 
 #: sub-command modules, in the order `vibroscope --help` lists them
-COMMANDS = ("demo", "info", "analyse", "convert", "simulate", "compare", "gap")
+COMMANDS = ("demo", "info", "analyse", "modal", "convert", "simulate", "compare", "gap")
 
 
 def build_parser() -> argparse.ArgumentParser:

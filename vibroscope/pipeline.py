@@ -7,8 +7,6 @@ adds the edges (reading MCAP, writing rerun recordings and figures).
 
 from __future__ import annotations
 
-import dataclasses
-import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -18,7 +16,7 @@ import scipy.signal
 from vibroscope.signals import Signals
 from vibroscope.spectral import FRF, CrossSpectralMatrix, Spectrum, csd_matrix, frf
 
-__all__ = ["Analysis", "analyse_signals", "decimate", "default_nperseg", "summary_dict"]
+__all__ = ["Analysis", "IdentifySettings", "METHODS", "analyse_signals", "decimate", "default_nperseg", "summary_dict"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +41,12 @@ class Analysis:
         Welch settings and the band analysed.
     warnings : list of str
         What the reader and the analysis noticed (gaps, jitter, skipped channels, ...).
+    identification : Identification or None
+        The modes with the rejected candidates (and why), the stabilization diagram, the
+        settings chosen and, for LSCF, the LSFD residues (:mod:`vibroscope.modal.automatic`).
+    severity : Severity or None
+        ISO 20816 vibration severity (velocity RMS over 10–1000 Hz, mm/s) of the acceleration
+        channels, from the record before any decimation.
     """
 
     signals: Signals
@@ -53,6 +57,8 @@ class Analysis:
     singular_values: tuple
     settings: dict
     warnings: list = field(default_factory=list)
+    identification: Any = None
+    severity: Any = None
 
 
 def default_nperseg(n: int, fs: float, *, fmin: float | None = None, averages: int = 16) -> int:
@@ -90,30 +96,64 @@ def decimate(signals: Signals, fmax: float) -> Signals:
     return Signals(data, fs, signals.channels, signals.units, signals.t0, meta)
 
 
-def _identify(sig, input, outputs, nperseg, window, fmin, fmax, n_modes, estimator, prominence, method):
-    """One identification pass at one resolution: (CSD of all channels, FRF or None, modal model)."""
-    from vibroscope import modal
+#: identification methods of ``analyse`` and ``modal``; "auto" is LSCF with an input, SSI-COV without
+METHODS = ("auto", "lscf", "ssi", "fdd", "efdd", "peak")
 
-    G = csd_matrix(sig, nperseg=nperseg, window=window)
+
+@dataclass(frozen=True)
+class IdentifySettings:
+    """Settings of one identification pass (see :func:`analyse_signals` for their meaning)."""
+
+    input: str | None
+    outputs: tuple
+    nperseg: int
+    window: str
+    fmin: float | None
+    fmax: float
+    n_modes: int | None
+    estimator: str
+    prominence: float
+    method: str
+    f_low: float | None = None
+    band: tuple | None = None
+    select: tuple | None = None
+    period: int | None = None
+
+
+def _identify(sig: Signals, s: IdentifySettings):
+    """One identification pass at one resolution: (CSD of all channels, FRF or None, Identification)."""
+    from vibroscope import modal
+    from vibroscope.modal.automatic import Identification, auto_lscf, auto_ssi
+    from vibroscope.modal.selection import select_modes
+
+    G = csd_matrix(sig, nperseg=s.nperseg, window=s.window)
+    outputs = list(s.outputs)
     Gout = G.select(outputs)
-    if input:
-        h = frf(G, input, outputs, estimator=estimator)
-        return G, h, modal.peak_picking(h, n_modes=n_modes, fmin=fmin, fmax=fmax)
-    if method == "ssi":
-        # 60 block rows (or fewer for short records) and orders 10..120: Peeters & De Roeck 1999
-        n_lags = int(min(60, sig.n_samples // 20))
-        orders = range(10, int(min(120, n_lags * len(outputs))) + 1, 4)
-        st = modal.ssi_cov(sig.select(outputs), n_lags=n_lags, orders=orders)
-        mm = st.modal_model(fmin=fmin, fmax=fmax)
-        mm = dataclasses.replace(mm, extra={**mm.extra, "stabilization": st})
-        if n_modes is not None and len(mm) > n_modes:
-            warnings.warn(f"SSI-COV found {len(mm)} modes; all are reported (n_modes={n_modes} applies to FDD)",
-                          stacklevel=3)
-        return G, None, mm
+    lo, hi = s.band if s.band is not None else (s.fmin, s.fmax)
+    if s.input:
+        h = frf(G, s.input, outputs, estimator=s.estimator)
+        if s.period:  # periodic excitation: whole periods, rectangular window, no leakage
+            from vibroscope.spectral.periodic import frf_periodic
+
+            h = frf_periodic(sig, s.input, outputs, period=s.period, drop_periods=1)
+        if s.method == "peak":
+            mm = modal.peak_picking(h, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax)
+            sel = select_modes(mm, fmin=lo, fmax=hi, coherence=(h.frequencies, h.coherence))
+            return G, h, Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria})
+        if s.method in ("ssi", "fdd", "efdd"):
+            raise ValueError(f"method={s.method!r} is output-only; with an input use 'lscf' or 'peak'")
+        return G, h, auto_lscf(h, fmin=lo, fmax=hi, select=s.select)
+    if s.method in ("lscf", "peak"):
+        raise ValueError(f"method={s.method!r} needs an input (force) channel; output-only: 'ssi', 'fdd', 'efdd'")
+    if s.method in ("auto", "ssi"):
+        ident = auto_ssi(sig.select(outputs), f_low=s.f_low or (lo or sig.fs / s.nperseg * 10), fmin=s.fmin, fmax=hi,
+                         select=s.select)
+        return G, None, ident
     # two singular values: close modes (e.g. a tower's two bending directions) both show
-    mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=fmax, n_singular=min(2, len(outputs)),
-                   prominence=prominence)
-    return G, None, mm
+    mm = modal.fdd(Gout, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax, n_singular=min(2, len(outputs)),
+                   prominence=s.prominence, efdd=s.method == "efdd")
+    sel = select_modes(mm, fmin=s.fmin, fmax=hi)
+    return G, None, Identification(sel.modes, sel.rejected, None, {"method": mm.method, **sel.criteria})
 
 
 def analyse_signals(
@@ -128,40 +168,52 @@ def analyse_signals(
     n_modes: int | None = None,
     estimator: str = "H1",
     prominence: float = 10.0,
-    method: str = "fdd",
+    method: str = "auto",
+    select: Sequence[float] | None = None,
 ) -> Analysis:
     """Spectra, FRFs, coherence and modal vectors of a record.
+
+    Without `fmin`/`fmax` the band is chosen from the data: with an input, the band its PSD
+    excites (within 20 dB of its maximum, :func:`vibroscope.modal.selection.excited_band`);
+    output-only, the lowest resonance up to the frequency below which 95 % of the response
+    variance lies (:func:`vibroscope.modal.selection.response_band`). Every method's candidates
+    then pass the physical-mode selection of :mod:`vibroscope.modal.selection`; the rejected ones
+    are kept in ``Analysis.identification.rejected`` with their reasons.
 
     Parameters
     ----------
     signals : Signals
         The record (SI units).
     input : str, optional
-        The force channel. With it: FRFs from it to every output (`estimator`) and modal vectors
-        by peak picking (quadrature response); without: output-only FDD of the outputs' CSD.
+        The force channel. With it: FRFs from it to every output (`estimator`) and modes by
+        LSCF + LSFD (default) or peak picking; without: output-only SSI-COV (default), FDD or EFDD.
     outputs : sequence of str, optional
         Response channels; default every channel but the input.
     nperseg : int, optional
-        Welch segment length; default :func:`default_nperseg`, then, with an input, doubled while an
-        identified mode's half-power band ``2 ζ f_n`` spans fewer than 8 bins and at least 5
-        averages remain (the damping needs the resolution; a warning says so).
+        Welch segment length; default :func:`default_nperseg` (fine enough for the band's lowest
+        frequency), then, with an input, doubled while an identified mode's half-power band
+        ``2 ζ f_n`` spans fewer than 8 bins and at least 5 averages remain (the damping needs the
+        resolution; a warning says so).
     window : str, optional
         Welch window (default Hann).
     fmin, fmax : float, optional
-        Band (Hz) searched for modes; fmax also sets a decimation before the analysis.
+        Band (Hz) searched for modes; fmax also sets a decimation before the analysis. Default:
+        chosen from the data (see above).
     n_modes : int, optional
-        Number of modes to report (default: every clear peak).
+        Number of modes to report (peak picking and FDD; default every clear peak).
     estimator : {'H1', 'H2', 'Hv'}, optional
         FRF estimator with an input.
     prominence : float, optional
-        Smallest prominence (dB) of a peak of the first singular values for output-only FDD;
-        default 10 dB (ambient records average few segments at the resolution modes need, and
-        their singular values fluctuate by several dB). Peak picking with a force uses its own
-        3 dB default on the far smoother FRFs.
-    method : {'fdd', 'ssi'}, optional
-        Output-only identification: FDD with EFDD damping (default; Brincker et al. 2001) or
-        covariance-driven SSI with clustering of stable poles (Peeters & De Roeck 1999), which
-        resolves light damping that the FDD bell cannot at the resolution a short record allows.
+        Smallest prominence (dB) of a peak of the first singular values for FDD/EFDD; default
+        10 dB.
+    method : {'auto', 'lscf', 'ssi', 'fdd', 'efdd', 'peak'}, optional
+        Identification: 'auto' (default) is LSCF/polyMAX with LSFD with an input (Peeters et al.
+        2004) and covariance-driven SSI with clustering of stable poles without (Peeters & De
+        Roeck 1999); 'fdd' / 'efdd' frequency-domain decomposition (Brincker et al. 2001) with
+        half-power / enhanced damping; 'peak' peak picking on the FRFs.
+    select : sequence of float, optional
+        LSCF and SSI-COV: take the modes at these frequencies (Hz) from the stabilization diagram
+        instead of the automatic physical-mode selection.
 
     Returns
     -------
@@ -172,12 +224,14 @@ def analyse_signals(
     KeyError
         If `input` or an output is not a channel of `signals`.
     ValueError
-        If the record is too short for the segment length.
+        If the record is too short for the segment length, or the method does not fit the
+        presence or absence of an input.
     """
     from vibroscope import modal
+    from vibroscope.modal.selection import excited_band, response_band
     from vibroscope.spectral._engine import check_option
 
-    check_option("method", method, ("fdd", "ssi"))
+    check_option("method", method, METHODS)
     notes = list(signals.meta.get("warnings", []))
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     flat = [c for c in outputs if np.ptp(signals[c]) == 0]
@@ -189,22 +243,57 @@ def analyse_signals(
         raise ValueError("no non-constant response channel to analyse")
     chans = ([input] if input else []) + outputs
     sig = signals.select(chans)
+    f_low, band_note = None, None
+    if fmax is None or (fmin is None and not input):
+        # the band from the data: a quick Welch pass at ~16 averages
+        n0 = default_nperseg(sig.n_samples, sig.fs)
+        fw, P = scipy.signal.welch(sig.data, sig.fs, nperseg=n0)
+        if input:
+            lo_x, hi_x = excited_band(fw, P[0])
+            fmax = hi_x if fmax is None else fmax
+            band_note = f"band from the input: {lo_x:.4g}–{hi_x:.4g} Hz (its PSD within 20 dB of the maximum)"
+        else:
+            f_low, hi_r = response_band(fw, P, fmin=fmin)
+            fmax = hi_r if fmax is None else fmax
+            band_note = (f"band from the response: lowest resonance {f_low:.4g} Hz, 95 % of the variance "
+                         f"below {hi_r:.4g} Hz")
+        notes.append(band_note + " (set --fmin/--fmax to choose)")
     if fmax is not None and fmax < 0.4 * sig.fs:
         sig = decimate(sig, fmax)
     fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
+    if input:
+        fw, P = scipy.signal.welch(sig[input], sig.fs, nperseg=default_nperseg(sig.n_samples, sig.fs))
+        lo_x, hi_x = excited_band(fw, P)
+        band = (max(fmin or 0.0, lo_x), min(fmax_eff, hi_x))
+    else:
+        band = (fmin, fmax_eff)
+    period = None
+    if input:
+        from vibroscope.spectral.periodic import detect_period
+
+        per = detect_period(sig[input], sig.fs)
+        if per.is_periodic and per.n_periods >= 3:
+            period = per.period_samples
+            notes.append(f"periodic input: period {per.period_s:.6g} s ({per.period_samples} samples, "
+                         f"{per.n_periods} periods, score {per.score:.4f}); FRFs period-synchronous "
+                         f"(rectangular window over whole periods, the first period dropped)")
     auto = nperseg is None
     if auto:
-        nperseg = default_nperseg(sig.n_samples, sig.fs, fmin=fmin)
+        nperseg = default_nperseg(sig.n_samples, sig.fs, fmin=fmin or (f_low / 6 if f_low else None))
     refinements = []
+    meth = method
     while True:
-        G, h, mm = _identify(sig, input, outputs, nperseg, window, fmin, fmax_eff, n_modes, estimator, prominence,
-                             method)
+        s = IdentifySettings(input, tuple(outputs), nperseg, window, fmin, fmax_eff, n_modes, estimator, prominence,
+                             meth, f_low, band, None if select is None else tuple(select), period)
+        G, h, ident = _identify(sig, s)
+        mm = ident.modes
         # half-power bands should span several bins for the damping to be resolved (Brandt 2011,
         # §14.3): refine the resolution while that is not so and >= 5 averages remain. FRFs only:
         # output-only FDD loses more to the fewer averages than it gains in resolution
         bw = 2 * np.asarray(mm.damping_ratios) * np.asarray(mm.natural_frequencies)
         df = sig.fs / nperseg
-        if not auto or not input or not np.any(np.isfinite(bw) & (bw < 8 * df)) or 2 * nperseg > 2 * sig.n_samples / 6:
+        if (not auto or not input or period or not np.any(np.isfinite(bw) & (bw < 8 * df))
+                or 2 * nperseg > 2 * sig.n_samples / 6):
             break
         refinements.append(nperseg)
         nperseg *= 2
@@ -214,9 +303,24 @@ def analyse_signals(
     psd = G.psd()
     Gout = G.select(outputs)
     sv = modal.singular_values(Gout)
+    severity = _severity(signals.select(outputs), notes)
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
-                    input=input, outputs=list(outputs))
-    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes)
+                    input=input, outputs=list(outputs), method=mm.method, band_hz=list(band))
+    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity)
+
+
+def _severity(sig: Signals, notes: list):
+    """ISO 20816 velocity RMS (10–1000 Hz, mm/s) of the acceleration channels, or None."""
+    from vibroscope.spectral.integration import vibration_severity
+
+    acc = [c for c, u in zip(sig.channels, sig.units) if u in ("m/s^2", "m/s²", "m s^-2", "g")]
+    if not acc or sig.fs / 2 <= 10.0:
+        return None
+    try:
+        return vibration_severity(sig.select(acc))
+    except ValueError as exc:
+        notes.append(f"vibration severity not computed: {exc}")
+        return None
 
 
 def _jsonable(v: Any) -> Any:
@@ -233,11 +337,19 @@ def _jsonable(v: Any) -> Any:
     return v
 
 
+def _modes(analysis: Analysis) -> dict:
+    from vibroscope.modal.automatic import modes_document
+
+    ident = analysis.identification
+    return modes_document(analysis.modal, ident.rejected if ident is not None else ())
+
+
 def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: Any = None) -> dict:
     """The machine-readable summary (the ``--json`` file of ``vibroscope analyse``).
 
     Keys: ``fs`` (Hz), ``channels``, ``warnings``, ``modes`` (each ``frequency_hz``,
-    ``damping_ratio``, ``shape`` {path: [re, im]}, ``method``), plus ``input``, ``outputs``,
+    ``damping_ratio``, ``frequency_std_hz``, ``damping_std``, ``shape`` {path: [re, im]}, ``mpc``,
+    ``mpd``, ``stable``), ``rejected_modes`` (``frequency_hz``, ``damping_ratio``, ``reason``), plus ``input``, ``outputs``,
     ``settings``, ``timebase`` and, with `true_modes`, ``true_modes``.
     """
     sig = analysis.signals
@@ -252,9 +364,18 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
         "outputs": analysis.settings.get("outputs"),
         "warnings": list(analysis.warnings),
         "modal_method": analysis.modal.method,
-        "modes": analysis.modal.to_dict()["modes"],
+        "modes": _modes(analysis)["modes"],
+        "rejected_modes": _modes(analysis)["rejected"],
         "settings": {k: v for k, v in analysis.settings.items() if k not in ("outputs",)},
     }
+    sev = analysis.severity
+    if sev is not None:
+        out["vibration_severity"] = {"standard": "ISO 20816-1 (velocity RMS)", "band_hz": list(sev.band_hz),
+                                     "velocity_rms_mm_s": dict(zip(sev.channels, sev.velocity_rms_mm_s.tolist())),
+                                     "note": sev.note}
+    ident = analysis.identification
+    if ident is not None:
+        out["identification"] = {k: v for k, v in ident.settings.items() if k not in ("orders",)}
     for key in ("timebase", "skipped", "decimated", "resampled"):
         if key in sig.meta:
             out[key] = sig.meta[key]

@@ -12,6 +12,10 @@ __all__ = ["add_parser", "run", "analyse_log"]
 #: most channels an automatic (non-IMU) selection analyses
 MAX_AUTO_CHANNELS = 32
 
+#: how the report names each identification method
+METHOD_NAMES = {"lscf": "LSCF/polyMAX + LSFD", "ssi_cov": "SSI-COV", "fdd": "FDD", "efdd": "EFDD",
+                "peak_picking": "peak picking"}
+
 
 def add_parser(sub) -> None:
     """Register ``analyse`` on the CLI's sub-parsers."""
@@ -22,7 +26,8 @@ def add_parser(sub) -> None:
         description=(
             "Read an MCAP log (ROS 2 CDR, JSON, protobuf), put the channels on one time grid, and "
             "compute PSDs, the cross-spectral matrix, FRFs with coherence (with --input) and modal "
-            "vectors (peak picking with a force input, FDD without). Writes a rerun recording, "
+            "vectors (LSCF + LSFD with a force input, SSI-COV without; the band, orders and physical "
+            "modes chosen automatically unless --fmin/--fmax are given). Writes a rerun recording, "
             "PNG figures and, with --json, a machine-readable summary."
         ),
     )
@@ -42,8 +47,13 @@ def add_parser(sub) -> None:
     p.add_argument("--fmax", type=float, help="highest frequency analysed (Hz); decimates when well below fs/2")
     p.add_argument("--n-modes", type=int, help="number of modes to report")
     p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
-    p.add_argument("--method", default="fdd", choices=["fdd", "ssi"],
-                   help="output-only identification: fdd (FDD/EFDD, default) or ssi (SSI-COV)")
+    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "fdd", "efdd", "peak"],
+                   help="modal identification: auto (default: LSCF with --input, SSI-COV without), lscf, ssi, "
+                        "fdd, efdd (output-only), peak (peak picking on the FRFs)")
+    p.add_argument("--select", metavar="F1,F2,..",
+                   help="LSCF/SSI-COV: take the modes at these frequencies (Hz) from the stabilization diagram")
+    p.add_argument("--ods", type=float, nargs="+", metavar="F",
+                   help="operating deflection shapes at these frequencies (Hz), drawn and animated like modes")
     p.add_argument("--progress", action="store_true", help="progress bar while reading")
     p.set_defaults(func=run)
 
@@ -80,12 +90,19 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
 
 def run(args) -> int:
     """Run ``vibroscope analyse``; prints the modes found and where the outputs went."""
-    an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
-                     nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
-                     estimator=args.estimator, method=args.method)
+    from vibroscope.commands.modal import _select_freqs
+    from vibroscope.errors import VibroscopeError
+
+    try:
+        an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
+                         nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
+                         estimator=args.estimator, method=args.method, select=_select_freqs(args.select))
+    except ValueError as exc:
+        raise VibroscopeError(f"{args.log}: {exc}") from None
     print(report_text(an, source=str(args.log)))
     write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=None if args.no_rrd else (args.rrd or args.log.with_suffix(".rrd")),
-                  figures=args.figures or args.log.parent / f"{args.log.stem}_figures", spawn=args.spawn)
+                  figures=args.figures or args.log.parent / f"{args.log.stem}_figures", spawn=args.spawn,
+                  ods=args.ods)
     return 0
 
 
@@ -95,38 +112,72 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
     lines = [f"{source}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
              f"({sig.duration:.2f} s); nperseg={an.settings['nperseg']} "
              f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {an.settings['n_averages']} averages)"]
+    how = METHOD_NAMES.get(an.modal.method, an.modal.method)
     if an.settings.get("input"):
         lines.append(f"input {an.settings['input']} -> {len(an.settings['outputs'])} outputs, "
-                     f"{an.settings['estimator']} FRF, modes by peak picking")
+                     f"{an.settings['estimator']} FRF, modes by {how}")
     else:
-        how = "SSI-COV" if an.modal.method == "ssi_cov" else "FDD"
         lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by {how}")
     for w in an.warnings:
         lines.append(f"  warning: {w}")
     mm = an.modal
-    lines.append(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9}" + (f" {'true f_n':>10} {'err [%]':>8} {'true zeta':>9}" if true_modes is not None else "") + "  method")
+    fstd = mm.extra.get("frequency_std_hz")
+    zstd = mm.extra.get("damping_std")
+    unc = isinstance(fstd, np.ndarray) and fstd.shape == mm.natural_frequencies.shape and np.any(np.isfinite(fstd))
+    lines.append(f"{'mode':>4} {'f_n [Hz]':>10}" + (f" {'+-std':>7}" if unc else "") + f" {'zeta [%]':>9}"
+                 + (f" {'+-std':>7}" if unc else "")
+                 + (f" {'true f_n':>10} {'err [%]':>8} {'true zeta':>9}" if true_modes is not None else "") + "  method")
     for k in range(len(mm.natural_frequencies)):
         f, z = mm.natural_frequencies[k], mm.damping_ratios[k]
-        row = f"{k + 1:>4} {f:>10.3f} {100 * z:>9.3f}"
+        row = f"{k + 1:>4} {f:>10.3f}" + (f" {fstd[k]:>7.3f}" if unc else "") + f" {100 * z:>9.3f}" \
+            + (f" {100 * zstd[k]:>7.3f}" if unc else "")
         if true_modes is not None:
             tf = true_modes.natural_frequencies
             j = int(abs(tf - f).argmin())
             row += f" {tf[j]:>10.3f} {100 * (f - tf[j]) / tf[j]:>8.3f} {100 * true_modes.damping_ratios[j]:>8.3f}%"
         lines.append(row + f"  {mm.method}")
     if len(mm.natural_frequencies) == 0:
-        lines.append("   (no mode: no peak above the prominence threshold in the band)")
+        lines.append("   (no mode passed the physical-mode selection in the band)")
+    ident = getattr(an, "identification", None)
+    if ident is not None and ident.rejected:
+        lines.append(f"  {len(ident.rejected)} candidates rejected (listed in the --json summary), e.g.:")
+        for r in sorted(ident.rejected, key=lambda r: -len(r.reason))[:0] or ident.rejected[:4]:
+            lines.append(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
+    if ident is not None and ident.settings.get("uncertainty") and unc:
+        lines.append(f"  std: {ident.settings['uncertainty']}")
+    sev = getattr(an, "severity", None)
+    if sev is not None:
+        v = sev.velocity_rms_mm_s
+        k = int(np.argmax(v))
+        lines.append(f"vibration severity (ISO 20816, velocity RMS {sev.band_hz[0]:g}–{sev.band_hz[1]:g} Hz): "
+                     f"max {v[k]:.3g} mm/s at {sev.channels[k]}; median {np.median(v):.3g} mm/s over "
+                     f"{len(v)} channels" + (f" ({sev.note})" if sev.note else ""))
     return "\n".join(lines)
 
 
 def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,
-                  true_modes=None) -> dict:
-    """Write the summary JSON, the rerun recording and the figures of an analysis."""
+                  true_modes=None, ods=None) -> dict:
+    """Write the summary JSON, the rerun recording and the figures of an analysis.
+
+    With `ods` (frequencies in Hz) the operating deflection shapes at those frequencies (from the
+    FRFs with an input, the CSD without) are drawn and animated after the modes.
+    """
     from vibroscope.io.coords import line_coords, read_coords
     from vibroscope.pipeline import summary_dict
 
     outs = an.settings["outputs"]
     sc = read_coords(coords, outs) if coords else line_coords(outs)
     written = {}
+    ods_models = []
+    if ods:
+        from vibroscope.spectral.integration import ods as ods_at
+        from vibroscope.viewers.acquisition import ods_as_modal_model
+
+        for f in ods:
+            o = ods_at(an.frf if an.frf is not None else an.csd, f)
+            ods_models.append(ods_as_modal_model(o))
+            print(f"ODS at {o.frequency_hz:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
+                                                              for p, v in list(zip(o.points, o.shape))[:6]))
     if json_path:
         d = summary_dict(an, source=str(log), true_modes=true_modes)
         json_path.parent.mkdir(parents=True, exist_ok=True)
@@ -137,17 +188,38 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         from vibroscope.viewers.figures import summary_figures
 
         figures.mkdir(parents=True, exist_ok=True)
+        ident = getattr(an, "identification", None)
+        synth = None
+        if ident is not None and ident.lsfd is not None and an.frf is not None:
+            synth = ident.lsfd.synthesize()
         paths = summary_figures(figures, signals=an.signals, psd=an.psd, frf=an.frf, modal=an.modal,
                                 sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
-                                stabilization=an.modal.extra.get("stabilization"))
+                                stabilization=ident.stabilization if ident is not None else None,
+                                synthesized=synth)
+        from vibroscope.viewers.figures import _save, plot_mode_shapes
+
+        acc = [c for c, u in zip(an.signals.channels, an.signals.units) if c in outs and u in ("m/s^2", "m/s²")]
+        if acc:
+            from vibroscope.viewers.acquisition import plot_kinematics
+
+            paths.append(_save(plot_kinematics(an.signals.select(acc)), figures / "kinematics.png"))
+        for o in ods_models:
+            paths.append(_save(plot_mode_shapes(o, sc.as_mapping()), figures / f"ods_{o.natural_frequencies[0]:.4g}Hz.png"))
         written["figures"] = paths
         print(f"figures: {', '.join(str(p) for p in paths)}")
     if rrd or spawn:
         from vibroscope.viewers.rerun_view import log_analysis
 
-        path = log_analysis(signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf, modal=an.modal,
+        from vibroscope.commands.modal import _with_ods
+
+        ident = getattr(an, "identification", None)
+        path = log_analysis(signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf,
+                            modal=_with_ods(an.modal, ods_models) if ods_models else an.modal,
                             coords=sc.as_mapping(), rrd_path=rrd, spawn=spawn,
-                            recording_name=Path(log).stem)
+                            recording_name=Path(log).stem,
+                            stabilization=ident.stabilization if ident is not None else None,
+                            synthesized=ident.lsfd.synthesize() if ident is not None and ident.lsfd is not None
+                            and an.frf is not None else None)
         written["rrd"] = path
         if rrd:
             print(f"rerun recording: {rrd}  (open with: rerun {rrd})")

@@ -93,8 +93,10 @@ class Stabilization:
         Returns
         -------
         ModalModel
-            ``method='ssi_cov'``; ``extra["cluster_size"]``, ``extra["damping_std"]``, ``extra["mpc"]``.
+            ``method`` from the settings (``'ssi_cov'``, ``'lscf'``); ``extra["cluster_size"]``,
+            ``extra["damping_std"]``, ``extra["mpc"]``.
         """
+        method = self.settings.get("method", "ssi_cov")
         n_orders = len(self.settings.get("orders", ())) or int(np.unique(self.order).size)
         min_count = max(3, n_orders // 4) if min_count is None else int(min_count)
         sel = self.stable == 3
@@ -128,12 +130,12 @@ class Stabilization:
                 modes.append((fmed, float(np.median(self.damping[p])), self.shapes[rep], len(p),
                               float(np.std(self.damping[p]))))
         if not modes:
-            return ModalModel(np.zeros(0), np.zeros(0), np.zeros((0, len(self.points))), self.points, "ssi_cov",
+            return ModalModel(np.zeros(0), np.zeros(0), np.zeros((0, len(self.points))), self.points, method,
                               {"cluster_size": np.zeros(0, int), "damping_std": np.zeros(0), "mpc": np.zeros(0),
                                "settings": dict(self.settings)})
         f, z, s, c, zs = zip(*modes)
         shapes = normalize_shapes(np.array(s))
-        return ModalModel(np.array(f), np.array(z), shapes, self.points, "ssi_cov",
+        return ModalModel(np.array(f), np.array(z), shapes, self.points, method,
                           {"cluster_size": np.array(c), "damping_std": np.array(zs), "mpc": mpc(shapes),
                            "settings": dict(self.settings, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min)})
 
@@ -248,6 +250,7 @@ def ssi_cov(
     order_a, f_a, z_a, phi_a, code_a = (np.concatenate(c) for c in zip(*rows))
     phi_a = phi_a.reshape(-1, n_ch)
     return Stabilization(order_a, f_a, z_a, phi_a, code_a, tuple(points),
-                         dict(fs=fs, n_lags=n_lags, orders=tuple(orders), ref=None if ref is None else tuple(ref),
+                         dict(method="ssi_cov", fs=fs, n_lags=n_lags, orders=tuple(orders),
+                              ref=None if ref is None else tuple(ref),
                               max_damping=max_damping, tol_frequency=tol_frequency, tol_damping=tol_damping,
                               tol_mac=tol_mac))

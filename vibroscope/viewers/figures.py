@@ -17,7 +17,7 @@ import numpy as np
 from vibroscope.viewers._common import match_modes, mode_label, real_shape, sensor_geometry
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
-           "summary_figures"]
+           "plot_stabilization", "plot_frf_synthesis", "summary_figures"]
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
@@ -436,14 +436,16 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
 
 
 def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
-    """Stabilization diagram: SSI poles (frequency vs model order), coloured by stability.
+    """Stabilization diagram: poles (frequency vs model order), coloured by stability.
 
     Parameters
     ----------
     stabilization : Stabilization
-        From :func:`vibroscope.modal.ssi_cov` (``order``, ``frequency``, ``stable`` 0–3).
+        From :func:`vibroscope.modal.ssi_cov` or :func:`vibroscope.modal.lscf` (``order``,
+        ``frequency``, ``stable`` 0–3).
     sv : tuple (frequencies, S), optional
-        First singular value of the CSD drawn behind the poles (dB, right axis), as is customary.
+        First singular value of the CSD (or of the FRF matrix) drawn behind the poles (dB, right
+        axis), as is customary.
     modes : ModalModel, optional
         Selected modes, marked by vertical lines.
     ax : matplotlib Axes, optional
@@ -481,10 +483,91 @@ def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
             ax.axvline(fn, color="tab:red", lw=0.6, ls="--")
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("model order")
-    ax.set_title(f"Stabilization diagram (SSI-COV, {st.settings.get('n_lags', '?')} block rows)")
+    if st.settings.get("method") == "lscf":
+        ax.set_title("Stabilization diagram (LSCF / polyMAX, polynomial order)")
+    else:
+        ax.set_title(f"Stabilization diagram (SSI-COV, {st.settings.get('n_lags', '?')} block rows)")
     ax.legend(loc="upper left", fontsize=8, framealpha=0.9)
     ax.grid(alpha=0.3)
     return ax
+
+
+def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, input: int = 0, fig=None):
+    """Measured FRFs with the modal model's synthesized FRFs overlaid, and their error.
+
+    Parameters
+    ----------
+    frf : FRF
+        Measured ``H[f, output, input]``.
+    synthesized : FRF
+        The model's FRFs on the same axis (e.g. :meth:`vibroscope.modal.lsfd.LSFDResult.synthesize`).
+    modal : ModalModel, optional
+        Its natural frequencies are marked.
+    max_outputs : int, optional
+        Outputs drawn (the first ones); default 4.
+    input : int, optional
+        Input column; default 0.
+    fig : matplotlib Figure, optional
+
+    Returns
+    -------
+    matplotlib Figure
+        Per output: magnitude (dB, measured and synthesized) and phase; a bottom panel with the
+        relative error ``|H − Ĥ| / |H|`` (dB) of every output, and the overall error in the title.
+    """
+    plt = _pyplot()
+    n = min(max_outputs, len(frf.outputs))
+    if fig is None:
+        fig = plt.figure(figsize=(10, 2.2 * n + 2.2), layout="constrained")
+    axes = fig.subplots(n + 1, 2, squeeze=False, gridspec_kw={"width_ratios": [2, 1]})
+    f = frf.frequencies
+    Hs = np.asarray(synthesized.H)
+    fs_ = synthesized.frequencies
+    band = (f >= fs_.min()) & (f <= fs_.max())
+    tot_num = tot_den = 0.0
+    err_ax = axes[n, 0]
+    for o in range(len(frf.outputs)):
+        h = frf.H[band, o, input]
+        hs = np.interp(f[band], fs_, Hs[:, o, input].real) + 1j * np.interp(f[band], fs_, Hs[:, o, input].imag)
+        ok = np.isfinite(h)
+        tot_num += float(np.sum(np.abs(h[ok] - hs[ok]) ** 2))
+        tot_den += float(np.sum(np.abs(h[ok]) ** 2))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            e = 20 * np.log10(np.abs(h - hs) / np.abs(h))
+        if o < 8:
+            err_ax.plot(f[band], e, lw=0.7, label=_short(frf.outputs[o], 20))
+        if o >= n:
+            continue
+        ax, axp = axes[o]
+        with np.errstate(divide="ignore"):
+            ax.plot(f, 20 * np.log10(np.abs(frf.H[:, o, input])), color="0.35", lw=0.9, label="measured")
+            ax.plot(fs_, 20 * np.log10(np.abs(Hs[:, o, input])), color="tab:red", lw=1.0, ls="--", label="synthesized")
+        axp.plot(f, np.degrees(np.angle(frf.H[:, o, input])), color="0.35", lw=0.8)
+        axp.plot(fs_, np.degrees(np.angle(Hs[:, o, input])), color="tab:red", lw=0.9, ls="--")
+        ax.set_ylabel(f"|H| [dB re 1 {frf.units or 'unit'}]", fontsize=8)
+        ax.set_title(f"{_short(frf.outputs[o])} / {_short(frf.inputs[input], 24)}", fontsize=9)
+        axp.set_ylabel("phase [deg]", fontsize=8)
+        axp.set_ylim(-185, 185)
+        if modal is not None:
+            for fn in np.atleast_1d(modal.natural_frequencies):
+                ax.axvline(fn, color="tab:green", lw=0.5, ls=":")
+        for a in (ax, axp):
+            a.grid(alpha=0.3)
+            a.set_xlim(fs_.min(), fs_.max())
+        if o == 0:
+            ax.legend(fontsize=8, loc="best")
+    err_ax.set_xlabel("frequency [Hz]")
+    err_ax.set_ylabel("|H − Ĥ| / |H| [dB]")
+    err_ax.set_xlim(fs_.min(), fs_.max())
+    err_ax.grid(alpha=0.3)
+    if len(frf.outputs) > 1:
+        err_ax.legend(fontsize=7, ncol=2, loc="upper right")
+    axes[n, 1].axis("off")
+    rel = np.sqrt(tot_num / tot_den) if tot_den > 0 else np.nan
+    axes[n, 1].text(0.05, 0.5, f"overall relative error\n‖H − Ĥ‖ / ‖H‖ = {100 * rel:.2f} %\n"
+                              f"over {fs_.min():.4g}–{fs_.max():.4g} Hz", fontsize=10, va="center")
+    fig.suptitle("Measured vs synthesized FRFs (LSFD modal model)", fontsize=11)
+    return fig
 
 
 def _save(fig, path: Path) -> Path:
@@ -509,7 +592,7 @@ def _save(fig, path: Path) -> Path:
 
 def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=None, sv=None,
                     coords: Mapping[str, Any] | None = None, true_modes=None,
-                    stabilization=None) -> list[Path]:
+                    stabilization=None, synthesized=None) -> list[Path]:
     """Write the summary PNGs of an analysis, those whose inputs are given.
 
     Parameters
@@ -531,7 +614,9 @@ def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, mo
     true_modes : ModalModel, optional
         Reference modes, marked in the mode and singular value figures.
     stabilization : Stabilization, optional
-        SSI poles; writes ``stabilization.png``.
+        SSI-COV or LSCF poles; writes ``stabilization.png``.
+    synthesized : FRF, optional
+        The modal model's FRFs; with `frf` writes ``frf_synthesis.png`` (:func:`plot_frf_synthesis`).
 
     Returns
     -------
@@ -559,5 +644,7 @@ def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, mo
     if stabilization is not None:
         ax = plot_stabilization(stabilization, sv, modal)
         written.append(_save(ax.figure, out / "stabilization.png"))
+    if synthesized is not None and frf is not None:
+        written.append(_save(plot_frf_synthesis(frf, synthesized, modal), out / "frf_synthesis.png"))
     del plt
     return written

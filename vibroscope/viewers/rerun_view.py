@@ -168,7 +168,7 @@ def _eye(rrb, positions: np.ndarray):
 
 
 def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal, ftl, f_range=None,
-                     positions=None):
+                     positions=None, stabilization_present=False):
     import rerun.blueprint as rrb
 
     tabs = []
@@ -201,6 +201,10 @@ def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal,
             rrb.TimeSeriesView(origin="/frf/coherence", name=f"coherence γ² [-] vs frequency ({ftl})",
                                axis_y=rrb.ScalarAxis(range=(0.0, 1.05)), plot_legend=legend, **fx),
             row_shares=[2, 1.3, 1], name=f"FRF (timeline: {ftl})"))
+    if stabilization_present:
+        tabs.append(rrb.TimeSeriesView(origin="/stabilization", name=f"Stabilization diagram: model order vs "
+                                       f"frequency ({ftl}); green = stable in f, ζ and MAC",
+                                       plot_legend=rrb.PlotLegend(visible=False), **fx))
     if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
         fn = np.asarray(modal.natural_frequencies, dtype=float)
         z = np.asarray(modal.damping_ratios, dtype=float)
@@ -232,7 +236,7 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                  coords: Mapping[str, Any] | None = None, rrd_path: str | Path | None = None,
                  spawn: bool = False, application_id: str = "vibroscope",
                  recording_name: str | None = None, frames: int = FRAMES,
-                 recording_id: str | None = None) -> Path | None:
+                 recording_id: str | None = None, stabilization=None, synthesized=None) -> Path | None:
     """Log the results of one analysis to one rerun recording, with a blueprint.
 
     Entities (channel names are split on ``/`` into entity path parts):
@@ -250,6 +254,11 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
       :class:`rerun.LineStrips3D` joining the deformed locations (:func:`node_frames`); the
       undeformed sensors and structure under ``.../undeformed`` (static, grey);
       ``/modes/table``: a markdown :class:`rerun.TextDocument` of the modes.
+    - ``/stabilization/<class>/order_<n>``: the poles of a stabilization diagram as points (their
+      model order) on the frequency timeline, one series per order and stability class
+      (new, stable f, stable f+ζ, stable f+ζ+MAC).
+    - ``/frf/magnitude_db/synthesized/<output>``, ``/frf/phase_deg/synthesized/<output>``: the
+      modal model's synthesized FRFs beside the measured ones.
     - ``/about``: what the timelines mean and the settings.
 
     Parameters
@@ -276,6 +285,10 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         Animation frames per mode cycle.
     recording_id : str, optional
         Fixed recording id (a random one when None).
+    stabilization : Stabilization, optional
+        Poles of SSI-COV or LSCF (``order``, ``frequency`` Hz, ``stable`` 0–3).
+    synthesized : FRF, optional
+        The modal model's FRFs (logged beside `frf`).
 
     Returns
     -------
@@ -312,7 +325,7 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     if psd is None and csd is not None:
         psd = csd.psd()
     ftl, fidx = None, None
-    for src in (psd, frf, csd):
+    for src in (psd, frf, csd, synthesized):
         if src is not None:
             ftl, fidx = frequency_index(src.frequencies)
             break
@@ -321,7 +334,8 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         positions = sensor_geometry(list(modal.points), coords)[0]
     bp = _build_blueprint(signals=signals, spec_entities=psd is not None, frf_present=frf is not None,
                           csd_present=csd is not None, modal=modal, ftl=ftl or "frequency_mHz",
-                          f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions)
+                          f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions,
+                          stabilization_present=stabilization is not None and len(stabilization.frequency) > 0)
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
     if recording_name:
@@ -359,6 +373,10 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
             _log_singular_values(rec, csd)
         if frf is not None:
             _log_frf(rec, frf)
+        if synthesized is not None:
+            _log_frf(rec, synthesized, prefix="synthesized/", coherence=False)
+        if stabilization is not None and ftl is not None:
+            _log_stabilization(rec, stabilization, ftl)
         if modal is not None:
             _log_modes(rec, modal, coords, frames)
         rec.flush()
@@ -398,7 +416,30 @@ def _log_singular_values(rec, csd, n_sv: int = 3) -> None:
                          columns=rr.Scalars.columns(scalars=_db(S[:, k])))
 
 
-def _log_frf(rec, frf) -> None:
+#: (entity name, colour, marker) of the stability classes 0–3 of a stabilization diagram
+_STAB_CLASSES = {0: ("new", [150, 150, 150], "cross"), 1: ("stable_f", [255, 127, 14], "circle"),
+                 2: ("stable_f_damping", [31, 119, 180], "plus"), 3: ("stable_f_damping_mac", [44, 160, 44], "circle")}
+
+
+def _log_stabilization(rec, st, ftl: str) -> None:
+    import rerun as rr
+
+    fac = 1e6 if ftl == "frequency_uHz" else 1e3
+    for code, (name, colour, marker) in _STAB_CLASSES.items():
+        for order in np.unique(st.order):
+            m = (st.stable == code) & (st.order == order)
+            if not m.any():
+                continue
+            idx = np.round(np.asarray(st.frequency[m]) * fac).astype(np.int64)
+            idx, first = np.unique(idx, return_index=True)
+            ent = f"/stabilization/{name}/order_{int(order):03d}"
+            rec.log(ent, rr.SeriesPoints(colors=colour, markers=marker, marker_sizes=2.0 if code == 3 else 1.5,
+                                         names=f"{name.replace('_', ' ')}"), static=True)
+            rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=idx)],
+                             columns=rr.Scalars.columns(scalars=np.full(idx.size, float(order))))
+
+
+def _log_frf(rec, frf, prefix: str = "", coherence: bool = True) -> None:
     import rerun as rr
 
     ftl, fidx = frequency_index(frf.frequencies)
@@ -407,16 +448,18 @@ def _log_frf(rec, frf) -> None:
     n_in = H.shape[2]
     for i in range(n_in):
         for o, out in enumerate(frf.outputs):
-            tag = out if n_in == 1 else f"in{i}/{out}"
+            tag = prefix + (out if n_in == 1 else f"in{i}/{out}")
             h = H[:, o, i]
             for what, vals, name in (
-                    ("frf/magnitude_db", _db(np.abs(h), 20.0), f"|H| {out} / {frf.inputs[i]} [dB re 1 {frf.units or 'unit'}]"),
-                    ("frf/phase_deg", np.degrees(np.angle(h)), f"∠H {out} / {frf.inputs[i]} [deg]")):
+                    ("frf/magnitude_db", _db(np.abs(h), 20.0),
+                     f"{'synthesized ' if prefix else ''}|H| {out} / {frf.inputs[i]} [dB re 1 {frf.units or 'unit'}]"),
+                    ("frf/phase_deg", np.degrees(np.angle(h)),
+                     f"{'synthesized ' if prefix else ''}∠H {out} / {frf.inputs[i]} [deg]")):
                 ent = channel_entity(what, tag)
                 rec.log(ent, rr.SeriesLines(names=name), static=True)
                 rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],
                                  columns=rr.Scalars.columns(scalars=vals))
-            if i == 0 and coh.ndim == 2 and coh.shape[1] > o:
+            if coherence and i == 0 and coh.ndim == 2 and coh.shape[1] > o:
                 ent = channel_entity("frf/coherence", out)
                 rec.log(ent, rr.SeriesLines(names=f"γ² {out}"), static=True)
                 rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],

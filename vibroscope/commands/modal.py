@@ -1,0 +1,312 @@
+"""``vibroscope modal LOG.mcap | FRF.uff | FRF.csv``: modal identification an engineer can check.
+
+From a log the record is read and analysed as by ``vibroscope analyse`` (LSCF + LSFD with an
+input, SSI-COV without); from an FRF file (UFF 58, complex CSV, pyuff text FRFs) LSCF + LSFD
+runs on the measured FRFs. The physical modes are chosen automatically (or at ``--select``
+frequencies); the stabilization diagram, the synthesized-vs-measured FRFs and the mode shapes
+are written as PNGs and to a rerun recording, the modes as ``MODES.json``, UFF 55 and a model
+file that ``vibroscope simulate`` runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["add_parser", "run", "identify_frf", "FRF_SUFFIXES"]
+
+#: file suffixes read as FRF files (everything else is read as an MCAP log)
+FRF_SUFFIXES = (".uff", ".unv", ".uf", ".csv", ".txt")
+
+_KIND_QUANTITY = {"accelerance": "acceleration", "mobility": "velocity", "receptance": "displacement", None: "displacement"}
+
+
+def add_parser(sub) -> None:
+    """Register ``modal`` on the CLI's sub-parsers."""
+    p = sub.add_parser(
+        "modal",
+        help="modal identification (LSCF/LSFD, SSI-COV, FDD/EFDD, peak picking) from a log or FRF files",
+        description=(
+            "Identify natural frequencies, damping ratios and mode shapes from an MCAP log (with "
+            "--input: LSCF + LSFD on the H1 FRFs; without: output-only SSI-COV) or from measured FRF "
+            "files (UFF 58, complex CSV, pyuff text FRFs; several files combine into one FRF matrix). "
+            "Physical modes are selected automatically (stable across orders, physical damping, "
+            "MPC, inside the excited band); the rejected candidates are listed with the reason."
+        ),
+    )
+    p.add_argument("source", nargs="+", type=Path, help="an MCAP log, or one or more FRF files")
+    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "fdd", "efdd", "peak"],
+                   help="auto (default): LSCF with an input or an FRF file, SSI-COV without an input")
+    p.add_argument("--select", default="auto", metavar="auto|F1,F2,..",
+                   help="modes: 'auto' (physical-mode selection) or the frequencies (Hz) to take from the "
+                        "stabilization diagram")
+    p.add_argument("--input", help="force channel of a log (message path)")
+    p.add_argument("--outputs", nargs="+", metavar="PATH", help="response channels of a log")
+    p.add_argument("--coords", type=Path, help="sensor coordinates CSV (channel or sensor number, x, y, z, direction)")
+    p.add_argument("--fs", type=float, help="resample a log to this rate (Hz)")
+    p.add_argument("--fmin", type=float, help="lowest frequency of the band (Hz); default from the data")
+    p.add_argument("--fmax", type=float, help="highest frequency of the band (Hz); default from the data")
+    p.add_argument("--kind", choices=["accelerance", "mobility", "receptance"],
+                   help="what an FRF file holds when it does not say (default: unknown)")
+    p.add_argument("--df", type=float, default=1.0, help="line spacing (Hz) of text FRFs without an axis (default 1)")
+    p.add_argument("--json", type=Path, metavar="MODES.json", help="write the modes (and rejected candidates)")
+    p.add_argument("--export-model", type=Path, metavar="MODEL.toml",
+                   help="write the identified modal model (kind = \"modal\"; LSCF only) for `vibroscope simulate`")
+    p.add_argument("--uff55", type=Path, metavar="FILE", help="write the mode shapes as UFF 55")
+    p.add_argument("--uff58", type=Path, metavar="FILE", help="write the FRFs (measured or estimated) as UFF 58")
+    p.add_argument("--ods", type=float, nargs="+", metavar="F", help="operating deflection shapes at these frequencies (Hz)")
+    p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: ./<source>_modal/)")
+    p.add_argument("--rrd", type=Path, help="rerun recording (default: ./<source>_modal.rrd)")
+    p.add_argument("--no-rrd", action="store_true", help="write no rerun recording")
+    p.add_argument("--spawn", action="store_true", help="open a rerun viewer")
+    p.set_defaults(func=run)
+
+
+def _select_freqs(spec: str) -> list[float] | None:
+    from vibroscope.errors import VibroscopeError
+
+    if spec is None or spec.strip().lower() == "auto":
+        return None
+    try:
+        fr = [float(x) for x in spec.replace(";", ",").split(",") if x.strip()]
+    except ValueError:
+        raise VibroscopeError(f"--select {spec!r}: expected 'auto' or frequencies in Hz such as 6.5,17.5") from None
+    if not fr or any(f <= 0 for f in fr):
+        raise VibroscopeError(f"--select {spec!r}: frequencies must be positive (Hz)")
+    return fr
+
+
+def identify_frf(frf, *, method: str = "auto", fmin=None, fmax=None, select=None):
+    """Modes of measured FRFs: LSCF + LSFD (default) or peak picking, physical-mode selection.
+
+    Parameters
+    ----------
+    frf : FRF
+        Measured FRFs.
+    method : {'auto', 'lscf', 'peak'}, optional
+    fmin, fmax : float, optional
+        Band in Hz; default the FRF's axis (where the coherence, if any, is defined).
+    select : sequence of float, optional
+        Take the modes nearest these frequencies (Hz) from the stabilization diagram instead of the
+        automatic selection.
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    ValueError
+        For an output-only method.
+    """
+    from vibroscope import modal
+    from vibroscope.modal.automatic import Identification, auto_lscf
+    from vibroscope.modal.selection import select_modes
+
+    if method in ("ssi", "fdd", "efdd"):
+        raise ValueError(f"--method {method} is output-only: an FRF file needs lscf or peak")
+    if method == "peak":
+        mm = modal.peak_picking(frf, fmin=fmin, fmax=fmax)
+        coh = (frf.frequencies, frf.coherence) if np.any(np.isfinite(frf.coherence)) else None
+        sel = select_modes(mm, fmin=fmin, fmax=fmax, coherence=coh)
+        return Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria})
+    return auto_lscf(frf, fmin=fmin, fmax=fmax, select=select)
+
+
+def _default_out(source: Path, suffix: str) -> Path:
+    return Path.cwd() / f"{source.stem}_modal{suffix}"
+
+
+def run(args) -> int:
+    """Run ``vibroscope modal``; prints the modes and where the outputs went."""
+    from vibroscope.commands.analyse import METHOD_NAMES, report_text
+    from vibroscope.errors import VibroscopeError
+
+    sources = list(args.source)
+    first = sources[0]
+    select = _select_freqs(args.select)
+    is_frf = first.suffix.lower() in FRF_SUFFIXES
+    if not is_frf and len(sources) > 1:
+        raise VibroscopeError(f"one MCAP log at a time ({len(sources)} sources given)")
+    if is_frf:
+        from vibroscope.io.frf_files import read_frf
+
+        h = read_frf([str(s) for s in sources] if len(sources) > 1 else str(first), kind=args.kind, df=args.df)
+        try:
+            ident = identify_frf(h, method=args.method, fmin=args.fmin, fmax=args.fmax, select=select)
+        except ValueError as exc:
+            raise VibroscopeError(str(exc)) from None
+        mm = ident.modes
+        print(f"{first}{' + %d more' % (len(sources) - 1) if len(sources) > 1 else ''}: FRF {len(h.outputs)} outputs x "
+              f"{len(h.inputs)} inputs, {h.frequencies.size} lines {h.frequencies[0]:.4g}–{h.frequencies[-1]:.4g} Hz; "
+              f"modes by {METHOD_NAMES.get(mm.method, mm.method)}")
+        _print_modes(ident)
+        signals = psd = csd = None
+        sv = _mif(h)
+    else:
+        from vibroscope.commands.analyse import analyse_log
+
+        try:
+            an = analyse_log(first, input=args.input, outputs=args.outputs, fs=args.fs, fmin=args.fmin,
+                             fmax=args.fmax, method=args.method, select=select)
+        except ValueError as exc:
+            raise VibroscopeError(f"{first}: {exc}") from None
+        print(report_text(an, source=str(first)))
+        ident, h, mm = an.identification, an.frf, an.modal
+        signals, psd, csd, sv = an.signals, an.psd, an.csd, an.singular_values
+    synth = ident.lsfd.synthesize(h.frequencies[(h.frequencies >= ident.lsfd.fmin) & (h.frequencies <= ident.lsfd.fmax)]) \
+        if ident.lsfd is not None and h is not None else None
+    if synth is not None:
+        err = ident.lsfd.error(h)
+        print("synthesized FRF error (LSFD model vs measured, per output): "
+              + ", ".join(f"{100 * e:.2f} %" for e in np.atleast_1d(err)))
+    _write(args, first, ident, h, synth, signals, psd, csd, sv)
+    return 0
+
+
+def _mif(h):
+    """Sum of |H|² over outputs and inputs: the background curve of an FRF stabilization diagram."""
+    H = np.asarray(h.H)
+    with np.errstate(invalid="ignore"):
+        s = np.nansum(np.abs(H) ** 2, axis=(1, 2))
+    return h.frequencies, s[:, None]
+
+
+def _print_modes(ident) -> None:
+    mm = ident.modes
+    fstd = mm.extra.get("frequency_std_hz")
+    print(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9} {'MPC':>5}")
+    mp = mm.extra.get("mpc", np.full(len(mm), np.nan))
+    for k in range(len(mm)):
+        print(f"{k + 1:>4} {mm.natural_frequencies[k]:>10.3f} {100 * mm.damping_ratios[k]:>9.3f} {mp[k]:>5.2f}")
+    if not len(mm):
+        print("   (no mode passed the physical-mode selection)")
+    if ident.rejected:
+        print(f"  {len(ident.rejected)} candidates rejected (in MODES.json), e.g.:")
+        for r in ident.rejected[:4]:
+            print(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
+    del fstd
+
+
+def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
+    from vibroscope.errors import VibroscopeError
+    from vibroscope.io.coords import line_coords, read_coords
+
+    mm = ident.modes
+    pts = list(mm.points)
+    sc = read_coords(args.coords, pts) if args.coords else line_coords(pts)
+    if args.json:
+        doc = ident.to_dict()
+        doc["source"] = [str(s) for s in args.source]
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(_jsonable(doc), indent=2))
+        print(f"modes: {args.json}")
+    if args.uff55:
+        from vibroscope.io.frf_files import write_modes_uff55
+
+        dirs = None
+        if args.coords:
+            dirs = [int(np.argmax(np.abs(d))) + 1 if d[int(np.argmax(np.abs(d)))] >= 0 else -(int(np.argmax(np.abs(d))) + 1)
+                    for d in sc.directions]
+        write_modes_uff55(mm, args.uff55, directions=dirs)
+        print(f"mode shapes (UFF 55): {args.uff55}")
+    if args.uff58:
+        if h is None:
+            raise VibroscopeError("--uff58 needs FRFs: give --input for a log")
+        from vibroscope.io.frf_files import write_frf_uff58
+
+        write_frf_uff58(h, args.uff58)
+        print(f"FRFs (UFF 58): {args.uff58}")
+    if args.export_model:
+        if ident.lsfd is None:
+            raise VibroscopeError("--export-model needs residues: an input (LSCF + LSFD), not an output-only method")
+        path = export_modal_model(ident.lsfd, args.export_model, name=f"{source.stem}, identified by LSCF + LSFD")
+        print(f"modal model: {path}  (run with: vibroscope simulate {path} ...)")
+    ods = []
+    for f in args.ods or ():
+        from vibroscope.spectral.integration import ods as ods_at
+        from vibroscope.viewers.acquisition import ods_as_modal_model
+
+        src = h if h is not None else csd
+        ods.append(ods_as_modal_model(ods_at(src, f)))
+    figures = args.figures or _default_out(source, "")
+    from vibroscope.viewers.figures import plot_mode_shapes, summary_figures, _save
+
+    paths = summary_figures(figures, frf=h, modal=mm if len(mm) else None, sv=sv, coords=sc.as_mapping(),
+                            stabilization=ident.stabilization, synthesized=synth)
+    for o in ods:
+        paths.append(_save(plot_mode_shapes(o, sc.as_mapping()), Path(figures) / f"ods_{o.natural_frequencies[0]:.4g}Hz.png"))
+    print(f"figures: {', '.join(str(p) for p in paths)}")
+    if not args.no_rrd or args.spawn:
+        from vibroscope.viewers.rerun_view import log_analysis
+
+        rrd = None if args.no_rrd else (args.rrd or _default_out(source, ".rrd"))
+        show = mm
+        if ods:
+            show = _with_ods(mm, ods)
+        log_analysis(signals=signals, psd=psd, csd=csd, frf=h, modal=show, coords=sc.as_mapping(), rrd_path=rrd,
+                     spawn=args.spawn, recording_name=f"{source.stem} modal", stabilization=ident.stabilization,
+                     synthesized=synth)
+        if rrd:
+            print(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+
+
+def _with_ods(mm, ods):
+    """The modes followed by the operating deflection shapes (animated alike in rerun)."""
+    from vibroscope.modal import ModalModel
+
+    f = np.concatenate([mm.natural_frequencies, [o.natural_frequencies[0] for o in ods]])
+    z = np.concatenate([mm.damping_ratios, [np.nan] * len(ods)])
+    s = np.concatenate([mm.shapes.reshape(len(mm), -1), *[o.shapes for o in ods]])
+    return ModalModel(f, z, s, mm.points, mm.method + "+ods")
+
+
+def export_modal_model(res, path: Path, *, name: str = "") -> Path:
+    """Write an LSFD result as a ``kind = "modal"`` model file (pole-residue form).
+
+    Parameters
+    ----------
+    res : LSFDResult
+        Poles, residues and residual terms.
+    path : Path
+        The TOML file to write.
+    name : str, optional
+        The model's name.
+
+    Returns
+    -------
+    Path
+    """
+    from vibroscope.models import Input, Output
+    from vibroscope.models.modal_model import PoleResidueModel
+    from vibroscope.models.modelfile import dump_model
+
+    q = _KIND_QUANTITY.get(res.kind, "displacement")
+    inputs = tuple(Input(f"in{i + 1}", channel=c) for i, c in enumerate(res.inputs))
+    outputs = tuple(Output(f"out{o + 1}", q, c) for o, c in enumerate(res.outputs))
+    model = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, res.residues,
+                                                 inputs=inputs, outputs=outputs, lower=res.lower_residual,
+                                                 upper=res.upper_residual, name=name)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    dump_model(model, path)
+    return path
+
+
+def _jsonable(v):
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return _jsonable(v.tolist())
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    if dataclasses.is_dataclass(v) or callable(v):
+        return str(v)
+    return v

@@ -1,0 +1,328 @@
+"""Identification without hand-set bands or orders: the defaults of ``vibroscope analyse`` and
+``vibroscope modal``.
+
+- Output-only (:func:`auto_ssi`): SSI-COV with covariance lags covering two periods of the
+  record's lowest resonance, reference channels chosen by pivoted QR of the correlation matrix
+  (the most linearly independent sensors; Peeters & De Roeck 1999 use references to cut the
+  cost), orders up to 120, clustering of stable poles, physical-mode selection
+  (:mod:`vibroscope.modal.selection`) and block-bootstrap uncertainties
+  (:mod:`vibroscope.modal.uncertainty`).
+- With an input (:func:`auto_lscf`): LSCF/polyMAX over the excited band, clustering of stable
+  poles, physical-mode selection (excited band, coherence), LSFD residues with lower and upper
+  residuals, and the synthesized FRFs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from vibroscope.modal._results import ModalModel
+from vibroscope.modal.selection import DAMPING_RANGE, MIN_MPC, RejectedMode, cluster_poles, select_modes
+from vibroscope.signals import Signals
+
+__all__ = ["Identification", "modes_document", "auto_ssi", "auto_lscf", "reference_channels", "ssi_lags"]
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """Modes identified automatically, with what was rejected and how.
+
+    Attributes
+    ----------
+    modes : ModalModel
+        The physical modes; ``extra`` holds per-mode ``frequency_std_hz``, ``damping_std``,
+        ``mpc``, ``mpd_deg`` and ``stable``.
+    rejected : tuple of RejectedMode
+        Candidates not reported, each with its reason.
+    stabilization : Stabilization or None
+        The stabilization diagram (SSI-COV, LSCF).
+    settings : dict
+        Every setting chosen (band, lags, orders, references, criteria, uncertainty method).
+    lsfd : LSFDResult or None
+        Residues and residuals (LSCF only), whose ``synthesize`` gives the model's FRFs.
+    """
+
+    modes: ModalModel
+    rejected: tuple = ()
+    stabilization: Any = None
+    settings: dict = field(default_factory=dict)
+    lsfd: Any = None
+
+    def to_dict(self) -> dict:
+        """The ``MODES.json`` document.
+
+        Returns
+        -------
+        dict
+            ``{"method", "points", "modes": [{"frequency_hz", "damping_ratio", "frequency_std_hz",
+            "damping_std", "shape": {point: [re, im]}, "mpc", "mpd", "stable"}], "rejected":
+            [{"frequency_hz", "damping_ratio", "reason"}], "settings"}``; NaN becomes None.
+        """
+        return modes_document(self.modes, self.rejected, self.settings)
+
+
+def _num(v) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def modes_document(modes: ModalModel, rejected: Sequence[RejectedMode] = (), settings: dict | None = None) -> dict:
+    """A modal model as the ``MODES.json`` document of ``vibroscope modal``.
+
+    Parameters
+    ----------
+    modes : ModalModel
+        Per-mode ``extra`` arrays ``frequency_std_hz``, ``damping_std``, ``mpc``, ``mpd_deg`` and
+        ``stable`` are used when present (else null / computed).
+    rejected : sequence of RejectedMode, optional
+    settings : dict, optional
+        JSON-able settings.
+
+    Returns
+    -------
+    dict
+        See :meth:`Identification.to_dict`; frequencies in Hz, damping ratios dimensionless,
+        MPD in degrees.
+    """
+    from vibroscope.modal._results import mpc
+
+    ex = modes.extra
+    n = len(modes)
+
+    def col(key, default=np.nan):
+        v = ex.get(key)
+        return np.asarray(v) if isinstance(v, np.ndarray) and v.shape[:1] == (n,) else np.full(n, default)
+
+    fstd, zstd, stable = col("frequency_std_hz"), col("damping_std"), col("stable", True)
+    m = col("mpc") if "mpc" in ex else (mpc(modes.shapes) if n else np.zeros(0))
+    d = col("mpd_deg")
+    out = []
+    for r in range(n):
+        sh = modes.shapes[r]
+        out.append({"frequency_hz": float(modes.natural_frequencies[r]),
+                    "damping_ratio": _num(modes.damping_ratios[r]),
+                    "frequency_std_hz": _num(fstd[r]), "damping_std": _num(zstd[r]),
+                    "shape": {p: [float(v.real), float(v.imag)] for p, v in zip(modes.points, sh)},
+                    "mpc": _num(m[r]), "mpd": _num(d[r]), "stable": bool(stable[r])})
+    return {"method": modes.method, "points": list(modes.points), "modes": out,
+            "rejected": [x.to_dict() for x in rejected],
+            "normalisation": ex.get("normalisation", "unit_maximum"),
+            "settings": dict(settings or {})}
+
+
+def reference_channels(y: np.ndarray, n_ref: int = 6) -> list[int]:
+    """The `n_ref` most linearly independent channels (pivoted QR of the correlation matrix).
+
+    Parameters
+    ----------
+    y : ndarray, shape (n_channels, n_samples)
+    n_ref : int, optional
+        Default 6.
+
+    Returns
+    -------
+    list of int
+        Ascending channel indices; all channels when there are at most `n_ref`.
+    """
+    import scipy.linalg
+
+    y = np.asarray(y, float)
+    if y.shape[0] <= n_ref:
+        return list(range(y.shape[0]))
+    R0 = np.corrcoef(y - y.mean(axis=1, keepdims=True))
+    _, _, piv = scipy.linalg.qr(R0, pivoting=True)
+    return sorted(int(i) for i in piv[:n_ref])
+
+
+def ssi_lags(fs: float, f_low: float, n_samples: int, *, periods: float = 2.0) -> int:
+    """Block rows of SSI-COV: `periods` periods of the lowest mode `f_low` (Hz), within
+    [20, min(300, n_samples / 40)]."""
+    want = int(np.ceil(periods * fs / max(f_low, 1e-12)))
+    return int(max(20, min(want, 300, n_samples // 40)))
+
+
+def _add_quality(mm: ModalModel) -> ModalModel:
+    from vibroscope.modal._results import mpc
+
+    extra = dict(mm.extra)
+    extra["mpc"] = mpc(mm.shapes) if len(mm) else np.zeros(0)
+    try:
+        from vibroscope.modal.quality import mpd
+
+        extra["mpd_deg"] = np.atleast_1d(mpd(mm.shapes)) if len(mm) else np.zeros(0)
+    except ImportError:  # pragma: no cover
+        pass
+    return dataclasses.replace(mm, extra=extra)
+
+
+def auto_ssi(
+    signals: Signals,
+    *,
+    f_low: float,
+    fmin: float | None = None,
+    fmax: float | None = None,
+    n_ref: int = 6,
+    orders: Sequence[int] | None = None,
+    damping_range: tuple[float, float] = DAMPING_RANGE,
+    min_mpc: float = MIN_MPC,
+    uncertainty: bool = True,
+    select: Sequence[float] | None = None,
+) -> Identification:
+    """Output-only modes by SSI-COV with automatic settings and physical-mode selection.
+
+    Parameters
+    ----------
+    signals : Signals
+        The responses (already decimated to the band of interest: fs about 2.5–4 × `fmax`).
+    f_low : float
+        The lowest resonance (Hz), e.g. from :func:`vibroscope.modal.selection.response_band`;
+        the covariance lags cover two of its periods.
+    fmin, fmax : float, optional
+        The band (Hz) modes are reported in; default 0 to 0.4 fs.
+    n_ref : int, optional
+        Reference channels (:func:`reference_channels`); default 6.
+    orders : sequence of int, optional
+        Model orders; default every 4th from 8 to ``min(120, n_lags · n_ref)``.
+    damping_range : (float, float), optional
+        Physical damping ratios (see :func:`vibroscope.modal.selection.select_modes`).
+    min_mpc : float, optional
+        Smallest MPC of a reported mode.
+    uncertainty : bool, optional
+        Estimate standard deviations by :func:`vibroscope.modal.uncertainty.ssi_bootstrap`.
+    select : sequence of float, optional
+        Take the modes at these frequencies (Hz) from the stabilization diagram
+        (:func:`vibroscope.modal.selection.pick_poles`) instead of the automatic selection.
+
+    Returns
+    -------
+    Identification
+
+    References
+    ----------
+    .. [1] B. Peeters and G. De Roeck, "Reference-based stochastic subspace identification for
+       output-only modal analysis", Mechanical Systems and Signal Processing 13(6), 855–878, 1999.
+    """
+    from vibroscope.modal.ssi import ssi_cov
+    from vibroscope.modal.uncertainty import ssi_bootstrap
+
+    y = np.asarray(signals.data, float)
+    fs = signals.fs
+    fmax = 0.4 * fs if fmax is None else float(fmax)
+    n_lags = ssi_lags(fs, f_low, signals.n_samples)
+    ref = reference_channels(y, n_ref)
+    if orders is None:
+        orders = range(8, int(min(120, n_lags * len(ref))) + 1, 4)
+    st = ssi_cov(signals, n_lags=n_lags, orders=orders, ref=ref, max_damping=0.5)
+    if select is not None:
+        from vibroscope.modal.selection import Selection, pick_poles
+
+        sel = Selection(pick_poles(st, select), (), {"selected_hz": list(select)})
+    else:
+        cand, unstable = cluster_poles(st)  # all of them: those outside the band are listed as such
+        sel = select_modes(cand, fmin=fmin, fmax=fmax, damping_range=damping_range, min_mpc=min_mpc,
+                           rejected=unstable)
+    mm = _add_quality(sel.modes)
+    unc_method = None
+    if uncertainty and len(mm):
+        order = int(np.max(mm.extra["order"]))
+        try:
+            n_blocks = int(min(10, max(4, signals.n_samples // (4 * (2 * n_lags + 1)))))
+            u = ssi_bootstrap(y, fs, mm, n_lags=n_lags, order=order, ref=ref, n_blocks=n_blocks)
+            mm = dataclasses.replace(mm, extra={**mm.extra, "frequency_std_hz": u.frequency_std_hz,
+                                                "damping_std": u.damping_std})
+            unc_method = u.method
+        except ValueError as exc:  # record too short for blocks: the cluster spread stays
+            unc_method = f"spread over the cluster's model orders (bootstrap impossible: {exc})"
+    elif len(mm):
+        unc_method = "spread over the cluster's model orders"
+    settings = {"method": "ssi_cov", "fs": fs, "n_lags": n_lags, "orders": [int(o) for o in orders],
+                "references": [signals.channels[i] for i in ref], "f_low_hz": f_low, "band_hz": [fmin, fmax],
+                "uncertainty": unc_method, **{k: v for k, v in sel.criteria.items() if k != "band_hz"}}
+    mm = dataclasses.replace(mm, extra={**mm.extra, "settings": settings, "stabilization": st})
+    return Identification(mm, sel.rejected, st, settings)
+
+
+def auto_lscf(
+    frf,
+    *,
+    fmin: float | None = None,
+    fmax: float | None = None,
+    orders: Sequence[int] | None = None,
+    damping_range: tuple[float, float] = DAMPING_RANGE,
+    min_mpc: float = MIN_MPC,
+    min_coherence: float = 0.5,
+    driving_point: tuple | None = None,
+    select: Sequence[float] | None = None,
+) -> Identification:
+    """Modes from FRFs by LSCF/polyMAX, automatic pole selection and LSFD.
+
+    Parameters
+    ----------
+    frf : FRF
+        Measured FRFs ``H[f, output, input]``.
+    fmin, fmax : float, optional
+        The excited band in Hz (the input's, see :func:`vibroscope.modal.selection.excited_band`);
+        default the FRF's axis (0 Hz excluded).
+    orders : sequence of int, optional
+        Polynomial orders; default those of :func:`vibroscope.modal.lscf`.
+    damping_range : (float, float), optional
+        Physical damping ratios.
+    min_mpc : float, optional
+        Smallest MPC of a reported mode.
+    min_coherence : float, optional
+        Smallest coherence at a mode where the FRF carries one.
+    driving_point : (output, input), optional
+        For unit-modal-mass shapes (see :func:`vibroscope.modal.lsfd`).
+    select : sequence of float, optional
+        Take the modes at these frequencies (Hz) from the stabilization diagram
+        (:func:`vibroscope.modal.selection.pick_poles`) instead of the automatic selection.
+
+    Returns
+    -------
+    Identification
+        With ``lsfd`` (residues, residuals; ``lsfd.synthesize()`` the model FRFs).
+
+    References
+    ----------
+    .. [1] B. Peeters, H. Van der Auweraer, P. Guillaume and J. Leuridan, "The PolyMAX
+       frequency-domain method: a new standard for modal parameter estimation?", Shock and
+       Vibration 11, 395–409, 2004.
+    """
+    from vibroscope.modal.lscf import lscf
+    from vibroscope.modal.lsfd import lsfd
+
+    f = frf.frequencies
+    lo = float(f[f > 0].min()) if fmin is None else float(fmin)
+    hi = float(f.max()) if fmax is None else float(fmax)
+    kw = {} if orders is None else {"orders": orders}
+    st = lscf(frf, fmin=lo, fmax=hi, **kw)
+    if select is not None:
+        from vibroscope.modal.selection import Selection, pick_poles
+
+        sel = Selection(pick_poles(st, select), (), {"selected_hz": list(select)})
+    else:
+        cand, unstable = cluster_poles(st, fmin=lo, fmax=hi)
+        coh = None
+        if np.any(np.isfinite(frf.coherence)):
+            coh = (f, frf.coherence)
+        sel = select_modes(cand, fmin=lo, fmax=hi, damping_range=damping_range, min_mpc=min_mpc, coherence=coh,
+                           min_coherence=min_coherence, rejected=unstable)
+    kept = sel.modes
+    rejected = list(sel.rejected)
+    res = None
+    mm = kept
+    if len(kept):
+        res = lsfd(frf, kept.natural_frequencies, kept.damping_ratios, fmin=lo, fmax=hi, driving_point=driving_point)
+        mm = res.modal_model(driving_point=driving_point)
+        extra = {**kept.extra, **mm.extra}
+        mm = dataclasses.replace(mm, extra=extra)
+    mm = _add_quality(mm)
+    settings = {"method": "lscf", "band_hz": [lo, hi], "orders": list(st.settings.get("orders", [])),
+                "uncertainty": "spread over the cluster's model orders" if len(mm) else None,
+                **{k: v for k, v in sel.criteria.items() if k != "band_hz"}}
+    mm = dataclasses.replace(mm, extra={**mm.extra, "settings": settings, "stabilization": st})
+    return Identification(mm, tuple(sorted(rejected, key=lambda r: r.frequency_hz)), st, settings, res)

@@ -1,0 +1,388 @@
+"""Physical-mode selection: which identified poles are modes of the structure, and why the others
+are not.
+
+Every identification method proposes candidates (clusters of stable poles for SSI-COV and LSCF,
+peaks for peak picking and FDD). A candidate is reported as a mode only when it is
+
+- **stable** across model orders (a cluster holding at least a quarter of the orders, for the
+  methods with a stabilization diagram),
+- **physically damped**: ``damping_range[0] ≤ ζ ≤ damping_range[1]`` (default 0.01 %–10 %:
+  lighter than 0.01 % is a harmonic or an electrical line, heavier than 10 % is a noise or
+  computational pole for the structures this tool is made for),
+- **consistent in phase**: modal phase collinearity MPC ≥ `min_mpc` (default 0.5; Pappa et al.
+  1993) — a lightly, proportionally damped structure has nearly real modes,
+- **inside the band the test excites**: with a measured input, where the input's PSD is within
+  20 dB of its maximum and the coherence at the mode is at least `min_coherence`; without one,
+  inside the analysis band.
+
+The others are listed with the reason (:class:`RejectedMode`), so that an engineer can see what
+was dropped. This is the automated scheme of Reynders, Houbrechts & De Roeck (2012) and
+Magalhães, Cunha & Caetano (2009) reduced to criteria that need no user tuning.
+
+References
+----------
+.. [1] E. Reynders, J. Houbrechts and G. De Roeck, "Fully automated (operational) modal
+   analysis", Mechanical Systems and Signal Processing 29, 228–250, 2012.
+.. [2] F. Magalhães, Á. Cunha and E. Caetano, "Online automatic identification of the modal
+   parameters of a long span arch bridge", Mechanical Systems and Signal Processing 23(2),
+   316–329, 2009.
+.. [3] R. S. Pappa, K. B. Elliott and A. Schenk, "Consistent-mode indicator for the eigensystem
+   realization algorithm", J. Guidance, Control, and Dynamics 16(5), 852–858, 1993.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
+from vibroscope.modal.mac import mac
+
+__all__ = ["RejectedMode", "Selection", "select_modes", "cluster_poles", "pick_poles", "excited_band", "response_band",
+           "DAMPING_RANGE", "MIN_MPC"]
+
+#: physically plausible viscous damping ratios (dimensionless) of a structural mode
+DAMPING_RANGE = (1e-4, 0.10)
+#: smallest modal phase collinearity of a reported mode
+MIN_MPC = 0.5
+
+
+@dataclass(frozen=True)
+class RejectedMode:
+    """A candidate that was not reported as a mode.
+
+    Attributes
+    ----------
+    frequency_hz : float
+        Its natural frequency in Hz.
+    damping_ratio : float
+        Its damping ratio (dimensionless); NaN when not estimated.
+    reason : str
+        Why it was rejected, with the value and the threshold.
+    """
+
+    frequency_hz: float
+    damping_ratio: float
+    reason: str
+
+    def to_dict(self) -> dict:
+        """``{"frequency_hz", "damping_ratio", "reason"}`` (NaN damping as None)."""
+        z = self.damping_ratio
+        return {"frequency_hz": float(self.frequency_hz),
+                "damping_ratio": None if not np.isfinite(z) else float(z), "reason": self.reason}
+
+
+@dataclass(frozen=True, eq=False)
+class Selection:
+    """The modes kept by :func:`select_modes` and the candidates rejected.
+
+    Attributes
+    ----------
+    modes : ModalModel
+        The physical modes.
+    rejected : tuple of RejectedMode
+        The rest, ascending in frequency, each with its reason.
+    criteria : dict
+        The thresholds applied (``damping_range``, ``min_mpc``, ``band_hz``, ...).
+    """
+
+    modes: ModalModel
+    rejected: tuple = ()
+    criteria: dict = field(default_factory=dict)
+
+    def __iter__(self):
+        return iter((self.modes, self.rejected))
+
+
+def _subset(model: ModalModel, keep: np.ndarray) -> ModalModel:
+    """The modes `keep` (indices) of `model`, with every per-mode ``extra`` array subset too."""
+    keep = np.asarray(keep, dtype=int)
+    n = len(model)
+    extra = {}
+    for k, v in model.extra.items():
+        if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n:
+            extra[k] = v[keep]
+        else:
+            extra[k] = v
+    return ModalModel(model.natural_frequencies[keep], model.damping_ratios[keep],
+                      model.shapes[keep] if n else model.shapes, model.points, model.method, extra)
+
+
+def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: float = 20.0) -> tuple[float, float]:
+    """The band a measured input excites: where its PSD is within `drop_db` of its maximum.
+
+    Parameters
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Frequency axis in Hz.
+    input_psd : ndarray, shape (n_freqs,)
+        PSD of the input (unit²/Hz).
+    drop_db : float, optional
+        Level below the maximum (dB) that still counts as excited; default 20 dB (a hammer test's
+        usual −10 to −20 dB roll-off criterion, Ewins 2000 §3.6).
+
+    Returns
+    -------
+    (fmin, fmax) : tuple of float
+        The lowest and highest frequency (Hz) at which the input PSD is within `drop_db` of its
+        maximum (the 0 Hz line excluded).
+
+    Raises
+    ------
+    ValueError
+        If the input PSD has no positive value.
+    """
+    f = np.asarray(frequencies, float)
+    p = np.asarray(input_psd, float)
+    m = (f > 0) & np.isfinite(p)
+    if not np.any(p[m] > 0):
+        raise ValueError("the input PSD is zero everywhere: the input excites nothing")
+    top = np.max(p[m])
+    ok = m & (p >= top * 10 ** (-drop_db / 10))
+    return float(f[ok].min()), float(f[ok].max())
+
+
+def response_band(frequencies: np.ndarray, psd: np.ndarray, *, energy: float = 0.95,
+                  fmin: float | None = None) -> tuple[float, float]:
+    """The band of an output-only record's vibration: its lowest resonance and the frequency
+    below which `energy` of the response variance lies.
+
+    Parameters
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Frequency axis in Hz (Welch).
+    psd : ndarray, shape (n_freqs,) or (n_channels, n_freqs)
+        PSD (unit²/Hz) of the responses; several channels are summed.
+    energy : float, optional
+        Fraction of the summed variance below the upper limit; default 0.95 (the rest is the
+        broadband floor of the sensors and the ambient excitation, where no clear mode stands).
+    fmin : float, optional
+        Lowest frequency considered (Hz); default ten Welch lines.
+
+    Returns
+    -------
+    (f_low, fmax) : tuple of float
+        `f_low`: the lowest spectral peak (prominence ≥ 10 dB) above `fmin` — the lowest mode,
+        whose period sets the covariance lags of SSI-COV; `fmax`: the `energy` limit in Hz.
+    """
+    import scipy.signal
+
+    f = np.asarray(frequencies, float)
+    p = np.atleast_2d(np.asarray(psd, float)).sum(axis=0)
+    df = f[1] - f[0]
+    lo = 10 * df if fmin is None else max(float(fmin), df)
+    m = f >= lo
+    c = np.cumsum(p[m])
+    fmax = float(f[m][min(int(np.searchsorted(c, energy * c[-1])), m.sum() - 1)])
+    band = m & (f <= fmax)
+    db = 10 * np.log10(np.maximum(p[band], np.finfo(float).tiny))
+    pk, _ = scipy.signal.find_peaks(db, prominence=10.0)
+    f_low = float(f[band][pk[0]]) if pk.size else lo
+    return f_low, max(fmax, 2 * f_low)
+
+
+def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: float = 0.01, mac_min: float = 0.9,
+                  fmin: float | None = None, fmax: float | None = None) -> tuple[ModalModel, list[RejectedMode]]:
+    """Modes as clusters of fully stable poles of a stabilization diagram.
+
+    Fully stable poles (``stable == 3``) are taken by increasing frequency and grouped while within
+    `freq_tol` (relative) of the cluster's median frequency and with MAC ≥ `mac_min` to its first
+    member. A cluster with at least `min_count` poles is a mode (median frequency and damping, the
+    shape of the member nearest the median frequency); smaller clusters of two or more poles are
+    returned as rejected ("stable in k of N orders"). Magalhães et al. (2009) cluster the same way.
+
+    Parameters
+    ----------
+    stabilization : Stabilization
+        From :func:`vibroscope.modal.ssi_cov` or :func:`vibroscope.modal.lscf`.
+    min_count : int, optional
+        Smallest cluster; default ``max(3, n_orders // 4)``.
+    freq_tol : float, optional
+        Relative frequency tolerance of a cluster; default 0.01.
+    mac_min : float, optional
+        Smallest MAC with the cluster's first pole; default 0.9.
+    fmin, fmax : float, optional
+        Band in Hz.
+
+    Returns
+    -------
+    (ModalModel, list of RejectedMode)
+        ``extra``: ``cluster_size``, ``damping_std`` and ``frequency_std_hz`` (spread over the
+        cluster's orders, not a statistical uncertainty), ``mpc``, ``order`` (of the
+        representative pole) and ``settings``.
+    """
+    st = stabilization
+    n_orders = len(st.settings.get("orders", ())) or int(np.unique(st.order).size)
+    min_count = max(3, n_orders // 4) if min_count is None else int(min_count)
+    method = st.settings.get("method", "ssi_cov")
+    sel = st.stable == 3
+    if fmin is not None:
+        sel &= st.frequency >= fmin
+    if fmax is not None:
+        sel &= st.frequency <= fmax
+    idx = np.flatnonzero(sel)
+    idx = idx[np.argsort(st.frequency[idx], kind="stable")]
+    used = np.zeros(len(idx), bool)
+    modes, rejected = [], []
+    for a in range(len(idx)):
+        if used[a]:
+            continue
+        members = [a]
+        f0 = st.frequency[idx[a]]
+        for b in range(a + 1, len(idx)):
+            if used[b]:
+                continue
+            fb = st.frequency[idx[b]]
+            if fb > f0 * (1 + 2 * freq_tol):
+                break
+            fmed = np.median(st.frequency[idx[members]])
+            if abs(fb / fmed - 1) <= freq_tol and mac(st.shapes[idx[a]], st.shapes[idx[b]])[0, 0] >= mac_min:
+                members.append(b)
+        p = idx[members]
+        fmed = float(np.median(st.frequency[p]))
+        if len(members) >= min_count:
+            used[members] = True
+            rep = p[np.argmin(np.abs(st.frequency[p] - fmed))]
+            modes.append((fmed, float(np.median(st.damping[p])), st.shapes[rep], len(p),
+                          float(np.std(st.damping[p])), float(np.std(st.frequency[p])), int(st.order[rep])))
+        elif len(members) >= 2:
+            used[members] = True
+            rejected.append(RejectedMode(fmed, float(np.median(st.damping[p])),
+                                         f"not stable across orders: {len(p)} of {n_orders} orders (< {min_count})"))
+    settings = dict(st.settings, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min)
+    if not modes:
+        empty = np.zeros(0)
+        return ModalModel(empty, empty, np.zeros((0, len(st.points))), st.points, method,
+                          {"cluster_size": np.zeros(0, int), "damping_std": empty, "frequency_std_hz": empty,
+                           "mpc": empty, "order": np.zeros(0, int), "settings": settings}), rejected
+    f, z, s, c, zs, fsd, o = zip(*modes)
+    shapes = normalize_shapes(np.array(s))
+    return ModalModel(np.array(f), np.array(z), shapes, st.points, method,
+                      {"cluster_size": np.array(c), "damping_std": np.array(zs), "frequency_std_hz": np.array(fsd),
+                       "mpc": mpc(shapes), "order": np.array(o), "settings": settings}), rejected
+
+
+def select_modes(
+    model: ModalModel,
+    *,
+    fmin: float | None = None,
+    fmax: float | None = None,
+    damping_range: tuple[float, float] = DAMPING_RANGE,
+    min_mpc: float = MIN_MPC,
+    coherence: tuple[np.ndarray, np.ndarray] | None = None,
+    min_coherence: float = 0.5,
+    rejected: Sequence[RejectedMode] = (),
+) -> Selection:
+    """Keep the physical modes of an identified model; list the others with the reason.
+
+    Parameters
+    ----------
+    model : ModalModel
+        Candidates from any method.
+    fmin, fmax : float, optional
+        The band that was excited (Hz): the input's band (see :func:`excited_band`) with a
+        measured input, the analysis band without.
+    damping_range : (float, float), optional
+        Physically plausible damping ratios; default :data:`DAMPING_RANGE` (0.01 %–10 %). A NaN
+        damping (not estimated) is not a reason to reject.
+    min_mpc : float, optional
+        Smallest modal phase collinearity; default :data:`MIN_MPC` (0.5). Skipped for one point.
+    coherence : (frequencies, gamma2), optional
+        Axis (Hz) and coherence, shape (n_freqs,) or (n_freqs, n_outputs); a mode needs
+        `min_coherence` at its frequency on at least one output.
+    min_coherence : float, optional
+        Default 0.5.
+    rejected : sequence of RejectedMode, optional
+        Candidates already rejected upstream (e.g. unstable clusters); carried into the result.
+
+    Returns
+    -------
+    Selection
+        ``modes`` ascending in frequency with ``extra["stable"]`` True, ``rejected`` with reasons.
+    """
+    f = model.natural_frequencies
+    z = model.damping_ratios
+    m = mpc(model.shapes) if len(model) else np.zeros(0)
+    out = list(rejected)
+    keep = []
+    for r in range(len(model)):
+        why = None
+        if fmin is not None and f[r] < fmin:
+            why = f"below the band ({f[r]:.4g} < {fmin:.4g} Hz)"
+        elif fmax is not None and f[r] > fmax:
+            why = f"above the band ({f[r]:.4g} > {fmax:.4g} Hz)"
+        elif np.isfinite(z[r]) and not (damping_range[0] <= z[r] <= damping_range[1]):
+            why = (f"damping {100 * z[r]:.3g} % outside the physical range "
+                   f"{100 * damping_range[0]:.3g}–{100 * damping_range[1]:.3g} %")
+        elif len(model.points) > 1 and np.isfinite(m[r]) and m[r] < min_mpc:
+            why = f"complex shape: MPC {m[r]:.2f} < {min_mpc:g}"
+        elif coherence is not None:
+            fc, g = coherence
+            g = np.asarray(g, float).reshape(len(fc), -1)
+            k = int(np.argmin(np.abs(np.asarray(fc) - f[r])))
+            gk = np.nanmax(g[k]) if np.any(np.isfinite(g[k])) else np.nan
+            if np.isfinite(gk) and gk < min_coherence:
+                why = f"coherence {gk:.2f} < {min_coherence:g} at the mode"
+        if why is None:
+            keep.append(r)
+        else:
+            out.append(RejectedMode(float(f[r]), float(z[r]), why))
+    kept = _subset(model, np.array(keep, dtype=int))
+    kept = dataclasses.replace(kept, extra={**kept.extra, "stable": np.ones(len(kept), bool)})
+    out.sort(key=lambda x: x.frequency_hz)
+    criteria = {"band_hz": [fmin, fmax], "damping_range": list(damping_range), "min_mpc": min_mpc,
+                "min_coherence": min_coherence if coherence is not None else None}
+    return Selection(kept, tuple(out), criteria)
+
+
+def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float = 0.05,
+               freq_tol: float = 0.01) -> ModalModel:
+    """Modes at chosen frequencies of a stabilization diagram (the engineer's pick).
+
+    For each requested frequency the nearest pole that is stable in frequency and damping
+    (``stable >= 2``, else any pole) within ±`search` (relative) is found; the poles within
+    `freq_tol` of it with the same or better stability form its cluster (median frequency and
+    damping, the shape of the highest-order member).
+
+    Parameters
+    ----------
+    stabilization : Stabilization
+    frequencies_hz : sequence of float
+        Requested natural frequencies in Hz.
+    search : float, optional
+        Relative search window; default 0.05.
+    freq_tol : float, optional
+        Relative cluster width; default 0.01.
+
+    Returns
+    -------
+    ModalModel
+        One mode per requested frequency, ascending; ``extra["requested_hz"]``.
+
+    Raises
+    ------
+    ValueError
+        If no pole lies within the search window of a requested frequency.
+    """
+    st = stabilization
+    rows = []
+    for fr in frequencies_hz:
+        near = np.abs(st.frequency / fr - 1) <= search
+        if not near.any():
+            raise ValueError(f"no pole within {100 * search:g} % of {fr:g} Hz in the stabilization diagram")
+        best = near & (st.stable >= 2) if np.any(near & (st.stable >= 2)) else near
+        k = np.flatnonzero(best)[np.argmin(np.abs(st.frequency[best] - fr))]
+        memb = best & (np.abs(st.frequency / st.frequency[k] - 1) <= freq_tol)
+        p = np.flatnonzero(memb)
+        rep = p[np.argmax(st.order[p])]
+        rows.append((float(np.median(st.frequency[p])), float(np.median(st.damping[p])), st.shapes[rep],
+                     int(st.order[rep]), float(fr), float(np.std(st.frequency[p])), float(np.std(st.damping[p]))))
+    rows.sort(key=lambda r: r[0])
+    f, z, sh, o, req, fsd, zsd = zip(*rows)
+    shapes = normalize_shapes(np.array(sh))
+    return ModalModel(np.array(f), np.array(z), shapes, st.points, st.settings.get("method", "ssi_cov"),
+                      {"order": np.array(o), "requested_hz": np.array(req), "frequency_std_hz": np.array(fsd),
+                       "damping_std": np.array(zsd), "mpc": mpc(shapes), "stable": np.ones(len(rows), bool)})
