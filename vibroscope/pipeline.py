@@ -244,7 +244,7 @@ def analyse_signals(
     chans = ([input] if input else []) + outputs
     sig = signals.select(chans)
     f_low, band_note = None, None
-    if fmax is None or (fmin is None and not input):
+    if fmax is None or not input:
         # the band from the data: a quick Welch pass at ~16 averages
         n0 = default_nperseg(sig.n_samples, sig.fs)
         fw, P = scipy.signal.welch(sig.data, sig.fs, nperseg=n0)
@@ -253,11 +253,13 @@ def analyse_signals(
             fmax = hi_x if fmax is None else fmax
             band_note = f"band from the input: {lo_x:.4g}–{hi_x:.4g} Hz (its PSD within 20 dB of the maximum)"
         else:
-            f_low, hi_r = response_band(fw, P, fmin=fmin)
-            fmax = hi_r if fmax is None else fmax
-            band_note = (f"band from the response: lowest resonance {f_low:.4g} Hz, 95 % of the variance "
-                         f"below {hi_r:.4g} Hz")
-        notes.append(band_note + " (set --fmin/--fmax to choose)")
+            f_low, hi_r = response_band(fw, P[[sig.channels.index(c) for c in outputs]], fmin=fmin)
+            if fmax is None:
+                fmax = hi_r
+                band_note = (f"band from the response: lowest resonance {f_low:.4g} Hz, 95 % of the variance "
+                             f"below {hi_r:.4g} Hz")
+        if band_note:
+            notes.append(band_note + " (set --fmin/--fmax to choose)")
     if fmax is not None and fmax < 0.4 * sig.fs:
         sig = decimate(sig, fmax)
     fmax_eff = fmax if fmax is not None else 0.4 * sig.fs

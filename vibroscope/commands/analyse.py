@@ -123,7 +123,9 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
     mm = an.modal
     fstd = mm.extra.get("frequency_std_hz")
     zstd = mm.extra.get("damping_std")
-    unc = isinstance(fstd, np.ndarray) and fstd.shape == mm.natural_frequencies.shape and np.any(np.isfinite(fstd))
+    ident = getattr(an, "identification", None)
+    unc = (isinstance(fstd, np.ndarray) and fstd.shape == mm.natural_frequencies.shape and np.any(np.isfinite(fstd))
+           and ident is not None and "bootstrap" in str(ident.settings.get("uncertainty")))
     lines.append(f"{'mode':>4} {'f_n [Hz]':>10}" + (f" {'+-std':>7}" if unc else "") + f" {'zeta [%]':>9}"
                  + (f" {'+-std':>7}" if unc else "")
                  + (f" {'true f_n':>10} {'err [%]':>8} {'true zeta':>9}" if true_modes is not None else "") + "  method")

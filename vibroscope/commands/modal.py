@@ -223,7 +223,8 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
     if args.export_model:
         if ident.lsfd is None:
             raise VibroscopeError("--export-model needs residues: an input (LSCF + LSFD), not an output-only method")
-        path = export_modal_model(ident.lsfd, args.export_model, name=f"{source.stem}, identified by LSCF + LSFD")
+        path = export_modal_model(ident.lsfd, args.export_model, name=f"{source.stem}, identified by LSCF + LSFD",
+                                  frf=h)
         print(f"modal model: {path}  (run with: vibroscope simulate {path} ...)")
     ods = []
     for f in args.ods or ():
@@ -264,7 +265,7 @@ def _with_ods(mm, ods):
     return ModalModel(f, z, s, mm.points, mm.method + "+ods")
 
 
-def export_modal_model(res, path: Path, *, name: str = "") -> Path:
+def export_modal_model(res, path: Path, *, name: str = "", frf=None) -> Path:
     """Write an LSFD result as a ``kind = "modal"`` model file (pole-residue form).
 
     Parameters
@@ -275,6 +276,9 @@ def export_modal_model(res, path: Path, *, name: str = "") -> Path:
         The TOML file to write.
     name : str, optional
         The model's name.
+    frf : FRF, optional
+        The measured FRFs: residues and residuals are refitted in the file's plain pole-residue
+        form (:func:`vibroscope.modal.lsfd.pole_residue_form`); without it, LSFD's are written.
 
     Returns
     -------
@@ -285,11 +289,15 @@ def export_modal_model(res, path: Path, *, name: str = "") -> Path:
     from vibroscope.models.modelfile import dump_model
 
     q = _KIND_QUANTITY.get(res.kind, "displacement")
+    R, LR, UR = res.residues, res.lower_residual, res.upper_residual
+    if frf is not None:
+        from vibroscope.modal.lsfd import pole_residue_form
+
+        R, LR, UR = pole_residue_form(frf, res)
     inputs = tuple(Input(f"in{i + 1}", channel=c) for i, c in enumerate(res.inputs))
     outputs = tuple(Output(f"out{o + 1}", q, c) for o, c in enumerate(res.outputs))
-    model = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, res.residues,
-                                                 inputs=inputs, outputs=outputs, lower=res.lower_residual,
-                                                 upper=res.upper_residual, name=name)
+    model = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
+                                                 inputs=inputs, outputs=outputs, lower=LR, upper=UR, name=name)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     dump_model(model, path)

@@ -257,6 +257,7 @@ def auto_lscf(
     min_coherence: float = 0.5,
     driving_point: tuple | None = None,
     select: Sequence[float] | None = None,
+    min_peak_db: float | None = 30.0,
 ) -> Identification:
     """Modes from FRFs by LSCF/polyMAX, automatic pole selection and LSFD.
 
@@ -280,6 +281,11 @@ def auto_lscf(
     select : sequence of float, optional
         Take the modes at these frequencies (Hz) from the stabilization diagram
         (:func:`vibroscope.modal.selection.pick_poles`) instead of the automatic selection.
+    min_peak_db : float or None, optional
+        A mode whose own peak (:meth:`~vibroscope.modal.lsfd.LSFDResult.peak_magnitude`) lies more
+        than this many dB below the strongest mode's is rejected as weak; default 30 dB (the
+        measured modes of the real data sets lie within 20 dB, the local and spurious ones 35–47 dB
+        below). None keeps every stable, physical pole.
 
     Returns
     -------
@@ -317,6 +323,22 @@ def auto_lscf(
     mm = kept
     if len(kept):
         res = lsfd(frf, kept.natural_frequencies, kept.damping_ratios, fmin=lo, fmax=hi, driving_point=driving_point)
+        if select is None and min_peak_db is not None and len(kept) > 1:
+            # a mode whose own peak is far below the strongest mode's is beyond the dynamic range the
+            # measurement resolves (a local or barely excited mode, or an artefact): listed, not reported
+            pk = res.peak_magnitude()
+            rel = 20 * np.log10(np.maximum(pk, np.finfo(float).tiny) / pk.max())
+            weak = rel < -min_peak_db
+            if weak.any():
+                for r in np.flatnonzero(weak):
+                    rejected.append(RejectedMode(float(kept.natural_frequencies[r]), float(kept.damping_ratios[r]),
+                                                 f"weak: its peak is {-rel[r]:.0f} dB below the strongest mode's "
+                                                 f"(> {min_peak_db:g} dB)"))
+                from vibroscope.modal.selection import _subset
+
+                kept = _subset(kept, np.flatnonzero(~weak))
+                res = lsfd(frf, kept.natural_frequencies, kept.damping_ratios, fmin=lo, fmax=hi,
+                           driving_point=driving_point)
         mm = res.modal_model(driving_point=driving_point)
         extra = {**kept.extra, **mm.extra}
         mm = dataclasses.replace(mm, extra=extra)

@@ -12,7 +12,7 @@ import scipy.linalg
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.spectral import FRF
 
-__all__ = ["lsfd", "LSFDResult"]
+__all__ = ["pole_residue_form", "lsfd", "LSFDResult"]
 
 #: power of jω that turns a receptance into the FRF kind (None: treated as a receptance)
 _POWER = {"receptance": 0, "mobility": 1, "accelerance": 2, None: 0}
@@ -249,6 +249,48 @@ class LSFDResult:
         return FRF(f, H, coh, self.inputs, self.outputs, "lsfd", self.kind, self.units,
                    dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals))
 
+    def peak_magnitude(self) -> np.ndarray:
+        """Modulus of each mode's own term at its resonance, at the output/input pair where it is
+        largest (units of the FRF): the height of the mode's peak.
+
+        Returns
+        -------
+        ndarray, shape (n_modes,)
+        """
+        rho = self.residues / (self.poles**self.power)[:, None, None]
+        jw = 2j * np.pi * self.natural_frequencies[:, None, None]
+        lam = self.poles[:, None, None]
+        t = (rho / (jw - lam) + np.conj(rho) / (jw - np.conj(lam))) * jw**self.power
+        return np.abs(t).reshape(len(self), -1).max(axis=1) if len(self) else np.zeros(0)
+
+    def dominance(self) -> np.ndarray:
+        """How much each mode stands out at its own resonance.
+
+        For mode ``r`` at ``f_r``: ``|H_r| / |H − H_r|``, the modulus of the mode's own term over
+        that of everything else (the other modes and the residuals), taken at the output/input
+        pair where it is largest. A mode whose term is well below the rest everywhere is not seen
+        in the measurement (a computational or a barely excited pole); two equal modes one
+        half-power bandwidth apart score about 2 each.
+
+        Returns
+        -------
+        ndarray, shape (n_modes,)
+            Dimensionless ratios ≥ 0.
+        """
+        out = np.zeros(len(self))
+        rho = self.residues / (self.poles**self.power)[:, None, None]
+        for r in range(len(self)):
+            jw = 2j * np.pi * self.natural_frequencies[r]
+            terms = (rho / (jw - self.poles[:, None, None]) + np.conj(rho) / (jw - np.conj(self.poles)[:, None, None]))
+            terms = terms * jw**self.power
+            rest = terms.sum(axis=0) - terms[r]
+            if self.residuals:
+                rest = rest + self.lower_residual * jw ** (self.power - 2) + self.upper_residual * jw**self.power
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.abs(terms[r]) / np.abs(rest)
+            out[r] = float(np.nanmax(ratio)) if np.any(np.isfinite(ratio)) else np.inf
+        return out
+
     def error(self, frf: FRF) -> np.ndarray:
         """Relative misfit of the model to an FRF over the fitted band.
 
@@ -436,3 +478,48 @@ def lsfd(
     dp = _resolve_driving_point(driving_point, frf.outputs, frf.inputs)
     return LSFDResult(fn, zeta, lam, R, LR, UR, frf.outputs, frf.inputs, frf.kind, lo, hi, f,
                       frf.units, dp, bool(residuals))
+
+
+def pole_residue_form(frf: FRF, result: "LSFDResult") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Residues and residuals of the plain pole-residue model, refitted on the same lines.
+
+    :func:`lsfd` fits the modal terms as ``(jω/λ)^p R/(jω − λ)`` (the form whose residuals absorb
+    the out-of-band modes best); a model file (``kind = "modal"``, see
+    :class:`vibroscope.models.modal_model.PoleResidueModel`) stores the plain form
+    ``R/(jω − λ) + conj(R)/(jω − conj λ) + LR (jω)^(p−2) + UR (jω)^p``. This refits `R`, `LR`
+    and `UR` of that form by linear least squares on the measured FRF, for the poles of
+    `result`, over its band.
+
+    Parameters
+    ----------
+    frf : FRF
+        The measured FRFs `result` was fitted to.
+    result : LSFDResult
+        Poles (and band, kind) to use.
+
+    Returns
+    -------
+    residues : ndarray, complex, shape (n_modes, n_outputs, n_inputs)
+        Residues of `H` at the poles (units of `H` × rad/s).
+    lower, upper : ndarray, complex, shape (n_outputs, n_inputs)
+        Coefficients of ``(jω)^(p−2)`` and ``(jω)^p``.
+    """
+    sel, _, _ = _band(frf, result.fmin, result.fmax)
+    w = 2 * np.pi * frf.frequencies[sel]
+    H = np.asarray(frf.H)[sel]
+    nf, no, ni = H.shape
+    poles = result.poles
+    n = len(poles)
+    p = result.power
+    jw = 1j * w[:, None]
+    a = 1 / (jw - poles[None, :])
+    b = 1 / (jw - np.conj(poles)[None, :])
+    lo, up = jw ** (p - 2), jw**p
+    Phi = np.concatenate([a + b, 1j * (a - b), lo, 1j * lo, up, 1j * up], axis=1)
+    A = np.concatenate([Phi.real, Phi.imag], axis=0)
+    norm = np.linalg.norm(A, axis=0)
+    norm[norm == 0] = 1.0
+    B = np.concatenate([H.real, H.imag], axis=0).reshape(2 * nf, no * ni)
+    x = np.linalg.lstsq(A / norm, B, rcond=None)[0] / norm[:, None]
+    x = x.reshape(-1, no, ni)
+    return x[:n] + 1j * x[n:2 * n], x[2 * n] + 1j * x[2 * n + 1], x[2 * n + 2] + 1j * x[2 * n + 3]

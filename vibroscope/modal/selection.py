@@ -171,10 +171,12 @@ def response_band(frequencies: np.ndarray, psd: np.ndarray, *, energy: float = 0
     import scipy.signal
 
     f = np.asarray(frequencies, float)
-    p = np.atleast_2d(np.asarray(psd, float)).sum(axis=0)
+    p = np.nan_to_num(np.atleast_2d(np.asarray(psd, float)), nan=0.0).sum(axis=0)
     df = f[1] - f[0]
-    lo = 10 * df if fmin is None else max(float(fmin), df)
+    lo = min(10 * df, f[len(f) // 8]) if fmin is None else max(float(fmin), df)
     m = f >= lo
+    if m.sum() < 3 or not np.any(p[m] > 0):
+        return float(max(lo, df)), float(f[-1])
     c = np.cumsum(p[m])
     fmax = float(f[m][min(int(np.searchsorted(c, energy * c[-1])), m.sum() - 1)])
     band = m & (f <= fmax)

@@ -4,7 +4,7 @@ The record is cut into `n_blocks` contiguous blocks; each block gives its own ou
 (SSI-COV) or cross-spectra (LSCF). A bootstrap replicate draws `n_blocks` blocks with
 replacement, averages their covariances / spectra, re-identifies the poles at a fixed model order
 and pairs them with the modes (nearest frequency within 2 %, MAC ≥ 0.8). The standard deviation
-over the replicates is the reported uncertainty. Blocks much longer than the correlation time
+over the replicates (robust: 1.4826 × the median absolute deviation) is the reported uncertainty. Blocks much longer than the correlation time
 of the response (its slowest mode's decay) make them nearly independent, which the bootstrap
 assumes (Efron & Tibshirani 1993, ch. 8, the moving-block bootstrap; Reynders, Pintelon & De Roeck
 2008 estimate the same variances from the block covariances by first-order perturbation).
@@ -20,6 +20,7 @@ References
 from __future__ import annotations
 
 from dataclasses import dataclass
+import warnings
 from typing import Sequence
 
 import numpy as np
@@ -156,8 +157,11 @@ def ssi_bootstrap(y: np.ndarray, fs: float, modes: ModalModel, *, n_lags: int, o
         f, z, s = _ssi_poles(R, n_lags, order, fs)
         F[i], Z[i] = pair_poles(modes, f, z, s)
     enough = np.sum(np.isfinite(F), axis=0) >= n_boot / 2
-    with np.errstate(invalid="ignore"):
-        fstd = np.where(enough, np.nanstd(F, axis=0, ddof=1), np.nan)
-        zstd = np.where(enough, np.nanstd(Z, axis=0, ddof=1), np.nan)
+    # robust spread (1.4826 × median absolute deviation): a replicate that paired a neighbouring
+    # spurious pole must not dominate
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        fstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(F - np.nanmedian(F, axis=0)), axis=0), np.nan)
+        zstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(Z - np.nanmedian(Z, axis=0)), axis=0), np.nan)
     return ModalUncertainty(fstd, zstd, f"block bootstrap of the output covariances, {n_blocks} blocks, "
                                         f"{n_boot} replicates at order {order}")
