@@ -97,7 +97,7 @@ def decimate(signals: Signals, fmax: float) -> Signals:
 
 
 #: identification methods of ``analyse`` and ``modal``; "auto" is LSCF with an input, SSI-COV without
-METHODS = ("auto", "lscf", "ssi", "fdd", "efdd", "peak")
+METHODS = ("auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak")
 
 
 @dataclass(frozen=True)
@@ -140,11 +140,16 @@ def _identify(sig: Signals, s: IdentifySettings):
             mm = modal.peak_picking(h, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax)
             sel = select_modes(mm, fmin=lo, fmax=hi, coherence=(h.frequencies, h.coherence))
             return G, h, Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria})
-        if s.method in ("ssi", "fdd", "efdd"):
+        if s.method in ("ssi", "polymax", "fdd", "efdd"):
             raise ValueError(f"method={s.method!r} is output-only; with an input use 'lscf' or 'peak'")
         return G, h, auto_lscf(h, fmin=lo, fmax=hi, select=s.select)
     if s.method in ("lscf", "peak"):
         raise ValueError(f"method={s.method!r} needs an input (force) channel; output-only: 'ssi', 'fdd', 'efdd'")
+    if s.method == "polymax":
+        from vibroscope.modal.automatic import polymax_oma
+
+        return G, None, polymax_oma(sig.select(outputs), f_low=s.f_low or (lo or sig.fs / s.nperseg * 10),
+                                    fmin=s.fmin, fmax=hi)
     if s.method in ("auto", "ssi"):
         ident = auto_ssi(sig.select(outputs), f_low=s.f_low or (lo or sig.fs / s.nperseg * 10), fmin=s.fmin, fmax=hi,
                          select=s.select)
@@ -206,10 +211,11 @@ def analyse_signals(
     prominence : float, optional
         Smallest prominence (dB) of a peak of the first singular values for FDD/EFDD; default
         10 dB.
-    method : {'auto', 'lscf', 'ssi', 'fdd', 'efdd', 'peak'}, optional
+    method : {'auto', 'lscf', 'ssi', 'polymax', 'fdd', 'efdd', 'peak'}, optional
         Identification: 'auto' (default) is LSCF/polyMAX with LSFD with an input (Peeters et al.
         2004) and covariance-driven SSI with clustering of stable poles without (Peeters & De
-        Roeck 1999); 'fdd' / 'efdd' frequency-domain decomposition (Brincker et al. 2001) with
+        Roeck 1999); 'polymax' polyMAX on the output positive power spectra (Peeters & Van der
+        Auweraer 2005, the output-only cross-check); 'fdd' / 'efdd' frequency-domain decomposition (Brincker et al. 2001) with
         half-power / enhanced damping; 'peak' peak picking on the FRFs.
     select : sequence of float, optional
         LSCF and SSI-COV: take the modes at these frequencies (Hz) from the stabilization diagram

@@ -120,3 +120,42 @@ def test_modes_document_schema(ambient):
     assert set(m["shape"]) == set(an.modal.points) and all(len(v) == 2 for v in m["shape"].values())
     assert m["stable"] is True and 0.9 < m["mpc"] <= 1.0 and m["mpd"] < 10
     assert all(set(r) == {"frequency_hz", "damping_ratio", "reason"} for r in doc["rejected"])
+
+
+def test_periodic_input_is_analysed_period_synchronously():
+    """A random-phase multisine repeated 10 times: the period is found from the input, the FRFs
+    use whole periods with a rectangular window (the first period dropped), and LSCF gives the
+    five modes with their damping (no leakage bias from a Hann window)."""
+    n, periods = 8192, 10
+    rng = np.random.default_rng(7)
+    k = np.arange(1, n // 2)
+    lines = k[(k * FS / n > 5.0) & (k * FS / n < 100.0)]
+    X = np.zeros(n // 2 + 1, complex)
+    X[lines] = np.exp(2j * np.pi * rng.random(lines.size))
+    one = np.fft.irfft(X, n)
+    u = np.tile(one / one.std(), periods)
+    sig = simulate(MODEL, u, FS, noise=0.02, seed=8)
+    an = analyse_signals(sig, input=MODEL.input_channels()[0])
+    assert any("periodic input: period" in w and f"({n} samples" in w for w in an.warnings), an.warnings
+    assert an.frf.estimator == "periodic" and an.frf.settings["window"] == "boxcar"
+    _assert_matches_truth(an.modal, z_tol=0.03)
+
+
+def test_every_method_states_and_keeps_its_normalisation(ambient, forced):
+    """ModalModel does what its docstring says: unit maximum (largest entry exactly 1) unless
+    ``extra["normalisation"]`` says unit modal mass."""
+    models = [analyse_signals(ambient, method=m).modal for m in ("ssi", "fdd", "efdd")]
+    models += [analyse_signals(forced, input=MODEL.input_channels()[0], method=m).modal for m in ("lscf", "peak")]
+    for mm in models:
+        assert mm.extra.get("normalisation", "unit_maximum") == "unit_maximum", mm.method
+        assert len(mm) >= 3, mm.method
+        np.testing.assert_allclose(np.abs(mm.shapes).max(axis=1), 1.0, rtol=1e-12)
+        k = np.argmax(np.abs(mm.shapes), axis=1)
+        np.testing.assert_allclose(mm.shapes[np.arange(len(mm)), k], 1.0, rtol=1e-12)
+
+
+def test_polymax_on_output_spectra_cross_checks_ssi(ambient):
+    """polyMAX on the positive power spectra (exponential window removed from the damping)."""
+    an = analyse_signals(ambient, method="polymax")
+    assert an.modal.method == "polymax_oma"
+    _assert_matches_truth(an.modal, z_tol=0.05)

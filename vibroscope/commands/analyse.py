@@ -14,7 +14,7 @@ MAX_AUTO_CHANNELS = 32
 
 #: how the report names each identification method
 METHOD_NAMES = {"lscf": "LSCF/polyMAX + LSFD", "ssi_cov": "SSI-COV", "fdd": "FDD", "efdd": "EFDD",
-                "peak_picking": "peak picking"}
+                "peak_picking": "peak picking", "polymax_oma": "polyMAX on the output spectra"}
 
 
 def add_parser(sub) -> None:
@@ -47,7 +47,7 @@ def add_parser(sub) -> None:
     p.add_argument("--fmax", type=float, help="highest frequency analysed (Hz); decimates when well below fs/2")
     p.add_argument("--n-modes", type=int, help="number of modes to report")
     p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
-    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "fdd", "efdd", "peak"],
+    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
                    help="modal identification: auto (default: LSCF with --input, SSI-COV without), lscf, ssi, "
                         "fdd, efdd (output-only), peak (peak picking on the FRFs)")
     p.add_argument("--select", metavar="F1,F2,..",

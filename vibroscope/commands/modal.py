@@ -38,7 +38,7 @@ def add_parser(sub) -> None:
         ),
     )
     p.add_argument("source", nargs="+", type=Path, help="an MCAP log, or one or more FRF files")
-    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "fdd", "efdd", "peak"],
+    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
                    help="auto (default): LSCF with an input or an FRF file, SSI-COV without an input")
     p.add_argument("--select", default="auto", metavar="auto|F1,F2,..",
                    help="modes: 'auto' (physical-mode selection) or the frequencies (Hz) to take from the "
@@ -156,6 +156,8 @@ def run(args) -> int:
             raise VibroscopeError(f"{first}: {exc}") from None
         print(report_text(an, source=str(first)))
         ident, h, mm = an.identification, an.frf, an.modal
+        if an.frf is None and mm.method == "ssi_cov" and select is None:
+            _cross_check(an)
         signals, psd, csd, sv = an.signals, an.psd, an.csd, an.singular_values
     synth = ident.lsfd.synthesize(h.frequencies[(h.frequencies >= ident.lsfd.fmin) & (h.frequencies <= ident.lsfd.fmax)]) \
         if ident.lsfd is not None and h is not None else None
@@ -165,6 +167,26 @@ def run(args) -> int:
               + ", ".join(f"{100 * e:.2f} %" for e in np.atleast_1d(err)))
     _write(args, first, ident, h, synth, signals, psd, csd, sv)
     return 0
+
+
+def _cross_check(an) -> None:
+    """polyMAX on the output spectra beside SSI-COV: each SSI mode with the nearest polyMAX mode."""
+    from vibroscope.modal.automatic import polymax_oma
+
+    st = an.identification.settings
+    try:
+        pm = polymax_oma(an.signals.select(an.settings["outputs"]), f_low=st.get("f_low_hz") or 1.0,
+                         fmin=an.settings.get("fmin"), fmax=an.settings.get("fmax")).modes
+    except (ValueError, np.linalg.LinAlgError) as exc:
+        print(f"cross-check polyMAX (output spectra) not run: {exc}")
+        return
+    rows = []
+    for f, z in zip(an.modal.natural_frequencies, an.modal.damping_ratios):
+        if len(pm):
+            k = int(np.argmin(np.abs(pm.natural_frequencies - f)))
+            fp, zp = pm.natural_frequencies[k], pm.damping_ratios[k]
+            rows.append(f"{f:.3f}/{fp:.3f} Hz ({100 * (fp / f - 1):+.2f} %, ζ {100 * z:.2f}/{100 * zp:.2f} %)")
+    print(f"cross-check polyMAX on the output spectra ({len(pm)} modes), SSI-COV/polyMAX: " + "; ".join(rows))
 
 
 def _mif(h):

@@ -117,8 +117,13 @@ class ModalModel:
     damping_ratios : ndarray, shape (n_modes,)
         Viscous damping ratios ζ (dimensionless); NaN where not estimated.
     shapes : ndarray, complex, shape (n_modes, n_points)
-        Mode shapes, one per row, at `points`; normalised to unit maximum modulus with a real
-        positive reference entry (see :func:`normalize_shapes`).
+        Mode shapes, one per row, at `points`, as the method normalised them, which
+        ``extra["normalisation"]`` states: ``"unit_maximum"`` (the default when absent: largest
+        modulus exactly ``1 + 0j``, see :func:`normalize_shapes`; every method without a driving
+        point) or ``"unit_modal_mass"`` (LSCF + LSFD with a driving point: ``φᵀ M φ = 1``, mass-normalised
+        shapes in kg^-½ for FRFs in SI units per newton, see
+        :meth:`vibroscope.modal.lsfd.LSFDResult.modal_model`). The constructor stores the shapes as
+        given.
     points : tuple of str
         Channel names of the measurement points (the columns of `shapes`).
     method : str

@@ -24,7 +24,7 @@ from vibroscope.modal._results import ModalModel
 from vibroscope.modal.selection import DAMPING_RANGE, MIN_MPC, RejectedMode, cluster_poles, select_modes
 from vibroscope.signals import Signals
 
-__all__ = ["Identification", "modes_document", "auto_ssi", "auto_lscf", "reference_channels", "ssi_lags"]
+__all__ = ["Identification", "modes_document", "positive_power_spectra", "polymax_oma", "auto_ssi", "auto_lscf", "reference_channels", "ssi_lags"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -348,3 +348,106 @@ def auto_lscf(
                 **{k: v for k, v in sel.criteria.items() if k != "band_hz"}}
     mm = dataclasses.replace(mm, extra={**mm.extra, "settings": settings, "stabilization": st})
     return Identification(mm, tuple(sorted(rejected, key=lambda r: r.frequency_hz)), st, settings, res)
+
+
+def positive_power_spectra(signals: Signals, *, n_lags: int, ref: Sequence[int] | None = None,
+                           final_window: float = 0.01):
+    """Positive power spectra of output-only responses: the FRF-like input of polyMAX for OMA.
+
+    The output correlations ``R(τ)`` (lags ``0 … n_lags − 1``, :func:`~vibroscope.modal.ssi.output_covariances`)
+    are weighted by an exponential window ``w(τ) = exp(−σ τ)`` that decays to `final_window` at the
+    last lag, the zero lag halved, and Fourier transformed. Under white excitation these half
+    spectra have the structure's poles shifted by ``−σ`` (the window adds ``σ`` to the decay
+    rate), which :func:`polymax_oma` removes (Peeters & Van der Auweraer 2005).
+
+    Parameters
+    ----------
+    signals : Signals
+        Responses (n_channels, n_samples), ``fs`` in Hz.
+    n_lags : int
+        Correlation lags: the spectra's resolution is ``fs / n_lags``.
+    ref : sequence of int, optional
+        Reference channels (the "inputs"); default :func:`reference_channels`.
+    final_window : float, optional
+        Value of the exponential window at the last lag; default 0.01.
+
+    Returns
+    -------
+    (FRF, sigma)
+        Half spectra ``S⁺[f, output, reference]`` (estimator ``"positive_power_spectra"``, kind
+        None) and the window's decay rate ``σ`` in 1/s.
+
+    References
+    ----------
+    .. [1] B. Peeters and H. Van der Auweraer, "PolyMAX: a revolution in operational modal
+       analysis", Proc. 1st International Operational Modal Analysis Conference, Copenhagen, 2005.
+    """
+    from vibroscope.modal.ssi import output_covariances
+    from vibroscope.spectral import FRF
+
+    y = np.asarray(signals.data, float)
+    y = y - y.mean(axis=1, keepdims=True)
+    ref = reference_channels(y) if ref is None else list(ref)
+    R = output_covariances(y, n_lags, ref)
+    fs = signals.fs
+    sigma = -np.log(final_window) * fs / (n_lags - 1)
+    w = np.exp(-sigma * np.arange(n_lags) / fs)
+    Rw = R * w[:, None, None]
+    Rw[0] *= 0.5
+    S = np.fft.rfft(Rw, n=2 * n_lags, axis=0)  # Σ R(τ) w(τ) e^{−jωτ}: a causal response's spectrum
+    f = np.fft.rfftfreq(2 * n_lags, 1 / fs)
+    h = FRF(f, S, np.full((f.size, y.shape[0]), np.nan), tuple(signals.channels[i] for i in ref),
+            tuple(signals.channels), "positive_power_spectra", None, "", {"n_lags": n_lags, "sigma": sigma})
+    return h, float(sigma)
+
+
+def polymax_oma(signals: Signals, *, f_low: float, fmin: float | None = None, fmax: float | None = None,
+                n_ref: int = 6) -> Identification:
+    """Output-only modes by polyMAX on the positive power spectra: the cross-check of SSI-COV.
+
+    Parameters
+    ----------
+    signals : Signals
+        Responses, decimated to the band of interest.
+    f_low : float
+        Lowest resonance (Hz): the spectra resolve it with 20 lines per Hz-width of ``f_low``
+        (``n_lags = 20 fs / f_low``, at most a quarter of the record).
+    fmin, fmax : float, optional
+        Band in Hz; default up to 0.4 fs.
+    n_ref : int, optional
+        Reference channels.
+
+    Returns
+    -------
+    Identification
+        Method ``"polymax_oma"``; damping corrected for the exponential window.
+
+    References
+    ----------
+    .. [1] B. Peeters and H. Van der Auweraer, "PolyMAX: a revolution in operational modal
+       analysis", Proc. 1st International Operational Modal Analysis Conference, Copenhagen, 2005.
+    """
+    from vibroscope.modal.lscf import lscf
+
+    fs = signals.fs
+    fmax = 0.4 * fs if fmax is None else float(fmax)
+    n_lags = int(min(20 * fs / max(f_low, 1e-9), signals.n_samples // 4))
+    ref = reference_channels(np.asarray(signals.data), n_ref)
+    h, sigma = positive_power_spectra(signals, n_lags=n_lags, ref=ref)
+    lo = fmin if fmin is not None else 0.5 * f_low
+    st = lscf(h, fmin=lo, fmax=fmax)
+    # remove the window's damping: λ = λ' + σ
+    wn = 2 * np.pi * st.frequency
+    lam = -st.damping * wn + 1j * wn * np.sqrt(np.maximum(1 - st.damping**2, 0)) + sigma
+    f = np.abs(lam) / (2 * np.pi)
+    z = -lam.real / np.abs(lam)
+    st = dataclasses.replace(st, frequency=f, damping=z,
+                             settings={**st.settings, "method": "polymax_oma", "window_sigma": sigma})
+    cand, unstable = cluster_poles(st)
+    sel = select_modes(cand, fmin=fmin, fmax=fmax, rejected=unstable)
+    mm = _add_quality(sel.modes)
+    settings = {"method": "polymax_oma", "n_lags": n_lags, "window_sigma_per_s": sigma,
+                "references": [signals.channels[i] for i in ref], "band_hz": [fmin, fmax],
+                "uncertainty": "spread over the cluster's model orders"}
+    mm = dataclasses.replace(mm, extra={**mm.extra, "settings": settings, "stabilization": st})
+    return Identification(mm, sel.rejected, st, settings)
