@@ -158,4 +158,4 @@ def test_polymax_on_output_spectra_cross_checks_ssi(ambient):
     """polyMAX on the positive power spectra (exponential window removed from the damping)."""
     an = analyse_signals(ambient, method="polymax")
     assert an.modal.method == "polymax_oma"
-    _assert_matches_truth(an.modal, z_tol=0.05)
+    _assert_matches_truth(an.modal, z_tol=0.05, mac_min=0.95)  # shapes: the quick LSFD of the diagram
