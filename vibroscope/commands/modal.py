@@ -194,7 +194,7 @@ def _mif(h):
     H = np.asarray(h.H)
     with np.errstate(invalid="ignore"):
         s = np.nansum(np.abs(H) ** 2, axis=(1, 2))
-    return h.frequencies, s[:, None]
+    return h.frequencies, s[:, None], "Σ |H|² over outputs and inputs [dB]"
 
 
 def _print_modes(ident) -> None:

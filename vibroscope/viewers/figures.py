@@ -443,9 +443,9 @@ def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
     stabilization : Stabilization
         From :func:`vibroscope.modal.ssi_cov` or :func:`vibroscope.modal.lscf` (``order``,
         ``frequency``, ``stable`` 0–3).
-    sv : tuple (frequencies, S), optional
-        First singular value of the CSD (or of the FRF matrix) drawn behind the poles (dB, right
-        axis), as is customary.
+    sv : tuple (frequencies, S) or (frequencies, S, label), optional
+        First singular value of the CSD (or the FRFs' summed power, with its label) drawn behind
+        the poles (dB, right axis), as is customary.
     modes : ModalModel, optional
         Selected modes, marked by vertical lines.
     ax : matplotlib Axes, optional
@@ -472,10 +472,10 @@ def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
             ax.scatter(st.frequency[m], st.order[m], marker=marker, s=14 if marker != "o" else 10,
                        color=color, label=label, linewidths=0.8)
     if sv is not None:
-        f, S = sv
+        f, S = sv[0], sv[1]
         ax2 = ax.twinx()
         ax2.plot(f, 10 * np.log10(np.maximum(S[:, 0], np.finfo(float).tiny)), color="0.3", lw=0.8)
-        ax2.set_ylabel("first singular value [dB]")
+        ax2.set_ylabel(sv[2] if len(sv) > 2 else "first singular value [dB]")
         fmax = max(float(np.max(st.frequency)) if st.frequency.size else f[-1], 1e-9)
         ax.set_xlim(0, min(f[-1], 1.05 * fmax))
     if modes is not None:
@@ -636,7 +636,7 @@ def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, mo
         written.append(_save(plot_frf(frf), out / "frf.png"))
     if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
         written.append(_save(plot_mode_shapes(modal, coords, true_modes=true_modes), out / "modes.png"))
-    if sv is not None:
+    if sv is not None and len(sv) == 2:
         f, S = sv
         ft = None if true_modes is None else true_modes.natural_frequencies
         ax = plot_singular_values(f, S, modal, true_frequencies=ft)
