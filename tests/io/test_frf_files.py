@@ -268,3 +268,17 @@ def test_geometry_2411_in_millimetres(tmp_path):
     assert np.allclose(xyz, [[0.1, 0.0, 1.2345678], [0.2505, 0.001, 0.0]], rtol=1e-14)
     with pytest.raises(LogFormatError, match=r"no node record \(dataset 15 or 2411\).*dataset 58"):
         read_geometry(write_frf_uff58(_synthetic_frf(n=8), tmp_path / "f.uff"))
+
+
+def test_uff_geometry_places_dof_named_channels(tmp_path):
+    """`--coords geometry.uff`: channels named like UFF DOFs sit at their nodes, along their axes."""
+    from vibroscope.io import write_geometry_uff15
+    from vibroscope.io.coords import read_coords
+
+    geo = tmp_path / "geo.uff"
+    write_geometry_uff15(geo, [3, 7], np.array([[0.0, 0.0, 1.5], [0.2, 0.0, 3.0]]))
+    sc = read_coords(geo, ["7+X", "3-Z"])
+    np.testing.assert_allclose(sc.xyz, [[0.2, 0.0, 3.0], [0.0, 0.0, 1.5]], atol=1e-6)
+    np.testing.assert_allclose(sc.directions, [[1, 0, 0], [0, 0, -1]])
+    with pytest.raises(Exception, match="not a DOF"):
+        read_coords(geo, ["/imu/a.linear_acceleration.x"])

@@ -92,6 +92,8 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
     Parameters
     ----------
     path : str or Path
+        A UFF geometry (datasets 15 / 2411, matched by the node of DOF-like channel names such
+        as ``"12+Z"``, the direction from the name), or a
         CSV with a header naming ``x``, ``y``, ``z`` (m), optionally ``direction``
         (1/2/3 or x/y/z, a sign allowed) and either ``channel`` (names) or
         ``sensor``/``sensor number`` (1-based numbers), e.g. the LUMO ``coords_lumo.csv``.
@@ -113,6 +115,8 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
         If a channel has no row.
     """
     path = Path(path)
+    if path.suffix.lower() in (".uff", ".unv", ".uf"):
+        return _uff_coords(path, channels)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
@@ -165,3 +169,26 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
             raise ChannelError(f"{path}: {len(table)} coordinate rows for {len(channels)} channels")
     return SensorCoords(tuple(channels), np.array([t[2] for t in chosen]).reshape(-1, 3),
                         np.array([t[3] for t in chosen]).reshape(-1, 3), True, str(path))
+
+
+def _uff_coords(path: Path, channels: Sequence[str]) -> SensorCoords:
+    """Channels named like UFF DOFs (``"12+Z"``) placed at the nodes of a UFF geometry file."""
+    from vibroscope.io.frf_files import _parse_dof, read_geometry
+
+    ids, xyz = read_geometry(path)
+    where = {int(i): k for k, i in enumerate(ids)}
+    pos, dirs = [], []
+    for ch in channels:
+        dof = _parse_dof(ch)
+        if dof is None or dof[0] not in where:
+            raise ChannelError(f"{path}: channel {ch!r} is not a DOF of a node in the geometry "
+                               f"({len(ids)} nodes, e.g. {int(ids[0])})")
+        node, code = dof
+        d = np.zeros(3)
+        if 1 <= abs(code) <= 3:
+            d[abs(code) - 1] = np.sign(code)
+        else:
+            d[2] = 1.0
+        pos.append(xyz[where[node]])
+        dirs.append(d)
+    return SensorCoords(tuple(channels), np.array(pos, float), np.array(dirs, float), True, str(path))
