@@ -56,6 +56,8 @@ def add_parser(sub) -> None:
     p.add_argument("--export-model", type=Path, metavar="MODEL.toml",
                    help="write the identified modal model (kind = \"modal\"; LSCF only) for `vibroscope simulate`")
     p.add_argument("--uff55", type=Path, metavar="FILE", help="write the mode shapes as UFF 55")
+    p.add_argument("--uff15", type=Path, metavar="FILE",
+                   help="write the sensor geometry (nodes of --uff55, from --coords) as UFF 15")
     p.add_argument("--uff58", type=Path, metavar="FILE", help="write the FRFs (measured or estimated) as UFF 58")
     p.add_argument("--ods", type=float, nargs="+", metavar="F", help="operating deflection shapes at these frequencies (Hz)")
     p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: ./<source>_modal/)")
@@ -235,6 +237,11 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
                     for d in sc.directions]
         write_modes_uff55(mm, args.uff55, directions=dirs)
         print(f"mode shapes (UFF 55): {args.uff55}")
+    if args.uff15:
+        from vibroscope.io.frf_files import write_geometry_uff15
+
+        write_geometry_uff15(args.uff15, list(range(1, len(pts) + 1)), sc.xyz)
+        print(f"geometry (UFF 15, node k = point k of MODES.json): {args.uff15}")
     if args.uff58:
         if h is None:
             raise VibroscopeError("--uff58 needs FRFs: give --input for a log")
