@@ -29,6 +29,12 @@ def test_demo_finds_the_true_modes(tmp_path, capsys):
     for m in summary["modes"]:
         assert set(m["shape"]) == set(summary["outputs"]) and m["stable"] and m["mpc"] > 0.99
     assert (out / "demo.rrd").stat().st_size > 10_000
+    from vibroscope.viewers.rerun_view import read_rrd
+
+    rrd = read_rrd(out / "demo.rrd")
+    for what in ("velocity", "displacement"):  # the acquisition view: integrated, in the time view
+        assert sum(e.startswith(f"/{what}/imu/") for e in rrd) == 3
+    assert any(e.startswith("/stabilization/") for e in rrd) and any("/synthesized/" in e for e in rrd)
     assert (out / "demo.mcap").exists()
     for name in ("psd", "frf", "modes", "singular_values", "stabilization", "frf_synthesis", "kinematics"):
         assert (out / "figures" / f"{name}.png").stat().st_size > 5_000

@@ -215,7 +215,14 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         from vibroscope.commands.modal import _with_ods
 
         ident = getattr(an, "identification", None)
-        path = log_analysis(signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf,
+        kin = None
+        acc = [c for c, u in zip(an.signals.channels, an.signals.units) if c in outs and u in ("m/s^2", "m/s²")]
+        if acc:
+            from vibroscope.spectral.integration import integrate
+
+            a = an.signals.select(acc)
+            kin = (integrate(a, order=1), integrate(a, order=2))
+        path = log_analysis(kinematics=kin, signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf,
                             modal=_with_ods(an.modal, ods_models) if ods_models else an.modal,
                             coords=sc.as_mapping(), rrd_path=rrd, spawn=spawn,
                             recording_name=Path(log).stem,

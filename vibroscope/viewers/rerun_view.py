@@ -168,7 +168,7 @@ def _eye(rrb, positions: np.ndarray):
 
 
 def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal, ftl, f_range=None,
-                     positions=None, stabilization_present=False):
+                     positions=None, stabilization_present=False, kinematics=None):
     import rerun.blueprint as rrb
 
     tabs = []
@@ -182,6 +182,17 @@ def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal,
                  for c, u in zip(signals.channels, signals.units)]
         tabs.append(rrb.Grid(*views, grid_columns=1 if len(views) <= 4 else 2,
                              name="Time series (timeline: time)"))
+    if kinematics is not None:
+        vel, disp = kinematics
+        tx = _whole(rrb, "time", dict(seconds=0.0), dict(seconds=float(vel.duration)))
+        fc = vel.meta.get("integration", {}).get("f_cut_hz")
+        cut = f", high-pass {fc:.3g} Hz" if fc else ""
+        tabs.append(rrb.Vertical(
+            rrb.TimeSeriesView(origin="/velocity", name=f"velocity [{vel.units[0] or '-'}] (integrated{cut})",
+                               plot_legend=legend, **tx),
+            rrb.TimeSeriesView(origin="/displacement", name=f"displacement [{disp.units[0] or '-'}] (integrated{cut})",
+                               plot_legend=legend, **tx),
+            name="Velocity & displacement (timeline: time)"))
     if spec_entities:
         views = [rrb.TimeSeriesView(origin="/psd", name=f"PSD [dB re 1 unit²/Hz] vs frequency ({ftl})",
                                     plot_legend=rrb.PlotLegend(corner=rrb.Corner2D.RightTop,
@@ -236,7 +247,8 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                  coords: Mapping[str, Any] | None = None, rrd_path: str | Path | None = None,
                  spawn: bool = False, application_id: str = "vibroscope",
                  recording_name: str | None = None, frames: int = FRAMES,
-                 recording_id: str | None = None, stabilization=None, synthesized=None) -> Path | None:
+                 recording_id: str | None = None, stabilization=None, synthesized=None,
+                 kinematics=None) -> Path | None:
     """Log the results of one analysis to one rerun recording, with a blueprint.
 
     Entities (channel names are split on ``/`` into entity path parts):
@@ -289,6 +301,10 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         Poles of SSI-COV or LSCF (``order``, ``frequency`` Hz, ``stable`` 0–3).
     synthesized : FRF, optional
         The modal model's FRFs (logged beside `frf`).
+    kinematics : (Signals, Signals), optional
+        Velocity and displacement integrated from the accelerations
+        (:func:`vibroscope.spectral.integration.integrate`), logged under ``/velocity/<channel>``
+        and ``/displacement/<channel>`` on the ``time`` timeline, in a tab of their own.
 
     Returns
     -------
@@ -335,7 +351,8 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     bp = _build_blueprint(signals=signals, spec_entities=psd is not None, frf_present=frf is not None,
                           csd_present=csd is not None, modal=modal, ftl=ftl or "frequency_mHz",
                           f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions,
-                          stabilization_present=stabilization is not None and len(stabilization.frequency) > 0)
+                          stabilization_present=stabilization is not None and len(stabilization.frequency) > 0,
+                          kinematics=kinematics)
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
     if recording_name:
@@ -361,6 +378,15 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                 rec.log(ent, rr.SeriesLines(names=f"{ch} [{signals.units[k] or '-'}]"), static=True)
                 rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
                                  columns=rr.Scalars.columns(scalars=np.asarray(signals.data[k], dtype=np.float64)))
+        for ks in kinematics or ():
+            t = np.arange(ks.n_samples) / ks.fs
+            t_ns = np.round(t * 1e9).astype(np.int64).astype("timedelta64[ns]")
+            what = "velocity" if ks is kinematics[0] else "displacement"
+            for k, ch in enumerate(ks.channels):
+                ent = channel_entity(what, ch)
+                rec.log(ent, rr.SeriesLines(names=f"{ch} [{ks.units[k] or '-'}]"), static=True)
+                rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
+                                 columns=rr.Scalars.columns(scalars=np.asarray(ks.data[k], dtype=np.float64)))
         if psd is not None:
             ftl_p, fidx_p = frequency_index(psd.frequencies)
             fac = 20.0 if psd.scaling == "amplitude" else 10.0
