@@ -159,3 +159,16 @@ def test_polymax_on_output_spectra_cross_checks_ssi(ambient):
     an = analyse_signals(ambient, method="polymax")
     assert an.modal.method == "polymax_oma"
     _assert_matches_truth(an.modal, z_tol=0.05, mac_min=0.95)  # shapes: the quick LSFD of the diagram
+
+
+def test_lscf_bootstrap_random_error(forced):
+    """The block bootstrap of the cross-spectra gives positive, small spreads for every mode."""
+    from vibroscope.modal.uncertainty import lscf_bootstrap
+
+    an = analyse_signals(forced, input=MODEL.input_channels()[0], nperseg=4096)
+    u = lscf_bootstrap(forced, MODEL.input_channels()[0], MODEL.output_channels(), an.modal, nperseg=4096,
+                       order=40, fmin=5.0, fmax=100.0)
+    assert np.all(np.isfinite(u.frequency_std_hz)) and np.all(u.frequency_std_hz > 0)
+    assert np.all(u.frequency_std_hz / an.modal.natural_frequencies < 1e-3)
+    assert np.all(u.damping_std / an.modal.damping_ratios < 0.1)
+    assert "random error only" in u.method

@@ -343,8 +343,12 @@ def auto_lscf(
         extra = {**kept.extra, **mm.extra}
         mm = dataclasses.replace(mm, extra=extra)
     mm = _add_quality(mm)
+    # the spread of a cluster over model orders is no statistical uncertainty: not reported as one
+    nan = np.full(len(mm), np.nan)
+    mm = dataclasses.replace(mm, extra={**mm.extra, "frequency_std_hz": nan, "damping_std": nan})
     settings = {"method": "lscf", "band_hz": [lo, hi], "orders": list(st.settings.get("orders", [])),
-                "uncertainty": "spread over the cluster's model orders" if len(mm) else None,
+                "uncertainty": ("not estimated for FRFs (vibroscope.modal.uncertainty.lscf_bootstrap gives the "
+                                "random part from a record)") if len(mm) else None,
                 **{k: v for k, v in sel.criteria.items() if k != "band_hz"}}
     mm = dataclasses.replace(mm, extra={**mm.extra, "settings": settings, "stabilization": st})
     return Identification(mm, tuple(sorted(rejected, key=lambda r: r.frequency_hz)), st, settings, res)

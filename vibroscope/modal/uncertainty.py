@@ -29,7 +29,7 @@ from vibroscope.modal._results import ModalModel
 from vibroscope.modal.mac import mac
 from vibroscope.modal.ssi import output_covariances
 
-__all__ = ["ModalUncertainty", "ssi_bootstrap", "pair_poles"]
+__all__ = ["ModalUncertainty", "ssi_bootstrap", "lscf_bootstrap", "pair_poles"]
 
 
 @dataclass(frozen=True)
@@ -165,3 +165,80 @@ def ssi_bootstrap(y: np.ndarray, fs: float, modes: ModalModel, *, n_lags: int, o
         zstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(Z - np.nanmedian(Z, axis=0)), axis=0), np.nan)
     return ModalUncertainty(fstd, zstd, f"block bootstrap of the output covariances, {n_blocks} blocks, "
                                         f"{n_boot} replicates at order {order}")
+
+
+def lscf_bootstrap(signals, input: str, outputs, modes: ModalModel, *, nperseg: int, order: int,
+                   fmin: float, fmax: float, window: str = "hann", n_blocks: int = 8, n_boot: int = 20,
+                   seed: int = 0) -> ModalUncertainty:
+    """Block-bootstrap standard deviations of LSCF natural frequencies and damping ratios.
+
+    Each of `n_blocks` contiguous blocks of the record gives its own cross-spectral matrix (Welch,
+    `nperseg`); a replicate sums the spectra of blocks drawn with replacement (weighted by their
+    averages), forms the H1 FRFs and runs LSCF at one polynomial order; its poles are paired with
+    the modes (:func:`pair_poles`).
+
+    Parameters
+    ----------
+    signals : Signals
+        The record the modes were identified from (input and outputs).
+    input : str
+        The force channel.
+    outputs : sequence of str
+        Response channels (the modes' points).
+    modes : ModalModel
+        The identified modes.
+    nperseg : int
+        Welch segment length of the identification.
+    order : int
+        LSCF polynomial order of the replicates.
+    fmin, fmax : float
+        Band in Hz.
+    window : str, optional
+        Welch window.
+    n_blocks : int, optional
+        Default 8.
+    n_boot : int, optional
+        Default 20.
+    seed : int, optional
+
+    Returns
+    -------
+    ModalUncertainty
+
+    Raises
+    ------
+    ValueError
+        If a block holds fewer than two segments.
+    """
+    from vibroscope.modal.lscf import lscf
+    from vibroscope.spectral import CrossSpectralMatrix, csd_matrix, frf
+
+    chans = [input, *outputs]
+    sig = signals.select(chans)
+    L = sig.n_samples // n_blocks
+    if L < 2 * nperseg:
+        raise ValueError(f"{n_blocks=} blocks of {L} samples hold fewer than two segments of {nperseg=}")
+    parts = [csd_matrix(sig.data[:, b * L:(b + 1) * L], sig.fs, nperseg=nperseg, window=window)
+             for b in range(n_blocks)]
+    Gb = np.stack([p.G for p in parts])
+    nb = np.array([p.settings.get("n_averages", 1) for p in parts], float)
+    rng = np.random.default_rng(seed)
+    F = np.full((n_boot, len(modes)), np.nan)
+    Z = np.full((n_boot, len(modes)), np.nan)
+    for i in range(n_boot):
+        w = np.bincount(rng.integers(0, n_blocks, n_blocks), minlength=n_blocks) * nb
+        G = np.tensordot(w / w.sum(), Gb, axes=1)
+        csd = CrossSpectralMatrix(parts[0].frequencies, G, tuple(chans), parts[0].units, parts[0].scaling,
+                                  dict(parts[0].settings))
+        h = frf(csd, input, list(outputs))
+        st = lscf(h, orders=[order - 1, order], fmin=fmin, fmax=fmax)
+        keep = st.order == order
+        F[i], Z[i] = pair_poles(modes, st.frequency[keep], st.damping[keep], st.shapes[keep])
+    enough = np.sum(np.isfinite(F), axis=0) >= n_boot / 2
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        fstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(F - np.nanmedian(F, axis=0)), axis=0), np.nan)
+        zstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(Z - np.nanmedian(Z, axis=0)), axis=0), np.nan)
+    return ModalUncertainty(fstd, zstd, f"block bootstrap of the cross-spectra, {n_blocks} blocks, "
+                                        f"{n_boot} replicates, LSCF order {order} (random error only: the bias of "
+                                        f"the H1 estimate is not included)")
