@@ -238,6 +238,8 @@ def analyse_signals(
     from vibroscope.spectral._engine import check_option
 
     check_option("method", method, METHODS)
+    if select is not None and method not in ("auto", "lscf", "ssi"):
+        raise ValueError(f"select= picks poles from a stabilization diagram: method 'lscf' or 'ssi', not {method!r}")
     notes = list(signals.meta.get("warnings", []))
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     flat = [c for c in outputs if np.ptp(signals[c]) == 0]
