@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vibroscope.models import LumpedModel
+from vibroscope.models import LumpedModel, close_modes_model
 from vibroscope.models.simulate import simulate
 from vibroscope.spectral import FRF, frf
 
@@ -25,7 +25,7 @@ NPERSEG = 8192  # Δf = 0.03125 Hz, 8x finer than the narrowest half-power band 
 
 
 def close_modes_5dof() -> LumpedModel:
-    """Fixed-free 5-DOF chain, force on the tip mass m5, accelerations of all masses.
+    """:func:`vibroscope.models.close_modes_model` (the parameters below, kept for reference).
 
     Returns
     -------
@@ -33,7 +33,9 @@ def close_modes_5dof() -> LumpedModel:
         Modes near 12.0, 27.0, 45.0, 45.9 and 80.0 Hz, all with ζ ≈ 1 %; modes 3 and 4 are
         2 % apart (modal overlap ≈ 1). Every mode is strongly excited at m5.
     """
-    return LumpedModel.chain(MASSES, SPRINGS, DAMPERS, input_dof=4, name="close modes 5-DOF")
+    model = close_modes_model()
+    assert model == LumpedModel.chain(MASSES, SPRINGS, DAMPERS, input_dof=4, name="close modes 5-DOF")
+    return model
 
 
 def analytic_frf(model: LumpedModel, frequencies_hz=None, quantity: str = "acceleration") -> FRF:

@@ -16,7 +16,8 @@ from vibroscope.models.elements import (
     Spring,
     make_element,
 )
-from vibroscope.models.lumped import Dof, Input, LumpedModel, Modes, Output, demo_model, demo_model_5dof
+from vibroscope.models.lumped import (Dof, Input, LumpedModel, Modes, Output, close_modes_model, demo_model,
+                                      demo_model_5dof)
 from vibroscope.models.modal_model import PoleResidueModel
 
 __all__ = [
@@ -28,6 +29,7 @@ __all__ = [
     "PoleResidueModel",
     "demo_model",
     "demo_model_5dof",
+    "close_modes_model",
     "Element",
     "Spring",
     "Damper",
