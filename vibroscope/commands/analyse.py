@@ -170,7 +170,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     outs = an.settings["outputs"]
     sc = read_coords(coords, outs) if coords else line_coords(outs)
     written = {}
-    ods_models = []
+    ods_models, ods_shapes = [], []
     if ods:
         from vibroscope.spectral.integration import ods as ods_at
         from vibroscope.viewers.acquisition import ods_as_modal_model
@@ -178,6 +178,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         for f in ods:
             o = ods_at(an.frf if an.frf is not None else an.csd, f)
             ods_models.append(ods_as_modal_model(o))
+            ods_shapes.append(o)
             print(f"ODS at {o.frequency_hz:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
                                                               for p, v in list(zip(o.points, o.shape))[:6]))
     if json_path:
@@ -198,15 +199,17 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                                 sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
                                 stabilization=ident.stabilization if ident is not None else None,
                                 synthesized=synth)
-        from vibroscope.viewers.figures import _save, plot_mode_shapes
+        from vibroscope.viewers.figures import _save
 
         acc = [c for c, u in zip(an.signals.channels, an.signals.units) if c in outs and u in ("m/s^2", "m/s²")]
         if acc:
             from vibroscope.viewers.acquisition import plot_kinematics
 
             paths.append(_save(plot_kinematics(an.signals.select(acc)), figures / "kinematics.png"))
-        for o in ods_models:
-            paths.append(_save(plot_mode_shapes(o, sc.as_mapping()), figures / f"ods_{o.natural_frequencies[0]:.4g}Hz.png"))
+        for o in ods_shapes:
+            from vibroscope.viewers.acquisition import plot_ods
+
+            paths.append(_save(plot_ods(o, sc.as_mapping()), figures / f"ods_{o.frequency_hz:.4g}Hz.png"))
         written["figures"] = paths
         print(f"figures: {', '.join(str(p) for p in paths)}")
     if rrd or spawn:

@@ -261,14 +261,16 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
         from vibroscope.viewers.acquisition import ods_as_modal_model
 
         src = h if h is not None else csd
-        ods.append(ods_as_modal_model(ods_at(src, f)))
+        ods.append(ods_at(src, f))
     figures = args.figures or _default_out(source, "")
-    from vibroscope.viewers.figures import plot_mode_shapes, summary_figures, _save
+    from vibroscope.viewers.figures import summary_figures, _save
 
     paths = summary_figures(figures, frf=h, modal=mm if len(mm) else None, sv=sv, coords=sc.as_mapping(),
                             stabilization=ident.stabilization, synthesized=synth)
     for o in ods:
-        paths.append(_save(plot_mode_shapes(o, sc.as_mapping()), Path(figures) / f"ods_{o.natural_frequencies[0]:.4g}Hz.png"))
+        from vibroscope.viewers.acquisition import plot_ods
+
+        paths.append(_save(plot_ods(o, sc.as_mapping()), Path(figures) / f"ods_{o.frequency_hz:.4g}Hz.png"))
     print(f"figures: {', '.join(str(p) for p in paths)}")
     if not args.no_rrd or args.spawn:
         from vibroscope.viewers.rerun_view import log_analysis
@@ -276,7 +278,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
         rrd = None if args.no_rrd else (args.rrd or _default_out(source, ".rrd"))
         show = mm
         if ods:
-            show = _with_ods(mm, ods)
+            show = _with_ods(mm, [ods_as_modal_model(o) for o in ods])
         log_analysis(signals=signals, psd=psd, csd=csd, frf=h, modal=show, coords=sc.as_mapping(), rrd_path=rrd,
                      spawn=args.spawn, recording_name=f"{source.stem} modal", stabilization=ident.stabilization,
                      synthesized=synth)
