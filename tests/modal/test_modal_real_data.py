@@ -87,3 +87,25 @@ def test_frf_file_errors_are_clear(tmp_path):
     assert main(["modal", str(bad), "--no-rrd"]) == 1
     with pytest.raises(SystemExit):
         main(["modal", str(bad), "--method", "nonsense"])
+
+
+def test_silverbox_log_with_an_input_and_no_imu(shared_data, tmp_path):
+    """A log without Imu and with --input: the responses are chosen from the other topics (never
+    the input's own), and LSCF gives the Silverbox's one resonance (69.5 Hz, ζ 4.8 %, the nominal
+    model of the gap example)."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location(
+        "sb_example", Path(__file__).resolve().parents[2] / "examples" / "gap" / "silverbox.py")
+    sb = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sb)
+    assert sb.main(["--data", str(shared_data / "silverbox"), "--out", str(tmp_path)]) == 0
+    js = tmp_path / "a.json"
+    assert main(["analyse", str(tmp_path / "silverbox_estimation.mcap"), "--input", "/silverbox/input.wrench.force.x",
+                 "--json", str(js), "--no-rrd", "--figures", str(tmp_path / "f")]) == 0
+    s = json.loads(js.read_text())
+    assert s["outputs"] == ["/silverbox/output.x"]
+    assert len(s["modes"]) == 1
+    assert s["modes"][0]["frequency_hz"] == pytest.approx(69.5, rel=0.005)
+    assert s["modes"][0]["damping_ratio"] == pytest.approx(0.048, rel=0.05)

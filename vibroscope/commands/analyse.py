@@ -71,10 +71,11 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
 
     notes, fallback = [], False
     if outputs is None:
-        sel = auto_channels(log)
+        # the input's topic holds the force, not a response
+        sel = auto_channels(log, exclude_topics=(input.split(".", 1)[0],) if input else ())
         notes.append(f"channels chosen automatically: {sel.reason}")
         notes += [f"{what}: skipped: {why}" for what, why in sel.skipped]
-        outputs, fallback = list(sel.channels), sel.fallback
+        outputs, fallback = [c for c in sel.channels if c != input], sel.fallback
     sig = read_mcap(log, [input, *outputs] if input else list(outputs), fs=fs, progress=progress)
     if fallback:  # automatic non-IMU choice: keep the fields that move, at most MAX_AUTO_CHANNELS
         moving = [c for c in outputs if np.ptp(sig[c]) > 0]

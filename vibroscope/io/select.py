@@ -45,7 +45,8 @@ class AutoSelection:
     fallback: bool = False
 
 
-def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int = 32) -> AutoSelection:
+def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int = 32,
+                  exclude_topics: tuple = ()) -> AutoSelection:
     """Choose what to analyse in a log with no channel given.
 
     1. Every ``linear_acceleration.{x,y,z}`` of the ``sensor_msgs/msg/Imu`` topics.
@@ -62,6 +63,8 @@ def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int
         Fewest messages a fallback topic needs (default 64).
     max_channels : int, optional
         Field count beyond which a topic scores no higher (default 32).
+    exclude_topics : tuple of str, optional
+        Topics never chosen as responses (e.g. the input's: a force is not a response).
 
     Returns
     -------
@@ -85,6 +88,8 @@ def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int
     fields = _discover(log)
     best, best_key = None, None
     for topic, paths in fields.items():
+        if topic in exclude_topics:
+            continue
         meas = [p for p in paths if not is_bookkeeping(p)]
         n = counts.get(topic, 0)
         score = n * min(len(meas), max_channels)
