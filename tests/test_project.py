@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import inspect
 import re
 import subprocess
 import sys
@@ -25,15 +24,22 @@ def test_numerical_core_imports_no_edge_library():
 
 
 @pytest.mark.parametrize("room, allowed", [
-    ("spectral", ("signals", "spectral", "errors")),
-    ("models", ("signals", "models", "errors")),
-    ("modal", ("signals", "spectral", "modal", "errors")),
+    ("spectral", ("signals", "spectral", "errors", "_checks")),
+    ("models", ("signals", "models", "errors", "_checks")),
+    ("modal", ("signals", "spectral", "modal", "errors", "_checks")),
+    ("instruments", ("signals", "models", "instruments", "errors", "_checks")),
 ])
 def test_rooms_import_only_what_the_guide_allows(room, allowed):
     """Module-level imports only: a result's ``.plot()`` imports the viewers lazily, by design."""
     for f in (REPO / "vibroscope" / room).glob("*.py"):
         for m in re.findall(r"^(?:from|import) vibroscope\.(\w+)", f.read_text(), re.M):
             assert m in allowed, f"{room}/{f.name} imports vibroscope.{m}"
+
+
+def test_models_never_import_instruments():
+    """GUIDE: instruments may use models, not the other way round (not even lazily)."""
+    for f in (REPO / "vibroscope" / "models").glob("*.py"):
+        assert not re.search(r"(?:from|import) vibroscope\.instruments", f.read_text()), f"models/{f.name}"
 
 
 def test_ci_runs_the_readme_test_command():
@@ -47,43 +53,85 @@ def test_ci_runs_the_readme_test_command():
     assert test_cmd in ci
 
 
-PUBLIC = [
-    "vibroscope.spectral.welch",
-    "vibroscope.spectral.csd_matrix",
-    "vibroscope.spectral.frf",
-    "vibroscope.spectral.coherence",
-    "vibroscope.spectral.amplitude_spectrum",
-    "vibroscope.spectral.spectrogram",
-    "vibroscope.modal.fdd",
-    "vibroscope.modal.peak_picking",
-    "vibroscope.modal.mac",
-    "vibroscope.modal.lscf",
-    "vibroscope.modal.lsfd",
-    "vibroscope.modal.ssi_cov",
-    "vibroscope.modal.select_modes",
-    "vibroscope.modal.auto_ssi",
-    "vibroscope.modal.auto_lscf",
-    "vibroscope.io.read_frf",
-    "vibroscope.spectral.integration.integrate",
-    "vibroscope.spectral.periodic.frf_periodic",
-    "vibroscope.io.read_mcap",
-    "vibroscope.io.write_ros2_mcap",
-    "vibroscope.io.mcap_info",
-    "vibroscope.models.simulate.simulate",
-    "vibroscope.models.modelfile.load_model",
-]
+# Every parameter of every public function and class is documented: tests/test_docstrings.py.
+
+LIGHT = ("rerun", "matplotlib", "mcap", "dask", "control", "numba")
 
 
-@pytest.mark.parametrize("qualname", PUBLIC)
-def test_public_functions_document_every_parameter(qualname):
-    """Like python-control's docstrings_test: every parameter of a public function is documented."""
+def test_import_vibroscope_is_light_and_offers_the_first_names():
+    """``import vibroscope`` loads none of the heavy edges; its curated names load on first use."""
+    import vibroscope
+
+    code = (
+        "import sys, vibroscope;"
+        f"heavy = [m for m in {LIGHT!r} if m in sys.modules];"
+        "print(','.join(heavy));"
+        "import inspect;"
+        "names = [n for n in vibroscope.__all__ if not n.startswith('__')];"
+        "bad = [n for n in names if not (inspect.isfunction(getattr(vibroscope, n)) or inspect.isclass(getattr(vibroscope, n)))];"
+        "print(','.join(bad));"
+        "print(','.join(sorted(set(dir(vibroscope)) & set(names))))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
+    heavy, bad, listed = out.stdout.splitlines()
+    assert heavy == "", f"import vibroscope imported {heavy}"
+    assert bad == "", f"not a function or class: {bad}"
+    assert set(listed.split(",")) == {n for n in vibroscope.__all__ if not n.startswith("__")}
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        vibroscope.nope  # noqa: B018
+
+
+@pytest.mark.parametrize("name, module", [
+    ("read_mcap", "vibroscope.io"), ("welch", "vibroscope.spectral"), ("csd_matrix", "vibroscope.spectral"),
+    ("frf", "vibroscope.spectral"), ("lscf", "vibroscope.modal"), ("lsfd", "vibroscope.modal"),
+    ("ssi_cov", "vibroscope.modal"), ("fdd", "vibroscope.modal"), ("peak_picking", "vibroscope.modal"),
+    ("auto_ssi", "vibroscope.modal"), ("auto_lscf", "vibroscope.modal"),
+    ("load_model", "vibroscope.models.modelfile"), ("simulate", "vibroscope.models.simulate"),
+    ("diagnose", "vibroscope.gap"), ("Signals", "vibroscope.signals"),
+])
+def test_top_level_name_is_the_rooms_object(name, module):
+    """Each curated name is the very object its room exports (not a copy, not a module)."""
     import importlib
 
-    mod, name = qualname.rsplit(".", 1)
-    fn = getattr(importlib.import_module(mod), name)
-    doc = inspect.getdoc(fn) or ""
-    assert "Parameters" in doc or not inspect.signature(fn).parameters, f"{qualname} has no Parameters section"
-    for p in inspect.signature(fn).parameters.values():
-        if p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL):
-            continue
-        assert re.search(rf"^\s*{p.name}\b|[ ,]{p.name}\b.*:", doc, re.M), f"{qualname}: parameter {p.name!r} undocumented"
+    import vibroscope
+
+    assert getattr(vibroscope, name) is getattr(importlib.import_module(module), name)
+    assert name in vibroscope.__all__
+
+
+def _readme_command(needle: str) -> list[str]:
+    import shlex
+
+    readme = (REPO / "README.md").read_text()
+    lines = [ln.strip(" -`") for ln in readme.splitlines() if needle in ln and "vibroscope simulate" in ln]
+    assert lines, f"README names no `vibroscope simulate {needle}` command"
+    cmd = lines[0][lines[0].index("vibroscope simulate"):]
+    return shlex.split(cmd[: cmd.index("`")] if "`" in cmd else cmd)
+
+
+def test_example_model_file_simulates(tmp_path, monkeypatch):
+    """examples/models/three_dof.toml is the demo model, and the README's command simulates it
+    into a log that reads back as the model's simulation."""
+    import numpy as np
+
+    from vibroscope.cli import main
+    from vibroscope.io import read_mcap
+    from vibroscope.models import demo_model
+    from vibroscope.models.modelfile import load_model
+    from vibroscope.models.simulate import simulate
+
+    path = REPO / "examples" / "models" / "three_dof.toml"
+    model = load_model(path)
+    assert model == demo_model()
+    argv = _readme_command("examples/models/three_dof.toml")
+    assert argv[:3] == ["vibroscope", "simulate", "examples/models/three_dof.toml"] and "--excitation" in argv
+    out = tmp_path / "three_dof.mcap"
+    argv[argv.index("--out") + 1] = str(out)
+    monkeypatch.chdir(REPO)
+    assert main([*argv[1:], "--duration", "20", "--seed", "1"]) == 0
+    chans = model.input_channels() + model.output_channels()
+    log = read_mcap(out, channels=chans)
+    assert log.channels == tuple(chans) and log.fs == pytest.approx(1000.0) and log.n_samples == 20_000
+    assert np.std(log.data[0]) == pytest.approx(10.0, rel=0.05)  # rms=10 of the excitation
+    ref = simulate(model, log.data[0], log.fs)
+    np.testing.assert_allclose(log.data[1:], ref.data[1:], rtol=0, atol=1e-9 * np.abs(ref.data[1:]).max())

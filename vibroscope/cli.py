@@ -24,13 +24,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        try:
-            mod = importlib.import_module(f"vibroscope.commands.{name}")
-        except ModuleNotFoundError as exc:  # a command not built yet
-            if exc.name == f"vibroscope.commands.{name}":
-                continue
-            raise
-        mod.add_parser(sub)
+        importlib.import_module(f"vibroscope.commands.{name}").add_parser(sub)
     return parser
 
 

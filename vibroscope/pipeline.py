@@ -35,8 +35,9 @@ class Analysis:
         H1/H2/Hv estimate from the input to every response, with coherence; None without input.
     modal : ModalModel
         Natural frequencies (Hz), damping ratios, complex mode shapes over the response channels.
-    singular_values : tuple of ndarray
-        ``(frequencies Hz, S (n_freqs, n_channels))`` of the response CSD (FDD).
+    singular_values : SingularValues
+        Singular values of the response CSD (FDD); unpacks as ``(frequencies Hz, S (n_freqs,
+        n_channels))``.
     settings : dict
         Welch settings and the band analysed.
     warnings : list of str
@@ -235,7 +236,7 @@ def analyse_signals(
     """
     from vibroscope import modal
     from vibroscope.modal.selection import excited_band, response_band
-    from vibroscope.spectral._engine import check_option
+    from vibroscope._checks import check_option
 
     check_option("method", method, METHODS)
     if select is not None and method not in ("auto", "lscf", "ssi"):

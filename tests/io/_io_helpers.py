@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-import numpy as np
+import struct
+from pathlib import Path
+
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from vibroscope.io._ros2 import MSGDEFS
@@ -40,3 +42,35 @@ def write_imu_log(path, topics: dict, *, chunk_size: int = 1 << 20, frame_ids=No
             fid = frame_ids[k % len(frame_ids)] if frame_ids else "imu"
             w.write_message(topic, schema, imu_msg(int(st[k]), ax[k], 2 * ax[k], -ax[k], fid), log_time=lt)
         w.finish()
+
+
+_FOOTER = 1 + 8 + 20  # opcode, record length, (summary_start u64, summary_offset_start u64, summary_crc u32)
+
+
+def _footer_fields(data) -> tuple[int, int, int, int]:
+    """(footer offset, summary_start, summary_offset_start, summary_crc) of an MCAP file's bytes."""
+    fpos = len(data) - 8 - _FOOTER
+    assert data[fpos] == 0x02, "no footer record before the closing magic"
+    return (fpos, *struct.unpack_from("<QQI", data, fpos + 9))
+
+
+def copy_with_damaged_summary(src, dst):
+    """`src` copied to `dst` with one byte of its summary section flipped, so that the summary
+    fails its CRC-32 (the data section is untouched). Returns `dst`."""
+    data = bytearray(Path(src).read_bytes())
+    _, start, _, crc = _footer_fields(data)
+    assert start and crc, "the file has no summary CRC to break"
+    data[start + 9] ^= 0xFF  # inside the first summary record's body
+    Path(dst).write_bytes(bytes(data))
+    return Path(dst)
+
+
+def copy_without_summary(src, dst):
+    """`src` copied to `dst` with its footer saying there is no summary section
+    (``summary_start = 0``, as from a writer that wrote none). Returns `dst`."""
+    data = bytearray(Path(src).read_bytes())
+    fpos, start, _, _ = _footer_fields(data)
+    assert start, "the file has no summary section"
+    struct.pack_into("<QQI", data, fpos + 9, 0, 0, 0)
+    Path(dst).write_bytes(bytes(data))
+    return Path(dst)

@@ -11,6 +11,8 @@ from vibroscope.cli import main
 from vibroscope.errors import ChannelError
 from vibroscope.io import discover_fields, mcap_info, read_mcap
 
+from _io_helpers import copy_without_summary
+
 FILES = ["alternate_bagfile_0", "bagfile_0", "controlled_data_0", "torque_ripple_data_0", "uncontrolled_data_0"]
 COUNTS = {"alternate_bagfile_0": 129300, "bagfile_0": 25387, "controlled_data_0": 1356,
           "torque_ripple_data_0": 409150, "uncontrolled_data_0": 1594}
@@ -69,16 +71,16 @@ def test_info_command(capstan, capsys):
     assert d["message_count"] == 1356
 
 
-def test_chunk_index_skips_unwanted_chunks(capstan, monkeypatch):
-    p = capstan / "torque_ripple_data_0.mcap"
-    ch = ["/robot/joint_state.position[0]"]
-    fast = read_mcap(p, ch)
+@pytest.mark.parametrize("name, channel", [("alternate_bagfile_0", "/robot/cpu_load.cpu_load"),
+                                           ("torque_ripple_data_0", "/robot/joint_state.position[0]")])
+def test_chunk_index_skips_unwanted_chunks(capstan, tmp_path, name, channel):
+    p = capstan / f"{name}.mcap"
+    fast = read_mcap(p, [channel])
     assert fast.meta["indexed"] is True
-    from vibroscope.io import _scan
-
-    real = _scan._read_summary
-    monkeypatch.setattr(_scan, "_read_summary", lambda *a: None)  # as if the summary were damaged
-    full = read_mcap(p, ch)
+    # /robot/cpu_load is in 13 of the 17 chunks; /robot/joint_state in all of them
+    assert fast.meta["chunks_skipped_by_index"] == (4 if "cpu_load" in channel else 0)
+    # the same recording with no summary section: every chunk is read, the samples are the same
+    full = read_mcap(copy_without_summary(p, tmp_path / "no_summary.mcap"), [channel])
     assert full.meta["indexed"] is False and full.meta["chunks_skipped_by_index"] == 0
-    assert np.array_equal(fast.data, full.data) and fast.t0 == full.t0
-    assert real is not None
+    assert np.array_equal(fast.data, full.data) and fast.t0 == full.t0 and fast.fs == full.fs
+    assert full.meta["skipped"] == fast.meta["skipped"]

@@ -6,8 +6,6 @@ from __future__ import annotations
 import json
 from collections import Counter
 
-import pytest
-
 from vibroscope.io import iter_raw_messages, mcap_info
 
 
@@ -30,7 +28,7 @@ def test_conformance_suite(shared_data):
     for f in files:
         js = json.loads(f.with_suffix(".json").read_text())
         channels, msgs = _expected(js)
-        got = iter_raw_messages(f)
+        got = list(iter_raw_messages(f))
         exp = Counter((channels.get(c, ""), c, t, d) for c, t, d in msgs)
         assert Counter((tp, c, t, d) for tp, c, t, d in got) == exp, f.name
         # file order within the data section is kept

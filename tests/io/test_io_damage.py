@@ -72,6 +72,25 @@ def test_cut_in_header_raises(tmp_path, log):
         _read(q)
 
 
+def test_iter_raw_messages_is_a_lazy_iterator_of_the_intact_messages(tmp_path, log):
+    p, data, x, chunks = log
+    it = iter_raw_messages(p)
+    assert iter(it) is it and not isinstance(it, (list, tuple))
+    topic, cid, t, payload = next(it)
+    assert topic == "/imu" and t == 50_000_000_000 and isinstance(payload, bytes)
+    assert 1 + sum(1 for _ in it) == N
+    # a cut file: the messages of the intact chunks, in file order
+    q = tmp_path / "cut.mcap"
+    q.write_bytes(data[: chunks[2][1] + 3])
+    got = list(iter_raw_messages(q))
+    assert len(got) == chunks[0][2] + chunks[1][2] + chunks[2][2]
+    assert [m[2] for m in got] == sorted(m[2] for m in got)
+    # nothing readable: raised by the call itself, not on the first next()
+    q.write_bytes(b"not an mcap file at all")
+    with pytest.raises(LogFormatError, match="byte offset 0"):
+        iter_raw_messages(q)
+
+
 @pytest.mark.parametrize("which", [1, 3])
 def test_flipped_byte_in_chunk(tmp_path, log, which):
     p, data, x, chunks = log

@@ -13,7 +13,7 @@ from vibroscope.io._ros2 import FLOAT_FIELDS, MSGDEFS, encode_fixed
 from vibroscope.io.mcap_write import stamps_ns, write_json_mcap, write_ros2_mcap
 from vibroscope.signals import Signals
 
-from _io_helpers import write_imu_log
+from _io_helpers import copy_with_damaged_summary, write_imu_log
 
 
 @pytest.fixture
@@ -139,25 +139,55 @@ def test_unknown_channel_errors_name_topic_and_field(tmp_path, mixed_signals):
         read_mcap(p, ["/env.pressure"])
 
 
-def test_progress_bar(tmp_path, mixed_signals, capsys):
+def test_progress_bar(tmp_path, mixed_signals, capfd):
     p = write_ros2_mcap(tmp_path / "a.mcap", mixed_signals)
     r = read_mcap(p, ["/imu/m1.linear_acceleration.x"], progress=True)
     assert r.n_samples == 777
+    out, err = capfd.readouterr()
+    # tqdm's bar over the file's bytes, on stderr, run to the end (100 %)
+    assert out == "" and "a.mcap" in err and "100%" in err
+    read_mcap(p, ["/imu/m1.linear_acceleration.x"])
+    assert capfd.readouterr().err == ""  # no bar without progress=True
 
 
-def test_chunk_index_skips_chunks_of_other_topics(tmp_path, monkeypatch):
-    from vibroscope.io import _scan
-
-    n = 2000
+def _sequential_log(path, n=2000):
+    """/a then /b, each in chunks of its own (/b logged entirely after /a); returns /a's x."""
     st = 1_000_000_000 + np.arange(n, dtype=np.int64) * 1_000_000
     ax = np.random.default_rng(8).standard_normal(n)
-    p = tmp_path / "seq.mcap"
-    # /b logged entirely after /a: separate chunks
-    write_imu_log(p, {"/a": (st, ax), "/b": (st, -ax)}, chunk_size=16_000,
+    write_imu_log(path, {"/a": (st, ax), "/b": (st, -ax)}, chunk_size=16_000,
                   log_times={"/b": st + n * 1_000_000})
+    return ax
+
+
+def test_chunk_index_skips_chunks_of_other_topics(tmp_path):
+    p = tmp_path / "seq.mcap"
+    ax = _sequential_log(p)
     r = read_mcap(p, ["/a.linear_acceleration.x"])
     assert r.meta["indexed"] and r.meta["chunks_skipped_by_index"] > 3
     assert np.array_equal(r.data[0], ax)
-    monkeypatch.setattr(_scan, "_read_summary", lambda *a: None)
-    full = read_mcap(p, ["/a.linear_acceleration.x"])
-    assert full.meta["chunks_skipped_by_index"] == 0 and np.array_equal(full.data, r.data)
+    # a damaged summary (its CRC fails) is not used: every chunk is read, with the same result
+    q = copy_with_damaged_summary(p, tmp_path / "bad_summary.mcap")
+    full = read_mcap(q, ["/a.linear_acceleration.x"])
+    assert not full.meta["indexed"] and full.meta["chunks_skipped_by_index"] == 0
+    assert np.array_equal(full.data, r.data) and full.meta["skipped"] == []
+
+
+def test_messages_lost_in_a_damaged_chunk_count_only_its_own(tmp_path):
+    """A damaged chunk followed by chunks passed over by the index: the loss reported for the
+    damaged chunk counts its own messages, not theirs."""
+    from vibroscope.io._scan import scan
+
+    p = tmp_path / "seq.mcap"
+    ax = _sequential_log(p)
+    blocks = scan(p).blocks
+    a_id = int(blocks[0].channel_id[0])
+    last_a = [b for b in blocks if a_id in b.channel_id][-1]  # the next chunks hold /b only
+    data = bytearray(p.read_bytes())
+    data[last_a.file_offset + 200] ^= 0xFF  # inside the chunk's (uncompressed) records: its CRC fails
+    q = tmp_path / "dmg.mcap"
+    q.write_bytes(bytes(data))
+    r = read_mcap(q, ["/a.linear_acceleration.x"])
+    assert r.meta["chunks_skipped_by_index"] > 3
+    (off, reason), = [(s["offset"], s["reason"]) for s in r.meta["skipped"] if "offset" in s]
+    assert off == last_a.file_offset and reason.endswith(f"({last_a.n} messages lost)"), reason
+    assert r.n_samples == ax.size - np.count_nonzero(last_a.channel_id == a_id)

@@ -100,3 +100,64 @@ def test_import_boundaries():
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+def test_match_modes_mac_min_drops_pairs_below_it():
+    ref = (np.array([10.0, 20.0]), np.eye(3)[:2])
+    est = (np.array([10.1, 19.9]), np.array([[1.0, 0.0, 0.0], [0.6, 0.8, 0.0]]))  # MAC 1 and 0.64
+    assert len(match_modes(est, ref).pairs) == 2
+    m = match_modes(est, ref, mac_min=0.7)
+    np.testing.assert_array_equal(m.pairs, [[0, 0]])
+    assert m.mac[0] == pytest.approx(1.0)
+
+
+def _two_dof_frf():
+    from vibroscope.models import LumpedModel
+    from vibroscope.spectral import FRF
+
+    model = LumpedModel.chain([1.0, 1.0], [2e4, 2e4], [4.0, 4.0])
+    f = np.arange(1, 2001) * 0.05
+    return model, FRF(f, model.frf(f), np.ones((2000, 2)), ["u"], ["a1", "a2"], "analytic", "accelerance")
+
+
+def test_stabilization_is_read_only_and_prints_a_summary():
+    from vibroscope.modal import lscf, lsfd
+
+    model, h = _two_dof_frf()
+    st = lscf(h, orders=range(2, 21), mac_min=0.98)
+    assert st.settings["mac_min"] == 0.98 and "tol_mac" not in st.settings
+    for name in ("order", "frequency", "damping", "shapes", "stable"):
+        with pytest.raises(ValueError):
+            getattr(st, name)[0] = 0
+    text = repr(st)
+    assert text.startswith("Stabilization('lscf', ") and "orders 2–20" in text and "array" not in text
+    modes = st.modal_model()
+    np.testing.assert_allclose(modes.natural_frequencies, model.modes().natural_frequencies, rtol=1e-3)
+    res = lsfd(h, modes.natural_frequencies, modes.damping_ratios)
+    text = repr(res)
+    assert text.startswith("LSFDResult(2 modes, f = [13.91, 36.42] Hz") and "array" not in text
+
+
+def test_singular_values_is_a_result_that_unpacks():
+    from vibroscope.modal import SingularValues, singular_values
+    from vibroscope.spectral import csd_matrix
+
+    x = np.random.default_rng(4).standard_normal((3, 8192))
+    G = csd_matrix(x, 100.0, nperseg=256)
+    sv = singular_values(G)
+    assert isinstance(sv, SingularValues) and sv.channels == G.channels and sv.settings["nperseg"] == 256
+    f, S = sv
+    assert len(sv) == 2 and sv[0] is f and sv[1] is S and S.shape == (129, 3)
+    np.testing.assert_allclose(S.sum(axis=1), np.real(np.trace(G.G, axis1=1, axis2=2)), rtol=1e-10)
+    with pytest.raises(ValueError):
+        S[0, 0] = 1.0
+    assert repr(sv) == "SingularValues(3 of 3 channels ['0', '1', '2'], 129 lines, 0–50 Hz)"
+
+
+def test_resonance_peaks_find_the_vertex_between_lines():
+    """The parabolic refinement is exact for a parabola (in dB) whose vertex lies between lines."""
+    from vibroscope.modal.compare import resonance_peaks
+
+    f = np.arange(0.0, 50.0, 0.5)
+    db = np.maximum(-40.0, -((f - 20.3) ** 2))
+    assert resonance_peaks(f, db, prominence=3.0) == pytest.approx([20.3], abs=1e-9)

@@ -86,7 +86,7 @@ def test_both_find_the_true_modes(identified):
 
 def test_ours_agrees_with_pyoma2(identified):
     name, model, true, ours, (f_py, z_py, phi_py), _, _ = identified
-    m = match_modes(ours, (f_py, phi_py), max_frequency_error=TOL_F_AGREE, min_mac=0.99)
+    m = match_modes(ours, (f_py, phi_py), max_frequency_error=TOL_F_AGREE, mac_min=0.99)
     assert len(m.pairs) == len(f_py), f"only {len(m.pairs)} of {len(f_py)} pyOMA2 modes matched"
     ie, ip = m.pairs.T
     rel_f = ours.natural_frequencies[ie] / f_py[ip] - 1

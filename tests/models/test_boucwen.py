@@ -1,23 +1,21 @@
 """The Bouc-Wen hysteretic benchmark (Noël & Schoukens 2016): reproduce the published,
 noise-free validation outputs from their inputs. Data: ../shared/data/boucwen (skips without)."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from vibroscope.models.simulate import boucwen_benchmark_model, simulate_boucwen_benchmark
 
-DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "boucwen"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data/boucwen")
-pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason=f"Bouc-Wen benchmark data not found at {DATA}")
 
-
-def load(name):
+@pytest.fixture(scope="module")
+def load(shared_data):
+    """``load(name)``: one benchmark record as a flat float array (skips without the data)."""
     from scipy.io import loadmat
 
-    return np.asarray(loadmat(DATA / f"{name}.mat")[name], dtype=float).ravel()
+    data = shared_data / "boucwen"
+    if not data.is_dir():
+        pytest.skip(f"Bouc-Wen benchmark data not found at {data}")
+    return lambda name: np.asarray(loadmat(data / f"{name}.mat")[name], dtype=float).ravel()
 
 
 def test_linear_part_matches_table2():
@@ -28,7 +26,7 @@ def test_linear_part_matches_table2():
     assert fn == pytest.approx(35.59, abs=0.005)
 
 
-def test_multisine_validation_output():
+def test_multisine_validation_output(load):
     """One steady-state period (8192 samples at 750 Hz): simulate 2 periods at 15 kHz and
     compare the last; published accuracy target 1e-6 m RMS (output RMS ~6.7e-4 m)."""
     u, y = load("uval_multisine"), load("yval_multisine")
@@ -39,7 +37,7 @@ def test_multisine_validation_output():
 
 
 @pytest.mark.slow
-def test_sinesweep_validation_output():
+def test_sinesweep_validation_output(load):
     """The sine sweep (153 000 samples, from rest): 3.06 million integration steps."""
     u, y = load("uval_sinesweep"), load("yval_sinesweep")
     ys = simulate_boucwen_benchmark(u, fs=750.0)

@@ -43,14 +43,23 @@ def test_proportional_damping_matches_undamped_problem():
     # C = a M + b K -> same frequencies as undamped problem, zeta_r = a/(2 w) + b w/2
     masses, springs = [2.0, 1.5, 1.0], [1e5, 8e4, 5e4]
     und = LumpedModel.chain(masses, springs, 0.0)
-    a, b = 0.0, 2e-4  # stiffness-proportional via dampers parallel to springs: c_i = b k_i
-    prop = LumpedModel.chain(masses, springs, [b * k for k in springs])
+    a, b = 0.8, 2e-4
+    # b K: dampers parallel to the springs (c_i = b k_i); a M: a damper from each mass to ground
+    stiff = LumpedModel.chain(masses, springs, [b * k for k in springs])
+    prop = stiff.replace(elements=stiff.elements + tuple(
+        Damper((d.name, "ground"), c=a * d.mass) for d in stiff.dofs))
+    np.testing.assert_allclose(prop.C, a * prop.M + b * prop.K, rtol=1e-12)
     eigw2 = np.sort(np.linalg.eigvals(np.linalg.solve(und.M, und.K)).real)
-    f_und = np.sqrt(eigw2) / (2 * np.pi)
-    md = prop.modes()
-    np.testing.assert_allclose(md.natural_frequencies, f_und, rtol=1e-10)
-    np.testing.assert_allclose(md.damping_ratios, b * 2 * np.pi * f_und / 2, rtol=1e-8)
+    w = np.sqrt(eigw2)
+    f_und = w / (2 * np.pi)
     np.testing.assert_allclose(und.modes().natural_frequencies, f_und, rtol=1e-10)
+    for model, alpha in ((stiff, 0.0), (prop, a)):
+        md = model.modes()
+        np.testing.assert_allclose(md.natural_frequencies, f_und, rtol=1e-10)
+        np.testing.assert_allclose(md.damping_ratios, alpha / (2 * w) + b * w / 2, rtol=1e-8)
+    # the mass-proportional part adds damping, most to the lowest mode
+    extra = prop.modes().damping_ratios - stiff.modes().damping_ratios
+    assert np.all(extra > 0) and np.all(np.diff(extra) < 0)
 
 
 def test_sdof_frf_closed_form():

@@ -177,6 +177,15 @@ def test_bouc_wen_and_mr_params(tmp_path):
     assert isinstance(m.elements[4], MRDamper) and m.elements[4].current == 1.5
 
 
+def test_loads_model_parses_text_and_names_its_path(tmp_path):
+    """The text parser behind load_model: same model, and errors name the path it is given."""
+    assert loads_model(GOOD) == load_model(write(tmp_path, GOOD))
+    with pytest.raises(ModelFileError, match=r"^<string>:\d+:.*'mass'"):
+        loads_model(GOOD.replace("mass = 1.0", "mass = -1.0"))
+    with pytest.raises(ModelFileError, match=r"^rig\.toml:\d+:.*'kind'"):
+        loads_model(GOOD.replace('kind = "lumped"', 'kind = "fem"'), path="rig.toml")
+
+
 def test_missing_file(tmp_path):
     with pytest.raises(ModelFileError, match="cannot read"):
         load_model(tmp_path / "nope.toml")

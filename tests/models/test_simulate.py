@@ -7,14 +7,10 @@ from scipy import integrate, signal
 
 from vibroscope.models.elements import BoucWen, CubicSpring, Damper, Spring
 from vibroscope.models.excitation import band_limited_random, multisine
+from vibroscope.models.integrate import integrate as integrate_model
 from vibroscope.models.lumped import Dof, Input, LumpedModel, Output, demo_model
-from vibroscope.models.simulate import (
-    _Integrator,
-    decimate_fir,
-    simulate,
-    simulate_periodic,
-    upsample,
-)
+from vibroscope.models._reference_integrator import _Integrator
+from vibroscope.models.simulate import decimate_fir, simulate, simulate_periodic, upsample
 
 
 def sdof(m=1.0, k=4e4, c=8.0, quantity="displacement", **kw):
@@ -163,8 +159,25 @@ def _duffing_reference(model, t_grid, uf):
     return integrate.solve_ivp(rhs, (0, t_grid[-1]), [0, 0], t_eval=t_grid, method="DOP853", rtol=1e-12, atol=1e-15).y
 
 
-@pytest.mark.parametrize("general", [False, True])
-def test_trapezoidal_converges_with_second_order(general):
+def _zero_cubic(ends=("m1", "ground")):
+    """A nonlinear element that adds no force: with it, the reference integrator takes its
+    general (several-element) path on what is physically the same model."""
+    return CubicSpring(ends, k3=0.0)
+
+
+def _fine_states(integrator, model, U, dt):
+    """States q (2n, N) of `model` under the fine-grid input `U`: the compiled kernel
+    (vibroscope.models.integrate.integrate) or the pure-Python reference."""
+    if integrator == "compiled":
+        return integrate_model(model, U, dt, store_states=True).q
+    ref = _Integrator(model, dt)
+    Q, _ = ref.run(U)
+    assert ref.newton_failures == 0
+    return Q
+
+
+@pytest.mark.parametrize("integrator", ["compiled", "reference"])
+def test_trapezoidal_converges_with_second_order(integrator):
     """Error vs step size of the nonlinear integrator on a hardening Duffing oscillator with a
     smooth input: halving the step divides the error by 4 (order 2, Newmark 1959)."""
     model = LumpedModel(
@@ -182,17 +195,16 @@ def test_trapezoidal_converges_with_second_order(general):
     for nsub in (100, 200, 400):
         n = 40 * nsub + 1
         t = np.linspace(0, T, n)
-        integ = _Integrator(model, T / (n - 1))
-        run = integ._run_general if general else integ._run_scalar
-        Q, _ = run(uf(t)[None], None, None)
+        Q = _fine_states(integrator, model, uf(t)[None], T / (n - 1))
         errs.append(np.max(np.abs(Q[0, ::nsub] - ref)))
     ratios = np.array(errs[:-1]) / np.array(errs[1:])
     np.testing.assert_allclose(ratios, 4.0, rtol=0.1)
 
 
-def test_bouc_wen_general_and_scalar_kernels_agree_and_converge():
-    """The non-smooth Bouc-Wen element (|v|, |z|): both kernels give the same answer, and the
-    error against a 4x finer step still falls about 4x per halving."""
+def test_bouc_wen_converges_and_the_integrators_agree():
+    """The non-smooth Bouc-Wen element (|v|, |z|): the error against a 4x finer step still falls
+    about 4x per halving, and the compiled kernel and both paths of the reference integrator
+    (one element; several elements) give the same answer."""
     model = LumpedModel(
         (Dof("m", 2.0),),
         (Spring(("m", "ground"), k=5e4), Damper(("m", "ground"), c=10.0), BoucWen(("m", "ground"))),
@@ -205,14 +217,18 @@ def test_bouc_wen_general_and_scalar_kernels_agree_and_converge():
     for nsub in (25, 50, 100, 400):
         n = 40 * nsub + 1
         t = np.linspace(0, T, n)
-        sols[nsub] = _Integrator(model, T / (n - 1))._run_scalar(uf(t)[None], None, None)[0][0, ::nsub]
+        sols[nsub] = _fine_states("compiled", model, uf(t)[None], T / (n - 1))[0, ::nsub]
     ref = sols[400]
     e = [np.max(np.abs(sols[s] - ref)) for s in (25, 50, 100)]
     assert e[0] / e[1] > 3.0 and e[1] / e[2] > 3.0, e
     n = 40 * 25 + 1
     t = np.linspace(0, T, n)
-    Qg, Gg = _Integrator(model, T / (n - 1))._run_general(uf(t)[None], None, None)
-    np.testing.assert_allclose(Qg[0, ::25], sols[25], atol=1e-12 * np.abs(ref).max() + 1e-14)
+    U, dt = uf(t)[None], T / (n - 1)
+    one = _fine_states("reference", model, U, dt)
+    several = _fine_states("reference", model.replace(elements=model.elements + (_zero_cubic(("m", "ground")),)), U, dt)
+    tol = 1e-12 * np.abs(ref).max() + 1e-14
+    np.testing.assert_allclose(one[0, ::25], sols[25], atol=tol)
+    np.testing.assert_allclose(several[0, ::25], sols[25], atol=tol)
 
 
 def test_upsample_and_decimate_roundtrip():
@@ -282,8 +298,8 @@ def test_mr_damper_general_kernel_runs_and_damps():
 
 
 def test_mr_damper_element_matches_mr_damper_module():
-    """The element's eq.-5 force and state derivatives equal vibroscope.models.mr_damper's."""
-    mr = pytest.importorskip("vibroscope.models.mr_damper")
+    """The element's eq.-5 force and state derivatives equal vibroscope.instruments.mr_damper's."""
+    mr = pytest.importorskip("vibroscope.instruments.mr_damper")
     from vibroscope.models.elements import MRDamper
 
     coeffs = mr.MRDamperParams.spencer1997().at_current(1.0)
@@ -296,15 +312,63 @@ def test_mr_damper_element_matches_mr_damper_module():
         assert el.force(x, v, (z, y)) == pytest.approx(f_ref, rel=1e-12)
 
 
-def test_kernels_agree_on_multi_dof():
-    """The fast single-element kernel (numpy state update for n > 1) and the generic one."""
+def test_integrators_agree_on_multi_dof():
+    """Two DOFs and one nonlinear element: the compiled kernel, the reference integrator (its
+    single-element path, numpy state update for n > 1) and the reference's general path (the
+    same model with a force-free second element) agree."""
     model = LumpedModel.chain([1.0, 0.5], [4e4, 2e4], [8.0, 3.0], nonlinear=(CubicSpring(("m2", "m1"), k3=5e9),))
     n = 4001
     t = np.linspace(0, 0.4, n)
     U = (30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 61 * t))[None]
-    integ = _Integrator(model, t[1])
-    Qs, Gs = integ._run_scalar(U, None, None)
-    Qg, Gg = integ._run_general(U, None, None)
-    for a, b in zip(Qs, Qg):
-        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(a).max())
-    np.testing.assert_allclose(Gs, Gg, rtol=0, atol=1e-9 * np.abs(Gs).max())
+    res = integrate_model(model, U, t[1], store_states=True)
+    ref = _Integrator(model, t[1])
+    Qs, Gs = ref.run(U)
+    gen = _Integrator(model.replace(elements=model.elements + (_zero_cubic(("m2", "m1")),)), t[1])
+    Qg, Gg = gen.run(U)
+    assert ref.newton_failures == gen.newton_failures == res.newton_failures == 0
+    for a, b, c in zip(Qs, Qg, res.q):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-9 * np.abs(a).max())
+        np.testing.assert_allclose(c, a, rtol=0, atol=1e-9 * np.abs(a).max())
+    np.testing.assert_allclose(Gg[:1], Gs, rtol=0, atol=1e-9 * np.abs(Gs).max())
+    np.testing.assert_array_equal(Gg[1], 0.0)
+    np.testing.assert_allclose(res.g, Gs, rtol=0, atol=1e-9 * np.abs(Gs).max())
+
+
+def test_models_simulate_is_always_the_module():
+    """``vibroscope.models.simulate`` means one thing: the module, before and after anything imports
+    from it (the function is ``vibroscope.models.simulate.simulate``, also ``vibroscope.simulate``)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import types, vibroscope, vibroscope.models as m\n"
+        "first = m.simulate\n"
+        "from vibroscope.models.simulate import simulate, upsample\n"
+        "import vibroscope.models.simulate as by_import\n"
+        "assert isinstance(first, types.ModuleType), first\n"
+        "assert first is m.simulate is by_import, (first, m.simulate)\n"
+        "assert m.simulate.simulate is simulate is vibroscope.simulate\n"
+        "from vibroscope.models import simulate as again\n"
+        "assert again is first\n"
+        "assert m.simulate_periodic is m.simulate.simulate_periodic  # other lazy names unchanged\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_reference_integrator_reports_newton_failures():
+    """The pure-Python reference counts and warns about steps whose Newton iteration did not
+    converge, as the compiled kernel does: near-Coulomb friction (v_eps = 1 nm/s) with a step
+    far too large for it; and none with a smooth element."""
+    from vibroscope.models.elements import Friction
+
+    model = _sdof_with(Friction(("m1", "ground"), force_=20.0, v_eps=1e-9))
+    U = (50 * np.sin(2 * np.pi * 30 * np.arange(400) * 1e-3))[None]
+    kernel = integrate_model(model, U, 1e-2, warn=False)
+    assert kernel.newton_failures > 100
+    ref = _Integrator(model, 1e-2)
+    with pytest.warns(RuntimeWarning, match="did not converge at [0-9]+ of 399 integration steps"):
+        ref.run(U)
+    assert ref.newton_failures > 100
+    smooth = _Integrator(_sdof_with(CubicSpring(("m1", "ground"), k3=4e9)), 1e-3)
+    smooth.run(U)
+    assert smooth.newton_failures == 0

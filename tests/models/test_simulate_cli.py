@@ -125,3 +125,26 @@ def test_simulate_then_analyse_finds_exactly_the_model_modes(tmp_path, model_fil
     assert len(found) == 2
     np.testing.assert_allclose(found, truth.natural_frequencies, rtol=0.005)
     np.testing.assert_allclose([m["damping_ratio"] for m in s["modes"]], truth.damping_ratios, rtol=0.1)
+
+
+def test_simulate_help_is_plain_text(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "``" not in out and ":func:" not in out  # no reST markup
+    # the description keeps its paragraphs and line breaks (RawDescriptionHelpFormatter)
+    assert "Drive a model file with an excitation or a recorded input" in out
+    assert "\n\nWith --input, the model's input channels" in out
+
+
+def test_every_command_is_registered():
+    """No command is silently left out of the parser (a failing import of a command module is an
+    error, not a missing sub-command)."""
+    import argparse
+
+    from vibroscope.cli import COMMANDS, build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(COMMANDS) <= set(sub.choices)  # (plus aliases such as "analyze")
+    assert all(sub.choices[c].get_default("func") is not None for c in COMMANDS)

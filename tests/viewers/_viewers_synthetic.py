@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vibroscope.signals import Signals
-from vibroscope.spectral._results import FRF, CrossSpectralMatrix, Spectrum
+from vibroscope.spectral._results import FRF, CrossSpectralMatrix
 
 FN = np.array([2.82, 7.9, 13.1])
 ZETA = np.array([0.012, 0.02, np.nan])

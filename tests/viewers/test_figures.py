@@ -43,6 +43,8 @@ def test_summary_figures_writes_every_png(tmp_path, results):
                                     coords=syn.coords(), true_modes=results["modal"])
     names = [p.name for p in paths]
     assert names == ["signals.png", "psd.png", "frf.png", "modes.png", "singular_values.png"]
+    from PIL import Image
+
     for p in paths:
         assert p.is_file()
         size = p.stat().st_size
@@ -50,6 +52,13 @@ def test_summary_figures_writes_every_png(tmp_path, results):
         img = mpimg.imread(p)
         assert img.ndim == 3 and img.shape[0] > 300 and img.shape[1] > 600
         assert img[..., :3].std() > 0.05  # not blank
+        with Image.open(p) as im:  # palette-quantised, as written by figures._save
+            assert im.format == "PNG" and im.mode == "P" and len(im.getcolors(256)) > 8
+    # the PNG is the figure at figures.DPI, pixel for pixel
+    fig = figures.plot_mode_shapes(results["modal"], syn.coords(), true_modes=results["modal"])
+    w, h = np.round(fig.get_size_inches() * figures.DPI).astype(int)
+    with Image.open(tmp_path / "figs" / "modes.png") as im:
+        assert im.size == (w, h)
 
 
 def test_summary_figures_only_what_is_given(tmp_path, results):

@@ -23,7 +23,7 @@ def add_parser(sub) -> None:
     p = sub.add_parser(
         "gap",
         help="diagnose the sim-to-real gap of a model file against logs",
-        description=__doc__.split("\n\n")[0],
+        description=__doc__.split("\n\n")[0].replace("``", ""),
     )
     p.add_argument("model", type=Path, metavar="MODEL.toml", help="nominal model file (kind = lumped | transfer_function)")
     p.add_argument("logs", type=Path, nargs="+", metavar="LOG.mcap", help="log(s) of the real machine; the last of several is held out")

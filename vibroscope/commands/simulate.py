@@ -11,10 +11,20 @@ sample k; between samples the input is reconstructed band-limited, not held).
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
 __all__ = ["add_parser", "run", "simulate_to_signals"]
+
+#: ``vibroscope simulate --help``: the module docstring in plain text (argparse prints no reST)
+_DESCRIPTION = """\
+Drive a model file with an excitation or a recorded input and write the result as a
+ROS 2 MCAP log, like a real recording.
+
+With --input, the model's input channels ([[input]] channel) are read from the log and
+the model is driven by them sample for sample (output sample k belongs to input sample k;
+between samples the input is reconstructed band-limited, not held)."""
 
 
 def add_parser(sub) -> None:
@@ -22,7 +32,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser(
         "simulate",
         help="simulate a model file (TOML) under an excitation or a logged input, write a ROS 2 MCAP",
-        description=__doc__.split("\n\n")[0],
+        description=_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("model", type=Path, metavar="MODEL.toml", help="model file (kind = lumped | transfer_function | modal)")
     src = p.add_mutually_exclusive_group(required=True)
@@ -78,17 +89,10 @@ def simulate_to_signals(model, *, excitation=None, input_log=None, fs=None, dura
     return sig.with_meta(input_log=str(input_log))
 
 
-def _writer():
-    try:
-        from vibroscope.io import write_ros2_mcap
-    except ImportError:
-        from vibroscope.io.mcap_write import write_ros2_mcap
-    return write_ros2_mcap
-
-
 def run(args) -> int:
     """Run ``vibroscope simulate``; returns the exit status."""
     from vibroscope.errors import ModelFileError
+    from vibroscope.io import write_ros2_mcap
     from vibroscope.models.modelfile import load_model
 
     model = load_model(args.model)
@@ -106,7 +110,7 @@ def run(args) -> int:
     except ValueError as exc:
         raise ModelFileError(f"{args.model}: cannot simulate: {exc}") from None
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    _writer()(args.out, sig)
+    write_ros2_mcap(args.out, sig)
     print(
         f"wrote {args.out}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
         f"({', '.join(sig.channels)})",

@@ -18,6 +18,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from vibroscope._checks import read_only as _ro
+
 __all__ = [
     "EFFECTS",
     "Band",
@@ -42,12 +44,6 @@ EFFECTS = (
     "cubic_stiffness",
     "saturation",
 )
-
-
-def _ro(a) -> np.ndarray:
-    a = np.array(a)
-    a.flags.writeable = False
-    return a
 
 
 def _num(x):

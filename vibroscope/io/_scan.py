@@ -217,6 +217,169 @@ def _index_messages(buf: bytes, pos: int, end: int, out_records: list) -> tuple[
     return (np.concatenate(cids), np.concatenate(logs), np.concatenate(starts), np.concatenate(lens))
 
 
+def _open(path: Path) -> Any:
+    """The file's bytes: a read-only map (chunk data and loose payloads are sliced without copying)."""
+    try:
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if size else b""
+    except (OSError, ValueError) as exc:
+        raise LogFormatError(f"{path}: cannot read ({exc})") from exc
+
+
+def _use_summary(res: ScanResult, data: Any, topics: Any) -> dict[int, set[int]]:
+    """Take schemas and channels from an intact summary section; returns the chunks (offset:
+    channel ids) that hold none of the wanted `topics` and need not be decompressed."""
+    summ = _read_summary(data, len(data))
+    if summ is None:
+        return {}
+    schemas, channels, chunks = summ
+    res.indexed = True
+    res.schemas.update(schemas)
+    res.channels.update(channels)
+    if topics is None:
+        return {}
+    wanted = {cid for cid, ch in channels.items() if ch.topic in topics}
+    return {off: ids for off, ids in chunks.items() if ids and not ids & wanted}
+
+
+class _DataSection:
+    """One linear pass over the records of the data section, filling a :class:`ScanResult`."""
+
+    def __init__(self, res: ScanResult, data: Any, validate_crcs: bool, skip_chunks: dict[int, set[int]]) -> None:
+        self.res = res
+        self.data = data
+        self.mview = memoryview(data)
+        self.validate_crcs = validate_crcs
+        self.skip_chunks = skip_chunks
+        self.loose: tuple[list, list, list, list] = ([], [], [], [])  # channel id, log time, start, length
+        self.pending_loss: list[int] = []  # indexes into res.skipped of the skipped chunks
+        self.last_skipped_chunk = False  # message indexes that follow count messages lost in it
+
+    def run(self, bar: Any = None) -> int:
+        """Read records from byte 8 up to the footer, the end of the file or the first cut-off
+        record; returns the byte offset where the scan stopped."""
+        res, data = self.res, self.data
+        n = len(data)
+        pos = 8
+        while pos < n:
+            if pos + 9 > n:
+                res.skipped.append((pos, f"file ends inside a record header ({n - pos} of 9 bytes)"))
+                break
+            op, length = _REC_HDR.unpack_from(data, pos)
+            body, end = pos + 9, pos + 9 + length
+            if end > n:
+                res.skipped.append(
+                    (pos, f"{_opname(op)} record cut off by the end of the file: needs {length} bytes, {n - body} left")
+                )
+                break
+            if op == Opcode.FOOTER:
+                self.footer(end)
+                return end
+            self.record(op, pos, body, end, length)
+            if op != Opcode.MESSAGE_INDEX:
+                self.last_skipped_chunk = self.last_skipped_chunk and op == Opcode.CHUNK
+            if bar is not None:
+                bar.update(end - pos)
+            pos = end
+        return pos
+
+    def record(self, op: int, pos: int, body: int, end: int, length: int) -> None:
+        res, data = self.res, self.data
+        if op == Opcode.CHUNK and pos in self.skip_chunks:
+            res.chunks_skipped_by_index += 1
+            self.last_skipped_chunk = False  # its message indexes are no loss
+        elif op == Opcode.CHUNK:
+            self.chunk(pos, body, end)
+        elif op == Opcode.MESSAGE_INDEX:
+            if self.last_skipped_chunk and length >= 6:
+                self.count_lost(body)
+        elif op == Opcode.MESSAGE:
+            self.message(pos, body, length)
+        elif op == Opcode.SCHEMA:
+            s = _parse(Schema, data[body:end])
+            res.schemas.setdefault(s.id, s)
+        elif op == Opcode.CHANNEL:
+            c = _parse(Channel, data[body:end])
+            res.channels.setdefault(c.id, c)
+        elif op == Opcode.HEADER:
+            res.header = _parse(Header, data[body:end])
+        elif op == Opcode.DATA_END:
+            self.data_end(pos, body, length)
+
+    def chunk(self, pos: int, body: int, end: int) -> None:
+        """Decompress, check and index one chunk; any failure skips this chunk only."""
+        res = self.res
+        try:
+            raw, recs, (cid, lt, st, ln) = self._open_chunk(body, end)
+        except Exception as exc:  # noqa: BLE001 - any failure skips this chunk only
+            res.skipped.append((pos, f"chunk skipped: {type(exc).__name__}: {exc}"))
+            self.last_skipped_chunk = True
+            self.pending_loss.append(len(res.skipped) - 1)
+            return
+        self.last_skipped_chunk = False
+        for r in recs:
+            (res.schemas if isinstance(r, Schema) else res.channels)[r.id] = r
+        if cid.size:
+            res.blocks.append(Block(raw, pos, cid, lt, st, ln))
+
+    def _open_chunk(self, body: int, end: int) -> tuple[bytes, list, tuple[np.ndarray, ...]]:
+        chunk = _read_chunk(self.mview, body, end)
+        raw = _decompress(chunk)
+        if len(raw) != chunk.uncompressed_size:
+            raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
+        if self.validate_crcs and chunk.uncompressed_crc != 0:
+            crc = zlib.crc32(raw)
+            if crc != chunk.uncompressed_crc:
+                raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
+        recs: list = []
+        return raw, recs, _index_messages(raw, 0, len(raw), recs)
+
+    def count_lost(self, body: int) -> None:
+        """Add the messages a message index lists to the loss reported for the last skipped chunk."""
+        # channel_id u16, records length u32, then (u64 log_time, u64 offset) pairs
+        nrec = struct.unpack_from("<I", self.data, body + 2)[0] // 16
+        i = self.pending_loss[-1]
+        off, reason = self.res.skipped[i]
+        lost = int(reason.rsplit("(", 1)[1].split()[0]) if reason.endswith("messages lost)") else 0
+        base = reason.rsplit(" (", 1)[0] if reason.endswith("messages lost)") else reason
+        self.res.skipped[i] = (off, f"{base} ({lost + nrec} messages lost)")
+
+    def message(self, pos: int, body: int, length: int) -> None:
+        """Index a message outside any chunk."""
+        if length < 22:
+            self.res.skipped.append((pos, f"message record too short ({length} bytes)"))
+            return
+        cid, _s, lt, _p = _MSG_HDR.unpack_from(self.data, body)
+        for col, v in zip(self.loose, (cid, lt, body + 22, length - 22)):
+            col.append(v)
+
+    def data_end(self, pos: int, body: int, length: int) -> None:
+        """Check the data section CRC, when the writer stored one."""
+        stored = struct.unpack_from("<I", self.data, body)[0] if length >= 4 else 0
+        if self.validate_crcs and stored != 0:
+            crc = zlib.crc32(memoryview(self.data)[:pos])
+            if crc != stored:
+                self.res.warnings.append(
+                    f"{self.res.path}: data section CRC-32 mismatch (stored {stored:#010x}, computed {crc:#010x}; "
+                    f"data section ends at byte offset {pos})"
+                )
+
+    def footer(self, end: int) -> None:
+        if bytes(self.data[end : end + 8]) != MAGIC:
+            self.res.skipped.append((end, "closing magic missing after the footer"))
+        else:
+            self.res.complete = True
+
+    def loose_block(self) -> Block | None:
+        """The messages found outside chunks, as one block over the whole file."""
+        if not self.loose[0]:
+            return None
+        c, lt, st, ln = self.loose
+        return Block(self.data, -1, np.array(c, np.uint16), np.array(lt, np.uint64), np.array(st, np.int64),
+                     np.array(ln, np.int64))
+
+
 def scan(
     path: str | Path, *, validate_crcs: bool = True, progress: bool = False, topics: Any = None
 ) -> ScanResult:
@@ -248,130 +411,24 @@ def scan(
         the header record.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            size = os.fstat(fh.fileno()).st_size
-            # a read-only map: chunk data and loose payloads are sliced without copying
-            data = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if size else b""
-    except (OSError, ValueError) as exc:
-        raise LogFormatError(f"{path}: cannot read ({exc})") from exc
+    data = _open(path)
     res = ScanResult(path=path, file_size=len(data))
-    n = len(data)
     if bytes(data[:8]) != MAGIC:
         raise LogFormatError(f"{path}: not an MCAP file (bad magic at byte offset 0)")
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=n, unit="B", unit_scale=True, desc=path.name)
-    mview = memoryview(data)
-    skip_chunks: dict[int, set[int]] = {}
-    summ = _read_summary(data, n)
-    if summ is not None:
-        res.indexed = True
-        res.schemas.update(summ[0])
-        res.channels.update(summ[1])
-        if topics is not None:
-            wanted = {cid for cid, ch in summ[1].items() if ch.topic in topics}
-            skip_chunks = {off: ids for off, ids in summ[2].items() if ids and not ids & wanted}
-    pos = 8
-    loose = ([], [], [], [])
-    pending_loss: list[int] = []  # messages lost in the last skipped chunk (from its message indexes)
-    last_skipped_chunk = False
+        bar = tqdm(total=len(data), unit="B", unit_scale=True, desc=path.name)
+    section = _DataSection(res, data, validate_crcs, _use_summary(res, data, topics))
     try:
-        while pos < n:
-            if pos + 9 > n:
-                res.skipped.append((pos, f"file ends inside a record header ({n - pos} of 9 bytes)"))
-                break
-            op, length = _REC_HDR.unpack_from(data, pos)
-            body, end = pos + 9, pos + 9 + length
-            if end > n:
-                res.skipped.append(
-                    (pos, f"{_opname(op)} record cut off by the end of the file: needs {length} bytes, {n - body} left")
-                )
-                break
-            if op == Opcode.CHUNK and pos in skip_chunks:
-                res.chunks_skipped_by_index += 1
-            elif op == Opcode.CHUNK:
-                try:
-                    chunk = _read_chunk(mview, body, end)
-                    raw = _decompress(chunk)
-                    if len(raw) != chunk.uncompressed_size:
-                        raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
-                    if validate_crcs and chunk.uncompressed_crc != 0:
-                        crc = zlib.crc32(raw)
-                        if crc != chunk.uncompressed_crc:
-                            raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
-                    recs: list = []
-                    cid, lt, st, ln = _index_messages(raw, 0, len(raw), recs)
-                except Exception as exc:  # noqa: BLE001 - any failure skips this chunk only
-                    res.skipped.append((pos, f"chunk skipped: {type(exc).__name__}: {exc}"))
-                    last_skipped_chunk = True
-                    pending_loss.append(len(res.skipped) - 1)
-                else:
-                    last_skipped_chunk = False
-                    for r in recs:
-                        (res.schemas if isinstance(r, Schema) else res.channels)[r.id] = r
-                    if cid.size:
-                        res.blocks.append(Block(raw, pos, cid, lt, st, ln))
-            elif op == Opcode.MESSAGE_INDEX:
-                if last_skipped_chunk and length >= 6:
-                    # channel_id u16, records length u32, then (u64 log_time, u64 offset) pairs
-                    nrec = struct.unpack_from("<I", data, body + 2)[0] // 16
-                    i = pending_loss[-1]
-                    off, reason = res.skipped[i]
-                    lost = int(reason.rsplit("(", 1)[1].split()[0]) if reason.endswith("messages lost)") else 0
-                    base = reason.rsplit(" (", 1)[0] if reason.endswith("messages lost)") else reason
-                    res.skipped[i] = (off, f"{base} ({lost + nrec} messages lost)")
-            elif op == Opcode.MESSAGE:
-                if length < 22:
-                    res.skipped.append((pos, f"message record too short ({length} bytes)"))
-                else:
-                    cid, _s, lt, _p = _MSG_HDR.unpack_from(data, body)
-                    loose[0].append(cid), loose[1].append(lt), loose[2].append(body + 22), loose[3].append(length - 22)
-            elif op == Opcode.SCHEMA:
-                s = _parse(Schema, data[body:end])
-                res.schemas.setdefault(s.id, s)
-            elif op == Opcode.CHANNEL:
-                c = _parse(Channel, data[body:end])
-                res.channels.setdefault(c.id, c)
-            elif op == Opcode.HEADER:
-                res.header = _parse(Header, data[body:end])
-            elif op == Opcode.DATA_END:
-                stored = struct.unpack_from("<I", data, body)[0] if length >= 4 else 0
-                if validate_crcs and stored != 0:
-                    crc = zlib.crc32(memoryview(data)[:pos])
-                    if crc != stored:
-                        res.warnings.append(
-                            f"{path}: data section CRC-32 mismatch (stored {stored:#010x}, computed {crc:#010x}; "
-                            f"data section ends at byte offset {pos})"
-                        )
-            elif op == Opcode.FOOTER:
-                if bytes(data[end : end + 8]) != MAGIC:
-                    res.skipped.append((end, "closing magic missing after the footer"))
-                else:
-                    res.complete = True
-                pos = end
-                break
-            if op != Opcode.MESSAGE_INDEX:
-                last_skipped_chunk = last_skipped_chunk and op == Opcode.CHUNK
-            if bar is not None:
-                bar.update(end - pos)
-            pos = end
+        pos = section.run(bar)
     finally:
         if bar is not None:
             bar.close()
-    if loose[0]:
-        res.blocks.append(
-            Block(
-                data,
-                -1,
-                np.array(loose[0], np.uint16),
-                np.array(loose[1], np.uint64),
-                np.array(loose[2], np.int64),
-                np.array(loose[3], np.int64),
-            )
-        )
+    loose = section.loose_block()
+    if loose is not None:
+        res.blocks.append(loose)
     if not res.blocks and (res.header is None or res.skipped):
         off = res.skipped[0][0] if res.skipped else 8
         raise LogFormatError(f"{path}: nothing readable (damaged at byte offset {off})")

@@ -14,7 +14,7 @@ import numbers
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -227,10 +227,7 @@ def _fast_extract(log: _Log, cid: int, names: list[str]) -> tuple[np.ndarray, np
     )
     vals = np.empty((len(names), stamps.size))
     for k, n in enumerate(names):
-        if n in _ros2.STAMP_FIELDS:
-            vals[k] = np.concatenate([p[n] for p in parts])
-        else:
-            vals[k] = np.concatenate([p[n] for p in parts])
+        vals[k] = np.concatenate([p[n] for p in parts])
     return stamps, vals
 
 
@@ -417,7 +414,7 @@ def mcap_info(path: str | Path) -> LogInfo:
     return _info(_Log(path))
 
 
-def iter_raw_messages(path: str | Path) -> list[tuple[str, int, int, bytes]]:
+def iter_raw_messages(path: str | Path) -> Iterator[tuple[str, int, int, bytes]]:
     """Every intact message, undecoded.
 
     Parameters
@@ -427,9 +424,11 @@ def iter_raw_messages(path: str | Path) -> list[tuple[str, int, int, bytes]]:
 
     Returns
     -------
-    list of (str, int, int, bytes)
+    iterator of (str, int, int, bytes)
         (topic, channel id, log time in ns, payload) in file order; messages outside
-        chunks come after the chunked ones. Damage is skipped as in :func:`read_mcap`.
+        chunks come after the chunked ones. Damage is skipped as in :func:`read_mcap`. The
+        file is scanned when this is called (so the error below is raised here, not on the
+        first ``next``); the payloads are copied out one by one as the iterator advances.
 
     Raises
     ------
@@ -437,12 +436,14 @@ def iter_raw_messages(path: str | Path) -> list[tuple[str, int, int, bytes]]:
         If nothing of the file can be read.
     """
     log = _Log(path)
-    out = []
+    return _raw_messages(log)
+
+
+def _raw_messages(log: _Log) -> Iterator[tuple[str, int, int, bytes]]:
     for b in log.scan.blocks:
         mv = memoryview(b.buf)
         for c, t, s, n in zip(b.channel_id.tolist(), b.log_time.tolist(), b.start.tolist(), b.length.tolist()):
-            out.append((log.scan.channels[c].topic if c in log.scan.channels else "", c, t, bytes(mv[s : s + n])))
-    return out
+            yield log.scan.channels[c].topic if c in log.scan.channels else "", c, t, bytes(mv[s : s + n])
 
 
 # -- field discovery and selection ---------------------------------------------------------
@@ -537,6 +538,192 @@ def select_acceleration_channels(info: LogInfo) -> tuple[list[str], list[tuple[s
 
 
 # -- read_mcap -------------------------------------------------------------------------------
+@dataclass
+class _Notes:
+    """What a read left out (``meta["skipped"]``) and what it has to say (``meta["warnings"]``)."""
+
+    skipped: list[dict]
+    warnings: list[str]
+
+    @classmethod
+    def of_scan(cls, log: _Log) -> "_Notes":
+        """The damage the scan skipped, as skipped entries and warnings."""
+        skipped = [{"offset": o, "reason": r} for o, r in log.scan.skipped]
+        warnings = list(log.scan.warnings)
+        warnings += [f"{log.path}: skipped at byte offset {o}: {r}" for o, r in log.scan.skipped]
+        return cls(skipped, warnings)
+
+
+@dataclass
+class _TopicSamples:
+    """The samples of one topic's requested fields, sorted by stamp and free of duplicates."""
+
+    t_ns: np.ndarray  # (n,) int64
+    values: np.ndarray  # (k, n): one row per requested field of the topic
+    report: TimebaseReport
+
+
+def _wanted_topics(channels: Sequence[str] | None) -> set[str] | None:
+    """Every prefix of the channels that could be the topic (matched exactly after the scan)."""
+    if channels is None:
+        return None
+    return {c[:i] for c in channels for i in range(1, len(c) + 1) if i == len(c) or c[i] in ".["}
+
+
+def _automatic_channels(log: _Log, notes: _Notes) -> list[str]:
+    """The acceleration channels of every readable Imu topic; unreadable Imu topics noted."""
+    sel, skip = select_acceleration_channels(_info(log))
+    for p, r in skip:
+        if not r.startswith("not an IMU"):
+            notes.skipped.append({"topic": p, "schema": "sensor_msgs/msg/Imu", "reason": r})
+    if not sel:
+        nums = _discover(log)
+        hint = "; ".join(f"{t}: {len(v)} numeric fields, e.g. {v[:3]}" for t, v in list(nums.items())[:6])
+        raise ChannelError(
+            f"{log.path}: no acceleration field (no readable sensor_msgs/msg/Imu topic); choose channels "
+            f"among the numeric fields (discover_fields): {hint}"
+        )
+    return sel
+
+
+def _extract(log: _Log, cid: int, fields: list[tuple[str | int, ...]], notes: _Notes, progress: bool):
+    """(stamps ns, values (k, n), time source, log times ns, fast path used) of channel `cid`."""
+    names = [format_path("", f).lstrip(".") for f in fields]
+    res = _fast_extract(log, cid, names)
+    if res is not None:
+        stamps, vals = res
+        return stamps, vals, "header.stamp", log.log_times(cid), True
+    stamps, vals, source, logt = _generic_extract(log, cid, fields, notes.skipped, progress)
+    return stamps, vals, source, logt, False
+
+
+def _usable_stamps(topic: str, stamps: np.ndarray, source: str, logt: np.ndarray, notes: _Notes):
+    """(stamps, source): the log times instead of header stamps that are mostly equal."""
+    if source == "header.stamp" and stamps.size > 1 and np.count_nonzero(np.diff(stamps) == 0) > 0.5 * (stamps.size - 1):
+        notes.warnings.append(
+            f"topic {topic!r}: header.stamp unusable (most consecutive stamps equal, e.g. {int(stamps[0])} ns, "
+            f"in {stamps.size} messages); using log_time"
+        )
+        return logt, "log_time"
+    return stamps, source
+
+
+def _timebase_warnings(topic: str, rep: TimebaseReport) -> list[str]:
+    """What was done to a topic's stamps: duplicates dropped, reordering, gaps."""
+    out = []
+    if rep.duplicates:
+        out.append(f"topic {topic!r}: {rep.duplicates} messages with duplicate stamps dropped")
+    if rep.out_of_order:
+        out.append(f"topic {topic!r}: {rep.out_of_order} out-of-order stamps (sorted)")
+    if rep.gaps:
+        out.append(
+            f"topic {topic!r}: {rep.gaps} gaps, {rep.gap_time_s:.6g} s missing in all "
+            f"(first at {rep.gap_where_s[0][0]:.6g} s after the start); interpolated across"
+        )
+    return out
+
+
+def _read_topic(
+    log: _Log, topic: str, fields: list[tuple[str | int, ...]], notes: _Notes, progress: bool,
+    fast_path: dict[str, bool],
+) -> _TopicSamples | None:
+    """The requested fields of one topic with their time base, or None (noted) when unreadable;
+    ``fast_path[topic]`` says whether the numpy fast path decoded it."""
+    cids = log.by_topic[topic]
+    cid = cids[0]
+    dec, reason = log.decoders.get(log.scan.channels[cid], log.schema(cid))
+    if dec is None:
+        notes.skipped.append({"topic": topic, "schema": log.schema_name(cid), "reason": reason})
+        notes.warnings.append(f"{log.path}: topic {topic!r} ({log.schema_name(cid)}) skipped: {reason}")
+        return None
+    if len(cids) > 1:
+        notes.warnings.append(f"topic {topic!r} has {len(cids)} channels; reading channel id {cid} only")
+    stamps, vals, source, logt, fast_path[topic] = _extract(log, cid, fields, notes, progress)
+    stamps, source = _usable_stamps(topic, stamps, source, logt, notes)
+    # stamps are in file (logging) order: out-of-order counts refer to that order
+    order, rep = analyse_stamps(topic, stamps, time_source=source)
+    if stamps.size == 0:
+        notes.skipped.append({"topic": topic, "schema": log.schema_name(cid), "reason": "no messages"})
+        return None
+    notes.warnings.extend(_timebase_warnings(topic, rep))
+    return _TopicSamples(stamps[order], vals[:, order], rep)
+
+
+def _drop_unmeasured_axes(by_topic: dict[str, list[int]], rows: dict[int, np.ndarray], parsed: list[MessagePath],
+                          notes: _Notes) -> None:
+    """Remove from `rows` an axis that is 0 in every message of a topic whose other axes move."""
+    for topic, idxs in by_topic.items():
+        zero = [i for i in idxs if i in rows and not np.any(rows[i])]
+        if zero and len(zero) < len(idxs):
+            for i in zero:
+                del rows[i]
+                notes.skipped.append({"topic": topic, "channel": str(parsed[i]),
+                                      "reason": "identically zero in every message (axis not measured)"})
+
+
+def _channels_read(log: _Log, parsed: list[MessagePath], rows: dict[int, np.ndarray], notes: _Notes) -> list[int]:
+    """Indices of the channels read; the others noted as not read. Raises when none was."""
+    keep = [i for i in range(len(parsed)) if i in rows]
+    if not keep:
+        raise ChannelError(
+            f"{log.path}: none of the requested channels can be read: "
+            + "; ".join(f"{s.get('topic')}: {s['reason']}" for s in notes.skipped if "topic" in s)
+        )
+    for i in range(len(parsed)):
+        if i not in rows and parsed[i].topic not in {s.get("topic") for s in notes.skipped}:
+            notes.skipped.append({"topic": parsed[i].topic, "reason": "not read"})
+    return keep
+
+
+def _output_rate(log: _Log, fs: float | None, topics: list[str], reports: dict[str, TimebaseReport],
+                 resample: bool) -> float:
+    """`fs`, by default the highest estimated topic rate (the first topic's without resampling)."""
+    if fs is None:
+        cand = [reports[t].fs_est for t in topics if np.isfinite(reports[t].fs_est)]
+        if not cand:
+            raise ChannelError(f"{log.path}: cannot estimate a sample rate (fewer than 2 messages per topic)")
+        fs = max(cand) if resample else cand[0]
+    return float(fs)
+
+
+def _as_logged(topics: list[str], samples: dict[str, _TopicSamples], rows: dict[int, np.ndarray],
+               keep: list[int]) -> tuple[int, list[np.ndarray], dict[str, bool]]:
+    """(start ns, rows, resampled per topic) of topics taken sample for sample (``resample=False``)."""
+    lens = {t: samples[t].t_ns.size for t in topics}
+    if len(set(lens.values())) != 1:
+        raise ValueError(f"resample=False needs equal sample counts per topic, got {lens=}")
+    return int(samples[topics[0]].t_ns[0]), [rows[i] for i in keep], {t: False for t in topics}
+
+
+def _onto_grid(log: _Log, topics: list[str], samples: dict[str, _TopicSamples], rows: dict[int, np.ndarray],
+               keep: list[int], parsed: list[MessagePath], fs: float,
+               notes: _Notes) -> tuple[int, list[np.ndarray], dict[str, bool]]:
+    """(start ns, rows, resampled per topic) on the grid at `fs` over the topics' common span: a
+    topic already on the grid is taken as it is, any other resampled (and said so)."""
+    start, n = grid_for([(int(samples[t].t_ns[0]), int(samples[t].t_ns[-1])) for t in topics], fs)
+    if n < 2:
+        raise ChannelError(f"{log.path}: the topics {topics} do not overlap in time")
+    grid_ns = start + np.round(np.arange(n) / fs * 1e9).astype(np.int64)
+    topic_rows: dict[int, np.ndarray] = {}
+    resampled: dict[str, bool] = {}
+    for t in topics:
+        tt, fs_src = samples[t].t_ns, samples[t].report.fs_est
+        ii = [i for i in keep if parsed[i].topic == t]
+        y = np.vstack([rows[i] for i in ii])
+        i0 = int(np.searchsorted(tt, start))
+        if tt.size - i0 >= n and on_grid(tt[i0 : i0 + n], start, fs):
+            out = y[:, i0 : i0 + n]
+            resampled[t] = False
+        else:
+            out = resample_to_grid((tt - start) * 1e-9, y, (grid_ns - start) * 1e-9, fs=fs, fs_src=fs_src)
+            resampled[t] = True
+            notes.warnings.append(
+                f"topic {t!r} ({fs_src:.6g} Hz est.) resampled onto {fs:.6g} Hz"
+                + (" with anti-alias low-pass" if fs_src > fs * 1.0001 else "")
+            )
+        for k, i in enumerate(ii):
+            topic_rows[i] = out[k]
+    return start, [topic_rows[i] for i in keep], resampled
 def read_mcap(
     path: str | Path,
     channels: Sequence[str] | None = None,
@@ -593,160 +780,48 @@ def read_mcap(
     it is interpolated (cubic spline) within the common time span of all topics, after an
     anti-alias low-pass when its rate exceeds `fs` (:func:`~vibroscope.io.timebase.resample_to_grid`).
     """
-    wanted = None
-    if channels is not None:  # every prefix that could be the topic (matched exactly after the scan)
-        wanted = {c[:i] for c in channels for i in range(1, len(c) + 1) if i == len(c) or c[i] in ".["}
-    log = _Log(path, progress=progress, topics=wanted)
-    skipped: list[dict] = [{"offset": o, "reason": r} for o, r in log.scan.skipped]
-    warnings: list[str] = list(log.scan.warnings)
-    for o, r in log.scan.skipped:
-        warnings.append(f"{log.path}: skipped at byte offset {o}: {r}")
+    log = _Log(path, progress=progress, topics=_wanted_topics(channels))
+    notes = _Notes.of_scan(log)
     auto = channels is None
-    if channels is None:
-        info = _info(log)
-        sel, skip = select_acceleration_channels(info)
-        for p, r in skip:
-            if not r.startswith("not an IMU"):
-                skipped.append({"topic": p, "schema": "sensor_msgs/msg/Imu", "reason": r})
-        if not sel:
-            nums = _discover(log)
-            hint = "; ".join(f"{t}: {len(v)} numeric fields, e.g. {v[:3]}" for t, v in list(nums.items())[:6])
-            raise ChannelError(
-                f"{log.path}: no acceleration field (no readable sensor_msgs/msg/Imu topic); choose channels "
-                f"among the numeric fields (discover_fields): {hint}"
-            )
-        channels = sel
+    if auto:
+        channels = _automatic_channels(log, notes)
     parsed = [log.topic_of(c) for c in channels]
     by_topic: dict[str, list[int]] = defaultdict(list)
     for i, mp in enumerate(parsed):
         by_topic[mp.topic].append(i)
 
-    rows: dict[int, np.ndarray] = {}
-    topic_t: dict[str, np.ndarray] = {}
-    reports: dict[str, TimebaseReport] = {}
-    fast_used: dict[str, bool] = {}
+    samples: dict[str, _TopicSamples] = {}
+    fast_path: dict[str, bool] = {}
+    rows: dict[int, np.ndarray] = {}  # index into `parsed` -> samples
     for topic, idxs in by_topic.items():
-        cids = log.by_topic[topic]
-        cid = cids[0]
-        ch = log.scan.channels[cid]
-        dec, reason = log.decoders.get(ch, log.schema(cid))
-        if dec is None:
-            skipped.append({"topic": topic, "schema": log.schema_name(cid), "reason": reason})
-            warnings.append(f"{log.path}: topic {topic!r} ({log.schema_name(cid)}) skipped: {reason}")
-            continue
-        if len(cids) > 1:
-            warnings.append(f"topic {topic!r} has {len(cids)} channels; reading channel id {cid} only")
-        names = [format_path("", parsed[i].fields).lstrip(".") for i in idxs]
-        fields = [parsed[i].fields for i in idxs]
-        res = _fast_extract(log, cid, names)
-        if res is not None:
-            stamps, vals = res
-            source = "header.stamp"
-            logt = log.log_times(cid)
-            fast_used[topic] = True
-        else:
-            stamps, vals, source, logt = _generic_extract(log, cid, fields, skipped, progress)
-            fast_used[topic] = False
-        if source == "header.stamp" and stamps.size > 1 and np.count_nonzero(np.diff(stamps) == 0) > 0.5 * (stamps.size - 1):
-            warnings.append(
-                f"topic {topic!r}: header.stamp unusable (most consecutive stamps equal, e.g. {int(stamps[0])} ns, "
-                f"in {stamps.size} messages); using log_time"
-            )
-            stamps, source = logt, "log_time"
-        # stamps are in file (logging) order: out-of-order counts refer to that order
-        order, rep = analyse_stamps(topic, stamps, time_source=source)
-        if stamps.size == 0:
-            skipped.append({"topic": topic, "schema": log.schema_name(cid), "reason": "no messages"})
-            continue
-        topic_t[topic] = stamps[order]
-        for k, i in enumerate(idxs):
-            rows[i] = vals[k, order]
-        reports[topic] = rep
-        if rep.duplicates:
-            warnings.append(f"topic {topic!r}: {rep.duplicates} messages with duplicate stamps dropped")
-        if rep.out_of_order:
-            warnings.append(f"topic {topic!r}: {rep.out_of_order} out-of-order stamps (sorted)")
-        if rep.gaps:
-            warnings.append(
-                f"topic {topic!r}: {rep.gaps} gaps, {rep.gap_time_s:.6g} s missing in all "
-                f"(first at {rep.gap_where_s[0][0]:.6g} s after the start); interpolated across"
-            )
+        got = _read_topic(log, topic, [parsed[i].fields for i in idxs], notes, progress, fast_path)
+        if got is not None:
+            samples[topic] = got
+            rows.update({i: got.values[k] for k, i in enumerate(idxs)})
     if auto:  # an axis that is 0 in every message of a topic whose other axes move was not measured
-        for topic, idxs in by_topic.items():
-            zero = [i for i in idxs if i in rows and not np.any(rows[i])]
-            if zero and len(zero) < len(idxs):
-                for i in zero:
-                    del rows[i]
-                    skipped.append({"topic": topic, "channel": str(parsed[i]),
-                                    "reason": "identically zero in every message (axis not measured)"})
-    keep = [i for i in range(len(parsed)) if i in rows]
-    if not keep:
-        raise ChannelError(
-            f"{log.path}: none of the requested channels can be read: "
-            + "; ".join(f"{s.get('topic')}: {s['reason']}" for s in skipped if "topic" in s)
-        )
-    for i in range(len(parsed)):
-        if i not in rows and parsed[i].topic not in {s.get("topic") for s in skipped}:
-            skipped.append({"topic": parsed[i].topic, "reason": "not read"})
+        _drop_unmeasured_axes(by_topic, rows, parsed, notes)
+    keep = _channels_read(log, parsed, rows, notes)
 
     topics = list(dict.fromkeys(parsed[i].topic for i in keep))
-    if fs is None:
-        cand = [reports[t].fs_est for t in topics if np.isfinite(reports[t].fs_est)]
-        if not cand:
-            raise ChannelError(f"{log.path}: cannot estimate a sample rate (fewer than 2 messages per topic)")
-        fs = max(cand) if resample else cand[0]
-    fs = float(fs)
-    data = []
-    resampled: dict[str, bool] = {}
-    if not resample:
-        lens = {t: topic_t[t].size for t in topics}
-        if len(set(lens.values())) != 1:
-            raise ValueError(f"resample=False needs equal sample counts per topic, got {lens=}")
-        start = int(topic_t[topics[0]][0])
-        data = [rows[i] for i in keep]
-        resampled = {t: False for t in topics}
+    reports = {t: samples[t].report for t in topics}
+    fs = _output_rate(log, fs, topics, reports, resample)
+    if resample:
+        start, data, resampled = _onto_grid(log, topics, samples, rows, keep, parsed, fs, notes)
     else:
-        start, n = grid_for([(int(topic_t[t][0]), int(topic_t[t][-1])) for t in topics], fs)
-        if n < 2:
-            raise ChannelError(f"{log.path}: the topics {topics} do not overlap in time")
-        grid_ns = start + np.round(np.arange(n) / fs * 1e9).astype(np.int64)
-        topic_rows: dict[str, np.ndarray] = {}
-        for t in topics:
-            tt = topic_t[t]
-            ii = [i for i in keep if parsed[i].topic == t]
-            y = np.vstack([rows[i] for i in ii])
-            i0 = int(np.searchsorted(tt, start))
-            if tt.size - i0 >= n and on_grid(tt[i0 : i0 + n], start, fs):
-                out = y[:, i0 : i0 + n]
-                resampled[t] = False
-            else:
-                ts = (tt - start) * 1e-9
-                out = resample_to_grid(ts, y, (grid_ns - start) * 1e-9, fs=fs, fs_src=reports[t].fs_est)
-                resampled[t] = True
-                warnings.append(
-                    f"topic {t!r} ({reports[t].fs_est:.6g} Hz est.) resampled onto {fs:.6g} Hz"
-                    + (" with anti-alias low-pass" if reports[t].fs_est > fs * 1.0001 else "")
-                )
-            for k, i in enumerate(ii):
-                topic_rows[i] = out[k]
-        data = [topic_rows[i] for i in keep]
-    timebase = {
-        t: {**reports[t].as_dict(), "resampled": resampled.get(t, False)} for t in topics
-    }
+        start, data, resampled = _as_logged(topics, samples, rows, keep)
     from dataclasses import replace
 
-    reports_out = {t: replace(reports[t], resampled=resampled.get(t, False)) for t in topics}
-    names = [str(parsed[i]) for i in keep]
-    units = [unit_for(parsed[i].fields) for i in keep]
     meta = {
         "source": str(log.path),
-        "timebase": timebase,
-        "timebase_reports": reports_out,
-        "warnings": warnings,
-        "skipped": skipped,
-        "fast_path": fast_used,
+        "timebase": {t: {**reports[t].as_dict(), "resampled": resampled.get(t, False)} for t in topics},
+        "timebase_reports": {t: replace(reports[t], resampled=resampled.get(t, False)) for t in topics},
+        "warnings": notes.warnings,
+        "skipped": notes.skipped,
+        "fast_path": fast_path,
         "t0_ns": int(start),
         "indexed": log.scan.indexed,
         "chunks_skipped_by_index": log.scan.chunks_skipped_by_index,
     }
+    names = [str(parsed[i]) for i in keep]
+    units = [unit_for(parsed[i].fields) for i in keep]
     return Signals(np.vstack(data), fs, names, units, start * 1e-9, meta)

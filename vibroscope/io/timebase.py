@@ -1,5 +1,10 @@
 """Time bases of logged topics: rate, jitter, gaps, duplicates, reordering; resampling
 topics of different rates onto one uniform grid.
+
+:func:`resample_to_grid` is the resampler for *time-stamped* samples (jitter, gaps, any rate
+ratio). Integer-factor rate changes of uniform records are elsewhere, for reasons given in
+:mod:`vibroscope.models.resample` (band-limited upsampling and FIR decimation of simulations)
+and :func:`vibroscope.pipeline.decimate` (IIR decimation to the analysis band).
 """
 
 from __future__ import annotations

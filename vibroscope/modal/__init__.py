@@ -12,7 +12,7 @@ Imports nothing of vibroscope's but :mod:`vibroscope.spectral` and :mod:`vibrosc
 
 from vibroscope.modal._results import ModalModel, Mode, mpc, normalize_shapes
 from vibroscope.modal.automatic import Identification, auto_lscf, auto_ssi, modes_document
-from vibroscope.modal.fdd import efdd_damping, fdd, singular_values
+from vibroscope.modal.fdd import SingularValues, efdd_damping, fdd, singular_values
 from vibroscope.modal.lscf import lscf
 from vibroscope.modal.lsfd import LSFDResult, lsfd
 from vibroscope.modal.mac import ModeMatch, mac, mac_matrix, match_modes
@@ -26,7 +26,7 @@ __all__ = [
     "ModalModel", "Mode", "normalize_shapes", "mpc",
     "lscf", "lsfd", "LSFDResult",
     "peak_picking", "half_power_bandwidth", "fit_sdof",
-    "fdd", "singular_values", "efdd_damping",
+    "fdd", "singular_values", "SingularValues", "efdd_damping",
     "mac", "mac_matrix", "match_modes", "ModeMatch",
     "automac", "comac", "complexity", "mpd", "modal_quality", "QualityTable",
     "ssi_cov", "Stabilization", "output_covariances",

@@ -7,13 +7,9 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from vibroscope._checks import read_only
+
 __all__ = ["Mode", "ModalModel", "normalize_shapes", "mpc"]
-
-
-def _ro(a, dtype) -> np.ndarray:
-    a = np.array(a, dtype=dtype)
-    a.flags.writeable = False
-    return a
 
 
 def normalize_shapes(shapes: np.ndarray) -> np.ndarray:
@@ -159,9 +155,9 @@ class ModalModel:
             )
         if s.shape[1] != len(self.points):
             raise ValueError(f"{s.shape=} shapes for {len(self.points)} points")
-        object.__setattr__(self, "natural_frequencies", _ro(f, float))
-        object.__setattr__(self, "damping_ratios", _ro(z, float))
-        object.__setattr__(self, "shapes", _ro(s, complex))
+        object.__setattr__(self, "natural_frequencies", read_only(f, float))
+        object.__setattr__(self, "damping_ratios", read_only(z, float))
+        object.__setattr__(self, "shapes", read_only(s, complex))
         object.__setattr__(self, "points", tuple(str(p) for p in self.points))
         object.__setattr__(self, "extra", dict(self.extra))
 

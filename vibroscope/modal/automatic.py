@@ -52,6 +52,9 @@ class Identification:
     settings: dict = field(default_factory=dict)
     lsfd: Any = None
 
+    def __repr__(self) -> str:
+        return f"Identification({self.modes!r}, {len(self.rejected)} rejected)"
+
     def to_dict(self) -> dict:
         """The ``MODES.json`` document.
 

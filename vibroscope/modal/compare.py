@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vibroscope.modal._peaks import parabolic_peak
+
 __all__ = ["FrequencyShift", "resonance_peaks", "frequency_shift"]
 
 
@@ -34,6 +36,10 @@ class FrequencyShift:
     shift_relative: np.ndarray
     unpaired_measured_hz: np.ndarray
     unpaired_model_hz: np.ndarray
+
+    def __repr__(self) -> str:
+        return (f"FrequencyShift({np.size(self.measured_hz)} pairs, {np.size(self.unpaired_measured_hz)} measured "
+                f"and {np.size(self.unpaired_model_hz)} model resonances unpaired)")
 
     def to_dict(self) -> dict:
         """JSON-ready ``{"pairs": [{"measured_hz", "model_hz", "shift_hz", "shift_percent"}], ...}``."""
@@ -72,15 +78,7 @@ def resonance_peaks(frequencies: np.ndarray, magnitude_db: np.ndarray, *, promin
     lo = f[1] if fmin is None else fmin
     k0 = int(np.searchsorted(f, lo))
     pk, _ = scipy.signal.find_peaks(p[k0:], prominence=prominence)
-    pk = pk + k0
-    out = []
-    for k in pk:
-        if 0 < k < len(f) - 1:
-            a, b, c = p[k - 1], p[k], p[k + 1]
-            d = a - 2 * b + c
-            off = 0.5 * (a - c) / d if d != 0 else 0.0
-            out.append(f[k] + off * (f[k + 1] - f[k - 1]) / 2)
-    return np.array(out)
+    return np.array([parabolic_peak(f, p, k) for k in pk + k0], dtype=float)
 
 
 def frequency_shift(measured: tuple[np.ndarray, np.ndarray], model: tuple[np.ndarray, np.ndarray], *,

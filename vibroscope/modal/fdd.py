@@ -3,16 +3,22 @@
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft
 import scipy.signal
 
+from vibroscope._checks import read_only
+from vibroscope.modal._peaks import band_indices, parabolic_peak, parabolic_vertex
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.modal.mac import mac
 from vibroscope.spectral import CrossSpectralMatrix
+from vibroscope.spectral._results import _axis_summary, _names, _Unpacks
 
-__all__ = ["fdd", "singular_values", "efdd_damping"]
+__all__ = ["fdd", "singular_values", "efdd_damping", "SingularValues"]
+
+_TINY = np.finfo(float).tiny
 
 
 def _svd(csd: CrossSpectralMatrix):
@@ -22,7 +28,48 @@ def _svd(csd: CrossSpectralMatrix):
     return U, S
 
 
-def singular_values(csd: CrossSpectralMatrix) -> tuple[np.ndarray, np.ndarray]:
+def _db(x: np.ndarray) -> np.ndarray:
+    """``10 log10 x`` with zeros floored at the smallest positive float."""
+    return 10 * np.log10(np.maximum(x, _TINY))
+
+
+@dataclass(frozen=True, eq=False)
+class SingularValues(_Unpacks):
+    """Singular values of a cross-spectral matrix at every frequency (:func:`singular_values`).
+
+    Unpacks like the tuple ``(frequencies, S)``.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_f,)
+        Hz.
+    S : ndarray, shape (n_f, n_ch)
+        Singular values in descending order at each frequency, in the units of ``G`` (e.g.
+        (m/s²)²/Hz).
+    channels : tuple of str
+        The channels of the cross-spectral matrix.
+    settings : dict
+        Its Welch settings.
+    """
+
+    frequencies: np.ndarray
+    S: np.ndarray
+    channels: tuple[str, ...] = ()
+    settings: dict = field(default_factory=dict)
+
+    _tuple_fields = ("frequencies", "S")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
+        object.__setattr__(self, "S", read_only(self.S, float))
+        object.__setattr__(self, "channels", tuple(self.channels))
+
+    def __repr__(self) -> str:
+        return (f"SingularValues({self.S.shape[-1]} of {len(self.channels)} channels {_names(self.channels)}, "
+                f"{_axis_summary(self.frequencies)})")
+
+
+def singular_values(csd: CrossSpectralMatrix) -> SingularValues:
     """Singular values of the cross-spectral matrix at every frequency (for the FDD plot).
 
     Parameters
@@ -32,13 +79,12 @@ def singular_values(csd: CrossSpectralMatrix) -> tuple[np.ndarray, np.ndarray]:
 
     Returns
     -------
-    frequencies : ndarray, shape (n_f,)
-        Hz.
-    S : ndarray, shape (n_f, n_ch)
-        Singular values in descending order at each frequency, in the units of `G`
+    SingularValues
+        Unpacks as ``(frequencies, S)``: frequencies in Hz, shape (n_f,), and the singular values
+        in descending order at each frequency, shape (n_f, n_ch), in the units of `G`
         (e.g. (m/s²)²/Hz).
     """
-    return np.asarray(csd.frequencies), _svd(csd)[1]
+    return SingularValues(csd.frequencies, _svd(csd)[1], csd.channels, dict(csd.settings or {}))
 
 
 def _window_lag_weights(csd: CrossSpectralMatrix, n: int) -> np.ndarray | None:
@@ -128,16 +174,9 @@ def efdd_damping(
     if ext.size == 0:
         return np.nan, np.nan, 0
     amp = np.abs(r[ext])
-    # refine extrema by parabolic interpolation
-    te, ae = [], []
-    for k in ext:
-        a, b, c = r[k - 1], r[k], r[k + 1] if k + 1 < n_use else r[k]
-        den = a - 2 * b + c
-        p = 0.5 * (a - c) / den if den != 0 else 0.0
-        p = float(np.clip(p, -0.5, 0.5))
-        te.append(t[k] + p / fs)
-        ae.append(abs(b - 0.25 * (a - c) * p))
-    te, ae = np.array(te), np.array(ae)
+    # refine extrema (never at the ends: argrelmax/argrelmin) by parabolic interpolation
+    vertices = np.array([parabolic_vertex(r, k) for k in ext])
+    te, ae = t[ext] + vertices[:, 0] / fs, np.abs(vertices[:, 1])
     # the envelope window: from the first extremum below max_level to the first below min_level
     below_max = np.flatnonzero(amp <= max_level)
     if below_max.size == 0:
@@ -170,8 +209,8 @@ def fdd(
     fmin: float | None = None,
     fmax: float | None = None,
     prominence: float = 6.0,
-    mac_threshold: float = 0.8,
-    mac_reject: float = 0.9,
+    mac_min: float = 0.8,
+    mac_duplicate: float = 0.9,
     efdd: bool = True,
     max_level: float = 0.9,
     min_level: float = 0.1,
@@ -186,12 +225,12 @@ def fdd(
        peaks of the first singular value ``s1(f)`` (in dB, :func:`scipy.signal.find_peaks` with
        `prominence`) are the modes and ``u1`` at the peak is the mode shape, normalised to unit
        maximum modulus with a real positive reference. Candidates are taken by decreasing
-       prominence; one whose shape has MAC > `mac_reject` with an already accepted mode and lies
-       inside that mode's bell (all bins between them have MAC(u1(f), φ) > `mac_threshold`) is the
+       prominence; one whose shape has MAC > `mac_duplicate` with an already accepted mode and
+       lies inside that mode's bell (all bins between them have MAC(u1(f), φ) > `mac_min`) is the
        same mode and is rejected.
     2. **EFDD** (Brincker, Ventura & Andersen 2001): the SDOF bell of each mode is the set of
        contiguous bins around the peak where the first (or second) singular vector has
-       MAC > `mac_threshold` with the shape; its singular values, zero elsewhere, are taken back to
+       MAC > `mac_min` with the shape; its singular values, zero elsewhere, are taken back to
        the correlation function by an inverse FFT (:func:`efdd_damping`): the logarithmic
        decrement of the envelope gives the damping and the zero crossings refine the frequency.
 
@@ -207,10 +246,12 @@ def fdd(
         Band in Hz searched for peaks (default the whole axis above 0 Hz).
     prominence : float, optional
         Smallest prominence of a peak of ``10 log10 s1`` in dB; default 6 dB.
-    mac_threshold : float, optional
-        MAC defining a mode's SDOF bell; default 0.8 (Brincker et al.).
-    mac_reject : float, optional
-        MAC above which a candidate inside an accepted mode's bell is a duplicate; default 0.9.
+    mac_min : float, optional
+        Smallest MAC accepted into a mode's SDOF bell: a bin belongs to the bell while the MAC of
+        its singular vector with the mode's shape is above `mac_min`; default 0.8 (Brincker et al.).
+    mac_duplicate : float, optional
+        MAC above which a candidate inside an accepted mode's bell is the same mode (a
+        duplicate, rejected); default 0.9.
     efdd : bool, optional
         Estimate damping and refine frequency by EFDD (default); otherwise damping is NaN and the
         frequency is the parabola-interpolated peak.
@@ -225,7 +266,7 @@ def fdd(
         that share one peak of ``s1`` (e.g. the two bending directions of a tower); they are
         taken after all ``s1`` candidates and pass the same duplicate test.
     min_bell_bins : int, optional
-        A peak is a mode only if its singular vector keeps MAC > `mac_threshold` over at least
+        A peak is a mode only if its singular vector keeps MAC > `mac_min` over at least
         this many bins (default 3: a Hann window spreads even the lightest-damped mode over its
         main lobe, while a noise peak's singular vector is random from bin to bin).
     sv_ratio_db : float, optional
@@ -263,132 +304,133 @@ def fdd(
         raise ValueError(f"FDD needs at least 2 channels, got {csd.G.shape[1]}")
     f_all = np.asarray(csd.frequencies)
     U, S = _svd(csd)
-    s1 = S[:, 0]
-    band = f_all > 0
-    if fmin is not None:
-        band &= f_all >= fmin
-    if fmax is not None:
-        band &= f_all <= fmax
-    idx = np.flatnonzero(band)
-    if idx.size < 5:
-        raise ValueError(f"the band {fmin=} .. {fmax=} Hz holds {idx.size} bins; at least 5 are needed")
-    tiny = np.finfo(float).tiny
-    cand_l, prom_l, sv_l = [], [], []
-    for q in range(min(int(n_singular), S.shape[1])):
-        dbq = 10 * np.log10(np.maximum(S[:, q], tiny))
-        pk, props = scipy.signal.find_peaks(dbq[idx], prominence=prominence)
-        if q > 0:  # higher singular values: only peaks comparable with s1 there
-            ok = dbq[idx[pk]] >= 10 * np.log10(np.maximum(s1[idx[pk]], tiny)) - sv_ratio_db
-            pk, props = pk[ok], {k: v[ok] for k, v in props.items()}
-        o = np.argsort(props["prominences"])[::-1]
-        cand_l += list(idx[pk][o])
-        prom_l += list(props["prominences"][o])
-        sv_l += [q] * len(o)
-    cand, prom, sv = np.array(cand_l, dtype=int), np.array(prom_l), np.array(sv_l, dtype=int)
-    order = np.arange(len(cand))
-
-    def bell_of(k: int, q: int, phi: np.ndarray) -> tuple[np.ndarray, int, int]:
-        """Bell values over the full axis and its index range [lo, hi] (peak of singular value q)."""
-        b = np.zeros_like(s1)
-        b[k] = S[k, q]
-        lo = hi = k
-        for step in (-1, 1):
-            j = k + step
-            while 0 < j < len(s1):
-                m1 = mac(phi, U[j, :, 0])[0, 0]
-                m2 = mac(phi, U[j, :, 1])[0, 0] if U.shape[2] > 1 else 0.0
-                if m1 > mac_threshold:
-                    b[j] = S[j, 0]
-                elif m2 > mac_threshold:
-                    b[j] = S[j, 1]
-                else:
-                    break
-                if step < 0:
-                    lo = j
-                else:
-                    hi = j
-                j += step
-        return b, lo, hi
-
-    accepted: list[int] = []
-    acc_prom: list[float] = []
-    acc_shape: list[np.ndarray] = []
-    acc_sv: list[int] = []
-    bells: list[tuple[np.ndarray, int, int]] = []
-    for o in order:
-        k = int(cand[o])
-        phi = U[k, :, sv[o]]
-        dup = False
-        for a, (_, lo, hi) in enumerate(bells):
-            if mac(phi, acc_shape[a])[0, 0] > mac_reject and lo <= k <= hi:
-                dup = True
-                break
-        if dup or (sv[o] > 0 and k in accepted):
-            continue
-        bell = bell_of(k, int(sv[o]), phi)
-        if bell[2] - bell[1] + 1 < min_bell_bins:  # incoherent from bin to bin: noise, not a mode
-            continue
-        accepted.append(k)
-        acc_prom.append(float(prom[o]))
-        acc_shape.append(phi)
-        acc_sv.append(int(sv[o]))
-        bells.append(bell)
-        if n_modes is not None and len(accepted) >= n_modes:
-            break
-    if n_modes is not None and len(accepted) < n_modes:
-        warnings.warn(f"found {len(accepted)} distinct peaks above {prominence=} dB, fewer than {n_modes=}",
+    idx = band_indices(f_all, fmin, fmax)
+    candidates = _peak_candidates(S, idx, prominence, n_singular, sv_ratio_db)
+    peaks = _distinct_peaks(candidates, U, S, mac_min, mac_duplicate, min_bell_bins, n_modes)
+    if n_modes is not None and len(peaks) < n_modes:
+        warnings.warn(f"found {len(peaks)} distinct peaks above {prominence=} dB, fewer than {n_modes=}",
                       stacklevel=2)
-    srt = np.argsort(accepted, kind="stable")
-    accepted = [accepted[i] for i in srt]
-    acc_prom = [acc_prom[i] for i in srt]
-    acc_shape = [acc_shape[i] for i in srt]
-    acc_sv = [acc_sv[i] for i in srt]
-    bells = [bells[i] for i in srt]
-
     fs = float((csd.settings or {}).get("fs", 2 * f_all[-1]))
     nfft = (csd.settings or {}).get("nfft")
     nfft = int(nfft) if nfft else 2 * (len(f_all) - 1)
     lagw = _window_lag_weights(csd, nfft // 2) if window_correction else None
-    fn_l, z_l, fpk, pkv, nb, nex = [], [], [], [], [], []
-    failed = []
-    for m_i, k in enumerate(accepted):
-        f_peak = float(f_all[k])
-        dbq = 10 * np.log10(np.maximum(S[:, acc_sv[m_i]], tiny))
-        if 0 < k < len(s1) - 1:
-            a, b, c = dbq[k - 1], dbq[k], dbq[k + 1]
-            den = a - 2 * b + c
-            if den < 0:
-                f_peak = float(f_all[k] + np.clip(0.5 * (a - c) / den, -0.5, 0.5) * (f_all[1] - f_all[0]))
-        bell, lo, hi = bells[m_i]
-        fn, zeta, n_ext = f_peak, np.nan, 0
-        if efdd:
-            fe, ze, n_ext = efdd_damping(f_all, bell, fs, nfft=nfft, lag_weights=lagw,
-                                         max_level=max_level, min_level=min_level)
-            if np.isfinite(fe) and ze > 0 and f_all[lo] - (f_all[1] - f_all[0]) <= fe <= f_all[hi] + (f_all[1] - f_all[0]):
-                fn, zeta = fe, ze
-            else:
-                failed.append(f_peak)
-        fn_l.append(fn)
-        z_l.append(zeta)
-        fpk.append(f_peak)
-        pkv.append(dbq[k])
-        nb.append(hi - lo + 1)
-        nex.append(n_ext)
+    rows = [_refine_peak(pk, f_all, S, fs, nfft, lagw, efdd, max_level, min_level) for pk in peaks]
+    failed = [r["frequency_peak"] for r in rows if r["efdd_failed"]]
     if failed:
         warnings.warn(f"EFDD could not fit the modes at {np.round(failed, 4).tolist()} Hz "
                       "(bell too narrow or decay longer than the segment); FDD peak kept, damping NaN",
                       stacklevel=2)
-    shapes = normalize_shapes(np.array(acc_shape).reshape(len(accepted), U.shape[1]))
+    shapes = normalize_shapes(np.array([pk.shape for pk in peaks]).reshape(len(peaks), U.shape[1]))
+
+    def column(key, dtype=float):
+        return np.array([r[key] for r in rows], dtype=dtype)
+
     extra = {
-        "frequency_peak": np.array(fpk),
-        "peak_value": np.array(pkv),
-        "prominence": np.array(acc_prom),
-        "bell_bins": np.array(nb, dtype=int),
-        "singular_value": np.array(acc_sv, dtype=int),
-        "n_extrema": np.array(nex, dtype=int),
-        "mpc": mpc(shapes) if len(accepted) else np.zeros(0),
-        "settings": dict(fmin=fmin, fmax=fmax, prominence=prominence, mac_threshold=mac_threshold,
-                         mac_reject=mac_reject, efdd=efdd, max_level=max_level, min_level=min_level,
+        "frequency_peak": column("frequency_peak"),
+        "peak_value": column("peak_value"),
+        "prominence": np.array([pk.prominence for pk in peaks], dtype=float),
+        "bell_bins": np.array([pk.hi - pk.lo + 1 for pk in peaks], dtype=int),
+        "singular_value": np.array([pk.q for pk in peaks], dtype=int),
+        "n_extrema": column("n_extrema", int),
+        "mpc": mpc(shapes) if len(peaks) else np.zeros(0),
+        "settings": dict(fmin=fmin, fmax=fmax, prominence=prominence, mac_min=mac_min,
+                         mac_duplicate=mac_duplicate, efdd=efdd, max_level=max_level, min_level=min_level,
                          window_correction=window_correction, n_singular=n_singular, csd=dict(csd.settings or {})),
     }
-    return ModalModel(np.array(fn_l), np.array(z_l), shapes, csd.channels, "efdd" if efdd else "fdd", extra)
+    return ModalModel(column("fn"), column("zeta"), shapes, csd.channels, "efdd" if efdd else "fdd", extra)
+
+
+def _peak_candidates(S: np.ndarray, idx: np.ndarray, prominence: float, n_singular: int,
+                     sv_ratio_db: float) -> list[tuple[int, float, int]]:
+    """``(bin, prominence in dB, singular value q)`` of every peak of ``s_q`` in the band: those of
+    ``s1`` by decreasing prominence, then those of ``s2`` ... that reach ``s1 − sv_ratio_db``."""
+    db1 = _db(S[:, 0])
+    out = []
+    for q in range(min(int(n_singular), S.shape[1])):
+        dbq = _db(S[:, q])
+        pk, props = scipy.signal.find_peaks(dbq[idx], prominence=prominence)
+        if q > 0:  # higher singular values: only peaks comparable with s1 there
+            ok = dbq[idx[pk]] >= db1[idx[pk]] - sv_ratio_db
+            pk, props = pk[ok], {k: v[ok] for k, v in props.items()}
+        o = np.argsort(props["prominences"])[::-1]
+        out += [(int(k), float(p), q) for k, p in zip(idx[pk][o], props["prominences"][o])]
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Peak:
+    """An accepted FDD peak: its bin, singular value, shape, prominence and SDOF bell."""
+
+    k: int
+    q: int
+    shape: np.ndarray
+    prominence: float
+    bell: np.ndarray
+    lo: int
+    hi: int
+
+
+def _bell(U: np.ndarray, S: np.ndarray, k: int, q: int, phi: np.ndarray, mac_min: float):
+    """The SDOF bell of the peak of ``s_q`` at bin `k` with shape `phi`: the singular values over
+    the full axis (zero outside) and its index range ``[lo, hi]``. A neighbouring bin belongs to it
+    while ``u1`` (else ``u2``) there has MAC > `mac_min` with `phi`."""
+    n = S.shape[0]
+    b = np.zeros(n)
+    b[k] = S[k, q]
+    lo = hi = k
+    for step in (-1, 1):
+        j = k + step
+        while 0 < j < n:
+            m1 = mac(phi, U[j, :, 0])[0, 0]
+            m2 = mac(phi, U[j, :, 1])[0, 0] if U.shape[2] > 1 else 0.0
+            if m1 > mac_min:
+                b[j] = S[j, 0]
+            elif m2 > mac_min:
+                b[j] = S[j, 1]
+            else:
+                break
+            if step < 0:
+                lo = j
+            else:
+                hi = j
+            j += step
+    return b, lo, hi
+
+
+def _distinct_peaks(candidates, U, S, mac_min: float, mac_duplicate: float, min_bell_bins: int,
+                    n_modes: int | None) -> list[_Peak]:
+    """Accept candidates in order, skipping duplicates of accepted modes (MAC > `mac_duplicate`
+    inside their bell), second-singular-value peaks on an accepted bin, and bells narrower than
+    `min_bell_bins` (noise); at most `n_modes`. Returned by increasing frequency."""
+    accepted: list[_Peak] = []
+    for k, prom, q in candidates:
+        phi = U[k, :, q]
+        if any(mac(phi, a.shape)[0, 0] > mac_duplicate and a.lo <= k <= a.hi for a in accepted):
+            continue
+        if q > 0 and any(a.k == k for a in accepted):
+            continue
+        bell, lo, hi = _bell(U, S, k, q, phi, mac_min)
+        if hi - lo + 1 < min_bell_bins:  # incoherent from bin to bin: noise, not a mode
+            continue
+        accepted.append(_Peak(k, q, phi, prom, bell, lo, hi))
+        if n_modes is not None and len(accepted) >= n_modes:
+            break
+    return sorted(accepted, key=lambda a: a.k)
+
+
+def _refine_peak(pk: _Peak, f_all, S, fs: float, nfft: int, lagw, efdd: bool, max_level: float,
+                 min_level: float) -> dict:
+    """Frequency (parabolic peak, then EFDD inside the bell) and damping (EFDD) of one peak."""
+    dbq = _db(S[:, pk.q])
+    f_peak = parabolic_peak(f_all, dbq, pk.k)
+    fn, zeta, n_ext, failed = f_peak, np.nan, 0, False
+    if efdd:
+        fe, ze, n_ext = efdd_damping(f_all, pk.bell, fs, nfft=nfft, lag_weights=lagw,
+                                     max_level=max_level, min_level=min_level)
+        df = f_all[1] - f_all[0]
+        if np.isfinite(fe) and ze > 0 and f_all[pk.lo] - df <= fe <= f_all[pk.hi] + df:
+            fn, zeta = fe, ze
+        else:
+            failed = True
+    return {"fn": fn, "zeta": zeta, "frequency_peak": f_peak, "peak_value": dbq[pk.k], "n_extrema": n_ext,
+            "efdd_failed": failed}

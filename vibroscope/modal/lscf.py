@@ -10,8 +10,7 @@ import scipy.linalg
 
 from vibroscope.modal._results import normalize_shapes
 from vibroscope.modal.lsfd import _POWER, _band, _fit
-from vibroscope.modal.mac import mac
-from vibroscope.modal.ssi import Stabilization
+from vibroscope.modal.ssi import Stabilization, stability_codes
 from vibroscope.spectral import FRF
 
 __all__ = ["lscf"]
@@ -71,7 +70,7 @@ def lscf(
     max_damping: float = 0.2,
     tol_frequency: float = 0.01,
     tol_damping: float = 0.05,
-    tol_mac: float = 0.98,
+    mac_min: float = 0.98,
 ) -> Stabilization:
     """Poly-reference least-squares complex frequency-domain estimator (polyMAX) of the poles.
 
@@ -104,9 +103,11 @@ def lscf(
         Frequency band in Hz; default all lines above 0 Hz. Poles outside it are dropped.
     max_damping : float, optional
         Poles with ``ζ`` outside ``(0, max_damping]`` are discarded; default 0.2.
-    tol_frequency, tol_damping, tol_mac : float, optional
+    tol_frequency, tol_damping : float, optional
         Stability criteria against the nearest pole of the previous order: relative frequency
-        change ≤ 1 %, relative damping change ≤ 5 %, MAC ≥ 0.98 (defaults).
+        change ≤ `tol_frequency` (default 1 %), relative damping change ≤ `tol_damping` (5 %).
+    mac_min : float, optional
+        Smallest MAC with that pole accepted as a stable shape; default 0.98.
 
     Returns
     -------
@@ -166,22 +167,45 @@ def lscf(
         raise ValueError(f"{nf} lines in [{lo}, {hi}] Hz are too few for order {P} with {ni} inputs")
     dt = 1.0 / (2.0 * hi)
     w = 2 * np.pi * f
+    power = _POWER[frf.kind]
+    rows = []
+    prev = None
+    for p, alpha in _denominators(w, H, dt, orders):
+        fr, zr, phi = _order_poles(alpha, p, ni, dt, w, H, power, max_damping, lo, hi)
+        code = stability_codes(prev, fr, zr, phi, tol_frequency=tol_frequency, tol_damping=tol_damping,
+                               mac_min=mac_min)
+        rows.append((np.full(len(fr), p), fr, zr, phi, code))
+        prev = (fr, zr, phi)
+    order_a, f_a, z_a, phi_a, code_a = (np.concatenate(c) for c in zip(*rows))
+    phi_a = phi_a.reshape(-1, no)
+    return Stabilization(order_a, f_a, z_a, phi_a, code_a, tuple(frf.outputs),
+                         dict(method="lscf", fmin=lo, fmax=hi, dt=dt, orders=tuple(orders), n_inputs=ni,
+                              n_lines=nf, kind=frf.kind, max_damping=max_damping,
+                              tol_frequency=tol_frequency, tol_damping=tol_damping, mac_min=mac_min))
+
+
+def _denominators(w: np.ndarray, H: np.ndarray, dt: float, orders: list[int]):
+    """Yield ``(p, α)`` for each order `p` in `orders`: the denominator coefficients solving the
+    reduced normal equations ``M = T − Sᵀ R⁻¹ S`` (summed over outputs) with ``α_p = I``.
+
+    Outputs are weighted by the inverse of their RMS. The blocks are built once for the highest
+    order; every lower order uses their leading sub-blocks, with ``R⁻¹`` through the leading
+    blocks of one Cholesky factor ``R = L Lᵀ`` (the first p+1 rows of ``L⁻¹ S_o`` depend only on
+    the first p+1 rows of ``S_o``).
+    """
+    no, ni = H.shape[1:]
+    P = orders[-1]
     scale = np.sqrt(np.mean(np.abs(H) ** 2, axis=(0, 2)))
     scale[scale == 0] = 1.0
     R, S, T = _normal_matrices(w, H / scale[None, :, None], dt, P)
-    # R = L Lᵀ: the leading (p+1) block of L factors the leading block of R, and the first p+1
-    # rows of L⁻¹ S_o depend only on the first p+1 rows of S_o.
     try:
         L = np.linalg.cholesky(R)
     except np.linalg.LinAlgError:
         L = np.linalg.cholesky(R + np.eye(P + 1) * 1e-12 * np.trace(R))
     Q = scipy.linalg.solve_triangular(L, S.transpose(1, 0, 2).reshape(P + 1, -1), lower=True)
     Q = Q.reshape(P + 1, no, (P + 1) * ni)
-    power = _POWER[frf.kind]
     wanted = set(orders)
     G = np.zeros(((P + 1) * ni, (P + 1) * ni))
-    rows = []
-    prev = None
     for p in range(P + 1):
         G += Q[p].T @ Q[p]
         if p not in wanted:
@@ -193,36 +217,24 @@ def lscf(
             alpha = -np.linalg.solve(Maa, Mab)
         except np.linalg.LinAlgError:
             alpha = -np.linalg.lstsq(Maa, Mab, rcond=None)[0]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lam = _companion_poles(alpha, p, ni, dt)
-            fr = np.abs(lam) / (2 * np.pi)
-            zr = -lam.real / np.abs(lam)
-        ok = (lam.imag > 0) & (zr > 0) & (zr <= max_damping) & (fr >= lo) & (fr <= hi)
-        lam, fr, zr = lam[ok], fr[ok], zr[ok]
-        srt = np.argsort(fr)
-        lam, fr, zr = lam[srt], fr[srt], zr[srt]
-        if len(lam):
-            res = _fit(w, H, lam, power, True, fast=True)[0]  # (n_poles, n_o, n_i)
-            ref = np.argmax(np.linalg.norm(res, axis=1), axis=1)
-            phi = normalize_shapes(res[np.arange(len(lam)), :, ref])
-        else:
-            phi = np.zeros((0, no), complex)
-        code = np.zeros(len(fr), int)
-        if prev is not None and len(prev[0]) and len(fr):
-            pf, pz, pphi = prev
-            for k in range(len(fr)):
-                j = int(np.argmin(np.abs(pf - fr[k])))
-                if abs(pf[j] - fr[k]) / fr[k] <= tol_frequency:
-                    code[k] = 1
-                    if abs(pz[j] - zr[k]) / zr[k] <= tol_damping:
-                        code[k] = 2
-                        if mac(pphi[j], phi[k])[0, 0] >= tol_mac:
-                            code[k] = 3
-        rows.append((np.full(len(fr), p), fr, zr, phi, code))
-        prev = (fr, zr, phi)
-    order_a, f_a, z_a, phi_a, code_a = (np.concatenate(c) for c in zip(*rows))
-    phi_a = phi_a.reshape(-1, no)
-    return Stabilization(order_a, f_a, z_a, phi_a, code_a, tuple(frf.outputs),
-                         dict(method="lscf", fmin=lo, fmax=hi, dt=dt, orders=tuple(orders), n_inputs=ni,
-                              n_lines=nf, kind=frf.kind, max_damping=max_damping,
-                              tol_frequency=tol_frequency, tol_damping=tol_damping, tol_mac=tol_mac))
+        yield p, alpha
+
+
+def _order_poles(alpha, p: int, ni: int, dt: float, w, H, power: int, max_damping: float, lo: float,
+                 hi: float):
+    """Frequencies (Hz), damping ratios and shapes of one order's physical-looking poles: positive
+    frequency inside ``[lo, hi]``, damping in ``(0, max_damping]``, sorted by frequency. A shape
+    is the residue vector (quick LSFD) over the outputs for the input with the largest one."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = _companion_poles(alpha, p, ni, dt)
+        fr = np.abs(lam) / (2 * np.pi)
+        zr = -lam.real / np.abs(lam)
+    ok = (lam.imag > 0) & (zr > 0) & (zr <= max_damping) & (fr >= lo) & (fr <= hi)
+    lam, fr, zr = lam[ok], fr[ok], zr[ok]
+    srt = np.argsort(fr)
+    lam, fr, zr = lam[srt], fr[srt], zr[srt]
+    if not len(lam):
+        return fr, zr, np.zeros((0, H.shape[1]), complex)
+    res = _fit(w, H, lam, power, True, fast=True)[0]  # (n_poles, n_o, n_i)
+    ref = np.argmax(np.linalg.norm(res, axis=1), axis=1)
+    return fr, zr, normalize_shapes(res[np.arange(len(lam)), :, ref])

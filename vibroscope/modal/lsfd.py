@@ -9,6 +9,7 @@ from typing import Sequence
 import numpy as np
 import scipy.linalg
 
+from vibroscope._checks import read_only
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.spectral import FRF
 
@@ -16,12 +17,6 @@ __all__ = ["pole_residue_form", "lsfd", "LSFDResult"]
 
 #: power of jω that turns a receptance into the FRF kind (None: treated as a receptance)
 _POWER = {"receptance": 0, "mobility": 1, "accelerance": 2, None: 0}
-
-
-def _ro(a, dtype) -> np.ndarray:
-    a = np.array(a, dtype=dtype)
-    a.flags.writeable = False
-    return a
 
 
 def _band(frf: FRF, fmin: float | None, fmax: float | None) -> tuple[np.ndarray, float, float]:
@@ -207,12 +202,18 @@ class LSFDResult:
         for name, dt in (("natural_frequencies", float), ("damping_ratios", float), ("poles", complex),
                          ("residues", complex), ("lower_residual", complex), ("upper_residual", complex),
                          ("frequencies", float)):
-            object.__setattr__(self, name, _ro(getattr(self, name), dt))
+            object.__setattr__(self, name, read_only(getattr(self, name), dt))
         object.__setattr__(self, "outputs", tuple(self.outputs))
         object.__setattr__(self, "inputs", tuple(self.inputs))
 
     def __len__(self) -> int:
         return int(self.poles.size)
+
+    def __repr__(self) -> str:
+        fs = ", ".join(f"{f:.4g}" for f in self.natural_frequencies[:6])
+        more = ", ..." if len(self) > 6 else ""
+        return (f"LSFDResult({len(self)} modes, f = [{fs}{more}] Hz, {len(self.outputs)} outputs × "
+                f"{len(self.inputs)} inputs, {self.fmin:.4g}–{self.fmax:.4g} Hz, kind={self.kind!r})")
 
     @property
     def power(self) -> int:

@@ -85,12 +85,12 @@ class ModeMatch(NamedTuple):
     mac: np.ndarray
 
 
-def match_modes(est, ref, *, min_mac: float = 0.0, max_frequency_error: float = np.inf,
+def match_modes(est, ref, *, mac_min: float = 0.0, max_frequency_error: float = np.inf,
                 frequency_weight: float = 1.0) -> ModeMatch:
     """Pair estimated modes with reference modes by MAC and frequency proximity.
 
     The assignment minimises ``Σ (1 − MAC) + w |f_est − f_ref| / f_ref`` over one-to-one pairings
-    (Hungarian algorithm, :func:`scipy.optimize.linear_sum_assignment`); pairs below `min_mac` or
+    (Hungarian algorithm, :func:`scipy.optimize.linear_sum_assignment`); pairs below `mac_min` or
     beyond `max_frequency_error` are then dropped.
 
     Parameters
@@ -98,8 +98,8 @@ def match_modes(est, ref, *, min_mac: float = 0.0, max_frequency_error: float = 
     est, ref : ModalModel, vibroscope.models.Modes or tuple (frequencies, shapes)
         Frequencies in Hz, shape (n_modes,); shapes (n_modes, n_points) with the same points in the
         same order.
-    min_mac : float, optional
-        Smallest MAC of a kept pair (default 0: keep all).
+    mac_min : float, optional
+        Smallest MAC accepted for a pair (default 0: keep all).
     max_frequency_error : float, optional
         Largest relative frequency error of a kept pair (default: no limit).
     frequency_weight : float, optional
@@ -131,7 +131,7 @@ def match_modes(est, ref, *, min_mac: float = 0.0, max_frequency_error: float = 
     dfrel = np.abs(fe[:, None] - fr[None, :]) / fr[None, :]
     cost = (1 - np.nan_to_num(M)) + frequency_weight * dfrel
     ie, ir = scipy.optimize.linear_sum_assignment(cost)
-    keep = (np.nan_to_num(M[ie, ir]) >= min_mac) & (dfrel[ie, ir] <= max_frequency_error)
+    keep = (np.nan_to_num(M[ie, ir]) >= mac_min) & (dfrel[ie, ir] <= max_frequency_error)
     ie, ir = ie[keep], ir[keep]
     order = np.argsort(ir)
     ie, ir = ie[order], ir[order]

@@ -11,23 +11,12 @@ import scipy.optimize
 import scipy.ndimage
 import scipy.signal
 
+from vibroscope._checks import check_option
+from vibroscope.modal._peaks import band_indices, parabolic_peak
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.spectral import FRF
-from vibroscope.spectral._engine import check_option
 
 __all__ = ["peak_picking", "half_power_bandwidth", "fit_sdof"]
-
-
-def _parabolic_peak(f: np.ndarray, y: np.ndarray, k: int) -> float:
-    """Vertex of the parabola through bins k-1, k, k+1 of `y` (Hz)."""
-    if k <= 0 or k >= len(y) - 1 or not np.all(np.isfinite(y[k - 1 : k + 2])):
-        return float(f[k])
-    a, b, c = y[k - 1], y[k], y[k + 1]
-    den = a - 2 * b + c
-    if den >= 0:
-        return float(f[k])
-    p = 0.5 * (a - c) / den
-    return float(f[k] + np.clip(p, -0.5, 0.5) * (f[1] - f[0]))
 
 
 def half_power_bandwidth(f: np.ndarray, power: np.ndarray, k: int) -> tuple[float, float]:
@@ -225,98 +214,99 @@ def peak_picking(
     15.92 Hz, zeta = 0.0200
     """
     check_option("refine", refine, ("sdof", None))
-    f_all = frf.frequencies
-    if frf.kind is not None and frf.kind != "receptance":
-        rec = frf.to("receptance").H
-    else:
-        rec = np.asarray(frf.H)
-    acc = frf.to("accelerance").H if frf.kind not in (None, "accelerance") else np.asarray(frf.H)
-    mob = frf.to("mobility").H if frf.kind not in (None, "mobility") else np.asarray(frf.H)
-    band = f_all > 0
-    if fmin is not None:
-        band &= f_all >= fmin
-    if fmax is not None:
-        band &= f_all <= fmax
-    idx = np.flatnonzero(band)
-    if idx.size < 5:
-        raise ValueError(f"the band {fmin=} .. {fmax=} Hz holds {idx.size} bins; at least 5 are needed")
-    f = f_all[idx]
-    R = rec[idx]  # (n_f, n_out, n_in)
-    Aacc = acc[idx]
+    rec, acc, mob = (_as_kind(frf, k) for k in ("receptance", "accelerance", "mobility"))
+    idx = band_indices(frf.frequencies, fmin, fmax)
+    f = frf.frequencies[idx]
+    R, Aacc = rec[idx], acc[idx]  # (n_f, n_out, n_in)
     n_f, n_out, n_in = R.shape
     # plain power sum: all responses share one unit, and the mobility's roll-off on both sides
     # keeps noise far from the modes low (a per-channel median normalisation lifts it instead)
-    P = np.abs(mob[idx]) ** 2
-    ind = np.nan_to_num(np.mean(P.reshape(n_f, -1), axis=1), nan=0.0)
+    ind = np.nan_to_num(np.mean((np.abs(mob[idx]) ** 2).reshape(n_f, -1), axis=1), nan=0.0)
     ind_db = 10 * np.log10(np.maximum(ind, np.finfo(float).tiny))
-    coh = np.asarray(frf.coherence)[idx]
-    coh_mean = np.nanmean(coh, axis=1) if coh.size else np.ones(n_f)
-    peaks, props = scipy.signal.find_peaks(ind_db, prominence=prominence)
-    prom = props["prominences"]
-    # leakage dips the coherence right at a lightly damped resonance (one or two bins): judge a
-    # peak by the median coherence within ±3 bins, low all around a noise peak
-    coh_near = scipy.ndimage.median_filter(np.nan_to_num(coh_mean, nan=1.0), size=7, mode="nearest")
-    ok = coh_near[peaks] >= min_coherence
-    peaks, prom = peaks[ok], prom[ok]
+    peaks, prom = _coherent_peaks(ind_db, np.asarray(frf.coherence)[idx], prominence, min_coherence)
     if n_modes is not None:
         if len(peaks) < n_modes:
             warnings.warn(f"found {len(peaks)} peaks above {prominence=} dB, fewer than {n_modes=}", stacklevel=2)
         best = np.sort(np.argsort(prom)[::-1][:n_modes])
         peaks, prom = peaks[best], prom[best]
+    in_col = _input_column(frf, input)
+    rows = []
+    for k in peaks:
+        row = _fit_peak(f, ind, ind_db, int(k), R, refine)
+        # quadrature picking: Im of the accelerance at the natural frequency, sign kept
+        q = np.imag(Aacc[int(np.argmin(np.abs(f - row["fn"])))])  # (n_out, n_in)
+        col = int(np.argmax(np.sum(q**2, axis=0))) if in_col is None else in_col
+        row["shape"] = q[:, col].astype(complex)
+        A = row.pop("A")
+        row["residue_shape"] = A.reshape(n_out, n_in)[:, col] if A is not None else np.full(n_out, np.nan + 0j)
+        rows.append(row)
 
-    if input is None:
-        in_cols = None
-    elif isinstance(input, str):
-        if input not in frf.inputs:
-            raise ValueError(f"{input=} is not one of the inputs {frf.inputs}")
-        in_cols = frf.inputs.index(input)
-    else:
-        in_cols = int(input)
+    def column(key, dtype=float):
+        return np.array([r[key] for r in rows], dtype=dtype)
 
-    df = f[1] - f[0]
-    fn_l, z_l, shapes, res_shapes, fpk, zhp, pkv, fitres = [], [], [], [], [], [], [], []
-    for k, pr in zip(peaks, prom):
-        f_peak = _parabolic_peak(f, ind_db, k)
-        f1, f2 = half_power_bandwidth(f, ind, k)
-        z_hp = (f2 - f1) / (2 * f_peak) if np.isfinite(f1) and np.isfinite(f2) else np.nan
-        fn, zeta = f_peak, z_hp
-        fitted_A = None
-        resid = np.nan
-        if refine == "sdof":
-            bw = (f2 - f1) if np.isfinite(z_hp) else 2 * 0.01 * f_peak
-            half = max(1.0 * bw, 4 * df)
-            sel = (f >= f_peak - half) & (f <= f_peak + half)
-            if np.count_nonzero(sel) >= 5:
-                z0 = z_hp if np.isfinite(z_hp) and z_hp > 0 else 0.01
-                try:
-                    fn_fit, z_fit, A, resid = fit_sdof(f[sel], R[sel].reshape(np.count_nonzero(sel), -1), f_peak, z0)
-                    if f[sel][0] < fn_fit < f[sel][-1] and 0 < z_fit < 0.49:
-                        fn, zeta = fn_fit, z_fit
-                        fitted_A = A.reshape(n_out, n_in)
-                except (np.linalg.LinAlgError, ValueError):
-                    pass
-        kk = int(np.argmin(np.abs(f - fn)))
-        q = np.imag(Aacc[kk])  # (n_out, n_in)
-        col = int(np.argmax(np.sum(q**2, axis=0))) if in_cols is None else in_cols
-        shapes.append(q[:, col].astype(complex))
-        res_shapes.append(fitted_A[:, col] if fitted_A is not None else np.full(n_out, np.nan + 0j))
-        fn_l.append(fn)
-        z_l.append(zeta)
-        fpk.append(f_peak)
-        zhp.append(z_hp)
-        pkv.append(ind_db[k])
-        fitres.append(resid)
-    shapes_arr = normalize_shapes(np.array(shapes).reshape(len(shapes), n_out))
-    res_arr = normalize_shapes(np.array(res_shapes).reshape(len(res_shapes), n_out))
+    shapes = normalize_shapes(column("shape", complex).reshape(len(rows), n_out))
     extra = {
-        "frequency_peak": np.array(fpk),
-        "damping_half_power": np.array(zhp),
-        "peak_value": np.array(pkv),
+        "frequency_peak": column("frequency_peak"),
+        "damping_half_power": column("damping_half_power"),
+        "peak_value": column("peak_value"),
         "prominence": np.asarray(prom, dtype=float),
-        "fit_residual": np.array(fitres),
-        "residue_shapes": res_arr,
-        "mpc": mpc(shapes_arr) if len(shapes) else np.zeros(0),
+        "fit_residual": column("fit_residual"),
+        "residue_shapes": normalize_shapes(column("residue_shape", complex).reshape(len(rows), n_out)),
+        "mpc": mpc(shapes) if len(rows) else np.zeros(0),
         "settings": dict(fmin=fmin, fmax=fmax, min_coherence=min_coherence, prominence=prominence,
                          refine=refine, frf_kind=frf.kind, estimator=frf.estimator),
     }
-    return ModalModel(np.array(fn_l), np.array(z_l), shapes_arr, frf.outputs, "peak_picking", extra)
+    return ModalModel(column("fn"), column("zeta"), shapes, frf.outputs, "peak_picking", extra)
+
+
+def _as_kind(frf: FRF, kind: str) -> np.ndarray:
+    """``H`` as `kind` (converted with :meth:`FRF.to`); as it is when the FRF's kind is unknown."""
+    return frf.to(kind).H if frf.kind not in (None, kind) else np.asarray(frf.H)
+
+
+def _coherent_peaks(ind_db: np.ndarray, coh: np.ndarray, prominence: float,
+                    min_coherence: float) -> tuple[np.ndarray, np.ndarray]:
+    """Peaks of the indicator (dB) with their prominences, where the coherence near them reaches
+    `min_coherence`."""
+    coh_mean = np.nanmean(coh, axis=1) if coh.size else np.ones(len(ind_db))
+    peaks, props = scipy.signal.find_peaks(ind_db, prominence=prominence)
+    # leakage dips the coherence right at a lightly damped resonance (one or two bins): judge a
+    # peak by the median coherence within ±3 bins, low all around a noise peak
+    coh_near = scipy.ndimage.median_filter(np.nan_to_num(coh_mean, nan=1.0), size=7, mode="nearest")
+    ok = coh_near[peaks] >= min_coherence
+    return peaks[ok], props["prominences"][ok]
+
+
+def _input_column(frf: FRF, input: int | str | None) -> int | None:
+    """Index of the input used for the shapes (None: the strongest at each peak)."""
+    if input is None:
+        return None
+    if isinstance(input, str):
+        if input not in frf.inputs:
+            raise ValueError(f"{input=} is not one of the inputs {frf.inputs}")
+        return frf.inputs.index(input)
+    return int(input)
+
+
+def _fit_peak(f: np.ndarray, ind: np.ndarray, ind_db: np.ndarray, k: int, R: np.ndarray, refine) -> dict:
+    """Frequency and damping of the peak at bin `k`: parabolic peak and half-power width, then the
+    single-DOF fit of the receptances `R` over ``fn ± (f2 − f1)`` (at least ± 4 bins) when
+    ``refine='sdof'`` and the fit lands inside that band. ``"A"``: the fitted modal constants or None."""
+    f_peak = parabolic_peak(f, ind_db, k)
+    f1, f2 = half_power_bandwidth(f, ind, k)
+    z_hp = (f2 - f1) / (2 * f_peak) if np.isfinite(f1) and np.isfinite(f2) else np.nan
+    fn, zeta, A, resid = f_peak, z_hp, None, np.nan
+    if refine == "sdof":
+        bw = (f2 - f1) if np.isfinite(z_hp) else 2 * 0.01 * f_peak
+        half = max(1.0 * bw, 4 * (f[1] - f[0]))
+        sel = (f >= f_peak - half) & (f <= f_peak + half)
+        if np.count_nonzero(sel) >= 5:
+            z0 = z_hp if np.isfinite(z_hp) and z_hp > 0 else 0.01
+            try:
+                fn_fit, z_fit, A_fit, resid = fit_sdof(f[sel], R[sel].reshape(np.count_nonzero(sel), -1), f_peak, z0)
+                if f[sel][0] < fn_fit < f[sel][-1] and 0 < z_fit < 0.49:
+                    fn, zeta, A = fn_fit, z_fit, A_fit
+            except (np.linalg.LinAlgError, ValueError):
+                pass
+    return {"fn": fn, "zeta": zeta, "frequency_peak": f_peak, "damping_half_power": z_hp,
+            "peak_value": ind_db[k], "fit_residual": resid, "A": A}

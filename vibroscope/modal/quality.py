@@ -7,16 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vibroscope._checks import read_only
 from vibroscope.modal._results import ModalModel, mpc
 from vibroscope.modal.mac import _shapes, mac
 
 __all__ = ["automac", "mpd", "comac", "complexity", "modal_quality", "QualityTable"]
-
-
-def _ro(a, dtype=float) -> np.ndarray:
-    a = np.array(a, dtype=dtype)
-    a.flags.writeable = False
-    return a
 
 
 def automac(shapes) -> np.ndarray:
@@ -236,11 +231,14 @@ class QualityTable:
     def __post_init__(self) -> None:
         for name in ("natural_frequencies", "damping_ratios", "mpc", "mpd_deg", "complexity", "automac",
                      "automac_max"):
-            object.__setattr__(self, name, _ro(getattr(self, name)))
+            object.__setattr__(self, name, read_only(getattr(self, name), float))
         object.__setattr__(self, "points", tuple(self.points))
 
     def __len__(self) -> int:
         return int(self.mpc.size)
+
+    def __repr__(self) -> str:
+        return f"QualityTable({len(self)} modes by {self.method!r} at {len(self.points)} points)"
 
     def to_dict(self) -> dict:
         """JSON-ready table.

@@ -96,6 +96,9 @@ class Selection:
     def __iter__(self):
         return iter((self.modes, self.rejected))
 
+    def __repr__(self) -> str:
+        return f"Selection({self.modes!r}, {len(self.rejected)} rejected)"
+
 
 def _subset(model: ModalModel, keep: np.ndarray) -> ModalModel:
     """The modes `keep` (indices) of `model`, with every per-mode ``extra`` array subset too."""

@@ -7,7 +7,8 @@ from typing import Sequence
 
 import numpy as np
 
-from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
+from vibroscope._checks import read_only
+from vibroscope.modal._results import ModalModel, normalize_shapes
 from vibroscope.modal.mac import mac
 from vibroscope.signals import Signals
 
@@ -59,7 +60,10 @@ class Stabilization:
     points : tuple of str
         Channel names.
     settings : dict
-        ``fs``, ``n_lags``, ``orders``, and the stability tolerances.
+        ``fs``, ``n_lags``, ``orders``, and the stability criteria ``tol_frequency``,
+        ``tol_damping``, ``mac_min``.
+
+    The arrays are read-only copies.
     """
 
     order: np.ndarray
@@ -70,6 +74,19 @@ class Stabilization:
     points: tuple[str, ...]
     settings: dict = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        for name, dtype in (("order", int), ("frequency", float), ("damping", float), ("shapes", complex),
+                            ("stable", int)):
+            object.__setattr__(self, name, read_only(getattr(self, name), dtype))
+        object.__setattr__(self, "points", tuple(self.points))
+
+    def __repr__(self) -> str:
+        method = self.settings.get("method", "ssi_cov")
+        orders = np.asarray(self.settings.get("orders") or np.unique(self.order))
+        span = f"orders {orders.min()}–{orders.max()}" if orders.size else "no orders"
+        return (f"Stabilization({method!r}, {self.frequency.size} poles over {span}, "
+                f"{int(np.count_nonzero(self.stable == 3))} fully stable, {len(self.points)} points)")
+
     def modal_model(self, *, min_count: int | None = None, freq_tol: float = 0.01,
                     mac_min: float = 0.9, fmin: float | None = None, fmax: float | None = None) -> ModalModel:
         """Modes as clusters of fully stable poles (``stable == 3``).
@@ -78,6 +95,8 @@ class Stabilization:
         (relative) of the cluster's median frequency and with MAC ≥ `mac_min` to its first member.
         A cluster with at least `min_count` poles (default a quarter of the orders) is a mode: the
         median frequency and damping, and the shape of the member nearest the median frequency.
+        The clustering is :func:`vibroscope.modal.selection.cluster_poles` (which also returns the
+        clusters too small to be modes).
 
         Parameters
         ----------
@@ -86,7 +105,7 @@ class Stabilization:
         freq_tol : float, optional
             Relative frequency tolerance of a cluster; default 0.01.
         mac_min : float, optional
-            Smallest MAC with the cluster's first pole; default 0.9.
+            Smallest MAC accepted between a pole and the cluster's first pole; default 0.9.
         fmin, fmax : float, optional
             Frequency band in Hz.
 
@@ -94,50 +113,13 @@ class Stabilization:
         -------
         ModalModel
             ``method`` from the settings (``'ssi_cov'``, ``'lscf'``); ``extra["cluster_size"]``,
-            ``extra["damping_std"]``, ``extra["mpc"]``.
+            ``extra["damping_std"]``, ``extra["frequency_std_hz"]``, ``extra["order"]``,
+            ``extra["mpc"]``, ``extra["settings"]`` (this diagram's
+            settings updated with ``min_count``, ``freq_tol`` and the clustering's ``mac_min``).
         """
-        method = self.settings.get("method", "ssi_cov")
-        n_orders = len(self.settings.get("orders", ())) or int(np.unique(self.order).size)
-        min_count = max(3, n_orders // 4) if min_count is None else int(min_count)
-        sel = self.stable == 3
-        if fmin is not None:
-            sel &= self.frequency >= fmin
-        if fmax is not None:
-            sel &= self.frequency <= fmax
-        idx = np.flatnonzero(sel)
-        idx = idx[np.argsort(self.frequency[idx])]
-        used = np.zeros(len(idx), bool)
-        modes = []
-        for a in range(len(idx)):
-            if used[a]:
-                continue
-            members = [a]
-            f0 = self.frequency[idx[a]]
-            for b in range(a + 1, len(idx)):
-                if used[b]:
-                    continue
-                fb = self.frequency[idx[b]]
-                if fb > f0 * (1 + 2 * freq_tol):
-                    break
-                fmed = np.median(self.frequency[idx[members]])
-                if abs(fb / fmed - 1) <= freq_tol and mac(self.shapes[idx[a]], self.shapes[idx[b]])[0, 0] >= mac_min:
-                    members.append(b)
-            if len(members) >= min_count:
-                used[members] = True
-                p = idx[members]
-                fmed = float(np.median(self.frequency[p]))
-                rep = p[np.argmin(np.abs(self.frequency[p] - fmed))]
-                modes.append((fmed, float(np.median(self.damping[p])), self.shapes[rep], len(p),
-                              float(np.std(self.damping[p]))))
-        if not modes:
-            return ModalModel(np.zeros(0), np.zeros(0), np.zeros((0, len(self.points))), self.points, method,
-                              {"cluster_size": np.zeros(0, int), "damping_std": np.zeros(0), "mpc": np.zeros(0),
-                               "settings": dict(self.settings)})
-        f, z, s, c, zs = zip(*modes)
-        shapes = normalize_shapes(np.array(s))
-        return ModalModel(np.array(f), np.array(z), shapes, self.points, method,
-                          {"cluster_size": np.array(c), "damping_std": np.array(zs), "mpc": mpc(shapes),
-                           "settings": dict(self.settings, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min)})
+        from vibroscope.modal.selection import cluster_poles
+
+        return cluster_poles(self, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min, fmin=fmin, fmax=fmax)[0]
 
 
 def ssi_cov(
@@ -150,7 +132,7 @@ def ssi_cov(
     max_damping: float = 0.2,
     tol_frequency: float = 0.01,
     tol_damping: float = 0.05,
-    tol_mac: float = 0.98,
+    mac_min: float = 0.98,
 ) -> Stabilization:
     """Covariance-driven stochastic subspace identification over several model orders.
 
@@ -176,9 +158,11 @@ def ssi_cov(
         Reference channel indices (SSI-COV/ref); default all channels.
     max_damping : float, optional
         Poles with ``ζ`` outside ``(0, max_damping]`` are discarded; default 0.2.
-    tol_frequency, tol_damping, tol_mac : float, optional
+    tol_frequency, tol_damping : float, optional
         Stability criteria against the nearest pole of the previous order: relative frequency
-        change ≤ 1 %, relative damping change ≤ 5 %, MAC ≥ 0.98 (defaults).
+        change ≤ `tol_frequency` (default 1 %), relative damping change ≤ `tol_damping` (5 %).
+    mac_min : float, optional
+        Smallest MAC with that pole accepted as a stable shape; default 0.98.
 
     Returns
     -------
@@ -234,17 +218,8 @@ def ssi_cov(
         ok = (z > 0) & (z <= max_damping) & (f < fs / 2)
         f, z = f[ok], z[ok]
         phi = normalize_shapes((C @ psi[:, ok]).T) if ok.any() else np.zeros((0, n_ch), complex)
-        code = np.zeros(len(f), int)
-        if prev is not None and len(prev[0]) and len(f):
-            pf, pz, pphi = prev
-            for k in range(len(f)):
-                j = int(np.argmin(np.abs(pf - f[k])))
-                if abs(pf[j] - f[k]) / f[k] <= tol_frequency:
-                    code[k] = 1
-                    if abs(pz[j] - z[k]) / z[k] <= tol_damping:
-                        code[k] = 2
-                        if mac(pphi[j], phi[k])[0, 0] >= tol_mac:
-                            code[k] = 3
+        code = stability_codes(prev, f, z, phi, tol_frequency=tol_frequency, tol_damping=tol_damping,
+                               mac_min=mac_min)
         rows.append((np.full(len(f), order), f, z, phi, code))
         prev = (f, z, phi)
     order_a, f_a, z_a, phi_a, code_a = (np.concatenate(c) for c in zip(*rows))
@@ -253,4 +228,41 @@ def ssi_cov(
                          dict(method="ssi_cov", fs=fs, n_lags=n_lags, orders=tuple(orders),
                               ref=None if ref is None else tuple(ref),
                               max_damping=max_damping, tol_frequency=tol_frequency, tol_damping=tol_damping,
-                              tol_mac=tol_mac))
+                              mac_min=mac_min))
+
+
+def stability_codes(prev, f: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_frequency: float,
+                    tol_damping: float, mac_min: float) -> np.ndarray:
+    """Stability code of each pole of one order against the nearest pole of the previous order.
+
+    Parameters
+    ----------
+    prev : (f, z, phi) or None
+        Frequencies (Hz), damping ratios and shapes of the previous order's poles.
+    f, z : ndarray, shape (n_poles,)
+        This order's frequencies (Hz) and damping ratios.
+    phi : ndarray, complex, shape (n_poles, n_points)
+        This order's shapes.
+    tol_frequency, tol_damping : float
+        Largest relative frequency and damping changes of a stable pole.
+    mac_min : float
+        Smallest MAC with the previous pole accepted as a stable shape.
+
+    Returns
+    -------
+    ndarray of int, shape (n_poles,)
+        0 new, 1 frequency stable, 2 and damping, 3 and shape (see :class:`Stabilization`).
+    """
+    code = np.zeros(len(f), int)
+    if prev is None or not len(prev[0]) or not len(f):
+        return code
+    pf, pz, pphi = prev
+    for k in range(len(f)):
+        j = int(np.argmin(np.abs(pf - f[k])))
+        if abs(pf[j] - f[k]) / f[k] <= tol_frequency:
+            code[k] = 1
+            if abs(pz[j] - z[k]) / z[k] <= tol_damping:
+                code[k] = 2
+                if mac(pphi[j], phi[k])[0, 0] >= mac_min:
+                    code[k] = 3
+    return code

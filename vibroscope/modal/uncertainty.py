@@ -50,6 +50,9 @@ class ModalUncertainty:
     damping_std: np.ndarray
     method: str
 
+    def __repr__(self) -> str:
+        return f"ModalUncertainty({np.size(self.frequency_std_hz)} modes, {self.method})"
+
 
 def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarray, *,
                freq_tol: float = 0.02, mac_min: float = 0.8) -> tuple[np.ndarray, np.ndarray]:

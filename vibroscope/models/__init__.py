@@ -44,7 +44,13 @@ __all__ = [
 
 def __getattr__(name):  # lazy: simulate / excitation / modelfile load on first use
     import importlib
+    import importlib.util
 
+    # A submodule's name always means the submodule, as it does once anything has imported it
+    # (`from vibroscope.models.simulate import upsample` binds it here): `vibroscope.models.simulate`
+    # is the module, its function `vibroscope.models.simulate.simulate` (or `vibroscope.simulate`).
+    if importlib.util.find_spec(f"{__name__}.{name}") is not None:
+        return importlib.import_module(f"{__name__}.{name}")
     for mod in ("simulate", "excitation", "modelfile"):
         m = importlib.import_module(f"vibroscope.models.{mod}")
         if name in getattr(m, "__all__", ()):

@@ -6,7 +6,8 @@ integrator before the compiled kernel"; :func:`vibroscope.models.simulate.simula
 :mod:`vibroscope.models.integrate` instead.
 
 The scheme is the trapezoidal rule (Newmark average acceleration, ``a = 1/2``, ``b = 1/4``,
-``c = 1/2`` for internal states) [1]_.
+``c = 1/2`` for internal states) [1]_. Steps whose Newton iteration does not converge are
+counted (``_Integrator.newton_failures``) and warned about, as the compiled kernel does.
 
 References
 ----------
@@ -15,6 +16,8 @@ References
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -32,6 +35,7 @@ class _Integrator:
     iteration on the nonlinear element forces and states only."""
 
     def __init__(self, model: LumpedModel, dt: float):
+        self.newton_failures = 0  # of the last run()
         self.model = model
         n = model.n_dofs
         A, Bq, _, _ = model.state_matrices()
@@ -61,11 +65,27 @@ class _Integrator:
     def remainder(self, e, d, v, s):
         return e.force(d, v, s) - e.linear_stiffness * d - e.linear_damping * v
 
-    def run(self, U: np.ndarray, q0=None, s0=None):
-        """Integrate over the fine-grid input U (n_in, N); returns q (2n, N), g (n_e, N)."""
+    def run(self, U: np.ndarray, q0=None, s0=None, *, warn: bool = True):
+        """Integrate over the fine-grid input U (n_in, N); returns q (2n, N), g (n_e, N).
+
+        The steps whose Newton iteration stopped at its iteration limit (50 or 60) without
+        meeting its tolerance are counted in ``self.newton_failures`` (their last iterates are
+        kept), like :attr:`vibroscope.models.integrate.IntegrationResult.newton_failures`;
+        `warn` issues one :class:`RuntimeWarning` when there are any.
+        """
+        self.newton_failures = 0
         if len(self.els) == 1 and self.els[0].n_states <= 1:
-            return self._run_scalar(U, q0, s0)
-        return self._run_general(U, q0, s0)
+            out = self._run_scalar(U, q0, s0)
+        else:
+            out = self._run_general(U, q0, s0)
+        if self.newton_failures and warn:
+            warnings.warn(
+                f"reference integrator: Newton's iteration did not converge at {self.newton_failures} of "
+                f"{U.shape[1] - 1} integration steps; the last iterates were kept",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+        return out
 
     # generic: several elements and/or several internal states; residuals in Python floats,
     # Newton with a forward-difference Jacobian
@@ -137,6 +157,8 @@ class _Integrator:
                 x = [a - b for a, b in zip(x, dx.tolist())]
                 if all(abs(b) <= 1e-13 * max(1.0, abs(a)) for a, b in zip(x, dx.tolist())):
                     break
+            else:
+                self.newton_failures += 1
             g = x[:n_e]
             s = x[n_e:]
             q = qp + Gf @ np.asarray(g)
@@ -195,6 +217,8 @@ class _Integrator:
                     zz -= dz
                     if abs(dz) <= 1e-15 * (1.0 + abs(zz)) + 1e-300:
                         break
+                else:
+                    self.newton_failures += 1
                 vv = vp + s_v * zz
                 return zz, zz, al * vv - be * (ga * abs(vv) * zz + de * vv * abs(zz))
             gg = g
@@ -227,6 +251,8 @@ class _Integrator:
                     gg -= dg
                     if abs(dg) <= 1e-13 * (1.0 + abs(gg)):
                         break
+            else:
+                self.newton_failures += 1
             zdn = sdot(dp + s_d * gg, vp + s_v * gg, (zz,)) if has_state else 0.0
             return gg, zz, zdn
 

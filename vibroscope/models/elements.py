@@ -42,6 +42,7 @@ __all__ = [
     "Friction",
     "BoucWen",
     "MRDamper",
+    "spencer_mr_damper_rates",
     "ELEMENT_TYPES",
     "make_element",
 ]
@@ -265,6 +266,46 @@ class BoucWen(Element):
         )
 
 
+def spencer_mr_damper_rates(x, xdot, y, z, *, alpha, c0, c1, k0, gamma, beta, A, n):
+    """Spencer et al. (1997) MR-damper law, eq. 5: the rates ``(ydot, zdot)`` of the internal states.
+
+    The one implementation of the law, used by :class:`MRDamper` and by the MR-damper
+    instrument (:mod:`vibroscope.instruments.mr_damper`)::
+
+        ydot = (alpha z + c0 xdot + k0 (x - y)) / (c0 + c1)
+        zdot = -gamma |xdot - ydot| z |z|^(n-1) - beta (xdot - ydot) |z|^n + A (xdot - ydot)
+
+    The damper force is then ``f = c1 ydot + k1 (x - x0)``.
+
+    Parameters
+    ----------
+    x, xdot : float or ndarray
+        Damper displacement (m) and velocity (m/s).
+    y, z : float or ndarray
+        Internal displacement y (m) and hysteretic variable z (m).
+    alpha, c0, c1, k0 : float
+        Coefficients at the present current: Bouc-Wen force gain (N/m), viscous damping at
+        large and at low velocities (N s/m), stiffness at large velocities (N/m).
+    gamma, beta : float
+        Hysteresis shape parameters, m^-n.
+    A : float
+        Hysteresis scale, dimensionless.
+    n : float
+        Hysteresis exponent, dimensionless.
+
+    Returns
+    -------
+    tuple (ydot, zdot)
+        In m/s; scalars for scalar arguments, arrays for arrays (``abs`` is the builtin, so
+        python floats stay fast in a scalar integration loop).
+    """
+    ydot = (alpha * z + c0 * xdot + k0 * (x - y)) / (c0 + c1)
+    r = xdot - ydot
+    az = abs(z)
+    zdot = -gamma * abs(r) * z * az ** (n - 1) - beta * r * az**n + A * r
+    return ydot, zdot
+
+
 @dataclass(frozen=True)
 class MRDamper(Element):
     """Magnetorheological damper, the phenomenological model of Spencer et al. (1997), eq. 5.
@@ -286,10 +327,11 @@ class MRDamper(Element):
 
     Notes
     -----
-    Implemented here because ``vibroscope.models.mr_damper`` did not exist when this module
-    was written; :meth:`from_coefficients` builds the element from that module's
-    ``MRDamperParams.at_current(i)`` (its cubic current laws and A/V mapping). The offset
-    force ``-k1 x0`` is omitted (a static preload). State order: ``(z, y)``.
+    The law itself is :func:`spencer_mr_damper_rates`, shared with the MR-damper instrument;
+    :meth:`from_coefficients` builds the element from
+    :meth:`vibroscope.instruments.mr_damper.MRDamperParams.at_current` (its cubic current
+    laws and A/V mapping). The offset force ``-k1 x0`` is omitted (a static preload). State
+    order: ``(z, y)``.
     """
 
     current: float = 0.0
@@ -312,7 +354,7 @@ class MRDamper(Element):
     def from_coefficients(cls, between, coeffs) -> "MRDamper":
         """An element with fixed coefficients taken from any object with attributes
         ``alpha, c0, c1, k0, k1, gamma, beta, A, n`` (e.g.
-        :meth:`vibroscope.models.mr_damper.MRDamperParams.at_current`); ``x0`` is dropped."""
+        :meth:`vibroscope.instruments.mr_damper.MRDamperParams.at_current`); ``x0`` is dropped."""
         return cls(
             between,
             current=0.0,
@@ -334,10 +376,10 @@ class MRDamper(Element):
         i = self.current
         return self.alpha_a + self.alpha_b * i, self.c0_a + self.c0_b * i, self.c1_a + self.c1_b * i
 
-    def _ydot(self, d, v, state):
+    def _rates(self, d, v, state):
         alpha, c0, c1 = self._coeffs()
-        z, y = state[0], state[1]
-        return (alpha * z + c0 * v + self.k0 * (d - y)) / (c0 + c1)
+        return spencer_mr_damper_rates(d, v, state[1], state[0], alpha=alpha, c0=c0, c1=c1, k0=self.k0,
+                                       gamma=self.gamma, beta=self.beta, A=self.A, n=self.n)
 
     @property
     def linear_stiffness(self) -> float:
@@ -347,14 +389,11 @@ class MRDamper(Element):
         if state is None:
             return self.k1 * d
         _, _, c1 = self._coeffs()
-        return c1 * self._ydot(d, v, state) + self.k1 * d
+        ydot, _ = self._rates(d, v, state)
+        return c1 * ydot + self.k1 * d
 
     def state_derivative(self, d, v, state):
-        z = state[0]
-        ydot = self._ydot(d, v, state)
-        r = v - ydot
-        az = abs(z)
-        zdot = -self.gamma * abs(r) * z * az ** (self.n - 1) - self.beta * r * az**self.n + self.A * r
+        ydot, zdot = self._rates(d, v, state)
         return np.array([zdot, ydot])
 
 

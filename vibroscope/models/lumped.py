@@ -23,6 +23,8 @@ from typing import Literal, Sequence
 
 import numpy as np
 
+from vibroscope._checks import read_only as _ro
+
 from vibroscope.models.elements import GROUND, Damper, Element, Spring
 
 __all__ = ["Dof", "Input", "Output", "Modes", "LumpedModel", "demo_model", "demo_model_5dof", "close_modes_model"]
@@ -30,12 +32,6 @@ __all__ = ["Dof", "Input", "Output", "Modes", "LumpedModel", "demo_model", "demo
 Quantity = Literal["acceleration", "velocity", "displacement"]
 QUANTITIES = ("acceleration", "velocity", "displacement")
 UNITS = {"acceleration": "m/s^2", "velocity": "m/s", "displacement": "m", "force": "N"}
-
-
-def _ro(a) -> np.ndarray:
-    a = np.array(a)
-    a.flags.writeable = False
-    return a
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,8 @@ from typing import Sequence
 
 import numpy as np
 
+from vibroscope._checks import read_only as _ro
+
 from vibroscope.models.lumped import Input, Output
 
 __all__ = ["PoleResidueModel"]
@@ -39,12 +41,6 @@ __all__ = ["PoleResidueModel"]
 QUANTITY_ORDER = {"displacement": 0, "velocity": 1, "acceleration": 2}
 #: singular values below this fraction of the largest are dropped from a residue's rank
 _RANK_TOL = 1e-13
-
-
-def _ro(a) -> np.ndarray:
-    a = np.array(a)
-    a.flags.writeable = False
-    return a
 
 
 def _complex_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:

@@ -4,6 +4,26 @@ and MATLAB-style multistage FIR decimation of simulated outputs.
 Conventions: sample ``k`` of a record lands on sample ``k * factor`` of its upsampled
 version and output ``j`` of a decimation belongs to input ``j * factor`` (no delay).
 
+Resampling in vibroscope: three designs, each for its own job
+-------------------------------------------------------------
+* here, **integer factors around a simulation**: :func:`upsample` (band-limited) and
+  :func:`decimate_fir` (linear-phase FIR in prime stages, MATLAB ``decimate(x, r, 'fir')``).
+  Sample alignment is exact (no delay) and the FIR design is fixed, because the simulated
+  outputs must reproduce references made that way (the Bouc-Wen benchmark [1]_) and
+  because :func:`~vibroscope.models.simulate.simulate` and its tests rely on output ``k``
+  belonging to input ``k``;
+* :func:`vibroscope.io.timebase.resample_to_grid`, **irregular time stamps onto a uniform
+  grid** at any (non-integer) rate ratio: a cubic spline through the samples, with a
+  Butterworth anti-alias low-pass when the source is faster. Integer-factor filters do not
+  apply to jittered, gapped stamps;
+* :func:`vibroscope.pipeline.decimate`, **reducing a uniform record to the analysis band**
+  before spectral estimation: :func:`scipy.signal.decimate` (order-8 Chebyshev I, zero
+  phase) in stages of at most 10 for any integer factor, including large primes for which a
+  30th-order FIR per stage would alias; only the band below 0.4 fs is used afterwards.
+
+The three are kept apart on purpose: merging them would change simulated records (FIR vs
+IIR), analysed spectra, or the treatment of irregular logs.
+
 References
 ----------
 .. [1] J. P. Noël, M. Schoukens, "Hysteretic benchmark with a dynamic nonlinearity",

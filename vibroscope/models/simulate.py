@@ -37,7 +37,6 @@ from typing import Literal
 import numpy as np
 from scipy import signal
 
-from vibroscope.models._reference_integrator import _Integrator  # noqa: F401  (tests import it from here)
 from vibroscope.models.boucwen_benchmark import boucwen_benchmark_model, simulate_boucwen_benchmark
 from vibroscope.models.integrate import integrate
 from vibroscope.models.linear_sim import _dlsim_modal, _foh, _triangle_hold_compensation

@@ -4,7 +4,15 @@ conventions and parameter names. Imports nothing of vibroscope but :mod:`vibrosc
 """
 
 from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
-from vibroscope.spectral._results import FRF, FRF_KINDS, CrossSpectralMatrix, Spectrogram, Spectrum
+from vibroscope.spectral._results import (
+    FRF,
+    FRF_KINDS,
+    Coherence,
+    CrossSpectralMatrix,
+    MultipleCoherence,
+    Spectrogram,
+    Spectrum,
+)
 from vibroscope.spectral.estimators import (
     amplitude_spectrum,
     coherence,
@@ -21,6 +29,7 @@ from vibroscope.spectral.periodic import Periodicity, detect_period, frf_periodi
 __all__ = [
     "welch", "csd_matrix", "amplitude_spectrum", "frf", "coherence", "multiple_coherence",
     "spectrogram", "frf_kind", "Spectrum", "CrossSpectralMatrix", "FRF", "Spectrogram", "FRF_KINDS",
+    "Coherence", "MultipleCoherence",
     "CrossSpectralAccumulator", "segment_settings",
 ]
 __all__ += ["integrate", "vibration_severity", "ods", "Severity", "OperatingShape"]

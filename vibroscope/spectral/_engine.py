@@ -25,6 +25,8 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
+from vibroscope._checks import check_option  # re-exported: its old home
+
 __all__ = ["CrossSpectralAccumulator", "check_option", "segment_settings"]
 
 Detrend = Literal["constant", "linear", False]
@@ -32,21 +34,6 @@ Scaling = Literal["density", "spectrum"]
 
 #: segments transformed per batched FFT; bounds working memory independently of record length
 _BLOCK = 64
-
-
-def check_option(name: str, value: Any, allowed: tuple) -> None:
-    """Raise one uniform ``ValueError`` when `value` is not one of `allowed`.
-
-    Raises
-    ------
-    ValueError
-        ``"Invalid value for the 'name' parameter. Allowed values are ..., but got ... instead."``
-    """
-    if value not in allowed:
-        raise ValueError(
-            f"Invalid value for the {name!r} parameter. Allowed values are "
-            f"{', '.join(repr(a) for a in allowed)}, but got {value!r} instead."
-        )
 
 
 @dataclass(frozen=True)
@@ -215,14 +202,31 @@ class CrossSpectralAccumulator:
         self.n_segments += n_seg
 
     def merge(self, other: "CrossSpectralAccumulator") -> "CrossSpectralAccumulator":
-        """Add the segment sums of an accumulator over another (disjoint) record; returns self."""
-        if (other.settings.nperseg, other.settings.nfft, other.fs, other.cross) != (
-            self.settings.nperseg,
-            self.settings.nfft,
-            self.fs,
-            self.cross,
-        ):
-            raise ValueError("cannot merge accumulators with different fs, nperseg, nfft or mode")
+        """Add the segment sums of an accumulator over another (disjoint) record; returns self.
+
+        Raises
+        ------
+        ValueError
+            If the two differ in a setting that changes the sums: ``n_channels``, ``fs``, ``cross``
+            (the mode), ``nperseg``, ``noverlap``, ``nfft``, ``window`` or ``detrend``; the message
+            names the setting.
+        """
+        a, b = self.settings, other.settings
+        pairs = {
+            "n_channels": (self.n_channels, other.n_channels),
+            "fs": (self.fs, other.fs),
+            "cross": (self.cross, other.cross),
+            "nperseg": (a.nperseg, b.nperseg),
+            "noverlap": (a.noverlap, b.noverlap),
+            "nfft": (a.nfft, b.nfft),
+            "detrend": (a.detrend, b.detrend),
+        }
+        for name, (mine, theirs) in pairs.items():
+            if mine != theirs:
+                raise ValueError(f"cannot merge accumulators with different {name}: {mine!r} and {theirs!r}")
+        if not np.array_equal(a.window, b.window):
+            mine, theirs = (w if isinstance(w, (str, tuple)) else "custom" for w in (a.window_spec, b.window_spec))
+            raise ValueError(f"cannot merge accumulators with different window: {mine!r} and {theirs!r}")
         self._sum += other._sum
         self.n_segments += other.n_segments
         return self

@@ -4,11 +4,13 @@ their settings, unpack as tuples, and plot lazily."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Iterator, Literal
+from typing import Any, Iterator, Literal, Sequence
 
 import numpy as np
 
-__all__ = ["Spectrum", "CrossSpectralMatrix", "FRF", "Spectrogram", "FRF_KINDS"]
+from vibroscope._checks import check_option, read_only
+
+__all__ = ["Spectrum", "CrossSpectralMatrix", "FRF", "Spectrogram", "Coherence", "MultipleCoherence", "FRF_KINDS"]
 
 #: FRF kinds by response quantity per unit force (Ewins, *Modal Testing*, 2000, §1.3)
 FRF_KINDS = ("accelerance", "mobility", "receptance")
@@ -16,10 +18,60 @@ _POWER_OF_JW = {"receptance": 0, "mobility": 1, "accelerance": 2}
 _KIND_UNITS = {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}
 
 
-def _ro(a: Any, dtype=None) -> np.ndarray:
-    a = np.array(a, dtype=dtype, copy=True)
-    a.flags.writeable = False
-    return a
+
+def power_units(units: Sequence[str], scaling: str) -> tuple[str, ...]:
+    """Units of auto-spectra: ``(u)^2/Hz`` or ``(u)^2``; dimensionless channels give ``1/Hz`` or ``1``."""
+    return tuple((f"({u})^2" if u else "1") + ("/Hz" if scaling == "density" else "") if (u or scaling == "spectrum")
+                 else "1/Hz" for u in units)
+
+
+def channel_index(channels: Sequence[str], channel: str | int) -> int:
+    """Position of a channel given by name or by (possibly negative) index.
+
+    Raises
+    ------
+    KeyError
+        If the name is not one of `channels` or the index is out of range; the message names the
+        valid channels.
+    """
+    n = len(channels)
+    if isinstance(channel, (int, np.integer)) and not isinstance(channel, bool):
+        if -n <= channel < n:
+            return int(channel) % n
+        raise KeyError(f"no channel {channel!r} (index out of range 0..{n - 1}); channels are {list(channels)}")
+    try:
+        return list(channels).index(channel)
+    except ValueError:
+        raise KeyError(f"no channel {channel!r}; channels are {list(channels)}") from None
+
+
+def _axis_summary(f: np.ndarray) -> str:
+    """``"129 lines, 0–256 Hz"`` for a frequency axis."""
+    if f.size == 0:
+        return "0 lines"
+    return f"{f.size} lines, {f[0]:.4g}–{f[-1]:.4g} Hz"
+
+
+def _names(names: Sequence[str], k: int = 3) -> str:
+    """At most `k` names, then the count of the others."""
+    head = ", ".join(repr(n) for n in names[:k])
+    return f"[{head}{f', … +{len(names) - k}' if len(names) > k else ''}]"
+
+
+class _Unpacks:
+    """Tuple behaviour of a result: it unpacks, has a length and indexes like the tuple of its
+    ``_tuple_fields`` (what the function returned before it returned a result object)."""
+
+    _tuple_fields = ()
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(tuple(getattr(self, name) for name in self._tuple_fields))
+
+    def __len__(self) -> int:
+        return len(self._tuple_fields)
+
+    def __getitem__(self, i):
+        return tuple(self)[i]
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,8 +113,8 @@ class Spectrum:
     settings: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
-        object.__setattr__(self, "values", _ro(np.atleast_2d(self.values), float))
+        object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
+        object.__setattr__(self, "values", read_only(np.atleast_2d(self.values), float))
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "units", tuple(self.units))
 
@@ -70,9 +122,18 @@ class Spectrum:
         return iter((self.frequencies, self.values))
 
     def __getitem__(self, channel: str | int) -> np.ndarray:
-        """Values of one channel, shape (n_freqs,)."""
-        i = channel if isinstance(channel, (int, np.integer)) else self.channels.index(channel)
-        return self.values[i]
+        """Values of one channel (name or index), shape (n_freqs,).
+
+        Raises
+        ------
+        KeyError
+            If there is no such channel; the message names the valid ones.
+        """
+        return self.values[channel_index(self.channels, channel)]
+
+    def __repr__(self) -> str:
+        return (f"Spectrum({len(self.channels)} channels {_names(self.channels)}, "
+                f"{_axis_summary(self.frequencies)}, scaling={self.scaling!r})")
 
     @property
     def df(self) -> float:
@@ -125,13 +186,17 @@ class CrossSpectralMatrix:
     settings: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
-        object.__setattr__(self, "G", _ro(self.G, complex))
+        object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
+        object.__setattr__(self, "G", read_only(self.G, complex))
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "units", tuple(self.units))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return iter((self.frequencies, self.G))
+
+    def __repr__(self) -> str:
+        return (f"CrossSpectralMatrix({self.n_channels}×{self.n_channels} channels {_names(self.channels)}, "
+                f"{_axis_summary(self.frequencies)}, scaling={self.scaling!r})")
 
     @property
     def n_channels(self) -> int:
@@ -139,26 +204,20 @@ class CrossSpectralMatrix:
         return self.G.shape[1]
 
     def index(self, channel: str | int) -> int:
-        """Index of a channel given by name or position.
+        """Index of a channel given by name or position (negative positions count from the end).
 
         Raises
         ------
         KeyError
-            If the name is not one of `channels`.
+            If the name is not one of `channels` or the position is out of range; the message
+            names the valid channels.
         """
-        if isinstance(channel, (int, np.integer)):
-            return int(channel)
-        try:
-            return self.channels.index(channel)
-        except ValueError:
-            raise KeyError(f"no channel {channel!r}; channels are {list(self.channels)}") from None
+        return channel_index(self.channels, channel)
 
     def psd(self) -> Spectrum:
         """The auto-spectra (diagonal) as a :class:`Spectrum`."""
         vals = np.real(np.einsum("fii->if", self.G))
-        from vibroscope.spectral.estimators import _power_units
-
-        units = _power_units(self.units, self.scaling)
+        units = power_units(self.units, self.scaling)
         return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings))
 
     def select(self, channels) -> "CrossSpectralMatrix":
@@ -217,14 +276,19 @@ class FRF:
     settings: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
-        object.__setattr__(self, "H", _ro(self.H, complex))
-        object.__setattr__(self, "coherence", _ro(self.coherence, float))
+        object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
+        object.__setattr__(self, "H", read_only(self.H, complex))
+        object.__setattr__(self, "coherence", read_only(self.coherence, float))
         object.__setattr__(self, "inputs", tuple(self.inputs))
         object.__setattr__(self, "outputs", tuple(self.outputs))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return iter((self.frequencies, self.H, self.coherence))
+
+    def __repr__(self) -> str:
+        kind = f", kind={self.kind!r}" if self.kind else ""
+        return (f"FRF({self.estimator}, {len(self.outputs)} outputs {_names(self.outputs)} per "
+                f"{len(self.inputs)} inputs {_names(self.inputs)}, {_axis_summary(self.frequencies)}{kind})")
 
     @property
     def magnitude_db(self) -> np.ndarray:
@@ -248,8 +312,6 @@ class FRF:
         ValueError
             If this FRF's kind is unknown (None) or `kind` is not one of :data:`FRF_KINDS`.
         """
-        from vibroscope.spectral._engine import check_option
-
         check_option("kind", kind, FRF_KINDS)
         if self.kind is None:
             raise ValueError("this FRF has no known kind (accelerance/mobility/receptance) to convert from")
@@ -296,9 +358,85 @@ class Spectrogram:
     settings: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "frequencies", _ro(self.frequencies, float))
-        object.__setattr__(self, "times", _ro(self.times, float))
-        object.__setattr__(self, "values", _ro(self.values, float))
+        object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
+        object.__setattr__(self, "times", read_only(self.times, float))
+        object.__setattr__(self, "values", read_only(self.values, float))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return iter((self.frequencies, self.times, self.values))
+
+    def __repr__(self) -> str:
+        t = self.times
+        span = f"{t.size} times, {t[0]:.4g}–{t[-1]:.4g} s" if t.size else "0 times"
+        return (f"Spectrogram({len(self.channels)} channels {_names(self.channels)}, "
+                f"{_axis_summary(self.frequencies)}, {span}, scaling={self.scaling!r})")
+
+
+@dataclass(frozen=True, eq=False)
+class Coherence(_Unpacks):
+    """Ordinary coherence of every channel pair (:func:`~vibroscope.spectral.coherence`).
+
+    Unpacks like the tuple ``(frequencies, gamma2)`` that scipy's ``coherence`` returns.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Hz.
+    gamma2 : ndarray, shape (n_freqs, n_channels, n_channels)
+        ``γ²_ij = |G_ij|² / (G_ii G_jj)`` ∈ [0, 1] (dimensionless); NaN where a channel has no power.
+    channels : tuple of str
+        Channel names.
+    settings : dict
+        The Welch settings of the cross-spectral matrix.
+    """
+
+    frequencies: np.ndarray
+    gamma2: np.ndarray
+    channels: tuple[str, ...] = ()
+    settings: dict = field(default_factory=dict)
+
+    _tuple_fields = ("frequencies", "gamma2")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
+        object.__setattr__(self, "gamma2", read_only(self.gamma2, float))
+        object.__setattr__(self, "channels", tuple(self.channels))
+
+    def __repr__(self) -> str:
+        return f"Coherence({len(self.channels)} channels {_names(self.channels)}, {_axis_summary(self.frequencies)})"
+
+
+@dataclass(frozen=True, eq=False)
+class MultipleCoherence(_Unpacks):
+    """Multiple coherence of each output with all inputs together
+    (:func:`~vibroscope.spectral.multiple_coherence`); unpacks as ``(frequencies, gamma2)``.
+
+    Attributes
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Hz.
+    gamma2 : ndarray, shape (n_freqs, n_outputs)
+        ``γ²_{y:x}`` ∈ [0, 1] (dimensionless); NaN where undefined.
+    inputs, outputs : tuple of str
+        Channel names.
+    settings : dict
+        The Welch settings of the cross-spectral matrix.
+    """
+
+    frequencies: np.ndarray
+    gamma2: np.ndarray
+    inputs: tuple[str, ...] = ()
+    outputs: tuple[str, ...] = ()
+    settings: dict = field(default_factory=dict)
+
+    _tuple_fields = ("frequencies", "gamma2")
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
+        object.__setattr__(self, "gamma2", read_only(self.gamma2, float))
+        object.__setattr__(self, "inputs", tuple(self.inputs))
+        object.__setattr__(self, "outputs", tuple(self.outputs))
+
+    def __repr__(self) -> str:
+        return (f"MultipleCoherence({len(self.outputs)} outputs {_names(self.outputs)} on "
+                f"{len(self.inputs)} inputs {_names(self.inputs)}, {_axis_summary(self.frequencies)})")

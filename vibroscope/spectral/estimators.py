@@ -15,9 +15,20 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
+from vibroscope._checks import check_option
 from vibroscope.signals import Signals
-from vibroscope.spectral._engine import CrossSpectralAccumulator, check_option, segment_settings
-from vibroscope.spectral._results import FRF, CrossSpectralMatrix, Spectrogram, Spectrum
+from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
+from vibroscope.spectral._results import (
+    _KIND_UNITS,
+    FRF,
+    FRF_KINDS,
+    Coherence,
+    CrossSpectralMatrix,
+    MultipleCoherence,
+    Spectrogram,
+    Spectrum,
+)
+from vibroscope.spectral._results import power_units as _power_units
 
 __all__ = [
     "welch",
@@ -68,12 +79,6 @@ def _unpack(x: Signals | np.ndarray, fs: float | None) -> tuple[np.ndarray, floa
     if not np.isfinite(fs) or fs <= 0:
         raise ValueError(f"{fs=} must be a positive sampling frequency in Hz")
     return a, fs, tuple(str(i) for i in range(a.shape[0])), ("",) * a.shape[0]
-
-
-def _power_units(units, scaling: str) -> tuple[str, ...]:
-    """Units of auto-spectra: ``(u)^2/Hz`` or ``(u)^2``; dimensionless channels give ``1/Hz`` or ``1``."""
-    return tuple((f"({u})^2" if u else "1") + ("/Hz" if scaling == "density" else "") if (u or scaling == "spectrum")
-                 else "1/Hz" for u in units)
 
 
 def _accumulate(data, fs, st, *, cross: bool, workers: int) -> CrossSpectralAccumulator:
@@ -242,6 +247,7 @@ def amplitude_spectrum(
     window: str | tuple = "hann",
     nperseg: int | None = None,
     noverlap: int | None = None,
+    detrend: Literal["constant", "linear", False] = "constant",
 ) -> Spectrum:
     """Peak amplitude spectrum with window amplitude correction.
 
@@ -256,6 +262,9 @@ def amplitude_spectrum(
         Default: the whole record (one FFT). Otherwise the RMS average over Welch segments.
     noverlap : int, optional
         Default ``nperseg // 2``.
+    detrend : {'constant', 'linear', False}, optional
+        Per-segment detrending; default ``'constant'`` removes the mean, so a DC offset reads 0.
+        With False the 0 Hz line reads the mean (as ``scipy.signal.periodogram(x, detrend=False)``).
 
     Returns
     -------
@@ -277,7 +286,7 @@ def amplitude_spectrum(
     data, fs, channels, units = _unpack(x, fs)
     n = data.shape[1]
     nperseg = n if nperseg is None else nperseg
-    sp = welch(data, fs, nperseg=nperseg, noverlap=noverlap, window=window, scaling="spectrum")
+    sp = welch(data, fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend, scaling="spectrum")
     amp = np.sqrt(sp.values)  # RMS of each line; peak = sqrt(2) RMS except at DC and Nyquist
     last = None if sp.settings["nfft"] % 2 else -1
     amp[:, 1:last] *= np.sqrt(2.0)
@@ -296,7 +305,7 @@ def frf_kind(input_units: Sequence[str], output_units: Sequence[str]) -> tuple[s
     if ins == {"N"} and len(outs) == 1:
         kind = {"m/s^2": "accelerance", "m/s": "mobility", "m": "receptance"}.get(outs.pop())
         if kind:
-            return kind, {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}[kind]
+            return kind, _KIND_UNITS[kind]
     if len(ins) == 1 and len(outs) == 1:
         i, o = ins.pop(), outs.pop()
         return None, (f"{o}/{i}" if i or o else "")
@@ -329,9 +338,10 @@ def frf(
     outputs : channel or sequence of channels, optional
         Response (``resp``) channels; default all channels that are not inputs.
     estimator : {'H1', 'H2', 'Hv'}, optional
-        ``H1 = Gyx Gxx⁻¹`` (least squares, unbiased by output noise), ``H2 = Gyy Gxy⁻¹`` (unbiased
+        ``H1 = Gxy / Gxx`` (least squares, unbiased by output noise), ``H2 = Gyy / Gyx`` (unbiased
         by input noise; one input, or as many inputs as outputs) or ``Hv`` (total least squares,
-        the smallest eigenvector of the ``[inputs, output]`` spectral matrix per output).
+        the smallest eigenvector of the ``[inputs, output]`` spectral matrix per output); with
+        ``Gxy = E[conj(X) Y]`` as in Notes.
     {welch_params}
         (The Welch settings are ignored when `x` is a CrossSpectralMatrix.)
     kind : {'accelerance', 'mobility', 'receptance'}, optional
@@ -403,8 +413,6 @@ def frf(
     out_units = [G.units[o] for o in oo]
     k_inf, unit = frf_kind(in_units, out_units)
     if kind is not None:
-        from vibroscope.spectral._results import FRF_KINDS, _KIND_UNITS
-
         check_option("kind", kind, FRF_KINDS)
         k_inf, unit = kind, _KIND_UNITS[kind]
     return FRF(G.frequencies, H, coh, [G.channels[i] for i in ii], [G.channels[o] for o in oo],
@@ -445,7 +453,7 @@ def coherence(
     window: str | tuple | np.ndarray = "hann",
     detrend: Literal["constant", "linear", False] = "constant",
     nfft: int | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> Coherence:
     """Ordinary coherence of every channel pair.
 
     Parameters
@@ -456,9 +464,9 @@ def coherence(
 
     Returns
     -------
-    frequencies : ndarray, shape (n_freqs,)
-        Hz.
-    gamma2 : ndarray, shape (n_freqs, n_channels, n_channels)
+    Coherence
+        Unpacks as ``(frequencies, gamma2)``: ``frequencies`` in Hz, shape (n_freqs,), and
+        ``gamma2`` of shape (n_freqs, n_channels, n_channels),
         ``γ²_ij = |G_ij|² / (G_ii G_jj)`` ∈ [0, 1]; ``gamma2[:, i, j]`` equals
         ``scipy.signal.coherence(x[i], x[j])``.
 
@@ -471,7 +479,7 @@ def coherence(
     d = np.real(np.einsum("fii->fi", G.G))
     with np.errstate(divide="ignore", invalid="ignore"):
         g2 = np.abs(G.G) ** 2 / (d[:, :, None] * d[:, None, :])
-    return G.frequencies, g2
+    return Coherence(G.frequencies, g2, G.channels, dict(G.settings))
 
 
 def multiple_coherence(
@@ -479,7 +487,7 @@ def multiple_coherence(
     inputs: Sequence[Channel] | Channel,
     outputs: Sequence[Channel] | Channel | None = None,
     **welch_kw: Any,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> MultipleCoherence:
     """Multiple coherence of each output with all `inputs` together.
 
     Parameters
@@ -495,17 +503,17 @@ def multiple_coherence(
 
     Returns
     -------
-    frequencies : ndarray, shape (n_freqs,)
-        Hz.
-    gamma2 : ndarray, shape (n_freqs, n_outputs)
-        ``γ²_{y:x} = Gyxᴴ Gxx⁻¹ Gyx / Gyy`` ∈ [0, 1]; equals the ordinary coherence for one input.
+    MultipleCoherence
+        Unpacks as ``(frequencies, gamma2)``: ``frequencies`` in Hz, shape (n_freqs,), and
+        ``gamma2`` of shape (n_freqs, n_outputs),
+        ``γ²_{y:x} = Gxyᴴ Gxx⁻¹ Gxy / Gyy`` ∈ [0, 1]; equals the ordinary coherence for one input.
 
     References
     ----------
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §7.3.
     """
     h = frf(x, inputs, outputs, **welch_kw)
-    return h.frequencies, h.coherence
+    return MultipleCoherence(h.frequencies, h.coherence, h.inputs, h.outputs, dict(h.settings))
 
 
 def spectrogram(

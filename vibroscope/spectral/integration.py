@@ -16,9 +16,9 @@ import scipy.fft
 import scipy.signal
 from scipy.integrate import cumulative_trapezoid
 
+from vibroscope._checks import check_option, read_only
 from vibroscope.signals import Signals
-from vibroscope.spectral._engine import check_option
-from vibroscope.spectral._results import FRF, CrossSpectralMatrix
+from vibroscope.spectral._results import FRF, CrossSpectralMatrix, channel_index
 
 __all__ = ["integrate", "default_f_cut", "vibration_severity", "Severity", "ods", "OperatingShape",
            "highpass_gain"]
@@ -31,12 +31,6 @@ G_N = 9.80665
 _ACC_UNITS = {"m/s^2", "m/s²", "m/s2", "m s^-2", "m·s^-2", "m*s^-2", "m.s^-2"}
 _VEL_UNITS = {"m/s", "m s^-1", "m·s^-1", "m*s^-1"}
 _INTEGRAL_UNIT = {**{u: "m/s" for u in _ACC_UNITS}, **{u: "m" for u in _VEL_UNITS}}
-
-
-def _ro(a, dtype=None) -> np.ndarray:
-    a = np.array(a, dtype=dtype, copy=True)
-    a.flags.writeable = False
-    return a
 
 
 def _integral_unit(unit: str, order: int) -> str:
@@ -276,13 +270,18 @@ class Severity:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "channels", tuple(self.channels))
-        object.__setattr__(self, "velocity_rms_mm_s", _ro(self.velocity_rms_mm_s, float))
+        object.__setattr__(self, "velocity_rms_mm_s", read_only(self.velocity_rms_mm_s, float))
         object.__setattr__(self, "band_hz", (float(self.band_hz[0]), float(self.band_hz[1])))
 
     def __getitem__(self, channel: str | int) -> float:
-        """RMS velocity of one channel in mm/s."""
-        i = channel if isinstance(channel, (int, np.integer)) else self.channels.index(channel)
-        return float(self.velocity_rms_mm_s[i])
+        """RMS velocity of one channel (name or index) in mm/s.
+
+        Raises
+        ------
+        KeyError
+            If there is no such channel; the message names the valid ones.
+        """
+        return float(self.velocity_rms_mm_s[channel_index(self.channels, channel)])
 
     def __repr__(self) -> str:
         vals = ", ".join(f"{c}: {v:.3g}" for c, v in zip(self.channels[:4], self.velocity_rms_mm_s[:4]))
@@ -437,8 +436,8 @@ class OperatingShape:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "frequency_hz", float(self.frequency_hz))
-        object.__setattr__(self, "shape", _ro(self.shape, complex))
-        object.__setattr__(self, "values", _ro(self.values, complex))
+        object.__setattr__(self, "shape", read_only(self.shape, complex))
+        object.__setattr__(self, "values", read_only(self.values, complex))
         object.__setattr__(self, "points", tuple(str(p) for p in self.points))
 
     def plot(self, coords=None, **kwargs):

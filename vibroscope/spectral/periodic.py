@@ -16,8 +16,8 @@ import scipy.fft
 import scipy.ndimage
 import scipy.stats
 
+from vibroscope._checks import check_option
 from vibroscope.signals import Signals
-from vibroscope.spectral._engine import check_option
 from vibroscope.spectral._results import FRF, FRF_KINDS, _KIND_UNITS
 from vibroscope.spectral.estimators import _unpack, frf_kind
 

@@ -6,7 +6,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["sensor_geometry", "real_shape", "mode_label", "match_modes"]
+__all__ = ["sensor_geometry", "real_shape", "mode_label", "nearest_frequencies"]
 
 _AXES = {"1": (1.0, 0.0, 0.0), "2": (0.0, 1.0, 0.0), "3": (0.0, 0.0, 1.0),
          "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
@@ -113,7 +113,7 @@ def mode_label(f: float, zeta: float) -> str:
     return f"f = {f:.4g} Hz, ζ = {z}"
 
 
-def match_modes(f_est: np.ndarray, f_true: np.ndarray) -> np.ndarray:
+def nearest_frequencies(f_est: np.ndarray, f_true: np.ndarray) -> np.ndarray:
     """Index of the nearest true frequency for each estimated one (−1 when no true modes)."""
     f_est = np.asarray(f_est, dtype=float)
     f_true = np.asarray(f_true, dtype=float)

@@ -14,7 +14,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from vibroscope.viewers._common import match_modes, mode_label, real_shape, sensor_geometry
+from vibroscope.viewers._common import mode_label, nearest_frequencies, real_shape, sensor_geometry
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
            "plot_stabilization", "plot_frf_synthesis", "summary_figures"]
@@ -222,85 +222,25 @@ def plot_mode_shapes(modal, coords: Mapping[str, Any] | None = None, *, fig=None
     shapes = np.atleast_2d(np.asarray(modal.shapes, dtype=complex))
     points = list(modal.points)
     n_modes = fn.size
-    pos, _, from_coords = sensor_geometry(points, coords)
-    if from_coords and len(points) > 1:
-        axis = int(np.argmax(np.ptp(pos, axis=0)))
-        xcoord = pos[:, axis]
-        vertical = axis == 2
-        coord_label = f"{'xyz'[axis]} [m]"
-    else:
-        xcoord = np.arange(len(points), dtype=float)
-        vertical = False
-        coord_label = "measurement point"
+    pos, dirs, from_coords = sensor_geometry(points, coords)
+    xcoord, vertical, coord_label = _shape_axis(pos, from_coords, len(points))
     order = np.argsort(xcoord, kind="stable")
-    # one line per measuring direction (e.g. the two horizontal axes of a tower at each height)
-    groups: list[tuple[str, np.ndarray]] = []
-    if from_coords:
-        _, dirs, _ = sensor_geometry(points, coords)
-        keys = [tuple(np.round(d, 3)) for d in dirs]
-        for key in dict.fromkeys(keys):
-            members = np.array([k for k, kk in enumerate(keys) if kk == key])
-            axis_names = {(1.0, 0.0, 0.0): "along x", (0.0, 1.0, 0.0): "along y", (0.0, 0.0, 1.0): "along z"}
-            groups.append((axis_names.get(tuple(float(v) for v in key), f"along {key}"), members))
-    else:
-        groups.append(("", np.arange(len(points))))
-    ncols = min(max(n_modes, 1), 5 if vertical else 3)
-    nrows = int(np.ceil(max(n_modes, 1) / ncols))
-    if fig is None:
-        plt = _pyplot()
-        w = 2.6 * ncols + 0.8 if vertical else 4.0 * ncols + 0.6
-        h = 4.2 * nrows + 0.6 if vertical else 2.9 * nrows + 0.7
-        fig = plt.figure(figsize=(min(w, 16), min(h, 14)), layout="constrained")
-    else:
-        fig.clf()
-    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
-    tm_idx = None
+    groups = _direction_groups(dirs) if from_coords else [("", np.arange(len(points)))]
+    fig, axes = _mode_axes(fig, n_modes, vertical)
+    tm_idx, same_points = None, False
     if true_modes is not None:
-        tm_idx = match_modes(fn, np.asarray(true_modes.natural_frequencies, dtype=float))
+        tm_idx = nearest_frequencies(fn, np.asarray(true_modes.natural_frequencies, dtype=float))
         same_points = list(getattr(true_modes, "points", [])) == points
     for r, ax in enumerate(axes):
         if r >= n_modes:
             ax.set_visible(False)
             continue
         phi = real_shape(shapes[r])
-        mod = np.abs(shapes[r]) / (np.max(np.abs(shapes[r])) or 1.0)
         ref = None
         if tm_idx is not None and tm_idx[r] >= 0 and same_points:
-            ref = real_shape(np.asarray(true_modes.shapes)[tm_idx[r]])
-            ref = ref / (np.max(np.abs(ref)) or 1.0)
-            if np.dot(ref, phi) < 0:
-                ref = -ref
-        (ax.axvline if vertical else ax.axhline)(0, color="0.5", lw=0.8)
-        for g, (gname, members) in enumerate(groups):
-            sel = order[np.isin(order, members)]  # this direction's points along the structure
-            x, y = xcoord[sel], phi[sel]
-            col = f"C{g % 10}" if len(groups) > 1 else "C0"
-            lab = f"{gname} (real part)" if len(groups) > 1 else "identified (real part)"
-            lines = [(y, "o-", dict(color=col, lw=1.4, ms=4, label=lab)),
-                     (mod[sel], ":", dict(color=col, lw=0.9, alpha=0.6, label="|φ|" if g == 0 else None))]
-            if ref is not None:
-                lines.append((ref[sel], "s--", dict(color="C3" if len(groups) == 1 else col, lw=1.0, ms=3,
-                                                    alpha=0.8, label="true" if g == 0 else None)))
-            for vals, fmt, kw in lines:
-                if vertical:
-                    ax.plot(vals, x, fmt, **kw)
-                else:
-                    ax.plot(x, vals, fmt, **kw)
-        if vertical:
-            ax.set_xlabel("amplitude [-]")
-            ax.set_ylabel(coord_label)
-            ax.set_xlim(-1.15, 1.15)
-        else:
-            ax.set_ylabel("amplitude [-]")
-            ax.set_ylim(-1.15, 1.15)
-            ax.set_xlabel(coord_label)
-            xs = xcoord[order]
-            if len(points) <= 12 and np.all(np.diff(xs) > 0):
-                short = _distinct_labels(points)
-                ax.set_xticks(xs, [short[k] for k in order], rotation=30 if len(points) > 5 else 0,
-                              ha="right" if len(points) > 5 else "center", fontsize=7)
-                if from_coords:
-                    ax.set_xlabel(coord_label + " (sensor names as ticks)")
+            ref = _reference_shape(np.asarray(true_modes.shapes)[tm_idx[r]], phi)
+        _draw_shape(ax, shapes[r], phi, ref, xcoord, order, groups, vertical)
+        _label_shape_axes(ax, points, xcoord, order, vertical, coord_label, from_coords)
         title = f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}"
         if tm_idx is not None and tm_idx[r] >= 0:
             ft = float(np.asarray(true_modes.natural_frequencies)[tm_idx[r]])
@@ -311,6 +251,92 @@ def plot_mode_shapes(modal, coords: Mapping[str, Any] | None = None, *, fig=None
             ax.legend(fontsize=7, loc="best")
     fig.suptitle(f"Mode shapes ({getattr(modal, 'method', '')}, {len(points)} points)", fontsize=11)
     return fig
+
+
+def _shape_axis(pos: np.ndarray, from_coords: bool, n_points: int) -> tuple[np.ndarray, bool, str]:
+    """(coordinate of each point along the structure, drawn vertically?, its axis label): the
+    coordinate in which the points spread most (vertical when it is the height z), else the
+    point index."""
+    if from_coords and n_points > 1:
+        axis = int(np.argmax(np.ptp(pos, axis=0)))
+        return pos[:, axis], axis == 2, f"{'xyz'[axis]} [m]"
+    return np.arange(n_points, dtype=float), False, "measurement point"
+
+
+_AXIS_NAMES = {(1.0, 0.0, 0.0): "along x", (0.0, 1.0, 0.0): "along y", (0.0, 0.0, 1.0): "along z"}
+
+
+def _direction_groups(dirs: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """(name, point indices) per measuring direction, e.g. the two horizontal axes of a tower:
+    one line each."""
+    keys = [tuple(np.round(d, 3)) for d in dirs]
+    groups = []
+    for key in dict.fromkeys(keys):
+        members = np.array([k for k, kk in enumerate(keys) if kk == key])
+        groups.append((_AXIS_NAMES.get(tuple(float(v) for v in key), f"along {key}"), members))
+    return groups
+
+
+def _mode_axes(fig, n_modes: int, vertical: bool):
+    """(figure, axes): one axes per mode on a grid (narrow, tall panels for a vertical
+    structure), in `fig` (cleared) or a new figure."""
+    ncols = min(max(n_modes, 1), 5 if vertical else 3)
+    nrows = int(np.ceil(max(n_modes, 1) / ncols))
+    if fig is None:
+        plt = _pyplot()
+        w = 2.6 * ncols + 0.8 if vertical else 4.0 * ncols + 0.6
+        h = 4.2 * nrows + 0.6 if vertical else 2.9 * nrows + 0.7
+        fig = plt.figure(figsize=(min(w, 16), min(h, 14)), layout="constrained")
+    else:
+        fig.clf()
+    return fig, np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False).ravel())
+
+
+def _reference_shape(shape: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """A reference mode's real shape scaled to 1 and signed like `phi`."""
+    ref = real_shape(shape)
+    ref = ref / (np.max(np.abs(ref)) or 1.0)
+    return -ref if np.dot(ref, phi) < 0 else ref
+
+
+def _draw_shape(ax, shape, phi, ref, xcoord, order, groups, vertical: bool) -> None:
+    """Per measuring direction: the real shape `phi`, the modulus ``|φ|`` and the reference `ref`."""
+    mod = np.abs(shape) / (np.max(np.abs(shape)) or 1.0)
+    (ax.axvline if vertical else ax.axhline)(0, color="0.5", lw=0.8)
+    for g, (gname, members) in enumerate(groups):
+        sel = order[np.isin(order, members)]  # this direction's points along the structure
+        x, y = xcoord[sel], phi[sel]
+        col = f"C{g % 10}" if len(groups) > 1 else "C0"
+        lab = f"{gname} (real part)" if len(groups) > 1 else "identified (real part)"
+        lines = [(y, "o-", dict(color=col, lw=1.4, ms=4, label=lab)),
+                 (mod[sel], ":", dict(color=col, lw=0.9, alpha=0.6, label="|φ|" if g == 0 else None))]
+        if ref is not None:
+            lines.append((ref[sel], "s--", dict(color="C3" if len(groups) == 1 else col, lw=1.0, ms=3,
+                                                alpha=0.8, label="true" if g == 0 else None)))
+        for vals, fmt, kw in lines:
+            if vertical:
+                ax.plot(vals, x, fmt, **kw)
+            else:
+                ax.plot(x, vals, fmt, **kw)
+
+
+def _label_shape_axes(ax, points, xcoord, order, vertical: bool, coord_label: str, from_coords: bool) -> None:
+    """Amplitude and coordinate labels and limits; a few points along a line named as ticks."""
+    if vertical:
+        ax.set_xlabel("amplitude [-]")
+        ax.set_ylabel(coord_label)
+        ax.set_xlim(-1.15, 1.15)
+        return
+    ax.set_ylabel("amplitude [-]")
+    ax.set_ylim(-1.15, 1.15)
+    ax.set_xlabel(coord_label)
+    xs = xcoord[order]
+    if len(points) <= 12 and np.all(np.diff(xs) > 0):
+        short = _distinct_labels(points)
+        ax.set_xticks(xs, [short[k] for k in order], rotation=30 if len(points) > 5 else 0,
+                      ha="right" if len(points) > 5 else "center", fontsize=7)
+        if from_coords:
+            ax.set_xlabel(coord_label + " (sensor names as ticks)")
 
 
 def plot_singular_values(frequencies, S, modes=None, *, ax=None, n_sv: int = 3, true_frequencies=None):

@@ -336,15 +336,9 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     """
     if rrd_path is None and not spawn:
         raise ValueError("log_analysis needs rrd_path or spawn=True")
-    import rerun as rr
-
     if psd is None and csd is not None:
         psd = csd.psd()
-    ftl, fidx = None, None
-    for src in (psd, frf, csd, synthesized):
-        if src is not None:
-            ftl, fidx = frequency_index(src.frequencies)
-            break
+    ftl, fidx = _frequency_timeline(psd, frf, csd, synthesized)
     positions = None
     if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
         positions = sensor_geometry(list(modal.points), coords)[0]
@@ -353,48 +347,15 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                           f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions,
                           stabilization_present=stabilization is not None and len(stabilization.frequency) > 0,
                           kinematics=kinematics)
-
-    rec = rr.RecordingStream(application_id, recording_id=recording_id)
-    if recording_name:
-        rec.send_recording_name(recording_name)
-    path = Path(rrd_path) if rrd_path is not None else None
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    if spawn and path is not None:
-        rr.spawn(connect=False)
-        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(), default_blueprint=bp)
-    elif spawn:
-        rec.spawn(default_blueprint=bp)
-    else:
-        rec.save(str(path), default_blueprint=bp)
-
+    rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, spawn, bp)
     try:
         _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl)
         if signals is not None:
-            t = np.arange(signals.n_samples) / signals.fs
-            t_ns = np.round(t * 1e9).astype(np.int64).astype("timedelta64[ns]")  # rounded, not truncated
-            for k, ch in enumerate(signals.channels):
-                ent = channel_entity("signals", ch)
-                rec.log(ent, rr.SeriesLines(names=f"{ch} [{signals.units[k] or '-'}]"), static=True)
-                rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
-                                 columns=rr.Scalars.columns(scalars=np.asarray(signals.data[k], dtype=np.float64)))
+            _log_time_series(rec, "signals", signals)
         for ks in kinematics or ():
-            t = np.arange(ks.n_samples) / ks.fs
-            t_ns = np.round(t * 1e9).astype(np.int64).astype("timedelta64[ns]")
-            what = "velocity" if ks is kinematics[0] else "displacement"
-            for k, ch in enumerate(ks.channels):
-                ent = channel_entity(what, ch)
-                rec.log(ent, rr.SeriesLines(names=f"{ch} [{ks.units[k] or '-'}]"), static=True)
-                rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
-                                 columns=rr.Scalars.columns(scalars=np.asarray(ks.data[k], dtype=np.float64)))
+            _log_time_series(rec, "velocity" if ks is kinematics[0] else "displacement", ks)
         if psd is not None:
-            ftl_p, fidx_p = frequency_index(psd.frequencies)
-            fac = 20.0 if psd.scaling == "amplitude" else 10.0
-            for k, ch in enumerate(psd.channels):
-                ent = channel_entity("psd", ch)
-                rec.log(ent, rr.SeriesLines(names=f"{ch} [dB re 1 {psd.units[k] or 'unit'}]"), static=True)
-                rec.send_columns(ent, indexes=[rr.TimeColumn(ftl_p, sequence=fidx_p)],
-                                 columns=rr.Scalars.columns(scalars=_db(psd.values[k], fac)))
+            _log_psd(rec, psd)
         if csd is not None:
             _log_singular_values(rec, csd)
         if frf is not None:
@@ -409,6 +370,62 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     finally:
         rec.disconnect()
     return path
+
+
+def _frequency_timeline(*results) -> tuple[str | None, np.ndarray | None]:
+    """The frequency timeline (name, index) of the first of `results` that is given."""
+    for src in results:
+        if src is not None:
+            return frequency_index(src.frequencies)
+    return None, None
+
+
+def _open_recording(application_id: str, recording_id: str | None, recording_name: str | None,
+                    rrd_path: str | Path | None, spawn: bool, blueprint):
+    """(an explicit :class:`rerun.RecordingStream` with its sinks and default blueprint, the
+    ``.rrd`` path or None)."""
+    import rerun as rr
+
+    rec = rr.RecordingStream(application_id, recording_id=recording_id)
+    if recording_name:
+        rec.send_recording_name(recording_name)
+    path = Path(rrd_path) if rrd_path is not None else None
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    if spawn and path is not None:
+        rr.spawn(connect=False)
+        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(), default_blueprint=blueprint)
+    elif spawn:
+        rec.spawn(default_blueprint=blueprint)
+    else:
+        rec.save(str(path), default_blueprint=blueprint)
+    return rec, path
+
+
+def _log_time_series(rec, prefix: str, sig) -> None:
+    """Every channel of `sig` under ``/<prefix>/<channel>`` on the ``time`` timeline (exact float64)."""
+    import rerun as rr
+
+    t = np.arange(sig.n_samples) / sig.fs
+    t_ns = np.round(t * 1e9).astype(np.int64).astype("timedelta64[ns]")  # rounded, not truncated
+    for k, ch in enumerate(sig.channels):
+        ent = channel_entity(prefix, ch)
+        rec.log(ent, rr.SeriesLines(names=f"{ch} [{sig.units[k] or '-'}]"), static=True)
+        rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
+                         columns=rr.Scalars.columns(scalars=np.asarray(sig.data[k], dtype=np.float64)))
+
+
+def _log_psd(rec, psd) -> None:
+    """``/psd/<channel>`` in dB (20 log10 for an amplitude spectrum) on the frequency timeline."""
+    import rerun as rr
+
+    ftl, fidx = frequency_index(psd.frequencies)
+    fac = 20.0 if psd.scaling == "amplitude" else 10.0
+    for k, ch in enumerate(psd.channels):
+        ent = channel_entity("psd", ch)
+        rec.log(ent, rr.SeriesLines(names=f"{ch} [dB re 1 {psd.units[k] or 'unit'}]"), static=True)
+        rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],
+                         columns=rr.Scalars.columns(scalars=_db(psd.values[k], fac)))
 
 
 def _log_about(rec, *, signals, psd, frf, ftl) -> None:

@@ -6,19 +6,22 @@ import control
 import numpy as np
 import pytest
 
-from vibroscope.models.influence import (
+from vibroscope.instruments.influence import (
     ClaimCheck,
     InfluenceTable,
     check_paper_claims,
     critical_frequency,
+    differentiate,
     influence_coefficient,
     influence_table,
+    paper_coefficient,
     peak_acceleration,
     pneumatic_influence_table,
     relative_change,
     resonance_frequency,
     response_time,
 )
+from vibroscope.instruments.pneumatic import pneumatic_motor
 
 
 @pytest.mark.parametrize("k", [1.0, 2.0, -1.0, 0.5])
@@ -70,9 +73,8 @@ def test_pneumatic_table_and_physics():
     assert t["A", "nu_r"] == pytest.approx(1.0, abs=0.1)
     assert t["V", "t_r"] > 0 and t["m", "t_r"] > 0 and t["A", "t_r"] < 0
     # step size independence (finite-difference converged)
-    t2 = influence_table({"nu_c": lambda **p: critical_frequency(__import__(
-        "vibroscope.models.paper", fromlist=["x"]).pneumatic_motor(**p, output="velocity"))},
-        t.nominal, ("A",), rel_step=0.01)
+    t2 = influence_table({"nu_c": lambda **p: critical_frequency(pneumatic_motor(**p, output="velocity"))},
+                         t.nominal, ("A",), rel_step=0.01)
     assert t2["A", "nu_c"] == pytest.approx(t["A", "nu_c"], rel=5e-3)
 
 
@@ -92,3 +94,14 @@ def test_claims_need_the_rows():
     bad = InfluenceTable(("A",), ("t_r",), np.zeros((1, 1)), {}, "x")
     with pytest.raises(ValueError):
         check_paper_claims(bad)
+
+
+def test_paper_coefficient_from_values_and_differentiate():
+    assert paper_coefficient(9.0, 36.0, 3.0, 6.0) == pytest.approx(3.0)
+    with pytest.raises(ValueError):
+        paper_coefficient(0.0, 1.0, 3.0, 6.0)
+    g = control.tf([2.0], [1.0, 3.0])
+    assert np.allclose(np.squeeze(differentiate(g, 2).num[0][0]), [2.0, 0.0, 0.0])
+    assert np.allclose(np.squeeze(differentiate(g, 0).num[0][0]), [2.0])
+    with pytest.raises(ValueError):
+        differentiate(g, -1)

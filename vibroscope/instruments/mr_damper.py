@@ -25,6 +25,11 @@ cubic coefficients (e.g. fitted to a measured damper) can be given to
 :class:`MRDamperParams`.  Spencer's first-order current-driver filter (eta = 190 1/s) is
 not modelled: the current is taken constant during a simulation.
 
+The law itself is :func:`vibroscope.models.elements.spencer_mr_damper_rates`, the one the
+simulator's :class:`vibroscope.models.elements.MRDamper` element uses; this instrument
+adds the current-dependent coefficients, a prescribed-displacement integration and the
+loop energies.  :func:`vibroscope.viewers.instruments.figure_mr_hysteresis` draws the loops.
+
 Spencer 1997 constants (their units -> SI): c0a 21.0 N s/cm = 2100 N s/m, c0b 3.50
 N s/(cm V) = 350 N s/(m V), k0 46.9 N/cm = 4690 N/m, c1a 283 N s/cm = 28300 N s/m,
 c1b 2.95 N s/(cm V) = 295 N s/(m V), k1 5.00 N/cm = 500 N/m, x0 14.3 cm = 0.143 m,
@@ -47,6 +52,8 @@ from typing import Sequence
 
 import numpy as np
 
+from vibroscope.models.elements import spencer_mr_damper_rates
+
 __all__ = [
     "MRDamperCoefficients",
     "MRDamperParams",
@@ -55,7 +62,7 @@ __all__ = [
     "MRDamperResult",
     "simulate_mr_damper",
     "linear_limit_energy",
-    "figure_mr_hysteresis",
+    "sine_test",
 ]
 
 #: Spencer et al. (1997) identification voltages, V.
@@ -186,6 +193,11 @@ class MRDamperParams:
         )
 
 
+def _rates(x, xdot, y, z, c: MRDamperCoefficients):
+    return spencer_mr_damper_rates(x, xdot, y, z, alpha=c.alpha, c0=c.c0, c1=c.c1, k0=c.k0,
+                                   gamma=c.gamma, beta=c.beta, A=c.A, n=c.n)
+
+
 def mr_damper_rhs(state, x, xdot, coeffs: MRDamperCoefficients):
     """Time derivatives ``(y', z')`` of the internal states.
 
@@ -201,22 +213,16 @@ def mr_damper_rhs(state, x, xdot, coeffs: MRDamperCoefficients):
     Returns
     -------
     tuple (ydot, zdot)
-        In m/s.
+        In m/s (:func:`vibroscope.models.elements.spencer_mr_damper_rates`).
     """
     y, z = state
-    c = coeffs
-    ydot = (c.alpha * z + c.c0 * xdot + c.k0 * (x - y)) / (c.c0 + c.c1)
-    v = xdot - ydot
-    az = np.abs(z)
-    zdot = -c.gamma * np.abs(v) * z * az ** (c.n - 1) - c.beta * v * az**c.n + c.A * v
-    return ydot, zdot
+    return _rates(x, xdot, y, z, coeffs)
 
 
 def mr_damper_force(x, xdot, y, z, coeffs: MRDamperCoefficients):
     """Damper force ``f = c1 y' + k1 (x - x0)`` in N (arguments in m, m/s)."""
-    c = coeffs
-    ydot = (c.alpha * z + c.c0 * xdot + c.k0 * (x - y)) / (c.c0 + c.c1)
-    return c.c1 * ydot + c.k1 * (x - c.x0)
+    ydot, _ = _rates(x, xdot, y, z, coeffs)
+    return coeffs.c1 * ydot + coeffs.k1 * (x - coeffs.x0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -272,20 +278,11 @@ class MRDamperResult:
         return self.dissipated_energy(self.time_s[-1] - period_s, self.time_s[-1])
 
     def plot(self, axes=None, label: str | None = None, last_s: float | None = None, **kwargs):
-        """Force-displacement and force-velocity loops (mm, mm/s, kN)."""
-        import matplotlib.pyplot as plt
+        """Force-displacement and force-velocity loops (mm, mm/s, kN)
+        (:func:`vibroscope.viewers.instruments.plot_mr_loops`)."""
+        from vibroscope.viewers.instruments import plot_mr_loops
 
-        if axes is None:
-            _, axes = plt.subplots(1, 2, figsize=(10, 4))
-        m = slice(None) if last_s is None else self.time_s >= self.time_s[-1] - last_s
-        axes[0].plot(self.x[m] * 1e3, self.force[m] * 1e-3, label=label, **kwargs)
-        axes[1].plot(self.xdot[m] * 1e3, self.force[m] * 1e-3, label=label, **kwargs)
-        axes[0].set_xlabel("displacement x [mm]")
-        axes[1].set_xlabel("velocity x' [mm/s]")
-        for a in axes:
-            a.set_ylabel("force f [kN]")
-            a.grid(True, alpha=0.3)
-        return axes
+        return plot_mr_loops(self, axes, label=label, last_s=last_s, **kwargs)
 
 
 def _rk4_scalar(x, xd, h_sample, nsub, c: MRDamperCoefficients, y0, z0):
@@ -296,20 +293,10 @@ def _rk4_scalar(x, xd, h_sample, nsub, c: MRDamperCoefficients, y0, z0):
     y, z = float(y0), float(z0)
     ys[0], zs[0] = y, z
     h = h_sample / nsub
-    alpha, c0, c1, k0 = c.alpha, c.c0, c.c1, c.k0
-    gamma, beta, A, nn = c.gamma, c.beta, c.A, c.n
-    inv = 1.0 / (c0 + c1)
-    n_is_2 = nn == 2.0
+    law = dict(alpha=c.alpha, c0=c.c0, c1=c.c1, k0=c.k0, gamma=c.gamma, beta=c.beta, A=c.A, n=c.n)
 
     def f(y, z, xv, xdv):
-        yd = (alpha * z + c0 * xdv + k0 * (xv - y)) * inv
-        v = xdv - yd
-        az = abs(z)
-        if n_is_2:
-            zd = -gamma * abs(v) * z * az - beta * v * az * az + A * v
-        else:
-            zd = -gamma * abs(v) * z * az ** (nn - 1) - beta * v * az**nn + A * v
-        return yd, zd
+        return spencer_mr_damper_rates(xv, xdv, y, z, **law)
 
     xl = x.tolist()
     xdl = xd.tolist()
@@ -419,53 +406,38 @@ def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequenc
     return float(np.pi * amplitude**2 * K.imag)
 
 
-def figure_mr_hysteresis(
-    path,
-    currents=(0.0, 0.5, 1.0, 1.5, 2.0),
+def sine_test(
+    currents: Sequence[float] = (0.0, 0.5, 1.0, 1.5, 2.0),
     amplitude: float = 0.015,
     frequency_hz: float = 2.5,
+    *,
     params: MRDamperParams | None = None,
-) -> None:
-    """Force-displacement and force-velocity loops for several currents (PNG at `path`).
+    fs: float = 2000.0,
+    cycles: float = 2.0,
+) -> list[MRDamperResult]:
+    """Spencer's characterisation test: a sinusoidal displacement at several coil currents.
 
     Parameters
     ----------
-    path : str or path-like
-        PNG file written.
     currents : sequence of float
         Coil currents, A.
     amplitude : float
-        Sinusoidal displacement amplitude, m (Spencer's test: 1.5 cm).
+        Displacement amplitude, m (Spencer's test: 1.5 cm).
     frequency_hz : float
         Excitation frequency, Hz (Spencer's test: 2.5 Hz).
     params : MRDamperParams, optional
+        Defaults to :meth:`MRDamperParams.spencer1997`.
+    fs : float
+        Sampling frequency of the imposed motion, Hz.
+    cycles : float
+        Duration in periods of the excitation.
+
+    Returns
+    -------
+    list of MRDamperResult
+        One per current; ``r.loop_energy(1 / frequency_hz)`` is the loop area of the last cycle.
     """
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    fs = 2000.0
-    t = np.arange(int(2 * fs / frequency_hz) + 1) / fs
+    t = np.arange(int(cycles * fs / frequency_hz) + 1) / fs
     w = 2 * np.pi * frequency_hz
     x, xd = amplitude * np.sin(w * t), amplitude * w * np.cos(w * t)
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.3))
-    energies = []
-    for i in currents:
-        r = simulate_mr_damper(x, fs, i, xdot=xd, params=params)
-        e = r.loop_energy(1.0 / frequency_hz)
-        energies.append(e)
-        r.plot(axes[:2], label=f"i = {i:g} A", last_s=1.0 / frequency_hz)
-        axes[2].plot(t, r.force * 1e-3, label=f"i = {i:g} A")
-    axes[0].set_title(f"force-displacement ({amplitude * 1e3:g} mm, {frequency_hz:g} Hz)")
-    axes[1].set_title("force-velocity")
-    axes[2].set_title("force history")
-    axes[2].set_xlabel("time [s]")
-    axes[2].set_ylabel("force f [kN]")
-    axes[2].grid(True, alpha=0.3)
-    axes[2].legend(fontsize=8, loc="upper right", framealpha=0.9)
-    fig.suptitle("MR damper, Spencer et al. (1997) model; loop energy per cycle: "
-                 + ", ".join(f"{e:.0f} J" for e in energies))
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
+    return [simulate_mr_damper(x, fs, i, xdot=xd, params=params) for i in currents]

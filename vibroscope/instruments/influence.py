@@ -32,11 +32,15 @@ import control
 import numpy as np
 from scipy import optimize
 
-from vibroscope.models.lti import step_response
+from vibroscope.instruments.lti import bode, step_response
+from vibroscope.instruments.pneumatic import PNEUMATIC_NOMINAL, pneumatic_motor
 
 __all__ = [
     "influence_coefficient",
+    "paper_coefficient",
     "relative_change",
+    "time_grid",
+    "differentiate",
     "response_time",
     "peak_acceleration",
     "resonance_frequency",
@@ -107,8 +111,32 @@ def influence_coefficient(
     if method == "paper":
         pf = p0 * (1 + rel_step) if final is None else float(final)
         ff = float(func(**{**nominal, param: pf}))
-        return relative_change(f0, ff) / relative_change(p0, pf)
+        return paper_coefficient(f0, ff, p0, pf)
     raise ValueError(f"{method=} must be 'central' or 'paper'")
+
+
+def paper_coefficient(pcd_initial: float, pcd_final: float, pcf_initial: float, pcf_final: float) -> float:
+    """Paper eq. (2)-(3) from values: ``C = R_PCD / R_PCF``.
+
+    Parameters
+    ----------
+    pcd_initial, pcd_final : float
+        The criterion (PCD) at the initial and the final parameter value (any unit).
+    pcf_initial, pcf_final : float
+        The parameter (PCF) before and after the change (any unit).
+
+    Returns
+    -------
+    float
+        The dimensionless coefficient; ValueError for a zero initial value (see
+        :func:`relative_change`).
+
+    Examples
+    --------
+    >>> round(paper_coefficient(9.0, 36.0, 3.0, 6.0), 12)   # PCD = PCF^2 from 3 to 6
+    3.0
+    """
+    return relative_change(pcd_initial, pcd_final) / relative_change(pcf_initial, pcf_final)
 
 
 # --------------------------------------------------------------------------- criteria
@@ -119,11 +147,46 @@ def _num_den(sys):
     return np.atleast_1d(np.squeeze(tf.num[0][0])), np.atleast_1d(np.squeeze(tf.den[0][0]))
 
 
-def _time_grid(sys, n: int = 8001) -> np.ndarray:
-    p = control.poles(sys)
-    p = p[np.abs(p) > 1e-12]
+def differentiate(sys, order: int = 1) -> control.TransferFunction:
+    """``s^order * sys``: the response's `order`-th time derivative (e.g. acceleration from velocity).
+
+    Parameters
+    ----------
+    sys : control.LTI
+        SISO system.
+    order : int
+        Number of derivatives, >= 0.
+    """
+    if order < 0:
+        raise ValueError(f"{order=} must be >= 0")
+    num, den = _num_den(sys)
+    return control.tf(np.polymul(num, [1.0] + [0.0] * order), den)
+
+
+def time_grid(*systems, n: int = 8001, horizon: float = 8.0, zero_tol: float = 1e-12) -> np.ndarray:
+    """Time grid for step responses of `systems`: ``horizon`` slowest time constants, s.
+
+    Parameters
+    ----------
+    *systems : control.LTI
+        The systems to be simulated on one grid.
+    n : int
+        Number of samples.
+    horizon : float
+        Length of the grid in units of the slowest decay time ``1 / min |Re p|`` over the
+        stable poles p of all systems (1 s when none is stable).
+    zero_tol : float
+        Poles with ``|p| <= zero_tol`` (integrators) are ignored, rad/s.
+
+    Returns
+    -------
+    ndarray
+        ``linspace(0, horizon / slowest, n)``.
+    """
+    p = np.concatenate([np.atleast_1d(control.poles(g)) for g in systems])
+    p = p[np.abs(p) > zero_tol]
     slow = np.min(np.abs(p.real[p.real < 0])) if np.any(p.real < 0) else 1.0
-    return np.linspace(0.0, 8.0 / slow, n)
+    return np.linspace(0.0, horizon / slow, n)
 
 
 def response_time(sys, t=None) -> float:
@@ -132,7 +195,7 @@ def response_time(sys, t=None) -> float:
     `sys` is a "velocity-like" system with finite DC gain (for the pneumatic motor: the
     velocity per flow, whose step is the paper's velocity characteristic).
     """
-    t = _time_grid(sys) if t is None else t
+    t = time_grid(sys) if t is None else t
     return float(step_response(sys, t).rise_time_s)
 
 
@@ -142,54 +205,48 @@ def peak_acceleration(sys, t=None, amplitude: float = 1.0) -> float:
     For the pneumatic motor's velocity-per-flow system this is the peak piston
     acceleration in m/s^2 per m^3/s of flow step (the output of ``s * sys``).
     """
-    t = _time_grid(sys) if t is None else t
-    num, den = _num_den(sys)
-    acc = control.tf(np.polymul(num, [1.0, 0.0]), den)
-    r = control.forced_response(acc, T=t, U=np.full(len(t), amplitude))
+    t = time_grid(sys) if t is None else t
+    r = control.forced_response(differentiate(sys), T=t, U=np.full(len(t), amplitude))
     return float(np.max(np.abs(r.outputs)))
 
 
-def _mag(num, den, w):
-    s = 1j * w
-    return np.abs(np.polyval(num, s) / np.polyval(den, s))
+def _mag(sys, w):
+    """|G(j w)| at angular frequencies `w` (rad/s), by :func:`vibroscope.instruments.lti.bode`."""
+    return bode(sys, np.atleast_1d(w) / (2 * np.pi)).magnitude
 
 
 def resonance_frequency(sys) -> float:
     """Resonance frequency nu_r, Hz: frequency of the largest |G(j w)| (nan if no peak above DC)."""
-    num, den = _num_den(sys)
     p = control.poles(sys)
     wmax = 10.0 * max(np.max(np.abs(p)), 1e-6)
     w = np.logspace(np.log10(wmax) - 6, np.log10(wmax), 4000)
-    m = _mag(num, den, w)
+    m = _mag(sys, w)
     k = int(np.argmax(m))
     if k == 0 or k == w.size - 1:
         return float("nan")
-    res = optimize.minimize_scalar(lambda x: -_mag(num, den, np.exp(x)), bracket=(np.log(w[k - 1]), np.log(w[k]), np.log(w[k + 1])),
-                                   tol=1e-12)
+    res = optimize.minimize_scalar(lambda x: -_mag(sys, np.exp(x))[0],
+                                   bracket=(np.log(w[k - 1]), np.log(w[k]), np.log(w[k + 1])), tol=1e-12)
     return float(np.exp(res.x) / (2 * np.pi))
 
 
 def critical_frequency(sys, level_db: float = -3.0) -> float:
     """Critical (cut-off) frequency nu_c, Hz: the first frequency where |G| falls `level_db`
     (default -3 dB) below its DC value (the bandwidth of ``control.bandwidth``)."""
-    num, den = _num_den(sys)
-    g0 = _mag(num, den, np.array([0.0]))[0]
+    g0 = _mag(sys, 0.0)[0]
     target = g0 * 10 ** (level_db / 20.0)
     p = control.poles(sys)
     wmax = 100.0 * max(np.max(np.abs(p)), 1e-6)
     w = np.logspace(np.log10(wmax) - 8, np.log10(wmax), 8000)
-    m = _mag(num, den, w)
+    m = _mag(sys, w)
     below = np.flatnonzero(m < target)
     if below.size == 0 or below[0] == 0:
         return float("nan")
     k = below[0]
-    wc = optimize.brentq(lambda x: _mag(num, den, np.array([x]))[0] - target, w[k - 1], w[k], xtol=1e-14, rtol=1e-13)
+    wc = optimize.brentq(lambda x: _mag(sys, x)[0] - target, w[k - 1], w[k], xtol=1e-14, rtol=1e-13)
     return float(wc / (2 * np.pi))
 
 
 def _pneumatic_velocity(**params):
-    from vibroscope.models.paper import pneumatic_motor
-
     return pneumatic_motor(**params, output="velocity")
 
 
@@ -286,13 +343,11 @@ def pneumatic_influence_table(nominal: Mapping[str, float] | None = None, *, rel
     Parameters
     ----------
     nominal : mapping, optional
-        Pneumatic-motor parameters (SI); :data:`vibroscope.models.paper.PNEUMATIC_NOMINAL`
+        Pneumatic-motor parameters (SI); :data:`vibroscope.instruments.pneumatic.PNEUMATIC_NOMINAL`
         by default.
     rel_step : float
         Relative step of the central difference.
     """
-    from vibroscope.models.paper import PNEUMATIC_NOMINAL
-
     nominal = dict(PNEUMATIC_NOMINAL if nominal is None else nominal)
     return influence_table(PNEUMATIC_CRITERIA, nominal, ("A", "V", "m"), rel_step=rel_step)
 

@@ -6,16 +6,8 @@ import control
 import numpy as np
 import pytest
 
-from vibroscope.models.lti import (
-    Block,
-    BlockSchema,
-    Sum,
-    bode,
-    clean_tf,
-    nyquist,
-    step_info,
-    step_response,
-)
+from vibroscope.instruments.block_schema import Block, BlockSchema, Sum
+from vibroscope.instruments.lti import bode, clean_tf, nyquist, step_info, step_response
 
 
 def _same_tf(a, b, f=np.logspace(-2, 2, 50)):
@@ -107,6 +99,7 @@ def test_clean_tf_cancels():
 
 
 def test_plots_are_lazy_and_work():
+    """The results draw through vibroscope.viewers.instruments."""
     import matplotlib.pyplot as plt
 
     f = np.logspace(-1, 1, 50)
@@ -114,3 +107,74 @@ def test_plots_are_lazy_and_work():
     nyquist(G2, f).plot()
     step_response(G2, np.linspace(0, 5, 100)).plot()
     plt.close("all")
+
+
+# Values of the earlier in-house implementation (numpy polyval for the frequency response, a
+# hand-written step_info), recorded before it was replaced by control.frequency_response /
+# control.step_info: (system, time grid, rise time, settling time, overshoot %, peak, final value).
+_RECORDED_STEPS = [
+    (control.tf([16.0], [1, 2.4, 16.0]), np.linspace(0, 15, 30001),
+     0.3303351787899117, 2.8080000000000003, 37.23260094872578, 1.3723260094872578, 1.0),
+    (G2, np.linspace(0, 10, 5001), 0.18417091165563265, 4.486, 91.18754301427488, 0.38237508602854975, 0.2),
+    (control.tf([-2.0], [1, 1]), np.linspace(0, 10, 2001), 2.197226861725981, 3.915, 0.0, 1.9999092001404735, -2.0),
+]
+
+
+@pytest.mark.parametrize("sys, t, rise, settle, overshoot, peak, final", _RECORDED_STEPS)
+def test_step_criteria_equal_the_recorded_values(sys, t, rise, settle, overshoot, peak, final):
+    r = step_response(sys, t)
+    assert r.rise_time_s == pytest.approx(rise, rel=1e-12)
+    assert r.settling_time_s == pytest.approx(settle, rel=1e-12)
+    assert r.overshoot_pct == pytest.approx(overshoot, rel=1e-12, abs=1e-12)
+    assert r.peak == pytest.approx(peak, rel=1e-12)
+    assert r.final_value == pytest.approx(final, rel=1e-12)
+
+
+def test_step_info_equals_the_recorded_values():
+    t = np.linspace(0, 10, 2001)
+    info = step_info(t, 1 - np.exp(-t))
+    assert info == pytest.approx(dict(rise_time_s=2.196823352786585, settling_time_s=3.91, overshoot_pct=0.0,
+                                      peak=0.9999546000702375), rel=1e-12)
+    zero = step_info(t, 0 * t)
+    assert np.isnan(zero["rise_time_s"]) and np.isnan(zero["settling_time_s"]) and zero["peak"] == 0.0
+    # never reaching 90 % of the final value: no rise nor settling time (control.step_info would fail)
+    slow = step_info(t, 1 - np.exp(-t), final_value=2.0)
+    assert np.isnan(slow["rise_time_s"]) and np.isnan(slow["settling_time_s"]) and slow["overshoot_pct"] == 0.0
+
+
+def test_bode_equals_the_recorded_values():
+    r = bode(G2, [0.01, 1.0, 10.0, 100.0])
+    np.testing.assert_allclose(r.magnitude, [0.2004893353120184, 0.17337256411293528, 0.01592960676918768,
+                                             0.0015915635409895193], rtol=1e-13)
+    np.testing.assert_allclose(r.phase_deg, [2.1544397012591068, -79.01774836468499, -89.08633751755458,
+                                             -89.90880916383048], rtol=1e-13)
+    h = control.frequency_response(G2, 2 * np.pi * np.array([0.01, 1.0])).complex.ravel()
+    np.testing.assert_array_equal(nyquist(G2, [0.01, 1.0]).response, h)
+
+
+def test_bode_of_an_integrator_at_zero_frequency_is_infinite_without_warning():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = bode(control.tf([1.0], [1.0, 0.0]), [0.0, 1.0])
+    assert np.isinf(r.magnitude[0]) and r.magnitude[1] == pytest.approx(1 / (2 * np.pi))
+
+
+def test_clean_tf_keeps_the_system_when_minreal_fails(monkeypatch):
+    def fails(*args, **kwargs):
+        raise np.linalg.LinAlgError("ill-conditioned")
+
+    monkeypatch.setattr(control, "minreal", fails)
+    g = clean_tf(control.tf([2, 2], [2, 6, 4]))  # unreduced, but monic
+    np.testing.assert_allclose(np.squeeze(g.den[0][0]), [1, 3, 2])
+    np.testing.assert_allclose(np.squeeze(g.num[0][0]), [1, 1])
+
+
+def test_clean_tf_does_not_swallow_unexpected_errors(monkeypatch):
+    def broken(*args, **kwargs):
+        raise TypeError("a bug, not a numerical failure")
+
+    monkeypatch.setattr(control, "minreal", broken)
+    with pytest.raises(TypeError, match="a bug"):
+        clean_tf(control.tf([1, 1], [1, 3, 2]))

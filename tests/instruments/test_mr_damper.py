@@ -5,15 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from vibroscope.models.mr_damper import (
-    MRDamperCoefficients,
+from vibroscope.instruments.mr_damper import (
     MRDamperParams,
-    figure_mr_hysteresis,
     linear_limit_energy,
     mr_damper_force,
     mr_damper_rhs,
     simulate_mr_damper,
+    sine_test,
 )
+from vibroscope.viewers.instruments import figure_mr_hysteresis
 
 
 def _sine(amplitude, freq, fs, cycles):
@@ -89,3 +89,34 @@ def test_figure(tmp_path):
     out = tmp_path / "mr.png"
     figure_mr_hysteresis(out, currents=(0.0, 2.0))
     assert out.stat().st_size > 10_000
+
+
+def test_hysteresis_equals_the_simulator_elements_law():
+    """One Spencer law: the instrument's simulated loop, sample by sample, is the law of the
+    simulator's MRDamper element (models.elements) on the same x, x', y, z."""
+    from vibroscope.models.elements import MRDamper, spencer_mr_damper_rates
+
+    (r,) = sine_test((1.5,), 0.015, 2.5, cycles=1)
+    c = r.coeffs
+    el = MRDamper.from_coefficients(("m1", "ground"), c)
+    for k in range(0, r.x.size, 37):
+        x, v, y, z = r.x[k], r.xdot[k], r.y[k], r.z[k]
+        ydot, zdot = mr_damper_rhs((y, z), x, v, c)
+        np.testing.assert_array_equal(el.state_derivative(x, v, (z, y)), [zdot, ydot])
+        assert el.force(x, v, (z, y)) - c.k1 * c.x0 == pytest.approx(r.force[k], rel=1e-12, abs=1e-9)
+    # vectorised over the whole record, the shared law gives the instrument's force
+    ydot, _ = spencer_mr_damper_rates(r.x, r.xdot, r.y, r.z, alpha=c.alpha, c0=c.c0, c1=c.c1, k0=c.k0,
+                                      gamma=c.gamma, beta=c.beta, A=c.A, n=c.n)
+    np.testing.assert_array_equal(r.force, c.c1 * ydot + c.k1 * (r.x - c.x0))
+
+
+def test_simulation_equals_the_recorded_values():
+    """Force of the earlier implementation (its own copy of the law), recorded before the law moved."""
+    x, xd = _sine(0.015, 2.5, 2000.0, 1)
+    r = simulate_mr_damper(x, 2000.0, 1.0, xdot=xd)
+    np.testing.assert_allclose(r.force[::200], _RECORDED_FORCE, rtol=1e-12)
+    assert r.loop_energy(0.4) == pytest.approx(_RECORDED_ENERGY, rel=1e-12)
+
+
+_RECORDED_FORCE = [469.0000739228436, 44.8334337175732, -1159.153876835775, -187.83804065283934, 1015.0699500408598]
+_RECORDED_ENERGY = 58.17145894891515

@@ -49,7 +49,6 @@ def test_compare_errors(tmp_path, capsys):
 
 
 def test_compare_toml_model(tmp_path, capsys):
-    pytest.importorskip("vibroscope.models.modelfile")
     model = tmp_path / "m.toml"
     model.write_text(
         'kind = "lumped"\n[[dof]]\nname = "m1"\nmass = 2.0\n'
