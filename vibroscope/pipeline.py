@@ -68,6 +68,22 @@ def default_nperseg(n: int, fs: float, *, fmin: float | None = None, averages: i
     When `fmin` (Hz) is given, the segment is lengthened if needed so that the resolution
     ``fs / nperseg`` is at most ``fmin / 8`` (a lightly damped mode near fmin still spans bins),
     down to a minimum of 4 averages.
+
+    Parameters
+    ----------
+    n : int
+        Record length in samples.
+    fs : float
+        Sampling frequency in Hz.
+    fmin : float, optional
+        Lowest frequency of interest in Hz; default None (no lengthening).
+    averages : int, optional
+        Target number of 50 %-overlapping segments; default 16.
+
+    Returns
+    -------
+    int
+        A power of two (at least 16), at most `n`.
     """
     target = max(16, int(2 * n / (averages + 1)))
     nper = 2 ** int(np.floor(np.log2(target)))
@@ -81,6 +97,19 @@ def decimate(signals: Signals, fmax: float) -> Signals:
     """Low-pass and decimate so that `fmax` (Hz) stays below 0.4·fs; unchanged if no gain.
 
     Uses :func:`scipy.signal.decimate` (order-8 Chebyshev I, zero phase) in stages of at most 10.
+
+    Parameters
+    ----------
+    signals : Signals
+        The record.
+    fmax : float
+        Highest frequency of interest in Hz; the total factor is ``floor(fs / (2.5 fmax))``.
+
+    Returns
+    -------
+    Signals
+        At the reduced rate, with ``meta["decimated"] = {"factors", "fs_in", "fs_out"}``; the
+        input itself when the factor is below 2.
     """
     q = int(np.floor(signals.fs / (2.5 * fmax)))
     if q < 2:
@@ -103,7 +132,43 @@ METHODS = ("auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak")
 
 @dataclass(frozen=True)
 class IdentifySettings:
-    """Settings of one identification pass (see :func:`analyse_signals` for their meaning)."""
+    """Settings of one identification pass (see :func:`analyse_signals` for their meaning).
+
+    Attributes
+    ----------
+    input : str or None
+        The force channel; None for output-only identification.
+    outputs : tuple of str
+        Response channels.
+    nperseg : int
+        Welch segment length in samples.
+    window : str
+        Welch window.
+    fmin : float or None
+        Lower edge (Hz) of the band searched for modes.
+    fmax : float
+        Upper edge (Hz) of that band.
+    n_modes : int or None
+        Number of modes for peak picking and FDD (None: every clear peak).
+    estimator : {'H1', 'H2', 'Hv'}
+        FRF estimator with an input.
+    prominence : float
+        Smallest peak prominence in dB for FDD/EFDD.
+    method : {'auto', 'lscf', 'ssi', 'polymax', 'fdd', 'efdd', 'peak'}
+        Identification method.
+    f_low : float, optional
+        Output-only: the lowest resonance (Hz) found in the response, which sets the SSI /
+        polyMAX time lags; default None (derived from the band or ``10 fs / nperseg``).
+    band : tuple of (float, float), optional
+        The band (Hz) the modes are selected in (with an input: the excited band within
+        `fmin`, `fmax`); default None (``(fmin, fmax)``).
+    select : tuple of float, optional
+        Frequencies (Hz) of the modes to take from the stabilization diagram (LSCF, SSI-COV);
+        default None (automatic selection).
+    period : int, optional
+        Period in samples of a periodic input: the FRFs are then period-synchronous; default
+        None.
+    """
 
     input: str | None
     outputs: tuple
@@ -362,6 +427,21 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
     ``damping_ratio``, ``frequency_std_hz``, ``damping_std``, ``shape`` {path: [re, im]}, ``mpc``,
     ``mpd``, ``stable``), ``rejected_modes`` (``frequency_hz``, ``damping_ratio``, ``reason``), plus ``input``, ``outputs``,
     ``settings``, ``timebase`` and, with `true_modes`, ``true_modes``.
+
+    Parameters
+    ----------
+    analysis : Analysis
+        The result of :func:`analyse_signals`.
+    source : str, optional
+        Where the record came from (e.g. the log's path), stored under ``source``.
+    true_modes : Modes, optional
+        Known modes (``natural_frequencies`` in Hz, ``damping_ratios``) to list beside the
+        identified ones, e.g. :meth:`vibroscope.models.LumpedModel.modes`.
+
+    Returns
+    -------
+    dict
+        JSON-serialisable.
     """
     sig = analysis.signals
     out = {

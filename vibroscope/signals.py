@@ -110,10 +110,20 @@ class Signals:
     def index(self, channel: str | int) -> int:
         """Row index of `channel` (a name or an int).
 
+        Parameters
+        ----------
+        channel : str or int
+            A name of `channels`, or a row position (negative counts from the end).
+
+        Returns
+        -------
+        int
+            The non-negative row index.
+
         Raises
         ------
         KeyError
-            If the name is not one of `channels`.
+            If the name is not one of `channels`, or the position is out of range.
         """
         if isinstance(channel, (int, np.integer)):
             if not -self.n_channels <= channel < self.n_channels:
@@ -129,7 +139,23 @@ class Signals:
         return self.data[self.index(channel)]
 
     def select(self, channels: Iterable[str | int]) -> "Signals":
-        """A new :class:`Signals` holding only `channels`, in that order."""
+        """A new :class:`Signals` holding only `channels`, in that order.
+
+        Parameters
+        ----------
+        channels : iterable of str or int
+            Channel names or row positions (:meth:`index`).
+
+        Returns
+        -------
+        Signals
+            Same `fs`, `t0` and `meta`.
+
+        Raises
+        ------
+        KeyError
+            As :meth:`index`.
+        """
         idx = [self.index(c) for c in channels]
         return Signals(
             self.data[idx],
@@ -148,10 +174,20 @@ class Signals:
     def stack(parts: Sequence["Signals"]) -> "Signals":
         """Join channels of several Signals on the same grid (same fs and length).
 
+        Parameters
+        ----------
+        parts : sequence of Signals
+            The parts, their channels joined in order; `t0` is the first part's, the `meta`
+            dicts are merged (later parts win).
+
+        Returns
+        -------
+        Signals
+
         Raises
         ------
         ValueError
-            If the parts differ in `fs` or `n_samples`.
+            If `parts` is empty, or the parts differ in `fs` or `n_samples`.
         """
         if not parts:
             raise ValueError("nothing to stack")

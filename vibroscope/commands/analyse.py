@@ -18,7 +18,13 @@ METHOD_NAMES = {"lscf": "LSCF/polyMAX + LSFD", "ssi_cov": "SSI-COV", "fdd": "FDD
 
 
 def add_parser(sub) -> None:
-    """Register ``analyse`` on the CLI's sub-parsers."""
+    """Register ``analyse`` on the CLI's sub-parsers.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The sub-parsers of the ``vibroscope`` parser.
+    """
     p = sub.add_parser(
         "analyse",
         aliases=["analyze"],
@@ -64,6 +70,27 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     Without `outputs`, the responses are chosen by :func:`vibroscope.io.select.auto_channels`
     (Imu accelerations; else the measurement fields of the busiest topic), and the choice and
     what was skipped (undecodable channels by name) go into the warnings.
+
+    Parameters
+    ----------
+    log : Path
+        The MCAP log.
+    input : str, optional
+        The force channel (message path); without it the analysis is output-only.
+    outputs : sequence of str, optional
+        The response channels; default: chosen automatically (see above), at most
+        ``MAX_AUTO_CHANNELS`` varying fields when no IMU is found.
+    fs : float, optional
+        Rate in Hz to resample onto (:func:`vibroscope.io.read_mcap`); default the highest
+        topic rate.
+    progress : bool, optional
+        Show a progress bar while reading; default False.
+    **kw
+        Passed to :func:`vibroscope.pipeline.analyse_signals` (``nperseg``, ``fmin``, ...).
+
+    Returns
+    -------
+    Analysis
     """
     from vibroscope.io import read_mcap
     from vibroscope.io.select import auto_channels
@@ -90,7 +117,13 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
 
 
 def run(args) -> int:
-    """Run ``vibroscope analyse``; prints the modes found and where the outputs went."""
+    """Run ``vibroscope analyse``; prints the modes found and where the outputs went.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
 

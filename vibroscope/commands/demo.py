@@ -16,7 +16,13 @@ __all__ = ["add_parser", "run", "make_demo_log"]
 
 
 def add_parser(sub) -> None:
-    """Register ``demo`` on the CLI's sub-parsers."""
+    """Register ``demo`` on the CLI's sub-parsers.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The sub-parsers of the ``vibroscope`` parser.
+    """
     p = sub.add_parser("demo", help="simulate a 3-DOF structure to an MCAP log, analyse it, compare with the true modes")
     p.add_argument("--out", type=Path, default=Path("vibroscope-demo"), help="output directory (default ./vibroscope-demo)")
     p.add_argument("--duration", type=float, default=120.0, help="record length in s (default 120)")
@@ -30,6 +36,23 @@ def add_parser(sub) -> None:
 def make_demo_log(path: Path, *, fs: float = 1000.0, duration: float = 120.0, seed: int = 1,
                   noise: float = 0.02):
     """Simulate the demo model under random force and write it as a ROS 2 MCAP.
+
+    The force is band-limited random noise, 2 Hz to ``0.3 fs``, 20 N RMS, on the
+    :func:`~vibroscope.models.demo_model`; the log starts at t0 = 1.7e9 s.
+
+    Parameters
+    ----------
+    path : Path
+        The MCAP file to write (its folder is created if missing).
+    fs : float, optional
+        Sampling frequency in Hz; default 1000.
+    duration : float, optional
+        Record length in s; default 120.
+    seed : int, optional
+        Seed of the force; ``seed + 1`` seeds the measurement noise; default 1.
+    noise : float, optional
+        Gaussian measurement noise, standard deviation relative to each output channel's
+        RMS; default 0.02.
 
     Returns
     -------
@@ -53,7 +76,13 @@ def make_demo_log(path: Path, *, fs: float = 1000.0, duration: float = 120.0, se
 
 
 def run(args) -> int:
-    """Run the demo; prints the modes found beside the true ones."""
+    """Run the demo; prints the modes found beside the true ones.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from vibroscope.commands.analyse import analyse_log, report_text, write_outputs
 
     out: Path = args.out

@@ -19,7 +19,13 @@ __all__ = ["add_parser", "run"]
 
 
 def add_parser(sub) -> None:
-    """Register ``gap`` on the CLI's sub-parsers."""
+    """Register ``gap`` on the CLI's sub-parsers.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The sub-parsers of the ``vibroscope`` parser.
+    """
     p = sub.add_parser(
         "gap",
         help="diagnose the sim-to-real gap of a model file against logs",
@@ -38,7 +44,13 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    """Run ``vibroscope gap``; returns the exit status."""
+    """Run ``vibroscope gap``; returns the exit status.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from vibroscope.errors import ModelFileError
     from vibroscope.gap import diagnose
     from vibroscope.gap.report import EFFECTS

@@ -25,7 +25,13 @@ _KIND_QUANTITY = {"accelerance": "acceleration", "mobility": "velocity", "recept
 
 
 def add_parser(sub) -> None:
-    """Register ``modal`` on the CLI's sub-parsers."""
+    """Register ``modal`` on the CLI's sub-parsers.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The sub-parsers of the ``vibroscope`` parser.
+    """
     p = sub.add_parser(
         "modal",
         help="modal identification (LSCF/LSFD, SSI-COV, FDD/EFDD, peak picking) from a log or FRF files",
@@ -123,7 +129,13 @@ def _default_out(source: Path, suffix: str) -> Path:
 
 
 def run(args) -> int:
-    """Run ``vibroscope modal``; prints the modes and where the outputs went."""
+    """Run ``vibroscope modal``; prints the modes and where the outputs went.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from vibroscope.commands.analyse import METHOD_NAMES, report_text
     from vibroscope.errors import VibroscopeError
 

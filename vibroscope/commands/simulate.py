@@ -28,7 +28,13 @@ between samples the input is reconstructed band-limited, not held)."""
 
 
 def add_parser(sub) -> None:
-    """Register ``simulate`` on the CLI's sub-parsers."""
+    """Register ``simulate`` on the CLI's sub-parsers.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The sub-parsers of the ``vibroscope`` parser.
+    """
     p = sub.add_parser(
         "simulate",
         help="simulate a model file (TOML) under an excitation or a logged input, write a ROS 2 MCAP",
@@ -56,6 +62,34 @@ def add_parser(sub) -> None:
 def simulate_to_signals(model, *, excitation=None, input_log=None, fs=None, duration=None, noise=0.0, seed=None,
                         t0=1_700_000_000.0):
     """The simulated :class:`~vibroscope.signals.Signals` (inputs then outputs).
+
+    Parameters
+    ----------
+    model : LumpedModel, TransferFunctionModel or PoleResidueModel
+        The model to simulate (:func:`vibroscope.models.simulate.simulate`).
+    excitation : str, optional
+        An excitation spec (:func:`~vibroscope.models.excitation.parse_excitation`), generated
+        for each input with its own seed.
+    input_log : str or path-like, optional
+        An MCAP log whose channels named by ``model.input_channels()`` are the inputs
+        (instead of `excitation`); its rate and start time are used.
+    fs : float, optional
+        Sampling frequency in Hz; default 1000 with `excitation`, the log's highest topic
+        rate with `input_log`.
+    duration : float, optional
+        Record length in s with `excitation`; default 60. Ignored with `input_log`.
+    noise : float, optional
+        Gaussian output noise, standard deviation relative to each output channel's RMS,
+        >= 0; default 0.
+    seed : int, optional
+        Seed of the excitation and the noise; default None (not reproducible).
+    t0 : float, optional
+        Time of the first sample in s with `excitation`; default 1.7e9 (Unix time, 2023-11).
+
+    Returns
+    -------
+    Signals
+        With ``meta["excitation"]`` or ``meta["input_log"]`` set.
 
     Raises
     ------
@@ -90,7 +124,13 @@ def simulate_to_signals(model, *, excitation=None, input_log=None, fs=None, dura
 
 
 def run(args) -> int:
-    """Run ``vibroscope simulate``; returns the exit status."""
+    """Run ``vibroscope simulate``; returns the exit status.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    """
     from vibroscope.errors import ModelFileError
     from vibroscope.io import write_ros2_mcap
     from vibroscope.models.modelfile import load_model

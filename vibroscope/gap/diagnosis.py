@@ -81,6 +81,17 @@ def as_lumped(model) -> LumpedModel:
     ``b / (a2 s^2 + a1 s + a0)`` (times ``s`` or ``s^2`` for velocity or acceleration
     outputs) becomes one mass ``a2 / b``, damper ``a1 / b`` and spring ``a0 / b``.
 
+    Parameters
+    ----------
+    model : LumpedModel or TransferFunctionModel
+        A lumped model (returned as is) or a second-order transfer function of that form.
+
+    Returns
+    -------
+    LumpedModel
+        For a transfer function: one DOF ``m1`` tied to ground, with the transfer function's
+        input (moved to ``m1``) and output.
+
     Raises
     ------
     ValueError

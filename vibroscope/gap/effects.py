@@ -55,7 +55,19 @@ def pair_name(between) -> str:
 
 
 def connections(model: LumpedModel) -> list[tuple[str, str]]:
-    """The distinct element locations of `model` (as written), in model order."""
+    """The distinct element locations of `model` (as written), in model order.
+
+    Parameters
+    ----------
+    model : LumpedModel
+        The model whose elements are scanned.
+
+    Returns
+    -------
+    list of tuple of (str, str)
+        Each element's ``between`` once; ``(a, b)`` and ``(b, a)`` count as one location,
+        kept as first written.
+    """
     out: list[tuple[str, str]] = []
     for e in model.elements:
         if e.between not in out and (e.between[1], e.between[0]) not in out:
@@ -70,6 +82,25 @@ class LinearParams:
     coefficients (``c:<a>-<b>``) of `model`; ``apply(model, theta)`` multiplies each by
     ``exp(theta_i)``. `which` restricts the set (``"all"``, ``"kc"`` (no masses),
     or an explicit list of names).
+
+    Parameters
+    ----------
+    model : LumpedModel
+        The nominal model; its DOFs, its :class:`~vibroscope.models.Spring` elements with
+        ``k > 0`` and its :class:`~vibroscope.models.Damper` elements with ``c > 0`` give the
+        parameters, in that order.
+    which : {"all", "kc"} or iterable of str, optional
+        ``"all"`` (default): every such parameter; ``"kc"``: stiffnesses and damping only;
+        otherwise the names to keep (e.g. ``["k:m1-ground", "c:m1-ground"]``); unknown names
+        are ignored.
+
+    Attributes
+    ----------
+    names : list of str
+        The parameter names, the order of ``theta``.
+    refs : list of tuple of (str, int)
+        For each name, its kind (``"m"``, ``"k"``, ``"c"``) and the index of its DOF or
+        element in `model`.
     """
 
     def __init__(self, model: LumpedModel, which="all"):
@@ -97,7 +128,20 @@ class LinearParams:
         return len(self.names)
 
     def apply(self, model: LumpedModel, theta) -> LumpedModel:
-        """`model` with every parameter multiplied by ``exp(theta)``."""
+        """`model` with every parameter multiplied by ``exp(theta)``.
+
+        Parameters
+        ----------
+        model : LumpedModel
+            A model with the same DOFs and elements (by position) as the one this
+            parametrisation was built from.
+        theta : array_like, shape (len(self),)
+            Log factors, one per name of :attr:`names`; empty returns `model` unchanged.
+
+        Returns
+        -------
+        LumpedModel
+        """
         theta = np.asarray(theta, float)
         if theta.size == 0:
             return model
@@ -114,11 +158,35 @@ class LinearParams:
         return replace(model, dofs=tuple(dofs), elements=tuple(els))
 
     def changed(self, theta, tol: float = 0.03) -> list[str]:
-        """Names of the parameters whose factor differs from 1 by more than `tol`."""
+        """Names of the parameters whose factor differs from 1 by more than `tol`.
+
+        Parameters
+        ----------
+        theta : array_like, shape (len(self),)
+            Log factors.
+        tol : float, optional
+            Relative change ``|exp(theta_i) - 1|`` above which a parameter counts as
+            changed; default 0.03 (3 %).
+
+        Returns
+        -------
+        list of str
+        """
         return [n for n, t in zip(self.names, np.asarray(theta, float)) if abs(math.expm1(t)) > tol]
 
     def values(self, model: LumpedModel) -> dict[str, float]:
-        """Current values (kg, N/m, N s/m) of the parameters in `model`."""
+        """Current values (kg, N/m, N s/m) of the parameters in `model`.
+
+        Parameters
+        ----------
+        model : LumpedModel
+            A model with the same DOFs and elements (by position) as the nominal one.
+
+        Returns
+        -------
+        dict of str to float
+            Name -> mass (kg), stiffness (N/m) or damping coefficient (N s/m).
+        """
         out = {}
         for n, (kind, i) in zip(self.names, self.refs):
             out[n] = model.dofs[i].mass if kind == "m" else (model.elements[i].k if kind == "k" else model.elements[i].c)
@@ -144,6 +212,9 @@ class EffectSpec:
         The SI parameters of the report.
     linear : bool
         True when the augmented model is linear (fitted on the FRF, no time simulation).
+    meta : dict
+        Free-form extra information; default empty (vibroscope itself neither sets nor
+        reads it).
     """
 
     effect: str
@@ -158,6 +229,19 @@ class EffectSpec:
     meta: dict = field(default_factory=dict)
 
     def apply(self, model: LumpedModel, p) -> LumpedModel:
+        """`model` augmented with this effect: ``build(model, p)``.
+
+        Parameters
+        ----------
+        model : LumpedModel
+            The (linear-fitted) model to augment.
+        p : array_like, shape (n,)
+            The effect parameters, in the parametrisation of :attr:`lower` / :attr:`upper`.
+
+        Returns
+        -------
+        LumpedModel
+        """
         return self.build(model, np.asarray(p, float))
 
     @property

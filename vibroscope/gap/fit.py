@@ -63,6 +63,23 @@ class LogSimulator:
         """Outputs of `model` (n_outputs, n) for the first `n` samples of the input.
 
         Non-finite results (an unstable candidate) are returned as NaN rows.
+
+        Parameters
+        ----------
+        model : LumpedModel
+            The model variant; its inputs take the rows of the logged input.
+        n : int, optional
+            Number of leading samples to simulate; default all.
+        fast : bool, optional
+            For nonlinear models, integrate with the coarser screening oversampling
+            ``max(8, ceil(16 f_max / fs))`` instead of the simulator's default; default False.
+            Linear models always use 8 sub-steps.
+
+        Returns
+        -------
+        ndarray, shape (n_outputs, n)
+            Simulated outputs in their units; all NaN when the simulation fails or is not
+            finite.
         """
         n = self.u.shape[1] if n is None else int(n)
         u = self.u[:, :n]
@@ -87,7 +104,24 @@ class LogSimulator:
 
 
 def frf_residual(model: LumpedModel, f: np.ndarray, H: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Weighted relative complex FRF error ``w (H_model - H) / |H|``, stacked [re, im]."""
+    """Weighted relative complex FRF error ``w (H_model - H) / |H|``, stacked [re, im].
+
+    Parameters
+    ----------
+    model : LumpedModel
+        The model; its FRF to the first input is taken in each output's own quantity.
+    f : ndarray, shape (n_f,)
+        Frequencies in Hz.
+    H : ndarray of complex, shape (n_f, n_outputs)
+        Measured FRF to the first input.
+    w : ndarray, shape (n_f, n_outputs)
+        Weights.
+
+    Returns
+    -------
+    ndarray, shape (2 n_f n_outputs,)
+        Real parts, then imaginary parts, each raveled.
+    """
     Hm = model.frf(f, quantity=None)[:, :, 0]
     r = w * (Hm - H) / np.maximum(np.abs(H), 1e-300)
     return np.concatenate([r.real.ravel(), r.imag.ravel()])
@@ -109,6 +143,9 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
         Weights (coherence-based).
     spec : EffectSpec, optional
         A linear effect to fit jointly.
+    p_starts : list of array_like, optional
+        Start vectors for `spec`'s parameters, one fit per start, the best kept; default
+        ``spec.starts[0]`` only (none without `spec`).
     prior : float
         Weight of a small pull of the log-factors towards 0 (keeps unidentifiable
         parameters at their nominal values).
@@ -160,6 +197,14 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
         Fitting samples per log.
     ns : list of int
         Samples to simulate per log (0 skips the log).
+    fast : bool, optional
+        Simulate with the coarser screening oversampling (:meth:`LogSimulator.run`);
+        default True.
+    max_nfev : int, optional
+        Function evaluations allowed to :func:`scipy.optimize.least_squares`; default 30.
+    diff_step : float, optional
+        Relative finite-difference step of the Jacobian (``least_squares``'s
+        ``diff_step``); default 1e-3.
 
     Returns
     -------

@@ -49,10 +49,23 @@ def nrmse(measured, simulated, mask=None) -> float:
 def input_levels(u: np.ndarray, fs: float, *, window_s: float = 0.5, max_levels: int = 5):
     """Excitation levels of an input record: windowed RMS clustered on a log scale.
 
+    Parameters
+    ----------
+    u : ndarray, shape (n_inputs, n_samples) or (n_samples,)
+        The input record (N); only the first input is used.
+    fs : float
+        Sampling frequency in Hz.
+    window_s : float, optional
+        Length of the RMS windows in s (at least 8 samples); default 0.5.
+    max_levels : int, optional
+        Most levels to look for (1-D k-means on log10 RMS, from this many down; a level
+        needs centres a factor 1.5 apart and at least 8 % of the windows); default 5.
+
     Returns
     -------
     labels : ndarray of int, shape (n_samples,)
-        Level index per sample (0 = lowest RMS); -1 for a silent tail.
+        Level index per sample (0 = lowest RMS); samples after the last whole window take
+        that window's level.
     rms : ndarray, shape (n_levels,)
         Median RMS (N) of each level.
     """
@@ -142,6 +155,15 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
         Hz.
     skip : list of int, optional
         Samples at the start of each log left out of every metric (initial transient).
+    validation_fraction : float, optional
+        One log: the share of the record at its end held out by the time split; default 1/3.
+    screen_s : float, optional
+        Shortest screening prefix in s after `skip` (extended until every input level is in
+        it); default 8.0.
+
+    Returns
+    -------
+    Split
     """
     skip = skip or [0] * len(us)
     n_logs = len(us)
@@ -254,7 +276,20 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int):
 
 @dataclass(frozen=True)
 class NoiseFloor:
-    """Noise estimate: per-channel noise PSD level and the pooled nrmse it implies."""
+    """Noise estimate: per-channel noise PSD level and the pooled nrmse it implies.
+
+    Attributes
+    ----------
+    nrmse : float
+        The noise floor as a normalised RMS error: ``sqrt(sum noise variance x samples /
+        sum y^2)`` pooled over channels and logs; NaN without data.
+    method : str
+        How it was estimated (the methods used, ``"; "``-joined).
+    psd_level : ndarray, shape (n_outputs,)
+        Per output channel, the white noise PSD level in unit^2/Hz (mean over the logs).
+    excited_band : tuple of (float, float)
+        The input's excited band ``(f_lo, f_hi)`` in Hz (:func:`excited_band`).
+    """
 
     nrmse: float
     method: str
@@ -284,6 +319,24 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> Noi
     over the whole band, gives the noise variance per channel [2]_. When fewer than 16
     such lines exist, the noise is the non-coherent output power ``(1 - gamma^2) Gyy``
     (noise plus nonlinear distortion, an upper bound).
+
+    Parameters
+    ----------
+    ys : list of ndarray, shape (n_outputs, n_samples)
+        Measured outputs per log.
+    us : list of ndarray, shape (n_inputs, n_samples)
+        Logged inputs per log (the first input is used).
+    masks : list of ndarray of bool, shape (n_samples,)
+        Per log, the samples to use (only Welch segments wholly inside count; a log without
+        any is skipped).
+    fs : float
+        Sampling frequency in Hz.
+    nperseg : int
+        Welch segment length in samples (Hann, 50 % overlap; :func:`masked_csd`).
+
+    Returns
+    -------
+    NoiseFloor
     """
     fb = excited_band(np.concatenate([u for u in us], axis=1), fs, nperseg)
     num = den = 0.0
@@ -332,6 +385,13 @@ def locate_bands(f: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray,
         Pooled (normalised) PSD of measured - nominal.
     noise_psd : ndarray, shape (n_f,)
         The noise floor's PSD on the same scale.
+    energy : float, optional
+        Share of the excess energy (residual above noise, 3-bin smoothed) the bands must
+        hold, taking the strongest bins first; default 0.8.
+    min_share : float, optional
+        Least share of the excess energy a band must hold to be kept; default 0.05.
+    max_bands : int, optional
+        Most bands returned; default 4.
 
     Returns
     -------
@@ -380,6 +440,29 @@ def regime_gaps(y, yhat, mask, states: dict, u, level_labels) -> tuple[RegimeGap
     Regimes (from the nominal model's simulated states): ``near_zero_velocity`` (some DOF's
     |velocity| below 10 % of its RMS), ``large_displacement`` (some DOF's |displacement| above
     twice its RMS), ``input_peaks`` (|u| above twice its RMS).
+
+    Parameters
+    ----------
+    y : ndarray, shape (n_outputs, n_samples)
+        Measured outputs.
+    yhat : ndarray, shape (n_outputs, n_samples)
+        The nominal model's simulated outputs.
+    mask : ndarray of bool, shape (n_samples,)
+        The samples to evaluate (e.g. the held-out ones).
+    states : dict
+        The nominal model's simulated states: ``"velocity"`` (m/s) and ``"displacement"`` (m),
+        each ndarray of shape (n_dofs, n_samples); a missing key skips its regime.
+    u : ndarray, shape (n_inputs, n_samples) or (n_samples,)
+        The input (N); the first input is used.
+    level_labels : ndarray of int, shape (n_samples,)
+        Excitation level per sample (:func:`input_levels`); negative labels are skipped.
+
+    Returns
+    -------
+    tuple of RegimeGap
+        One per regime, then one per level (``level_1``, ...), each with the nrmse over the
+        masked samples in it and their share of the mask; those with 10 samples or fewer are
+        left out.
     """
     out = []
     v = states.get("velocity")

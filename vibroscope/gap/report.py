@@ -71,6 +71,7 @@ class Band:
     share: float
 
     def to_dict(self) -> dict:
+        """The band as a JSON-ready dict: ``f_lo_hz``, ``f_hi_hz``, ``share``; NaN and inf become None."""
         return {"f_lo_hz": _num(self.f_lo_hz), "f_hi_hz": _num(self.f_hi_hz), "share": _num(self.share)}
 
 
@@ -78,7 +79,23 @@ class Band:
 class ChannelGap:
     """Gap of one output channel on the held-out samples: nrmse of the nominal model
     (`gap`) and of the verdict's model (`gap_after`), and the RMS simulation errors in the
-    channel's unit (`rms_error`, `rms_error_after`)."""
+    channel's unit (`rms_error`, `rms_error_after`).
+
+    Attributes
+    ----------
+    channel : str
+        The output channel (message path).
+    gap : float
+        nrmse of the nominal model on the held-out samples.
+    gap_after : float
+        nrmse of the verdict's model there; NaN (default) when not evaluated.
+    rms_error : float
+        RMS of measured - nominal simulation, in `unit`; default NaN.
+    rms_error_after : float
+        RMS of measured - verdict model's simulation, in `unit`; default NaN.
+    unit : str
+        The channel's unit (e.g. ``"m/s^2"``); default ``""``.
+    """
 
     channel: str
     gap: float
@@ -88,6 +105,7 @@ class ChannelGap:
     unit: str = ""
 
     def to_dict(self) -> dict:
+        """The channel's gap as a JSON-ready dict: every field by its name; NaN and inf become None."""
         return {"channel": self.channel, "gap": _num(self.gap), "gap_after": _num(self.gap_after),
                 "rms_error": _num(self.rms_error), "rms_error_after": _num(self.rms_error_after), "unit": self.unit}
 
@@ -114,6 +132,7 @@ class RegimeGap:
     fraction: float
 
     def to_dict(self) -> dict:
+        """The regime's gap as a JSON-ready dict: every field by its name; NaN and inf become None."""
         return {"kind": self.kind, "name": self.name, "gap": _num(self.gap), "fraction": _num(self.fraction)}
 
 
@@ -154,6 +173,8 @@ class Candidate:
     model_toml: str = ""
 
     def to_dict(self) -> dict:
+        """The candidate as a JSON-ready dict: ``effect``, ``where``, ``parameters``, ``gap_after``, ``score``,
+        ``gap_fit``, ``n_parameters`` (not ``model_toml``); NaN and inf become None."""
         return {
             "effect": self.effect,
             "where": dict(self.where),
@@ -201,6 +222,8 @@ class SignatureTest:
     y_label: str = ""
 
     def to_dict(self) -> dict:
+        """The test as a JSON-ready dict: ``name``, ``value``, ``threshold``, ``flagged``, ``points_to``,
+        ``detail`` (not the evidence curve); NaN and inf become None."""
         return {
             "name": self.name,
             "value": _num(self.value),
@@ -400,7 +423,16 @@ class GapReport:
     def plot(self, out_dir=None):
         """Figures of the diagnosis (lazy matplotlib, :mod:`vibroscope.viewers.gap_figures`).
 
-        Returns a dict name -> matplotlib Figure; with `out_dir`, also writes ``NAME.png`` there.
+        Parameters
+        ----------
+        out_dir : str or Path, optional
+            Also write each figure as ``NAME.png`` there (created if missing); default None.
+
+        Returns
+        -------
+        dict
+            Name -> matplotlib Figure (see
+            :func:`~vibroscope.viewers.gap_figures.plot_gap_report`).
         """
         from vibroscope.viewers.gap_figures import plot_gap_report
 

@@ -140,7 +140,22 @@ class BlockSchema:
     # ---------------------------------------------------------------- builders
     @classmethod
     def series(cls, *systems, names: Sequence[str] | None = None, name: str = "") -> "BlockSchema":
-        """Blocks in series ``r -> G1 -> x1 -> G2 -> ... -> y``; the last signal is ``"y"``."""
+        """Blocks in series ``r -> G1 -> x1 -> G2 -> ... -> y``; the last signal is ``"y"``.
+
+        Parameters
+        ----------
+        *systems : control.LTI
+            The SISO blocks, in signal order.
+        names : sequence of str, optional
+            Block names, one per system; default ``G1``, ``G2``, ...
+        name : str, optional
+            The schema's name; default ``""``.
+
+        Returns
+        -------
+        BlockSchema
+            One exogenous input ``"r"``.
+        """
         names = list(names) if names is not None else [f"G{i + 1}" for i in range(len(systems))]
         blocks, prev = [], "r"
         for i, (n, g) in enumerate(zip(names, systems)):
@@ -151,14 +166,46 @@ class BlockSchema:
 
     @classmethod
     def parallel(cls, *systems, names: Sequence[str] | None = None, name: str = "") -> "BlockSchema":
-        """Blocks in parallel, each fed by ``"r"``, outputs ``x1..xn`` summed into ``"y"``."""
+        """Blocks in parallel, each fed by ``"r"``, outputs ``x1..xn`` summed into ``"y"``.
+
+        Parameters
+        ----------
+        *systems : control.LTI
+            The SISO blocks.
+        names : sequence of str, optional
+            Block names, one per system; default ``G1``, ``G2``, ...
+        name : str, optional
+            The schema's name; default ``""``.
+
+        Returns
+        -------
+        BlockSchema
+            One exogenous input ``"r"``.
+        """
         names = list(names) if names is not None else [f"G{i + 1}" for i in range(len(systems))]
         blocks = tuple(Block(n, g, "r", f"x{i + 1}") for i, (n, g) in enumerate(zip(names, systems)))
         return cls(blocks, (Sum("y", tuple(b.output for b in blocks)),), ("r",), name)
 
     @classmethod
     def feedback(cls, forward, back=None, *, sign: int = -1, name: str = "") -> "BlockSchema":
-        """Feedback loop ``e = r + sign*m``, ``y = forward*e``, ``m = back*y`` (unity if None)."""
+        """Feedback loop ``e = r + sign*m``, ``y = forward*e``, ``m = back*y`` (unity if None).
+
+        Parameters
+        ----------
+        forward : control.LTI
+            The forward path, block ``"forward"`` from ``e`` to ``y``.
+        back : control.LTI, optional
+            The feedback path, block ``"feedback"`` from ``y`` to ``m``; default unity gain.
+        sign : int, optional
+            Negative (default -1) for negative feedback ``e = r - m``; otherwise ``e = r + m``.
+        name : str, optional
+            The schema's name; default ``""``.
+
+        Returns
+        -------
+        BlockSchema
+            Exogenous input ``"r"``; signals ``e``, ``y``, ``m``.
+        """
         back = control.tf([1.0], [1.0]) if back is None else back
         s = "-m" if sign < 0 else "m"
         return cls(
@@ -228,7 +275,23 @@ class BlockSchema:
         return self._cache[key]
 
     def transfers(self, from_: str | None = None) -> dict[str, control.TransferFunction]:
-        """Transfer functions from `from_` to every named point, as a dict keyed by signal name."""
+        """Transfer functions from `from_` to every named point, as a dict keyed by signal name.
+
+        Parameters
+        ----------
+        from_ : str, optional
+            An exogenous input; defaults to ``self.inputs[0]`` (the reference).
+
+        Returns
+        -------
+        dict of str to control.TransferFunction
+            As :meth:`transfer`, for every name of :attr:`signals`.
+
+        Raises
+        ------
+        ValueError
+            If `from_` is not an exogenous input of the schema.
+        """
         return {s: self.transfer(s, from_) for s in self.signals}
 
     def step(self, t, from_: str | None = None, amplitude: float = 1.0) -> dict[str, StepResult]:
@@ -246,7 +309,18 @@ class BlockSchema:
         return {s: step_response(g, t, amplitude=amplitude) for s, g in self.transfers(from_).items()}
 
     def block_bode(self, frequencies_hz) -> dict[str, BodeResult]:
-        """Bode data of each block on its own, keyed by block name."""
+        """Bode data of each block on its own, keyed by block name.
+
+        Parameters
+        ----------
+        frequencies_hz : array_like
+            Frequencies in Hz.
+
+        Returns
+        -------
+        dict of str to BodeResult
+            :func:`~vibroscope.instruments.lti.bode` of each block's system.
+        """
         return {b.name: bode(b.sys, frequencies_hz) for b in self.blocks}
 
     def forced_response(self, t, u, from_: str | None = None) -> dict[str, np.ndarray]:

@@ -196,7 +196,17 @@ class HydraulicComparison:
 
     def plot(self, axes=None):
         """Step responses and velocities of both loops
-        (:func:`vibroscope.viewers.instruments.plot_hydraulic_comparison`)."""
+        (:func:`vibroscope.viewers.instruments.plot_hydraulic_comparison`).
+
+        Parameters
+        ----------
+        axes : sequence of 2 matplotlib.axes.Axes, optional
+            Position and velocity axes; default a new figure.
+
+        Returns
+        -------
+        (Axes, Axes)
+        """
         from vibroscope.viewers.instruments import plot_hydraulic_comparison
 
         return plot_hydraulic_comparison(self, axes)
@@ -204,7 +214,18 @@ class HydraulicComparison:
 
 def step_velocity(r: StepResult) -> np.ndarray:
     """Piston velocity of a position step response, ``d response / dt`` (second-order
-    central differences), in response unit per s."""
+    central differences), in response unit per s.
+
+    Parameters
+    ----------
+    r : StepResult
+        A step response (``time_s`` in s, ``response``).
+
+    Returns
+    -------
+    ndarray, shape (n_t,)
+        ``numpy.gradient(response, time_s)``.
+    """
     return np.gradient(np.asarray(r.response), np.asarray(r.time_s))
 
 

@@ -55,7 +55,25 @@ __all__ = [
 
 
 def relative_change(initial: float, final: float) -> float:
-    """Paper eq. (2): ``(initial - final) / initial``."""
+    """Paper eq. (2): ``(initial - final) / initial``.
+
+    Parameters
+    ----------
+    initial : float
+        The initial value, non-zero (any unit).
+    final : float
+        The final value, same unit.
+
+    Returns
+    -------
+    float
+        Dimensionless; positive when the value decreased.
+
+    Raises
+    ------
+    ValueError
+        If `initial` is 0.
+    """
     if initial == 0:
         raise ValueError(f"{initial=} must be non-zero for a relative change")
     return (initial - final) / initial
@@ -194,6 +212,18 @@ def response_time(sys, t=None) -> float:
 
     `sys` is a "velocity-like" system with finite DC gain (for the pneumatic motor: the
     velocity per flow, whose step is the paper's velocity characteristic).
+
+    Parameters
+    ----------
+    sys : control.LTI
+        SISO system (time unit s) with finite DC gain.
+    t : array_like, optional
+        Time grid in s; default :func:`time_grid` of `sys`.
+
+    Returns
+    -------
+    float
+        The rise time in s (NaN when the response does not settle or its final value is 0).
     """
     t = time_grid(sys) if t is None else t
     return float(step_response(sys, t).rise_time_s)
@@ -204,6 +234,20 @@ def peak_acceleration(sys, t=None, amplitude: float = 1.0) -> float:
 
     For the pneumatic motor's velocity-per-flow system this is the peak piston
     acceleration in m/s^2 per m^3/s of flow step (the output of ``s * sys``).
+
+    Parameters
+    ----------
+    sys : control.LTI
+        SISO system (time unit s).
+    t : array_like, optional
+        Time grid in s; default :func:`time_grid` of `sys`.
+    amplitude : float, optional
+        Step height in the input's unit; default 1.
+
+    Returns
+    -------
+    float
+        ``max |d/dt y(t)|`` on `t`, in output unit per s.
     """
     t = time_grid(sys) if t is None else t
     r = control.forced_response(differentiate(sys), T=t, U=np.full(len(t), amplitude))
@@ -216,7 +260,20 @@ def _mag(sys, w):
 
 
 def resonance_frequency(sys) -> float:
-    """Resonance frequency nu_r, Hz: frequency of the largest |G(j w)| (nan if no peak above DC)."""
+    """Resonance frequency nu_r, Hz: frequency of the largest |G(j w)| (nan if no peak above DC).
+
+    Parameters
+    ----------
+    sys : control.LTI
+        SISO system (time unit s). The magnitude is searched on a log grid of angular
+        frequencies up to 10 times the largest pole modulus, the peak refined by a
+        bracketed scalar minimisation.
+
+    Returns
+    -------
+    float
+        Hz; NaN when the largest magnitude lies at an end of the grid.
+    """
     p = control.poles(sys)
     wmax = 10.0 * max(np.max(np.abs(p)), 1e-6)
     w = np.logspace(np.log10(wmax) - 6, np.log10(wmax), 4000)
@@ -231,7 +288,21 @@ def resonance_frequency(sys) -> float:
 
 def critical_frequency(sys, level_db: float = -3.0) -> float:
     """Critical (cut-off) frequency nu_c, Hz: the first frequency where |G| falls `level_db`
-    (default -3 dB) below its DC value (the bandwidth of ``control.bandwidth``)."""
+    (default -3 dB) below its DC value (the bandwidth of ``control.bandwidth``).
+
+    Parameters
+    ----------
+    sys : control.LTI
+        SISO system (time unit s) with finite non-zero DC gain.
+    level_db : float, optional
+        The level relative to the DC gain, dB (negative); default -3.
+
+    Returns
+    -------
+    float
+        Hz; NaN when the magnitude never falls below the level on the searched grid (up to
+        100 times the largest pole modulus).
+    """
     g0 = _mag(sys, 0.0)[0]
     target = g0 * 10 ** (level_db / 20.0)
     p = control.poles(sys)
@@ -300,7 +371,18 @@ class InfluenceTable:
         return float(self.values[self.parameters.index(p), self.criteria.index(c)])
 
     def to_markdown(self, digits: int = 3) -> str:
-        """A GitHub-flavoured Markdown table (signed coefficients)."""
+        """A GitHub-flavoured Markdown table (signed coefficients).
+
+        Parameters
+        ----------
+        digits : int, optional
+            Decimals of each coefficient; default 3.
+
+        Returns
+        -------
+        str
+            One row per parameter, one column per criterion.
+        """
         head = "| parameter | " + " | ".join(self.criteria) + " |"
         sep = "|---|" + "---:|" * len(self.criteria)
         lines = [head, sep]
@@ -389,11 +471,22 @@ def check_paper_claims(table: InfluenceTable) -> list[ClaimCheck]:
     4. "all dynamic parameters are influenced (most) by A": in every column, ``|C[A, .]|``
        is the largest.
 
+    Parameters
+    ----------
+    table : InfluenceTable
+        Influence coefficients with at least the rows ``A``, ``V``, ``m`` and the columns
+        ``t_r``, ``a_max``, ``nu_r``, ``nu_c`` (e.g. from :data:`PNEUMATIC_CRITERIA`).
+
     Returns
     -------
     list of ClaimCheck
         Disagreement is reported as ``holds=False`` with the numbers; e.g. physics says the
         critical frequency of a mass-loaded actuator *falls* with mass.
+
+    Raises
+    ------
+    ValueError
+        If a required row or column is missing from `table`.
     """
     for p in ("A", "V", "m"):
         if p not in table.parameters:

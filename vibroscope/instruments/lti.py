@@ -117,7 +117,21 @@ class BodeResult:
 
     def plot(self, axes=None, label: str | None = None, **kwargs):
         """Magnitude (dB) and phase (deg) on log frequency axes; returns the two axes
-        (:func:`vibroscope.viewers.instruments.plot_bode`)."""
+        (:func:`vibroscope.viewers.instruments.plot_bode`).
+
+        Parameters
+        ----------
+        axes : sequence of 2 matplotlib.axes.Axes, optional
+            Magnitude and phase axes to draw on; default a new figure.
+        label : str, optional
+            Legend label of the curves.
+        **kwargs
+            Passed to ``Axes.semilogx``.
+
+        Returns
+        -------
+        (Axes, Axes)
+        """
         from vibroscope.viewers.instruments import plot_bode
 
         return plot_bode(self, axes, label=label, **kwargs)
@@ -143,7 +157,23 @@ class NyquistResult:
 
     def plot(self, ax=None, label: str | None = None, mirror: bool = True, **kwargs):
         """Re/Im locus (with its mirror image for negative frequencies, dashed)
-        (:func:`vibroscope.viewers.instruments.plot_nyquist`)."""
+        (:func:`vibroscope.viewers.instruments.plot_nyquist`).
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; default a new figure.
+        label : str, optional
+            Legend label of the locus.
+        mirror : bool, optional
+            Also draw the mirror image (negative frequencies), dashed; default True.
+        **kwargs
+            Passed to ``Axes.plot`` for the locus.
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+        """
         from vibroscope.viewers.instruments import plot_nyquist
 
         return plot_nyquist(self, ax, label=label, mirror=mirror, **kwargs)
@@ -184,7 +214,21 @@ class StepResult:
         return iter((self.time_s, self.response))
 
     def plot(self, ax=None, label: str | None = None, **kwargs):
-        """Response versus time; returns the axes (:func:`vibroscope.viewers.instruments.plot_step`)."""
+        """Response versus time; returns the axes (:func:`vibroscope.viewers.instruments.plot_step`).
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; default a new figure.
+        label : str, optional
+            Legend label of the curve.
+        **kwargs
+            Passed to ``Axes.plot``.
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+        """
         from vibroscope.viewers.instruments import plot_step
 
         return plot_step(self, ax, label=label, **kwargs)

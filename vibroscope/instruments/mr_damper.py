@@ -175,7 +175,25 @@ class MRDamperParams:
         return cls(**polys, i_max=float(i[-1]))
 
     def at_current(self, i: float) -> MRDamperCoefficients:
-        """Coefficients at coil current `i` (A)."""
+        """Coefficients at coil current `i` (A).
+
+        Parameters
+        ----------
+        i : float
+            Coil current in A, finite and >= 0 (the polynomials are meant for up to
+            :attr:`i_max`, which is not enforced).
+
+        Returns
+        -------
+        MRDamperCoefficients
+            ``alpha``, ``c0``, ``c1``, ``k0`` from the cubic polynomials at `i`; the others
+            as stored.
+
+        Raises
+        ------
+        ValueError
+            If `i` is negative or not finite.
+        """
         i = float(i)
         if not np.isfinite(i) or i < 0:
             raise ValueError(f"{i=} must be a non-negative current in A")
@@ -220,7 +238,22 @@ def mr_damper_rhs(state, x, xdot, coeffs: MRDamperCoefficients):
 
 
 def mr_damper_force(x, xdot, y, z, coeffs: MRDamperCoefficients):
-    """Damper force ``f = c1 y' + k1 (x - x0)`` in N (arguments in m, m/s)."""
+    """Damper force ``f = c1 y' + k1 (x - x0)`` in N (arguments in m, m/s).
+
+    Parameters
+    ----------
+    x, xdot : float or ndarray
+        Damper displacement (m) and velocity (m/s).
+    y, z : float or ndarray
+        Internal displacement y (m) and hysteretic variable z (m).
+    coeffs : MRDamperCoefficients
+        The coefficients at the present current (:meth:`MRDamperParams.at_current`).
+
+    Returns
+    -------
+    float or ndarray
+        The force in N, ``y'`` from :func:`~vibroscope.models.elements.spencer_mr_damper_rates`.
+    """
     ydot, _ = _rates(x, xdot, y, z, coeffs)
     return coeffs.c1 * ydot + coeffs.k1 * (x - coeffs.x0)
 
@@ -264,6 +297,19 @@ class MRDamperResult:
         """Energy dissipated ``integral f x' dt`` (J) between `t_start` and `t_stop` (s).
 
         Over one full period of a periodic motion this is the hysteresis loop area.
+
+        Parameters
+        ----------
+        t_start : float, optional
+            Start time in s; default the first sample.
+        t_stop : float, optional
+            Stop time in s; default the last sample.
+
+        Returns
+        -------
+        float
+            Trapezoidal integral of ``force * xdot`` over the samples in
+            ``[t_start, t_stop]``, J.
         """
         t = self.time_s
         m = np.ones(t.size, bool)
@@ -274,12 +320,39 @@ class MRDamperResult:
         return float(np.trapezoid(self.force[m] * self.xdot[m], t[m]))
 
     def loop_energy(self, period_s: float) -> float:
-        """Hysteresis loop area (J) over the last full `period_s` of the record."""
+        """Hysteresis loop area (J) over the last full `period_s` of the record.
+
+        Parameters
+        ----------
+        period_s : float
+            The motion's period in s.
+
+        Returns
+        -------
+        float
+            :meth:`dissipated_energy` over ``[time_s[-1] - period_s, time_s[-1]]``, J.
+        """
         return self.dissipated_energy(self.time_s[-1] - period_s, self.time_s[-1])
 
     def plot(self, axes=None, label: str | None = None, last_s: float | None = None, **kwargs):
         """Force-displacement and force-velocity loops (mm, mm/s, kN)
-        (:func:`vibroscope.viewers.instruments.plot_mr_loops`)."""
+        (:func:`vibroscope.viewers.instruments.plot_mr_loops`).
+
+        Parameters
+        ----------
+        axes : sequence of 2 matplotlib.axes.Axes, optional
+            Force-displacement and force-velocity axes; default a new figure.
+        label : str, optional
+            Legend label of the loops.
+        last_s : float, optional
+            Plot only the last `last_s` seconds of the record; default all.
+        **kwargs
+            Passed to ``Axes.plot``.
+
+        Returns
+        -------
+        (Axes, Axes)
+        """
         from vibroscope.viewers.instruments import plot_mr_loops
 
         return plot_mr_loops(self, axes, label=label, last_s=last_s, **kwargs)

@@ -144,7 +144,25 @@ def pneumatic_natural_frequency_rad_s(
 ) -> tuple[float, float]:
     """Analytical natural angular frequency (rad/s) and damping ratio of eq. (3)'s quadratic.
 
-    Parameters are those of :func:`pneumatic_motor` (SI).
+    Parameters are those of :func:`pneumatic_motor` (SI); defaults the nominal
+    values :data:`PNEUMATIC_NOMINAL`.
+
+    Parameters
+    ----------
+    A : float, optional
+        Active piston area, m^2.
+    V : float, optional
+        Air volume of the motor chamber, m^3.
+    m : float, optional
+        Mass reduced to the piston axis, kg.
+    a_m : float, optional
+        Leakage-flow gradient with pressure, m^5/(N s).
+    b_m : float, optional
+        Viscous friction gradient, N s/m.
+    chi : float, optional
+        Polytropic exponent, dimensionless; default 1.4 (air).
+    dp : float, optional
+        Working pressure of the linearisation, Pa.
 
     Returns
     -------

@@ -311,7 +311,27 @@ class TopicInfo:
 
 @dataclass(frozen=True)
 class LogInfo:
-    """Summary of an MCAP log (see :func:`mcap_info`)."""
+    """Summary of an MCAP log (see :func:`mcap_info`).
+
+    Attributes
+    ----------
+    path : str
+        The file.
+    profile, library : str
+        The MCAP header's profile (e.g. ``"ros2"``) and writing library; ``""`` without a
+        header.
+    message_count : int
+        Messages in all topics.
+    start_ns, end_ns : int
+        Earliest and latest message log time over the topics with messages, int64 ns (0
+        when there are none).
+    topics : tuple of TopicInfo
+        One per topic, sorted by topic name.
+    skipped : tuple of (int, str)
+        Damage the scan skipped: byte offset and reason; default none.
+    warnings : tuple of str
+        What the scan has to say about the file; default none.
+    """
 
     path: str
     profile: str
@@ -329,7 +349,22 @@ class LogInfo:
         return (self.end_ns - self.start_ns) * 1e-9
 
     def topic(self, name: str) -> TopicInfo:
-        """The :class:`TopicInfo` of topic `name` (raises ChannelError if absent)."""
+        """The :class:`TopicInfo` of topic `name` (raises ChannelError if absent).
+
+        Parameters
+        ----------
+        name : str
+            A topic name, e.g. ``"/imu/data"``.
+
+        Returns
+        -------
+        TopicInfo
+
+        Raises
+        ------
+        ChannelError
+            If the log has no such topic.
+        """
         for t in self.topics:
             if t.topic == name:
                 return t

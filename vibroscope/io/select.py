@@ -18,7 +18,18 @@ _BOOKKEEPING = re.compile(
 
 
 def is_bookkeeping(path: str) -> bool:
-    """True for a message path whose field is bookkeeping (header, stamps, sequence, ids, counters)."""
+    """True for a message path whose field is bookkeeping (header, stamps, sequence, ids, counters).
+
+    Parameters
+    ----------
+    path : str
+        A message path ``topic.field...``; the part after the first ``.`` is tested (a path
+        without a field is not bookkeeping).
+
+    Returns
+    -------
+    bool
+    """
     fields = path.split(".", 1)[1] if "." in path else ""
     return bool(_BOOKKEEPING.search(fields))
 

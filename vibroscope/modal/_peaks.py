@@ -14,6 +14,18 @@ MIN_BAND_LINES = 5
 def band_indices(frequencies: np.ndarray, fmin: float | None, fmax: float | None) -> np.ndarray:
     """Indices of the lines with ``f > 0``, ``f >= fmin`` and ``f <= fmax`` (Hz; None: no bound).
 
+    Parameters
+    ----------
+    frequencies : array_like, shape (n_freqs,)
+        The frequency axis in Hz.
+    fmin, fmax : float or None
+        Band edges in Hz, both included; None for no bound.
+
+    Returns
+    -------
+    ndarray of int
+        Ascending indices into `frequencies`.
+
     Raises
     ------
     ValueError
@@ -33,6 +45,13 @@ def band_indices(frequencies: np.ndarray, fmin: float | None, fmax: float | None
 
 def parabolic_vertex(y: np.ndarray, k: int) -> tuple[float, float]:
     """Vertex of the parabola through ``y[k-1], y[k], y[k+1]`` (a maximum or a minimum).
+
+    Parameters
+    ----------
+    y : ndarray, shape (n,)
+        Values on equally spaced lines (e.g. a magnitude in dB).
+    k : int
+        The centre line, ``1 <= k <= n - 2``.
 
     Returns
     -------

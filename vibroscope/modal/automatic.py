@@ -143,7 +143,24 @@ def reference_channels(y: np.ndarray, n_ref: int = 6) -> list[int]:
 
 def ssi_lags(fs: float, f_low: float, n_samples: int, *, periods: float = 2.0) -> int:
     """Block rows of SSI-COV: `periods` periods of the lowest mode `f_low` (Hz), within
-    [20, min(300, n_samples / 40)]."""
+    [20, min(300, n_samples / 40)].
+
+    Parameters
+    ----------
+    fs : float
+        Sampling frequency in Hz.
+    f_low : float
+        Frequency of the lowest mode of interest in Hz.
+    n_samples : int
+        Record length in samples.
+    periods : float, optional
+        Periods of `f_low` the time lags should span; default 2.
+
+    Returns
+    -------
+    int
+        ``max(20, min(ceil(periods fs / f_low), 300, n_samples // 40))``.
+    """
     want = int(np.ceil(periods * fs / max(f_low, 1e-12)))
     return int(max(20, min(want, 300, n_samples // 40)))
 

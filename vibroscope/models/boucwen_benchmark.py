@@ -52,6 +52,21 @@ def simulate_boucwen_benchmark(
     upsampling, `n_periods` simulated, last one returned); otherwise the simulation starts
     from rest (polyphase band-limited upsampling).
 
+    Parameters
+    ----------
+    u : array_like, shape (n_samples,)
+        Input force in N sampled at `fs` (with ``periodic=True``: one period).
+    fs : float, optional
+        Sampling frequency of `u` and of the result, Hz; default 750 (the benchmark's).
+    periodic : bool, optional
+        Treat `u` as one period of a periodic input and return the steady state
+        (:func:`~vibroscope.models.simulate.simulate_periodic`); default False (from rest,
+        :func:`~vibroscope.models.simulate.simulate`).
+    n_periods : int, optional
+        Periods simulated when `periodic`, the last one returned; default 2.
+    oversample : int, optional
+        Integration rate as a multiple of `fs`; default 20 (15 kHz at 750 Hz).
+
     Returns
     -------
     ndarray, shape (n_samples,)

@@ -6,7 +6,7 @@ Every element joins two ends ``between = (a, b)``: two DOF names, or a DOF and
 (m) and velocity (m/s), the element force ``f = force(d, v, state)`` (N) acts as ``-f`` on
 `a` and ``+f`` on `b` (a positive stiffness pulls the ends together).
 
-Elements with internal state (Bouc-Wen, MR damper) have ``n_states = 1`` and give the
+Elements with internal state have ``n_states > 0`` (Bouc-Wen 1, MR damper 2) and give the
 derivative of their state with :meth:`state_derivative`.
 
 Each element states the *linear part* it contributes to the model's ``K`` and ``C``
@@ -71,7 +71,19 @@ def _nonneg(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class Element:
-    """Base class: an element between two ends (see module docstring)."""
+    """Base class: an element between two ends (see module docstring).
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends ``(a, b)``: two DOF names, or a DOF name and ``"ground"``.
+
+    Raises
+    ------
+    ValueError
+        If `between` does not name two ends, names the same end twice, or joins ground to
+        ground.
+    """
 
     between: tuple[str, str]
 
@@ -96,11 +108,46 @@ class Element:
         return 0.0
 
     def force(self, d: float, v: float, state=None) -> float:
-        """Element force in N for relative displacement `d` (m) and velocity `v` (m/s)."""
+        """Element force in N for relative displacement `d` (m) and velocity `v` (m/s).
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            The element's internal states (length ``n_states``); None for elements without.
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+
+        Raises
+        ------
+        NotImplementedError
+            Always, on the base class: each element type implements it.
+        """
         raise NotImplementedError
 
     def state_derivative(self, d: float, v: float, state) -> float:
-        """Time derivative of the internal state (elements with ``n_states == 1``)."""
+        """Time derivative of the internal state (elements with ``n_states >= 1``).
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float
+            The element's internal states (length ``n_states``).
+
+        Returns
+        -------
+        float
+            The base class has no state and returns 0.0.
+        """
         return 0.0
 
     def params(self) -> dict:
@@ -110,7 +157,20 @@ class Element:
 
 @dataclass(frozen=True)
 class Spring(Element):
-    """Linear spring ``f = k d``; `k` in N/m."""
+    """Linear spring ``f = k d``; `k` in N/m.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    k : float, optional
+        Stiffness (N/m), finite and >= 0; default 0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`) or `k` is negative or not finite.
+    """
 
     k: float = 0.0
     type: ClassVar[str] = "spring"
@@ -125,12 +185,41 @@ class Spring(Element):
         return self.k
 
     def force(self, d, v, state=None):
+        """Element force (N) ``k d``.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            Unused (no internal state).
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
         return self.k * d
 
 
 @dataclass(frozen=True)
 class Damper(Element):
-    """Linear viscous damper ``f = c v``; `c` in N s/m."""
+    """Linear viscous damper ``f = c v``; `c` in N s/m.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    c : float, optional
+        Viscous damping coefficient (N s/m), finite and >= 0; default 0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`) or `c` is negative or not finite.
+    """
 
     c: float = 0.0
     type: ClassVar[str] = "damper"
@@ -145,6 +234,22 @@ class Damper(Element):
         return self.c
 
     def force(self, d, v, state=None):
+        """Element force (N) ``c v``.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            Unused (no internal state).
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
         return self.c * v
 
 
@@ -153,6 +258,22 @@ class CubicSpring(Element):
     """Hardening (``k3 > 0``) or softening (``k3 < 0``) spring ``f = k d + k3 d^3``.
 
     `k` in N/m (its linear part, may be 0), `k3` in N/m^3.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    k3 : float, optional
+        Cubic stiffness (N/m^3), finite, either sign; default 0.
+    k : float, optional
+        Linear stiffness (N/m), finite and >= 0; default 0. It is the part the element adds
+        to the model's linear ``K``.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`), `k` is negative or not finite, or
+        `k3` is not finite.
     """
 
     k3: float = 0.0
@@ -172,6 +293,22 @@ class CubicSpring(Element):
         return self.k
 
     def force(self, d, v, state=None):
+        """Element force (N) ``k d + k3 d^3``.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            Unused (no internal state).
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
         return self.k * d + self.k3 * d * d * d
 
 
@@ -180,6 +317,21 @@ class Backlash(Element):
     """Spring with a clearance (dead zone): ``f = k (d - gap sign d)`` for ``|d| > gap``, else 0.
 
     `k` in N/m, `gap` in m (half the total free play).
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    k : float, optional
+        Contact stiffness outside the clearance (N/m), finite and >= 0; default 0.
+    gap : float, optional
+        Half the total free play (m), finite and >= 0; default 0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`) or `k` or `gap` is negative or not
+        finite.
     """
 
     k: float = 0.0
@@ -192,6 +344,22 @@ class Backlash(Element):
         object.__setattr__(self, "gap", _nonneg("gap", self.gap))
 
     def force(self, d, v, state=None):
+        """Element force (N) ``k (d - gap sign d)`` outside the clearance, 0 inside.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            Unused (no internal state).
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
         if d > self.gap:
             return self.k * (d - self.gap)
         if d < -self.gap:
@@ -205,6 +373,23 @@ class Friction(Element):
 
     `force` is the sliding friction force in N, `v_eps` (m/s) the regularisation velocity
     (default 1e-3 m/s).
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    force_ : float, optional
+        Sliding (Coulomb) friction force (N), finite and >= 0; default 0. Stored under the
+        trailing-underscore name because :meth:`force` is the method; the model-file key
+        (and :meth:`params`) call it ``force``.
+    v_eps : float, optional
+        Regularisation velocity (m/s), > 0; default 1e-3.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`), `force_` is negative or not finite,
+        or `v_eps` is not > 0.
     """
 
     force_: float = 0.0
@@ -220,6 +405,22 @@ class Friction(Element):
         object.__setattr__(self, "v_eps", v_eps)
 
     def force(self, d, v, state=None):
+        """Element force (N) ``force_ tanh(v / v_eps)``; it does not depend on `d`.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            Unused (no internal state).
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
         return self.force_ * math.tanh(v / self.v_eps)
 
     def params(self) -> dict:
@@ -233,6 +434,27 @@ class BoucWen(Element):
 
     Parameters are those of Noël & Schoukens (2016): `alpha` in N/m, `beta` in 1/m
     (for ``nu = 1``), `gamma`, `delta` and `nu` dimensionless. Defaults are the benchmark's.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    alpha : float, optional
+        Stiffness gain of the hysteretic force (N/m); default 5.0e4.
+    beta : float, optional
+        Hysteresis amplitude (1/m for ``nu = 1``); default 1.0e3.
+    gamma : float, optional
+        Hysteresis shape, dimensionless; default 0.8.
+    delta : float, optional
+        Hysteresis shape, dimensionless; default -1.1.
+    nu : float, optional
+        Hysteresis exponent, dimensionless, > 0; default 1.0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`), a parameter is not finite, or
+        ``nu <= 0``.
     """
 
     alpha: float = 5.0e4
@@ -254,9 +476,41 @@ class BoucWen(Element):
             raise ValueError(f"nu={self.nu} must be > 0")
 
     def force(self, d, v, state=None):
+        """Element force (N) ``z``, the hysteretic state itself; `d` and `v` are unused.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            ``(z,)``, the hysteretic force (N); None gives 0.0.
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
         return state[0] if state is not None else 0.0
 
     def state_derivative(self, d, v, state):
+        """Rate ``zdot`` (N/s) of the hysteretic force (see the class docstring).
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement (m); unused (the law depends on the velocity only).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : float or sequence of float
+            ``z`` (N), or ``(z,)``.
+
+        Returns
+        -------
+        float
+            ``alpha v - beta (gamma |v| |z|^(nu-1) z + delta v |z|^nu)``, N/s.
+        """
         z = state[0] if not isinstance(state, float) else state
         az = abs(z)
         if self.nu == 1.0:
@@ -332,6 +586,37 @@ class MRDamper(Element):
     :meth:`vibroscope.instruments.mr_damper.MRDamperParams.at_current` (its cubic current
     laws and A/V mapping). The offset force ``-k1 x0`` is omitted (a static preload). State
     order: ``(z, y)``.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    current : float, optional
+        Coil current ``i`` (A), taken as constant; default 0. (Model-file key ``i``.)
+    alpha_a, alpha_b : float, optional
+        ``alpha = alpha_a + alpha_b i``: Bouc-Wen force gain (N/m) and its slope (N/(m A));
+        defaults 140.0e2 and 695.0e2.
+    c0_a, c0_b : float, optional
+        ``c0 = c0_a + c0_b i``: viscous damping at large velocities (N s/m) and its slope
+        (N s/(m A)); defaults 21.0e2 and 3.50e2.
+    c1_a, c1_b : float, optional
+        ``c1 = c1_a + c1_b i``: viscous damping at low velocities (N s/m) and its slope
+        (N s/(m A)); defaults 283.0e2 and 2.95e2.
+    k0 : float, optional
+        Stiffness at large velocities (N/m); default 46.9e2.
+    k1 : float, optional
+        Accumulator stiffness (N/m), the element's linear stiffness; default 5.0e2.
+    gamma, beta : float, optional
+        Hysteresis shape parameters (m^-n); defaults 363.0e4 each.
+    A : float, optional
+        Hysteresis scale, dimensionless; default 301.0.
+    n : float, optional
+        Hysteresis exponent, dimensionless; default 2.0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`). The coefficients are not checked.
     """
 
     current: float = 0.0
@@ -354,7 +639,22 @@ class MRDamper(Element):
     def from_coefficients(cls, between, coeffs) -> "MRDamper":
         """An element with fixed coefficients taken from any object with attributes
         ``alpha, c0, c1, k0, k1, gamma, beta, A, n`` (e.g.
-        :meth:`vibroscope.instruments.mr_damper.MRDamperParams.at_current`); ``x0`` is dropped."""
+        :meth:`vibroscope.instruments.mr_damper.MRDamperParams.at_current`); ``x0`` is dropped.
+
+        Parameters
+        ----------
+        between : tuple of (str, str)
+            The two ends: two DOF names, or a DOF name and ``"ground"``.
+        coeffs : object
+            Has attributes ``alpha`` (N/m), ``c0``, ``c1`` (N s/m), ``k0``, ``k1`` (N/m),
+            ``gamma``, ``beta`` (m^-n), ``A`` and ``n`` (dimensionless), in SI units; they
+            become the current-independent parts (``*_a``), with ``current = 0`` and the
+            ``*_b`` slopes 0.
+
+        Returns
+        -------
+        MRDamper
+        """
         return cls(
             between,
             current=0.0,
@@ -386,6 +686,23 @@ class MRDamper(Element):
         return self.k1
 
     def force(self, d, v, state=None):
+        """Element force (N) ``c1 ydot + k1 d``; without `state`, only the spring part ``k1 d``.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            ``(z, y)``: the hysteretic variable z (m) and internal displacement y (m);
+            None gives ``k1 d``.
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
         if state is None:
             return self.k1 * d
         _, _, c1 = self._coeffs()
@@ -393,6 +710,22 @@ class MRDamper(Element):
         return c1 * ydot + self.k1 * d
 
     def state_derivative(self, d, v, state):
+        """Rates of the internal states, by :func:`spencer_mr_damper_rates`.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m), the law's ``x``.
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s), the law's ``xdot``.
+        state : sequence of float
+            ``(z, y)``: the hysteretic variable z (m) and the internal displacement y (m).
+
+        Returns
+        -------
+        ndarray, shape (2,)
+            ``(zdot, ydot)``, m/s, in the state order.
+        """
         ydot, zdot = self._rates(d, v, state)
         return np.array([zdot, ydot])
 
@@ -419,6 +752,22 @@ ELEMENT_TYPES: dict[str, tuple[type, dict[str, str], tuple[str, ...]]] = {
 
 def make_element(type: str, between, **params) -> Element:
     """Build an element from its model-file type name and parameters.
+
+    Parameters
+    ----------
+    type : str
+        A key of :data:`ELEMENT_TYPES`: ``'spring'``, ``'damper'``, ``'cubic_spring'``,
+        ``'backlash'``, ``'friction'``, ``'bouc_wen'`` or ``'mr_damper'``.
+    between : tuple of (str, str)
+        The two ends: two DOF names, or a DOF name and ``"ground"``.
+    **params : float
+        The element's parameters under their model-file keys (e.g. ``k``, ``c``; ``force``
+        for friction, ``i`` for the MR damper's current), in SI units; converted to float.
+
+    Returns
+    -------
+    Element
+        An instance of the class registered for `type`.
 
     Raises
     ------

@@ -66,10 +66,31 @@ def band_limited_random(
     White Gaussian noise is filtered ideally in the frequency domain (DFT bins outside the
     band set to zero) and scaled to the RMS value `rms`.
 
+    Parameters
+    ----------
+    fs : float
+        Sampling frequency in Hz, > 0.
+    n : int, optional
+        Number of samples, >= 2. Give exactly one of `n` and `duration`.
+    duration : float, optional
+        Record length in s (``n = round(duration * fs)``), instead of `n`.
+    f_lo : float, optional
+        Lower band edge in Hz; default 0.
+    f_hi : float, optional
+        Upper band edge in Hz; default ``fs / 2``. The 0 Hz line is never excited.
+    rms : float, optional
+        RMS value of the result, in the unit of the excitation (N for a force); default 1.
+    seed : int, optional
+        Seed of :func:`numpy.random.default_rng`; default None (not reproducible).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
     Raises
     ------
     ValueError
-        If the band is empty or outside ``[0, fs/2]``.
+        If the band is empty or outside ``[0, fs/2]``, or `fs` is not positive, not exactly one of `n` and `duration` is given, or ``n < 2``.
     """
     n = _n(fs, n, duration)
     f_hi = fs / 2 if f_hi is None else f_hi
@@ -104,19 +125,40 @@ def multisine(
 
     Parameters
     ----------
+    fs : float
+        Sampling frequency in Hz, > 0.
+    n : int, optional
+        Number of samples, >= 2. Give exactly one of `n` and `duration`.
+    duration : float, optional
+        Record length in s (``n = round(duration * fs)``), instead of `n`.
+    f_lo : float, optional
+        Lower edge of the excited band in Hz; default 0.
+    f_hi : float, optional
+        Upper edge in Hz; default ``fs / 2``. The 0 Hz and Nyquist lines are never excited.
+    rms : float, optional
+        RMS value of the result (N for a force); default 1.
     lines : {"all", "odd", "random_odd"}
         ``"all"``: every line in ``[f_lo, f_hi]``; ``"odd"``: odd lines only (even
         nonlinearities fall on the even lines); ``"random_odd"``: odd lines with one line
         removed at random in each group of `group` consecutive odd lines (detection lines
         for odd nonlinear distortions).
     group : int
-        Group size for ``"random_odd"``.
+        Group size for ``"random_odd"``; default 3.
+    seed : int, optional
+        Seed of :func:`numpy.random.default_rng` (phases, and the removed lines of
+        ``"random_odd"``); default None (not reproducible).
 
     Returns
     -------
     x : ndarray, shape (n,)
     excited : ndarray of int
         Excited DFT line indices ``k`` (frequency ``k fs / n``).
+
+    Raises
+    ------
+    ValueError
+        If the band is outside ``[0, fs/2]`` or excites no line, `lines` is unknown, or
+        `fs` is not positive, not exactly one of `n` and `duration` is given, or ``n < 2``.
     """
     n = _n(fs, n, duration)
     f_hi = fs / 2 if f_hi is None else f_hi
@@ -156,6 +198,35 @@ def sine_sweep(
     logarithmic (exponential) in frequency, starting at phase 0 (``x[0] = 0``).
 
     `seed` is accepted for a uniform signature and unused.
+
+    Parameters
+    ----------
+    fs : float
+        Sampling frequency in Hz, > 0.
+    n : int, optional
+        Number of samples, >= 2. Give exactly one of `n` and `duration`.
+    duration : float, optional
+        Record length in s (``n = round(duration * fs)``), instead of `n`.
+    f0 : float, optional
+        Start frequency in Hz, at ``t = 0``; default 1.
+    f1 : float, optional
+        End frequency in Hz, reached at the last sample; default ``fs / 2``. May be below `f0`
+        (a downward sweep).
+    amplitude : float, optional
+        Peak value (N for a force); default 1.
+    kind : {"linear", "log"}, optional
+        Frequency law in time; default ``"linear"``.
+    seed : int, optional
+        Unused.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        If `f0` or `f1` is not in ``(0, fs/2]``, `kind` is unknown, or `fs` is not positive, not exactly one of `n` and `duration` is given, or ``n < 2``.
     """
     n = _n(fs, n, duration)
     f1 = fs / 2 if f1 is None else f1
@@ -181,10 +252,32 @@ def impact(
     """Half-sine force pulse of height `peak` and length `pulse` s starting at `t_start` s
     (an idealised hammer impact; its spectrum is flat to about ``1 / (2 pulse)`` Hz).
 
+    Parameters
+    ----------
+    fs : float
+        Sampling frequency in Hz, > 0.
+    n : int, optional
+        Number of samples, >= 2. Give exactly one of `n` and `duration`.
+    duration : float, optional
+        Record length in s (``n = round(duration * fs)``), instead of `n`.
+    peak : float, optional
+        Pulse height (N for a force); default 1.
+    pulse : float, optional
+        Pulse length in s, > 0; default 0.002.
+    t_start : float, optional
+        Start of the pulse in s from the first sample; default 0.
+    seed : int, optional
+        Unused (uniform signature).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Zero outside ``[t_start, t_start + pulse]``.
+
     Raises
     ------
     ValueError
-        If `pulse` is not positive.
+        If `pulse` is not positive, or `fs` is not positive, not exactly one of `n` and `duration` is given, or ``n < 2``.
     """
     n = _n(fs, n, duration)
     if pulse <= 0:
@@ -203,7 +296,32 @@ def step(
     t_start: float = 0.0,
     seed: int | None = None,
 ) -> np.ndarray:
-    """Step of height `amplitude` at `t_start` s (0 before)."""
+    """Step of height `amplitude` at `t_start` s (0 before).
+
+    Parameters
+    ----------
+    fs : float
+        Sampling frequency in Hz, > 0.
+    n : int, optional
+        Number of samples, >= 2. Give exactly one of `n` and `duration`.
+    duration : float, optional
+        Record length in s (``n = round(duration * fs)``), instead of `n`.
+    amplitude : float, optional
+        Step height (N for a force); default 1.
+    t_start : float, optional
+        Time of the step in s from the first sample; default 0.
+    seed : int, optional
+        Unused (uniform signature).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+
+    Raises
+    ------
+    ValueError
+        If `fs` is not positive, not exactly one of `n` and `duration` is given, or ``n < 2``.
+    """
     n = _n(fs, n, duration)
     t = np.arange(n) / fs
     return np.where(t >= t_start, float(amplitude), 0.0)
@@ -220,13 +338,45 @@ _KINDS = {
 
 @dataclass(frozen=True)
 class Excitation:
-    """A parsed excitation spec: `kind` and its keyword `params`; call :meth:`generate`."""
+    """A parsed excitation spec: `kind` and its keyword `params`; call :meth:`generate`.
+
+    Parameters
+    ----------
+    kind : {"random", "multisine", "sweep", "impact", "step"}
+        The generator: :func:`band_limited_random`, :func:`multisine`, :func:`sine_sweep`,
+        :func:`impact` or :func:`step`. Not checked here (see :func:`parse_excitation`).
+    params : dict, optional
+        Keyword arguments of that generator (for ``impact``, the key ``duration`` is the
+        pulse length in s); default empty.
+    """
 
     kind: str
     params: dict = field(default_factory=dict)
 
     def generate(self, fs: float, n: int, seed: int | None = None) -> np.ndarray:
-        """The excitation, shape (n,), at `fs` Hz (multisines: periodic in `n`)."""
+        """The excitation, shape (n,), at `fs` Hz (multisines: periodic in `n`).
+
+        Parameters
+        ----------
+        fs : float
+            Sampling frequency in Hz.
+        n : int
+            Number of samples.
+        seed : int, optional
+            Seed passed to the generator (used by ``random`` and ``multisine``); default None.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            For a multisine, the signal only (not the excited lines).
+
+        Raises
+        ------
+        KeyError
+            If :attr:`kind` is not a known kind.
+        ValueError
+            As the generator.
+        """
         func, _ = _KINDS[self.kind]
         params = dict(self.params)
         if self.kind == "impact" and "duration" in params:  # pulse length, not record length
@@ -242,15 +392,25 @@ def parse_excitation(spec: str) -> Excitation:
     lines=all|odd|random_odd, group), ``sweep`` (f0, f1, amplitude, kind=linear|log),
     ``impact`` (peak, duration = pulse length in s, t_start), ``step`` (amplitude, t_start).
 
-    Examples
-    --------
-    >>> parse_excitation("random:f_lo=1,f_hi=200,rms=10")
-    Excitation(kind='random', params={'f_lo': 1.0, 'f_hi': 200.0, 'rms': 10.0})
+    Parameters
+    ----------
+    spec : str
+        The spec, e.g. ``"sweep:f0=1,f1=200,amplitude=5"``. Values are floats (Hz, s, or the
+        excitation's unit), but ``group`` is an int and ``lines``, ``kind`` are strings.
+
+    Returns
+    -------
+    Excitation
 
     Raises
     ------
     ValueError
         For an unknown kind or key, or a malformed value.
+
+    Examples
+    --------
+    >>> parse_excitation("random:f_lo=1,f_hi=200,rms=10")
+    Excitation(kind='random', params={'f_lo': 1.0, 'f_hi': 200.0, 'rms': 10.0})
     """
     kind, _, rest = spec.strip().partition(":")
     kind = kind.strip()

@@ -36,7 +36,20 @@ UNITS = {"acceleration": "m/s^2", "velocity": "m/s", "displacement": "m", "force
 
 @dataclass(frozen=True)
 class Dof:
-    """A degree of freedom: a point mass `mass` (kg) moving along one axis, named `name`."""
+    """A degree of freedom: a point mass `mass` (kg) moving along one axis, named `name`.
+
+    Parameters
+    ----------
+    name : str
+        The DOF's name (converted to str); ``"ground"`` is reserved.
+    mass : float
+        Mass in kg, positive and finite.
+
+    Raises
+    ------
+    ValueError
+        If `mass` is not a positive finite number or `name` is ``"ground"``.
+    """
 
     name: str
     mass: float
@@ -92,7 +105,23 @@ class Input:
 @dataclass(frozen=True)
 class Output:
     """A measured response of DOF `dof`: ``quantity`` in acceleration (m/s^2),
-    velocity (m/s) or displacement (m), logged as `channel`."""
+    velocity (m/s) or displacement (m), logged as `channel`.
+
+    Parameters
+    ----------
+    dof : str
+        Name of the DOF whose motion is measured.
+    quantity : {"acceleration", "velocity", "displacement"}, optional
+        The measured quantity, in m/s^2, m/s or m; default ``"acceleration"``.
+    channel : str, optional
+        Message path of the output in a log; default None (the model derives one from the
+        DOF and quantity, see :meth:`LumpedModel.output_channels`).
+
+    Raises
+    ------
+    ValueError
+        If `quantity` is not one of the three.
+    """
 
     dof: str
     quantity: str = "acceleration"
@@ -213,6 +242,16 @@ class LumpedModel:
     def dof_index(self, name: str) -> int:
         """Index of DOF `name` in the DOF vector.
 
+        Parameters
+        ----------
+        name : str
+            A DOF name.
+
+        Returns
+        -------
+        int
+            Its position in :attr:`dofs` (and in the rows of ``M``, ``K``, ``C``).
+
         Raises
         ------
         KeyError
@@ -234,7 +273,23 @@ class LumpedModel:
         return tuple(e for e in self.elements if not e.is_linear)
 
     def element_vector(self, element: Element) -> np.ndarray:
-        """Connectivity ``l`` of `element`, shape (n_dofs,): ``d = l @ x``."""
+        """Connectivity ``l`` of `element`, shape (n_dofs,): ``d = l @ x``.
+
+        Parameters
+        ----------
+        element : Element
+            An element whose ends are DOFs of this model or ``"ground"``.
+
+        Returns
+        -------
+        ndarray, shape (n_dofs,)
+            +1 at the first end's DOF, -1 at the second's, 0 elsewhere (nothing for ground).
+
+        Raises
+        ------
+        KeyError
+            If an end names no DOF of the model.
+        """
         lv = np.zeros(self.n_dofs)
         a, b = element.between
         if a != GROUND:
@@ -438,10 +493,38 @@ class LumpedModel:
         input acts on DOF index `input_dof`; every DOF has an output (acceleration by default)
         named ``/imu/m{k}.linear_acceleration.x`` (k from 1).
 
+        Parameters
+        ----------
+        masses : sequence of float
+            Masses in kg, m1 first; their count n sets the number of DOFs (named ``m1`` …
+            ``mn``).
+        springs : sequence of float or float
+            Stiffnesses in N/m, length n (or a scalar, broadcast to all n).
+        dampers : sequence of float or float, optional
+            Viscous damping coefficients in N s/m, length n or a scalar; default 0.0. A zero
+            entry adds no damper.
+        input_dof : int, optional
+            Index (from 0) of the DOF the force input acts on; default 0 (m1).
+        input_channel : str, optional
+            Message path of the force input; default ``"/actuator/force.wrench.force.x"``.
+        output_quantity : {"acceleration", "velocity", "displacement"}, optional
+            Quantity measured at every DOF; default ``"acceleration"``. The output channels are
+            ``/imu/m{k}.linear_acceleration.x``, ``/imu/m{k}.velocity.x`` or
+            ``/imu/m{k}.displacement.x``.
+        nonlinear : sequence of Element, optional
+            Further elements appended after the chain's springs and dampers; default none.
+        name : str, optional
+            The model's name; default ``"chain"``.
+
+        Returns
+        -------
+        LumpedModel
+
         Raises
         ------
         ValueError
-            If the lengths of `masses`, `springs` and `dampers` differ.
+            If `springs` or `dampers` cannot be broadcast to the length of `masses`, or
+            `input_dof` is not in ``range(n)``.
         """
         masses = list(np.atleast_1d(np.asarray(masses, dtype=float)))
         n = len(masses)

@@ -133,9 +133,11 @@ class TransferFunctionModel:
         return self.input.saturation is None
 
     def input_channels(self) -> list[str]:
+        """The input's channel name, in a one-item list (default ``/input.x``)."""
         return [self.input.channel or "/input.x"]
 
     def output_channels(self) -> list[str]:
+        """The output's channel name, in a one-item list (default ``/output.x``)."""
         return [self.output.channel or "/output.x"]
 
     def state_matrices(self):
@@ -151,7 +153,19 @@ class TransferFunctionModel:
         return control.tf(list(self.num), list(self.den))
 
     def frf(self, frequencies_hz) -> np.ndarray:
-        """``H(j 2 pi f)``, shape (n_f, 1, 1), times the input delay factor."""
+        """``H(j 2 pi f)``, shape (n_f, 1, 1), times the input delay factor.
+
+        Parameters
+        ----------
+        frequencies_hz : float or array_like, shape (n_f,)
+            Frequencies in Hz.
+
+        Returns
+        -------
+        ndarray of complex, shape (n_f, 1, 1)
+            ``num(s) / den(s) * exp(-s delay)`` at ``s = j 2 pi f``, with the input's
+            ``delay`` in s; in the output unit per input unit.
+        """
         s = 2j * np.pi * np.atleast_1d(np.asarray(frequencies_hz, float))
         H = np.polyval(self.num, s) / np.polyval(self.den, s) * np.exp(-s * self.input.delay)
         return H[:, None, None]
@@ -339,7 +353,25 @@ def _parse_modal(ctx, doc) -> PoleResidueModel:
 
 
 def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunctionModel | PoleResidueModel:
-    """Parse a model file's text; see :func:`load_model`."""
+    """Parse a model file's text; see :func:`load_model`.
+
+    Parameters
+    ----------
+    text : str
+        The TOML text of a model file.
+    path : str, optional
+        Name used in error messages (``path:line``); default ``"<string>"``.
+
+    Returns
+    -------
+    LumpedModel, TransferFunctionModel or PoleResidueModel
+        By the text's ``kind``.
+
+    Raises
+    ------
+    ModelFileError
+        As :func:`load_model`.
+    """
     ctx = _Ctx(path, text)
     try:
         doc = tomllib.loads(text)
@@ -483,7 +515,18 @@ def _pairs_fmt(a) -> str:
 
 def dumps_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel) -> str:
     """The TOML text of `model` (inverse of :func:`loads_model`; floats written by ``repr``,
-    so a round trip is exact)."""
+    so a round trip is exact).
+
+    Parameters
+    ----------
+    model : LumpedModel, TransferFunctionModel or PoleResidueModel
+        The model to write.
+
+    Returns
+    -------
+    str
+        The model file's text, ending in a newline.
+    """
     if isinstance(model, PoleResidueModel):
         lines = ['kind = "modal"']
         if model.name:
@@ -525,5 +568,13 @@ def dumps_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel) -
 
 
 def dump_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel, path) -> None:
-    """Write `model` as a TOML model file that :func:`load_model` reads back equal."""
+    """Write `model` as a TOML model file that :func:`load_model` reads back equal.
+
+    Parameters
+    ----------
+    model : LumpedModel, TransferFunctionModel or PoleResidueModel
+        The model to write (text as :func:`dumps_model`).
+    path : str or path-like
+        The file to write (UTF-8), replaced if it exists.
+    """
     Path(path).write_text(dumps_model(model), encoding="utf-8")

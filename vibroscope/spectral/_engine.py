@@ -164,7 +164,24 @@ class CrossSpectralAccumulator:
 
     # -- feeding ---------------------------------------------------------------------------
     def update(self, x: np.ndarray) -> "CrossSpectralAccumulator":
-        """Add the next piece of the record, shape (n_channels, n_samples_piece); returns self."""
+        """Add the next piece of the record, shape (n_channels, n_samples_piece); returns self.
+
+        Parameters
+        ----------
+        x : array_like, shape (n_channels, n_samples_piece)
+            The samples following those already fed (any length; a partial segment is carried
+            over to the next piece).
+
+        Returns
+        -------
+        CrossSpectralAccumulator
+            self.
+
+        Raises
+        ------
+        ValueError
+            If `x` is not 2-D with ``n_channels`` rows.
+        """
         x = np.asarray(x, dtype=float)
         if x.ndim != 2 or x.shape[0] != self.n_channels:
             raise ValueError(f"piece must have shape ({self.n_channels}, n), got {x.shape=}")
@@ -204,6 +221,17 @@ class CrossSpectralAccumulator:
     def merge(self, other: "CrossSpectralAccumulator") -> "CrossSpectralAccumulator":
         """Add the segment sums of an accumulator over another (disjoint) record; returns self.
 
+        Parameters
+        ----------
+        other : CrossSpectralAccumulator
+            An accumulator with the same settings; its carried-over partial segment is not
+            added (segments never straddle two records).
+
+        Returns
+        -------
+        CrossSpectralAccumulator
+            self.
+
         Raises
         ------
         ValueError
@@ -238,6 +266,11 @@ class CrossSpectralAccumulator:
 
     def result(self, scaling: Scaling = "density") -> np.ndarray:
         """Scaled, averaged one-sided spectra.
+
+        Parameters
+        ----------
+        scaling : {'density', 'spectrum'}, optional
+            ``1 / (fs Σw²)`` per segment, unit²/Hz (default), or ``1 / (Σw)²``, unit².
 
         Returns
         -------

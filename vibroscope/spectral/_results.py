@@ -153,7 +153,22 @@ class Spectrum:
         return np.sqrt(np.sum(self.values, axis=-1) * self.df)
 
     def plot(self, ax=None, *, db: bool = False, channels=None):
-        """Plot on a log (or dB) axis; imports matplotlib lazily. Returns the Axes."""
+        """Plot on a log (or dB) axis; imports matplotlib lazily. Returns the Axes.
+
+        Parameters
+        ----------
+        ax : matplotlib.axes.Axes, optional
+            Axes to draw on; a new figure when None.
+        db : bool, optional
+            Plot in dB on a linear axis instead of the values on a log axis; default False.
+        channels : sequence of str or int, optional
+            Channels to plot (names or indices); all when None.
+
+        Returns
+        -------
+        matplotlib.axes.Axes
+            See :func:`vibroscope.viewers.figures.plot_spectrum`.
+        """
         from vibroscope.viewers.figures import plot_spectrum
 
         return plot_spectrum(self, ax=ax, db=db, channels=channels)
@@ -206,6 +221,16 @@ class CrossSpectralMatrix:
     def index(self, channel: str | int) -> int:
         """Index of a channel given by name or position (negative positions count from the end).
 
+        Parameters
+        ----------
+        channel : str or int
+            A name of `channels`, or a position.
+
+        Returns
+        -------
+        int
+            The non-negative index.
+
         Raises
         ------
         KeyError
@@ -221,7 +246,22 @@ class CrossSpectralMatrix:
         return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings))
 
     def select(self, channels) -> "CrossSpectralMatrix":
-        """The sub-matrix of `channels` (names or indices), in that order."""
+        """The sub-matrix of `channels` (names or indices), in that order.
+
+        Parameters
+        ----------
+        channels : sequence of str or int
+            The channels to keep, by name or position (:meth:`index`).
+
+        Returns
+        -------
+        CrossSpectralMatrix
+
+        Raises
+        ------
+        KeyError
+            As :meth:`index`.
+        """
         idx = [self.index(c) for c in channels]
         return CrossSpectralMatrix(
             self.frequencies,
@@ -233,7 +273,17 @@ class CrossSpectralMatrix:
         )
 
     def band(self, fmin: float, fmax: float) -> "CrossSpectralMatrix":
-        """The matrix restricted to ``fmin <= f <= fmax`` (Hz)."""
+        """The matrix restricted to ``fmin <= f <= fmax`` (Hz).
+
+        Parameters
+        ----------
+        fmin, fmax : float
+            Band edges in Hz, both included.
+
+        Returns
+        -------
+        CrossSpectralMatrix
+        """
         m = (self.frequencies >= fmin) & (self.frequencies <= fmax)
         return CrossSpectralMatrix(
             self.frequencies[m], self.G[m], self.channels, self.units, self.scaling, dict(self.settings)
@@ -307,6 +357,16 @@ class FRF:
         ``mobility = accelerance / (jω)``, ``receptance = accelerance / (jω)²``; the 0 Hz bin of a
         division becomes NaN.
 
+        Parameters
+        ----------
+        kind : {'accelerance', 'mobility', 'receptance'}
+            The FRF kind to convert to.
+
+        Returns
+        -------
+        FRF
+            With the new `kind` and its units; frequencies, coherence and settings unchanged.
+
         Raises
         ------
         ValueError
@@ -326,7 +386,20 @@ class FRF:
                    _KIND_UNITS[kind], dict(self.settings))
 
     def plot(self, *, output=0, input=0, fig=None):
-        """Bode-style figure (magnitude dB, phase, coherence); imports matplotlib lazily. Returns the Figure."""
+        """Bode-style figure (magnitude dB, phase, coherence); imports matplotlib lazily. Returns the Figure.
+
+        Parameters
+        ----------
+        output, input : str or int, optional
+            Which response and which excitation (names or indices); default 0 each.
+        fig : matplotlib.figure.Figure, optional
+            Figure to draw in (cleared); a new one when None.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            See :func:`vibroscope.viewers.figures.plot_frf`.
+        """
         from vibroscope.viewers.figures import plot_frf
 
         return plot_frf(self, output=output, input=input, fig=fig)

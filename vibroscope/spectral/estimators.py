@@ -300,7 +300,24 @@ def _resolve(G: CrossSpectralMatrix, chans: Sequence[Channel] | Channel) -> list
 
 
 def frf_kind(input_units: Sequence[str], output_units: Sequence[str]) -> tuple[str | None, str]:
-    """FRF kind and unit string from channel units (``N`` in, ``m/s^2`` | ``m/s`` | ``m`` out)."""
+    """FRF kind and unit string from channel units (``N`` in, ``m/s^2`` | ``m/s`` | ``m`` out).
+
+    Parameters
+    ----------
+    input_units : sequence of str
+        Units of the input channels.
+    output_units : sequence of str
+        Units of the output channels.
+
+    Returns
+    -------
+    kind : {'accelerance', 'mobility', 'receptance'} or None
+        When every input is in ``N`` and every output in one of ``m/s^2``, ``m/s``, ``m``;
+        else None.
+    units : str
+        The kind's units; else ``"output/input"`` when each side has a single unit (``""``
+        when both are empty), ``""`` for mixed units.
+    """
     ins, outs = set(input_units), set(output_units)
     if ins == {"N"} and len(outs) == 1:
         kind = {"m/s^2": "accelerance", "m/s": "mobility", "m": "receptance"}.get(outs.pop())

@@ -108,13 +108,38 @@ def real_shape(shape: np.ndarray) -> np.ndarray:
 
 
 def mode_label(f: float, zeta: float) -> str:
-    """``"f = 2.82 Hz, ζ = 1.20 %"`` (ζ shown as ``n/a`` when NaN)."""
+    """``"f = 2.82 Hz, ζ = 1.20 %"`` (ζ shown as ``n/a`` when NaN).
+
+    Parameters
+    ----------
+    f : float
+        Natural frequency in Hz (4 significant digits).
+    zeta : float
+        Damping ratio, dimensionless (shown in % with 2 decimals).
+
+    Returns
+    -------
+    str
+    """
     z = "n/a" if not np.isfinite(zeta) else f"{100 * zeta:.2f} %"
     return f"f = {f:.4g} Hz, ζ = {z}"
 
 
 def nearest_frequencies(f_est: np.ndarray, f_true: np.ndarray) -> np.ndarray:
-    """Index of the nearest true frequency for each estimated one (−1 when no true modes)."""
+    """Index of the nearest true frequency for each estimated one (−1 when no true modes).
+
+    Parameters
+    ----------
+    f_est : array_like, shape (n_est,)
+        Estimated natural frequencies in Hz.
+    f_true : array_like, shape (n_true,)
+        True natural frequencies in Hz.
+
+    Returns
+    -------
+    ndarray of int, shape (n_est,)
+        Index into `f_true` of the nearest frequency (several estimates may share one).
+    """
     f_est = np.asarray(f_est, dtype=float)
     f_true = np.asarray(f_true, dtype=float)
     if f_true.size == 0:

@@ -58,6 +58,16 @@ def where_label(where: Mapping[str, Any]) -> str:
     ``{"between": ["m1", "ground"]}`` -> ``"m1–ground"``; ``{"dof": "m2", "frequency_hz": 12.3}``
     -> ``"m2, 12.3 Hz"``; ``{"side": "input"}`` -> ``"input"``; ``{"parameters": ["k1", "c1"]}``
     -> ``"k1, c1"``; ``{}`` -> ``""``.
+
+    Parameters
+    ----------
+    where : mapping of str to object
+        A candidate's location (:attr:`vibroscope.gap.report.Candidate.where`); other keys
+        are written ``key=value``; more than four parameters are shortened to ``+n``.
+
+    Returns
+    -------
+    str
     """
     if not where:
         return ""
@@ -80,13 +90,34 @@ def where_label(where: Mapping[str, Any]) -> str:
 
 
 def candidate_label(candidate) -> str:
-    """``"effect @ where"`` (just ``"effect"`` when the candidate has no location)."""
+    """``"effect @ where"`` (just ``"effect"`` when the candidate has no location).
+
+    Parameters
+    ----------
+    candidate : Candidate
+        Any object with ``effect`` and ``where`` attributes (:func:`where_label`).
+
+    Returns
+    -------
+    str
+    """
     w = where_label(candidate.where)
     return f"{candidate.effect} @ {w}" if w else str(candidate.effect)
 
 
 def verdict_index(report) -> int | None:
-    """Index in ``report.candidates`` of the verdict's candidate (the first of its effect), or None."""
+    """Index in ``report.candidates`` of the verdict's candidate (the first of its effect), or None.
+
+    Parameters
+    ----------
+    report : GapReport
+        The diagnosis; its ``verdict`` is compared with each candidate's ``effect``.
+
+    Returns
+    -------
+    int or None
+        None when no candidate has the verdict's effect.
+    """
     for k, c in enumerate(report.candidates):
         if c.effect == report.verdict:
             return k
@@ -94,7 +125,18 @@ def verdict_index(report) -> int | None:
 
 
 def held_out_spans(validation: np.ndarray) -> list[tuple[int, int]]:
-    """Runs of True in a boolean mask, as ``(start, stop)`` sample index pairs (stop exclusive)."""
+    """Runs of True in a boolean mask, as ``(start, stop)`` sample index pairs (stop exclusive).
+
+    Parameters
+    ----------
+    validation : array_like of bool, shape (n_samples,)
+        The held-out samples (raveled).
+
+    Returns
+    -------
+    list of tuple of (int, int)
+        In sample order; empty for an empty or all-False mask.
+    """
     v = np.asarray(validation, dtype=bool).ravel()
     if v.size == 0:
         return []
@@ -109,6 +151,13 @@ def zoom_window(traces, width_s: float = 0.75) -> tuple[int, int, int]:
     its largest value on the held-out samples (every sample when none is held out) is the
     centre of a window `width_s` long (at least 20 samples, at most the record), kept inside
     the record.
+
+    Parameters
+    ----------
+    traces : GapTraces
+        Its ``measured`` and ``nominal`` outputs, ``validation`` mask and ``fs`` (Hz) are used.
+    width_s : float, optional
+        Window length in s; default 0.75.
 
     Returns
     -------

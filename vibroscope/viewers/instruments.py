@@ -39,7 +39,23 @@ __all__ = [
 
 def plot_bode(result, axes=None, label: str | None = None, **kwargs):
     """Magnitude (dB) and phase (deg) of a :class:`~vibroscope.instruments.lti.BodeResult` on
-    log frequency axes; returns the two axes."""
+    log frequency axes; returns the two axes.
+
+    Parameters
+    ----------
+    result : BodeResult
+        Its ``frequencies_hz``, ``magnitude_db`` and ``phase_deg`` are drawn.
+    axes : sequence of 2 matplotlib.axes.Axes, optional
+        Magnitude and phase axes; default a new figure (shared x).
+    label : str, optional
+        Legend label of the curves.
+    **kwargs
+        Passed to ``Axes.semilogx``.
+
+    Returns
+    -------
+    (Axes, Axes)
+    """
     if axes is None:
         _, axes = _pyplot().subplots(2, 1, sharex=True, figsize=(6, 5))
     a1, a2 = axes
@@ -55,7 +71,25 @@ def plot_bode(result, axes=None, label: str | None = None, **kwargs):
 
 def plot_nyquist(result, ax=None, label: str | None = None, mirror: bool = True, **kwargs):
     """Re/Im locus of a :class:`~vibroscope.instruments.lti.NyquistResult` (with its mirror
-    image for negative frequencies, dashed) and the critical point -1; returns the axes."""
+    image for negative frequencies, dashed) and the critical point -1; returns the axes.
+
+    Parameters
+    ----------
+    result : NyquistResult
+        Its complex ``response`` is drawn.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on; default a new figure.
+    label : str, optional
+        Legend label of the locus.
+    mirror : bool, optional
+        Also draw the mirror image ``conj(response)``, dashed; default True.
+    **kwargs
+        Passed to ``Axes.plot`` for the locus.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
     if ax is None:
         _, ax = _pyplot().subplots(figsize=(5, 5))
     (line,) = ax.plot(result.response.real, result.response.imag, label=label, **kwargs)
@@ -69,7 +103,23 @@ def plot_nyquist(result, ax=None, label: str | None = None, mirror: bool = True,
 
 
 def plot_step(result, ax=None, label: str | None = None, **kwargs):
-    """A :class:`~vibroscope.instruments.lti.StepResult` versus time; returns the axes."""
+    """A :class:`~vibroscope.instruments.lti.StepResult` versus time; returns the axes.
+
+    Parameters
+    ----------
+    result : StepResult
+        Its ``response`` is drawn against ``time_s`` (s).
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on; default a new figure.
+    label : str, optional
+        Legend label of the curve.
+    **kwargs
+        Passed to ``Axes.plot``.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
     if ax is None:
         _, ax = _pyplot().subplots(figsize=(6, 3.5))
     ax.plot(result.time_s, result.response, label=label, **kwargs)
@@ -81,7 +131,19 @@ def plot_step(result, ax=None, label: str | None = None, **kwargs):
 
 def plot_hydraulic_comparison(comparison, axes=None):
     """Step responses and piston velocities of the P and PD2 loops of a
-    :class:`~vibroscope.instruments.hydraulic.HydraulicComparison`; returns the two axes."""
+    :class:`~vibroscope.instruments.hydraulic.HydraulicComparison`; returns the two axes.
+
+    Parameters
+    ----------
+    comparison : HydraulicComparison
+        Its ``step_p`` and ``step_pd2`` step responses are drawn (time in ms).
+    axes : sequence of 2 matplotlib.axes.Axes, optional
+        Position and velocity axes; default a new figure.
+
+    Returns
+    -------
+    (Axes, Axes)
+    """
     from vibroscope.instruments.hydraulic import step_velocity
 
     if axes is None:
@@ -103,7 +165,25 @@ def plot_hydraulic_comparison(comparison, axes=None):
 def plot_mr_loops(result, axes=None, label: str | None = None, last_s: float | None = None, **kwargs):
     """Force-displacement and force-velocity loops (mm, mm/s, kN) of a
     :class:`~vibroscope.instruments.mr_damper.MRDamperResult`, the last `last_s` seconds
-    (all by default); returns the two axes."""
+    (all by default); returns the two axes.
+
+    Parameters
+    ----------
+    result : MRDamperResult
+        Its ``x`` (m), ``xdot`` (m/s) and ``force`` (N) are drawn in mm, mm/s and kN.
+    axes : sequence of 2 matplotlib.axes.Axes, optional
+        Force-displacement and force-velocity axes; default a new figure.
+    label : str, optional
+        Legend label of the loops.
+    last_s : float, optional
+        Only the samples with ``time_s >= time_s[-1] - last_s``; default all.
+    **kwargs
+        Passed to ``Axes.plot``.
+
+    Returns
+    -------
+    (Axes, Axes)
+    """
     if axes is None:
         _, axes = _pyplot().subplots(1, 2, figsize=(10, 4))
     m = slice(None) if last_s is None else result.time_s >= result.time_s[-1] - last_s

@@ -67,7 +67,19 @@ def channel_entity(prefix: str, channel: str) -> str:
 
 
 def mode_entity(r: int, f: float) -> str:
-    """Entity path of mode `r` (0-based) at `f` Hz: ``/modes/mode_1_2.82Hz``."""
+    """Entity path of mode `r` (0-based) at `f` Hz: ``/modes/mode_1_2.82Hz``.
+
+    Parameters
+    ----------
+    r : int
+        Mode index from 0 (the path numbers modes from 1).
+    f : float
+        Natural frequency in Hz (3 significant digits in the path).
+
+    Returns
+    -------
+    str
+    """
     return "/modes/" + _esc(f"mode_{r + 1}_{f:.3g}Hz")
 
 
