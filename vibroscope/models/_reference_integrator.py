@@ -21,6 +21,7 @@ import warnings
 
 import numpy as np
 
+from vibroscope.models.elements import BoucWen
 from vibroscope.models.lumped import LumpedModel
 
 __all__: list[str] = []
@@ -185,7 +186,7 @@ class _Integrator:
         Q[:, 0] = q
         Gl = [0.0] * N
         f, sdot = e.force, e.state_derivative
-        bw = type(e).__name__ == "BoucWen" and e.nu == 1.0
+        bw = isinstance(e, BoucWen) and e.nu == 1.0
         if bw:
             al, be, ga, de = e.alpha, e.beta, e.gamma, e.delta
         half = 0.5 * dt
