@@ -21,3 +21,22 @@ def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
         pytest.skip(f"real data sets not found at {SHARED_DATA} (clone with ../shared beside the repo)")
     return SHARED_DATA
+
+
+def _check_png(path, min_size=(300, 200), min_colours=8):
+    """A written figure is a PNG of at least `min_size` pixels with more than `min_colours`
+    colours (not blank); returns its (width, height)."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        assert im.format == "PNG", path
+        assert im.size[0] >= min_size[0] and im.size[1] >= min_size[1], (path, im.size)
+        colours = im.convert("RGB").getcolors(1 << 16)
+        assert colours is None or len(colours) > min_colours, (path, len(colours))
+        return im.size
+
+
+@pytest.fixture
+def check_png():
+    """:func:`_check_png`: asserts a figure file is a real, non-blank PNG (not just a big file)."""
+    return _check_png

@@ -51,6 +51,6 @@ def test_hydraulic_pd2_beats_p():
         hydraulic_comparison(tuning="magic")
 
 
-def test_figure(tmp_path):
+def test_figure(tmp_path, check_png):
     out = figure_hydraulic(tmp_path / "hydraulic.png")
-    assert out.stat().st_size > 10_000
+    check_png(out)

@@ -85,10 +85,10 @@ def test_default_velocity_and_validation():
         simulate_mr_damper(x, 1000.0, 0.5, xdot=xd[:-1])
 
 
-def test_figure(tmp_path):
+def test_figure(tmp_path, check_png):
     out = tmp_path / "mr.png"
     figure_mr_hysteresis(out, currents=(0.0, 2.0))
-    assert out.stat().st_size > 10_000
+    check_png(out)
 
 
 def test_hysteresis_equals_the_simulator_elements_law():

@@ -46,6 +46,7 @@ def test_larger_area_raises_natural_frequency():
     assert w[0] < w[1] < w[2]
 
 
-def test_figure(tmp_path):
+def test_figure(tmp_path, check_png):
     out = figure_pneumatic(tmp_path / "pneumatic.png")
-    assert out == tmp_path / "pneumatic.png" and out.stat().st_size > 10_000
+    assert out == tmp_path / "pneumatic.png"
+    check_png(out)
