@@ -211,15 +211,13 @@ def _identify(sig: Signals, s: IdentifySettings):
         return G, h, auto_lscf(h, fmin=lo, fmax=hi, select=s.select)
     if s.method in ("lscf", "peak"):
         raise ValueError(f"method={s.method!r} needs an input (force) channel; output-only: 'ssi', 'fdd', 'efdd'")
+    f_low = s.f_low or (lo or sig.fs / s.nperseg * 10)  # the lowest resonance sets the lags
     if s.method == "polymax":
         from vibroscope.modal.automatic import polymax_oma
 
-        return G, None, polymax_oma(sig.select(outputs), f_low=s.f_low or (lo or sig.fs / s.nperseg * 10),
-                                    fmin=s.fmin, fmax=hi)
+        return G, None, polymax_oma(sig.select(outputs), f_low=f_low, fmin=s.fmin, fmax=hi)
     if s.method in ("auto", "ssi"):
-        ident = auto_ssi(sig.select(outputs), f_low=s.f_low or (lo or sig.fs / s.nperseg * 10), fmin=s.fmin, fmax=hi,
-                         select=s.select)
-        return G, None, ident
+        return G, None, auto_ssi(sig.select(outputs), f_low=f_low, fmin=s.fmin, fmax=hi, select=s.select)
     # two singular values: close modes (e.g. a tower's two bending directions) both show
     mm = modal.fdd(Gout, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax, n_singular=min(2, len(outputs)),
                    prominence=s.prominence, efdd=s.method == "efdd")
@@ -407,7 +405,7 @@ def _jsonable(v: Any) -> Any:
     if isinstance(v, np.generic):
         return v.item()
     if isinstance(v, np.ndarray):
-        return v.tolist()
+        return _jsonable(v.tolist())  # NaN entries become null too
     if isinstance(v, float) and not np.isfinite(v):
         return None
     return v

@@ -177,7 +177,7 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
     ident = getattr(an, "identification", None)
     if ident is not None and ident.rejected:
         lines.append(f"  {len(ident.rejected)} candidates rejected (listed in the --json summary), e.g.:")
-        for r in sorted(ident.rejected, key=lambda r: -len(r.reason))[:0] or ident.rejected[:4]:
+        for r in ident.rejected[:4]:
             lines.append(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
     if ident is not None and ident.settings.get("uncertainty") and unc:
         lines.append(f"  std: {ident.settings['uncertainty']}")
@@ -204,14 +204,16 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     outs = an.settings["outputs"]
     sc = read_coords(coords, outs) if coords else line_coords(outs)
     written = {}
-    ods_models, ods_shapes = [], []
+    ident = getattr(an, "identification", None)
+    stab = ident.stabilization if ident is not None else None
+    synth = ident.lsfd.synthesize() if ident is not None and ident.lsfd is not None and an.frf is not None else None
+    acc = [c for c, u in zip(an.signals.channels, an.signals.units) if c in outs and u in ("m/s^2", "m/s²")]
+    ods_shapes = []
     if ods:
         from vibroscope.spectral.integration import ods as ods_at
-        from vibroscope.viewers.acquisition import ods_as_modal_model
 
         for f in ods:
             o = ods_at(an.frf if an.frf is not None else an.csd, f)
-            ods_models.append(ods_as_modal_model(o))
             ods_shapes.append(o)
             print(f"ODS at {o.frequency_hz:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
                                                               for p, v in list(zip(o.points, o.shape))[:6]))
@@ -222,50 +224,34 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         written["json"] = json_path
         print(f"summary: {json_path}")
     if figures:
-        from vibroscope.viewers.figures import summary_figures
+        from vibroscope.viewers.acquisition import plot_kinematics, plot_ods
+        from vibroscope.viewers.figures import _save, summary_figures
 
         figures.mkdir(parents=True, exist_ok=True)
-        ident = getattr(an, "identification", None)
-        synth = None
-        if ident is not None and ident.lsfd is not None and an.frf is not None:
-            synth = ident.lsfd.synthesize()
         paths = summary_figures(figures, signals=an.signals, psd=an.psd, frf=an.frf, modal=an.modal,
                                 sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
-                                stabilization=ident.stabilization if ident is not None else None,
-                                synthesized=synth)
-        from vibroscope.viewers.figures import _save
-
-        acc = [c for c, u in zip(an.signals.channels, an.signals.units) if c in outs and u in ("m/s^2", "m/s²")]
+                                stabilization=stab, synthesized=synth)
         if acc:
-            from vibroscope.viewers.acquisition import plot_kinematics
-
             paths.append(_save(plot_kinematics(an.signals.select(acc)), figures / "kinematics.png"))
         for o in ods_shapes:
-            from vibroscope.viewers.acquisition import plot_ods
-
             paths.append(_save(plot_ods(o, sc.as_mapping()), figures / f"ods_{o.frequency_hz:.4g}Hz.png"))
         written["figures"] = paths
         print(f"figures: {', '.join(str(p) for p in paths)}")
     if rrd or spawn:
+        from vibroscope.commands.modal import _with_ods
+        from vibroscope.viewers.acquisition import ods_as_modal_model
         from vibroscope.viewers.rerun_view import log_analysis
 
-        from vibroscope.commands.modal import _with_ods
-
-        ident = getattr(an, "identification", None)
         kin = None
-        acc = [c for c, u in zip(an.signals.channels, an.signals.units) if c in outs and u in ("m/s^2", "m/s²")]
         if acc:
             from vibroscope.spectral.integration import integrate
 
             a = an.signals.select(acc)
             kin = (integrate(a, order=1), integrate(a, order=2))
-        path = log_analysis(kinematics=kin, signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf,
-                            modal=_with_ods(an.modal, ods_models) if ods_models else an.modal,
-                            coords=sc.as_mapping(), rrd_path=rrd, spawn=spawn,
-                            recording_name=Path(log).stem,
-                            stabilization=ident.stabilization if ident is not None else None,
-                            synthesized=ident.lsfd.synthesize() if ident is not None and ident.lsfd is not None
-                            and an.frf is not None else None)
+        modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
+        path = log_analysis(kinematics=kin, signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
+                            coords=sc.as_mapping(), rrd_path=rrd, spawn=spawn, recording_name=Path(log).stem,
+                            stabilization=stab, synthesized=synth)
         written["rrd"] = path
         if rrd:
             print(f"rerun recording: {rrd}  (open with: rerun {rrd})")

@@ -10,7 +10,6 @@ file that ``vibroscope simulate`` runs.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 
@@ -173,8 +172,7 @@ def run(args) -> int:
         if an.frf is None and mm.method == "ssi_cov" and select is None:
             _cross_check(an)
         signals, psd, csd, sv = an.signals, an.psd, an.csd, an.singular_values
-    synth = ident.lsfd.synthesize(h.frequencies[(h.frequencies >= ident.lsfd.fmin) & (h.frequencies <= ident.lsfd.fmax)]) \
-        if ident.lsfd is not None and h is not None else None
+    synth = ident.lsfd.synthesize() if ident.lsfd is not None and h is not None else None  # on the fitted lines
     if synth is not None:
         err = ident.lsfd.error(h)
         print("synthesized FRF error (LSFD model vs measured, per output): "
@@ -213,7 +211,6 @@ def _mif(h):
 
 def _print_modes(ident) -> None:
     mm = ident.modes
-    fstd = mm.extra.get("frequency_std_hz")
     print(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9} {'MPC':>5}")
     mp = mm.extra.get("mpc", np.full(len(mm), np.nan))
     for k in range(len(mm)):
@@ -224,11 +221,11 @@ def _print_modes(ident) -> None:
         print(f"  {len(ident.rejected)} candidates rejected (in MODES.json), e.g.:")
         for r in ident.rejected[:4]:
             print(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
-    del fstd
 
 
 def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
     from vibroscope.errors import VibroscopeError
+    from vibroscope.pipeline import _jsonable
     from vibroscope.io.coords import line_coords, read_coords
 
     mm = ident.modes
@@ -238,7 +235,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
         doc = ident.to_dict()
         doc["source"] = [str(s) for s in args.source]
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(_jsonable(doc), indent=2))
+        args.json.write_text(json.dumps(_jsonable(doc), indent=2))  # NaN -> null
         print(f"modes: {args.json}")
     if args.uff55:
         from vibroscope.io.frf_files import write_modes_uff55
@@ -345,19 +342,3 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     dump_model(model, path)
     return path
-
-
-def _jsonable(v):
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    if dataclasses.is_dataclass(v) or callable(v):
-        return str(v)
-    return v

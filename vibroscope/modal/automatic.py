@@ -166,16 +166,13 @@ def ssi_lags(fs: float, f_low: float, n_samples: int, *, periods: float = 2.0) -
 
 
 def _add_quality(mm: ModalModel) -> ModalModel:
+    """`mm` with per-mode ``mpc`` and ``mpd_deg`` in its ``extra``."""
     from vibroscope.modal._results import mpc
+    from vibroscope.modal.quality import mpd
 
-    extra = dict(mm.extra)
-    extra["mpc"] = mpc(mm.shapes) if len(mm) else np.zeros(0)
-    try:
-        from vibroscope.modal.quality import mpd
-
-        extra["mpd_deg"] = np.atleast_1d(mpd(mm.shapes)) if len(mm) else np.zeros(0)
-    except ImportError:  # pragma: no cover
-        pass
+    n = len(mm)
+    extra = {**mm.extra, "mpc": mpc(mm.shapes) if n else np.zeros(0),
+             "mpd_deg": np.atleast_1d(mpd(mm.shapes)) if n else np.zeros(0)}
     return dataclasses.replace(mm, extra=extra)
 
 

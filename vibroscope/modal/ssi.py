@@ -197,27 +197,15 @@ def ssi_cov(
     if not orders or orders[0] < 2 or orders[-1] > n_lags * n_ref:
         raise ValueError(f"{orders=} must lie in [2, n_lags * n_refs = {n_lags * n_ref}]")
     y = y - y.mean(axis=1, keepdims=True)
-    R = output_covariances(y, 2 * n_lags + 1, ref)
-    T = np.empty((n_lags * n_ch, n_lags * n_ref))
-    for p in range(n_lags):
-        for q in range(n_lags):
-            T[p * n_ch : (p + 1) * n_ch, q * n_ref : (q + 1) * n_ref] = R[n_lags + p - q]
+    T = block_toeplitz(output_covariances(y, 2 * n_lags + 1, ref), n_lags)
     U, S, _ = np.linalg.svd(T, full_matrices=False)
     rows = []
     prev = None
     for order in orders:
-        O = U[:, :order] * np.sqrt(S[:order])
-        A = np.linalg.lstsq(O[:-n_ch], O[n_ch:], rcond=None)[0]
-        C = O[:n_ch]
-        lam, psi = np.linalg.eig(A)
-        keep = lam.imag > 0
-        lam, psi = lam[keep], psi[:, keep]
-        mu = np.log(lam) * fs
-        f = np.abs(mu) / (2 * np.pi)
-        z = -mu.real / np.abs(mu)
+        f, z, shapes = observability_poles(U[:, :order] * np.sqrt(S[:order]), n_ch, fs)
         ok = (z > 0) & (z <= max_damping) & (f < fs / 2)
         f, z = f[ok], z[ok]
-        phi = normalize_shapes((C @ psi[:, ok]).T) if ok.any() else np.zeros((0, n_ch), complex)
+        phi = normalize_shapes(shapes[ok]) if ok.any() else np.zeros((0, n_ch), complex)
         code = stability_codes(prev, f, z, phi, tol_frequency=tol_frequency, tol_damping=tol_damping,
                                mac_min=mac_min)
         rows.append((np.full(len(f), order), f, z, phi, code))
@@ -229,6 +217,57 @@ def ssi_cov(
                               ref=None if ref is None else tuple(ref),
                               max_damping=max_damping, tol_frequency=tol_frequency, tol_damping=tol_damping,
                               mac_min=mac_min))
+
+
+def block_toeplitz(R: np.ndarray, n_lags: int) -> np.ndarray:
+    """Block Toeplitz matrix ``T[p, q] = R_{n_lags + p − q}`` of output covariances.
+
+    Parameters
+    ----------
+    R : ndarray, shape (2·n_lags + 1, n_channels, n_refs)
+        Covariances of :func:`output_covariances`.
+    n_lags : int
+        Block rows (and columns).
+
+    Returns
+    -------
+    ndarray, shape (n_lags · n_channels, n_lags · n_refs)
+    """
+    n_ch, n_ref = R.shape[1], R.shape[2]
+    T = np.empty((n_lags * n_ch, n_lags * n_ref))
+    for p in range(n_lags):
+        for q in range(n_lags):
+            T[p * n_ch:(p + 1) * n_ch, q * n_ref:(q + 1) * n_ref] = R[n_lags + p - q]
+    return T
+
+
+def observability_poles(O: np.ndarray, n_ch: int, fs: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poles of one model order from its observability matrix (shift invariance).
+
+    ``A = O↑⁺ O↓``; the eigenvalues ``λ`` of ``A`` with positive imaginary part give
+    ``μ = fs ln λ``, ``f = |μ| / 2π``, ``ζ = −Re μ / |μ|`` and the shapes ``C ψ`` with ``C`` the
+    first block row (Peeters & De Roeck 1999).
+
+    Parameters
+    ----------
+    O : ndarray, shape (n_lags · n_ch, order)
+        Observability matrix.
+    n_ch : int
+        Output channels (rows of a block).
+    fs : float
+        Sampling frequency in Hz.
+
+    Returns
+    -------
+    (f, z, shapes)
+        Frequencies in Hz, damping ratios, un-normalised complex shapes (n_poles, n_ch).
+    """
+    A = np.linalg.lstsq(O[:-n_ch], O[n_ch:], rcond=None)[0]
+    lam, psi = np.linalg.eig(A)
+    keep = lam.imag > 0
+    lam, psi = lam[keep], psi[:, keep]
+    mu = np.log(lam) * fs
+    return np.abs(mu) / (2 * np.pi), -mu.real / np.abs(mu), (O[:n_ch] @ psi).T
 
 
 def stability_codes(prev, f: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_frequency: float,

@@ -27,7 +27,7 @@ import numpy as np
 
 from vibroscope.modal._results import ModalModel
 from vibroscope.modal.mac import mac
-from vibroscope.modal.ssi import output_covariances
+from vibroscope.modal.ssi import block_toeplitz, observability_poles, output_covariances
 
 __all__ = ["ModalUncertainty", "ssi_bootstrap", "lscf_bootstrap", "pair_poles"]
 
@@ -91,22 +91,25 @@ def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarr
 
 def _ssi_poles(R: np.ndarray, n_lags: int, order: int, fs: float):
     """Poles (f Hz, ζ, shapes) of SSI-COV at one order from covariances R (lags, n_ch, n_ref)."""
-    n_ch, n_ref = R.shape[1], R.shape[2]
-    T = np.empty((n_lags * n_ch, n_lags * n_ref))
-    for p in range(n_lags):
-        for q in range(n_lags):
-            T[p * n_ch:(p + 1) * n_ch, q * n_ref:(q + 1) * n_ref] = R[n_lags + p - q]
+    T = block_toeplitz(R, n_lags)
     # leading singular vectors from the small Gram matrix TᵀT (n_lags·n_ref square): U = T V / S
     w, V = np.linalg.eigh(T.T @ T)
     w, V = w[::-1][:order], V[:, ::-1][:, :order]
     S = np.sqrt(np.maximum(w, np.finfo(float).tiny))
-    O = (T @ V) / np.sqrt(S)
-    A = np.linalg.lstsq(O[:-n_ch], O[n_ch:], rcond=None)[0]
-    lam, psi = np.linalg.eig(A)
-    keep = lam.imag > 0
-    lam, psi = lam[keep], psi[:, keep]
-    mu = np.log(lam) * fs
-    return np.abs(mu) / (2 * np.pi), -mu.real / np.abs(mu), (O[:n_ch] @ psi).T
+    return observability_poles((T @ V) / np.sqrt(S), R.shape[1], fs)
+
+
+def _robust_spread(F: np.ndarray, Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """1.4826 × the median absolute deviation over the replicates (rows) of frequency and damping:
+    a replicate that paired a neighbouring spurious pole must not dominate. NaN for a mode found
+    by fewer than half of the replicates."""
+    enough = np.sum(np.isfinite(F), axis=0) >= F.shape[0] / 2
+    out = []
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for X in (F, Z):
+            out.append(np.where(enough, 1.4826 * np.nanmedian(np.abs(X - np.nanmedian(X, axis=0)), axis=0), np.nan))
+    return out[0], out[1]
 
 
 def ssi_bootstrap(y: np.ndarray, fs: float, modes: ModalModel, *, n_lags: int, order: int,
@@ -159,13 +162,7 @@ def ssi_bootstrap(y: np.ndarray, fs: float, modes: ModalModel, *, n_lags: int, o
         R = np.tensordot(w / w.sum(), Rb, axes=1)
         f, z, s = _ssi_poles(R, n_lags, order, fs)
         F[i], Z[i] = pair_poles(modes, f, z, s)
-    enough = np.sum(np.isfinite(F), axis=0) >= n_boot / 2
-    # robust spread (1.4826 × median absolute deviation): a replicate that paired a neighbouring
-    # spurious pole must not dominate
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        fstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(F - np.nanmedian(F, axis=0)), axis=0), np.nan)
-        zstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(Z - np.nanmedian(Z, axis=0)), axis=0), np.nan)
+    fstd, zstd = _robust_spread(F, Z)
     return ModalUncertainty(fstd, zstd, f"block bootstrap of the output covariances, {n_blocks} blocks, "
                                         f"{n_boot} replicates at order {order}")
 
@@ -237,11 +234,7 @@ def lscf_bootstrap(signals, input: str, outputs, modes: ModalModel, *, nperseg: 
         st = lscf(h, orders=[order - 1, order], fmin=fmin, fmax=fmax)
         keep = st.order == order
         F[i], Z[i] = pair_poles(modes, st.frequency[keep], st.damping[keep], st.shapes[keep])
-    enough = np.sum(np.isfinite(F), axis=0) >= n_boot / 2
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        fstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(F - np.nanmedian(F, axis=0)), axis=0), np.nan)
-        zstd = np.where(enough, 1.4826 * np.nanmedian(np.abs(Z - np.nanmedian(Z, axis=0)), axis=0), np.nan)
+    fstd, zstd = _robust_spread(F, Z)
     return ModalUncertainty(fstd, zstd, f"block bootstrap of the cross-spectra, {n_blocks} blocks, "
                                         f"{n_boot} replicates, LSCF order {order} (random error only: the bias of "
                                         f"the H1 estimate is not included)")
