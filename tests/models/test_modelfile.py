@@ -189,3 +189,92 @@ def test_loads_model_parses_text_and_names_its_path(tmp_path):
 def test_missing_file(tmp_path):
     with pytest.raises(ModelFileError, match="cannot read"):
         load_model(tmp_path / "nope.toml")
+
+
+# --- issue 8: model files are data; every error names file, dotted key and line ------------------------
+
+
+def _line_of(text, needle):
+    return text.split("\n").index(needle) + 1
+
+
+@pytest.mark.parametrize(
+    "old, new, needle, dotted",
+    [
+        # unknown key
+        ("k = 2.0e4\n", "k = 2.0e4\nstiffnes = 3.0\n", "stiffnes = 3.0", "element[1].stiffnes"),
+        # non-physical value
+        ("mass = 1.0", "mass = -1.0", "mass = -1.0", "dof[1].mass"),
+        # wrong type
+        ("k3 = 1.0e9", 'k3 = "stiff"', 'k3 = "stiff"', "element[3].k3"),
+        ("saturation = 50.0", "saturation = nan", "saturation = nan", "input[0].saturation"),
+        # missing DOF
+        ('dof = "m2"', 'dof = "m9"', 'dof = "m9"', "output[1].dof"),
+        # a huge integer (no float holds it): an error, not an OverflowError
+        ("mass = 1.0", "mass = 1" + "0" * 400, "mass = 1" + "0" * 400, "dof[1].mass"),
+        ('kind = "lumped"', 'kind = "fem"', 'kind = "fem"', "kind"),
+    ],
+)
+def test_semantic_errors_name_file_dotted_key_and_line(tmp_path, old, new, needle, dotted):
+    text = GOOD.replace(old, new, 1)
+    assert text != GOOD
+    msg = _err(tmp_path, text)
+    n = _line_of(text, needle)
+    assert msg.startswith(f"{tmp_path / 'model.toml'}:{n}:"), msg
+    assert f"({dotted}, line {n})" in msg, msg
+
+
+def test_missing_key_names_dotted_key_and_block_line(tmp_path):
+    text = GOOD.replace('between = ["m2", "m1"]\nc = 3.0', 'c = 3.0')
+    msg = _err(tmp_path, text)
+    # the third [[element]] block, whose header is on this line
+    n = [i for i, ln in enumerate(text.split("\n"), 1) if ln == "[[element]]"][2]
+    assert "missing required key 'between'" in msg and f"(element[2].between, line {n})" in msg, msg
+    msg = _err(tmp_path, GOOD.replace('kind = "lumped"\n', ""))
+    assert "(kind, line 1)" in msg
+
+
+@pytest.mark.parametrize(
+    "old, new, line_of, key",
+    [
+        ("mass = 1.0", "mass = 1.0.0", "mass = 1.0.0", "mass"),  # a bad number
+        ('name = "m2"', 'name = "m2', 'name = "m2', "name"),  # unterminated string
+        ("k3 = 1.0e9", "k3 = 1.0e9\nk3 = 2.0", "k3 = 2.0", "k3"),  # a key given twice
+    ],
+)
+def test_syntax_errors_name_line_and_key(tmp_path, old, new, line_of, key):
+    text = GOOD.replace(old, new, 1)
+    msg = _err(tmp_path, text)
+    n = _line_of(text, line_of)
+    assert msg.startswith(f"{tmp_path / 'model.toml'}:{n}: line {n} key {key!r}: invalid TOML"), msg
+
+
+def test_line_numbers_count_lf_only(tmp_path):
+    """A LINE SEPARATOR (U+2028) in a comment is no line break for TOML: the line reported is tomllib's."""
+    text = GOOD.replace("# kg", "# kg \u2028 per DOF").replace("mass = 1.0", "mass = -1.0")
+    msg = _err(tmp_path, text)
+    n = _line_of(text, "mass = -1.0")
+    assert f"(dof[1].mass, line {n})" in msg and msg.startswith(f"{tmp_path / 'model.toml'}:{n}:")
+
+
+def test_binary_and_empty_files(tmp_path):
+    p = tmp_path / "bin.toml"
+    p.write_bytes(b'kind = "lumped"\n\xff\xfe\x00garbage')
+    with pytest.raises(ModelFileError, match=r"bin\.toml:2: line 2: not a text \(UTF-8\) model file"):
+        load_model(p)
+    p.write_bytes(b"")
+    with pytest.raises(ModelFileError, match=r"bin\.toml:1: .*missing required key 'kind'"):
+        load_model(p)
+
+
+def test_no_code_is_executed_or_unpickled():
+    """Model files are data: the parser has no eval, exec, pickle or import machinery."""
+    import inspect
+    import re
+
+    import vibroscope.models.modelfile as mf
+
+    src = inspect.getsource(mf)
+    for word in ("eval(", "exec(", "pickle", "__import__", "importlib", "compile(", "marshal", "yaml"):
+        assert not re.search(rf"(?<![\w.]){re.escape(word)}", src), word  # re.compile( is fine
+    assert re.search(r"^import tomllib$", src, re.M)

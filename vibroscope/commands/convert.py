@@ -2,16 +2,30 @@
 
 from __future__ import annotations
 
+import sys
+
 
 def add_parser(sub) -> None:
     """Register the ``convert`` sub-command."""
-    p = sub.add_parser("convert", help="convert CSV / .mat / UFF 58 data to an MCAP log")
-    p.add_argument("input", metavar="IN", help="input file (.csv, .txt, .mat, .uff)")
-    p.add_argument("output", metavar="OUT.mcap", help="output MCAP file")
-    p.add_argument("--fs", type=float, help="sampling rate in Hz (needed without a time column / fs variable)")
-    p.add_argument("--channels", help="comma-separated channel names")
-    p.add_argument("--units", help="comma-separated units (one for all, or one per channel)")
+    p = sub.add_parser(
+        "convert", help="convert CSV / .mat / UFF 58 data to an MCAP log",
+        description="Convert CSV / .mat / UFF 58 data to an MCAP log. Channels are chosen and labelled by name "
+                    "in every format (CSV header names or c0, c1, ... without a header; .mat variable names, "
+                    "acc[k] for the columns of a matrix acc; UFF 58 record names). Each channel's unit is stored "
+                    "in the MCAP. The output is written under a temporary name and renamed when complete.",
+    )
+    p.add_argument("input", metavar="IN", help="input file (.csv, .txt, .tsv, .mat, .uff, .unv)")
+    p.add_argument("output", metavar="OUT.mcap", help="output MCAP file (not the input)")
+    p.add_argument("--fs", type=float,
+                   help="sampling rate in Hz (needed for a CSV without a time column / a .mat without an fs variable)")
+    p.add_argument("--channels", help="comma-separated channel names to convert, in this order (default: all)")
+    p.add_argument("--units",
+                   help="units: name=unit pairs (force=N,acc=m/s^2), one unit for all channels, or one per "
+                        "selected channel in the --channels order")
     p.add_argument("--columns", help="CSV columns to read, 0-based, e.g. 0-17 or 0,2,5-7")
+    p.add_argument("--time-column",
+                   help="CSV column of sample times in s, by index or header name (default: a header column "
+                        "named t, time, time_s or 'time [s]', unless --columns lists it as data; with --fs too, they must agree)")
     p.add_argument("--kind", choices=("auto", "acceleration", "other"), default="auto",
                    help="'acceleration': write every channel as sensor_msgs/msg/Imu linear_acceleration.x; "
                         "'auto': those with unit m/s^2")
@@ -21,13 +35,22 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    """Convert; returns the exit status."""
+    """Convert; returns the exit status (2 for an option the input does not allow, printed in one line)."""
     from vibroscope.io.convert import convert_to_mcap
 
-    path, sig = convert_to_mcap(
-        args.input, args.output, fs=args.fs, columns=args.columns, names=args.channels, units=args.units,
-        kind=args.kind, topic_prefix=args.topic_prefix, progress=args.progress,
-    )
+    tc = args.time_column
+    if tc is not None and tc.strip().lstrip("-").isascii() and tc.strip().lstrip("-").isdigit():
+        tc = int(tc)
+    try:
+        path, sig = convert_to_mcap(
+            args.input, args.output, fs=args.fs, columns=args.columns, channels=args.channels, units=args.units,
+            time_column=tc, kind=args.kind, topic_prefix=args.topic_prefix, progress=args.progress,
+        )
+    except ValueError as exc:
+        if getattr(args, "debug", False):
+            raise
+        print(f"vibroscope convert: error: {exc}", file=sys.stderr)
+        return 2
     print(f"wrote {path}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz")
     for c, u in zip(sig.channels, sig.units):
         print(f"  {c} [{u}]")

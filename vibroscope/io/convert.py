@@ -11,7 +11,10 @@ import numpy as np
 from vibroscope.errors import LogFormatError
 from vibroscope.signals import Signals
 
-__all__ = ["read_csv", "read_mat", "read_uff58", "read_any", "convert_to_mcap", "parse_columns", "normalize_unit"]
+__all__ = [
+    "read_csv", "read_mat", "read_uff58", "read_any", "convert_to_mcap", "parse_columns", "parse_units",
+    "normalize_unit", "select_channels",
+]
 
 _ACC_UNITS = {"m/s^2", "m/s2", "m/s**2", "m s^-2", "m s-2", "m/s/s"}
 
@@ -35,6 +38,10 @@ def normalize_unit(u: str) -> str:
     return "m/s^2" if u in _ACC_UNITS else u
 
 
+#: the most columns a column spec may select (a typo like 0-10000000000 is an error, not a hang)
+_MAX_COLUMNS = 100_000
+
+
 def parse_columns(spec: str | Sequence[int] | None) -> list[int] | None:
     """Parse a column selection.
 
@@ -51,7 +58,8 @@ def parse_columns(spec: str | Sequence[int] | None) -> list[int] | None:
     Raises
     ------
     ValueError
-        If a part does not parse or a range runs backwards.
+        If a part does not parse (ASCII digits only), a range runs backwards, or the spec
+        selects more than 100 000 columns.
     """
     if spec is None:
         return None
@@ -62,13 +70,15 @@ def parse_columns(spec: str | Sequence[int] | None) -> list[int] | None:
         part = part.strip()
         if not part:
             continue
-        m = re.fullmatch(r"(\d+)\s*-\s*(\d+)", part)
+        m = re.fullmatch(r"([0-9]+)\s*-\s*([0-9]+)", part)
         if m:
             a, b = int(m.group(1)), int(m.group(2))
             if b < a:
                 raise ValueError(f"column range {part!r} runs backwards")
+            if b - a >= _MAX_COLUMNS or len(out) + b - a >= _MAX_COLUMNS:
+                raise ValueError(f"column spec {spec!r} selects more than {_MAX_COLUMNS} columns")
             out.extend(range(a, b + 1))
-        elif part.isdigit():
+        elif part.isascii() and part.isdigit():
             out.append(int(part))
         else:
             raise ValueError(f"cannot parse column spec {part!r} in {spec!r} (use e.g. 0-17 or 0,3,5-7)")
@@ -79,8 +89,216 @@ def _split_list(v: str | Sequence[str] | None) -> list[str] | None:
     if v is None:
         return None
     if isinstance(v, str):
-        return [s.strip() for s in v.split(",")]
-    return list(v)
+        out = [s.strip() for s in v.split(",")]
+        return out if any(out) else None
+    return [str(s) for s in v]
+
+
+def _base(name: str) -> str:
+    """``acc[1]`` -> ``acc`` (the .mat variable a matrix column came from)."""
+    m = re.fullmatch(r"(.+)\[\d+\]", name)
+    return m.group(1) if m else name
+
+
+def _match(name: str, channels: Sequence[str]) -> list[int]:
+    """Indices of the channels `name` selects: the channel of that name, else every column
+    ``name[k]`` of a matrix variable `name`."""
+    if name in channels:
+        return [channels.index(name)]
+    return [i for i, c in enumerate(channels) if c != name and _base(c) == name]
+
+
+def parse_units(units: str | Sequence[str] | None) -> dict[str, str] | list[str] | None:
+    """Parse a unit option.
+
+    Parameters
+    ----------
+    units : str or sequence of str or None
+        ``"N"`` (one unit for all channels), ``"N,m/s^2"`` (one per selected channel, in the
+        selected order) or ``"force=N,acc=m/s^2"`` (``name=unit`` pairs); a sequence holds
+        the comma-separated parts.
+
+    Returns
+    -------
+    dict or list of str or None
+        ``{name: unit}`` for pairs, the list of units otherwise (None for None or ``""``).
+
+    Raises
+    ------
+    ValueError
+        If pairs and plain units are mixed, a pair has no name, or a name repeats.
+    """
+    parts = _split_list(units)
+    if parts is None:
+        return None
+    pairs = ["=" in u for u in parts]
+    if not any(pairs):
+        return parts
+    if not all(pairs):
+        raise ValueError(f"{units=}: give either name=unit pairs or plain units, not both")
+    out: dict[str, str] = {}
+    for u in parts:
+        name, _, unit = u.rpartition("=")
+        name = name.strip()
+        if not name:
+            raise ValueError(f"{units=}: {u!r} names no channel (use name=unit)")
+        if name in out:
+            raise ValueError(f"{units=}: channel {name!r} is given twice")
+        out[name] = unit.strip()
+    return out
+
+
+def select_channels(
+    signals: Signals,
+    channels: str | Sequence[str] | None = None,
+    units: str | Sequence[str] | None = None,
+    *,
+    source: str | Path = "",
+    stable_order: bool = True,
+    known: Sequence[str] | None = None,
+) -> Signals:
+    """Select channels by name and label their units.
+
+    Parameters
+    ----------
+    signals : Signals
+        Every channel of a file, named as the file names them (CSV header names or
+        ``c<column>``, .mat variable names, with ``name[k]`` for the columns of a matrix,
+        UFF 58 record names).
+    channels : str (comma-separated) or sequence of str, optional
+        The channels to keep, in this order. A name selects the channel of that name, or
+        every column ``name[k]`` of a .mat matrix variable ``name``. Default: all, in the
+        file's order.
+    units : str or sequence of str, optional
+        As :func:`parse_units`: ``name=unit`` pairs (by name; channels not named keep the
+        file's unit, ``""`` when it has none), one unit for every selected channel, or one
+        per selected channel in the selected order. Spellings are normalised
+        (:func:`normalize_unit`).
+    source : str or Path, optional
+        The file, named in error messages.
+    stable_order : bool, optional
+        False when the file's channel order is not meaningful (.mat variables): then a
+        list of several units needs `channels` (or ``name=unit`` pairs), so that the same
+        command labels the same channels in every file.
+    known : sequence of str, optional
+        Every channel name the file has, when `signals` holds only those read (CSV
+        `columns`, .mat variables of one length): a ``name=unit`` pair for a known channel
+        that is not read is ignored, and error messages list these names.
+
+    Returns
+    -------
+    Signals
+        The selected rows, with their units; ``meta["selected"]`` lists the names.
+
+    Raises
+    ------
+    ValueError
+        If a name is not in the file (the message lists the names it has), a channel is
+        selected twice, or the number of units is neither 1 nor the number of selected
+        channels.
+    """
+    names = list(signals.channels)
+    where = f"{source}: " if str(source) else ""
+    everything = list(known) if known is not None else names
+    avail = f"the file's channels are {everything}"
+    sel = _split_list(channels)
+    if sel is None:
+        idx = list(range(len(names)))
+    else:
+        idx = []
+        for nm in sel:
+            hit = _match(nm, names)
+            if not hit:
+                why = " (not among the columns read)" if _match(nm, everything) else ""
+                raise ValueError(f"{where}no channel {nm!r}{why}; {avail}")
+            dup = [names[i] for i in hit if i in idx]
+            if dup:
+                raise ValueError(f"{where}channel {dup[0]!r} is selected twice ({channels=})")
+            idx.extend(hit)
+    un = [signals.units[i] for i in idx]
+    spec = parse_units(units)
+    if isinstance(spec, dict):
+        for nm, u in spec.items():
+            hit = _match(nm, names)
+            if not hit and not _match(nm, everything):
+                raise ValueError(f"{where}--units names no channel {nm!r}; {avail}")
+            for i in hit:
+                if i in idx:
+                    un[idx.index(i)] = u
+    elif spec is not None:
+        if len(spec) == 1:
+            un = spec * len(idx)
+        elif len(spec) != len(idx):
+            raise ValueError(
+                f"{where}{len(spec)} units {spec} for {len(idx)} channels {[names[i] for i in idx]}: give one unit "
+                "for all, one per selected channel in the selected order, or name=unit pairs"
+            )
+        elif sel is None and not stable_order and len({_base(names[i]) for i in idx}) > 1:
+            raise ValueError(
+                f"{where}{len(spec)} units {spec} by position, but the order of a .mat file's variables "
+                f"{[names[i] for i in idx]} is not meaningful: select the channels (--channels) or give "
+                "name=unit pairs (--units force=N,acc=m/s^2)"
+            )
+        else:
+            un = list(spec)
+    return Signals(signals.data[idx], signals.fs, [names[i] for i in idx], [normalize_unit(u) for u in un],
+                   signals.t0, {**signals.meta, "selected": [names[i] for i in idx]})
+
+
+#: header names taken as a time column in s: ``time``, ``time_s``, ``time [s]``, ``seconds`` in any
+#: case; ``t``, ``t_s``, ``t [s]`` in lower case only (``T`` may be a temperature)
+_TIME_HEADER = re.compile(r"(?i:time|times|time_s|seconds|time\s*[\[(]\s*s\s*[\])])|t|t_s|t\s*[\[(]\s*s\s*[\])]")
+
+
+def _loadtxt(path: Path, delimiter: str | None, skip: int) -> np.ndarray:
+    """The numbers of a CSV file, shape (n_rows, n_columns); an empty cell is a missing
+    sample: NaN, with a warning that counts them."""
+    import warnings
+
+    def fail(exc: ValueError) -> LogFormatError:
+        m = re.search(r"at row (\d+)", str(exc))
+        where = f"line {int(m.group(1)) + 1 + skip}: " if m else ""
+        return LogFormatError(f"{path}: {where}not a numeric CSV file ({exc})")
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": checked by the caller
+        try:
+            return np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2, dtype=np.float64)
+        except ValueError as exc:
+            if "string ''" not in str(exc) or delimiter is None:
+                raise fail(exc) from None
+        try:
+            a = np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2, dtype=np.float64,
+                           converters=lambda c: float(c) if c.strip() else np.nan)
+        except ValueError as exc:
+            raise fail(exc) from None
+    n = int(np.isnan(a).sum())
+    warnings.warn(f"{path}: {n} empty cells read as missing samples (NaN); nothing is filled in", stacklevel=3)
+    return a
+
+
+def _rate_from_times(path: Path, t: np.ndarray, col: int, header, fs: float | None, skip: int) -> tuple[float, float]:
+    """(fs, t0) from a time column in s, which must step uniformly (within 1 %)."""
+    name = repr(header[col]) if header and col < len(header) else str(col)
+    if t.size < 2:
+        if fs is None:
+            raise ValueError(f"{path}: one row: the time column {name} gives no rate; give fs in Hz (--fs)")
+        return fs, float(t[0])
+    dt = np.diff(t)
+    med = float(np.median(dt))
+    off = np.flatnonzero(~(np.abs(dt - med) <= 0.01 * med)) if med > 0 and np.isfinite(med) else np.arange(dt.size)
+    if off.size:
+        k = int(off[0])
+        raise ValueError(
+            f"{path}: the time column {name} does not step uniformly: line {k + 1 + skip} -> {k + 2 + skip} goes "
+            f"from {t[k]:g} s to {t[k + 1]:g} s (median step {med:g} s; {off.size} irregular steps). "
+            "Samples are never filled in: convert the uniform segments separately, or leave the time column out "
+            "(columns, --columns) and give fs (--fs)"
+        )
+    fs_t = (t.size - 1) / (t[-1] - t[0])
+    if fs is not None and not abs(fs - fs_t) <= 0.01 * fs_t:
+        raise ValueError(f"{path}: {fs=} Hz disagrees with the time column {name} ({fs_t:g} Hz); leave fs out")
+    return (fs if fs is not None else fs_t), float(t[0])
 
 
 def read_csv(
@@ -88,9 +306,9 @@ def read_csv(
     *,
     fs: float | None = None,
     columns: str | Sequence[int] | None = None,
-    names: str | Sequence[str] | None = None,
+    channels: str | Sequence[str] | None = None,
     units: str | Sequence[str] | None = None,
-    time_column: int | None = None,
+    time_column: int | str | None = None,
     delimiter: str | None = None,
 ) -> Signals:
     """Read a numeric CSV file (one column per channel, optional header line).
@@ -100,32 +318,44 @@ def read_csv(
     path : str or Path
         The file.
     fs : float, optional
-        Sampling frequency in Hz; required unless `time_column` is given.
+        Sampling frequency in Hz; required unless the file has a time column.
     columns : str or sequence of int, optional
-        Columns to read (``"0-17"``; 0-based, the time column excluded). Default: all.
-    names, units : str (comma-separated) or sequence of str, optional
-        Channel names and units (default: the header, else ``c0, c1, ...``; units ``""``).
-    time_column : int, optional
-        A column of sample times in s; the rate is estimated from it (it must be uniform
-        within 1 %).
+        Columns to read (``"0-17"``, 0-based indices of the file's columns). Default: all
+        but the time column.
+    channels : str (comma-separated) or sequence of str, optional
+        Channels to keep, by name, in this order (:func:`select_channels`); the names are
+        the header's, or ``c0, c1, ...`` (by column index) without a header.
+    units : str or sequence of str, optional
+        As :func:`select_channels` (default ``""``).
+    time_column : int or str, optional
+        A column of sample times in s (index or header name); the rate is estimated from it
+        (it must step uniformly within 1 %, and agree with `fs` if both are given). Default:
+        a header column named ``t``, ``time``, ``time_s``, ``time [s]`` or ``seconds``,
+        unless `columns` lists it as data.
     delimiter : str, optional
         Default: detected (``,`` ``;`` tab, else whitespace).
 
     Returns
     -------
     Signals
-        shape (n_columns, n_rows).
+        shape (n_channels, n_rows).
 
     Raises
     ------
     ValueError
-        If neither `fs` nor `time_column` is given, or the time column is not uniform.
+        If there is neither `fs` nor a time column (the message asks for ``--fs``), the time
+        column is not uniform or is selected as a channel, a column is out of range, or a
+        channel name is unknown.
     LogFormatError
-        If the file is not numeric (names file and line).
+        If the file cannot be read, has no data rows or is not numeric (names file and
+        line). An empty cell is a missing sample: NaN, with a warning.
     """
     path = Path(path)
-    with open(path, "r", encoding="utf-8", errors="replace") as fh:
-        first = fh.readline()
+    try:
+        with open(path, "r", encoding="utf-8", errors="replace") as fh:
+            first = fh.readline()
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read the input file ({exc.strerror or exc})") from None
     if delimiter is None:
         delimiter = next((d for d in (",", ";", "\t") if d in first), None)
     cells = [c.strip().strip('"') for c in (first.split(delimiter) if delimiter else first.split())]
@@ -134,41 +364,54 @@ def read_csv(
         header = None
     except ValueError:
         header = cells
-    try:
-        a = np.loadtxt(path, delimiter=delimiter, skiprows=1 if header else 0, ndmin=2, dtype=np.float64)
-    except ValueError as exc:
-        raise LogFormatError(f"{path}: not a numeric CSV file ({exc})") from exc
-    cols = parse_columns(columns)
+    a = _loadtxt(path, delimiter, 1 if header else 0)
+    if a.shape[0] == 0:
+        raise LogFormatError(f"{path}: no data rows")
+    if isinstance(time_column, str):
+        if not header or time_column not in header:
+            raise ValueError(f"{path}: no column named {time_column!r}; the header is {header}")
+        time_column = header.index(time_column)
+    explicit = parse_columns(columns)
+    if time_column is None and header:
+        time_column = next((i for i, h in enumerate(header) if _TIME_HEADER.fullmatch(h.strip())), None)
+        if time_column is not None and explicit is not None and time_column in explicit:
+            time_column = None  # the user lists it as a data column
+    if time_column is not None and not -a.shape[1] <= time_column < a.shape[1]:
+        raise ValueError(f"{path}: {time_column=} out of range for {a.shape[1]} columns")
+    if time_column is not None:
+        time_column %= a.shape[1]
     allcols = [c for c in range(a.shape[1]) if c != time_column]
-    cols = allcols if cols is None else cols
+    cols = allcols if explicit is None else explicit
     bad = [c for c in cols if c >= a.shape[1] or c < 0]
     if bad:
         raise ValueError(f"{path}: columns {bad} out of range for {a.shape[1]} columns")
+    if time_column is not None and time_column in cols:
+        raise ValueError(f"{path}: column {time_column} is the time column; it cannot also be a channel")
+    if not cols:
+        raise ValueError(f"{path}: no data column to read ({a.shape[1]} columns, time column {time_column})")
     if time_column is not None:
-        t = a[:, time_column]
-        dt = np.diff(t)
-        med = float(np.median(dt))
-        if not med > 0 or np.max(np.abs(dt - med)) > 0.01 * med:
-            raise ValueError(f"{path}: time column {time_column} is not uniformly sampled (median dt {med:g} s)")
-        fs_t = (t.size - 1) / (t[-1] - t[0])
-        fs = fs if fs is not None else fs_t
-        t0 = float(t[0])
+        fs, t0 = _rate_from_times(path, a[:, time_column], time_column, header, fs, skip=1 if header else 0)
     else:
         if fs is None:
-            raise ValueError(f"{path}: no time column, so the sampling rate must be stated (fs in Hz, --fs)")
+            raise ValueError(
+                f"{path}: a sampling rate is needed: give it in Hz with fs (--fs), because no time column was "
+                "found (no header column named t, time, time_s or 'time [s]'; name one with time_column / "
+                "--time-column)"
+            )
         t0 = 0.0
-    nm = _split_list(names) or ([header[c] for c in cols] if header else [f"c{c}" for c in cols])
-    un = _split_list(units) or [""] * len(cols)
-    if len(un) == 1 and len(cols) > 1:
-        un = un * len(cols)
-    return Signals(a[:, cols].T, fs, nm, [normalize_unit(u) for u in un], t0, {"source": str(path), "columns": cols})
+    nm = [header[c] if header and c < len(header) and header[c] else f"c{c}" for c in cols]
+    if len(set(nm)) < len(nm):  # a header that repeats names: fall back to column indices
+        nm = [f"c{c}" for c in cols]
+    sig = Signals(a[:, cols].T, fs, nm, None, t0, {"source": str(path), "columns": cols})
+    known = [h or f"c{c}" for c, h in enumerate(header)] if header and len(set(header)) == len(header) else None
+    return select_channels(sig, channels, units, source=path, known=known)
 
 
 def read_mat(
     path: str | Path,
     *,
     fs: float | None = None,
-    variables: Sequence[str] | None = None,
+    channels: str | Sequence[str] | None = None,
     units: str | Sequence[str] | None = None,
 ) -> Signals:
     """Read the numeric vector variables of a MATLAB .mat file as channels.
@@ -180,10 +423,16 @@ def read_mat(
     fs : float, optional
         Sampling frequency in Hz. Default: a scalar variable ``fs``/``Fs``/``fsample``
         in the file; otherwise required.
-    variables : sequence of str, optional
-        Variables to read (default: every real vector of the most common length;
-        a matrix contributes one channel per column, named ``name[k]``).
+    channels : str (comma-separated) or sequence of str, optional
+        Variables to read, by name, in this order (a matrix variable ``acc`` contributes one
+        channel per column, named ``acc[k]``; ``acc`` selects them all, ``acc[1]`` one).
+        Default: every real vector of the most common length, in the file's order (the
+        others are listed, with their lengths, in ``meta["skipped_variables"]``).
     units : str or sequence of str, optional
+        As :func:`select_channels`: ``name=unit`` pairs, one unit for all, or (with
+        `channels`) one per selected channel in the selected order. Several units by
+        position without `channels` are an error when the channels come from several
+        variables, since a .mat file's variable order is not meaningful.
 
     Returns
     -------
@@ -192,7 +441,10 @@ def read_mat(
     Raises
     ------
     ValueError
-        If no rate is known or the variables differ in length.
+        If no rate is known, a name is unknown (the message lists the variables), or the
+        selected variables differ in length.
+    LogFormatError
+        If the file cannot be read as a .mat file.
     """
     from scipy.io import loadmat
 
@@ -204,45 +456,66 @@ def read_mat(
     if fs is None:
         for k in ("fs", "Fs", "FS", "fsample", "sample_rate"):
             if k in m and np.size(m[k]) == 1:
-                fs = float(np.ravel(m[k])[0])
+                try:
+                    fs = float(np.ravel(m[k])[0])
+                except (TypeError, ValueError):
+                    continue
                 break
     if fs is None:
-        raise ValueError(f"{path}: no sampling rate variable in the file, so fs must be stated (Hz, --fs)")
+        raise ValueError(f"{path}: a sampling rate is needed: the file has no fs variable, so give fs in Hz (--fs)")
     chans: list[tuple[str, np.ndarray]] = []
-    keys = variables or [k for k in m if not k.startswith("__")]
-    for k in keys:
-        if k not in m:
-            raise ValueError(f"{path}: no variable {k!r}; variables are {[k for k in m if not k.startswith('__')]}")
+    for k in (k for k in m if not k.startswith("__")):
         v = m[k]
-        if not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu" or v.size < 2:
+        if not isinstance(v, np.ndarray) or v.dtype.kind not in "fiu" or v.size < 2 or v.ndim != 2:
             continue
         v = np.asarray(v, float)
-        if v.ndim == 2 and 1 in v.shape:
+        if 1 in v.shape:
             chans.append((k, v.ravel()))
-        elif v.ndim == 2:
+        else:
             v = v if v.shape[0] >= v.shape[1] else v.T
             chans.extend((f"{k}[{j}]", v[:, j]) for j in range(v.shape[1]))
     if not chans:
         raise ValueError(f"{path}: no numeric vector variables")
-    lens = [c.size for _, c in chans]
-    n = max(set(lens), key=lens.count)
-    if variables is not None and len(set(lens)) > 1:
-        raise ValueError(f"{path}: variables differ in length: {dict((k, c.size) for k, c in chans)}")
-    chans = [(k, c) for k, c in chans if c.size == n]
-    un = _split_list(units) or [""] * len(chans)
-    if len(un) == 1:
-        un = un * len(chans)
-    return Signals(np.vstack([c for _, c in chans]), fs, [k for k, _ in chans], [normalize_unit(u) for u in un],
-                   0.0, {"source": str(path)})
+    names = [k for k, _ in chans]
+    sel = _split_list(channels)
+    skipped: dict[str, int] = {}
+    if sel is None:
+        lens = [c.size for _, c in chans]
+        n = max(set(lens), key=lens.count)
+        skipped = {k: c.size for k, c in chans if c.size != n}
+        chans = [(k, c) for k, c in chans if c.size == n]
+    else:
+        idx: list[int] = []
+        for nm in sel:
+            hit = _match(nm, names)
+            if not hit:
+                raise ValueError(f"{path}: no channel {nm!r}; the file's numeric variables are {names}")
+            idx.extend(i for i in hit if i not in idx)
+        chans = [chans[i] for i in idx]
+        if len({c.size for _, c in chans}) > 1:
+            raise ValueError(f"{path}: variables differ in length: {dict((k, c.size) for k, c in chans)}")
+    sig = Signals(np.vstack([c for _, c in chans]), fs, [k for k, _ in chans], None, 0.0,
+                  {"source": str(path), "skipped_variables": skipped})
+    return select_channels(sig, channels, units, source=path, stable_order=False, known=names)
 
 
-def read_uff58(path: str | Path) -> Signals:
+def read_uff58(
+    path: str | Path,
+    *,
+    channels: str | Sequence[str] | None = None,
+    units: str | Sequence[str] | None = None,
+) -> Signals:
     """Read the time records (UFF dataset 58, function type 1) of a Universal File.
 
     Parameters
     ----------
     path : str or Path
         The UFF file (ASCII or binary 58, via pyuff).
+    channels : str (comma-separated) or sequence of str, optional
+        Records to keep, by name (``id1``), in this order. Default: all, in file order.
+    units : str or sequence of str, optional
+        Units that replace the file's, as :func:`select_channels` (``name=unit`` pairs
+        replace only the named records' units).
 
     Returns
     -------
@@ -254,6 +527,8 @@ def read_uff58(path: str | Path) -> Signals:
     ------
     LogFormatError
         If the file holds no time record, or the records differ in rate or length.
+    ValueError
+        If a channel name is unknown (the message lists the records).
 
     References
     ----------
@@ -287,16 +562,25 @@ def read_uff58(path: str | Path) -> Signals:
         if nm in names:
             nm = f"{nm} #{k}"
         names.append(nm)
-    units = [normalize_unit(str(s.get("ordinate_axis_units_lab", ""))) for s in recs]
+    file_units = [normalize_unit(str(s.get("ordinate_axis_units_lab", ""))) for s in recs]
     fs = 1.0 / inc
     fs_r = round(fs, 6)
     fs = fs_r if abs(fs_r - fs) < 1e-9 * fs else fs
     meta = {"source": str(path), "nodes": [(s.get("rsp_node"), s.get("rsp_dir")) for s in recs]}
-    return Signals(np.vstack([np.asarray(s["data"], float) for s in recs]), fs, names, units,
-                   float(recs[0].get("abscissa_min", 0.0)), meta)
+    sig = Signals(np.vstack([np.asarray(s["data"], float) for s in recs]), fs, names, file_units,
+                  float(recs[0].get("abscissa_min", 0.0)), meta)
+    return select_channels(sig, channels, units, source=path) if (channels or units) else sig
 
 
-def read_any(path: str | Path, **kw) -> Signals:
+def read_any(
+    path: str | Path,
+    *,
+    fs: float | None = None,
+    columns: str | Sequence[int] | None = None,
+    channels: str | Sequence[str] | None = None,
+    units: str | Sequence[str] | None = None,
+    time_column: int | str | None = None,
+) -> Signals:
     """Read a CSV, .mat or UFF 58 file by its suffix.
 
     Parameters
@@ -304,8 +588,17 @@ def read_any(path: str | Path, **kw) -> Signals:
     path : str or Path
         ``.csv``/``.txt``/``.tsv`` -> :func:`read_csv`, ``.mat`` -> :func:`read_mat`,
         ``.uff``/``.unv`` -> :func:`read_uff58`.
-    **kw
-        Keyword arguments of the reader (those that do not apply to .mat/.uff are dropped).
+    fs : float, optional
+        Rate in Hz (CSV without a time column, .mat without an ``fs`` variable); for a UFF
+        file it must agree with the records' abscissa increment.
+    columns : str or sequence of int, optional
+        CSV columns (0-based); an error for the other formats (use `channels`).
+    channels : str (comma-separated) or sequence of str, optional
+        Channels by name, in this order, for every format (:func:`select_channels`).
+    units : str or sequence of str, optional
+        ``name=unit`` pairs, one unit, or one per selected channel (:func:`select_channels`).
+    time_column : int or str, optional
+        CSV only: the column of times in s (:func:`read_csv`).
 
     Returns
     -------
@@ -314,17 +607,37 @@ def read_any(path: str | Path, **kw) -> Signals:
     Raises
     ------
     LogFormatError
-        For an unknown suffix.
+        For an unknown suffix or an unreadable file.
+    ValueError
+        For an option that does not apply to the format, an unknown channel name, or no rate.
     """
     path = Path(path)
     suf = path.suffix.lower()
     if suf in (".csv", ".txt", ".tsv"):
-        return read_csv(path, **kw)
+        return read_csv(path, fs=fs, columns=columns, channels=channels, units=units, time_column=time_column)
+    if suf not in (".mat", ".uff", ".unv"):
+        raise LogFormatError(f"{path}: unknown input format {suf!r} (csv, txt, tsv, mat, uff, unv)")
+    fmt = "a .mat" if suf == ".mat" else "a UFF"
+    if columns is not None:
+        raise ValueError(f"{path}: {columns=} selects CSV columns; select the channels of {fmt} file by name "
+                         "(channels, --channels)")
+    if time_column is not None:
+        raise ValueError(f"{path}: {time_column=} applies to CSV files only")
     if suf == ".mat":
-        return read_mat(path, **{k: v for k, v in kw.items() if k in ("fs", "units")})
-    if suf in (".uff", ".unv"):
-        return read_uff58(path)
-    raise LogFormatError(f"{path}: unknown input format {suf!r} (csv, mat, uff)")
+        return read_mat(path, fs=fs, channels=channels, units=units)
+    sig = read_uff58(path, channels=channels, units=units)
+    if fs is not None and not abs(fs - sig.fs) <= 1e-9 * sig.fs:
+        raise ValueError(f"{path}: {fs=} Hz disagrees with the records' rate {sig.fs:g} Hz (leave fs out)")
+    return sig
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return a.samefile(b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
 
 
 def convert_to_mcap(
@@ -333,8 +646,9 @@ def convert_to_mcap(
     *,
     fs: float | None = None,
     columns: str | Sequence[int] | None = None,
-    names: str | Sequence[str] | None = None,
+    channels: str | Sequence[str] | None = None,
     units: str | Sequence[str] | None = None,
+    time_column: int | str | None = None,
     kind: Literal["auto", "acceleration", "other"] = "auto",
     topic_prefix: str = "/vibroscope",
     progress: bool = False,
@@ -344,33 +658,62 @@ def convert_to_mcap(
     Parameters
     ----------
     src, out : str or Path
-        Input file and output ``.mcap``.
+        Input file and output ``.mcap``. `out` is written under a temporary name in its
+        directory and renamed when complete; it must not be `src`.
     fs : float, optional
         Rate in Hz (required for CSV without a time column and .mat without ``fs``).
-    columns, names, units : optional
-        As in :func:`read_csv`.
+    columns : str or sequence of int, optional
+        CSV columns (:func:`read_csv`).
+    channels : str (comma-separated) or sequence of str, optional
+        Channels by name, in this order, for every format (:func:`select_channels`).
+    units : str or sequence of str, optional
+        ``name=unit`` pairs (``"force=N,acc=m/s^2"``), one unit for all, or one per selected
+        channel in the selected order (:func:`select_channels`). Stored in the MCAP
+        (Channel metadata ``"vibroscope.units"``).
+    time_column : int or str, optional
+        CSV column of times in s (:func:`read_csv`).
     kind : {"auto", "acceleration", "other"}, optional
         ``"acceleration"``: every channel is an acceleration in m/s^2; ``"auto"``: channels
         whose unit is m/s^2 are. Acceleration channel k is written as
         ``sensor_msgs/msg/Imu`` on ``{topic_prefix}/s{k+1:02d}`` (``linear_acceleration.x``);
         the others as JSON fields of topic `topic_prefix`.
     topic_prefix : str, optional
+        Topic prefix (default ``/vibroscope``).
     progress : bool, optional
+        Show a progress bar.
 
     Returns
     -------
     out : Path
+        The MCAP written.
     written : Signals
         The signals as written, with their message-path channel names.
+
+    Raises
+    ------
+    ValueError
+        If `out` is `src` or a directory, `kind` is unknown, or as :func:`read_any`.
+    LogFormatError
+        If `src` does not exist or cannot be read.
     """
     from vibroscope.io.mcap_write import _sanitize, write_ros2_mcap
 
     if kind not in ("auto", "acceleration", "other"):
         raise ValueError(f"{kind=} must be one of 'auto', 'acceleration', 'other'")
-    sig = read_any(src, fs=fs, columns=columns, names=names, units=units)
+    src_p, out_p = Path(src), Path(out)
+    if _same_file(src_p, out_p):
+        raise ValueError(f"output {str(out_p)!r} is the input file; choose another output name (the input is kept)")
+    if out_p.is_dir() or not out_p.parent.is_dir():
+        raise ValueError(f"output {str(out_p)!r} is a directory, or its directory does not exist; name an output file")
+    if not src_p.is_file():
+        raise LogFormatError(f"{src_p}: no such input file" + (" (a directory)" if src_p.is_dir() else ""))
+    sig = read_any(src_p, fs=fs, columns=columns, channels=channels, units=units, time_column=time_column)
     prefix = "/" + topic_prefix.strip("/") if topic_prefix.strip("/") else ""
     new_names, new_units = [], []
     for k, (nm, u) in enumerate(zip(sig.channels, sig.units)):
+        if kind == "acceleration" and u not in ("", "m/s^2"):
+            raise ValueError(f"{src_p}: channel {nm!r} has unit {u!r}, but {kind=} writes every channel as an "
+                             "acceleration in m/s^2 (use kind 'auto' or 'other', or fix --units)")
         acc = kind == "acceleration" or (kind == "auto" and u == "m/s^2")
         if acc:
             new_names.append(f"{prefix}/s{k + 1:02d}.linear_acceleration.x")
@@ -380,5 +723,5 @@ def convert_to_mcap(
             new_units.append(u)
     written = Signals(sig.data, sig.fs, new_names, new_units, sig.t0,
                       {**sig.meta, "original_channels": list(sig.channels)})
-    path = write_ros2_mcap(out, written, progress=progress)
+    path = write_ros2_mcap(out_p, written, progress=progress)
     return path, written

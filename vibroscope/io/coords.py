@@ -120,8 +120,8 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             rows = list(csv.reader(fh))
-    except OSError as exc:
-        raise LogFormatError(f"{path}: cannot read ({exc})") from exc
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise LogFormatError(f"{path}: cannot read ({exc})") from None
     if not rows:
         raise LogFormatError(f"{path}: empty coordinates file")
     head = [h.strip().lower() for h in rows[0]]
@@ -145,12 +145,15 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
         try:
             xyz = np.array([float(r[ix]), float(r[iy]), float(r[iz])])
             sn = int(float(r[isn])) if isn is not None else None
-        except (ValueError, IndexError) as exc:
-            raise LogFormatError(f"{path}: line {ln}: {exc}") from None
+            name = r[ich].strip() if ich is not None else ""
+        except (ValueError, IndexError, OverflowError) as exc:
+            raise LogFormatError(f"{path}: line {ln}: {type(exc).__name__}: {exc}") from None
+        if not np.all(np.isfinite(xyz)):
+            raise LogFormatError(f"{path}: line {ln}: coordinates must be finite numbers, got {r}")
         if idir is not None and idir < len(r) and r[idir].strip() == "0":
             continue  # a node without a sensor (e.g. LUMO's base node, direction 0)
         d = _direction(r[idir], path, ln) if idir is not None and idir < len(r) and r[idir].strip() else np.array([0.0, 0.0, 1.0])
-        table.append((r[ich].strip() if ich is not None else "", sn, xyz, d))
+        table.append((name, sn, xyz, d))
     chosen: list[tuple] = []
     if ich is not None:
         by = {t[0]: t for t in table}

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import secrets
 from collections import defaultdict
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -15,10 +17,22 @@ from vibroscope.io import _ros2
 from vibroscope.io.paths import MessagePath, format_path, parse_path
 from vibroscope.signals import Signals
 
-__all__ = ["write_ros2_mcap", "write_json_mcap", "stamps_ns"]
+__all__ = ["write_ros2_mcap", "write_json_mcap", "stamps_ns", "UNITS_KEY", "channel_units"]
 
 IMU = "sensor_msgs/msg/Imu"
 WRENCH = "geometry_msgs/msg/WrenchStamped"
+
+#: key of the MCAP Channel record's ``metadata`` entry that holds the units of its fields:
+#: a JSON object ``{"linear_acceleration.x": "m/s^2", ...}`` (field path after the topic)
+UNITS_KEY = "vibroscope.units"
+
+#: units the ROS 2 message definitions fix for their fields (REP 103), by field-path prefix
+_ROS_UNITS = (
+    ("linear_acceleration.", "m/s^2"),
+    ("angular_velocity.", "rad/s"),
+    ("wrench.force.", "N"),
+    ("wrench.torque.", "N m"),
+)
 
 
 def stamps_ns(signals: Signals) -> np.ndarray:
@@ -136,10 +150,71 @@ def _json_payloads(signals: Signals, items, sec, nsec) -> list[bytes]:
     return out
 
 
+def channel_units(signals: Signals, kind: str, items: Sequence[tuple[int, tuple]]) -> dict[str, str]:
+    """The units a topic's Channel record stores under :data:`UNITS_KEY`.
+
+    Parameters
+    ----------
+    signals : Signals
+        The signals written; ``signals.units[i]`` is the unit of row ``i``.
+    kind : str
+        The topic's message type (``sensor_msgs/msg/Imu``, ``geometry_msgs/msg/WrenchStamped``)
+        or ``"json"``.
+    items : sequence of (int, tuple)
+        ``(row, fields)`` of the channels written to the topic.
+
+    Returns
+    -------
+    dict of str to str
+        ``{field path after the topic: unit}`` (``format_path("", fields).lstrip(".")``, e.g.
+        ``"wrench.force.x": "N"``) for every written channel whose unit is known: the
+        channel's own unit, else (ROS 2 types only) the unit the message definition fixes
+        (``linear_acceleration.*`` m/s^2, ``angular_velocity.*`` rad/s, ``wrench.force.*`` N,
+        ``wrench.torque.*`` N m). A channel of unknown unit has no entry (readers then fall
+        back to their own heuristic); nothing is guessed from a channel name.
+    """
+    out: dict[str, str] = {}
+    for i, f in items:
+        key = format_path("", f).lstrip(".")
+        unit = str(signals.units[i] or "").strip()
+        if not unit and kind != "json":
+            unit = next((u for prefix, u in _ROS_UNITS if key.startswith(prefix)), "")
+        if unit:
+            out[key] = unit
+    return out
+
+
+def _temp_name(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+
+
 def _write(path, signals: Signals, plan, *, frame_id: str, chunk_size: int, compression: str, progress: bool) -> Path:
+    """Write to a temporary file beside `path`, renamed to `path` only when complete."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"output {str(path)!r} is a directory; name an output file")
+    if not path.parent.is_dir():
+        raise ValueError(f"output {str(path)!r}: the directory {str(path.parent)!r} does not exist")
+    tmp = _temp_name(path)
+    done = False
+    try:
+        _write_to(tmp, path.name, signals, plan, frame_id=frame_id, chunk_size=chunk_size,
+                  compression=compression, progress=progress)
+        os.replace(tmp, path)
+        done = True
+    finally:
+        if not done:
+            try:
+                tmp.unlink()
+            except FileNotFoundError:
+                pass
+    return path
+
+
+def _write_to(tmp: Path, label: str, signals: Signals, plan, *, frame_id: str, chunk_size: int, compression: str,
+              progress: bool) -> None:
     from mcap.writer import CompressionType, Writer
 
-    path = Path(path)
     comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE, "": CompressionType.NONE}
     if compression not in comp:
         raise ValueError(f"{compression=} must be one of {sorted(comp)}")
@@ -150,22 +225,24 @@ def _write(path, signals: Signals, plan, *, frame_id: str, chunk_size: int, comp
     if st.size and sec[-1] > 2**31 - 1:
         raise ValueError("stamps beyond 2038 do not fit builtin_interfaces/Time.sec (int32)")
     n = signals.n_samples
-    with open(path, "wb") as fh:
+    with open(tmp, "xb") as fh:  # "x": a fresh file with the umask's permissions
         w = Writer(fh, chunk_size=chunk_size, compression=comp[compression], enable_crcs=True, enable_data_crcs=True)
         ros = any(k != "json" for k, _ in plan.values())
         w.start(profile="ros2" if ros else "", library="vibroscope")
         schema_ids: dict[str, int] = {}
         chans = []
         for topic, (kind, items) in plan.items():
+            units = channel_units(signals, kind, items)
+            meta = {UNITS_KEY: json.dumps(units, separators=(",", ":"))}
             if kind == "json":
                 sid = w.register_schema(topic.strip("/").replace("/", ".") or "signals", "jsonschema",
                                         json.dumps(_json_schema(items)).encode())
-                cid = w.register_channel(topic, "json", sid)
+                cid = w.register_channel(topic, "json", sid, metadata=meta)
                 payloads: Any = _json_payloads(signals, items, sec, nsec)
             else:
                 if kind not in schema_ids:
                     schema_ids[kind] = w.register_schema(kind, "ros2msg", _ros2.MSGDEFS[kind].encode())
-                cid = w.register_channel(topic, "cdr", schema_ids[kind])
+                cid = w.register_channel(topic, "cdr", schema_ids[kind], metadata=meta)
                 values = {format_path("", f).lstrip("."): signals.data[i] for i, f in items}
                 payloads = _ros2.encode_fixed(kind, sec, nsec, values, frame_id=frame_id)
             chans.append((cid, payloads))
@@ -174,7 +251,7 @@ def _write(path, signals: Signals, plan, *, frame_id: str, chunk_size: int, comp
         if progress:
             from tqdm.auto import tqdm
 
-            it = tqdm(it, desc=path.name, unit="sample")
+            it = tqdm(it, desc=label, unit="sample")
         add = w.add_message
         for k in it:
             t = stl[k]
@@ -182,7 +259,6 @@ def _write(path, signals: Signals, plan, *, frame_id: str, chunk_size: int, comp
                 add(channel_id=cid, log_time=t, data=bytes(pl[k]), publish_time=t, sequence=k)
         w.add_metadata("vibroscope", {"fs": repr(signals.fs), "t0": repr(signals.t0), "n_samples": str(n)})
         w.finish()
-    return path
 
 
 def write_ros2_mcap(
@@ -233,7 +309,7 @@ def write_ros2_mcap(
     ChannelError
         If a field repeats within a topic or a named channel does not exist.
     ValueError
-        If `t0` is negative.
+        If `t0` is negative, or `path` is a directory or in a directory that does not exist.
 
     Notes
     -----
@@ -241,6 +317,15 @@ def write_ros2_mcap(
     equal the stamp. The ROS 2 message definitions are stored as ROS 2 bags store them (the
     dependent types after ``====...`` / ``MSG: pkg/Type`` lines), so any ROS 2 tool decodes
     them; the payloads are serialised with numpy and equal ``mcap_ros2``'s byte for byte.
+
+    Each Channel record's ``metadata`` holds the units of the fields written on it under
+    the key ``"vibroscope.units"`` (:data:`UNITS_KEY`): a JSON object mapping the field path
+    after the topic to its unit, ``{"linear_acceleration.x": "m/s^2"}`` (see
+    :func:`channel_units`).
+
+    The file is written under a temporary name in the same directory
+    (``.NAME.PID-XXXXXXXX.part``) and renamed to `path` only when complete, so an
+    interrupted or failed write leaves no truncated `path` (and an existing `path` intact).
     """
     plan = _plan(signals, force_channels=force_channels, accel_channels=accel_channels, json_topic=json_topic)
     return _write(path, signals, plan, frame_id=frame_id, chunk_size=chunk_size, compression=compression, progress=progress)
@@ -272,6 +357,10 @@ def write_json_mcap(
     Returns
     -------
     Path
+
+    Notes
+    -----
+    Units and the temporary-name write as in :func:`write_ros2_mcap`.
     """
     plan = _plan(signals, json_topic=json_topic, ros=False)
     return _write(path, signals, plan, frame_id="", chunk_size=chunk_size, compression=compression, progress=progress)

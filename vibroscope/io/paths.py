@@ -15,8 +15,10 @@ from vibroscope.errors import ChannelError
 
 __all__ = ["MessagePath", "parse_path", "get_field", "format_path"]
 
-_FIELD = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[-?\d+\])*)$")
-_INDEX = re.compile(r"\[(-?\d+)\]")
+# ASCII only: "\d" would take other scripts' digits ("[٣]") that format_path writes back differently
+_FIELD = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[-?[0-9]+\])*)")
+_INDEX = re.compile(r"\[(-?[0-9]+)\]")
+_TOPIC = re.compile(r"([^.\[]+)(.*)", re.DOTALL)
 
 
 @dataclass(frozen=True)
@@ -65,9 +67,10 @@ def _parse_fields(s: str, whole: str) -> tuple[str | int, ...]:
         return ()
     fields: list[str | int] = []
     for part in s.split("."):
-        m = _FIELD.match(part)
+        m = _FIELD.fullmatch(part)
         if not m:
-            raise ChannelError(f"message path {whole!r}: cannot parse field {part!r}")
+            raise ChannelError(f"message path {whole!r}: cannot parse field {part!r} (a name [A-Za-z_][A-Za-z0-9_]* "
+                               "with optional [index] suffixes)")
         fields.append(m.group(1))
         fields.extend(int(i) for i in _INDEX.findall(m.group(2)))
     return tuple(fields)
@@ -92,8 +95,9 @@ def parse_path(s: str, topics: Iterable[str] | None = None) -> MessagePath:
     Raises
     ------
     ChannelError
-        If `s` is empty, names no topic, or a field does not parse, or `topics` is given and
-        none of them prefixes `s`.
+        If `s` is empty, names no topic, or a field does not parse (field names are ASCII
+        identifiers, indices ASCII integers), or `topics` is given and none of them (an
+        empty topic never matches) prefixes `s`. Nothing else is raised, whatever the text.
 
     Examples
     --------
@@ -108,21 +112,25 @@ def parse_path(s: str, topics: Iterable[str] | None = None) -> MessagePath:
     if topics is not None:
         best = None
         for t in topics:
-            if s.startswith(t) and (len(s) == len(t) or s[len(t)] in ".["):
+            if t and s.startswith(t) and (len(s) == len(t) or s[len(t)] in ".["):
                 if best is None or len(t) > len(best):
                     best = t
         if best is None:
             raise ChannelError(f"message path {s!r}: no topic of the file prefixes it")
         topic, rest = best, s[len(best):]
     else:
-        m = re.match(r"([^.\[]+)(.*)$", s)
+        m = _TOPIC.fullmatch(s)
         if not m:
             raise ChannelError(f"message path {s!r}: no topic")
         topic, rest = m.group(1), m.group(2)
     if rest.startswith("["):  # /topic[3].x: an index right after the topic is not allowed
         raise ChannelError(f"message path {s!r}: an array index needs a field before it")
+    if topic != topic.strip():
+        raise ChannelError(f"message path {s!r}: topic {topic!r} begins or ends with white space")
     if rest.startswith("."):
         rest = rest[1:]
+        if not rest:
+            raise ChannelError(f"message path {s!r}: a field name must follow the '.'")
     elif rest:
         raise ChannelError(f"message path {s!r}: expected '.' after topic {topic!r}")
     return MessagePath(topic, _parse_fields(rest, s))

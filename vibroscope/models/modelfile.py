@@ -183,7 +183,7 @@ def _locate(text: str, table: str | None, index: int, key: str | None) -> int:
     counts: dict[str, int] = {}
     current, cur_idx = None, 0
     header_line = 1
-    for lineno, line in enumerate(text.splitlines(), 1):
+    for lineno, line in enumerate(text.split("\n"), 1):  # TOML lines end at LF only (as tomllib counts)
         m = _HEADER.match(line)
         if m and not line.strip().startswith("#"):
             current = m.group(1)
@@ -198,28 +198,46 @@ def _locate(text: str, table: str | None, index: int, key: str | None) -> int:
     return header_line
 
 
+def _dotted(table: str | None, index: int, key: str | None) -> str:
+    """The dotted path of a key as the parsed document holds it: ``element[2].k`` (0-based
+    index into the ``[[element]]`` array), ``residual.lower``, ``kind``."""
+    if table is None:
+        return key or ""
+    head = table if table in _SINGLE_TABLES else f"{table}[{index}]"
+    return f"{head}.{key}" if key else head
+
+
 class _Ctx:
     def __init__(self, path: str, text: str):
         self.path, self.text = path, text
 
-    def error(self, msg: str, table: str | None = None, index: int = 0, key: str | None = None) -> ModelFileError:
+    def error(self, msg: str, table: str | None = None, index: int = 0, key: str | None = None,
+              missing: str | None = None) -> ModelFileError:
+        """``path:N: <block> key 'k' (element[2].k, line N): msg``; `missing` names a key that
+        is absent (the line is then the block's header)."""
         line = _locate(self.text, table, index, key)
         if table in _SINGLE_TABLES:
             where = f"[{table}]"
         else:
             where = f"[[{table}]] #{index + 1}" if table else "top level"
-        keytxt = f" key {key!r}" if key else ""
-        return ModelFileError(f"{self.path}:{line}: {where}{keytxt}: {msg}")
+        name = key or missing
+        keytxt = f" key {name!r}" if name else ""
+        dotted = _dotted(table, index, name)
+        loc = f"{dotted}, line {line}" if dotted else f"line {line}"
+        return ModelFileError(f"{self.path}:{line}: {where}{keytxt} ({loc}): {msg}")
 
 
 def _number(ctx, tbl, table, i, key, *, positive=False, nonneg=False, required=True, default=None):
     if key not in tbl:
         if required:
-            raise ctx.error(f"missing required key {key!r}", table, i, None)
+            raise ctx.error(f"missing required key {key!r}", table, i, None, missing=key)
         return default
     v = tbl[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ctx.error(f"{key}={v!r} must be a finite number", table, i, key)
+    ok = not isinstance(v, bool) and isinstance(v, (int, float))
+    if ok and isinstance(v, int):
+        ok = abs(v) <= 2**1023  # a huge TOML integer does not fit a float
+    if not ok or not math.isfinite(v):
+        raise ctx.error(f"{key}={_short(v)} must be a finite number", table, i, key)
     if positive and v <= 0:
         raise ctx.error(f"{key}={v!r} must be > 0", table, i, key)
     if nonneg and v < 0:
@@ -227,21 +245,27 @@ def _number(ctx, tbl, table, i, key, *, positive=False, nonneg=False, required=T
     return float(v)
 
 
+def _short(v, n: int = 60) -> str:
+    """``repr(v)``, cut to `n` characters (a fuzzed value can be huge)."""
+    r = repr(v) if not isinstance(v, int) or abs(v) < 10**40 else f"<integer of {len(str(abs(v)))} digits>"
+    return r if len(r) <= n else r[: n - 3] + "..."
+
+
 def _string(ctx, tbl, table, i, key, required=True, default=None):
     if key not in tbl:
         if required:
-            raise ctx.error(f"missing required key {key!r}", table, i, None)
+            raise ctx.error(f"missing required key {key!r}", table, i, None, missing=key)
         return default
     v = tbl[key]
     if not isinstance(v, str) or not v:
-        raise ctx.error(f"{key}={v!r} must be a non-empty string", table, i, key)
+        raise ctx.error(f"{key}={_short(v)} must be a non-empty string", table, i, key)
     return v
 
 
 def _unknown(ctx, tbl, table, i, allowed):
     for key in tbl:
         if key not in allowed:
-            raise ctx.error(f"unknown key {key!r}; allowed: {sorted(allowed)}", table, i, key)
+            raise ctx.error(f"unknown key {_short(key)}; allowed: {sorted(allowed)}", table, i, key)
 
 
 def _tables(ctx, doc, table):
@@ -279,10 +303,12 @@ def _parse_io(ctx, doc, dof_names):
         if q not in QUANTITIES:
             raise ctx.error(f"quantity={q!r} must be one of {QUANTITIES}", "output", i, "quantity")
         outputs.append(Output(dof, q, ch))
-    chans = [x.channel for x in inputs + outputs]
-    for c in chans:
-        if chans.count(c) > 1:
-            raise ctx.error(f"channel {c!r} is used twice", None, 0, None)
+    seen: set[str] = set()
+    for table, items in (("input", inputs), ("output", outputs)):
+        for i, x in enumerate(items):
+            if x.channel in seen:
+                raise ctx.error(f"channel {x.channel!r} is used twice", table, i, "channel")
+            seen.add(x.channel)
     return inputs, outputs
 
 
@@ -333,7 +359,7 @@ def _parse_modal(ctx, doc) -> PoleResidueModel:
             raise ctx.error(f"damping_ratio={z!r} must be < 1 (an oscillatory mode)", "mode", i, "damping_ratio")
         zetas.append(z)
         if "residues" not in t:
-            raise ctx.error("missing required key 'residues'", "mode", i, None)
+            raise ctx.error("missing required key 'residues'", "mode", i, None, missing="residues")
         residues.append(_pairs(ctx, t, "mode", i, "residues", shape))
     if not freqs:
         raise ctx.error("a modal model needs at least one [[mode]]")
@@ -376,11 +402,36 @@ def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunc
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise ModelFileError(f"{path}:{m.group(1) if m else '?'}: invalid TOML: {exc}") from None
+        raise _syntax_error(path, text, exc) from None
+    except RecursionError:
+        raise ModelFileError(f"{path}: invalid TOML: arrays or tables nested too deeply") from None
+    try:
+        return _parse_doc(ctx, doc)
+    except ModelFileError:
+        raise
+    except (ValueError, TypeError, ArithmeticError, RecursionError) as exc:  # a fault no check names: still a file error
+        raise ModelFileError(f"{path}: invalid model: {type(exc).__name__}: {exc}") from exc
+
+
+def _syntax_error(path: str, text: str, exc: Exception) -> ModelFileError:
+    """``path:N: line N, key 'k': invalid TOML: ...`` from tomllib's message ``(at line N, column C)``."""
+    msg = str(exc)
+    m = re.search(r"line (\d+)", msg)
+    if m:
+        line = int(m.group(1))
+    else:  # "(at end of document)"
+        line = max(1, len(text.rstrip("\n").split("\n")))
+        msg += f" (line {line})"
+    lines = text.split("\n")
+    k = re.match(r"^\s*([A-Za-z0-9_\-.\"' ]+?)\s*=", lines[line - 1]) if 0 < line <= len(lines) else None
+    keytxt = f" key {k.group(1).strip()!r}" if k else ""
+    return ModelFileError(f"{path}:{line}: line {line}{keytxt}: invalid TOML: {msg}")
+
+
+def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | PoleResidueModel:
     kind = doc.get("kind")
     if kind is None:
-        raise ctx.error(f"missing required key 'kind' (one of {', '.join(map(repr, KINDS))})")
+        raise ctx.error(f"missing required key 'kind' (one of {', '.join(map(repr, KINDS))})", missing="kind")
     if kind == "lumped":
         _unknown(ctx, doc, None, 0, {"kind", "name", "dof", "element", "input", "output"})
         dofs = []
@@ -403,7 +454,7 @@ def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunc
             _, keys, required = ELEMENT_TYPES[etype]
             _unknown(ctx, t, "element", i, {"type", "between"} | set(keys))
             if "between" not in t:
-                raise ctx.error("missing required key 'between'", "element", i, None)
+                raise ctx.error("missing required key 'between'", "element", i, None, missing="between")
             between = t["between"]
             if not (isinstance(between, list) and len(between) == 2 and all(isinstance(b, str) for b in between)):
                 raise ctx.error(f"between={between!r} must be two names", "element", i, "between")
@@ -433,9 +484,9 @@ def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunc
         for key in ("num", "den"):
             v = doc.get(key)
             if v is None:
-                raise ctx.error(f"missing required key {key!r}")
+                raise ctx.error(f"missing required key {key!r}", missing=key)
             if not (isinstance(v, list) and v and all(isinstance(c, (int, float)) and not isinstance(c, bool) for c in v)):
-                raise ctx.error(f"{key}={v!r} must be a list of numbers", None, 0, key)
+                raise ctx.error(f"{key}={_short(v)} must be a list of numbers", None, 0, key)
             coeffs[key] = v
         inputs, outputs = _parse_io(ctx, doc, None)
         if len(inputs) != 1 or len(outputs) != 1:
@@ -446,7 +497,7 @@ def loads_model(text: str, path: str = "<string>") -> LumpedModel | TransferFunc
             raise ctx.error(str(exc), None, 0, "den") from None
     if kind == "modal":
         return _parse_modal(ctx, doc)
-    raise ctx.error(f"kind={kind!r} must be one of {', '.join(map(repr, KINDS))}", None, 0, "kind")
+    raise ctx.error(f"kind={_short(kind)} must be one of {', '.join(map(repr, KINDS))}", None, 0, "kind")
 
 
 def load_model(path) -> LumpedModel | TransferFunctionModel | PoleResidueModel:
@@ -472,9 +523,16 @@ def load_model(path) -> LumpedModel | TransferFunctionModel | PoleResidueModel:
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot read model file: {exc}") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise ModelFileError(
+            f"{path}:{line}: line {line}: not a text (UTF-8) model file: byte {exc.start} is {data[exc.start]:#04x}"
+        ) from None
     return loads_model(text, str(path))
 
 
@@ -575,6 +633,18 @@ def dump_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel, pa
     model : LumpedModel, TransferFunctionModel or PoleResidueModel
         The model to write (text as :func:`dumps_model`).
     path : str or path-like
-        The file to write (UTF-8), replaced if it exists.
+        The file to write (UTF-8), replaced if it exists: written under a temporary name in
+        the same directory and renamed when complete, so a failed write leaves the old file.
     """
-    Path(path).write_text(dumps_model(model), encoding="utf-8")
+    import os
+    import secrets
+
+    path = Path(path)
+    text = dumps_model(model)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+    try:
+        with open(tmp, "x", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
