@@ -149,3 +149,111 @@ def test_capstan_recordings_info_and_analyse(name, shared_data, tmp_path, capsys
         assert any("/robot/joint_override" in w and "ros2idl" in w for w in s["warnings"])
         assert "/robot/joint_override" not in " ".join(s["channels"])
 
+
+
+# ---------------------------------------------------------------- one line per problem
+
+@pytest.fixture
+def failing_analyse(monkeypatch, tmp_path):
+    """``analyse`` whose analysis step runs `fault` (the command line around it is the real one)."""
+    import vibroscope.commands.analyse as analyse
+
+    monkeypatch.chdir(tmp_path)
+    box = {}
+
+    def fake(log, **kw):
+        return box["fault"]()
+
+    monkeypatch.setattr(analyse, "analyse_log", fake)
+    return box
+
+
+def _raise(exc):
+    def f():
+        raise exc
+    return f
+
+
+@pytest.mark.parametrize("exc,line", [
+    (TypeError("unsupported operand"), "TypeError: unsupported operand (run with --debug for the traceback)"),
+    (OSError(28, "No space left on device"),
+     "OSError: [Errno 28] No space left on device (run with --debug for the traceback)"),
+    (MemoryError(), "MemoryError (run with --debug for the traceback)"),
+    (RuntimeError("two\nlines"), "RuntimeError: two lines (run with --debug for the traceback)"),
+])
+def test_any_exception_is_one_line_on_stderr(exc, line, failing_analyse, capsys):
+    failing_analyse["fault"] = _raise(exc)
+    assert main(["analyse", "x.mcap"]) == 1
+    out, err = capsys.readouterr()
+    assert err == f"vibroscope analyse: error: {line}\n"
+    assert "Traceback" not in out + err
+
+
+def test_vibroscope_error_is_its_message_and_debug_shows_the_traceback(failing_analyse, capsys):
+    from vibroscope.errors import LogFormatError
+
+    failing_analyse["fault"] = _raise(LogFormatError("x.mcap: not an MCAP file (magic at byte 0)"))
+    assert main(["analyse", "x.mcap"]) == 1
+    assert capsys.readouterr().err == "vibroscope analyse: error: x.mcap: not an MCAP file (magic at byte 0)\n"
+    failing_analyse["fault"] = _raise(TypeError("boom"))
+    for argv in (["--debug", "analyse", "x.mcap"], ["analyse", "x.mcap", "--debug"]):
+        with pytest.raises(TypeError, match="boom"):
+            main(argv)
+    with pytest.raises(LookupError):  # a ChannelError is a KeyError too: --debug re-raises it as it is
+        failing_analyse["fault"] = _raise(__import__("vibroscope.errors").errors.ChannelError("/imu: no such topic"))
+        main(["analyse", "--debug", "x.mcap"])
+
+
+def test_warnings_print_one_line_each_once(failing_analyse, capsys):
+    import warnings
+
+    def fault():
+        for _ in range(3):
+            warnings.warn("10 NaN samples in /imu/m1.linear_acceleration.x\nat 1.5 s", RuntimeWarning)
+        warnings.warn("force channel constant", UserWarning)
+        np.log(np.zeros(1))  # numpy's own RuntimeWarning
+        raise TypeError("stop")
+
+    failing_analyse["fault"] = fault
+    assert main(["analyse", "x.mcap"]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["vibroscope analyse: warning: 10 NaN samples in /imu/m1.linear_acceleration.x at 1.5 s",
+                   "vibroscope analyse: warning: force channel constant",
+                   "vibroscope analyse: warning: divide by zero encountered in log",
+                   "vibroscope analyse: error: TypeError: stop (run with --debug for the traceback)"]
+
+
+def test_ctrl_c_is_interrupted_130(failing_analyse, capsys):
+    failing_analyse["fault"] = _raise(KeyboardInterrupt())
+    assert main(["analyse", "x.mcap"]) == 130
+    assert capsys.readouterr().err == "vibroscope analyse: interrupted\n"
+
+
+def test_argparse_errors_keep_their_usage_line_and_status_2(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["analyse", "x.mcap", "--nperseg", "many"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "usage: vibroscope analyse" in err and "invalid int value: 'many'" in err and "Traceback" not in err
+    assert main([]) == 2
+
+
+def test_analyse_opens_no_socket(tmp_path, monkeypatch, capsys):
+    """No network at run time (no viewer asked for): ``socket.socket`` raising changes nothing."""
+    import socket
+
+    from vibroscope.commands.demo import make_demo_log
+
+    log = tmp_path / "t.mcap"
+    make_demo_log(log, duration=4.0, fs=200.0)
+    monkeypatch.chdir(tmp_path)
+    opened = []
+
+    def no_network(*a, **k):
+        opened.append(a)
+        raise OSError("network access attempted")
+
+    monkeypatch.setattr(socket, "socket", no_network)
+    monkeypatch.setattr(socket, "create_connection", no_network)
+    assert main(["analyse", str(log), "--input", "/actuator/force.wrench.force.x", "--json", "s.json"]) == 0
+    assert not opened and (tmp_path / "t_analyse.rrd").is_file() and (tmp_path / "s.json").is_file()

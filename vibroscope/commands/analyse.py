@@ -43,10 +43,13 @@ def add_parser(sub) -> None:
                    help="response channels (default: every Imu linear_acceleration field)")
     p.add_argument("--coords", type=Path, help="sensor coordinates CSV (channel or sensor number, x, y, z, direction)")
     p.add_argument("--json", type=Path, metavar="SUMMARY.json", help="write the machine-readable summary")
-    p.add_argument("--rrd", type=Path, help="rerun recording to write (default: LOG.rrd beside the log)")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="folder of the default outputs (default: the current directory, never beside the log)")
+    p.add_argument("--rrd", type=Path, help="rerun recording to write (default: <out>/<LOG stem>_analyse.rrd)")
     p.add_argument("--no-rrd", action="store_true", help="write no rerun recording")
     p.add_argument("--spawn", action="store_true", help="open a rerun viewer")
-    p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: LOG_figures/ beside the log)")
+    p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: <out>/<LOG stem>_analyse_figures/)")
+    p.add_argument("--no-figures", action="store_true", help="write no PNG figures")
     p.add_argument("--fs", type=float, help="resample to this rate (Hz); default the highest topic rate")
     p.add_argument("--nperseg", type=int, help="Welch segment length (default: ~16 averages, fine enough for --fmin)")
     p.add_argument("--fmin", type=float, help="lowest frequency searched for modes (Hz)")
@@ -119,25 +122,57 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
 def run(args) -> int:
     """Run ``vibroscope analyse``; prints the modes found and where the outputs went.
 
+    The outputs go to the current directory or ``--out DIR`` (``<LOG stem>_analyse.rrd``,
+    ``<LOG stem>_analyse_figures/``) unless ``--rrd``/``--figures`` name them; every output is
+    checked against the inputs before the log is read and written atomically
+    (:mod:`vibroscope.commands._outputs`).
+
     Parameters
     ----------
     args : argparse.Namespace
         The parsed command line.
+
+    Raises
+    ------
+    VibroscopeError
+        When an output is an input file (``--json LOG``), or the analysis fails (the log named).
     """
+    from vibroscope.commands._outputs import check_out_dir, check_outputs, default_output
     from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
 
+    check_out_dir(args.out)
+    _check_options(args)
+    rrd = None if args.no_rrd else (args.rrd or default_output(args.log, "analyse", ".rrd", args.out))
+    figures = None if args.no_figures else (args.figures or default_output(args.log, "analyse", "_figures", args.out))
+    check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},
+                  {"log": args.log, "coordinates": args.coords})
+    select = _select_freqs(args.select)
     try:
         an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
                          nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
-                         estimator=args.estimator, method=args.method, select=_select_freqs(args.select))
+                         estimator=args.estimator, method=args.method, select=select)
     except ValueError as exc:
         raise VibroscopeError(f"{args.log}: {exc}") from None
     print(report_text(an, source=str(args.log)))
-    write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=None if args.no_rrd else (args.rrd or args.log.with_suffix(".rrd")),
-                  figures=args.figures or args.log.parent / f"{args.log.stem}_figures", spawn=args.spawn,
-                  ods=args.ods)
+    write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
+                  spawn=args.spawn, ods=args.ods)
     return 0
+
+
+def _check_options(args) -> None:
+    """Refuse non-finite or non-positive numbers in the options before any work."""
+    import math
+
+    from vibroscope.errors import VibroscopeError
+
+    for opt in ("fs", "fmin", "fmax", "nperseg", "n_modes", "df"):
+        v = getattr(args, opt, None)
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise VibroscopeError(f"--{opt.replace('_', '-')} {v:g}: must be a positive, finite number")
+    for f in getattr(args, "ods", None) or ():
+        if not (math.isfinite(f) and f > 0):
+            raise VibroscopeError(f"--ods {f:g}: frequencies must be positive and finite (Hz)")
 
 
 def report_text(an, *, source: str = "", true_modes=None) -> str:
@@ -193,14 +228,51 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
 
 def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,
                   true_modes=None, ods=None) -> dict:
-    """Write the summary JSON, the rerun recording and the figures of an analysis.
+    """Write the summary JSON, the rerun recording and the figures of an analysis, atomically.
 
     With `ods` (frequencies in Hz) the operating deflection shapes at those frequencies (from the
-    FRFs with an input, the CSD without) are drawn and animated after the modes.
+    FRFs with an input, the CSD without) are drawn and animated after the modes. Every output is
+    written under a temporary name beside its final path and moved into place when all are
+    complete (:class:`vibroscope.commands._outputs.AtomicOutputs`): an exception or Ctrl-C
+    leaves earlier outputs untouched and no temporary behind. Replacing an earlier output
+    prints ``replacing <path> (earlier output)``.
+
+    Parameters
+    ----------
+    an : Analysis
+        The analysis (:func:`vibroscope.pipeline.analyse_signals`).
+    log : Path
+        The analysed log (named in the summary and the recording; never written).
+    coords : Path, optional
+        Sensor coordinates CSV (:func:`vibroscope.io.coords.read_coords`); default a line.
+    json_path : Path, optional
+        The summary JSON to write.
+    rrd : Path, optional
+        The rerun recording to write.
+    figures : Path, optional
+        The PNG figures folder to write.
+    spawn : bool, optional
+        Also open a rerun viewer; default False.
+    true_modes : ModalModel, optional
+        Reference modes, written beside the identified ones.
+    ods : sequence of float, optional
+        Operating deflection shape frequencies in Hz.
+
+    Returns
+    -------
+    dict
+        ``"json"``, ``"figures"`` (list of PNG paths), ``"rrd"``: the final paths written.
+
+    Raises
+    ------
+    VibroscopeError
+        When an output is the log or the coordinates file.
     """
+    from vibroscope.commands._outputs import AtomicOutputs, check_outputs
     from vibroscope.io.coords import line_coords, read_coords
     from vibroscope.pipeline import summary_dict
 
+    check_outputs({"--json": json_path, "--rrd": rrd, "--figures": figures}, {"log": log, "coordinates": coords})
     outs = an.settings["outputs"]
     sc = read_coords(coords, outs) if coords else line_coords(outs)
     written = {}
@@ -212,47 +284,55 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     if ods:
         from vibroscope.spectral.integration import ods as ods_at
 
+        from vibroscope.errors import VibroscopeError
+
         for f in ods:
-            o = ods_at(an.frf if an.frf is not None else an.csd, f)
+            try:
+                o = ods_at(an.frf if an.frf is not None else an.csd, f)
+            except ValueError as exc:
+                raise VibroscopeError(f"--ods {f:g}: {exc}") from None
             ods_shapes.append(o)
             print(f"ODS at {o.frequency_hz:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
                                                               for p, v in list(zip(o.points, o.shape))[:6]))
-    if json_path:
-        d = summary_dict(an, source=str(log), true_modes=true_modes)
-        json_path.parent.mkdir(parents=True, exist_ok=True)
-        json_path.write_text(json.dumps(d, indent=2))
-        written["json"] = json_path
-        print(f"summary: {json_path}")
-    if figures:
-        from vibroscope.viewers.acquisition import plot_kinematics, plot_ods
-        from vibroscope.viewers.figures import _save, summary_figures
+    done = []
+    with AtomicOutputs(inputs=[log, coords]) as tx:
+        if json_path:
+            d = summary_dict(an, source=str(log), true_modes=true_modes)
+            tx.file(json_path).write_text(json.dumps(d, indent=2))
+            written["json"] = json_path
+            done.append(f"summary: {json_path}")
+        if figures:
+            from vibroscope.viewers.acquisition import plot_kinematics, plot_ods
+            from vibroscope.viewers.figures import _save, summary_figures
 
-        figures.mkdir(parents=True, exist_ok=True)
-        paths = summary_figures(figures, signals=an.signals, psd=an.psd, frf=an.frf, modal=an.modal,
-                                sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
-                                stabilization=stab, synthesized=synth)
-        if acc:
-            paths.append(_save(plot_kinematics(an.signals.select(acc)), figures / "kinematics.png"))
-        for o in ods_shapes:
-            paths.append(_save(plot_ods(o, sc.as_mapping()), figures / f"ods_{o.frequency_hz:.4g}Hz.png"))
-        written["figures"] = paths
-        print(f"figures: {', '.join(str(p) for p in paths)}")
-    if rrd or spawn:
-        from vibroscope.commands.modal import _with_ods
-        from vibroscope.viewers.acquisition import ods_as_modal_model
-        from vibroscope.viewers.rerun_view import log_analysis
+            tmp = tx.directory(figures)
+            paths = summary_figures(tmp, signals=an.signals, psd=an.psd, frf=an.frf, modal=an.modal,
+                                    sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
+                                    stabilization=stab, synthesized=synth)
+            if acc:
+                paths.append(_save(plot_kinematics(an.signals.select(acc)), tmp / "kinematics.png"))
+            for o in ods_shapes:
+                paths.append(_save(plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png"))
+            written["figures"] = [tx.final(p) for p in paths]
+            done.append(f"figures: {', '.join(str(p) for p in written['figures'])}")
+        if rrd or spawn:
+            from vibroscope.commands.modal import _with_ods
+            from vibroscope.viewers.acquisition import ods_as_modal_model
+            from vibroscope.viewers.rerun_view import log_analysis
 
-        kin = None
-        if acc:
-            from vibroscope.spectral.integration import integrate
+            kin = None
+            if acc:
+                from vibroscope.spectral.integration import integrate
 
-            a = an.signals.select(acc)
-            kin = (integrate(a, order=1), integrate(a, order=2))
-        modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
-        path = log_analysis(kinematics=kin, signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
-                            coords=sc.as_mapping(), rrd_path=rrd, spawn=spawn, recording_name=Path(log).stem,
-                            stabilization=stab, synthesized=synth)
-        written["rrd"] = path
-        if rrd:
-            print(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+                a = an.signals.select(acc)
+                kin = (integrate(a, order=1), integrate(a, order=2))
+            modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
+            path = log_analysis(kinematics=kin, signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
+                                coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None, spawn=spawn,
+                                recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
+            written["rrd"] = tx.final(path) if path is not None else None
+            if rrd:
+                done.append(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+    for line in done:
+        print(line)
     return written

@@ -28,7 +28,13 @@ BUILTINS = ("pneumatic", "hydraulic", "block-schema")
 
 
 def add_parser(sub) -> None:
-    """Register the ``compare`` sub-command."""
+    """Register the ``compare`` sub-command.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The sub-parsers of the ``vibroscope`` parser.
+    """
     p = sub.add_parser(
         "compare",
         help="overlay step and Bode characteristics of a model over a parameter sweep (CSV), print influence coefficients",
@@ -50,7 +56,10 @@ def _model(name: str):
     path = Path(name)
     if not path.is_file():
         raise VibroscopeError(f"{name}: neither a built-in model ({', '.join(BUILTINS)}) nor a model file")
-    return model_file_sweep_model(path)
+    try:
+        return model_file_sweep_model(path)
+    except UnicodeDecodeError as exc:
+        raise VibroscopeError(f"{path}: not a TOML model file (byte offset {exc.start} is not UTF-8 text)") from None
 
 
 def _read_sweep(path: Path) -> tuple[list[str], list[dict[str, float]]]:
@@ -59,6 +68,8 @@ def _read_sweep(path: Path) -> tuple[list[str], list[dict[str, float]]]:
         text = path.read_text()
     except OSError as exc:
         raise VibroscopeError(f"{path}: cannot read the sweep file ({exc.strerror})") from None
+    except UnicodeDecodeError as exc:
+        raise VibroscopeError(f"{path}: not a CSV sweep file (byte offset {exc.start} is not UTF-8 text)") from None
     rows = [r for r in csv.reader(line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#"))]
     if len(rows) < 2:
         raise VibroscopeError(f"{path}: a sweep needs a header line of parameter names and at least one row")
@@ -97,24 +108,48 @@ def _print_tables(result) -> None:
 
 
 def run(args) -> int:
-    """Run the comparison; returns the exit status."""
+    """Run the comparison; returns the exit status.
+
+    The PNG (``<out>/compare_<model>.png``) and ``--rrd`` are checked against the model file and
+    the sweep CSV before any work, and written under temporary names renamed when complete
+    (:mod:`vibroscope.commands._outputs`).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Raises
+    ------
+    VibroscopeError
+        When an output is an input file, the model or the sweep file is invalid.
+    """
+    from vibroscope.commands._outputs import AtomicOutputs, check_out_dir, check_outputs
     from vibroscope.instruments.sweeps import sweep
     from vibroscope.viewers.instruments import figure_sweep, log_sweep
 
+    inputs = {"sweep file": args.sweep, "model file": None if args.model in BUILTINS else args.model}
+    out = Path(args.out)
+    check_out_dir(out)
+    check_outputs({"--rrd": args.rrd, "--out": out}, inputs)
     model = _model(args.model)
+    png_path = out / f"compare_{model.name}.png"
+    check_outputs({"--out": png_path}, inputs)
     header, cases = _read_sweep(Path(args.sweep))
     try:
         result = sweep(model, header, cases)
     except ValueError as exc:
         raise VibroscopeError(f"{args.sweep}: {exc}") from None
 
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    png = figure_sweep(result, out / f"compare_{model.name}.png",
-                       title=f"vibroscope compare: model {model.name!r}, sweep {Path(args.sweep).name}")
-    print(f"wrote {png}")
-    if args.rrd:
-        rrd = log_sweep(result, args.rrd, model.name)
-        print(f"wrote {rrd}" if rrd else f"rerun-sdk not installed: {args.rrd} not written")
+    done = []
+    with AtomicOutputs(inputs=[p for p in inputs.values() if p]) as tx:
+        figure_sweep(result, tx.file(png_path),
+                     title=f"vibroscope compare: model {model.name!r}, sweep {Path(args.sweep).name}")
+        done.append(f"wrote {png_path}")
+        if args.rrd:
+            rrd = log_sweep(result, tx.file(args.rrd), model.name)
+            done.append(f"wrote {args.rrd}" if rrd else f"rerun-sdk not installed: {args.rrd} not written")
+    for line in done:
+        print(line)
     _print_tables(result)
     return 0

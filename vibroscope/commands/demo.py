@@ -78,16 +78,34 @@ def make_demo_log(path: Path, *, fs: float = 1000.0, duration: float = 120.0, se
 def run(args) -> int:
     """Run the demo; prints the modes found beside the true ones.
 
+    Writes ``demo.mcap``, ``demo_summary.json``, ``demo.rrd`` and ``figures/`` in ``--out``, each
+    under a temporary name renamed when complete (:mod:`vibroscope.commands._outputs`).
+
     Parameters
     ----------
     args : argparse.Namespace
         The parsed command line.
     """
+    from vibroscope.commands._outputs import AtomicOutputs
     from vibroscope.commands.analyse import analyse_log, report_text, write_outputs
 
+    import math
+
+    from vibroscope.errors import VibroscopeError
+
+    for opt, v in (("--duration", args.duration), ("--fs", args.fs)):
+        if not (math.isfinite(v) and v > 0):
+            raise VibroscopeError(f"{opt} {v:g}: must be a positive, finite number")
+    if not (math.isfinite(args.noise) and args.noise >= 0):
+        raise VibroscopeError(f"--noise {args.noise:g}: must be a finite number >= 0")
+    if not 64 <= args.duration * args.fs <= 1e8:
+        raise VibroscopeError(f"--duration {args.duration:g} s at --fs {args.fs:g} Hz: "
+                              f"{args.duration * args.fs:.4g} samples, the demo needs 64 to 1e8")
     out: Path = args.out
     log = out / "demo.mcap"
-    model, sig = make_demo_log(log, fs=args.fs, duration=args.duration, seed=args.seed, noise=args.noise)
+    with AtomicOutputs() as tx:  # the log is complete (renamed into place) before it is analysed
+        model, sig = make_demo_log(tx.file(log), fs=args.fs, duration=args.duration, seed=args.seed,
+                                   noise=args.noise)
     truth = model.modes()
     print(f"simulated {model.name}: {sig.n_samples} samples at {sig.fs:g} Hz -> {log}")
     print("true modes: " + ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in

@@ -46,28 +46,36 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Run ``vibroscope gap``; returns the exit status.
 
+    Every output is checked against the model file and the logs before any work and written
+    under a temporary name renamed when complete (:mod:`vibroscope.commands._outputs`).
+
     Parameters
     ----------
     args : argparse.Namespace
         The parsed command line.
+
+    Raises
+    ------
+    VibroscopeError
+        When an output is an input file; ModelFileError when the model cannot be diagnosed.
     """
+    from vibroscope.commands._outputs import AtomicOutputs, check_outputs
+    from vibroscope.commands.simulate import load_model_file
     from vibroscope.errors import ModelFileError
     from vibroscope.gap import diagnose
     from vibroscope.gap.report import EFFECTS
     from vibroscope.io import read_mcap
-    from vibroscope.models.modelfile import load_model
 
-    model = load_model(args.model)
+    inputs = {"model file": args.model, "log": list(args.logs)}
+    check_outputs({"--json": args.json, "--rrd": args.rrd, "--export-model": args.export_model,
+                   "--figures": args.figures}, inputs)
+    model = load_model_file(args.model)
     effects = None
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]
         bad = [e for e in effects if e not in EFFECTS]
         if bad:
             raise ModelFileError(f"--effects: unknown effect(s) {bad}; known: {list(EFFECTS)}")
-    outs = [p.resolve() for p in (args.json, args.rrd, args.export_model) if p is not None]
-    for log in args.logs:
-        if log.resolve() in outs or log.resolve() == args.model.resolve():
-            raise ModelFileError(f"{log}: an output would overwrite an input")
     channels = list(model.input_channels()) + list(model.output_channels())
     sigs = [read_mcap(log, channels, progress=not args.no_progress).with_meta(source=str(log)) for log in args.logs]
     try:
@@ -75,25 +83,26 @@ def run(args) -> int:
     except ValueError as exc:
         raise ModelFileError(f"{args.model}: cannot diagnose: {exc}") from None
     print(report.summary())
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
-        print(f"wrote {args.json}")
-    if args.export_model:
-        args.export_model.parent.mkdir(parents=True, exist_ok=True)
-        args.export_model.write_text(report.augmented_model_toml, encoding="utf-8")
-        print(f"wrote {args.export_model}")
-    if args.figures:
-        import matplotlib
+    done = []
+    with AtomicOutputs(inputs=[args.model, *args.logs]) as tx:
+        if args.json:
+            tx.file(args.json).write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+            done.append(f"wrote {args.json}")
+        if args.export_model:
+            tx.file(args.export_model).write_text(report.augmented_model_toml, encoding="utf-8")
+            done.append(f"wrote {args.export_model}")
+        if args.figures:
+            import matplotlib
 
-        matplotlib.use("Agg")
-        args.figures.mkdir(parents=True, exist_ok=True)
-        report.plot(out_dir=args.figures)
-        print(f"wrote figures to {args.figures}")
-    if args.rrd:
-        from vibroscope.viewers.rerun_gap import log_gap_report
+            matplotlib.use("Agg")
+            report.plot(out_dir=tx.directory(args.figures))
+            done.append(f"wrote figures to {args.figures}")
+        if args.rrd:
+            from vibroscope.viewers.rerun_gap import log_gap_report
 
-        log_gap_report(report, path=args.rrd)
-        print(f"wrote {args.rrd}")
+            log_gap_report(report, path=tx.file(args.rrd))
+            done.append(f"wrote {args.rrd}")
+    for line in done:
+        print(line)
     sys.stdout.flush()
     return 0

@@ -65,8 +65,12 @@ def add_parser(sub) -> None:
                    help="write the sensor geometry (nodes of --uff55, from --coords) as UFF 15")
     p.add_argument("--uff58", type=Path, metavar="FILE", help="write the FRFs (measured or estimated) as UFF 58")
     p.add_argument("--ods", type=float, nargs="+", metavar="F", help="operating deflection shapes at these frequencies (Hz)")
-    p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: ./<source>_modal/)")
-    p.add_argument("--rrd", type=Path, help="rerun recording (default: ./<source>_modal.rrd)")
+    p.add_argument("--out", type=Path, metavar="DIR",
+                   help="folder of the default outputs (default: the current directory, never beside the source)")
+    p.add_argument("--figures", type=Path, metavar="DIR",
+                   help="PNG figures directory (default: <out>/<source stem>_modal_figures/)")
+    p.add_argument("--rrd", type=Path, help="rerun recording (default: <out>/<source stem>_modal.rrd)")
+    p.add_argument("--no-figures", action="store_true", help="write no PNG figures")
     p.add_argument("--no-rrd", action="store_true", help="write no rerun recording")
     p.add_argument("--spawn", action="store_true", help="open a rerun viewer")
     p.set_defaults(func=run)
@@ -123,21 +127,50 @@ def identify_frf(frf, *, method: str = "auto", fmin=None, fmax=None, select=None
     return auto_lscf(frf, fmin=fmin, fmax=fmax, select=select)
 
 
-def _default_out(source: Path, suffix: str) -> Path:
-    return Path.cwd() / f"{source.stem}_modal{suffix}"
+def _default_out(source: Path, suffix: str, out_dir=None) -> Path:
+    from vibroscope.commands._outputs import default_output
+
+    return default_output(source, "modal", suffix, out_dir)
+
+
+def _planned_outputs(args) -> dict:
+    """Option -> output path (None: not written) of a ``modal`` command line, defaults resolved."""
+    first = args.source[0]
+    out_dir = getattr(args, "out", None)
+    return {"--json": args.json, "--export-model": args.export_model, "--uff55": args.uff55,
+            "--uff15": args.uff15, "--uff58": args.uff58,
+            "--figures": None if getattr(args, "no_figures", False) else (
+                args.figures or _default_out(first, "_figures", out_dir)),
+            "--rrd": None if args.no_rrd else (args.rrd or _default_out(first, ".rrd", out_dir))}
 
 
 def run(args) -> int:
     """Run ``vibroscope modal``; prints the modes and where the outputs went.
 
+    The default outputs go to the current directory or ``--out DIR``
+    (``<source stem>_modal.rrd``, ``<source stem>_modal_figures/``); every output is checked
+    against the inputs before any work and written atomically
+    (:mod:`vibroscope.commands._outputs`).
+
     Parameters
     ----------
     args : argparse.Namespace
         The parsed command line.
+
+    Raises
+    ------
+    VibroscopeError
+        When an output is an input file, or the identification fails.
     """
+    from vibroscope.commands._outputs import check_out_dir, check_outputs
     from vibroscope.commands.analyse import METHOD_NAMES, report_text
     from vibroscope.errors import VibroscopeError
 
+    check_out_dir(args.out)
+    from vibroscope.commands.analyse import _check_options
+
+    _check_options(args)
+    check_outputs(_planned_outputs(args), {"source": list(args.source), "coordinates": args.coords})
     sources = list(args.source)
     first = sources[0]
     select = _select_freqs(args.select)
@@ -224,75 +257,87 @@ def _print_modes(ident) -> None:
 
 
 def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
+    from vibroscope.commands._outputs import AtomicOutputs
     from vibroscope.errors import VibroscopeError
     from vibroscope.pipeline import _jsonable
     from vibroscope.io.coords import line_coords, read_coords
 
+    planned = _planned_outputs(args)
     mm = ident.modes
     pts = list(mm.points)
     sc = read_coords(args.coords, pts) if args.coords else line_coords(pts)
-    if args.json:
-        doc = ident.to_dict()
-        doc["source"] = [str(s) for s in args.source]
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(_jsonable(doc), indent=2))  # NaN -> null
-        print(f"modes: {args.json}")
-    if args.uff55:
-        from vibroscope.io.frf_files import write_modes_uff55
+    if args.uff58 and h is None:
+        raise VibroscopeError("--uff58 needs FRFs: give --input for a log")
+    if args.uff55 and not len(mm):
+        raise VibroscopeError("--uff55: no mode was identified, nothing to write (try --fmin/--fmax or --select)")
+    if args.export_model and ident.lsfd is None:
+        raise VibroscopeError("--export-model needs residues: an input (LSCF + LSFD), not an output-only method")
+    done = []
+    with AtomicOutputs(inputs=[*args.source, args.coords]) as tx:
+        if args.json:
+            doc = ident.to_dict()
+            doc["source"] = [str(s) for s in args.source]
+            tx.file(args.json).write_text(json.dumps(_jsonable(doc), indent=2))  # NaN -> null
+            done.append(f"modes: {args.json}")
+        if args.uff55:
+            from vibroscope.io.frf_files import write_modes_uff55
 
-        dirs = None
-        if args.coords:
-            dirs = [int(np.argmax(np.abs(d))) + 1 if d[int(np.argmax(np.abs(d)))] >= 0 else -(int(np.argmax(np.abs(d))) + 1)
-                    for d in sc.directions]
-        write_modes_uff55(mm, args.uff55, directions=dirs)
-        print(f"mode shapes (UFF 55): {args.uff55}")
-    if args.uff15:
-        from vibroscope.io.frf_files import write_geometry_uff15
+            dirs = None
+            if args.coords:
+                dirs = [int(np.argmax(np.abs(d))) + 1 if d[int(np.argmax(np.abs(d)))] >= 0
+                        else -(int(np.argmax(np.abs(d))) + 1) for d in sc.directions]
+            write_modes_uff55(mm, tx.file(args.uff55), directions=dirs)
+            done.append(f"mode shapes (UFF 55): {args.uff55}")
+        if args.uff15:
+            from vibroscope.io.frf_files import write_geometry_uff15
 
-        write_geometry_uff15(args.uff15, list(range(1, len(pts) + 1)), sc.xyz)
-        print(f"geometry (UFF 15, node k = point k of MODES.json): {args.uff15}")
-    if args.uff58:
-        if h is None:
-            raise VibroscopeError("--uff58 needs FRFs: give --input for a log")
-        from vibroscope.io.frf_files import write_frf_uff58
+            write_geometry_uff15(tx.file(args.uff15), list(range(1, len(pts) + 1)), sc.xyz)
+            done.append(f"geometry (UFF 15, node k = point k of MODES.json): {args.uff15}")
+        if args.uff58:
+            from vibroscope.io.frf_files import write_frf_uff58
 
-        write_frf_uff58(h, args.uff58)
-        print(f"FRFs (UFF 58): {args.uff58}")
-    if args.export_model:
-        if ident.lsfd is None:
-            raise VibroscopeError("--export-model needs residues: an input (LSCF + LSFD), not an output-only method")
-        path = export_modal_model(ident.lsfd, args.export_model, name=f"{source.stem}, identified by LSCF + LSFD",
-                                  frf=h)
-        print(f"modal model: {path}  (run with: vibroscope simulate {path} ...)")
-    ods = []
-    for f in args.ods or ():
-        from vibroscope.spectral.integration import ods as ods_at
-        from vibroscope.viewers.acquisition import ods_as_modal_model
+            write_frf_uff58(h, tx.file(args.uff58))
+            done.append(f"FRFs (UFF 58): {args.uff58}")
+        if args.export_model:
+            export_modal_model(ident.lsfd, tx.file(args.export_model),
+                               name=f"{source.stem}, identified by LSCF + LSFD", frf=h)
+            done.append(f"modal model: {args.export_model}  (run with: vibroscope simulate {args.export_model} ...)")
+        ods = []
+        for f in args.ods or ():
+            from vibroscope.spectral.integration import ods as ods_at
+            from vibroscope.viewers.acquisition import ods_as_modal_model
 
-        src = h if h is not None else csd
-        ods.append(ods_at(src, f))
-    figures = args.figures or _default_out(source, "")
-    from vibroscope.viewers.figures import summary_figures, _save
+            src = h if h is not None else csd
+            try:
+                ods.append(ods_at(src, f))
+            except ValueError as exc:
+                raise VibroscopeError(f"--ods {f:g}: {exc}") from None
+        if planned["--figures"] is not None:
+            from vibroscope.viewers.figures import summary_figures, _save
 
-    paths = summary_figures(figures, frf=h, modal=mm if len(mm) else None, sv=sv, coords=sc.as_mapping(),
-                            stabilization=ident.stabilization, synthesized=synth)
-    for o in ods:
-        from vibroscope.viewers.acquisition import plot_ods
+            tmp = tx.directory(planned["--figures"])
+            paths = summary_figures(tmp, frf=h, modal=mm if len(mm) else None, sv=sv, coords=sc.as_mapping(),
+                                    stabilization=ident.stabilization, synthesized=synth)
+            for o in ods:
+                from vibroscope.viewers.acquisition import plot_ods
 
-        paths.append(_save(plot_ods(o, sc.as_mapping()), Path(figures) / f"ods_{o.frequency_hz:.4g}Hz.png"))
-    print(f"figures: {', '.join(str(p) for p in paths)}")
-    if not args.no_rrd or args.spawn:
-        from vibroscope.viewers.rerun_view import log_analysis
+                paths.append(_save(plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png"))
+            done.append(f"figures: {', '.join(str(tx.final(p)) for p in paths)}")
+        if not args.no_rrd or args.spawn:
+            from vibroscope.viewers.rerun_view import log_analysis
 
-        rrd = None if args.no_rrd else (args.rrd or _default_out(source, ".rrd"))
-        show = mm
-        if ods:
-            show = _with_ods(mm, [ods_as_modal_model(o) for o in ods])
-        log_analysis(signals=signals, psd=psd, csd=csd, frf=h, modal=show, coords=sc.as_mapping(), rrd_path=rrd,
-                     spawn=args.spawn, recording_name=f"{source.stem} modal", stabilization=ident.stabilization,
-                     synthesized=synth)
-        if rrd:
-            print(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+            rrd = planned["--rrd"]
+            show = mm
+            if ods:
+                show = _with_ods(mm, [ods_as_modal_model(o) for o in ods])
+            log_analysis(signals=signals, psd=psd, csd=csd, frf=h, modal=show, coords=sc.as_mapping(),
+                         rrd_path=tx.file(rrd) if rrd else None, spawn=args.spawn,
+                         recording_name=f"{source.stem} modal", stabilization=ident.stabilization,
+                         synthesized=synth)
+            if rrd:
+                done.append(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+    for line in done:
+        print(line)
 
 
 def _with_ods(mm, ods):
@@ -301,7 +346,7 @@ def _with_ods(mm, ods):
 
     f = np.concatenate([mm.natural_frequencies, [o.natural_frequencies[0] for o in ods]])
     z = np.concatenate([mm.damping_ratios, [np.nan] * len(ods)])
-    s = np.concatenate([mm.shapes.reshape(len(mm), -1), *[o.shapes for o in ods]])
+    s = np.concatenate([np.reshape(mm.shapes, (len(mm), ods[0].shapes.shape[-1])), *[o.shapes for o in ods]])
     return ModalModel(f, z, s, mm.points, mm.method + "+ods")
 
 

@@ -123,19 +123,75 @@ def simulate_to_signals(model, *, excitation=None, input_log=None, fs=None, dura
     return sig.with_meta(input_log=str(input_log))
 
 
+def load_model_file(path: Path):
+    """:func:`vibroscope.models.modelfile.load_model`, with a binary file reported as a ModelFileError.
+
+    Parameters
+    ----------
+    path : Path
+        The model file (TOML).
+
+    Returns
+    -------
+    LumpedModel, TransferFunctionModel or PoleResidueModel
+
+    Raises
+    ------
+    ModelFileError
+        When the file cannot be read, is not UTF-8 text (naming the byte offset) or not a valid model.
+    """
+    from vibroscope.errors import ModelFileError
+    from vibroscope.models.modelfile import load_model
+
+    try:
+        return load_model(path)
+    except UnicodeDecodeError as exc:
+        raise ModelFileError(f"{path}: not a TOML model file (byte offset {exc.start} is not UTF-8 text)") from None
+
+
+def _check_options(args) -> None:
+    """Refuse non-finite, non-positive or huge numbers in the options before any work."""
+    import math
+
+    from vibroscope.errors import VibroscopeError
+
+    for opt in ("fs", "duration"):
+        v = getattr(args, opt)
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise VibroscopeError(f"--{opt} {v:g}: must be a positive, finite number")
+    if not (math.isfinite(args.noise) and args.noise >= 0):
+        raise VibroscopeError(f"--noise {args.noise:g}: must be a finite number >= 0")
+    if not math.isfinite(args.t0):
+        raise VibroscopeError(f"--t0 {args.t0:g}: must be a finite time in s")
+    if args.excitation is not None:
+        n = (1000.0 if args.fs is None else args.fs) * (60.0 if args.duration is None else args.duration)
+        if not 2 <= n <= 1e9:
+            raise VibroscopeError(f"--duration x --fs: {n:.4g} samples; between 2 and 1e9 can be simulated")
+
+
 def run(args) -> int:
     """Run ``vibroscope simulate``; returns the exit status.
+
+    ``--out`` is checked against the model file and the ``--input`` log before any work and
+    written under a temporary name renamed when complete (:mod:`vibroscope.commands._outputs`).
 
     Parameters
     ----------
     args : argparse.Namespace
         The parsed command line.
+
+    Raises
+    ------
+    VibroscopeError
+        When ``--out`` is an input file; ModelFileError when the model cannot be simulated.
     """
+    from vibroscope.commands._outputs import AtomicOutputs, check_outputs
     from vibroscope.errors import ModelFileError
     from vibroscope.io import write_ros2_mcap
-    from vibroscope.models.modelfile import load_model
 
-    model = load_model(args.model)
+    check_outputs({"--out": args.out}, {"model file": args.model, "--input log": args.input})
+    _check_options(args)
+    model = load_model_file(args.model)
     try:
         sig = simulate_to_signals(
             model,
@@ -149,8 +205,8 @@ def run(args) -> int:
         )
     except ValueError as exc:
         raise ModelFileError(f"{args.model}: cannot simulate: {exc}") from None
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    write_ros2_mcap(args.out, sig)
+    with AtomicOutputs(inputs=[args.model, args.input]) as tx:
+        write_ros2_mcap(tx.file(args.out), sig)
     print(
         f"wrote {args.out}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
         f"({', '.join(sig.channels)})",
