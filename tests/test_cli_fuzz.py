@@ -261,7 +261,7 @@ def test_regression_binary_model_file(command, pools, capsys):
             "simulate": ["simulate", bad, "--excitation", "step:amplitude=1", "--out", str(pools["out"] / "s.mcap")],
             "compare": ["compare", bad, "--sweep", str(pools["dir"] / "in" / "sweep.csv"),
                         "--out", str(pools["out"])]}[command]
-    _one_error_line(argv, capsys, "not a TOML model file (byte offset 0 is not UTF-8 text)")
+    _one_error_line(argv, capsys, "not a text (UTF-8) model file")
 
 
 def test_regression_modal_uff55_without_modes(pools, capsys):

@@ -59,7 +59,7 @@ def _model(name: str):
     try:
         return model_file_sweep_model(path)
     except UnicodeDecodeError as exc:
-        raise VibroscopeError(f"{path}: not a TOML model file (byte offset {exc.start} is not UTF-8 text)") from None
+        raise VibroscopeError(f"{path}: not a text (UTF-8) model file: byte {exc.start} is not UTF-8") from None
 
 
 def _read_sweep(path: Path) -> tuple[list[str], list[dict[str, float]]]:

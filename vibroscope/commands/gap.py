@@ -60,16 +60,16 @@ def run(args) -> int:
         When an output is an input file; ModelFileError when the model cannot be diagnosed.
     """
     from vibroscope.commands._outputs import AtomicOutputs, check_outputs
-    from vibroscope.commands.simulate import load_model_file
     from vibroscope.errors import ModelFileError
     from vibroscope.gap import diagnose
     from vibroscope.gap.report import EFFECTS
     from vibroscope.io import read_mcap
+    from vibroscope.models.modelfile import load_model
 
     inputs = {"model file": args.model, "log": list(args.logs)}
     check_outputs({"--json": args.json, "--rrd": args.rrd, "--export-model": args.export_model,
                    "--figures": args.figures}, inputs)
-    model = load_model_file(args.model)
+    model = load_model(args.model)
     effects = None
     if args.effects:
         effects = [e.strip() for e in args.effects.split(",") if e.strip()]

@@ -123,32 +123,6 @@ def simulate_to_signals(model, *, excitation=None, input_log=None, fs=None, dura
     return sig.with_meta(input_log=str(input_log))
 
 
-def load_model_file(path: Path):
-    """:func:`vibroscope.models.modelfile.load_model`, with a binary file reported as a ModelFileError.
-
-    Parameters
-    ----------
-    path : Path
-        The model file (TOML).
-
-    Returns
-    -------
-    LumpedModel, TransferFunctionModel or PoleResidueModel
-
-    Raises
-    ------
-    ModelFileError
-        When the file cannot be read, is not UTF-8 text (naming the byte offset) or not a valid model.
-    """
-    from vibroscope.errors import ModelFileError
-    from vibroscope.models.modelfile import load_model
-
-    try:
-        return load_model(path)
-    except UnicodeDecodeError as exc:
-        raise ModelFileError(f"{path}: not a TOML model file (byte offset {exc.start} is not UTF-8 text)") from None
-
-
 def _check_options(args) -> None:
     """Refuse non-finite, non-positive or huge numbers in the options before any work."""
     import math
@@ -188,10 +162,11 @@ def run(args) -> int:
     from vibroscope.commands._outputs import AtomicOutputs, check_outputs
     from vibroscope.errors import ModelFileError
     from vibroscope.io import write_ros2_mcap
+    from vibroscope.models.modelfile import load_model
 
     check_outputs({"--out": args.out}, {"model file": args.model, "--input log": args.input})
     _check_options(args)
-    model = load_model_file(args.model)
+    model = load_model(args.model)
     try:
         sig = simulate_to_signals(
             model,
