@@ -36,9 +36,23 @@ def test_info_and_reading(capstan, name):
     chosen = [f for f in fields if ".position[" in f][:2]
     assert chosen
     r = read_mcap(p, chosen)
-    assert r.n_channels == 2 and r.n_samples > 100 and np.isfinite(r.data).all()
+    assert r.n_channels == 2 and r.n_samples > 100
     tb = r.meta["timebase"]["/robot/joint_state"]
     assert tb["n_messages"] == js.message_count
+    # logging gaps are NaN, exactly where reported, never interpolated
+    gap_mask = np.zeros(r.n_samples, bool)
+    for g in r.meta["gaps"]:
+        i0 = round((g["start_s"] - r.t0) * r.fs)
+        assert g["topic"] == "/robot/joint_state" and g["length_s"] == pytest.approx(g["n_samples"] / r.fs)
+        gap_mask[i0 : i0 + g["n_samples"]] = True
+    assert np.array_equal(np.isnan(r.data), np.vstack([gap_mask, gap_mask]))
+    assert r.meta["nan_samples"] == {c: int(gap_mask.sum()) for c in chosen}
+    if name == "torque_ripple_data_0":  # 647 s of its 1276 s are logging gaps: none of it filled in
+        assert tb["gap_time_s"] == pytest.approx(647.0, abs=1.0)
+        assert gap_mask.sum() / r.fs > 640.0
+        assert any("samples are NaN (not interpolated)" in w for w in r.meta["warnings"])
+    if not tb["gaps"]:
+        assert np.isfinite(r.data).all() and not r.meta["gaps"]
     if name == "bagfile_0":  # this recording's header stamps are all 0: log time is used, and said so
         assert tb["time_source"] == "log_time"
         assert any("header.stamp unusable" in w for w in r.meta["warnings"])
@@ -82,5 +96,5 @@ def test_chunk_index_skips_unwanted_chunks(capstan, tmp_path, name, channel):
     # the same recording with no summary section: every chunk is read, the samples are the same
     full = read_mcap(copy_without_summary(p, tmp_path / "no_summary.mcap"), [channel])
     assert full.meta["indexed"] is False and full.meta["chunks_skipped_by_index"] == 0
-    assert np.array_equal(fast.data, full.data) and fast.t0 == full.t0 and fast.fs == full.fs
+    assert np.array_equal(fast.data, full.data, equal_nan=True) and fast.t0 == full.t0 and fast.fs == full.fs
     assert full.meta["skipped"] == fast.meta["skipped"]

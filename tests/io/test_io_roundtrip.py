@@ -8,7 +8,7 @@ import pytest
 
 from vibroscope.errors import ChannelError
 from vibroscope.io import discover_fields, mcap_info, read_mcap
-from vibroscope.io import mcap_read as mr
+from vibroscope.io import _extract
 from vibroscope.io._ros2 import FLOAT_FIELDS, MSGDEFS, encode_fixed
 from vibroscope.io.mcap_write import stamps_ns, write_json_mcap, write_ros2_mcap
 from vibroscope.signals import Signals
@@ -105,7 +105,7 @@ def test_fast_path_equals_generic_decoder(tmp_path, monkeypatch, frame_ids):
              "/imu.orientation.w", "/imu.header.stamp.nanosec"]
     fast = read_mcap(p, chans)
     assert fast.meta["fast_path"]["/imu"] is (len(frame_ids) == 1)  # varying frame_id: generic fallback
-    monkeypatch.setattr(mr, "_fast_extract", lambda *a, **k: None)
+    monkeypatch.setattr(_extract, "fast_extract", lambda *a, **k: None)
     gen = read_mcap(p, chans)
     assert gen.meta["fast_path"]["/imu"] is False
     assert fast.data.tobytes() == gen.data.tobytes()

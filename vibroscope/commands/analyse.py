@@ -72,7 +72,8 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
 
     Without `outputs`, the responses are chosen by :func:`vibroscope.io.select.auto_channels`
     (Imu accelerations; else the measurement fields of the busiest topic), and the choice and
-    what was skipped (undecodable channels by name) go into the warnings.
+    what was skipped (undecodable channels by name) go into the warnings; the log is then
+    scanned once (:class:`vibroscope.io.LogIndex`) for both the choice and the read.
 
     Parameters
     ----------
@@ -95,20 +96,22 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     -------
     Analysis
     """
-    from vibroscope.io import read_mcap
+    from vibroscope.io import LogIndex, read_mcap
     from vibroscope.io.select import auto_channels
     from vibroscope.pipeline import analyse_signals
 
-    notes, fallback = [], False
-    if outputs is None:
+    notes, fallback, source = [], False, log
+    if outputs is None:  # scan the log once: the index serves the choice and the read
+        source = LogIndex.open(log, progress=progress)
         # the input's topic holds the force, not a response
-        sel = auto_channels(log, exclude_topics=(input.split(".", 1)[0],) if input else ())
+        sel = auto_channels(source, exclude_topics=(input.split(".", 1)[0],) if input else ())
         notes.append(f"channels chosen automatically: {sel.reason}")
         notes += [f"{what}: skipped: {why}" for what, why in sel.skipped]
         outputs, fallback = [c for c in sel.channels if c != input], sel.fallback
-    sig = read_mcap(log, [input, *outputs] if input else list(outputs), fs=fs, progress=progress)
+    sig = read_mcap(source, [input, *outputs] if input else list(outputs), fs=fs, progress=progress)
     if fallback:  # automatic non-IMU choice: keep the fields that move, at most MAX_AUTO_CHANNELS
-        moving = [c for c in outputs if np.ptp(sig[c]) > 0]
+        finite = {c: sig[c][np.isfinite(sig[c])] for c in outputs}  # NaN marks a gap, not a value
+        moving = [c for c in outputs if finite[c].size and finite[c].max() > finite[c].min()]
         if len(moving) > MAX_AUTO_CHANNELS:
             notes.append(f"{len(moving) - MAX_AUTO_CHANNELS} varying fields beyond the first {MAX_AUTO_CHANNELS} "
                          f"not analysed (from {moving[MAX_AUTO_CHANNELS]}); choose with --outputs")

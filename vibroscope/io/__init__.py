@@ -6,6 +6,7 @@ Importing this package imports ``mcap``; the numerical core never imports it.
 """
 
 from vibroscope.io.mcap_read import (
+    LogIndex,
     LogInfo,
     TopicInfo,
     discover_fields,
@@ -36,6 +37,7 @@ __all__ = [
     "read_geometry",
     "write_geometry_uff15",
     "read_mcap",
+    "LogIndex",
     "mcap_info",
     "discover_fields",
     "select_acceleration_channels",

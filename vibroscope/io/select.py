@@ -6,7 +6,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from vibroscope.io.mcap_read import _discover, _info, _Log, select_acceleration_channels
+from vibroscope.io.log_index import LogIndex, select_acceleration_channels
 
 __all__ = ["AutoSelection", "auto_channels", "is_bookkeeping"]
 
@@ -56,7 +56,7 @@ class AutoSelection:
     fallback: bool = False
 
 
-def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int = 32,
+def auto_channels(path: str | Path | LogIndex, *, min_messages: int = 64, max_channels: int = 32,
                   exclude_topics: tuple = ()) -> AutoSelection:
     """Choose what to analyse in a log with no channel given.
 
@@ -68,8 +68,8 @@ def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int
 
     Parameters
     ----------
-    path : str or Path
-        The MCAP log.
+    path : str or Path or LogIndex
+        The MCAP log, or its index (:meth:`LogIndex.open`: then the log is not scanned again).
     min_messages : int, optional
         Fewest messages a fallback topic needs (default 64).
     max_channels : int, optional
@@ -88,15 +88,16 @@ def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int
     """
     from vibroscope.errors import ChannelError
 
-    log = _Log(path)  # one scan serves the topic table and, for the fallback, the field discovery
-    info = _info(log)
+    # one scan serves the topic table and, for the fallback, the field discovery
+    log = path if isinstance(path, LogIndex) else LogIndex.open(path)
+    info = log.info()
     undecodable = tuple((t.topic, f"{t.schema_name}: {t.reason}") for t in info.topics
                         if not t.decodable and t.message_count > 0)
     acc, _ = select_acceleration_channels(info)
     if acc:
         return AutoSelection(tuple(acc), "linear_acceleration of every sensor_msgs/msg/Imu topic", undecodable)
     counts = {t.topic: t.message_count for t in info.topics if t.decodable}
-    fields = _discover(log)
+    fields = log.discover_fields()
     best, best_key = None, None
     for topic, paths in fields.items():
         if topic in exclude_topics:
@@ -107,7 +108,7 @@ def auto_channels(path: str | Path, *, min_messages: int = 64, max_channels: int
         if meas and n >= min_messages and (best_key is None or score > best_key):
             best, best_key = (topic, meas), score
     if best is None:
-        raise ChannelError(f"{path}: no acceleration field and no decodable topic with {min_messages}+ messages "
+        raise ChannelError(f"{log.path}: no acceleration field and no decodable topic with {min_messages}+ messages "
                            "and numeric measurement fields; name channels with --outputs")
     topic, meas = best
     return AutoSelection(tuple(meas),

@@ -1,5 +1,12 @@
-"""Time bases of logged topics: rate, jitter, gaps, duplicates, reordering; resampling
-topics of different rates onto one uniform grid.
+"""Time bases of logged topics: rate, jitter, gaps, duplicates, reordering, outlier stamps;
+resampling topics of different rates onto one uniform grid, never across a gap.
+
+Tolerances (documented here, used by :mod:`vibroscope.io._grid`): consecutive stamps more
+than :data:`GAP_PERIODS` median periods apart bracket a *gap*, and nothing is interpolated
+in it (the grid samples there are NaN); a stamp within :data:`ON_GRID_TOL` of a period of a
+grid point *is on the grid*; a stamp more than :data:`OUTLIER_PERIODS` periods (and at least
+:data:`OUTLIER_MIN_S`) away from its neighbours or its own log time is an *outlier*
+(:func:`outlier_stamps`) and dropped.
 
 :func:`resample_to_grid` is the resampler for *time-stamped* samples (jitter, gaps, any rate
 ratio). Integer-factor rate changes of uniform records are elsewhere, for reasons given in
@@ -14,7 +21,20 @@ from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["TimebaseReport", "analyse_stamps", "resample_to_grid"]
+__all__ = ["TimebaseReport", "analyse_stamps", "outlier_stamps", "resample_to_grid", "GAP_PERIODS",
+           "ON_GRID_TOL", "OUTLIER_PERIODS", "OUTLIER_MIN_S", "DOWNSAMPLE_RATIO"]
+
+#: increments longer than this many median periods are gaps: no interpolation across them
+GAP_PERIODS = 1.5
+#: a stamp within this fraction of a period of a grid point is taken as that grid sample
+ON_GRID_TOL = 0.01
+#: a stamp this many median periods (and at least OUTLIER_MIN_S) off its neighbours is an outlier
+OUTLIER_PERIODS = 1000.0
+#: least deviation in s of an outlier stamp
+OUTLIER_MIN_S = 1.0
+#: a source rate this much above the output rate is low-passed before resampling (below, the
+#: band that could alias, ``fs/2 .. fs_src/2``, is under 0.5 % of the output band)
+DOWNSAMPLE_RATIO = 1.01
 
 
 @dataclass(frozen=True)
@@ -36,11 +56,14 @@ class TimebaseReport:
     max_dev_s : float
         Largest ``|dt - median(dt)|`` in s (gaps excluded).
     gaps : int
-        Increments longer than 1.5 median periods.
+        Increments longer than :data:`GAP_PERIODS` (1.5) median periods. On the output grid
+        nothing is interpolated across them: the grid samples inside are NaN and listed in
+        ``Signals.meta["gaps"]``.
     gap_time_s : float
         Time missing in gaps, ``sum(dt - median)`` over gaps, in s.
     gap_where_s : tuple of (float, float)
-        (start time relative to the first stamp in s, gap length in s) of the first 20 gaps.
+        (start time relative to the first stamp in s, increment across the gap in s) of the
+        first 20 gaps.
     duplicates : int
         Messages dropped because their stamp equals the previous one.
     out_of_order : int
@@ -48,7 +71,11 @@ class TimebaseReport:
     time_source : str
         ``"header.stamp"`` or ``"log_time"``.
     resampled : bool
-        Whether the samples were interpolated onto the output grid (False: taken as they are).
+        Whether the samples were interpolated onto the output grid (within each contiguous
+        run of stamps; False: placed by index, or taken as they are).
+    outliers : int
+        Messages dropped before this analysis because their stamp was an outlier
+        (:func:`outlier_stamps`); default 0.
     """
 
     topic: str
@@ -63,6 +90,7 @@ class TimebaseReport:
     out_of_order: int
     time_source: str = "log_time"
     resampled: bool = False
+    outliers: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         """A plain dict (JSON-serialisable)."""
@@ -71,7 +99,7 @@ class TimebaseReport:
         return d
 
 
-def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log_time"):
+def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log_time", outliers: int = 0):
     """Sort stamps, drop duplicates and describe the time base.
 
     Parameters
@@ -82,6 +110,8 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
         Stamps in ns, in the order the messages were logged.
     time_source : str, optional
         Where the stamps came from, recorded in the report.
+    outliers : int, optional
+        Outlier stamps dropped before (recorded in the report); default 0.
 
     Returns
     -------
@@ -105,7 +135,7 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
     if ts.size >= 2:
         dt = np.diff(ts).astype(np.float64) * 1e-9
         med = float(np.median(dt))
-        isgap = dt > 1.5 * med
+        isgap = dt > GAP_PERIODS * med
         fs_est = _rate(dt[~isgap], med)
         gaps = int(isgap.sum())
         gap_time = float(np.sum(dt[isgap] - med))
@@ -115,9 +145,93 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
         jitter = float(np.std(reg)) if reg.size else 0.0
         max_dev = float(np.max(np.abs(reg - med))) if reg.size else 0.0
     rep = TimebaseReport(
-        topic, n, fs_est, jitter, max_dev, gaps, gap_time, where, duplicates, out_of_order, time_source
+        topic, n, fs_est, jitter, max_dev, gaps, gap_time, where, duplicates, out_of_order, time_source,
+        outliers=outliers,
     )
     return order, rep
+
+
+def outlier_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray | None = None, *,
+                   periods: float = OUTLIER_PERIODS, min_s: float = OUTLIER_MIN_S) -> np.ndarray:
+    """Which stamps are outliers: far off their neighbours or their own log time.
+
+    Parameters
+    ----------
+    stamps_ns : ndarray of int64, shape (n,)
+        Stamps in ns, in the order the messages were logged.
+    log_times_ns : ndarray of int64, shape (n,), optional
+        The messages' log times in ns, when the stamps are header stamps (a second,
+        independent clock); None when the stamps are the log times.
+    periods : float, optional
+        Threshold in median periods (default :data:`OUTLIER_PERIODS`, 1000).
+    min_s : float, optional
+        Least threshold in s (default :data:`OUTLIER_MIN_S`, 1 s).
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True for an outlier.
+
+    Notes
+    -----
+    With ``thr = max(min_s, periods * median period)``, a stamp is an outlier when
+
+    1. its offset from its log time differs from the median offset by more than ``thr``
+       (header stamps only: a flipped bit in one clock, not in the other);
+    2. it is more than ``thr`` from both its neighbours in logging order while they are
+       within ``thr`` of each other (an isolated jump; at the ends, one neighbour and the
+       next pair);
+    3. it lies in a small cluster (at most 1 % of the stamps, at least 1) separated from
+       the rest by more than ``thr`` and by more than 10 times the span of the rest.
+
+    A stamp that was wrong by less than ``thr`` cannot be told from jitter or a gap here.
+    """
+    t = np.asarray(stamps_ns, np.int64)
+    n = t.size
+    out = np.zeros(n, bool)
+    if n < 3:
+        return out
+    dt = np.diff(t)
+    increasing = bool(np.all(dt > 0))
+    if increasing:  # the usual case: no sort needed
+        order_all, pos = None, dt
+    else:
+        order_all = np.argsort(t, kind="stable")
+        d = np.diff(t[order_all])
+        pos = d[d > 0]
+    if pos.size == 0:
+        return out
+    thr = max(min_s * 1e9, periods * float(np.median(pos)))
+    if log_times_ns is not None:
+        off = t - np.asarray(log_times_ns, np.int64)
+        out |= np.abs(off - np.median(off)) > thr
+    jump = np.abs(dt.astype(np.float64)) > thr  # (n-1,)
+    if increasing and not jump.any():
+        return out  # no increment beyond thr: no isolated jump, no far cluster
+    if order_all is None:
+        order_all = np.arange(n)
+    tf = t.astype(np.float64)
+    inner = np.zeros(n, bool)
+    inner[1:-1] = jump[:-1] & jump[1:] & (np.abs(tf[2:] - tf[:-2]) <= thr)
+    inner[0] = jump[0] and not jump[1]
+    inner[-1] = jump[-1] and not jump[-2]
+    out |= inner
+    for _ in range(4):  # clusters far outside the span of the rest
+        order = order_all[~out[order_all]]
+        if order.size < 3:
+            break
+        ts = tf[order]
+        dd = np.diff(ts)
+        j = int(np.argmax(dd))
+        small = max(1, int(0.01 * ts.size))
+        left, right = j + 1, ts.size - j - 1
+        if dd[j] <= thr or min(left, right) > small:
+            break
+        span_rest = (ts[-1] - ts[j + 1]) if left <= right else (ts[j] - ts[0])
+        if dd[j] <= 10 * span_rest:
+            break
+        out[order[: j + 1] if left <= right else order[j + 1 :]] = True
+    return out
 
 
 def _rate(dt_reg: np.ndarray, med: float) -> float:
@@ -133,6 +247,10 @@ def _rate(dt_reg: np.ndarray, med: float) -> float:
         if r > 0 and abs(r - fs) <= tol * fs:
             return r
     return fs
+
+
+#: fewest uniform samples the anti-alias filter runs on (``sosfiltfilt``'s pad length + 1)
+_MIN_FILTER_LEN = 27
 
 
 def _lowpass_uniform(y: np.ndarray, fs_src: float, fs: float) -> np.ndarray:
@@ -164,10 +282,14 @@ def resample_to_grid(
     Returns
     -------
     ndarray, shape (n_channels, m)
+        All NaN when downsampling a record too short for the anti-alias filter (fewer than
+        28 samples at `fs_src`).
 
     Notes
     -----
-    Downsampling (``fs_src > fs``): the samples are first put on a uniform grid at `fs_src`
+    The samples must form one contiguous run (no gap): the caller splits a topic at its gaps
+    (:mod:`vibroscope.io._grid`) and calls this per run, so a spline never spans a gap.
+    Downsampling (``fs_src > 1.01 fs``, :data:`DOWNSAMPLE_RATIO`): the samples are first put on a uniform grid at `fs_src`
     (cubic spline), low-passed (8th-order Butterworth at 0.4 `fs`, forward-backward so with
     no phase shift), then interpolated. Otherwise a cubic spline through the samples
     (interpolation error O(h^4) for band-limited signals; linear interpolation would
@@ -176,10 +298,13 @@ def resample_to_grid(
     from scipy.interpolate import CubicSpline
 
     y = np.atleast_2d(np.asarray(y, float))
+    if fs_src > fs * DOWNSAMPLE_RATIO:
+        n_u = int(np.floor((t_s[-1] - t_s[0]) * fs_src)) + 1
+        if n_u <= _MIN_FILTER_LEN:  # too short to low-pass: no samples rather than aliased ones
+            return np.full((y.shape[0], np.size(grid_s)), np.nan)
     if t_s.size < 4:
         return np.vstack([np.interp(grid_s, t_s, row) for row in y])
-    if fs_src > fs * 1.0001:
-        n_u = int(np.floor((t_s[-1] - t_s[0]) * fs_src)) + 1
+    if fs_src > fs * DOWNSAMPLE_RATIO:
         tu = t_s[0] + np.arange(n_u) / fs_src
         yu = CubicSpline(t_s, y, axis=1)(tu)
         yu = _lowpass_uniform(yu, fs_src, fs)

@@ -1,0 +1,230 @@
+"""Topics' time-stamped samples onto one uniform grid, never inventing a sample.
+
+A topic whose stamps lie on the grid (within :data:`~vibroscope.io.timebase.ON_GRID_TOL` of
+a period, at the grid's rate) is placed by index, ``k = round((t - start) fs)``: no
+interpolation at all, NaN where nothing was logged. Any other topic is interpolated
+(:func:`~vibroscope.io.timebase.resample_to_grid`) within each contiguous run of its stamps
+(increments of at most :data:`~vibroscope.io.timebase.GAP_PERIODS` median periods), so the
+spline and the anti-alias filter never span a gap; the grid samples in a gap are NaN. Chunks
+lost to damage are gaps like any other. Every gap is reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from vibroscope.errors import ChannelError
+from vibroscope.io.timebase import DOWNSAMPLE_RATIO, GAP_PERIODS, ON_GRID_TOL, TimebaseReport, grid_for, resample_to_grid
+
+#: refuse a grid with more samples than this many times the messages read (x the rate ratio)
+MAX_GRID_FACTOR = 10
+
+
+@dataclass
+class TopicSamples:
+    """The samples of one topic's requested fields, sorted by stamp and free of duplicates.
+
+    Attributes
+    ----------
+    t_ns : ndarray of int64, shape (n,)
+        Stamps in ns, increasing.
+    values : ndarray, shape (k, n)
+        One row per requested field of the topic.
+    report : TimebaseReport
+        The topic's time base.
+    """
+
+    t_ns: np.ndarray
+    values: np.ndarray
+    report: TimebaseReport
+
+
+def _on_grid_index(t: np.ndarray, start: int, fs: float) -> np.ndarray | None:
+    """Grid indices of stamps `t` when they are samples of the grid at `fs` (one per period)."""
+    rel = (t - start).astype(np.float64) * 1e-9 * fs
+    k = np.rint(rel)
+    if np.max(np.abs(rel - k), initial=0.0) > ON_GRID_TOL:
+        return None
+    k = k.astype(np.int64)
+    if k.size > 1 and (np.any(np.diff(k) <= 0) or np.median(np.diff(k)) != 1):
+        return None  # stamps at a multiple of the grid period (upsampling): interpolate
+    return k
+
+
+def _runs(t: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) indices of the contiguous runs of increasing stamps `t`."""
+    if t.size < 2:
+        return [(0, t.size - 1)] if t.size else []
+    dt = np.diff(t)
+    med = float(np.median(dt))
+    cut = np.flatnonzero(dt > GAP_PERIODS * med)
+    firsts = np.r_[0, cut + 1]
+    lasts = np.r_[cut, t.size - 1]
+    return list(zip(firsts.tolist(), lasts.tolist()))
+
+
+def _interp_runs(t: np.ndarray, y: np.ndarray, grid_ns: np.ndarray, start: int, fs: float, fs_src: float,
+                 runs: list[tuple[int, int]], out: np.ndarray, covered: np.ndarray) -> None:
+    """Interpolate each run of `t` onto the grid points it brackets (in place)."""
+    for a, b in runs:
+        if b <= a:
+            continue  # a lone sample between gaps: not on the grid, nothing to interpolate with
+        g0 = int(np.searchsorted(grid_ns, t[a], "left"))
+        g1 = int(np.searchsorted(grid_ns, t[b], "right"))
+        if g1 <= g0:
+            continue
+        v = resample_to_grid((t[a : b + 1] - start) * 1e-9, y[:, a : b + 1],
+                             (grid_ns[g0:g1] - start) * 1e-9, fs=fs, fs_src=fs_src)
+        out[:, g0:g1] = v
+        covered[g0:g1] = np.isfinite(v).any(axis=0)  # a run too short to low-pass stays NaN
+
+
+def place_topic(s: TopicSamples, start: int, n: int, fs: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(rows (k, n) with NaN where nothing was logged, covered (n,) bool, resampled) of one topic.
+
+    Parameters
+    ----------
+    s : TopicSamples
+        The topic's samples.
+    start : int
+        Grid start in ns.
+    n : int
+        Grid length.
+    fs : float
+        Grid rate in Hz.
+
+    Returns
+    -------
+    (ndarray, ndarray, bool)
+    """
+    t, y = s.t_ns, s.values
+    out = np.full((y.shape[0], n), np.nan)
+    covered = np.zeros(n, bool)
+    k = _on_grid_index(t, start, fs)
+    if k is not None:
+        i0, i1 = np.searchsorted(k, [0, n])  # k is increasing
+        k, y = k[i0:i1], y[:, i0:i1]
+        if k.size and k[-1] - k[0] == k.size - 1:  # contiguous: a plain copy
+            out[:, k[0] : k[-1] + 1] = y
+            covered[k[0] : k[-1] + 1] = True
+        else:
+            out[:, k] = y
+            covered[k] = True
+        return out, covered, False
+    grid_ns = start + np.round(np.arange(n) / fs * 1e9).astype(np.int64)
+    fs_src = s.report.fs_est
+    if not np.isnan(y).any():
+        _interp_runs(t, y, grid_ns, start, fs, fs_src, _runs(t), out, covered)
+        out[:, ~covered] = np.nan
+        return out, covered, True
+    # NaN samples (fields missing in some messages): each row's runs end at its NaN samples too
+    for r in range(y.shape[0]):
+        ok = np.isfinite(y[r])
+        cov_r = np.zeros(n, bool)
+        brk = np.flatnonzero(~ok)
+        runs = []
+        for a, b in _runs(t):
+            edges = [a - 1, *brk[(brk >= a) & (brk <= b)].tolist(), b + 1]
+            runs += [(e0 + 1, e1 - 1) for e0, e1 in zip(edges[:-1], edges[1:]) if e1 - 1 >= e0 + 1]
+        _interp_runs(t, y[r : r + 1], grid_ns, start, fs, fs_src, runs, out[r : r + 1], cov_r)
+        covered |= cov_r
+    return out, covered, True
+
+
+def _nan_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(first index, length) of the runs of True in `mask`."""
+    if not mask.any():
+        return []
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    a = np.flatnonzero(d == 1)
+    b = np.flatnonzero(d == -1)
+    return list(zip(a.tolist(), (b - a).tolist()))
+
+
+def check_grid_size(path: Any, topics: list[str], samples: dict[str, TopicSamples], n: int, fs: float) -> None:
+    """Refuse a grid far larger than the messages read (damaged stamps), naming the topic.
+
+    Raises
+    ------
+    ChannelError
+        If ``n`` exceeds :data:`MAX_GRID_FACTOR` times the messages of every topic (scaled by
+        the ratio of `fs` to the topic's rate when upsampling).
+    """
+    def allowed(t: str) -> float:
+        r = samples[t].report.fs_est
+        ratio = fs / r if np.isfinite(r) and r > 0 else 1.0
+        return MAX_GRID_FACTOR * samples[t].t_ns.size * max(1.0, ratio)
+
+    if n <= 100_000 or n <= max(allowed(t) for t in topics):
+        return
+    worst = min(topics, key=allowed)
+    raise ChannelError(
+        f"{path}: topic {worst!r}: the grid at {fs:.6g} Hz over the topics' span of {(n - 1) / fs:.6g} s would "
+        f"hold {n} samples, more than {MAX_GRID_FACTOR} times the {samples[worst].t_ns.size} messages read "
+        "(damaged or inconsistent stamps?); check the stamps (vibroscope info), read the topics separately, "
+        "or give a lower fs"
+    )
+
+
+def onto_grid(path: Any, topics: list[str], samples: dict[str, TopicSamples], fs: float,
+              warnings: list[str]) -> tuple[int, dict[str, np.ndarray], dict[str, bool], list[dict]]:
+    """All topics onto the grid at `fs` over their common span.
+
+    Parameters
+    ----------
+    path : str or Path
+        The log (for messages).
+    topics : list of str
+        Topics, in output order.
+    samples : dict of str to TopicSamples
+        Their samples.
+    fs : float
+        Grid rate in Hz.
+    warnings : list of str
+        Appended to: resampling and gaps, one line per topic.
+
+    Returns
+    -------
+    start : int
+        Grid start in ns.
+    rows : dict of str to ndarray, shape (k, n)
+        Per topic, its rows on the grid (NaN in gaps).
+    resampled : dict of str to bool
+    gaps : list of dict
+        ``{"topic", "start_s" (absolute, s), "length_s", "n_samples"}`` per gap.
+
+    Raises
+    ------
+    ChannelError
+        If the topics do not overlap in time, or the grid would be far larger than the
+        messages read (:func:`check_grid_size`).
+    """
+    start, n = grid_for([(int(samples[t].t_ns[0]), int(samples[t].t_ns[-1])) for t in topics], fs)
+    if n < 2:
+        raise ChannelError(f"{path}: the topics {topics} do not overlap in time")
+    check_grid_size(path, topics, samples, n, fs)
+    rows: dict[str, np.ndarray] = {}
+    resampled: dict[str, bool] = {}
+    gaps: list[dict] = []
+    for t in topics:
+        out, covered, resampled[t] = place_topic(samples[t], start, n, fs)
+        rows[t] = out
+        if resampled[t]:
+            fs_src = samples[t].report.fs_est
+            warnings.append(
+                f"topic {t!r} ({fs_src:.6g} Hz est.) resampled onto {fs:.6g} Hz within each contiguous run of stamps"
+                + (" with anti-alias low-pass" if fs_src > fs * DOWNSAMPLE_RATIO else "")
+            )
+        runs = _nan_runs(~covered)
+        for i0, m in runs:
+            gaps.append({"topic": t, "start_s": start * 1e-9 + i0 / fs, "length_s": m / fs, "n_samples": int(m)})
+        if runs:
+            tot = sum(m for _, m in runs)
+            warnings.append(
+                f"topic {t!r}: {len(runs)} gaps, {tot / fs:.4g} s in all (first at {runs[0][0] / fs:.6g} s): "
+                f"{tot} samples are NaN (not interpolated)"
+            )
+    return start, rows, resampled, gaps
