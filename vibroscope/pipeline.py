@@ -7,14 +7,17 @@ adds the edges (reading MCAP, writing rerun recordings and figures).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
 import numpy as np
 import scipy.signal
 
+from vibroscope.faults import apply_faults, detect_faults
 from vibroscope.signals import Signals
 from vibroscope.spectral import FRF, CrossSpectralMatrix, Spectrum, csd_matrix, frf
+from vibroscope.spectral.estimators import MIN_AVERAGES, FewAveragesWarning
 
 __all__ = ["Analysis", "IdentifySettings", "METHODS", "analyse_signals", "decimate", "default_nperseg", "summary_dict"]
 
@@ -48,6 +51,9 @@ class Analysis:
     severity : Severity or None
         ISO 20816 vibration severity (velocity RMS over 10–1000 Hz, mm/s) of the acceleration
         channels, from the record before any decimation.
+    faults : tuple of Fault
+        The signal faults found (:func:`vibroscope.faults.detect_faults`) and handled; each is
+        also one line of `warnings`.
     """
 
     signals: Signals
@@ -60,6 +66,7 @@ class Analysis:
     warnings: list = field(default_factory=list)
     identification: Any = None
     severity: Any = None
+    faults: tuple = ()
 
 
 def default_nperseg(n: int, fs: float, *, fmin: float | None = None, averages: int = 16) -> int:
@@ -97,6 +104,10 @@ def decimate(signals: Signals, fmax: float) -> Signals:
     """Low-pass and decimate so that `fmax` (Hz) stays below 0.4·fs; unchanged if no gain.
 
     Uses :func:`scipy.signal.decimate` (order-8 Chebyshev I, zero phase) in stages of at most 10.
+    Missing samples (NaN in any channel) are never filtered across: each stretch where every
+    channel is present is decimated as a record of its own, on the global decimated grid (its
+    start rounded up to a multiple of the factor), and the decimated samples of the gaps (and of
+    stretches too short to filter) are NaN.
 
     Parameters
     ----------
@@ -114,16 +125,34 @@ def decimate(signals: Signals, fmax: float) -> Signals:
     q = int(np.floor(signals.fs / (2.5 * fmax)))
     if q < 2:
         return signals
-    data, fs, left = signals.data, signals.fs, q
-    stages = []
+    stages, left = [], q
     while left >= 2:  # stages of at most 10 (scipy's advice); total factor <= q keeps fs >= 2.5 fmax
         f = min(left, 10)
-        data = scipy.signal.decimate(data, f, axis=-1, zero_phase=True)
-        fs /= f
         stages.append(f)
         left //= f
+    total = int(np.prod(stages))
+    fs = signals.fs / total
+    present = np.isfinite(signals.data).all(axis=0)
+    if present.all():
+        data = _decimate_stages(signals.data, stages)
+    else:
+        n_out = -(-signals.n_samples // total)
+        data = np.full((signals.n_channels, n_out), np.nan)
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], present.astype(np.int8), [0]))))
+        for a, b in zip(edges[::2], edges[1::2]):
+            a = -(-a // total) * total  # on the global decimated grid
+            if b - a < 64 * total:  # too short for the filter's padding: stays missing
+                continue
+            part = _decimate_stages(signals.data[:, a:b], stages)
+            data[:, a // total: a // total + part.shape[1]] = part
     meta = {**signals.meta, "decimated": {"factors": stages, "fs_in": signals.fs, "fs_out": fs}}
     return Signals(data, fs, signals.channels, signals.units, signals.t0, meta)
+
+
+def _decimate_stages(data: np.ndarray, stages: list) -> np.ndarray:
+    for f in stages:
+        data = scipy.signal.decimate(data, f, axis=-1, zero_phase=True)
+    return data
 
 
 #: identification methods of ``analyse`` and ``modal``; "auto" is LSCF with an input, SSI-COV without
@@ -294,8 +323,23 @@ def analyse_signals(
     KeyError
         If `input` or an output is not a channel of `signals`.
     ValueError
-        If the record is too short for the segment length, or the method does not fit the
-        presence or absence of an input.
+        If the record is too short for the segment length, the method does not fit the
+        presence or absence of an input, ``fmin > fmax``, or a signal fault stops the analysis
+        (an all-missing channel, a zero or constant input, a record shorter than `nperseg`); the
+        message names the channel or option and the remedy.
+
+    Notes
+    -----
+    Signal faults (:mod:`vibroscope.faults`) are detected first and handled as documented there:
+    missing samples (NaN) skip the Welch segments they touch; Inf, clipped and dropped-out samples
+    are set to NaN (masked, never replaced by other numbers) and skipped the same way; constant
+    outputs are left out; each fault is a line of ``Analysis.warnings`` and is listed in
+    ``Analysis.faults``. A sample missing in one analysed channel is treated as missing in all
+    of them, so that every entry of the spectral matrix, the FRFs, the coherence and the SSI
+    covariances comes from the same segments (or lag windows) -- unless that would leave less
+    than half of the record, when each pair keeps its own segments (a note says so); the
+    automatic `nperseg` is halved until at least 8 segments of every channel fit between the
+    gaps, and a note says how many segments were averaged. Decimation never filters across a gap (:func:`decimate`).
     """
     from vibroscope import modal
     from vibroscope.modal.selection import excited_band, response_band
@@ -305,21 +349,53 @@ def analyse_signals(
     if select is not None and method not in ("auto", "lscf", "ssi"):
         raise ValueError(f"select= picks poles from a stabilization diagram: method 'lscf' or 'ssi', not {method!r}")
     notes = list(signals.meta.get("warnings", []))
+    if fmin is not None and fmax is not None and fmin > fmax:
+        raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
-    flat = [c for c in outputs if np.ptp(signals[c]) == 0]
+    if input is not None:
+        signals.index(input)
+    for c in outputs:
+        signals.index(c)
+    # signal faults: detected on the data, their documented actions applied (masking as NaN,
+    # dropping constant outputs), or a ValueError naming the channel and the remedy
+    chans = ([input] if input else []) + outputs
+    sig = signals.select(chans)
+    present = np.isfinite(sig.data)
+    n_valid = int(present.all(axis=0).sum())
+    faults = detect_faults(sig, input=input, nperseg=nperseg or default_nperseg(max(n_valid, 1), sig.fs))
+    flat = [f.channel for f in faults if f.action == "drop"]
     if flat:  # e.g. the unused axes of a one-axis IMU: no information, singular spectra
         more = f" and {len(flat) - 3} more" if len(flat) > 3 else ""
         notes.append(f"{len(flat)} constant channels skipped (no vibration): {flat[:3]}{more}")
         outputs = [c for c in outputs if c not in flat]
     if not outputs:
         raise ValueError("no non-constant response channel to analyse")
-    chans = ([input] if input else []) + outputs
-    sig = signals.select(chans)
+    notes += [str(f) for f in faults if f.action != "drop"]
+    sig = apply_faults(sig, faults)
+    # a sample missing in one channel is missing in all: every spectral entry and covariance then
+    # comes from the same segments (consistent H1/H2/Hv, coherence and SSI covariances) -- unless
+    # that leaves less than half the record: then each pair keeps its own segments
+    present = np.isfinite(sig.data).all(axis=0)
+    gappy = not present.all()
+    if gappy:
+        n_valid = int(present.sum())
+        longest = _longest_run(present)
+        if n_valid >= sig.n_samples // 2:
+            data = np.array(sig.data)
+            data[:, ~present] = np.nan
+            sig = Signals(data, sig.fs, sig.channels, sig.units, sig.t0, sig.meta)
+            notes.append(f"{sig.n_samples - n_valid} of {sig.n_samples} samples missing in at least one "
+                         f"channel (longest stretch without a gap: {longest} samples, {longest / sig.fs:.4g} s); "
+                         f"they are missing in every channel for the analysis")
+        else:
+            notes.append(f"{sig.n_samples - n_valid} of {sig.n_samples} samples missing in at least one "
+                         f"channel: too many to drop them from every channel; each channel pair is averaged "
+                         f"over its own segments (estimates from different segment sets)")
     f_low, band_note = None, None
     if fmax is None or not input:
         # the band from the data: a quick Welch pass at ~16 averages
-        n0 = default_nperseg(sig.n_samples, sig.fs)
-        fw, P = scipy.signal.welch(sig.data, sig.fs, nperseg=n0)
+        n0 = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs))
+        fw, P = _quick_welch(sig.data, sig.fs, n0)
         if input:
             lo_x, hi_x = excited_band(fw, P[0])
             fmax = hi_x if fmax is None else fmax
@@ -332,17 +408,20 @@ def analyse_signals(
                              f"below {hi_r:.4g} Hz")
         if band_note:
             notes.append(band_note + " (set --fmin/--fmax to choose)")
+    undecimated = sig
     if fmax is not None and fmax < 0.4 * sig.fs:
         sig = decimate(sig, fmax)
     fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
     if input:
-        fw, P = scipy.signal.welch(sig[input], sig.fs, nperseg=default_nperseg(sig.n_samples, sig.fs))
-        lo_x, hi_x = excited_band(fw, P)
+        fw, P = _quick_welch(sig[input][None], sig.fs, _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs)))
+        lo_x, hi_x = excited_band(fw, P[0])
         band = (max(fmin or 0.0, lo_x), min(fmax_eff, hi_x))
     else:
         band = (fmin, fmax_eff)
     period = None
-    if input:
+    if input and gappy:
+        notes.append("periodic input not looked for: the record has gaps")
+    elif input:
         from vibroscope.spectral.periodic import detect_period
 
         per = detect_period(sig[input], sig.fs)
@@ -353,13 +432,16 @@ def analyse_signals(
                          f"(rectangular window over whole periods, the first period dropped)")
     auto = nperseg is None
     if auto:
-        nperseg = default_nperseg(sig.n_samples, sig.fs, fmin=fmin or (f_low / 6 if f_low else None))
+        nperseg = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs,
+                                                    fmin=fmin or (f_low / 6 if f_low else None)))
     refinements = []
     meth = method
     while True:
         s = IdentifySettings(input, tuple(outputs), nperseg, window, fmin, fmax_eff, n_modes, estimator, prominence,
                              meth, f_low, band, None if select is None else tuple(select), period)
-        G, h, ident = _identify(sig, s)
+        with warnings.catch_warnings():  # said once below, as a note
+            warnings.simplefilter("ignore", FewAveragesWarning)
+            G, h, ident = _identify(sig, s)
         mm = ident.modes
         # half-power bands should span several bins for the damping to be resolved (Brandt 2011,
         # §14.3): refine the resolution while that is not so and >= 5 averages remain. FRFs only:
@@ -367,7 +449,7 @@ def analyse_signals(
         bw = 2 * np.asarray(mm.damping_ratios) * np.asarray(mm.natural_frequencies)
         df = sig.fs / nperseg
         if (not auto or not input or period or not np.any(np.isfinite(bw) & (bw < 8 * df))
-                or 2 * nperseg > 2 * sig.n_samples / 6):
+                or 2 * nperseg > 2 * sig.n_samples / 6 or _nperseg_for(sig, 2 * nperseg) < 2 * nperseg):
             break
         refinements.append(nperseg)
         nperseg *= 2
@@ -377,10 +459,51 @@ def analyse_signals(
     psd = G.psd()
     Gout = G.select(outputs)
     sv = modal.singular_values(Gout)
-    severity = _severity(signals.select(outputs), notes)
+    if "n_segments" in G.settings:
+        k = G.settings["n_averages"]
+        few = (f": few averages, the spectra have a high variance (about {100 / np.sqrt(k):.0f} %)"
+               if k < MIN_AVERAGES else "")
+        notes.append(f"{k} of {G.settings['n_segments']} Welch segments averaged (nperseg={nperseg}); "
+                     f"those touching a missing sample were skipped{few}")
+    severity = _severity(undecimated.select(outputs), notes)
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
                     input=input, outputs=list(outputs), method=mm.method, band_hz=list(band))
-    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity)
+    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity, tuple(faults))
+
+
+def _longest_run(present: np.ndarray) -> int:
+    """Longest run of True in a 1-D boolean array."""
+    d = np.diff(np.concatenate(([0], present.astype(np.int8), [0])))
+    a, b = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+    return int((b - a).max()) if a.size else 0
+
+
+def _nperseg_for(sig: Signals, nperseg: int) -> int:
+    """`nperseg`, halved (a power of two, at least 16) until at least 8 Welch segments (50 %
+    overlap, on the record's grid) of every channel hold no missing sample; unchanged for a
+    gap-free record."""
+    missing = ~np.isfinite(sig.data)
+    if not missing.any():
+        return nperseg
+    rows = missing[missing.any(axis=1)]
+    cm = np.concatenate((np.zeros((rows.shape[0], 1), np.int64), np.cumsum(rows, axis=1)), axis=1)
+    n = int(nperseg)
+    while n > 16:
+        starts = np.arange(0, sig.n_samples - n + 1, n - n // 2)
+        if np.count_nonzero(cm[:, starts + n] == cm[:, starts], axis=1).min() >= 8:
+            break
+        n //= 2
+    return n
+
+
+def _quick_welch(data: np.ndarray, fs: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
+    """Welch PSD that skips segments touching missing samples (quiet about few averages)."""
+    from vibroscope.spectral import welch
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sp = welch(data, fs, nperseg=nperseg)
+    return sp.frequencies, sp.values
 
 
 def _severity(sig: Signals, notes: list):
@@ -391,7 +514,15 @@ def _severity(sig: Signals, notes: list):
     if not acc or sig.fs / 2 <= 10.0:
         return None
     try:
-        return vibration_severity(sig.select(acc))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", FewAveragesWarning)
+            sev = vibration_severity(sig.select(acc))
+        for w in caught:
+            if issubclass(w.category, FewAveragesWarning):
+                notes.append(f"vibration severity: {w.message}")
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        return sev
     except ValueError as exc:
         notes.append(f"vibration severity not computed: {exc}")
         return None
@@ -421,7 +552,9 @@ def _modes(analysis: Analysis) -> dict:
 def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: Any = None) -> dict:
     """The machine-readable summary (the ``--json`` file of ``vibroscope analyse``).
 
-    Keys: ``fs`` (Hz), ``channels``, ``warnings``, ``modes`` (each ``frequency_hz``,
+    Keys: ``fs`` (Hz), ``channels``, ``warnings``, ``faults`` (one dict per signal fault:
+    ``channel``, ``kind``, ``message``, ``action``, ``n_samples``, ``n_spans``, ``spans`` (sample
+    index ranges), ``times_s`` (s from the first sample); see :meth:`vibroscope.faults.Fault.to_dict`), ``modes`` (each ``frequency_hz``,
     ``damping_ratio``, ``frequency_std_hz``, ``damping_std``, ``shape`` {path: [re, im]}, ``mpc``,
     ``mpd``, ``stable``), ``rejected_modes`` (``frequency_hz``, ``damping_ratio``, ``reason``), plus ``input``, ``outputs``,
     ``settings``, ``timebase`` and, with `true_modes`, ``true_modes``.
@@ -452,6 +585,7 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
         "input": analysis.settings.get("input"),
         "outputs": analysis.settings.get("outputs"),
         "warnings": list(analysis.warnings),
+        "faults": [f.to_dict() for f in getattr(analysis, "faults", ())],
         "modal_method": analysis.modal.method,
         "modes": _modes(analysis)["modes"],
         "rejected_modes": _modes(analysis)["rejected"],

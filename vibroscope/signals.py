@@ -42,6 +42,8 @@ class Signals:
 
     Raises
     ------
+    TypeError
+        If `data` is complex (never cut silently to its real part).
     ValueError
         If `fs` is not positive and finite, or the number of channel names or units does not
         match the number of rows of `data`, or names repeat.
@@ -62,7 +64,11 @@ class Signals:
     meta: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        data = np.asarray(self.data, dtype=float)
+        data = np.asarray(self.data)
+        if np.iscomplexobj(data):
+            raise TypeError(f"data must be real (got dtype {data.dtype}): store the real and imaginary "
+                            f"parts as separate channels")
+        data = np.asarray(data, dtype=float)
         if data.ndim == 1:
             data = data[np.newaxis, :]
         if data.ndim != 2:

@@ -179,19 +179,27 @@ def _check_options(args) -> None:
 
 
 def report_text(an, *, source: str = "", true_modes=None) -> str:
-    """Human-readable report: record, warnings, and the modes (beside true ones when given)."""
+    """Human-readable report: record, signal faults (one line each: ``fault: <kind> in <channel>:
+    <message>``), warnings, and the modes (beside true ones when given)."""
     sig = an.signals
+    n_seg = an.settings.get("n_segments")
+    avg = f"{an.settings['n_averages']} of {n_seg} averages" if n_seg else f"{an.settings['n_averages']} averages"
     lines = [f"{source}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
              f"({sig.duration:.2f} s); nperseg={an.settings['nperseg']} "
-             f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {an.settings['n_averages']} averages)"]
+             f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {avg})"]
     how = METHOD_NAMES.get(an.modal.method, an.modal.method)
     if an.settings.get("input"):
         lines.append(f"input {an.settings['input']} -> {len(an.settings['outputs'])} outputs, "
                      f"{an.settings['estimator']} FRF, modes by {how}")
     else:
         lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by {how}")
+    faults = tuple(getattr(an, "faults", ()) or ())
+    for f in faults:
+        lines.append(f"  fault: {f}")
+    shown = {str(f) for f in faults}
     for w in an.warnings:
-        lines.append(f"  warning: {w}")
+        if w not in shown:
+            lines.append(f"  warning: {w}")
     mm = an.modal
     fstd = mm.extra.get("frequency_std_hz")
     zstd = mm.extra.get("damping_std")

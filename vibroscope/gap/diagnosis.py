@@ -118,6 +118,49 @@ def as_lumped(model) -> LumpedModel:
     )
 
 
+def _split_at_gaps(model, sigs: list, nperseg: int | None) -> list:
+    """Logs with missing samples (NaN) cut into their gap-free stretches, each taken as a log.
+
+    A stretch counts when every model channel is present over at least ``4 nperseg`` samples
+    (8 s without `nperseg`); shorter ones are left out. The simulation restarts at rest at each
+    stretch, so nothing is bridged across a gap. Raises ValueError naming the channels with
+    missing samples when no stretch is long enough.
+    """
+    import warnings
+
+    chans = model.input_channels() + model.output_channels()
+    out = []
+    for sig in sigs:
+        rows = [list(sig.channels).index(c) for c in chans if c in sig.channels]
+        if len(rows) < len(chans):
+            out.append(sig)  # _split_channels names the missing channel
+            continue
+        data = np.asarray(sig.data)[rows]
+        present = np.isfinite(data).all(axis=0)
+        if present.all():
+            out.append(sig)
+            continue
+        bad = [c for c, r in zip(chans, data) if not np.isfinite(r).all()]
+        min_len = 4 * int(nperseg) if nperseg else int(8 * sig.fs)
+        d = np.diff(np.concatenate(([0], present.astype(np.int8), [0])))
+        starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+        keep = [(a, b) for a, b in zip(starts, stops) if b - a >= min_len]
+        if not keep:
+            longest = int((stops - starts).max()) if starts.size else 0
+            raise ValueError(f"missing samples (NaN) in channel(s) {bad}: the longest stretch without one is "
+                             f"{longest} samples ({longest / sig.fs:.3g} s), the gap diagnosis needs "
+                             f"{min_len} ({min_len / sig.fs:.3g} s); give a smaller nperseg or a log "
+                             f"with fewer gaps")
+        used = sum(b - a for a, b in keep)
+        warnings.warn(f"missing samples (NaN) in channel(s) {bad}: the log is diagnosed as {len(keep)} "
+                      f"gap-free stretches ({used} of {sig.n_samples} samples; stretches shorter than "
+                      f"{min_len / sig.fs:.3g} s left out)", UserWarning, stacklevel=4)
+        for a, b in keep:
+            out.append(Signals(sig.data[:, a:b], sig.fs, sig.channels, sig.units, sig.t0 + a / sig.fs,
+                               {**sig.meta, "stretch": [int(a), int(b)]}))
+    return out
+
+
 def _split_channels(model: LumpedModel, sig: Signals):
     idx = {c: i for i, c in enumerate(sig.channels)}
     rows = []
@@ -294,8 +337,16 @@ def diagnose(
     ChannelError
         If a model channel is missing from a log.
     ValueError
-        If the logs have different sampling rates, non-finite samples, or the model cannot be
-        diagnosed (see :func:`as_lumped`).
+        If the logs have different sampling rates, ±Inf samples, too little left between
+        missing samples, or the model cannot be diagnosed (see :func:`as_lumped`).
+
+    Warns
+    -----
+    UserWarning
+        When a log with missing samples (NaN) is cut into its gap-free stretches: each stretch
+        of at least ``4 nperseg`` samples (8 s by default) is diagnosed as a log of its own
+        (the simulation restarts at rest; the last stretch of the last log is held out for
+        validation), shorter ones are left out; nothing is interpolated across a gap.
     """
     import warnings
 
@@ -319,6 +370,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     sigs = [signals] if isinstance(signals, Signals) else list(signals)
     if not sigs:
         raise ValueError("no log given")
+    sigs = _split_at_gaps(model, sigs, nperseg)
     fs = float(sigs[0].fs)
     for s in sigs[1:]:
         if abs(float(s.fs) - fs) > 1e-9 * fs:

@@ -136,6 +136,9 @@ def reference_channels(y: np.ndarray, n_ref: int = 6) -> list[int]:
     y = np.asarray(y, float)
     if y.shape[0] <= n_ref:
         return list(range(y.shape[0]))
+    ok = np.isfinite(y).all(axis=0)  # missing samples (NaN): the instants where all are present
+    if not ok.all():
+        y = y[:, ok]
     R0 = np.corrcoef(y - y.mean(axis=1, keepdims=True))
     _, _, piv = scipy.linalg.qr(R0, pivoting=True)
     return sorted(int(i) for i in piv[:n_ref])
@@ -406,8 +409,9 @@ def positive_power_spectra(signals: Signals, *, n_lags: int, ref: Sequence[int] 
     from vibroscope.modal.ssi import output_covariances
     from vibroscope.spectral import FRF
 
-    y = np.asarray(signals.data, float)
-    y = y - y.mean(axis=1, keepdims=True)
+    from vibroscope.modal.ssi import center
+
+    y = center(np.asarray(signals.data, float))
     ref = reference_channels(y) if ref is None else list(ref)
     R = output_covariances(y, n_lags, ref)
     fs = signals.fs

@@ -21,7 +21,7 @@ def output_covariances(y: np.ndarray, n_lags: int, ref: Sequence[int] | None = N
     Parameters
     ----------
     y : ndarray, shape (n_channels, n_samples)
-        Zero-mean outputs.
+        Zero-mean outputs; NaN marks a missing sample.
     n_lags : int
         Number of lags.
     ref : sequence of int, optional
@@ -30,14 +30,59 @@ def output_covariances(y: np.ndarray, n_lags: int, ref: Sequence[int] | None = N
     Returns
     -------
     ndarray, shape (n_lags, n_channels, n_refs)
-        In the squared units of `y`.
+        In the squared units of `y`. NaN where a pair of channels has no sample pair at a lag.
+
+    Notes
+    -----
+    Missing samples (NaN): each entry ``R_i[a, b]`` averages ``y_a[k+i] y_b[k]`` over the sample
+    pairs where both are present only, divided by their own count (pairwise deletion), so a gap
+    removes the lag windows that straddle it and nothing is interpolated. Without NaN this is the
+    plain ``Σ_k y[k+i] y_ref[k]ᵀ / (n − i)``.
     """
     n = y.shape[1]
+    missing = np.isnan(y)
+    if missing.any():
+        return _output_covariances_nan(y, n_lags, ref, ~missing)
     yr = y if ref is None else y[list(ref)]
     R = np.empty((n_lags, y.shape[0], yr.shape[0]))
     for i in range(n_lags):
         R[i] = y[:, i:] @ yr[:, : n - i].T / (n - i)
     return R
+
+
+def _output_covariances_nan(y, n_lags, ref, present):
+    """:func:`output_covariances` over the present sample pairs only (NaN = missing)."""
+    n = y.shape[1]
+    y0 = np.where(present, y, 0.0)
+    m = present.astype(float)
+    idx = slice(None) if ref is None else list(ref)
+    yr, mr = y0[idx], m[idx]
+    R = np.empty((n_lags, y.shape[0], yr.shape[0]))
+    for i in range(n_lags):
+        cnt = m[:, i:] @ mr[:, : n - i].T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            R[i] = (y0[:, i:] @ yr[:, : n - i].T) / cnt
+        R[i][cnt == 0] = np.nan
+    return R
+
+
+def center(y: np.ndarray) -> np.ndarray:
+    """`y` minus each row's mean over its present (non-NaN) samples; NaN stays NaN.
+
+    Parameters
+    ----------
+    y : ndarray, shape (n_channels, n_samples)
+        The outputs.
+
+    Returns
+    -------
+    ndarray
+        A new array, zero-mean per row.
+    """
+    y = np.asarray(y, float)
+    if np.isnan(y).any():
+        return y - np.nanmean(y, axis=1, keepdims=True)
+    return y - y.mean(axis=1, keepdims=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -196,7 +241,9 @@ def ssi_cov(
     orders = sorted(int(o) for o in orders)
     if not orders or orders[0] < 2 or orders[-1] > n_lags * n_ref:
         raise ValueError(f"{orders=} must lie in [2, n_lags * n_refs = {n_lags * n_ref}]")
-    y = y - y.mean(axis=1, keepdims=True)
+    y = center(y)
+    if np.isinf(y).any():
+        raise ValueError("the outputs hold ±Inf samples: mask them as NaN (missing) first")
     T = block_toeplitz(output_covariances(y, 2 * n_lags + 1, ref), n_lags)
     U, S, _ = np.linalg.svd(T, full_matrices=False)
     rows = []

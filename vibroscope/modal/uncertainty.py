@@ -145,15 +145,19 @@ def ssi_bootstrap(y: np.ndarray, fs: float, modes: ModalModel, *, n_lags: int, o
     Raises
     ------
     ValueError
-        If a block is shorter than four times the covariance lags.
+        If a block is shorter than four times the covariance lags, or (missing samples) a
+        block's covariances cannot be estimated at every lag.
     """
-    y = np.asarray(y, float)
-    y = y - y.mean(axis=1, keepdims=True)
+    from vibroscope.modal.ssi import center
+
+    y = center(np.asarray(y, float))
     n = y.shape[1]
     L = n // n_blocks
     if L < 4 * (2 * n_lags + 1):
         raise ValueError(f"{n_blocks=} blocks of {L} samples are too short for {n_lags=} covariance lags")
     Rb = np.stack([output_covariances(y[:, b * L:(b + 1) * L], 2 * n_lags + 1, ref) for b in range(n_blocks)])
+    if not np.isfinite(Rb).all():
+        raise ValueError("a bootstrap block has lags without any pair of present (non-NaN) samples")
     rng = np.random.default_rng(seed)
     F = np.full((n_boot, len(modes)), np.nan)
     Z = np.full((n_boot, len(modes)), np.nan)

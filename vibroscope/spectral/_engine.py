@@ -88,12 +88,21 @@ def segment_settings(
     Raises
     ------
     ValueError
-        If `nperseg` exceeds the record length, `noverlap` is not in ``[0, nperseg)``, `nfft` is
-        shorter than `nperseg`, or `detrend` is not an allowed option.
+        If `nperseg` is not a positive whole number or exceeds the record length, `noverlap` is
+        not in ``[0, nperseg)``, `nfft` is shorter than `nperseg`, or `detrend` is not an allowed
+        option; the message names the setting and the remedy.
     """
+    if nperseg is not None:
+        if isinstance(nperseg, (bool, np.bool_)) or int(nperseg) != nperseg:
+            raise ValueError(f"{nperseg=} must be a whole number of samples")
+        if nperseg < 1:
+            raise ValueError(f"{nperseg=} must be positive (a segment length in samples)")
     if isinstance(window, (str, tuple)):
         if nperseg is None:
             nperseg = 256 if n is None else min(256, n)
+        if n is not None and nperseg > n:
+            raise ValueError(f"{nperseg=} must not exceed the record length {n=}: use a shorter nperseg "
+                             f"or a longer record")
         win = scipy.signal.get_window(window, int(nperseg), fftbins=True)
     else:
         win = np.asarray(window, dtype=float)
@@ -105,12 +114,16 @@ def segment_settings(
             raise ValueError(f"{win.size=} must equal {nperseg=}")
     nperseg = int(nperseg)
     if nperseg < 1:
-        raise ValueError(f"{nperseg=} must be positive")
+        raise ValueError(f"{nperseg=} must be positive (a segment length in samples)")
     if n is not None and nperseg > n:
-        raise ValueError(f"{nperseg=} must not exceed the record length {n=}")
+        raise ValueError(f"{nperseg=} must not exceed the record length {n=}: use a shorter nperseg "
+                         f"or a longer record")
+    if noverlap is not None and (isinstance(noverlap, (bool, np.bool_)) or int(noverlap) != noverlap):
+        raise ValueError(f"{noverlap=} must be a whole number of samples")
     noverlap = nperseg // 2 if noverlap is None else int(noverlap)
     if not 0 <= noverlap < nperseg:
-        raise ValueError(f"{noverlap=} must be in [0, {nperseg=})")
+        raise ValueError(f"{noverlap=} must be in [0, {nperseg=}): use a smaller noverlap "
+                         f"(default nperseg // 2)")
     nfft = nperseg if nfft is None else int(nfft)
     if nfft < nperseg:
         raise ValueError(f"{nfft=} must be at least {nperseg=}")
@@ -146,6 +159,13 @@ class CrossSpectralAccumulator:
     scales by ``1 / (fs Σ w²)`` (density) or ``1 / (Σ w)²`` (spectrum), doubles all bins but DC
     (and Nyquist for even `nfft`), and divides by the count — scipy's ``csd`` conventions [1]_.
 
+    Missing samples: a segment of channel ``i`` that holds a NaN or ±Inf is skipped for every pair
+    with ``i`` (its transform is set to zero, so it adds nothing), and each pair keeps its own
+    count ``K_ij`` of segments in which both channels are finite (:attr:`n_averages`);
+    ``G_ij = S_ij / K_ij`` is then exactly Welch's estimate over the segments valid for that pair.
+    Without NaN/Inf the pass is unchanged (finiteness is read from the per-segment mean that the
+    constant detrend computes anyway) and every ``K_ij`` equals :attr:`n_segments`.
+
     References
     ----------
     .. [1] P. D. Welch, IEEE Trans. Audio Electroacoust. AU-15, 70–73, 1967.
@@ -160,6 +180,7 @@ class CrossSpectralAccumulator:
         shape = (nf, self.n_channels, self.n_channels) if cross else (self.n_channels, nf)
         self._sum = np.zeros(shape, dtype=complex if cross else float)
         self.n_segments = 0
+        self._count = np.zeros((self.n_channels, self.n_channels), dtype=np.int64)
         self._tail = np.empty((self.n_channels, 0))
 
     # -- feeding ---------------------------------------------------------------------------
@@ -202,13 +223,23 @@ class CrossSpectralAccumulator:
         work = np.empty((self.n_channels, min(_BLOCK, n_seg), st.nperseg))
         for b0 in range(0, n_seg, _BLOCK):
             blk = segs[:, b0 : b0 + _BLOCK]
-            w = work[:, : blk.shape[1]]
-            if st.detrend == "constant":
-                np.subtract(blk, blk.mean(axis=-1, keepdims=True), out=w)
-            elif st.detrend == "linear":
-                w[...] = scipy.signal.detrend(blk, type="linear", axis=-1)
-            else:
-                w[...] = blk
+            nb = blk.shape[1]
+            w = work[:, :nb]
+            # finiteness of each (channel, segment) from a per-segment reduction: the mean that the
+            # constant detrend needs anyway, so the NaN-free path does no extra pass
+            with np.errstate(invalid="ignore", over="ignore"):  # Inf - Inf in a segment to be skipped
+                if st.detrend == "constant":
+                    mean = blk.mean(axis=-1, keepdims=True)
+                    ok = np.isfinite(mean[..., 0])
+                    np.subtract(blk, mean, out=w)
+                else:
+                    ok = np.isfinite(blk.sum(axis=-1))
+                    w[...] = blk
+            clean = bool(ok.all())
+            if not clean:
+                w[~ok] = 0.0  # a segment touching NaN/Inf contributes nothing to any pair
+            if st.detrend == "linear":
+                w[...] = scipy.signal.detrend(w, type="linear", axis=-1)
             w *= st.window
             X = scipy.fft.rfft(w, n=st.nfft, axis=-1)  # (n_ch, nb, nf)
             if self.cross:
@@ -216,6 +247,11 @@ class CrossSpectralAccumulator:
                 self._sum += np.matmul(Xf.conj(), Xf.transpose(0, 2, 1))
             else:
                 self._sum += (X.real**2 + X.imag**2).sum(axis=1)
+            if clean:
+                self._count += nb
+            else:
+                okf = ok.astype(np.int64)
+                self._count += okf @ okf.T
         self.n_segments += n_seg
 
     def merge(self, other: "CrossSpectralAccumulator") -> "CrossSpectralAccumulator":
@@ -256,10 +292,17 @@ class CrossSpectralAccumulator:
             mine, theirs = (w if isinstance(w, (str, tuple)) else "custom" for w in (a.window_spec, b.window_spec))
             raise ValueError(f"cannot merge accumulators with different window: {mine!r} and {theirs!r}")
         self._sum += other._sum
+        self._count += other._count
         self.n_segments += other.n_segments
         return self
 
     # -- results ---------------------------------------------------------------------------
+    @property
+    def n_averages(self) -> np.ndarray:
+        """Segments averaged per channel pair (both channels finite over the segment), int, shape
+        (n_channels, n_channels); the diagonal is the count per channel."""
+        return self._count.copy()
+
     def frequencies(self) -> np.ndarray:
         """One-sided frequency axis in Hz, shape (nfft // 2 + 1,)."""
         return scipy.fft.rfftfreq(self.settings.nfft, 1.0 / self.fs)
@@ -279,6 +322,8 @@ class CrossSpectralAccumulator:
             auto-spectra, shape (n_channels, n_freqs). Units: unit_i·unit_j/Hz ('density') or
             unit_i·unit_j ('spectrum').
 
+        Pairs (or, for auto-spectra, channels) with no valid segment (:attr:`n_averages` 0) are NaN.
+
         Raises
         ------
         ValueError
@@ -289,7 +334,16 @@ class CrossSpectralAccumulator:
             raise ValueError(f"no complete segment of nperseg={self.settings.nperseg} samples was accumulated")
         w = self.settings.window
         scale = 1.0 / (self.fs * np.sum(w * w)) if scaling == "density" else 1.0 / np.sum(w) ** 2
-        out = self._sum * (scale / self.n_segments)
+        if np.all(self._count == self.n_segments):
+            out = self._sum * (scale / self.n_segments)
+        else:  # each pair normalised by its own number of valid segments
+            cnt = self._count.astype(float) if self.cross else np.diag(self._count).astype(float)[:, None]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                out = self._sum * (scale / cnt)
+            if self.cross:
+                out[:, self._count == 0] = np.nan
+            else:
+                out[np.diag(self._count) == 0] = np.nan
         fax = 0 if self.cross else -1
         sl = [slice(None)] * out.ndim
         last = None if self.settings.nfft % 2 else -1

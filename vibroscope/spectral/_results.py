@@ -92,7 +92,12 @@ class Spectrum:
     scaling : {'density', 'spectrum', 'amplitude'}
         What `values` are.
     settings : dict
-        ``fs``, ``nperseg``, ``noverlap``, ``nfft``, ``window``, ``detrend``, ``n_averages``.
+        ``fs``, ``nperseg``, ``noverlap``, ``nfft``, ``window``, ``detrend``, ``n_averages`` (the
+        smallest count over the channels) and, when segments were skipped for missing samples,
+        ``n_segments`` (all segments of the record).
+    n_averages : ndarray of int, shape (n_channels,), or None
+        Segments averaged per channel: those free of NaN/Inf (Welch estimates); None when not
+        from Welch averaging.
 
     Examples
     --------
@@ -111,12 +116,15 @@ class Spectrum:
     units: tuple[str, ...]
     scaling: Literal["density", "spectrum", "amplitude"]
     settings: dict = field(default_factory=dict)
+    n_averages: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
         object.__setattr__(self, "values", read_only(np.atleast_2d(self.values), float))
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "units", tuple(self.units))
+        if self.n_averages is not None:
+            object.__setattr__(self, "n_averages", read_only(self.n_averages, np.int64))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return iter((self.frequencies, self.values))
@@ -190,7 +198,14 @@ class CrossSpectralMatrix:
         Channel names and units; ``G[f, i, j]`` has unit ``units[i]·units[j]/Hz`` (density).
     scaling : {'density', 'spectrum'}
     settings : dict
-        ``fs``, ``nperseg``, ``noverlap``, ``nfft``, ``window``, ``detrend``, ``n_averages``.
+        ``fs``, ``nperseg``, ``noverlap``, ``nfft``, ``window``, ``detrend``, ``n_averages`` (the
+        smallest count over the pairs) and, when segments were skipped for missing samples,
+        ``n_segments`` (all segments of the record).
+    n_averages : ndarray of int, shape (n_channels, n_channels), or None
+        Segments averaged for each pair: those over which both channels are finite. Each
+        ``G[:, i, j]`` is normalised by its own count, so with unequal counts (missing samples)
+        entries of `G` are estimated from different segment sets (and `G` need not be positive
+        semi-definite). None when unknown (e.g. a matrix assembled by hand).
     """
 
     frequencies: np.ndarray
@@ -199,12 +214,15 @@ class CrossSpectralMatrix:
     units: tuple[str, ...]
     scaling: Literal["density", "spectrum"]
     settings: dict = field(default_factory=dict)
+    n_averages: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "frequencies", read_only(self.frequencies, float))
         object.__setattr__(self, "G", read_only(self.G, complex))
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "units", tuple(self.units))
+        if self.n_averages is not None:
+            object.__setattr__(self, "n_averages", read_only(self.n_averages, np.int64))
 
     def __iter__(self) -> Iterator[np.ndarray]:
         return iter((self.frequencies, self.G))
@@ -243,7 +261,8 @@ class CrossSpectralMatrix:
         """The auto-spectra (diagonal) as a :class:`Spectrum`."""
         vals = np.real(np.einsum("fii->if", self.G))
         units = power_units(self.units, self.scaling)
-        return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings))
+        n_avg = None if self.n_averages is None else np.diag(self.n_averages)
+        return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings), n_avg)
 
     def select(self, channels) -> "CrossSpectralMatrix":
         """The sub-matrix of `channels` (names or indices), in that order.
@@ -270,6 +289,7 @@ class CrossSpectralMatrix:
             [self.units[i] for i in idx],
             self.scaling,
             dict(self.settings),
+            None if self.n_averages is None else self.n_averages[np.ix_(idx, idx)],
         )
 
     def band(self, fmin: float, fmax: float) -> "CrossSpectralMatrix":
@@ -283,10 +303,18 @@ class CrossSpectralMatrix:
         Returns
         -------
         CrossSpectralMatrix
+
+        Raises
+        ------
+        ValueError
+            If ``fmin > fmax``.
         """
+        if fmin > fmax:
+            raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
         m = (self.frequencies >= fmin) & (self.frequencies <= fmax)
         return CrossSpectralMatrix(
-            self.frequencies[m], self.G[m], self.channels, self.units, self.scaling, dict(self.settings)
+            self.frequencies[m], self.G[m], self.channels, self.units, self.scaling, dict(self.settings),
+            self.n_averages,
         )
 
 

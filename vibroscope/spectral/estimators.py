@@ -8,6 +8,7 @@ doubled, ``scaling='density'`` (unit²/Hz) or ``'spectrum'`` (unit²), periodic 
 
 from __future__ import annotations
 
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Literal, Sequence
 
@@ -39,7 +40,18 @@ __all__ = [
     "multiple_coherence",
     "spectrogram",
     "frf_kind",
+    "MIN_AVERAGES",
+    "FewAveragesWarning",
 ]
+
+#: fewer valid segments than this for a channel pair, after segments touching NaN/Inf were
+#: skipped, gives a :class:`FewAveragesWarning` (the relative standard deviation of a Welch
+#: auto-spectrum is about ``1/sqrt(K)``: 35 % at K = 8); none at all is a ValueError
+MIN_AVERAGES = 8
+
+
+class FewAveragesWarning(UserWarning):
+    """Few segments remain for a channel pair after skipping those with missing samples."""
 
 Channel = str | int
 
@@ -70,7 +82,11 @@ def _unpack(x: Signals | np.ndarray, fs: float | None) -> tuple[np.ndarray, floa
         if fs is not None and float(fs) != x.fs:
             raise ValueError(f"{fs=} contradicts the Signals' fs={x.fs}")
         return x.data, x.fs, x.channels, x.units
-    a = np.asarray(x, dtype=float)
+    a = np.asarray(x)
+    if np.iscomplexobj(a):
+        raise TypeError(f"x must be real (got dtype {a.dtype}): pass the real and imaginary parts as "
+                        f"separate channels, or np.real(x) if the imaginary part is noise")
+    a = np.asarray(a, dtype=float)
     if a.ndim == 1:
         a = a[np.newaxis]
     if a.ndim != 2:
@@ -102,20 +118,63 @@ def _accumulate(data, fs, st, *, cross: bool, workers: int) -> CrossSpectralAccu
     return parts[0]
 
 
-def _settings_dict(fs, st, n_avg) -> dict:
+def _settings_dict(fs, st, n_avg, n_segments=None) -> dict:
     win = st.window_spec if isinstance(st.window_spec, (str, tuple)) else "custom"
-    return dict(fs=fs, nperseg=st.nperseg, noverlap=st.noverlap, nfft=st.nfft, window=win,
-                detrend=st.detrend, n_averages=n_avg)
+    out = dict(fs=fs, nperseg=st.nperseg, noverlap=st.noverlap, nfft=st.nfft, window=win,
+               detrend=st.detrend, n_averages=n_avg)
+    if n_segments is not None and n_segments != n_avg:
+        out["n_segments"] = n_segments
+    return out
+
+
+def _check_averages(acc: CrossSpectralAccumulator, channels: Sequence[str], *, cross: bool) -> np.ndarray:
+    """Valid segments per pair (``cross``) or per channel; raise when one has none, warn when few.
+
+    Returns the counts, shape (n, n) or (n,). Raises ValueError naming the channel(s) with no
+    segment free of NaN/Inf; warns (:class:`FewAveragesWarning`) when segments were skipped and
+    fewer than :data:`MIN_AVERAGES` remain for a pair.
+    """
+    cnt = acc.n_averages
+    if not cross:
+        cnt = np.diag(cnt).copy()
+    total = acc.n_segments
+    if np.all(cnt == total):
+        return cnt
+    nper = acc.settings.nperseg
+    diag = np.diag(acc.n_averages)
+    for i in range(len(channels)):
+        if diag[i] == 0:
+            raise ValueError(
+                f"channel {channels[i]!r} has no segment of nperseg={nper} samples free of NaN/Inf "
+                f"(all {total} segments touch a missing sample): use a shorter nperseg, or drop the channel")
+    if cross:
+        zi, zj = np.nonzero(np.triu(cnt == 0, 1))
+        if zi.size:
+            i, j = int(zi[0]), int(zj[0])
+            raise ValueError(
+                f"channels {channels[i]!r} and {channels[j]!r} have no common segment of nperseg={nper} "
+                f"samples free of NaN/Inf (their gaps alternate): use a shorter nperseg")
+    few = np.argwhere(np.triu(cnt < MIN_AVERAGES)) if cross else np.argwhere(cnt < MIN_AVERAGES)
+    if few.size:
+        k = few[0]
+        what = (f"channel {channels[k[0]]!r}" if (not cross or k[0] == k[1])
+                else f"channels {channels[k[0]]!r} and {channels[k[1]]!r}")
+        kk = int(cnt[tuple(k)])
+        warnings.warn(f"only {kk} averages remain for {what} after skipping segments with NaN/Inf "
+                      f"({total - kk} of {total} skipped): the spectra have a high variance (about "
+                      f"{100 / np.sqrt(kk):.0f} %); use a shorter nperseg", FewAveragesWarning, stacklevel=4)
+    return cnt
 
 
 def _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling, workers, *, cross: bool):
-    """Validate, then one pass of the engine: (accumulator, channels, units, settings dict)."""
+    """Validate, then one pass of the engine: (accumulator, channels, units, settings dict, counts)."""
     data, fs, channels, units = _unpack(x, fs)
     check_option("scaling", scaling, ("density", "spectrum"))
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
                           detrend=detrend, nfft=nfft)
     acc = _accumulate(data, fs, st, cross=cross, workers=workers)
-    return acc, channels, units, _settings_dict(fs, st, acc.n_segments)
+    cnt = _check_averages(acc, channels, cross=cross)
+    return acc, channels, units, _settings_dict(fs, st, int(cnt.min()), acc.n_segments), cnt
 
 
 @_fill_doc
@@ -150,8 +209,18 @@ def csd_matrix(
 
     Raises
     ------
+    TypeError
+        If `x` is complex (it is never cut silently to its real part).
     ValueError
-        If `nperseg` exceeds the record length, `noverlap` ∉ [0, nperseg), or an option is unknown.
+        If `fs` or `nperseg` is not positive, `nperseg` exceeds the record length, `noverlap` ∉
+        [0, nperseg), an option is unknown, or a channel (pair) has no segment free of NaN/Inf;
+        the message names the setting or channel and the remedy.
+
+    Warns
+    -----
+    FewAveragesWarning
+        When segments were skipped for missing samples and fewer than :data:`MIN_AVERAGES` (8)
+        remain for a pair.
 
     Notes
     -----
@@ -159,6 +228,11 @@ def csd_matrix(
     ``G_ij(f_k) = (2 / (K fs Σw²)) Σ_s conj(X_i,s(f_k)) X_j,s(f_k)`` for ``0 < f_k < fs/2`` (no
     doubling at DC and Nyquist); ``scaling='spectrum'`` uses ``(Σw)²`` in place of ``fs Σw²``
     (Welch 1967; Bendat & Piersol 2010, §11.5). Every segment is transformed once for all pairs.
+
+    Missing samples: a segment in which channel i or j holds a NaN or ±Inf is left out of
+    ``G_ij``, and K is that pair's own count of valid segments (``n_averages[i, j]`` of the
+    result); ``G[:, i, j]`` then equals ``scipy.signal.csd`` over those segments only. No sample
+    is interpolated. With unequal counts the entries come from different segment sets.
 
     References
     ----------
@@ -174,9 +248,9 @@ def csd_matrix(
     >>> round(float(G.G[1:-1, 0, 0].real.mean()), 4)  # white noise of unit variance: 2/fs per Hz
     0.002
     """
-    acc, channels, units, settings = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
-                                                 workers, cross=True)
-    return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), channels, units, scaling, settings)
+    acc, channels, units, settings, cnt = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
+                                                      workers, cross=True)
+    return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), channels, units, scaling, settings, cnt)
 
 
 @_fill_doc
@@ -212,14 +286,22 @@ def welch(
 
     Raises
     ------
+    TypeError
+        If `x` is complex.
     ValueError
+        As :func:`csd_matrix`; also when a channel has no segment free of NaN/Inf.
+
+    Warns
+    -----
+    FewAveragesWarning
         As :func:`csd_matrix`.
 
     Notes
     -----
     ``P(f_k) = (2 / (K fs Σw²)) Σ_s |X_s(f_k)|²``. With ``scaling='spectrum'`` a sine of amplitude
     A, centred on a bin, peaks at ``A²/2`` for any window; with ``'density'`` the integral
-    ``Σ P df`` is the mean square (Parseval).
+    ``Σ P df`` is the mean square (Parseval). Segments touching a NaN/Inf sample are skipped per
+    channel; ``Spectrum.n_averages`` gives each channel's count of segments used.
 
     References
     ----------
@@ -234,10 +316,10 @@ def welch(
     >>> round(float(s.values[0].max()), 6)   # A²/2
     2.0
     """
-    acc, channels, units, settings = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
-                                                 workers, cross=False)
+    acc, channels, units, settings, cnt = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
+                                                      workers, cross=False)
     return Spectrum(acc.frequencies(), acc.result(scaling), channels, _power_units(units, scaling), scaling,
-                    settings)
+                    settings, cnt)
 
 
 def amplitude_spectrum(
@@ -290,7 +372,7 @@ def amplitude_spectrum(
     amp = np.sqrt(sp.values)  # RMS of each line; peak = sqrt(2) RMS except at DC and Nyquist
     last = None if sp.settings["nfft"] % 2 else -1
     amp[:, 1:last] *= np.sqrt(2.0)
-    return Spectrum(sp.frequencies, amp, channels, units, "amplitude", dict(sp.settings))
+    return Spectrum(sp.frequencies, amp, channels, units, "amplitude", dict(sp.settings), sp.n_averages)
 
 
 def _resolve(G: CrossSpectralMatrix, chans: Sequence[Channel] | Channel) -> list[int]:
@@ -385,6 +467,12 @@ def frf(
     ``Hv = (Gyy − Gxx + sqrt((Gxx − Gyy)² + 4|Gxy|²)) / (2 Gyx)``, with ``|H1| ≤ |Hv| ≤ |H2|``
     (Bendat & Piersol 2010, §6.1.4, §9.1; Rocklin, Crowley & Vold 1985 for Hv).
 
+    With missing samples (NaN/Inf) every entry ``G_ij`` of the spectral matrix is averaged over
+    the segments valid for its pair and divided by its own count, and H1, H2, Hv and the coherence
+    all use these entries: with unequal counts ``Gxx``, ``Gxy`` and ``Gyy`` come from different
+    segment sets (so γ² may slightly exceed 1 before clipping). ``settings['n_averages']`` is the
+    smallest count over the pairs used.
+
     References
     ----------
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
@@ -426,6 +514,9 @@ def frf(
                 v = V[:, :, 0]  # smallest eigenvalue's eigenvector
                 H[:, k, :] = -(v[:, :ni] / v[:, ni : ni + 1])
         coh = _multiple_coherence(Sxx, Sxy, Syy)
+    settings = dict(G.settings)
+    if G.n_averages is not None:
+        settings["n_averages"] = int(G.n_averages[np.ix_(ii + oo, ii + oo)].min())
     in_units = [G.units[i] for i in ii]
     out_units = [G.units[o] for o in oo]
     k_inf, unit = frf_kind(in_units, out_units)
@@ -433,7 +524,7 @@ def frf(
         check_option("kind", kind, FRF_KINDS)
         k_inf, unit = kind, _KIND_UNITS[kind]
     return FRF(G.frequencies, H, coh, [G.channels[i] for i in ii], [G.channels[o] for o in oo],
-               estimator, k_inf, unit, dict(G.settings))
+               estimator, k_inf, unit, settings)
 
 
 def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:

@@ -377,15 +377,19 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     if nperseg < 8:
         raise ValueError(f"the record is too short for a spectrum: {n=} samples")
     noverlap = nperseg // 2
-    f, P = scipy.signal.welch(np.asarray(signals.data) * scale[:, None], fs, window="hann", nperseg=nperseg,
-                              noverlap=noverlap, detrend="linear", scaling="density", axis=-1)
+    from vibroscope.spectral.estimators import welch
+
+    # NaN-aware: segments touching a missing sample are skipped (see welch)
+    sp = welch(np.asarray(signals.data) * scale[:, None], fs, window="hann", nperseg=nperseg,
+               noverlap=noverlap, detrend="linear", scaling="density")
+    f, P = sp.frequencies, sp.values
     df = float(f[1] - f[0])
     if df > f_lo / 4:
         notes.append(f"record of {n / fs:g} s resolves only {df:.3g} Hz: the band edge at {f_lo:g} Hz is coarse")
     sel = (f >= f_lo) & (f <= f_hi) & (f > 0)
     pv = P[:, sel] / (2 * np.pi * f[sel]) ** 2
     v_rms = np.sqrt(np.sum(pv, axis=-1) * df)
-    n_avg = 1 + (n - nperseg) // (nperseg - noverlap) if nperseg < n else 1
+    n_avg = int(sp.n_averages.min())
     settings = dict(fs=fs, nperseg=int(nperseg), noverlap=int(noverlap), window="hann", detrend="linear",
                     df_hz=df, n_averages=int(n_avg))
     method = "Welch PSD of acceleration / (2πf)², integrated over the band (Parseval)"

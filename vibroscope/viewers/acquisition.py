@@ -39,8 +39,9 @@ def _trace(ax, t: np.ndarray, x: np.ndarray, color: str, max_points: int) -> Non
     if x.size > max_points:
         nb = max_points // 2
         edges = np.linspace(0, x.size, nb + 1).astype(int)
-        lo = np.minimum.reduceat(x, edges[:-1])
-        hi = np.maximum.reduceat(x, edges[:-1])
+        with np.errstate(invalid="ignore"):  # over the present samples; an all-missing bin breaks
+            lo = np.fmin.reduceat(x, edges[:-1])
+            hi = np.fmax.reduceat(x, edges[:-1])
         ax.fill_between(t[edges[:-1]], lo, hi, color=color, lw=0, step="post")
     else:
         ax.plot(t, x, lw=0.8, color=color)

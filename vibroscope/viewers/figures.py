@@ -416,6 +416,9 @@ def plot_singular_values(frequencies, S, modes=None, *, ax=None, n_sv: int = 3, 
 def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 1600):
     """Time series of the first channels, one panel each, min/max-decimated for size.
 
+    Missing samples (NaN, ±Inf: logging gaps, lost chunks, masked faults) are never bridged: the
+    trace breaks there and each gap is shaded (``axvspan``, labelled "gap (no data)").
+
     Parameters
     ----------
     signals : Signals
@@ -425,7 +428,8 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
     max_channels : int, optional
         At most this many channels are drawn (the title says how many there are).
     max_points : int, optional
-        Longer records are drawn as their per-bin minimum and maximum envelope.
+        Longer records are drawn as their per-bin minimum and maximum envelope (over the present
+        samples; a bin with none is a break).
 
     Returns
     -------
@@ -439,17 +443,28 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
         fig.clf()
     axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False).ravel())
     t = np.arange(signals.n_samples) / signals.fs
+    n_gaps = 0
     for k, ax in enumerate(axes):
-        x = np.asarray(signals.data[k])
+        x = np.asarray(signals.data[k], dtype=float)
+        finite = np.isfinite(x)
+        if not finite.all():
+            x = np.where(finite, x, np.nan)
         if x.size > max_points:
             nb = max_points // 2
             edges = np.linspace(0, x.size, nb + 1).astype(int)
-            lo = np.minimum.reduceat(x, edges[:-1])
-            hi = np.maximum.reduceat(x, edges[:-1])
+            with np.errstate(invalid="ignore"):
+                lo = np.fmin.reduceat(x, edges[:-1])
+                hi = np.fmax.reduceat(x, edges[:-1])
             tb = t[edges[:-1]]
             ax.fill_between(tb, lo, hi, color=f"C{k % 10}", lw=0)
         else:
             ax.plot(t, x, lw=0.8, color=f"C{k % 10}")
+        spans = gap_spans(finite, signals.fs, min_width=signals.duration / 300)  # visible when short
+        for j, (a, b) in enumerate(spans):
+            ax.axvspan(a, b, color="0.5", alpha=0.35, lw=0, label="gap (no data)" if j == 0 else None)
+        if spans:
+            n_gaps += len(spans)
+            ax.legend(loc="upper right", fontsize=7)
         u = signals.units[k]
         ax.set_ylabel(f"[{u}]" if u else "[-]", fontsize=8)
         ax.set_title(_short(signals.channels[k], 60), fontsize=8, loc="left")
@@ -457,8 +472,51 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
     t0 = f"{signals.t0:.3f}" if abs(signals.t0) >= 1e6 else f"{signals.t0:g}"
     axes[-1].set_xlabel(f"time since t0 = {t0} s [s]")
     more = f" (first {n} of {signals.n_channels})" if signals.n_channels > n else ""
-    fig.suptitle(f"Time series, fs = {signals.fs:g} Hz{more}", fontsize=10)
+    gaps = f"; shaded: {n_gaps} gaps without data" if n_gaps else ""
+    fig.suptitle(f"Time series, fs = {signals.fs:g} Hz{more}{gaps}", fontsize=10)
     return fig
+
+
+def gap_spans(present: np.ndarray, fs: float, *, min_width: float = 0.0, max_spans: int = 200) -> list:
+    """Time spans ``(start_s, stop_s)`` of the runs of missing samples, for drawing.
+
+    A gap starts at its first missing sample and ends at the next present one (``stop / fs``).
+    Spans closer than `min_width` (s) are merged, each is widened to at least `min_width` so that
+    it shows, and at most `max_spans` are returned (the closest merged first).
+
+    Parameters
+    ----------
+    present : ndarray of bool, shape (n_samples,)
+        True where the sample is present (finite).
+    fs : float
+        Sampling frequency in Hz.
+    min_width : float, optional
+        Narrowest span drawn, in s; default 0.
+    max_spans : int, optional
+        Most spans returned; default 200.
+
+    Returns
+    -------
+    list of (float, float)
+        In s from the first sample.
+    """
+    d = np.diff(np.concatenate(([0], (~np.asarray(present, bool)).astype(np.int8), [0])))
+    a = np.flatnonzero(d == 1) / fs
+    b = np.flatnonzero(d == -1) / fs
+    if a.size == 0:
+        return []
+    spans = [[a[0], b[0]]]
+    for s0, s1 in zip(a[1:], b[1:]):
+        if s0 - spans[-1][1] < min_width:
+            spans[-1][1] = s1
+        else:
+            spans.append([s0, s1])
+    while len(spans) > max_spans:
+        gaps = np.diff([s[0] for s in spans])  # merge the closest neighbours
+        j = int(np.argmin(gaps))
+        spans[j][1] = spans[j + 1][1]
+        del spans[j + 1]
+    return [(float(s0), float(max(s1, s0 + min_width))) for s0, s1 in spans]
 
 
 def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):

@@ -415,16 +415,38 @@ def _open_recording(application_id: str, recording_id: str | None, recording_nam
 
 
 def _log_time_series(rec, prefix: str, sig) -> None:
-    """Every channel of `sig` under ``/<prefix>/<channel>`` on the ``time`` timeline (exact float64)."""
+    """Every channel of `sig` under ``/<prefix>/<channel>`` on the ``time`` timeline (exact float64).
+
+    Missing samples (NaN, ±Inf) are not sent: the series is broken at each gap by a
+    :class:`rerun.Clear` at the gap's first missing sample (scalar plots draw a clear as a hole,
+    never a line across the gap), and each gap is a ``WARN`` entry of the :class:`rerun.TextLog`
+    ``/<prefix>/gaps`` at its start time: ``"gap (no data) in <channel>: <start>–<stop> s
+    (<n> samples)"``.
+    """
     import rerun as rr
 
     t = np.arange(sig.n_samples) / sig.fs
     t_ns = np.round(t * 1e9).astype(np.int64).astype("timedelta64[ns]")  # rounded, not truncated
     for k, ch in enumerate(sig.channels):
         ent = channel_entity(prefix, ch)
+        x = np.asarray(sig.data[k], dtype=np.float64)
         rec.log(ent, rr.SeriesLines(names=f"{ch} [{sig.units[k] or '-'}]"), static=True)
-        rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
-                         columns=rr.Scalars.columns(scalars=np.asarray(sig.data[k], dtype=np.float64)))
+        present = np.isfinite(x)
+        if present.all():
+            rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
+                             columns=rr.Scalars.columns(scalars=x))
+            continue
+        rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns[present])],
+                         columns=rr.Scalars.columns(scalars=x[present]))
+        d = np.diff(np.concatenate(([0], (~present).astype(np.int8), [0])))
+        starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+        log_ent = channel_entity(prefix, "gaps")
+        for a, b in zip(starts, stops):
+            rec.set_time("time", duration=t_ns[a])
+            rec.log(ent, rr.Clear(recursive=False))
+            rec.log(log_ent, rr.TextLog(f"gap (no data) in {ch}: {t[a]:.6g}–{b / sig.fs:.6g} s ({b - a} samples)",
+                                        level="WARN"))
+        rec.reset_time()
 
 
 def _log_psd(rec, psd) -> None:
