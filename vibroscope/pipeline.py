@@ -362,7 +362,10 @@ def analyse_signals(
     sig = signals.select(chans)
     present = np.isfinite(sig.data)
     n_valid = int(present.all(axis=0).sum())
-    faults = detect_faults(sig, input=input, nperseg=nperseg or default_nperseg(max(n_valid, 1), sig.fs))
+    # the automatic nperseg is halved to fit between gaps (_nperseg_for): only a stretch shorter than
+    # what it can reach stops the analysis
+    nper_check = nperseg or _nperseg_for(sig, default_nperseg(max(n_valid, 1), sig.fs))
+    faults = detect_faults(sig, input=input, nperseg=nper_check)
     flat = [f.channel for f in faults if f.action == "drop"]
     if flat:  # e.g. the unused axes of a one-axis IMU: no information, singular spectra
         more = f" and {len(flat) - 3} more" if len(flat) > 3 else ""
@@ -410,7 +413,12 @@ def analyse_signals(
             notes.append(band_note + " (set --fmin/--fmax to choose)")
     undecimated = sig
     if fmax is not None and fmax < 0.4 * sig.fs:
-        sig = decimate(sig, fmax)
+        dec = decimate(sig, fmax)
+        if not gappy or _clean_segments(dec, 16) >= 8:
+            sig = dec
+        else:  # the decimation filter's settling eats short stretches between gaps
+            notes.append(f"not decimated to the {fmax:.4g} Hz band: the stretches between gaps are too short "
+                         f"for the decimation filter to settle")
     fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
     if input:
         fw, P = _quick_welch(sig[input][None], sig.fs, _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs)))
@@ -482,18 +490,22 @@ def _nperseg_for(sig: Signals, nperseg: int) -> int:
     """`nperseg`, halved (a power of two, at least 16) until at least 8 Welch segments (50 %
     overlap, on the record's grid) of every channel hold no missing sample; unchanged for a
     gap-free record."""
-    missing = ~np.isfinite(sig.data)
-    if not missing.any():
+    if np.isfinite(sig.data).all():
         return nperseg
-    rows = missing[missing.any(axis=1)]
-    cm = np.concatenate((np.zeros((rows.shape[0], 1), np.int64), np.cumsum(rows, axis=1)), axis=1)
     n = int(nperseg)
-    while n > 16:
-        starts = np.arange(0, sig.n_samples - n + 1, n - n // 2)
-        if np.count_nonzero(cm[:, starts + n] == cm[:, starts], axis=1).min() >= 8:
-            break
+    while n > 16 and _clean_segments(sig, n) < 8:
         n //= 2
     return n
+
+
+def _clean_segments(sig: Signals, n: int) -> int:
+    """Fewest Welch segments of `n` samples (50 % overlap) free of missing samples, over the channels."""
+    missing = ~np.isfinite(sig.data)
+    if sig.n_samples < n:
+        return 0
+    cm = np.concatenate((np.zeros((missing.shape[0], 1), np.int64), np.cumsum(missing, axis=1)), axis=1)
+    starts = np.arange(0, sig.n_samples - n + 1, n - n // 2)
+    return int(np.count_nonzero(cm[:, starts + n] == cm[:, starts], axis=1).min())
 
 
 def _quick_welch(data: np.ndarray, fs: float, nperseg: int) -> tuple[np.ndarray, np.ndarray]:
