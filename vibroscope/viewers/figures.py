@@ -58,6 +58,12 @@ def _distinct_labels(names: Sequence[str], n: int = 16) -> list[str]:
     return [_short(x, n) for x in out]
 
 
+def _legend_if(ax, **kw) -> None:
+    """``ax.legend(**kw)`` when something on `ax` has a label (no empty legend, no warning)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(**kw)
+
+
 def _legend(ax, n: int) -> None:
     if n == 0:
         return
@@ -171,7 +177,7 @@ def plot_frf(frf, *, output: str | int = 0, input: str | int = 0, fig=None):
     unit = frf.units or "unit"
     axm.plot(f, mag, lw=1.1, color="C0", label=f"{frf.estimator}")
     axm.set_ylabel(f"|H| [dB re 1 {unit}]")
-    axm.legend(fontsize=8, loc="best")
+    _legend_if(axm, fontsize=8, loc="best")
     axp.plot(f, np.degrees(np.angle(h)), lw=1.0, color="C1")
     axp.set_ylabel("phase [deg]")
     axp.set_ylim(-185, 185)
@@ -248,7 +254,7 @@ def plot_mode_shapes(modal, coords: Mapping[str, Any] | None = None, *, fig=None
         ax.set_title(title, fontsize=9)
         ax.grid(True, alpha=0.4)
         if r == 0:
-            ax.legend(fontsize=7, loc="best")
+            _legend_if(ax, fontsize=7, loc="best")
     fig.suptitle(f"Mode shapes ({getattr(modal, 'method', '')}, {len(points)} points)", fontsize=11)
     return fig
 
@@ -409,7 +415,7 @@ def plot_singular_values(frequencies, S, modes=None, *, ax=None, n_sv: int = 3, 
     if f.size:
         ax.set_xlim(f[0], f[-1])
     ax.grid(True, alpha=0.4)
-    ax.legend(fontsize=8, loc="best")
+    _legend_if(ax, fontsize=8, loc="best")
     return ax
 
 
@@ -464,7 +470,7 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
             ax.axvspan(a, b, color="0.5", alpha=0.35, lw=0, label="gap (no data)" if j == 0 else None)
         if spans:
             n_gaps += len(spans)
-            ax.legend(loc="upper right", fontsize=7)
+            _legend_if(ax, loc="upper right", fontsize=7)
         u = signals.units[k]
         ax.set_ylabel(f"[{u}]" if u else "[-]", fontsize=8)
         ax.set_title(_short(signals.channels[k], 60), fontsize=8, loc="left")
@@ -571,7 +577,7 @@ def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
         ax.set_title("Stabilization diagram (LSCF / polyMAX, polynomial order)")
     else:
         ax.set_title(f"Stabilization diagram (SSI-COV, {st.settings.get('n_lags', '?')} block rows)")
-    ax.legend(loc="upper left", fontsize=8, framealpha=0.9)
+    _legend_if(ax, loc="upper left", fontsize=8, framealpha=0.9)
     ax.grid(alpha=0.3)
     return ax
 
@@ -639,13 +645,13 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
             a.grid(alpha=0.3)
             a.set_xlim(fs_.min(), fs_.max())
         if o == 0:
-            ax.legend(fontsize=8, loc="best")
+            _legend_if(ax, fontsize=8, loc="best")
     err_ax.set_xlabel("frequency [Hz]")
     err_ax.set_ylabel("|H − Ĥ| / |H| [dB]")
     err_ax.set_xlim(fs_.min(), fs_.max())
     err_ax.grid(alpha=0.3)
     if len(frf.outputs) > 1:
-        err_ax.legend(fontsize=7, ncol=2, loc="upper right")
+        _legend_if(err_ax, fontsize=7, ncol=2, loc="upper right")
     axes[n, 1].axis("off")
     rel = np.sqrt(tot_num / tot_den) if tot_den > 0 else np.nan
     axes[n, 1].text(0.05, 0.5, f"overall relative error\n‖H − Ĥ‖ / ‖H‖ = {100 * rel:.2f} %\n"
