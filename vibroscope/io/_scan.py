@@ -1,20 +1,58 @@
 """Record-level MCAP scanning that survives damage.
 
-The summary section is used when it is intact (its CRC checks out and its chunk indexes
-point at chunk records): its channels are known up front and chunks holding none of the
-wanted topics are passed over. The data section is then read in one linear pass, record by
-record, with every chunk's CRC-32 checked (``mcap.reader``/``mcap.stream_reader`` check
-CRCs only with ``validate_crcs=True``; here always), and the data section CRC when the
-writer stored one. A damaged summary, or none, just means every chunk is read. A chunk that fails to
-decompress or whose CRC does not match is skipped whole and reported with its byte offset;
-a record cut off by the end of the file stops the scan and is reported. Everything before
-the damage is kept. Message records are not decoded here: they are indexed as arrays
-(channel id, log time, payload offset and length) into their chunk's bytes, so that the
-decoders can work on whole blocks with numpy.
+Three reading paths (``scan(..., mode=...)``), with one result:
+
+``"stream"``
+    One linear pass over the records from byte 8, never looking at the summary section.
+``"indexed"``
+    Chunks located through the summary section's chunk indexes (each chunk read at the
+    offset its index gives, its message indexes passed over by their stated length); the
+    records between chunks are still read, so messages outside chunks are found. When the
+    summary is missing or does not validate, the linear pass is used instead and
+    ``ScanResult.warnings`` says so.
+``"auto"`` (default)
+    The linear pass, helped by the summary when it validates: its channels are known up
+    front, chunks holding none of the wanted topics are passed over, and its chunk indexes
+    serve to recover after damage.
+
+The summary *validates* when it parses, lies inside the file, and its CRC-32 matches (a
+summary without a CRC must also have every chunk index pointing at a chunk opcode).
+
+Every chunk's CRC-32 of its uncompressed data is checked (``mcap.reader`` does so only
+with ``validate_crcs=True``; here always), and the data section CRC when the writer stored
+one. A chunk that fails to parse, decompress or match its CRC is skipped whole and
+reported with its byte offset and, when its message indexes (after it, or in the summary's
+chunk index) say so, the topics and number of messages lost.
+
+Resynchronisation: a damaged record — an opcode of 0x00 or in the undefined range
+0x10–0x7F, a length running past the end of the file (or over a chunk the summary lists),
+a record that does not parse (Header, Schema, Channel, Attachment, Metadata, Message
+Index), a summary-only record, a footer or data end record in the middle of the data
+section — is reported (byte offset, what was found) and the scan resumes at the next valid
+record: the next offset where a Chunk record (opcode 0x06) parses and decompresses to its
+stated size and CRC, or, when the summary validates, the next chunk offset its chunk
+indexes list (whichever comes first). A valid chunk found *behind* the damaged record (a
+damaged length that still looked well framed led the walk into it) is gone back to. A
+chunk whose record header is damaged but which the summary's chunk index knows is read
+through the index when its body agrees with the index and its CRC; a record with a
+damaged opcode whose body is exactly a valid chunk is read as that chunk. A record length
+longer than the record's own fields, followed where the fields end by well-framed
+records, is taken as damaged and the walk goes on where the fields end. A chunk that
+holds fewer messages than its message indexes list is reported. Chunks lost in the bytes
+passed over are reported one by one from the summary when it knows them, else with the
+count of the intact message index records that end where the scan resumed; when the
+summary's statistics count more messages than were found and no damage explains it, that
+too is reported. Nothing in a damaged byte range is ever decoded, and no message outside
+a chunk is taken from bytes the walk later finds to belong to a chunk.
+
+Message records are not decoded here: they are indexed as arrays (channel id, log time,
+payload offset and length) into their chunk's bytes, so that the decoders can work on
+whole blocks with numpy.
 """
 
 from __future__ import annotations
 
+import bisect
 import mmap
 import os
 import struct
@@ -22,18 +60,25 @@ import zlib
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, ChunkIndex, Header, Schema
+from mcap.records import Attachment, Channel, Chunk, ChunkIndex, Header, Metadata, Schema, Statistics
 
 from vibroscope.errors import LogFormatError
 
 MAGIC = b"\x89MCAP0\r\n"
 _MSG_HDR = struct.Struct("<HIQQ")  # channel_id, sequence, log_time, publish_time
 _REC_HDR = struct.Struct("<BQ")
+_FOOTER_LEN = 1 + 8 + 20
+_MAX_CHUNK_USIZE = 1 << 32  # a stated uncompressed size beyond this is damage, not data
+_COMPRESSIONS = (b"", b"zstd", b"lz4")
+MODES = ("auto", "stream", "indexed")
+_SUMMARY_ONLY_OPS = {Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX, Opcode.STATISTICS,
+                     Opcode.SUMMARY_OFFSET}
+_DATA_OPS = {Opcode.CHUNK, Opcode.MESSAGE, Opcode.MESSAGE_INDEX, Opcode.ATTACHMENT, Opcode.METADATA, Opcode.HEADER}
 
 try:  # optional codecs of mcap
     import zstandard as _zstd
@@ -52,6 +97,11 @@ def _opname(op: int) -> str:
         return f"opcode 0x{op:02x}"
 
 
+def _valid_opcode(op: int) -> bool:
+    """Defined opcodes (0x01–0x0F) and the private range (0x80–0xFF); 0x00 and 0x10–0x7F are damage."""
+    return 0x01 <= op <= 0x0F or op >= 0x80
+
+
 @dataclass
 class Block:
     """Messages found in one container (a chunk, or the loose messages of the data section)."""
@@ -68,8 +118,55 @@ class Block:
         return int(self.channel_id.size)
 
 
+@dataclass(frozen=True)
+class Damage:
+    """One damaged place of a file and what was lost there.
+
+    Parameters
+    ----------
+    offset : int
+        Byte offset of the damaged record (or of the chunk lost).
+    reason : str
+        What was found there, and where the scan resumed.
+    messages : int or None, optional
+        Messages lost, when the message indexes (after the chunk, or listed by the summary)
+        say so; None when unknown.
+    channel_ids : tuple of int, optional
+        Channels of the messages lost, when known.
+    """
+
+    offset: int
+    reason: str
+    messages: int | None = None
+    channel_ids: tuple[int, ...] = ()
+
+    def describe(self, channels: dict[int, Channel]) -> str:
+        """The reason with the topics and message count lost (``"...; topics /a, /b (12 messages lost)"``)."""
+        text = self.reason
+        if self.channel_ids:
+            topics = sorted({channels[c].topic for c in self.channel_ids if c in channels})
+            unknown = [f"channel id {c}" for c in self.channel_ids if c not in channels]
+            names = ([f"topic{'s' if len(topics) > 1 else ''} {', '.join(topics)}"] if topics else []) + unknown
+            text += "; " + ", ".join(names)
+        if self.messages is not None:
+            text += f" ({self.messages} messages lost)"
+        return text
+
+
 @dataclass
 class ScanResult:
+    """What a scan found: schemas, channels, message blocks, and the damage.
+
+    ``skipped`` lists (byte offset, reason) for every damaged place, in file order; a reason
+    ends in ``"; topic /t (N messages lost)"`` when the loss is known (channel ids stand
+    for topics no channel record names). ``damage`` holds the same as :class:`Damage`
+    entries. ``warnings`` carries what cost no message (a damaged header, a chunk read
+    through the summary's index, a summary not used, a data section CRC mismatch), each
+    starting with the file's path. ``mode`` is the reading path asked for; ``indexed`` says
+    whether a valid summary was used; ``recovered`` counts chunks read through the index
+    despite a damaged record header.
+    """
+
     path: Path
     file_size: int
     header: Header | None = None
@@ -81,43 +178,73 @@ class ScanResult:
     complete: bool = False  # footer and closing magic seen
     indexed: bool = False  # a valid summary (chunk indexes) was used
     chunks_skipped_by_index: int = 0  # chunks not decompressed: none of the wanted topics in them
+    mode: str = "auto"  # the reading path taken: "stream", "indexed" or "auto"
+    damage: list[Damage] = field(default_factory=list)  # every damaged place, in file order
+    recovered: int = 0  # chunks with a damaged record header read through the summary's index
 
 
-def _read_summary(data: Any, n: int) -> tuple[dict, dict, dict[int, set[int]]] | None:
-    """Schemas, channels and {chunk offset: channel ids} from the summary section, or None
-    when there is none or it fails any check (the caller then scans everything)."""
-    fsize = 1 + 8 + 20
-    if n < 8 + fsize + 8 or bytes(data[n - 8 : n]) != MAGIC:
-        return None
-    fpos = n - 8 - fsize
+@dataclass
+class _Summary:
+    start: int
+    schemas: dict[int, Schema]
+    channels: dict[int, Channel]
+    chunks: dict[int, ChunkIndex]
+    message_count: int | None
+
+
+def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
+    """The summary section, or None and why not (None, None: the file has none).
+
+    Every record is parsed defensively: a summary that does not parse, lies outside the file,
+    fails its CRC-32, or (without a CRC) has a chunk index not pointing at a chunk opcode is
+    not used.
+    """
+    if n < 8 + _FOOTER_LEN + 8 or bytes(data[n - 8 : n]) != MAGIC:
+        return None, None
+    fpos = n - 8 - _FOOTER_LEN
     op, length = _REC_HDR.unpack_from(data, fpos)
     if op != Opcode.FOOTER or length != 20:
-        return None
+        return None, f"no footer record at byte offset {fpos} (found {_opname(op)}, length {length})"
     summary_start, _sos, summary_crc = struct.unpack_from("<QQI", data, fpos + 9)
-    if summary_start == 0 or not 8 <= summary_start <= fpos:
-        return None
-    if summary_crc != 0 and zlib.crc32(memoryview(data)[summary_start : fpos + 9 + 16]) != summary_crc:
-        return None
-    schemas, channels, chunks = {}, {}, {}
+    if summary_start == 0:
+        return None, None
+    if not 8 <= summary_start <= fpos:
+        return None, f"the footer's summary start {summary_start} lies outside the file"
+    if summary_crc != 0:
+        crc = zlib.crc32(memoryview(data)[summary_start : fpos + 9 + 16])
+        if crc != summary_crc:
+            return None, (f"summary section at byte offset {summary_start} fails its CRC-32 "
+                          f"(stored {summary_crc:#010x}, computed {crc:#010x})")
+    schemas, channels, chunks, count = {}, {}, {}, None
     pos = summary_start
     while pos < fpos:
+        if pos + 9 > fpos:
+            return None, f"summary record header cut off at byte offset {pos}"
         op, length = _REC_HDR.unpack_from(data, pos)
         body, end = pos + 9, pos + 9 + length
-        if end > fpos:
-            return None
-        if op == Opcode.SCHEMA:
-            sc = _parse(Schema, data[body:end])
-            schemas[sc.id] = sc
-        elif op == Opcode.CHANNEL:
-            ch = _parse(Channel, data[body:end])
-            channels[ch.id] = ch
-        elif op == Opcode.CHUNK_INDEX:
-            ci = _parse(ChunkIndex, data[body:end])
-            if ci.chunk_start_offset >= summary_start or data[ci.chunk_start_offset] != Opcode.CHUNK:
-                return None
-            chunks[ci.chunk_start_offset] = set(ci.message_index_offsets)
+        if end > fpos or not _valid_opcode(op):
+            return None, f"summary record at byte offset {pos} is damaged ({_opname(op)}, length {length})"
+        try:
+            if op == Opcode.SCHEMA:
+                sc = _parse(Schema, data[body:end])
+                schemas[sc.id] = sc
+            elif op == Opcode.CHANNEL:
+                ch = _parse(Channel, data[body:end])
+                channels[ch.id] = ch
+            elif op == Opcode.CHUNK_INDEX:
+                ci = _parse(ChunkIndex, data[body:end])
+                o = ci.chunk_start_offset
+                if not (8 <= o and ci.chunk_length >= 9 and o + ci.chunk_length <= summary_start):
+                    return None, f"chunk index at byte offset {pos} points outside the data section ({o})"
+                if summary_crc == 0 and data[o] != Opcode.CHUNK:
+                    return None, f"chunk index at byte offset {pos} points at {_opname(data[o])}, not a chunk ({o})"
+                chunks[o] = ci
+            elif op == Opcode.STATISTICS:
+                count = _parse(Statistics, data[body:end]).message_count
+        except Exception as exc:  # noqa: BLE001 - any parse failure invalidates the summary
+            return None, f"summary {_opname(op)} record at byte offset {pos} does not parse ({type(exc).__name__}: {exc})"
         pos = end
-    return schemas, channels, chunks
+    return _Summary(summary_start, schemas, channels, chunks, count), None
 
 
 def _parse(cls: Any, body: bytes) -> Any:
@@ -126,7 +253,13 @@ def _parse(cls: Any, body: bytes) -> Any:
 
 def _read_chunk(mv: memoryview, body: int, end: int) -> Chunk:
     """Parse a Chunk record without copying its (possibly large) data."""
+    if end - body < 40:
+        raise ValueError(f"chunk record of {end - body} bytes is shorter than its fixed fields (40)")
     start_t, end_t, usize, crc, clen = struct.unpack_from("<QQQII", mv, body)
+    if body + 40 + clen > end:
+        raise ValueError(f"compression name length {clen} runs past the record end")
+    if usize > _MAX_CHUNK_USIZE:
+        raise ValueError(f"uncompressed size {usize} is implausible")
     p = body + 32
     comp = bytes(mv[p : p + clen]).decode()
     p += clen
@@ -152,11 +285,12 @@ def _decompress(chunk: Chunk) -> bytes:
     raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
 
 
-def _index_messages(buf: bytes, pos: int, end: int, out_records: list) -> tuple[np.ndarray, ...]:
+def _index_messages(buf: bytes, pos: int, end: int, out_records: list, fast: bool = True) -> tuple[np.ndarray, ...]:
     """Index the records of `buf[pos:end]`; Schema/Channel records go to `out_records`.
 
     Message records of one equal length laid end to end (the usual case for a sensor
-    topic) are indexed with numpy in one step; anything else record by record.
+    topic) are indexed with numpy in one step (unless `fast` is false); anything else
+    record by record.
     """
     cids: list[np.ndarray] = []
     logs: list[np.ndarray] = []
@@ -177,7 +311,7 @@ def _index_messages(buf: bytes, pos: int, end: int, out_records: list) -> tuple[
 
     unpack_rec = _REC_HDR.unpack_from
     unpack_msg = _MSG_HDR.unpack_from
-    tried_periodic = False
+    tried_periodic = not fast
     while pos < end:
         if pos + 9 > end:
             raise ValueError(f"record header cut off at {pos} of {end} bytes")
@@ -217,6 +351,33 @@ def _index_messages(buf: bytes, pos: int, end: int, out_records: list) -> tuple[
     return (np.concatenate(cids), np.concatenate(logs), np.concatenate(starts), np.concatenate(lens))
 
 
+def _fields_end(data: Any, op: int, body: int, end: int) -> int | None:
+    """Where the fields of a Header, Schema, Channel, Message Index or Data End record end
+    (from their own length prefixes), or None for other records or when they run past `end`."""
+    try:
+        if op == Opcode.HEADER:
+            p = body
+            for _ in range(2):
+                p += 4 + struct.unpack_from("<I", data, p)[0]
+        elif op == Opcode.SCHEMA:
+            p = body + 2
+            for _ in range(3):
+                p += 4 + struct.unpack_from("<I", data, p)[0]
+        elif op == Opcode.CHANNEL:
+            p = body + 4
+            for _ in range(3):
+                p += 4 + struct.unpack_from("<I", data, p)[0]
+        elif op == Opcode.MESSAGE_INDEX:
+            p = body + 6 + struct.unpack_from("<I", data, body + 2)[0]
+        elif op == Opcode.DATA_END:
+            p = body + 4
+        else:
+            return None
+    except struct.error:
+        return None
+    return p if p <= end else None
+
+
 def _open(path: Path) -> Any:
     """The file's bytes: a read-only map (chunk data and loose payloads are sliced without copying)."""
     try:
@@ -227,103 +388,237 @@ def _open(path: Path) -> Any:
         raise LogFormatError(f"{path}: cannot read ({exc})") from exc
 
 
-def _use_summary(res: ScanResult, data: Any, topics: Any) -> dict[int, set[int]]:
-    """Take schemas and channels from an intact summary section; returns the chunks (offset:
-    channel ids) that hold none of the wanted `topics` and need not be decompressed."""
-    summ = _read_summary(data, len(data))
-    if summ is None:
-        return {}
-    schemas, channels, chunks = summ
-    res.indexed = True
-    res.schemas.update(schemas)
-    res.channels.update(channels)
-    if topics is None:
-        return {}
-    wanted = {cid for cid, ch in channels.items() if ch.topic in topics}
-    return {off: ids for off, ids in chunks.items() if ids and not ids & wanted}
+class _Scanner:
+    """Walks the records of the data section, filling a :class:`ScanResult`."""
 
-
-class _DataSection:
-    """One linear pass over the records of the data section, filling a :class:`ScanResult`."""
-
-    def __init__(self, res: ScanResult, data: Any, validate_crcs: bool, skip_chunks: dict[int, set[int]]) -> None:
+    def __init__(self, res: ScanResult, data: Any, *, validate_crcs: bool, fast: bool, summary: _Summary | None,
+                 skip_chunks: set[int], search: bool, seek: bool, bar: Any) -> None:
         self.res = res
         self.data = data
+        self.n = len(data)
         self.mview = memoryview(data)
         self.validate_crcs = validate_crcs
+        self.fast = fast
+        self.summary = summary
+        self.index = summary.chunks if summary is not None else {}
+        self.targets = sorted(self.index)
         self.skip_chunks = skip_chunks
+        self.search = search  # look for chunk records byte by byte after damage
+        self.seek = seek  # jump over each indexed chunk's message indexes by the stated length
+        self.bar = bar
+        self.done: set[int] = set()  # chunk offsets read, skipped or reported
+        self.opened: dict[int, tuple] = {}  # chunks opened while resynchronising
         self.loose: tuple[list, list, list, list] = ([], [], [], [])  # channel id, log time, start, length
-        self.pending_loss: list[int] = []  # indexes into res.skipped of the skipped chunks
-        self.last_skipped_chunk = False  # message indexes that follow count messages lost in it
+        self.ended = False  # data end or footer reached
+        self.last_good = 8  # just after the start of the last chunk read: a back-search starts here
 
-    def run(self, bar: Any = None) -> int:
-        """Read records from byte 8 up to the footer, the end of the file or the first cut-off
-        record; returns the byte offset where the scan stopped."""
-        res, data = self.res, self.data
-        n = len(data)
-        pos = 8
-        while pos < n:
-            if pos + 9 > n:
-                res.skipped.append((pos, f"file ends inside a record header ({n - pos} of 9 bytes)"))
-                break
+    # -- the walk ---------------------------------------------------------------------------
+    def walk(self, pos: int, stop: int) -> int:
+        """Read records in ``[pos, stop)``; returns where the walk ended."""
+        data = self.data
+        while pos < stop and not self.ended:
+            if pos in self.index and pos not in self.done:
+                nxt = self.indexed_chunk(pos, stop)
+                if nxt is not None:
+                    self._progress(pos, nxt)
+                    pos = nxt
+                    continue
+                if data[pos] != Opcode.CHUNK:  # the index says a chunk is here: what is here is damaged
+                    ci = self.index[pos]
+                    end = pos + ci.chunk_length
+                    if self._plausible(end, stop):
+                        msgs, cids = self.loss_of_chunk(pos, end, stop)
+                        self.res.damage.append(Damage(pos, f"chunk record damaged (found {_opname(data[pos])} where "
+                                                           f"the summary's chunk index lists a chunk)", msgs, cids))
+                        self.done.add(pos)
+                        pos = end
+                        continue
+                    pos = self.damaged(pos, f"{_opname(data[pos])} where the summary's chunk index lists a chunk", stop)
+                    continue
+            if pos + 9 > stop:
+                pos = self.damaged(pos, f"{stop - pos} bytes left where a record header needs 9"
+                                   + (" (file cut off?)" if stop == self.n else ""), stop)
+                continue
             op, length = _REC_HDR.unpack_from(data, pos)
             body, end = pos + 9, pos + 9 + length
-            if end > n:
-                res.skipped.append(
-                    (pos, f"{_opname(op)} record cut off by the end of the file: needs {length} bytes, {n - body} left")
-                )
-                break
-            if op == Opcode.FOOTER:
-                self.footer(end)
-                return end
-            self.record(op, pos, body, end, length)
-            if op != Opcode.MESSAGE_INDEX:
-                self.last_skipped_chunk = self.last_skipped_chunk and op == Opcode.CHUNK
-            if bar is not None:
-                bar.update(end - pos)
-            pos = end
+            if not _valid_opcode(op):
+                if length >= 40 and end <= stop and self.disguised_chunk(pos, op, body, end):
+                    self._progress(pos, end)
+                    pos = end
+                    continue
+                pos = self.damaged(pos, f"invalid opcode 0x{op:02x} (record length {length})", stop)
+                continue
+            if end > stop:
+                where = "cut off by the end of the file" if stop == self.n else f"running past byte offset {stop}"
+                pos = self.damaged(pos, f"{_opname(op)} record {where}: needs {length} bytes, {stop - body} left", stop)
+                continue
+            over = self.jumps_over_chunk(pos, end)
+            if over is not None:
+                pos = self.damaged(pos, f"{_opname(op)} record of {length} bytes runs over the chunk the summary "
+                                        f"lists at byte offset {over}", stop)
+                continue
+            if op != Opcode.CHUNK and op != Opcode.MESSAGE and length >= 40 and self.disguised_chunk(pos, op, body, end):
+                self._progress(pos, end)
+                pos = end
+                continue
+            nxt = self.record(op, pos, body, end, stop)
+            self._progress(pos, nxt)
+            pos = nxt
         return pos
 
-    def record(self, op: int, pos: int, body: int, end: int, length: int) -> None:
+    def _progress(self, a: int, b: int) -> None:
+        if self.bar is not None and b > a:
+            self.bar.update(b - a)
+
+    def record(self, op: int, pos: int, body: int, end: int, stop: int) -> int:
+        """Handle one well-framed record; returns the offset to continue at."""
         res, data = self.res, self.data
-        if op == Opcode.CHUNK and pos in self.skip_chunks:
-            res.chunks_skipped_by_index += 1
-            self.last_skipped_chunk = False  # its message indexes are no loss
-        elif op == Opcode.CHUNK:
-            self.chunk(pos, body, end)
-        elif op == Opcode.MESSAGE_INDEX:
-            if self.last_skipped_chunk and length >= 6:
-                self.count_lost(body)
-        elif op == Opcode.MESSAGE:
-            self.message(pos, body, length)
-        elif op == Opcode.SCHEMA:
-            s = _parse(Schema, data[body:end])
-            res.schemas.setdefault(s.id, s)
-        elif op == Opcode.CHANNEL:
-            c = _parse(Channel, data[body:end])
-            res.channels.setdefault(c.id, c)
-        elif op == Opcode.HEADER:
-            res.header = _parse(Header, data[body:end])
-        elif op == Opcode.DATA_END:
-            self.data_end(pos, body, length)
+        fit = _fields_end(data, op, body, end)
+        if fit is not None and fit < end and self._plausible(fit, stop):
+            # a record length longer than the record's own fields, and well-framed records where
+            # they end: the length is damaged (padding is not followed by records that way)
+            res.warnings.append(f"{res.path}: {_opname(op)} record at byte offset {pos}: record length {end - body} "
+                                f"disagrees with its fields ({fit - body} bytes); read on at byte offset {fit}")
+            end = fit
+        if op == Opcode.FOOTER or op == Opcode.DATA_END:
+            if op == Opcode.FOOTER and not (end - body == 20 and end + 8 == self.n):
+                return self.bad_record(pos, end, stop, f"footer record of {end - body} bytes inside the file")
+            if op == Opcode.DATA_END and not self.summary_follows(end):
+                return self.bad_record(pos, end, stop, f"data end record of {end - body} bytes followed by more of "
+                                                       f"the data section")
+            if op == Opcode.DATA_END:
+                self.data_end(pos, body, end - body)
+            self.ended = True
+            return end
+        if op == Opcode.MESSAGE_INDEX:
+            rl = struct.unpack_from("<I", data, body + 2)[0] if end - body >= 6 else -1
+            if rl < 0 or rl % 16 or body + 6 + rl > end:
+                return self.bad_record(pos, end, stop, f"message index record of {end - body} bytes does not parse")
+            return end
+        if op in _SUMMARY_ONLY_OPS:
+            return self.bad_record(pos, end, stop, f"{_opname(op)} record inside the data section")
+        if op == Opcode.CHUNK:
+            if pos in self.skip_chunks:
+                res.chunks_skipped_by_index += 1
+                self.done.add(pos)
+                return end
+            exc = self.chunk(pos, body, end)
+            if exc is None:
+                fit = self.chunk_fit(body, end)
+                if fit != end and self._plausible(fit, stop):
+                    self.res.warnings.append(
+                        f"{self.res.path}: chunk at byte offset {pos}: record length {end - body} disagrees with its "
+                        f"fields ({fit - body} bytes); read on at byte offset {fit}")
+                    return fit
+                return self.after_chunk(pos, end, stop)
+            return self.bad_record(pos, end, stop, f"chunk skipped: {exc}", chunk=True)
+        if op == Opcode.MESSAGE:
+            if end - body < 22:
+                return self.bad_record(pos, end, stop, f"message record too short ({end - body} bytes)")
+            cid, _s, lt, _p = _MSG_HDR.unpack_from(data, body)
+            if cid not in self.res.channels:
+                if end - body >= 40 and self.disguised_chunk(pos, op, body, end):
+                    return end
+                return self.bad_record(pos, end, stop, f"message record on channel id {cid}, which no channel record "
+                                                       f"defines before it")
+            for col, v in zip(self.loose, (cid, lt, body + 22, end - body - 22)):
+                col.append(v)
+            return end
+        if op in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.HEADER, Opcode.ATTACHMENT, Opcode.METADATA):
+            cls = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel, Opcode.HEADER: Header, Opcode.ATTACHMENT: Attachment,
+                   Opcode.METADATA: Metadata}[op]
+            try:
+                rec = _parse(cls, data[body:end])
+            except Exception as exc:  # noqa: BLE001 - a record that does not parse is skipped and reported
+                return self.bad_record(pos, end, stop, f"{_opname(op)} record does not parse ({type(exc).__name__}: {exc})")
+            if op == Opcode.HEADER:
+                if pos == 8:  # a header anywhere else is not the file's
+                    res.header = rec
+            elif op in (Opcode.SCHEMA, Opcode.CHANNEL):
+                (res.schemas if op == Opcode.SCHEMA else res.channels).setdefault(rec.id, rec)
+        return end
 
-    def chunk(self, pos: int, body: int, end: int) -> None:
-        """Decompress, check and index one chunk; any failure skips this chunk only."""
-        res = self.res
+    def bad_record(self, pos: int, end: int, stop: int, reason: str, chunk: bool = False) -> int:
+        """A framed record that failed: go on after it when what follows looks like a record,
+        else resynchronise from the next byte."""
+        if self._plausible(end, stop):
+            msgs, cids = self.loss_of_chunk(pos, end, stop) if chunk else (None, ())
+            self.res.damage.append(Damage(pos, reason, msgs, cids))
+            self.done.add(pos)
+            return end
+        return self.damaged(pos, reason + "; its record length is not trustworthy", stop)
+
+    def jumps_over_chunk(self, pos: int, end: int) -> int | None:
+        """The offset of a chunk of the summary's index not yet read that ``(pos, end)`` would
+        pass over (a damaged record length), or None."""
+        if not self.targets:
+            return None
+        i = bisect.bisect_right(self.targets, pos)
+        while i < len(self.targets) and self.targets[i] < end:
+            if self.targets[i] not in self.done:
+                return self.targets[i]
+            i += 1
+        return None
+
+    def summary_follows(self, p: int) -> bool:
+        """Whether what lies at `p` may follow a data end record: anything but a well-framed
+        data section record (a chunk, message, message index, attachment or metadata), which
+        would mean that the data end record is a damaged one inside the data section."""
+        if p + 9 > self.n:
+            return True
+        op, length = _REC_HDR.unpack_from(self.data, p)
+        return op not in _DATA_OPS or p + 9 + length > self.n
+
+    def disguised_chunk(self, pos: int, op: int, body: int, end: int) -> bool:
+        """A record whose opcode is damaged but whose body is exactly a valid chunk (framing that
+        fits its length, decompression to the stated size, a matching CRC-32): read as the chunk."""
+        data = self.data
+        (clen,) = struct.unpack_from("<I", data, body + 28)
+        if clen > 4 or body + 40 + clen > end or bytes(data[body + 32 : body + 32 + clen]) not in _COMPRESSIONS:
+            return False
+        (dlen,) = struct.unpack_from("<Q", data, body + 32 + clen)
+        (crc,) = struct.unpack_from("<I", data, body + 24)
+        if body + 40 + clen + dlen != end or (crc == 0 and clen == 0) or not self.validate_crcs:
+            return False
         try:
-            raw, recs, (cid, lt, st, ln) = self._open_chunk(body, end)
-        except Exception as exc:  # noqa: BLE001 - any failure skips this chunk only
-            res.skipped.append((pos, f"chunk skipped: {type(exc).__name__}: {exc}"))
-            self.last_skipped_chunk = True
-            self.pending_loss.append(len(res.skipped) - 1)
-            return
-        self.last_skipped_chunk = False
-        for r in recs:
-            (res.schemas if isinstance(r, Schema) else res.channels)[r.id] = r
-        if cid.size:
-            res.blocks.append(Block(raw, pos, cid, lt, st, ln))
+            opened = self.open_chunk(body, end)
+        except Exception as exc:  # noqa: BLE001 - framed like a chunk, but damaged
+            msgs, cids = self.loss_of_chunk(pos, end, self.n)
+            self.res.damage.append(Damage(pos, f"record with a damaged opcode ({_opname(op)}) framed like a chunk, "
+                                               f"chunk skipped: {type(exc).__name__}: {exc}", msgs, cids))
+            self.done.add(pos)
+            return True
+        self.take(pos, opened, end)
+        self.res.warnings.append(f"{self.res.path}: record at byte offset {pos} has a damaged opcode ({_opname(op)}) "
+                                 f"but holds a valid chunk (its CRC-32 checked): read as the chunk")
+        return True
 
-    def _open_chunk(self, body: int, end: int) -> tuple[bytes, list, tuple[np.ndarray, ...]]:
+    def chunk_fit(self, body: int, end: int) -> int:
+        """Where a chunk record's own fields end (its compression name and data lengths)."""
+        (clen,) = struct.unpack_from("<I", self.data, body + 28)
+        (dlen,) = struct.unpack_from("<Q", self.data, body + 32 + clen)
+        return body + 40 + clen + dlen
+
+    def _plausible(self, p: int, stop: int, depth: int = 2) -> bool:
+        """Whether `depth` well-framed records (valid opcodes, lengths inside the file) start at `p`."""
+        if p == stop or depth == 0:
+            return True
+        if p + 9 > stop:
+            return False
+        op, length = _REC_HDR.unpack_from(self.data, p)
+        return _valid_opcode(op) and p + 9 + length <= stop and self._plausible(p + 9 + length, stop, depth - 1)
+
+    def after_chunk(self, pos: int, end: int, stop: int) -> int:
+        """Where to go on after a chunk read: past its message indexes when seeking by the index."""
+        ci = self.index.get(pos)
+        if self.seek and ci is not None:
+            nxt = end + ci.message_index_length
+            if end <= nxt <= stop and self._plausible(nxt, stop):
+                return nxt
+        return end
+
+    # -- chunks -----------------------------------------------------------------------------
+    def open_chunk(self, body: int, end: int) -> tuple[bytes, list, tuple[np.ndarray, ...]]:
         chunk = _read_chunk(self.mview, body, end)
         raw = _decompress(chunk)
         if len(raw) != chunk.uncompressed_size:
@@ -333,27 +628,206 @@ class _DataSection:
             if crc != chunk.uncompressed_crc:
                 raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
         recs: list = []
-        return raw, recs, _index_messages(raw, 0, len(raw), recs)
+        return raw, recs, _index_messages(raw, 0, len(raw), recs, self.fast)
 
-    def count_lost(self, body: int) -> None:
-        """Add the messages a message index lists to the loss reported for the last skipped chunk."""
-        # channel_id u16, records length u32, then (u64 log_time, u64 offset) pairs
-        nrec = struct.unpack_from("<I", self.data, body + 2)[0] // 16
-        i = self.pending_loss[-1]
-        off, reason = self.res.skipped[i]
-        lost = int(reason.rsplit("(", 1)[1].split()[0]) if reason.endswith("messages lost)") else 0
-        base = reason.rsplit(" (", 1)[0] if reason.endswith("messages lost)") else reason
-        self.res.skipped[i] = (off, f"{base} ({lost + nrec} messages lost)")
+    def chunk(self, pos: int, body: int, end: int) -> str | None:
+        """Decompress, check and index one chunk; returns why it failed, or None."""
+        try:
+            opened = self.opened.pop(pos, None) or self.open_chunk(body, end)
+        except Exception as exc:  # noqa: BLE001 - any failure skips this chunk only
+            return f"{type(exc).__name__}: {exc}"
+        self.take(pos, opened, end)
+        return None
 
-    def message(self, pos: int, body: int, length: int) -> None:
-        """Index a message outside any chunk."""
-        if length < 22:
-            self.res.skipped.append((pos, f"message record too short ({length} bytes)"))
-            return
-        cid, _s, lt, _p = _MSG_HDR.unpack_from(self.data, body)
-        for col, v in zip(self.loose, (cid, lt, body + 22, length - 22)):
-            col.append(v)
+    def take(self, pos: int, opened: tuple, end: int) -> None:
+        """Keep the messages of a chunk that validated; a chunk holding fewer messages than its
+        message indexes (or the summary's chunk index) list is reported as damaged."""
+        raw, recs, (cid, lt, st, ln) = opened
+        self.done.add(pos)
+        self.last_good = max(self.last_good, pos + 1)
+        for r in recs:
+            (self.res.schemas if isinstance(r, Schema) else self.res.channels)[r.id] = r
+        if cid.size:
+            self.res.blocks.append(Block(raw, pos, cid, lt, st, ln))
+        listed, cids = self.loss_of_chunk(pos, end, self.n)
+        if listed is not None and listed > cid.size:
+            self.res.damage.append(Damage(pos, f"chunk holds {cid.size} messages where its message indexes list "
+                                               f"{listed}: damaged", listed - int(cid.size), cids))
 
+    def indexed_chunk(self, pos: int, stop: int) -> int | None:
+        """A chunk the summary's index lists at `pos`: passed over when not wanted, read through
+        the index when its record header is damaged; None to read it as any record."""
+        ci = self.index[pos]
+        end = pos + ci.chunk_length
+        if end > stop:
+            return None
+        if pos in self.skip_chunks:
+            self.res.chunks_skipped_by_index += 1
+            self.done.add(pos)
+            return end
+        op, length = _REC_HDR.unpack_from(self.data, pos)
+        if op == Opcode.CHUNK and length == ci.chunk_length - 9:
+            return None
+        try:
+            chunk = _read_chunk(self.mview, pos + 9, end)
+            if (chunk.compression != ci.compression or len(chunk.data) != ci.compressed_size
+                    or chunk.uncompressed_size != ci.uncompressed_size or chunk.uncompressed_crc == 0
+                    or pos + 9 + 40 + len(chunk.compression) + len(chunk.data) != end):
+                return None  # the body does not agree with the index (or has no CRC to prove it)
+            opened = self.open_chunk(pos + 9, end)
+        except Exception:  # noqa: BLE001 - not recoverable: reported as damage by the walk
+            return None
+        self.take(pos, opened, end)
+        self.res.recovered += 1
+        self.res.warnings.append(
+            f"{self.res.path}: chunk record header at byte offset {pos} damaged ({_opname(op)}, length {length}); "
+            f"the chunk was read through the summary's chunk index and its CRC-32 checked"
+        )
+        return self.after_chunk(pos, end, stop)
+
+    def loss_of_chunk(self, pos: int, end: int | None, stop: int) -> tuple[int | None, tuple[int, ...]]:
+        """Messages and channel ids lost with the chunk at `pos`: from the summary's chunk index
+        when it lists the chunk, else from the message index records that follow it."""
+        data, n = self.data, self.n
+        ci = self.index.get(pos)
+        if ci is not None and ci.message_index_offsets:
+            total: int | None = 0
+            for cid, off in ci.message_index_offsets.items():
+                ok = off + 15 <= n and data[off] == Opcode.MESSAGE_INDEX
+                if ok:
+                    (length,) = struct.unpack_from("<Q", data, off + 1)
+                    c, rl = struct.unpack_from("<HI", data, off + 9)
+                    ok = c == cid and 6 + rl <= length and off + 9 + length <= n
+                if not ok or total is None:
+                    total = None
+                else:
+                    total += rl // 16
+            return total, tuple(sorted(ci.message_index_offsets))
+        if end is None:
+            return None, ()
+        total, cids, p = 0, [], end
+        while p + 15 <= stop and data[p] == Opcode.MESSAGE_INDEX:
+            (length,) = struct.unpack_from("<Q", data, p + 1)
+            if p + 9 + length > stop or length < 6:
+                break
+            c, rl = struct.unpack_from("<HI", data, p + 9)
+            if rl % 16 or 6 + rl > length:
+                break
+            total += rl // 16
+            cids.append(c)
+            p += 9 + length
+        return (total, tuple(sorted(set(cids)))) if cids else (None, ())
+
+    # -- damage and resynchronisation -------------------------------------------------------
+    def damaged(self, pos: int, problem: str, stop: int) -> int:
+        """Report the damaged record at `pos`, find where to resume, report the chunks lost in
+        between; returns the offset to resume at.
+
+        A valid chunk between the last chunk read and `pos` means that a damaged record length
+        (one that still looked well framed) led the walk into it: the scan goes back to it, and
+        the messages outside chunks taken from those bytes are dropped."""
+        back = self.search_chunk(self.last_good, pos, stop) if self.search and self.last_good < pos else None
+        if back is not None:
+            keep = [i for i, st in enumerate(self.loose[2]) if st < back]
+            for col in self.loose:
+                col[:] = [col[i] for i in keep]
+            self.res.damage.append(Damage(pos, f"damaged record: {problem}; resumed back at byte offset {back} (a "
+                                               f"valid chunk that a damaged record length had passed over)"))
+            return back
+        nxt = self.resync(pos + 1, stop)
+        if nxt >= self.n:
+            tail = f"{nxt - pos} bytes to the end of the file passed over"
+        elif nxt == stop and (self.summary is None or nxt != self.summary.start) and nxt not in self.index:
+            tail = f"{nxt - pos} bytes passed over up to byte offset {nxt}"
+        else:
+            what = "the summary section" if self.summary is not None and nxt == self.summary.start else "a valid chunk"
+            tail = f"{nxt - pos} bytes passed over; resumed at byte offset {nxt} ({what})"
+        lost = [o for o in self.targets if o not in self.done and (pos <= o < nxt or o < pos < o + self.index[o].chunk_length)]
+        msgs, cids = (None, ())
+        if pos in lost:
+            msgs, cids = self.loss_of_chunk(pos, None, stop)
+        elif not lost and not self.index:
+            msgs, cids = self.trailing_indexes(pos, nxt)
+        self.res.damage.append(Damage(pos, f"damaged record: {problem}; {tail}", msgs, cids))
+        for o in lost:
+            self.done.add(o)
+            if o != pos:
+                m, c = self.loss_of_chunk(o, None, stop)
+                self.res.damage.append(Damage(o, "chunk lost in the damaged bytes", m, c))
+        return nxt
+
+    def trailing_indexes(self, a: int, b: int) -> tuple[int | None, tuple[int, ...]]:
+        """Messages and channel ids listed by a run of intact message index records that ends
+        exactly at `b` inside the damaged bytes ``[a, b)`` (those of the chunk lost there), or
+        (None, ()) when there is no such run."""
+        data, find = self.data, self.data.find
+        q = find(b"\x07", a + 1, b)
+        while 0 <= q < b:
+            p, total, cids = q, 0, []
+            while p + 15 <= b and data[p] == Opcode.MESSAGE_INDEX:
+                (length,) = struct.unpack_from("<Q", data, p + 1)
+                c, rl = struct.unpack_from("<HI", data, p + 9)
+                if length < 6 or rl % 16 or 6 + rl > length or p + 9 + length > b:
+                    break
+                total += rl // 16
+                cids.append(c)
+                p += 9 + length
+            if p == b and cids:
+                return total, tuple(sorted(set(cids)))
+            q = find(b"\x07", q + 1, b)
+        return None, ()
+
+    def resync(self, p: int, stop: int) -> int:
+        """The next offset in ``[p, stop]`` to resume at: the next chunk offset of the summary's
+        index, or an earlier offset where a valid chunk record lies."""
+        i = bisect.bisect_left(self.targets, p)
+        t = stop
+        while i < len(self.targets):
+            if self.targets[i] < stop and self.targets[i] not in self.done:
+                t = self.targets[i]
+                break
+            i += 1
+        if self.search:
+            q = self.search_chunk(p, t)
+            if q is not None:
+                return q
+        return t
+
+    def search_chunk(self, p: int, t: int, limit: int | None = None) -> int | None:
+        """The first offset in ``[p, t)`` where a whole, valid chunk record lies (it parses,
+        decompresses to its stated size and matches its CRC-32) ending by `limit` (default
+        `t`), or None."""
+        limit = t if limit is None else limit
+        data, find = self.data, self.data.find
+        unpack_q, unpack_i = struct.Struct("<Q").unpack_from, struct.Struct("<I").unpack_from
+        while True:
+            q = find(b"\x06", p, t)
+            if q < 0:
+                return None
+            p = q + 1
+            if q in self.done:
+                continue
+            if q + 9 + 40 > limit:
+                return None
+            (length,) = unpack_q(data, q + 1)
+            end = q + 9 + length
+            if end > limit or length < 40:
+                continue
+            (clen,) = unpack_i(data, q + 9 + 28)  # after start/end time, sizes and CRC
+            if clen > 4 or q + 9 + 40 + clen > end:
+                continue
+            if bytes(data[q + 41 : q + 41 + clen]) not in _COMPRESSIONS:
+                continue
+            (dlen,) = unpack_q(data, q + 41 + clen)
+            if q + 9 + 40 + clen + dlen != end:
+                continue
+            try:
+                self.opened[q] = self.open_chunk(q + 9, end)
+            except Exception:  # noqa: BLE001 - not a valid chunk: keep looking
+                continue
+            return q
+
+    # -- the rest ---------------------------------------------------------------------------
     def data_end(self, pos: int, body: int, length: int) -> None:
         """Check the data section CRC, when the writer stored one."""
         stored = struct.unpack_from("<I", self.data, body)[0] if length >= 4 else 0
@@ -365,12 +839,6 @@ class _DataSection:
                     f"data section ends at byte offset {pos})"
                 )
 
-    def footer(self, end: int) -> None:
-        if bytes(self.data[end : end + 8]) != MAGIC:
-            self.res.skipped.append((end, "closing magic missing after the footer"))
-        else:
-            self.res.complete = True
-
     def loose_block(self) -> Block | None:
         """The messages found outside chunks, as one block over the whole file."""
         if not self.loose[0]:
@@ -381,9 +849,15 @@ class _DataSection:
 
 
 def scan(
-    path: str | Path, *, validate_crcs: bool = True, progress: bool = False, topics: Any = None
+    path: str | Path,
+    *,
+    validate_crcs: bool = True,
+    progress: bool = False,
+    topics: Any = None,
+    mode: Literal["auto", "stream", "indexed"] = "auto",
+    fast: bool = True,
 ) -> ScanResult:
-    """Scan an MCAP file record by record.
+    """Scan an MCAP file record by record, recovering after damage.
 
     Parameters
     ----------
@@ -394,44 +868,104 @@ def scan(
     progress : bool, optional
         Show a tqdm bar over the bytes of the file.
     topics : set of str, optional
-        Only these topics are wanted: when the summary section is intact (its CRC checks
-        out and its chunk indexes point at chunks), chunks whose message indexes list none
-        of their channels are passed over undecompressed. A damaged or missing summary
-        falls back to decoding every chunk.
+        Only these topics are wanted: when the summary section validates, a chunk whose
+        message indexes list only channels known from the summary, none of them on a wanted
+        topic, is passed over undecompressed (``ScanResult.chunks_skipped_by_index``). A
+        damaged or missing summary falls back to decoding every chunk. Not used with
+        ``mode="stream"``.
+    mode : {"auto", "stream", "indexed"}, optional
+        The reading path. ``"stream"``: one linear pass over the records, never looking at
+        the summary; resynchronisation after damage by searching for the next valid chunk
+        record. ``"indexed"``: chunks located through the summary's chunk indexes (each read
+        at its offset, its message indexes passed over by their stated length), the records
+        between chunks still read; when the summary is missing or does not validate, the
+        linear pass with a note in ``ScanResult.warnings``. ``"auto"`` (default): the linear
+        pass, using a valid summary for its channels, the `topics` filter and recovery
+        (resuming at its next chunk offset, reading a chunk with a damaged record header
+        through its index), and searching for the next valid chunk record as well.
+    fast : bool, optional
+        Index runs of equal-length message records with numpy (default); False indexes every
+        record one by one (the same result, slower: for tests).
 
     Returns
     -------
     ScanResult
-        Schemas, channels, indexed message blocks, and the damage skipped (byte offsets).
+        Schemas, channels, indexed message blocks (chunks in file order, then the messages
+        outside chunks), and the damage: ``damage`` (:class:`Damage` entries) and
+        ``skipped`` (byte offset, reason with topics and ``"(N messages lost)"`` when known).
 
     Raises
     ------
     LogFormatError
-        If the file cannot be opened, does not start with the MCAP magic, or ends before
-        the header record.
+        If the file cannot be opened, is empty, does not start with the MCAP magic, or
+        holds no readable message and no intact header record (names the byte offset).
+    ValueError
+        If `mode` is not one of the three.
     """
+    if mode not in MODES:
+        raise ValueError(f"{mode=} must be one of {MODES}")
     path = Path(path)
     data = _open(path)
-    res = ScanResult(path=path, file_size=len(data))
+    n = len(data)
+    res = ScanResult(path=path, file_size=n, mode=mode)
+    if n == 0:
+        raise LogFormatError(f"{path}: empty file (0 bytes; no MCAP magic at byte offset 0)")
     if bytes(data[:8]) != MAGIC:
         raise LogFormatError(f"{path}: not an MCAP file (bad magic at byte offset 0)")
+    if n == 8:
+        raise LogFormatError(f"{path}: only the MCAP magic: the file ends at byte offset 8, before the header record")
+    summary, why = (None, None) if mode == "stream" else _read_summary(data, n)
+    if why is not None:
+        res.warnings.append(f"{path}: {why}; the summary is not used")
+    if mode == "indexed" and summary is None:
+        res.warnings.append(f"{path}: no valid summary section to read by its chunk indexes; read by a linear pass")
+    skip: set[int] = set()
+    if summary is not None:
+        res.indexed = True
+        res.schemas.update(summary.schemas)
+        res.channels.update(summary.channels)
+        if topics is not None:
+            wanted = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
+            for off, ci in summary.chunks.items():
+                ids = set(ci.message_index_offsets)
+                if ids and ids <= summary.channels.keys() and not ids & wanted:
+                    skip.add(off)
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(data), unit="B", unit_scale=True, desc=path.name)
-    section = _DataSection(res, data, validate_crcs, _use_summary(res, data, topics))
+        bar = tqdm(total=n, unit="B", unit_scale=True, desc=path.name)
+    stop = summary.start if summary is not None else n
+    sc = _Scanner(res, data, validate_crcs=validate_crcs, fast=fast, summary=summary, skip_chunks=skip,
+                  search=mode != "indexed" or summary is None or not summary.chunks, seek=mode == "indexed", bar=bar)
     try:
-        pos = section.run(bar)
+        if n >= 8 + 9:
+            op = data[8]
+            if op != Opcode.HEADER:
+                res.warnings.append(f"{path}: header record damaged at byte offset 8 (found {_opname(op)}); "
+                                    f"the rest of the file is read")
+        sc.walk(8, stop)
     finally:
         if bar is not None:
+            bar.update(max(0, n - bar.n))  # the summary and anything passed over
             bar.close()
-    loose = section.loose_block()
+    loose = sc.loose_block()
     if loose is not None:
         res.blocks.append(loose)
-    if not res.blocks and (res.header is None or res.skipped):
+    res.complete = n >= 8 + _FOOTER_LEN + 8 and bytes(data[n - 8 :]) == MAGIC and data[n - 8 - _FOOTER_LEN] == Opcode.FOOTER
+    if summary is not None and summary.message_count is not None and topics is None and not res.damage:
+        got = sum(b.n for b in res.blocks)
+        if got < summary.message_count:  # a loss no damaged place explains: reported all the same
+            res.damage.append(Damage(summary.start, f"the summary's statistics (section at this byte offset) count "
+                                                    f"{summary.message_count} messages, {got} were found",
+                                     summary.message_count - got))
+    res.damage.sort(key=lambda d: d.offset)
+    res.skipped.extend((d.offset, d.describe(res.channels)) for d in res.damage)
+    if res.header is None and not any("header record damaged" in w for w in res.warnings):
+        res.warnings.append(f"{path}: no intact header record at byte offset 8")
+    if not res.blocks and not res.chunks_skipped_by_index and (res.header is None or res.skipped):
         off = res.skipped[0][0] if res.skipped else 8
         raise LogFormatError(f"{path}: nothing readable (damaged at byte offset {off})")
     if not res.complete and not res.skipped:
-        res.skipped.append((pos, "file ends without a footer (log not closed?)"))
+        res.skipped.append((n, "file ends without a footer (log not closed?)"))
     return res
