@@ -330,8 +330,8 @@ def recovery(tmp: Path, big: int) -> None:
     q = tmp / "zero9.mcap"
     q.write_bytes(bytes(data))
     got = sum(1 for _ in iter_raw_messages(q))
-    check("9 zeroed bytes at one chunk's start lose that chunk only", got == big - n,
-          f"{got} of {big} messages (the chunk held {n})")
+    check("9 zeroed bytes at one chunk's start lose that chunk at most", got >= big - n,
+          f"{got} of {big} messages (the chunk held {n}; read through the summary's chunk index when intact)")
     data = bytearray(p.read_bytes())
     hlen = struct.unpack_from("<Q", data, 9)[0]
     data[8 : 8 + 9 + hlen] = bytes(9 + hlen)

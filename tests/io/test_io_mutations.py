@@ -251,7 +251,7 @@ def test_regression_chunk_opcode_and_size_flipped(synth, work, mode):
     uncompressed size flipped: the record was passed over as a message index, its messages lost
     without a word. Now it is reported as a damaged chunk, with the count."""
     log = synth["zstd"]
-    off, end, n = log.chunks[2][0], log.chunks[2][1], sum(log.chunks[2][2].values())
+    off, n = log.chunks[2][0], sum(log.chunks[2][2].values())
     bad = bytearray(log.data)
     bad[off] ^= 1
     bad[off + 9 + 16] ^= 1
