@@ -154,3 +154,20 @@ def test_fault_is_reportable():
     with pytest.raises(KeyError):
         detect_faults(_sig(x), input="/nope")
     assert isinstance(f, Fault)
+
+
+def test_fault_lines_one_line_per_kind():
+    """A kind found in many channels is one line naming them (the CLI prints one line per problem)."""
+    from vibroscope.faults import fault_lines
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((5, 4000))
+    x[:4, 1000:1010] = np.nan  # the same gap in four channels
+    x[4] += 50.0  # a DC offset in one
+    sig = Signals(x, 100.0, [f"/c{k}" for k in range(5)], ["m/s^2"] * 5)
+    faults = detect_faults(sig, nperseg=256)
+    lines = fault_lines(faults)
+    assert [ln.split(" in ", 1)[0] for ln in lines] == ["nan", "dc_offset"]
+    assert lines[0].startswith("nan in 4 channels (/c0, /c1, /c2 and 1 more); e.g. /c0: 10 missing samples")
+    assert lines[1].startswith("dc_offset in /c4: ")
+    assert sum(f.kind == "nan" for f in faults) == 4  # every fault kept in full

@@ -55,7 +55,7 @@ import numpy as np
 
 from vibroscope.signals import Signals
 
-__all__ = ["Fault", "FAULT_KINDS", "detect_faults", "apply_faults", "nan_spans"]
+__all__ = ["fault_lines", "Fault", "FAULT_KINDS", "detect_faults", "apply_faults", "nan_spans"]
 
 FAULT_KINDS = ("nan", "inf", "clipping", "dropout", "dc_offset", "drift", "missing_unit", "constant",
                "zero_input", "short_record")
@@ -129,6 +129,38 @@ def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Starts and stops (exclusive) of the runs of True in a 1-D boolean array."""
     d = np.diff(np.concatenate(([0], mask.view(np.int8) if mask.dtype == bool else mask.astype(np.int8), [0])))
     return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def fault_lines(faults, *, max_names: int = 3) -> list[str]:
+    """One line per kind of fault: the channels it touches and one example message.
+
+    Parameters
+    ----------
+    faults : sequence of Fault
+        From :func:`detect_faults`.
+    max_names : int, optional
+        Channels named before "and N more"; default 3.
+
+    Returns
+    -------
+    list of str
+        ``"<kind> in <channel>: <message>"`` for a kind found in one channel;
+        ``"<kind> in N channels (<a>, <b>, <c> and M more); e.g. <a>: <message>"`` otherwise, in
+        the order the kinds first occur. Every fault stays in full in ``Analysis.faults`` and the
+        JSON summary.
+    """
+    by_kind: dict[str, list] = {}
+    for f in faults:
+        by_kind.setdefault(f.kind, []).append(f)
+    out = []
+    for kind, fs in by_kind.items():
+        if len(fs) == 1:
+            out.append(str(fs[0]))
+            continue
+        names = ", ".join(f.channel for f in fs[:max_names])
+        more = f" and {len(fs) - max_names} more" if len(fs) > max_names else ""
+        out.append(f"{kind} in {len(fs)} channels ({names}{more}); e.g. {fs[0].channel}: {fs[0].message}")
+    return out
 
 
 def nan_spans(x: np.ndarray) -> list[tuple[int, int]]:
@@ -299,7 +331,7 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
             continue
         if not unit:
             faults.append(_fault(ch, "missing_unit", "no unit: spectra are in unit²/Hz of an unknown unit and "
-                                 "the FRF kind cannot be inferred; give --units", "report", (), fs, 0))
+                                 "the FRF kind cannot be inferred; store units in the log (vibroscope convert --units)", "report", (), fs, 0))
         clip = _clipping(x, finite)
         if clip:
             spans = [(a, b) for a, b, _ in clip]

@@ -179,8 +179,8 @@ def _check_options(args) -> None:
 
 
 def report_text(an, *, source: str = "", true_modes=None) -> str:
-    """Human-readable report: record, signal faults (one line each: ``fault: <kind> in <channel>:
-    <message>``), warnings, and the modes (beside true ones when given)."""
+    """Human-readable report: record, signal faults (one line per kind, :func:`vibroscope.faults.fault_lines`),
+    warnings, and the modes (beside true ones when given)."""
     sig = an.signals
     n_seg = an.settings.get("n_segments")
     avg = f"{an.settings['n_averages']} of {n_seg} averages" if n_seg else f"{an.settings['n_averages']} averages"
@@ -193,9 +193,11 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
                      f"{an.settings['estimator']} FRF, modes by {how}")
     else:
         lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by {how}")
+    from vibroscope.faults import fault_lines
+
     faults = tuple(getattr(an, "faults", ()) or ())
-    for f in faults:
-        lines.append(f"  fault: {f}")
+    for line in fault_lines(faults):
+        lines.append(f"  fault: {line}")
     shown = {str(f) for f in faults}
     for w in an.warnings:
         if w not in shown:
