@@ -449,7 +449,7 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
         fig.clf()
     axes = np.atleast_1d(fig.subplots(n, 1, sharex=True, squeeze=False).ravel())
     t = np.arange(signals.n_samples) / signals.fs
-    n_gaps = 0
+    n_gaps = n_shaded = 0
     for k, ax in enumerate(axes):
         x = np.asarray(signals.data[k], dtype=float)
         finite = np.isfinite(x)
@@ -469,7 +469,8 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
         for j, (a, b) in enumerate(spans):
             ax.axvspan(a, b, color="0.5", alpha=0.35, lw=0, label="gap (no data)" if j == 0 else None)
         if spans:
-            n_gaps += len(spans)
+            n_gaps = max(n_gaps, int(np.count_nonzero(np.diff(finite.astype(np.int8)) == -1)) + int(not finite[0]))
+            n_shaded = max(n_shaded, len(spans))
             _legend_if(ax, loc="upper right", fontsize=7)
         u = signals.units[k]
         ax.set_ylabel(f"[{u}]" if u else "[-]", fontsize=8)
@@ -478,7 +479,9 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
     t0 = f"{signals.t0:.3f}" if abs(signals.t0) >= 1e6 else f"{signals.t0:g}"
     axes[-1].set_xlabel(f"time since t0 = {t0} s [s]")
     more = f" (first {n} of {signals.n_channels})" if signals.n_channels > n else ""
-    gaps = f"; shaded: {n_gaps} gaps without data" if n_gaps else ""
+    gaps = f"; {n_gaps} gaps without data, shaded" if n_gaps else ""
+    if n_gaps > n_shaded:
+        gaps += f" (merged into {n_shaded} span{'s' if n_shaded > 1 else ''} at this scale)"
     fig.suptitle(f"Time series, fs = {signals.fs:g} Hz{more}{gaps}", fontsize=10)
     return fig
 
