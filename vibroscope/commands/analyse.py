@@ -196,7 +196,7 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
     from vibroscope.faults import fault_lines
 
     faults = tuple(getattr(an, "faults", ()) or ())
-    for line in fault_lines(faults):
+    for line in fault_lines([f for f in faults if f.action != "drop"]):  # dropped channels: one note below
         lines.append(f"  fault: {line}")
     shown = {str(f) for f in faults}
     for w in an.warnings:
