@@ -47,16 +47,6 @@ IMU_CH = "/imu.linear_acceleration.x"
 MODES = [("stream", True), ("stream", False), ("indexed", True), ("auto", True), ("auto", False)]
 
 
-def messages(res) -> list[tuple[int, int, bytes]]:
-    """(channel id, log time, payload) of every message of a scan."""
-    out = []
-    for b in res.blocks:
-        mv = memoryview(b.buf)
-        for c, t, s, n in zip(b.channel_id.tolist(), b.log_time.tolist(), b.start.tolist(), b.length.tolist()):
-            out.append((c, t, bytes(mv[s : s + n])))
-    return out
-
-
 class Original:
     """An intact log: its bytes, its messages, and the extent and messages of each chunk."""
 
@@ -65,7 +55,7 @@ class Original:
         self.data = path.read_bytes()
         res = scan(path)
         assert not res.skipped, res.skipped
-        self.all = Counter(messages(res))
+        self.all = Counter(res.messages())
         self.chunks = []  # (start, end, Counter of messages)
         self.no_crc: list[tuple[int, int]] = []  # extents of the chunks without a CRC-32
         for b in res.blocks:
@@ -73,7 +63,7 @@ class Original:
                 continue
             (length,) = struct.unpack_from("<Q", self.data, b.file_offset + 1)
             one = type(res)(path=path, file_size=0, blocks=[b])
-            self.chunks.append((b.file_offset, b.file_offset + 9 + length, Counter(messages(one))))
+            self.chunks.append((b.file_offset, b.file_offset + 9 + length, Counter(one.messages())))
             (crc,) = struct.unpack_from("<I", self.data, b.file_offset + 9 + 24)
             if crc == 0:  # a chunk written without a CRC: a changed byte inside it cannot be detected
                 self.no_crc.append((b.file_offset, b.file_offset + 9 + length))
@@ -180,7 +170,7 @@ def _campaign(args: argparse.Namespace, tmp: Path) -> int:
             failures.append(f"{o.path.name} {kind} {ranges} {mode}: {type(exc).__name__}: {exc}\n"
                             + traceback.format_exc(limit=3))
             continue
-        got = Counter(messages(res))
+        got = Counter(res.messages())
         for a, e, msgs in o.chunks:
             if not any(ra < e and a < rb for ra, rb in ranges):
                 lost = sum((msgs - got).values())

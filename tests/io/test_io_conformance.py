@@ -31,16 +31,6 @@ def _files(shared_data):
     return files
 
 
-def _scanned(res):
-    """(channel id, log time, payload) of every message a scan found, blocks in order."""
-    out = []
-    for b in res.blocks:
-        mv = memoryview(b.buf)
-        for c, t, s, n in zip(b.channel_id.tolist(), b.log_time.tolist(), b.start.tolist(), b.length.tolist()):
-            out.append((c, t, bytes(mv[s : s + n])))
-    return out
-
-
 def test_conformance_suite(shared_data):
     files = _files(shared_data)
     with_messages = 0
@@ -80,7 +70,7 @@ def test_conformance_every_reading_path(shared_data, path):
     for f in _files(shared_data):
         channels, msgs = _expected(json.loads(f.with_suffix(".json").read_text()))
         res = scan(f, **kw)
-        assert Counter(_scanned(res)) == Counter(msgs), f"{f.name} via {path}"
+        assert Counter(res.messages()) == Counter(msgs), f"{f.name} via {path}"
         assert res.skipped == [] and res.damage == [], f"{f.name} via {path}: {res.skipped}"
         assert {c: ch.topic for c, ch in res.channels.items() if c in channels} == {
             c: channels[c] for c in channels if c in res.channels}, f.name
@@ -103,7 +93,7 @@ def test_conformance_filtered_by_each_topic(shared_data):
         for topic in sorted(set(channels.values())):
             ids = {c for c, t in channels.items() if t == topic}
             res = scan(f, topics={topic})
-            got = [m for m in _scanned(res) if m[0] in ids]
+            got = [m for m in res.messages() if m[0] in ids]
             assert Counter(got) == Counter(m for m in msgs if m[0] in ids), f"{f.name} topic {topic}"
             assert res.skipped == [], f.name
             pairs += 1

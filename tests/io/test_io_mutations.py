@@ -28,29 +28,20 @@ SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.function_scope
                 derandomize=True)
 
 
-def _messages(res):
-    out = []
-    for b in res.blocks:
-        mv = memoryview(b.buf)
-        for c, t, s, n in zip(b.channel_id.tolist(), b.log_time.tolist(), b.start.tolist(), b.length.tolist()):
-            out.append((c, t, bytes(mv[s : s + n])))
-    return out
-
-
 class _Log:
     def __init__(self, path: Path, x: np.ndarray | None = None) -> None:
         self.path, self.x = path, x
         self.data = path.read_bytes()
         res = scan(path)
         assert res.skipped == []
-        self.all = Counter(_messages(res))
+        self.all = Counter(res.messages())
         self.chunks, self.no_crc = [], []
         for b in res.blocks:
             if b.file_offset < 0:
                 continue
             (length,) = struct.unpack_from("<Q", self.data, b.file_offset + 1)
             end = b.file_offset + 9 + length
-            self.chunks.append((b.file_offset, end, Counter(_messages(type(res)(path=path, file_size=0, blocks=[b])))))
+            self.chunks.append((b.file_offset, end, Counter(type(res)(path=path, file_size=0, blocks=[b]).messages())))
             if struct.unpack_from("<I", self.data, b.file_offset + 9 + 24)[0] == 0:
                 self.no_crc.append((b.file_offset, end))
 
@@ -121,7 +112,7 @@ def _check(log: _Log, work: Path, ranges, mutate, mode: str, fast: bool, samples
         res = scan(work, mode=mode, fast=fast)
     except VibroscopeError:
         return
-    got = Counter(_messages(res))
+    got = Counter(res.messages())
     touched_no_crc = any(ra < e and a < rb for a, e in log.no_crc for ra, rb in ranges)
     if not touched_no_crc:  # every message returned is one of the original's, unchanged
         assert not got - log.all, f"{sum((got - log.all).values())} messages altered or invented"
@@ -197,7 +188,7 @@ def test_fuzz_structured_records(synth, work, recs, tail, mode):
         res = scan(work, mode=mode)
     except VibroscopeError:
         return
-    got = Counter(_messages(res))
+    got = Counter(res.messages())
     if tail:  # the real records after the fuzz: nothing of theirs altered
         assert not {m for m in got if m[0] == 1} - set(synth["zstd"].all)
 
@@ -222,7 +213,7 @@ def test_regression_chunk_body_zeroed_behind_intact_header(synth, work, mode):
     bad[off + 3 : off + 503] = bytes(500)
     work.write_bytes(bytes(bad))
     res = scan(work, mode=mode)
-    assert Counter(_messages(res)) == log.all - log.chunks[0][2]
+    assert Counter(res.messages()) == log.all - log.chunks[0][2]
     assert res.skipped[0][0] == off and res.skipped[0][1].endswith(f"({n} messages lost)")
 
 
@@ -241,7 +232,7 @@ def test_regression_header_opcode_and_length_flipped(synth, work, mode):
     expect = Counter()
     for c in log.chunks[:4]:
         expect.update(c[2])
-    assert Counter(_messages(res)) == expect
+    assert Counter(res.messages()) == expect
     assert res.skipped and res.header is None
 
 
@@ -257,6 +248,6 @@ def test_regression_chunk_opcode_and_size_flipped(synth, work, mode):
     bad[off + 9 + 16] ^= 1
     work.write_bytes(bytes(bad))
     res = scan(work, mode=mode)
-    assert Counter(_messages(res)) == log.all - log.chunks[2][2]
+    assert Counter(res.messages()) == log.all - log.chunks[2][2]
     (o, reason), = res.skipped
     assert o == off and reason.endswith(f"({n} messages lost)"), reason

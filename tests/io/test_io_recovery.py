@@ -21,15 +21,6 @@ CH = "/imu.linear_acceleration.x"
 MODES = ["auto", "indexed", "stream"]
 
 
-def _messages(res):
-    out = []
-    for b in res.blocks:
-        mv = memoryview(b.buf)
-        for c, t, s, n in zip(b.channel_id.tolist(), b.log_time.tolist(), b.start.tolist(), b.length.tolist()):
-            out.append((c, t, bytes(mv[s : s + n])))
-    return out
-
-
 def _chunks(path, data):
     """(offset, end, Counter of messages) of each chunk of an intact log."""
     res = scan(path)
@@ -37,7 +28,7 @@ def _chunks(path, data):
     for b in res.blocks:
         (length,) = struct.unpack_from("<Q", data, b.file_offset + 1)
         one = type(res)(path=path, file_size=0, blocks=[b])
-        out.append((b.file_offset, b.file_offset + 9 + length, Counter(_messages(one))))
+        out.append((b.file_offset, b.file_offset + 9 + length, Counter(one.messages())))
     return out
 
 
@@ -50,7 +41,7 @@ def big(tmp_path_factory):
     data = p.read_bytes()
     chunks = _chunks(p, data)
     assert len(chunks) > 20
-    return p, data, x[0], chunks, Counter(_messages(scan(p)))
+    return p, data, x[0], chunks, Counter(scan(p).messages())
 
 
 def _write(tmp_path, data, name="bad.mcap"):
@@ -68,7 +59,7 @@ def test_zeroed_chunk_start_loses_at_most_that_chunk(tmp_path, big, mode):
     bad = bytearray(data)
     bad[off : off + 9] = bytes(9)
     res = scan(_write(tmp_path, bad), mode=mode)
-    got = Counter(_messages(res))
+    got = Counter(res.messages())
     if mode == "stream":
         assert got == orig - msgs
         assert [o for o, _ in res.skipped] == [off]
@@ -97,7 +88,7 @@ def test_zeroed_header_record(tmp_path, big, mode):
     bad[8 : 8 + 9 + hlen] = bytes(9 + hlen)
     q = _write(tmp_path, bad)
     res = scan(q, mode=mode)
-    assert Counter(_messages(res)) == orig
+    assert Counter(res.messages()) == orig
     assert res.header is None
     assert any("header record damaged at byte offset 8" in w for w in res.warnings)
     assert res.skipped and res.skipped[0][0] == 8
@@ -116,7 +107,7 @@ def test_zeroed_whole_chunk_is_reported(tmp_path, big, mode):
     bad = bytearray(data)
     bad[off:end] = bytes(end - off)
     res = scan(_write(tmp_path, bad), mode=mode)
-    assert Counter(_messages(res)) == orig - msgs
+    assert Counter(res.messages()) == orig - msgs
     (o, reason), = res.skipped
     assert o == off
     # the count from the summary's chunk index, or (stream) from the intact message indexes
@@ -149,7 +140,7 @@ def test_bad_chunk_record_length(tmp_path, big, mode, length):
     bad = bytearray(data)
     struct.pack_into("<Q", bad, off + 1, length)
     res = scan(_write(tmp_path, bad), mode=mode)
-    got = Counter(_messages(res))
+    got = Counter(res.messages())
     assert not got - orig  # nothing invented
     if mode != "stream":
         assert got == orig and res.recovered == 1
@@ -171,7 +162,7 @@ def test_damaged_chunk_opcode(tmp_path, big, mode, opcode):
     bad = bytearray(data)
     bad[off] = opcode
     res = scan(_write(tmp_path, bad), mode=mode)
-    assert Counter(_messages(res)) == orig
+    assert Counter(res.messages()) == orig
     assert any(f"byte offset {off}" in w for w in res.warnings)
 
 
@@ -184,7 +175,7 @@ def test_zeroed_message_indexes_lose_nothing(tmp_path, big, mode):
     bad = bytearray(data)
     bad[end:nxt] = bytes(nxt - end)
     res = scan(_write(tmp_path, bad), mode=mode)
-    assert Counter(_messages(res)) == orig
+    assert Counter(res.messages()) == orig
     if mode == "indexed":  # message indexes are passed over by the length the chunk index states
         assert res.skipped == []
     else:
@@ -202,7 +193,7 @@ def test_flipped_bits_in_summary(tmp_path, big, mode):
         bad = bytearray(data)
         bad[pos] ^= 1 << int(rng.integers(8))
         res = scan(_write(tmp_path, bad), mode=mode)
-        assert Counter(_messages(res)) == orig, pos
+        assert Counter(res.messages()) == orig, pos
         assert res.skipped == []
         if mode != "stream":
             assert any("summary" in w for w in res.warnings), pos
@@ -230,7 +221,7 @@ def test_missing_summary_and_footer(tmp_path, big):
     q = _write(tmp_path, data[:start])
     for mode in MODES:
         res = scan(q, mode=mode)
-        assert Counter(_messages(res)) == orig and not res.indexed and not res.complete
+        assert Counter(res.messages()) == orig and not res.indexed and not res.complete
         assert res.skipped == [(start, "file ends without a footer (log not closed?)")]
     assert any("linear pass" in w for w in scan(q, mode="indexed").warnings)
 
@@ -251,7 +242,7 @@ def test_truncated_at_many_positions(tmp_path, big, mode):
                 scan(q, mode=mode)
             continue
         res = scan(q, mode=mode)
-        assert Counter(_messages(res)) == expect, cut
+        assert Counter(res.messages()) == expect, cut
         if len(whole) < len(chunks):
             assert res.skipped and res.skipped[0][0] >= whole[-1][1] - (whole[-1][1] - whole[-1][0]), cut
 

@@ -182,6 +182,21 @@ class ScanResult:
     damage: list[Damage] = field(default_factory=list)  # every damaged place, in file order
     recovered: int = 0  # chunks with a damaged record header read through the summary's index
 
+    def messages(self) -> list[tuple[int, int, bytes]]:
+        """Every message found, undecoded, blocks in order (chunks in file order, then the loose ones).
+
+        Returns
+        -------
+        list of (int, int, bytes)
+            (channel id, log time in ns, payload copied out).
+        """
+        out = []
+        for b in self.blocks:
+            mv = memoryview(b.buf)
+            for c, t, s, n in zip(b.channel_id.tolist(), b.log_time.tolist(), b.start.tolist(), b.length.tolist()):
+                out.append((c, t, bytes(mv[s : s + n])))
+        return out
+
 
 @dataclass
 class _Summary:
