@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -135,3 +136,27 @@ def test_example_model_file_simulates(tmp_path, monkeypatch):
     assert np.std(log.data[0]) == pytest.approx(10.0, rel=0.05)  # rms=10 of the excitation
     ref = simulate(model, log.data[0], log.fs)
     np.testing.assert_allclose(log.data[1:], ref.data[1:], rtol=0, atol=1e-9 * np.abs(ref.data[1:]).max())
+
+
+def test_cli_help_and_info_load_no_heavy_edge(tmp_path):
+    """`vibroscope --help` and `vibroscope info LOG` start without rerun, matplotlib, control, dask or numba
+    (issue #9, start-up): only what the command uses is imported."""
+    from vibroscope.io import write_ros2_mcap
+    from vibroscope.signals import Signals
+
+    log = tmp_path / "x.mcap"
+    write_ros2_mcap(log, Signals(np.zeros((1, 100)) + 1.0, 100.0, ["/imu.linear_acceleration.x"], ["m/s^2"]))
+    heavy = ("rerun", "matplotlib", "control", "dask", "numba")
+    for argv in (["--help"], ["info", str(log)]):
+        code = (
+            "import sys, contextlib, io\n"
+            "from vibroscope.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n"
+            f"        main({argv!r})\n"
+            "    except SystemExit:\n"
+            "        pass\n"
+            f"print(','.join(m for m in {heavy!r} if m in sys.modules))\n"
+        )
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
+        assert out.stdout.strip() == "", f"vibroscope {' '.join(argv)} imported {out.stdout.strip()}"
