@@ -423,7 +423,9 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
     """Time series of the first channels, one panel each, min/max-decimated for size.
 
     Missing samples (NaN, ±Inf: logging gaps, lost chunks, masked faults) are never bridged: the
-    trace breaks there and each gap is shaded (``axvspan``, labelled "gap (no data)").
+    trace breaks there and each gap is shaded (``axvspan``, labelled "gap (no data)"; gaps closer
+    than 1/300 of the record merge into one span). The title counts the gaps of the channel that
+    has the most, and says when they merged into fewer shaded spans.
 
     Parameters
     ----------
