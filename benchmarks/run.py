@@ -8,8 +8,10 @@ Cases
 csd_matrix      full cross-spectral matrix: our one-pass engine vs pairwise ``scipy.signal.csd``
 csd_threads     the engine with 2 worker threads vs 1
 csd_memory      peak traced memory (tracemalloc) of the engine vs pairwise scipy
-mcap_read       reading Imu accelerations from a ROS 2 MCAP: ``read_mcap`` (numpy chunk fast path)
-                vs decoding every message with ``mcap_ros2`` (the library's own reader)
+mcap_read       reading Imu accelerations from a ROS 2 MCAP (1e6 messages, zstd and lz4 chunks):
+                ``read_mcap`` (chunks opened on threads, numpy / compiled chunk fast path) vs
+                decoding every message with ``mcap_ros2`` (timed on 1e5 messages, scaled) and
+                vs ``rerun.chunk.McapReader`` (benchmarks/mcap_ingest.py)
 simulate_nonlinear
                 60 s of a 1 kHz log through a 3-DOF chain (modes 18, 42, 60 Hz) with one
                 cubic spring, and with friction + cubic spring: the whole ``simulate()`` call
@@ -24,7 +26,6 @@ import argparse
 import gc
 import json
 import sys
-import tempfile
 import time
 import tracemalloc
 from pathlib import Path
@@ -88,36 +89,11 @@ def bench_csd(n_ch: int, n: int) -> list[dict]:
 
 
 def bench_mcap(n_msgs: int) -> list[dict]:
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
+    """1e6 Imu messages, zstd and lz4: see ``benchmarks/mcap_ingest.py``."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from mcap_ingest import bench_mcap as _bench
 
-    from vibroscope import Signals
-    from vibroscope.io import read_mcap, write_ros2_mcap
-
-    rng = np.random.default_rng(1)
-    chans = [f"/imu/a.linear_acceleration.{c}" for c in "xyz"]
-    sig = Signals(rng.standard_normal((3, n_msgs)), 1000.0, chans, ["m/s^2"] * 3, t0=1.7e9)
-    with tempfile.TemporaryDirectory() as d:
-        path = Path(d) / "imu.mcap"
-        write_ros2_mcap(path, sig)
-
-        def ours():
-            return read_mcap(path, chans)
-
-        def library():
-            with open(path, "rb") as f:
-                r = make_reader(f, decoder_factories=[DecoderFactory()])
-                vals = [(m.linear_acceleration.x, m.linear_acceleration.y, m.linear_acceleration.z)
-                        for _, _, _, m in r.iter_decoded_messages(topics=["/imu/a"])]
-            return np.array(vals)
-
-        got = ours().data
-        ref = library().T
-        assert np.array_equal(got, ref), "fast path differs from the library decoder"
-        t_ours, t_lib = _best(ours), _best(library, 1)
-    return [dict(case="mcap_read", size=f"{n_msgs} Imu messages", ours_s=t_ours, baseline_s=t_lib,
-                 speedup=t_lib / t_ours, ours_msgs_per_s=n_msgs / t_ours, baseline_msgs_per_s=n_msgs / t_lib,
-                 baseline="mcap_ros2 iter_decoded_messages")]
+    return _bench(n_msgs)
 
 
 def bench_simulate(seconds: float = 60.0, ref_seconds: float = 6.0) -> list[dict]:
@@ -162,7 +138,7 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     n = int(a.samples) if a.samples else (10**5 if a.quick else 10**6)
     rows = bench_csd(10, n)
-    rows += bench_mcap(20_000 if a.quick else 200_000)
+    rows += bench_mcap(100_000 if a.quick else 1_000_000)
     rows += bench_simulate(60.0, 2.0 if a.quick else 6.0)
     for r in rows:
         print("  ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in r.items()))

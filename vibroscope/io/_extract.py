@@ -59,8 +59,54 @@ def _stamp_of(msg: Any) -> int | None:
         return None
 
 
+def _block_fast(buf: Any, st: np.ndarray, ln: np.ndarray, tname: str, names: list[str]):
+    """(stamps ns, values (k, m)) of the payloads at `st` (lengths `ln`) of one block, or None when
+    one of them does not fit the fixed layout. Payloads of one length evenly spaced (one topic,
+    or topics interleaved in a fixed pattern) are one strided numpy view; in any other block (frame
+    ids of mixed lengths, irregular interleaving) each field is gathered at its byte offsets."""
+    m = st.size
+    L = int(ln[0])
+    if m == 1 or (ln.min() == ln.max() and (d := np.diff(st)).min() == d.max() and d[0] >= L):
+        lay = _ros2.layout_of_length(tname, L)
+        if lay is None:
+            return None
+        first, dt = lay
+        step = int(st[1] - st[0]) if m > 1 else L
+        p = np.ndarray((m,), dtype=dt, buffer=buf, offset=int(st[0]), strides=(step,))
+        if not (p["_cdr"] == 0x0100).all() or not _ros2.flen_fits(p["_flen"], first):
+            return None
+        stamps = p["header.stamp.sec"].astype(np.int64) * 1_000_000_000 + p["header.stamp.nanosec"]
+        return stamps, [p[n] for n in names]
+    floats = _ros2.FLOAT_FIELDS[tname]
+    nb = len(buf)
+    st, ln = st.astype(np.int64), ln.astype(np.int64)
+    if int(st.min()) < 0 or int(ln.min()) < 16 or int((st + ln).max()) > nb:
+        return None
+
+    def at(dtype: str, offs: np.ndarray) -> np.ndarray:  # values of `dtype` at any byte offsets
+        size = np.dtype(dtype).itemsize
+        return np.ndarray((nb - size + 1,), dtype, buf, 0, (1,))[offs]
+
+    if not (at("<u2", st) == 0x0100).all():
+        return None
+    first = 4 + (12 + at("<u4", st + 12).astype(np.int64) + 7) // 8 * 8
+    if not (first + 8 * len(floats) == ln).all():
+        return None
+    sec, nsec = at("<i4", st + 4), at("<u4", st + 8)
+    first += st
+    cols = {"header.stamp.sec": sec, "header.stamp.nanosec": nsec}
+    vals = [cols[n] if n in cols else at("<f8", first + 8 * floats.index(n)) for n in names]
+    return sec.astype(np.int64) * 1_000_000_000 + nsec, vals
+
+
 def fast_extract(log: Any, cid: int, names: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
-    """(stamps ns, values (k, n)) by the numpy fast path, or None when it does not apply."""
+    """(stamps ns, values (k, n)) by the numpy fast path, or None when it does not apply.
+
+    It applies to a CDR channel of a fixed-layout type (:data:`~vibroscope.io._ros2.FLOAT_FIELDS`)
+    whose every message is one such payload (CDR little-endian, a frame_id of any length, no
+    bytes more or less than the layout): block by block (a chunk's bytes, hot in the cache),
+    each block one strided view or one gather per field.
+    """
     ch = log.scan.channels[cid]
     tname = log.schema_name(cid)
     if ch.message_encoding != "cdr" or tname not in _ros2.FLOAT_FIELDS:
@@ -71,36 +117,20 @@ def fast_extract(log: Any, cid: int, names: list[str]) -> tuple[np.ndarray, np.n
     if not where:
         return None
     blocks = log.scan.blocks
-    lens = np.concatenate([blocks[bi].length[idx] for bi, idx in where])
-    if lens.min() != lens.max():
-        return None
-    b0, i0 = where[0]
-    s0 = int(blocks[b0].start[i0[0]])
-    lay = _ros2.layout_for(tname, blocks[b0].buf[s0 : s0 + int(lens[0])])
-    if lay is None:
-        return None
-    parts = []
+    total = sum(int(idx.size) for _, idx in where)
+    stamps = np.empty(total, np.int64)
+    vals = np.empty((len(names), total))
+    o = 0
     for bi, idx in where:
         b = blocks[bi]
-        st = b.start[idx]
-        d = np.diff(st)
-        if st.size == 1 or (d.min() == d.max() and d[0] >= lay.payload_len):
-            step = int(d[0]) if st.size > 1 else lay.payload_len
-            a = np.ndarray((st.size,), dtype=lay.dtype, buffer=b.buf, offset=int(st[0]), strides=(step,))
-        else:
-            mv = memoryview(b.buf)
-            L = lay.payload_len
-            a = np.frombuffer(b"".join([mv[s : s + L] for s in st.tolist()]), dtype=lay.dtype)
-        parts.append(a)
-    ok = all(((p["_cdr"] == 0x0100) & (p["_flen"] == lay.frame_len)).all() for p in parts)
-    if not ok:
-        return None
-    stamps = np.concatenate(
-        [p["header.stamp.sec"].astype(np.int64) * 1_000_000_000 + p["header.stamp.nanosec"] for p in parts]
-    )
-    vals = np.empty((len(names), stamps.size))
-    for k, n in enumerate(names):
-        vals[k] = np.concatenate([p[n] for p in parts])
+        got = _block_fast(b.buf, b.start[idx], b.length[idx], tname, names)
+        if got is None:
+            return None
+        m = idx.size
+        stamps[o : o + m] = got[0]
+        for k, v in enumerate(got[1]):
+            vals[k, o : o + m] = v
+        o += m
     return stamps, vals
 
 

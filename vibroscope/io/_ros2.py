@@ -99,6 +99,39 @@ def layout_for(type_name: str, payload: bytes) -> FastLayout | None:
     return FastLayout(type_name, len(payload), frame_len, dt)
 
 
+def layout_of_length(type_name: str, length: int) -> tuple[int, np.dtype] | None:
+    """(offset of the first float64, structured dtype) of a `type_name` payload of `length` bytes,
+    or None when no frame_id length gives that payload length.
+
+    The frame_id length (``_flen``, NUL included) of a payload of this layout lies in
+    ``[first - 23, first - 16]`` (see :func:`flen_fits`); the dtype reads it with the CDR
+    encapsulation (``_cdr``) so that the caller checks both.
+    """
+    key = (type_name, length)
+    got = _LAYOUTS.get(key)
+    if got is None and key not in _LAYOUTS:
+        floats = FLOAT_FIELDS.get(type_name)
+        first = length - 8 * len(floats) if floats else -1
+        if floats is None or first < 20 or (first - 4) % 8:
+            got = None
+        else:
+            names = ["_cdr", "_flen", "header.stamp.sec", "header.stamp.nanosec", *floats]
+            formats = ["<u2", "<u4", "<i4", "<u4", *(["<f8"] * len(floats))]
+            offsets = [0, 12, 4, 8, *(first + 8 * i for i in range(len(floats)))]
+            got = first, np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": length})
+        _LAYOUTS[key] = got
+    return got
+
+
+_LAYOUTS: dict[tuple[str, int], tuple[int, np.dtype] | None] = {}
+
+
+def flen_fits(flen: np.ndarray, first: int) -> bool:
+    """Whether every frame_id length `flen` (NUL included) puts the first float64 at `first`."""
+    lo, hi = int(flen.min()), int(flen.max())
+    return _layout(lo) == first and _layout(hi) == first
+
+
 def encode_fixed(
     type_name: str,
     sec: np.ndarray,

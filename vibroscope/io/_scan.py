@@ -56,7 +56,9 @@ import bisect
 import mmap
 import os
 import struct
+import threading
 import zlib
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
@@ -76,6 +78,7 @@ _FOOTER_LEN = 1 + 8 + 20
 _MAX_CHUNK_USIZE = 1 << 32  # a stated uncompressed size beyond this is damage, not data
 _COMPRESSIONS = (b"", b"zstd", b"lz4")
 MODES = ("auto", "stream", "indexed")
+_MAX_WORKERS = 8
 _SUMMARY_ONLY_OPS = {Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA_INDEX, Opcode.STATISTICS,
                      Opcode.SUMMARY_OFFSET}
 _DATA_OPS = {Opcode.CHUNK, Opcode.MESSAGE, Opcode.MESSAGE_INDEX, Opcode.ATTACHMENT, Opcode.METADATA, Opcode.HEADER}
@@ -286,18 +289,30 @@ def _read_chunk(mv: memoryview, body: int, end: int) -> Chunk:
                  uncompressed_crc=crc, uncompressed_size=usize)
 
 
+_LOCAL = threading.local()
+
+
 def _decompress(chunk: Chunk) -> bytes:
     if chunk.compression == "":
         return chunk.data
     if chunk.compression == "zstd":
         if _zstd is None:
             raise ValueError("zstd compression but the zstandard module is not installed")
-        return _zstd.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+        dec = getattr(_LOCAL, "zstd", None)
+        if dec is None:  # one decompression context per thread, reused (zstandard objects are not thread-safe)
+            dec = _LOCAL.zstd = _zstd.ZstdDecompressor()
+        return dec.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
     if chunk.compression == "lz4":
         if _lz4 is None:
             raise ValueError("lz4 compression but the lz4 module is not installed")
         return _lz4.decompress(chunk.data)
     raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+
+
+def _periodic_dtype(stride: int) -> np.dtype:
+    """Message records of `stride` bytes laid end to end: opcode, record length, channel id, log time."""
+    return np.dtype({"names": ["op", "len", "cid", "log_time"], "formats": ["u1", "<u8", "<u2", "<u8"],
+                     "offsets": [0, 1, 9, 15], "itemsize": stride})
 
 
 def _index_messages(buf: bytes, pos: int, end: int, out_records: list, fast: bool = True) -> tuple[np.ndarray, ...]:
@@ -339,14 +354,22 @@ def _index_messages(buf: bytes, pos: int, end: int, out_records: list, fast: boo
                 stride = 9 + length
                 rest = end - pos
                 if length >= 22 and rest % stride == 0 and rest // stride > 8:
-                    a = np.frombuffer(buf, np.uint8, count=rest, offset=pos).reshape(-1, stride)
-                    if (a[:, 0] == Opcode.MESSAGE).all() and (a[:, 1:9] == a[0, 1:9]).all():
+                    m = rest // stride
+                    a = np.ndarray((m,), _periodic_dtype(stride), buf, pos)
+                    if (a["op"] == Opcode.MESSAGE).all() and (a["len"] == length).all():
                         flush_py()
-                        m = a.shape[0]
-                        cids.append(a[:, 9:11].copy().view("<u2").ravel().astype(np.uint16))
-                        logs.append(a[:, 15:23].copy().view("<u8").ravel().astype(np.uint64))
+                        cids.append(a["cid"].astype(np.uint16))
+                        logs.append(a["log_time"].astype(np.uint64))
                         starts.append(pos + 31 + stride * np.arange(m, dtype=np.int64))
                         lens.append(np.full(m, length - 22, np.int64))
+                        pos = end
+                        break
+                if fast:  # any other layout: the record walk compiled (numba), else record by record below
+                    got = _index_compiled(buf, pos, end, out_records)
+                    if got is not None:
+                        flush_py()
+                        for col, arr in zip((cids, logs, starts, lens), got):
+                            col.append(arr)
                         pos = end
                         break
             cid, _seq, log_time, _pub = unpack_msg(buf, pos + 9)
@@ -364,6 +387,72 @@ def _index_messages(buf: bytes, pos: int, end: int, out_records: list, fast: boo
         e = np.empty(0, np.int64)
         return np.empty(0, np.uint16), np.empty(0, np.uint64), e, e.copy()
     return (np.concatenate(cids), np.concatenate(logs), np.concatenate(starts), np.concatenate(lens))
+
+
+def _walk_records(buf, pos, end, op, start, length, cid, logt):  # pragma: no cover - compiled by numba
+    """Walk the records of ``buf[pos:end]`` (numba kernel): fill op, payload start, length and, for
+    messages, channel id and log time; returns (records, 0) or (records so far, 1) at anything the
+    record-by-record walk would treat specially (a cut-off record, a message shorter than its
+    header, more records than the arrays hold)."""
+    n = 0
+    while pos < end:
+        if pos + 9 > end or n >= op.size:
+            return n, 1
+        ln = 0
+        for k in range(8):
+            ln |= np.int64(buf[pos + 1 + k]) << np.int64(8 * k)
+        if ln < 0 or ln > end - pos - 9:
+            return n, 1
+        o = buf[pos]
+        op[n] = o
+        length[n] = ln
+        if o == 0x05:
+            if ln < 22:
+                return n, 1
+            c = np.int64(buf[pos + 9]) | (np.int64(buf[pos + 10]) << np.int64(8))
+            t = np.uint64(0)
+            for k in range(8):
+                t |= np.uint64(buf[pos + 15 + k]) << np.uint64(8 * k)
+            cid[n] = c
+            logt[n] = t
+            start[n] = pos + 31
+            length[n] = ln - 22
+        else:
+            start[n] = pos
+        n += 1
+        pos += 9 + ln
+    return n, 0
+
+
+_COMPILED: dict[str, Any] = {}
+_COMPILE_LOCK = threading.Lock()
+
+
+def _index_compiled(buf: Any, pos: int, end: int, out_records: list) -> tuple[np.ndarray, ...] | None:
+    """The records of ``buf[pos:end]`` indexed by the compiled walk (the same result as the
+    record-by-record walk), or None where that walk must decide (it raises the same errors)."""
+    with _COMPILE_LOCK:
+        walk = _COMPILED.get("walk")
+        if walk is None:
+            try:
+                import numba
+            except ImportError:  # pragma: no cover - numba is a dependency
+                return None
+            walk = _COMPILED["walk"] = numba.njit(cache=True, nogil=True)(_walk_records)
+    cap = (end - pos) // 23 + 1  # every record of a chunk (schema, channel, message) has at least 23 bytes
+    op = np.empty(cap, np.uint8)
+    start, length = np.empty(cap, np.int64), np.empty(cap, np.int64)
+    cid, logt = np.empty(cap, np.uint16), np.empty(cap, np.uint64)
+    u8 = np.frombuffer(buf, np.uint8, count=end, offset=0)
+    m, status = walk(u8, pos, end, op, start, length, cid, logt)
+    if status:
+        return None
+    op = op[:m]
+    msg = op == Opcode.MESSAGE
+    for i in np.flatnonzero((op == Opcode.SCHEMA) | (op == Opcode.CHANNEL)).tolist():
+        s, ln = int(start[i]), int(length[i])
+        out_records.append(_parse(Schema if op[i] == Opcode.SCHEMA else Channel, buf[s + 9 : s + 9 + ln]))
+    return cid[:m][msg], logt[:m][msg], start[:m][msg], length[:m][msg]
 
 
 def _fields_end(data: Any, op: int, body: int, end: int) -> int | None:
@@ -426,6 +515,49 @@ class _Scanner:
         self.loose: tuple[list, list, list, list] = ([], [], [], [])  # channel id, log time, start, length
         self.ended = False  # data end or footer reached
         self.last_good = 8  # just after the start of the last chunk read: a back-search starts here
+        self.pool: ThreadPoolExecutor | None = None  # opens the chunks ahead of the walk (see prefetch)
+        self.pending: dict[tuple[int, int], Future] = {}  # (body, end) -> open_chunk(body, end) under way
+        self.frontier = 0  # where the look-ahead for chunk records stopped
+        self.window = 1
+
+    # -- chunks opened ahead of the walk -----------------------------------------------------
+    def start_pool(self, workers: int) -> None:
+        """Open chunks ahead of the walk on `workers` threads (decompression and CRC-32 release the GIL)."""
+        if workers > 1:
+            self.pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="vibroscope-mcap")
+            self.window = 2 * workers + 2
+
+    def close_pool(self) -> None:
+        """Drop what was opened ahead and not used (damage sent the walk elsewhere); stop the threads."""
+        for fut in self.pending.values():
+            fut.cancel()
+        self.pending.clear()
+        if self.pool is not None:
+            self.pool.shutdown(wait=True)
+            self.pool = None
+
+    def prefetch(self, pos: int, stop: int) -> None:
+        """Start opening the chunk records that follow one another from `pos` (hopping over records
+        by their lengths, as the walk will): a guess only, the walk decides what is read; a chunk
+        opened ahead is used only for the very record bytes ``(body, end)`` the walk reads, so the
+        result is that of opening it in turn."""
+        if self.pool is None:
+            return
+        for key in [k for k in self.pending if k[0] < pos]:  # the walk went elsewhere
+            self.pending.pop(key).cancel()
+        p = self.frontier if self.frontier > pos else pos
+        data, hops = self.data, 0
+        while len(self.pending) < self.window and p + 9 <= stop and hops < 1024:
+            op, length = _REC_HDR.unpack_from(data, p)
+            e = p + 9 + length
+            if not _valid_opcode(op) or e > stop:
+                break
+            if op == Opcode.CHUNK and length >= 40 and p not in self.skip_chunks and p not in self.done:
+                key = (p + 9, e)
+                if key not in self.pending:
+                    self.pending[key] = self.pool.submit(self.open_chunk, p + 9, e)
+            p, hops = e, hops + 1
+        self.frontier = p
 
     # -- the walk ---------------------------------------------------------------------------
     def walk(self, pos: int, stop: int) -> int:
@@ -648,7 +780,13 @@ class _Scanner:
     def chunk(self, pos: int, body: int, end: int) -> str | None:
         """Decompress, check and index one chunk; returns why it failed, or None."""
         try:
-            opened = self.opened.pop(pos, None) or self.open_chunk(body, end)
+            opened = self.opened.pop(pos, None)
+            if opened is None:
+                self.prefetch(pos, self.summary.start if self.summary is not None else self.n)
+                fut = self.pending.pop((body, end), None)
+                if fut is None:
+                    self.frontier = 0
+                opened = fut.result() if fut is not None else self.open_chunk(body, end)
         except Exception as exc:  # noqa: BLE001 - any failure skips this chunk only
             return f"{type(exc).__name__}: {exc}"
         self.take(pos, opened, end)
@@ -871,6 +1009,7 @@ def scan(
     topics: Any = None,
     mode: Literal["auto", "stream", "indexed"] = "auto",
     fast: bool = True,
+    workers: int | None = None,
 ) -> ScanResult:
     """Scan an MCAP file record by record, recovering after damage.
 
@@ -901,6 +1040,9 @@ def scan(
     fast : bool, optional
         Index runs of equal-length message records with numpy (default); False indexes every
         record one by one (the same result, slower: for tests).
+    workers : int, optional
+        Threads that open (decompress, CRC-check, index) the chunks ahead of the walk; default
+        the machine's cores (at most 8); 1 opens each chunk in turn (the same result).
 
     Returns
     -------
@@ -953,6 +1095,7 @@ def scan(
     stop = summary.start if summary is not None else n
     sc = _Scanner(res, data, validate_crcs=validate_crcs, fast=fast, summary=summary, skip_chunks=skip,
                   search=mode != "indexed" or summary is None or not summary.chunks, seek=mode == "indexed", bar=bar)
+    sc.start_pool(min(os.cpu_count() or 1, _MAX_WORKERS) if workers is None else workers)
     try:
         if n >= 8 + 9:
             op = data[8]
@@ -961,6 +1104,7 @@ def scan(
                                     f"the rest of the file is read")
         sc.walk(8, stop)
     finally:
+        sc.close_pool()
         if bar is not None:
             bar.update(max(0, n - bar.n))  # the summary and anything passed over
             bar.close()
