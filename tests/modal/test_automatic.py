@@ -172,3 +172,20 @@ def test_lscf_bootstrap_random_error(forced):
     assert np.all(u.frequency_std_hz / an.modal.natural_frequencies < 1e-3)
     assert np.all(u.damping_std / an.modal.damping_ratios < 0.1)
     assert "random error only" in u.method
+
+
+def test_identification_entry_points_run_on_one_blas_thread():
+    """BLAS oversubscription (issue #9): auto_ssi, auto_lscf and polymax_oma bound every BLAS pool
+    to one thread for their duration, and restore it after."""
+    from threadpoolctl import threadpool_info
+
+    from vibroscope.modal import automatic
+
+    def blas_threads():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas_threads()
+    assert set(automatic.one_blas_thread(blas_threads)()) == {1}
+    assert blas_threads() == before
+    for name in ("auto_ssi", "auto_lscf", "polymax_oma"):
+        assert getattr(automatic, name).__wrapped__.__name__ == name

@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -23,6 +24,38 @@ import numpy as np
 from vibroscope.modal._results import ModalModel
 from vibroscope.modal.selection import DAMPING_RANGE, MIN_MPC, RejectedMode, cluster_poles, select_modes
 from vibroscope.signals import Signals
+
+
+def one_blas_thread(fn):
+    """Decorator: run `fn` with every BLAS thread pool limited to one thread (threadpoolctl).
+
+    Modal identification is many small and medium dense factorisations (SVDs, QRs, least
+    squares): on this project's 2-core machine a BLAS pool of two threads per library (numpy's
+    and scipy's OpenBLAS each start their own) gains nothing when the machine is idle and,
+    when it is loaded, spins against the other work. SSI-COV on LUMO (18 channels x 1e5
+    samples, the whole ``analyse_signals``; ``benchmarks/modal_threads.py``) with two busy
+    processes on the two cores: 9.3 s with the default threads, 4.4 s with one (26 s against
+    5.4 s in an earlier run); idle, 2.3 s against 2.8 s.
+
+    Parameters
+    ----------
+    fn : callable
+        The function to wrap.
+
+    Returns
+    -------
+    callable
+        `fn` with the limit set for the duration of each call (restored after it).
+    """
+
+    @functools.wraps(fn)
+    def bounded(*args, **kwargs):
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+
+    return bounded
 
 __all__ = ["Identification", "modes_document", "positive_power_spectra", "polymax_oma", "auto_ssi", "auto_lscf", "reference_channels", "ssi_lags"]
 
@@ -179,6 +212,7 @@ def _add_quality(mm: ModalModel) -> ModalModel:
     return dataclasses.replace(mm, extra=extra)
 
 
+@one_blas_thread
 def auto_ssi(
     signals: Signals,
     *,
@@ -266,6 +300,7 @@ def auto_ssi(
     return Identification(mm, sel.rejected, st, settings)
 
 
+@one_blas_thread
 def auto_lscf(
     frf,
     *,
@@ -426,6 +461,7 @@ def positive_power_spectra(signals: Signals, *, n_lags: int, ref: Sequence[int] 
     return h, float(sigma)
 
 
+@one_blas_thread
 def polymax_oma(signals: Signals, *, f_low: float, fmin: float | None = None, fmax: float | None = None,
                 n_ref: int = 6) -> Identification:
     """Output-only modes by polyMAX on the positive power spectra: the cross-check of SSI-COV.
