@@ -2,8 +2,12 @@
 and resampling onto a uniform grid, converters (CSV, MAT, UFF 58), FRF files
 (UFF 58, complex CSV, pyuff text), mode shapes (UFF 55) and geometry (UFF 15 / 2411).
 
-Importing this package imports ``mcap``; the numerical core never imports it.
+Importing this package imports ``mcap``; the numerical core never imports it. The file
+converters and the FRF/UFF files (which use scipy and the modal room) load on first use, so
+``vibroscope info LOG`` starts without them.
 """
+
+import importlib as _importlib
 
 from vibroscope.io.mcap_read import (
     LogIndex,
@@ -15,15 +19,6 @@ from vibroscope.io.mcap_read import (
     read_mcap,
     select_acceleration_channels,
     unit_for,
-)
-from vibroscope.io.convert import convert_to_mcap, read_csv, read_mat, read_uff58
-from vibroscope.io.frf_files import (
-    read_frf,
-    read_geometry,
-    read_modes_uff55,
-    write_frf_uff58,
-    write_geometry_uff15,
-    write_modes_uff55,
 )
 from vibroscope.io.mcap_write import write_json_mcap, write_ros2_mcap
 from vibroscope.io.paths import MessagePath, get_field, parse_path
@@ -56,3 +51,22 @@ __all__ = [
     "parse_path",
     "get_field",
 ]
+
+#: names loaded on first use, by module
+_LAZY = {
+    "convert_to_mcap": "convert", "read_csv": "convert", "read_mat": "convert", "read_uff58": "convert",
+    "read_frf": "frf_files", "read_geometry": "frf_files", "read_modes_uff55": "frf_files",
+    "write_frf_uff58": "frf_files", "write_geometry_uff15": "frf_files", "write_modes_uff55": "frf_files",
+}
+
+
+def __getattr__(name: str):
+    mod = _LAZY.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'vibroscope.io' has no attribute {name!r}")
+    return getattr(_importlib.import_module(f"vibroscope.io.{mod}"), name)
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
