@@ -4,15 +4,45 @@
   (MNE-Python's ``_check_option``).
 - :func:`read_only`: a private, read-only copy of an array, as results store their arrays
   (scipy's ``ShortTimeFFT`` returns read-only windows the same way).
+- :func:`atomic_file`: write one file under a temporary name, renamed when complete.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import contextlib
+import os
+import secrets
+from pathlib import Path
+from typing import Any, Iterator
 
 import numpy as np
 
-__all__ = ["check_option", "read_only"]
+__all__ = ["check_option", "read_only", "atomic_file"]
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside `path`, renamed to `path` when the block completes.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write; replaced if it exists.
+
+    Yields
+    ------
+    Path
+        ``.NAME.PID-XXXXXXXX.part`` in the same directory; the caller creates and writes it.
+        On any exception (``KeyboardInterrupt`` included) it is removed and `path` is left as
+        it was; the rename (``os.replace``) is atomic on one file system.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def check_option(name: str, value: Any, allowed: tuple) -> None:

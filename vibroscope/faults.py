@@ -53,7 +53,7 @@ from typing import Literal
 
 import numpy as np
 
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, true_runs
 
 __all__ = ["fault_lines", "Fault", "FAULT_KINDS", "detect_faults", "apply_faults", "nan_spans"]
 
@@ -125,12 +125,6 @@ class Fault:
                 "times_s": [[float(a), float(b)] for a, b in self.times[:100]]}
 
 
-def _runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Starts and stops (exclusive) of the runs of True in a 1-D boolean array."""
-    d = np.diff(np.concatenate(([0], mask.view(np.int8) if mask.dtype == bool else mask.astype(np.int8), [0])))
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-
-
 def fault_lines(faults, *, max_names: int = 3) -> list[str]:
     """One line per kind of fault: the channels it touches and one example message.
 
@@ -176,7 +170,7 @@ def nan_spans(x: np.ndarray) -> list[tuple[int, int]]:
     list of (int, int)
         Sample index ranges, in order; empty when every sample is finite.
     """
-    a, b = _runs(~np.isfinite(np.asarray(x, dtype=float)))
+    a, b = true_runs(~np.isfinite(np.asarray(x, dtype=float)))
     return list(zip(a.tolist(), b.tolist()))
 
 
@@ -208,7 +202,7 @@ def _clipping(x: np.ndarray, finite: np.ndarray) -> list[tuple[int, int, float]]
             continue  # constant channel
         nxt = inside.max() if sign > 0 else inside.min()
         n_next = int(np.count_nonzero(xf == nxt))
-        a, b = _runs(at)
+        a, b = true_runs(at)
         if n_at < CLIP_RATIO * n_next or not np.any(b - a >= CLIP_MIN_RUN):
             continue
         out += [(int(s), int(e), float(v)) for s, e in zip(a, b)]
@@ -225,7 +219,7 @@ def _dropouts(x: np.ndarray, finite: np.ndarray, rails: set) -> list[tuple[int, 
         eq &= finite[1:]
     if not eq.any():
         return []
-    a, b = _runs(eq)  # a run of k equal steps is k + 1 equal samples
+    a, b = true_runs(eq)  # a run of k equal steps is k + 1 equal samples
     lengths = b - a + 1
     long = lengths >= DROPOUT_MIN_RUN
     # the channel's own rate of equal steps, outside the long runs (quantised data repeat often)
@@ -297,7 +291,7 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
                 faults.append(_fault(ch, "nan", "every sample is missing (NaN): nothing to analyse; "
                                      "drop the channel or check the log", "stop", spans, fs, nan.sum()))
                 continue
-            a, b = _runs(finite)
+            a, b = true_runs(finite)
             longest = int((b - a).max())
             if longest < nper:
                 faults.append(_fault(ch, "nan", f"{int(nan.sum())} missing samples (NaN) in {_where(spans, fs)}; "
@@ -308,7 +302,7 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
                                      f"Welch segments touching them are skipped", "skip_segments", spans, fs,
                                      nan.sum()))
         if inf.any():
-            a, b = _runs(inf)
+            a, b = true_runs(inf)
             spans = list(zip(a, b))
             faults.append(_fault(ch, "inf", f"{int(inf.sum())} infinite samples in {_where(spans, fs)}; "
                                  f"treated as missing (NaN), their segments skipped", "mask", spans, fs, inf.sum()))

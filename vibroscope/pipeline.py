@@ -15,7 +15,7 @@ import numpy as np
 import scipy.signal
 
 from vibroscope.faults import apply_faults, detect_faults
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, true_runs
 from vibroscope.spectral import FRF, CrossSpectralMatrix, Spectrum, csd_matrix, frf
 from vibroscope.spectral.estimators import MIN_AVERAGES, FewAveragesWarning
 
@@ -382,7 +382,8 @@ def analyse_signals(
     gappy = not present.all()
     if gappy:
         n_valid = int(present.sum())
-        longest = _longest_run(present)
+        starts, stops = true_runs(present)
+        longest = int((stops - starts).max(initial=0))
         if n_valid >= sig.n_samples // 2:
             data = np.array(sig.data)
             data[:, ~present] = np.nan
@@ -477,13 +478,6 @@ def analyse_signals(
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
                     input=input, outputs=list(outputs), method=mm.method, band_hz=list(band))
     return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity, tuple(faults))
-
-
-def _longest_run(present: np.ndarray) -> int:
-    """Longest run of True in a 1-D boolean array."""
-    d = np.diff(np.concatenate(([0], present.astype(np.int8), [0])))
-    a, b = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
-    return int((b - a).max()) if a.size else 0
 
 
 def _nperseg_for(sig: Signals, nperseg: int) -> int:

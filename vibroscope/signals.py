@@ -7,7 +7,28 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Signals"]
+__all__ = ["Signals", "true_runs"]
+
+
+def true_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Runs of True in a 1-D boolean array (present samples, missing samples, a fault's samples).
+
+    Parameters
+    ----------
+    mask : array_like of bool, shape (n,)
+
+    Returns
+    -------
+    starts, stops : ndarray of int, shape (n_runs,)
+        Index of each run's first element and one past its last (``mask[a:b]`` is all True).
+
+    Examples
+    --------
+    >>> true_runs(np.array([True, True, False, True]))
+    (array([0, 3]), array([2, 4]))
+    """
+    d = np.diff(np.concatenate(([0], np.asarray(mask, bool).view(np.int8), [0])))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

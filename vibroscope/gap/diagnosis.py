@@ -66,7 +66,7 @@ from vibroscope.gap.report import Candidate, ChannelGap, GapReport, GapSpectrum,
 from vibroscope.gap.signatures import run_signatures
 from vibroscope.models.lumped import Dof, LumpedModel, Output
 from vibroscope.models.elements import Damper, Spring
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, true_runs
 
 __all__ = ["diagnose", "fit_linear_model", "as_lumped"]
 
@@ -142,8 +142,7 @@ def _split_at_gaps(model, sigs: list, nperseg: int | None) -> list:
             continue
         bad = [c for c, r in zip(chans, data) if not np.isfinite(r).all()]
         min_len = 4 * int(nperseg) if nperseg else int(8 * sig.fs)
-        d = np.diff(np.concatenate(([0], present.astype(np.int8), [0])))
-        starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+        starts, stops = true_runs(present)
         keep = [(a, b) for a, b in zip(starts, stops) if b - a >= min_len]
         if not keep:
             longest = int((stops - starts).max()) if starts.size else 0

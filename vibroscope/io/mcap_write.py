@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
 import re
-import secrets
 from collections import defaultdict
 from pathlib import Path
 from typing import Any, Iterable, Sequence
@@ -13,6 +11,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from vibroscope.errors import ChannelError
+from vibroscope._checks import atomic_file
 from vibroscope.io import _ros2
 from vibroscope.io.paths import MessagePath, format_path, parse_path
 from vibroscope.signals import Signals
@@ -184,10 +183,6 @@ def channel_units(signals: Signals, kind: str, items: Sequence[tuple[int, tuple]
     return out
 
 
-def _temp_name(path: Path) -> Path:
-    return path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
-
-
 def _write(path, signals: Signals, plan, *, frame_id: str, chunk_size: int, compression: str, progress: bool) -> Path:
     """Write to a temporary file beside `path`, renamed to `path` only when complete."""
     path = Path(path)
@@ -195,19 +190,9 @@ def _write(path, signals: Signals, plan, *, frame_id: str, chunk_size: int, comp
         raise ValueError(f"output {str(path)!r} is a directory; name an output file")
     if not path.parent.is_dir():
         raise ValueError(f"output {str(path)!r}: the directory {str(path.parent)!r} does not exist")
-    tmp = _temp_name(path)
-    done = False
-    try:
+    with atomic_file(path) as tmp:
         _write_to(tmp, path.name, signals, plan, frame_id=frame_id, chunk_size=chunk_size,
                   compression=compression, progress=progress)
-        os.replace(tmp, path)
-        done = True
-    finally:
-        if not done:
-            try:
-                tmp.unlink()
-            except FileNotFoundError:
-                pass
     return path
 
 

@@ -636,15 +636,8 @@ def dump_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel, pa
         The file to write (UTF-8), replaced if it exists: written under a temporary name in
         the same directory and renamed when complete, so a failed write leaves the old file.
     """
-    import os
-    import secrets
+    from vibroscope._checks import atomic_file
 
-    path = Path(path)
     text = dumps_model(model)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
-    try:
-        with open(tmp, "x", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    with atomic_file(path) as tmp, open(tmp, "x", encoding="utf-8") as fh:
+        fh.write(text)

@@ -14,6 +14,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, nearest_frequencies, real_shape, sensor_geometry
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
@@ -511,9 +512,8 @@ def gap_spans(present: np.ndarray, fs: float, *, min_width: float = 0.0, max_spa
     list of (float, float)
         In s from the first sample.
     """
-    d = np.diff(np.concatenate(([0], (~np.asarray(present, bool)).astype(np.int8), [0])))
-    a = np.flatnonzero(d == 1) / fs
-    b = np.flatnonzero(d == -1) / fs
+    a, b = true_runs(~np.asarray(present, bool))
+    a, b = a / fs, b / fs
     if a.size == 0:
         return []
     spans = [[a[0], b[0]]]

@@ -32,6 +32,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, sensor_geometry
 
 __all__ = ["log_analysis", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
@@ -438,8 +439,7 @@ def _log_time_series(rec, prefix: str, sig) -> None:
             continue
         rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns[present])],
                          columns=rr.Scalars.columns(scalars=x[present]))
-        d = np.diff(np.concatenate(([0], (~present).astype(np.int8), [0])))
-        starts, stops = np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+        starts, stops = true_runs(~present)
         log_ent = channel_entity(prefix, "gaps")
         for a, b in zip(starts, stops):
             rec.set_time("time", duration=t_ns[a])
