@@ -48,6 +48,10 @@ def add_parser(sub) -> None:
     p.add_argument("--rrd", type=Path, help="rerun recording to write (default: <out>/<LOG stem>_analyse.rrd)")
     p.add_argument("--no-rrd", action="store_true", help="write no rerun recording")
     p.add_argument("--spawn", action="store_true", help="open a rerun viewer")
+    p.add_argument("--connect", nargs="?", const="", metavar="URL",
+                   help="stream to a running rerun viewer while the log is read: the time series as they arrive "
+                        "and the PSD/FRF/coherence refreshed as averages accumulate (default URL: "
+                        "rerun+http://127.0.0.1:9876/proxy); then the analysis runs as usual")
     p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: <out>/<LOG stem>_analyse_figures/)")
     p.add_argument("--no-figures", action="store_true", help="write no PNG figures")
     p.add_argument("--fs", type=float, help="resample to this rate (Hz); default the highest topic rate")
@@ -151,6 +155,14 @@ def run(args) -> int:
     check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},
                   {"log": args.log, "coordinates": args.coords})
     select = _select_freqs(args.select)
+    if getattr(args, "connect", None) is not None:  # live view first (vibroscope.viewers.rerun_live)
+        from vibroscope.viewers.rerun_live import stream_log
+
+        try:
+            stream_log(args.log, url=args.connect or None, input=args.input, outputs=args.outputs, fs=args.fs,
+                       nperseg=args.nperseg, estimator=args.estimator)
+        except (ValueError, ConnectionError) as exc:
+            raise VibroscopeError(f"{args.log}: {exc}") from None
     try:
         an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
                          nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,

@@ -7,7 +7,11 @@ Timelines
 ---------
 ``time`` (duration)
     The time series, in s since the first sample (``Signals.t0`` is written in the ``about``
-    document). Stored by rerun as int64 ns.
+    document). Stored by rerun as int64 ns. A channel longer than :data:`MAX_POINTS` (100 000)
+    samples is logged for display as its min/max envelope (:func:`envelope_indices`: the
+    smallest and largest sample of each of 50 000 consecutive bins, at their true times), so a
+    1e7-sample analysis stays small and every peak stays visible; the spectra keep the full
+    resolution of the record.
 ``frequency_mHz`` (sequence)
     Spectra, FRF and coherence. rerun 0.41's :class:`~rerun.blueprint.TimeSeriesView` plots
     against a timeline only (no free x axis, no log axes), and timelines hold integers
@@ -36,10 +40,14 @@ from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, sensor_geometry
 
 __all__ = ["log_analysis", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
-           "mode_frames", "node_frames"]
+           "mode_frames", "node_frames", "envelope_indices", "MAX_POINTS"]
 
 #: animation frames per cycle of a mode
 FRAMES = 40
+
+#: most points logged per time-series channel: longer channels are logged as their min/max
+#: envelope (:func:`envelope_indices`), 50 000 bins of two true samples each
+MAX_POINTS = 100_000
 
 
 def _esc(part: str) -> str:
@@ -261,13 +269,15 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                  spawn: bool = False, application_id: str = "vibroscope",
                  recording_name: str | None = None, frames: int = FRAMES,
                  recording_id: str | None = None, stabilization=None, synthesized=None,
-                 kinematics=None) -> Path | None:
+                 kinematics=None, max_points: int | None = MAX_POINTS) -> Path | None:
     """Log the results of one analysis to one rerun recording, with a blueprint.
 
     Entities (channel names are split on ``/`` into entity path parts):
 
     - ``/signals/<channel>``: the samples, one ``send_columns`` per channel on the ``time``
-      timeline (duration, s since the first sample), :class:`rerun.Scalars` (float64, exact).
+      timeline (duration, s since the first sample), :class:`rerun.Scalars` (float64, exact);
+      beyond `max_points` samples, the min/max envelope (true samples at their true times,
+      :func:`envelope_indices`).
     - ``/psd/<channel>``: ``10 log10`` of the PSD on the frequency timeline (see the module
       docstring: ``frequency_mHz``, index ``round(1000 f)``); NaN where the PSD is 0.
     - ``/csd/singular_values/s1..s3``: ``10 log10`` of the first singular values of `csd`.
@@ -318,6 +328,10 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         Velocity and displacement integrated from the accelerations
         (:func:`vibroscope.spectral.integration.integrate`), logged under ``/velocity/<channel>``
         and ``/displacement/<channel>`` on the ``time`` timeline, in a tab of their own.
+    max_points : int or None, optional
+        Most points logged per time-series channel (default :data:`MAX_POINTS`, 100 000): a
+        longer channel is logged as its min/max envelope over ``max_points // 2`` bins; None logs
+        every sample.
 
     Returns
     -------
@@ -362,11 +376,11 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                           kinematics=kinematics)
     rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, spawn, bp)
     try:
-        _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl)
+        _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl, max_points=max_points)
         if signals is not None:
-            _log_time_series(rec, "signals", signals)
+            _log_time_series(rec, "signals", signals, max_points)
         for ks in kinematics or ():
-            _log_time_series(rec, "velocity" if ks is kinematics[0] else "displacement", ks)
+            _log_time_series(rec, "velocity" if ks is kinematics[0] else "displacement", ks, max_points)
         if psd is not None:
             _log_psd(rec, psd)
         if csd is not None:
@@ -415,8 +429,69 @@ def _open_recording(application_id: str, recording_id: str | None, recording_nam
     return rec, path
 
 
-def _log_time_series(rec, prefix: str, sig) -> None:
+def envelope_indices(x: np.ndarray, max_points: int | None = MAX_POINTS) -> np.ndarray:
+    """Indices of the samples kept to draw `x` with at most `max_points` points: a min/max envelope.
+
+    With ``n <= max_points`` finite samples, every finite sample is kept. Otherwise the record is
+    cut into ``B = max_points // 2`` consecutive bins of ``w = ceil(n / B)`` samples and, in each
+    bin, the sample of the smallest and the sample of the largest finite value are kept, in time
+    order (one index when they coincide; none in a bin with no finite sample). Every kept point
+    is a true sample at its true time, so each bin's extremes, and hence every peak and the
+    record's minimum and maximum, are drawn exactly; only the path between extremes within a bin
+    (``w`` samples, one pixel-like column of the plot) is left out. Missing samples (NaN, ±Inf)
+    are never kept and never interpolated.
+
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        One channel.
+    max_points : int or None, optional
+        Most points kept (default :data:`MAX_POINTS`, 100 000); None keeps every finite sample.
+
+    Returns
+    -------
+    ndarray of int64, shape (n_kept,)
+        Ascending sample indices, ``n_kept <= max_points``.
+
+    Raises
+    ------
+    ValueError
+        If `max_points` is less than 2.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    present = np.isfinite(x)
+    n = x.size
+    if max_points is not None and max_points < 2:
+        raise ValueError(f"{max_points=} must be at least 2 (a min and a max per bin), or None for every sample")
+    if max_points is None or n <= max_points:
+        return np.flatnonzero(present)
+    n_bins = max_points // 2
+    w = -(-n // n_bins)  # ceil
+    n_bins = -(-n // w)
+    clean = bool(present.all())
+    if clean and n == n_bins * w:
+        lo_src = hi_src = x
+    else:  # missing samples never win; the last, partial bin padded with values that never win
+        lo_src = np.full(n_bins * w, np.inf)
+        hi_src = np.full(n_bins * w, -np.inf)
+        lo_src[:n] = x if clean else np.where(present, x, np.inf)
+        hi_src[:n] = x if clean else np.where(present, x, -np.inf)
+    lo = lo_src.reshape(n_bins, w).argmin(axis=1)
+    hi = hi_src.reshape(n_bins, w).argmax(axis=1)
+    base = np.arange(n_bins, dtype=np.int64) * w
+    idx = np.stack([base + np.minimum(lo, hi), base + np.maximum(lo, hi)], axis=1)
+    if not clean:  # a bin with no finite sample keeps nothing (its argmin points at a missing sample)
+        idx = idx[present[idx[:, 0]]]
+    idx = idx.ravel()
+    return idx[np.concatenate(([True], np.diff(idx) != 0))]  # one index where min and max coincide
+
+
+def _log_time_series(rec, prefix: str, sig, max_points: int | None = None) -> None:
     """Every channel of `sig` under ``/<prefix>/<channel>`` on the ``time`` timeline (exact float64).
+
+    A channel longer than `max_points` samples is logged as its min/max envelope
+    (:func:`envelope_indices`): true samples at their true times, at most `max_points` of them;
+    None logs every sample. One :meth:`~rerun.RecordingStream.send_columns` per channel.
 
     Missing samples (NaN, ±Inf) are not sent: the series is broken at each gap by a
     :class:`rerun.Clear` at the gap's first missing sample (scalar plots draw a clear as a hole,
@@ -426,25 +501,25 @@ def _log_time_series(rec, prefix: str, sig) -> None:
     """
     import rerun as rr
 
-    t = np.arange(sig.n_samples) / sig.fs
-    t_ns = np.round(t * 1e9).astype(np.int64).astype("timedelta64[ns]")  # rounded, not truncated
     for k, ch in enumerate(sig.channels):
         ent = channel_entity(prefix, ch)
         x = np.asarray(sig.data[k], dtype=np.float64)
         rec.log(ent, rr.SeriesLines(names=f"{ch} [{sig.units[k] or '-'}]"), static=True)
+        keep = envelope_indices(x, max_points)
+        t_ns = np.round(keep / sig.fs * 1e9).astype(np.int64).astype("timedelta64[ns]")  # rounded, not truncated
+        rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
+                         columns=rr.Scalars.columns(scalars=x[keep]))
+        if keep.size == x.size:
+            continue
         present = np.isfinite(x)
         if present.all():
-            rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns)],
-                             columns=rr.Scalars.columns(scalars=x))
             continue
-        rec.send_columns(ent, indexes=[rr.TimeColumn("time", duration=t_ns[present])],
-                         columns=rr.Scalars.columns(scalars=x[present]))
         starts, stops = true_runs(~present)
         log_ent = channel_entity(prefix, "gaps")
         for a, b in zip(starts, stops):
-            rec.set_time("time", duration=t_ns[a])
+            rec.set_time("time", duration=np.timedelta64(int(np.round(a / sig.fs * 1e9)), "ns"))
             rec.log(ent, rr.Clear(recursive=False))
-            rec.log(log_ent, rr.TextLog(f"gap (no data) in {ch}: {t[a]:.6g}–{b / sig.fs:.6g} s ({b - a} samples)",
+            rec.log(log_ent, rr.TextLog(f"gap (no data) in {ch}: {a / sig.fs:.6g}–{b / sig.fs:.6g} s ({b - a} samples)",
                                         level="WARN"))
         rec.reset_time()
 
@@ -462,7 +537,7 @@ def _log_psd(rec, psd) -> None:
                          columns=rr.Scalars.columns(scalars=_db(psd.values[k], fac)))
 
 
-def _log_about(rec, *, signals, psd, frf, ftl) -> None:
+def _log_about(rec, *, signals, psd, frf, ftl, max_points=None) -> None:
     import rerun as rr
 
     lines = ["# vibroscope analysis", "",
@@ -473,6 +548,10 @@ def _log_about(rec, *, signals, psd, frf, ftl) -> None:
              + ("µHz (1 000 000 = 1 Hz)" if ftl == "frequency_uHz" else "millihertz (1000 = 1 Hz)")
              + "; power quantities in dB;",
              "- `animation` — mode shape frames, one cycle per mode.", ""]
+    if signals is not None and max_points is not None and signals.n_samples > max_points:
+        lines += [f"Time series decimated for display: {signals.n_samples} samples per channel shown as their "
+                  f"min/max envelope over {max_points // 2} bins (true samples at their true times, every peak "
+                  f"kept); the spectra use every sample.", ""]
     if psd is not None:
         lines.append(f"PSD settings: `{dict(psd.settings)}` (scaling: {psd.scaling})")
     if frf is not None:
