@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_parser", "run", "analyse_log"]
+__all__ = ["add_parser", "run", "analyse_log", "run_stream", "run_fleet", "memory_budget", "whole_read_bytes",
+           "parse_size", "stream_report_text", "stream_summary"]
 
 #: most channels an automatic (non-IMU) selection analyses
 MAX_AUTO_CHANNELS = 32
@@ -37,7 +38,8 @@ def add_parser(sub) -> None:
             "PNG figures and, with --json, a machine-readable summary."
         ),
     )
-    p.add_argument("log", type=Path, help="the MCAP log")
+    p.add_argument("log", type=Path, nargs="+",
+                   help="the MCAP log (several logs: a fleet analysis, with --dask or on this machine)")
     p.add_argument("--input", help="force channel (message path), e.g. /actuator/force.wrench.force.x")
     p.add_argument("--outputs", nargs="+", metavar="PATH",
                    help="response channels (default: every Imu linear_acceleration field)")
@@ -68,6 +70,17 @@ def add_parser(sub) -> None:
     p.add_argument("--ods", type=float, nargs="+", metavar="F",
                    help="operating deflection shapes at these frequencies (Hz), drawn and animated like modes")
     p.add_argument("--progress", action="store_true", help="progress bar while reading")
+    p.add_argument("--stream", action="store_true",
+                   help="read the log block by block into the spectral accumulators (memory bounded by the block; "
+                        "spectra, FRFs and modes from the spectra; no figures or rerun recording). Chosen "
+                        "automatically when the log needs more than --max-memory")
+    p.add_argument("--max-memory", metavar="SIZE",
+                   help="memory budget for reading a log whole, e.g. 1GB, 512MB (default: half the available "
+                        "memory or of the address-space limit, ulimit -v, whichever is smaller)")
+    p.add_argument("--dask", nargs="?", const="", default=None, metavar="ADDRESS",
+                   help="spread the accumulation of the logs over a Dask cluster (tcp://host:8786; without an "
+                        "address a local cluster sized to this machine); writes the fleet table "
+                        "(<out>/fleet.csv, fleet.json) and the merged spectra figure")
     p.set_defaults(func=run)
 
 
@@ -150,6 +163,21 @@ def run(args) -> int:
 
     check_out_dir(args.out)
     _check_options(args)
+    logs = list(args.log) if isinstance(args.log, (list, tuple)) else [args.log]
+    if args.dask is not None and args.dask and (args.dask.endswith(".mcap") or Path(args.dask).is_file()):
+        logs.insert(0, Path(args.dask))  # `--dask a.mcap b.mcap`: no address, the first log taken by --dask
+        args.dask = ""
+    if args.dask is not None or len(logs) > 1:
+        return run_fleet(args, logs)
+    args.log = logs[0]
+    budget = memory_budget(args.max_memory)
+    need = whole_read_bytes(args.log)
+    if args.stream or need > budget:
+        why = ("--stream" if args.stream else
+               f"reading it whole needs about {need / 2**20:.0f} MiB, more than the memory budget "
+               f"{budget / 2**20:.0f} MiB (--max-memory)")
+        print(f"streaming {args.log} block by block: {why}")
+        return run_stream(args)
     rrd = None if args.no_rrd else (args.rrd or default_output(args.log, "analyse", ".rrd", args.out))
     figures = None if args.no_figures else (args.figures or default_output(args.log, "analyse", "_figures", args.out))
     check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},
@@ -172,6 +200,277 @@ def run(args) -> int:
     print(report_text(an, source=str(args.log)))
     write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
                   spawn=args.spawn, ods=args.ods)
+    return 0
+
+
+def parse_size(text: str) -> int:
+    """Bytes of a size such as ``1GB``, ``512MB``, ``1.5G``, ``200000`` (powers of 1024).
+
+    Parameters
+    ----------
+    text : str
+        A number with an optional unit K, M, G, T (with or without B, ``iB``).
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        If `text` is not such a size or not positive.
+    """
+    import re
+
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([kmgt]?)(i?b)?\s*", str(text), re.I)
+    if not m or float(m.group(1)) <= 0:
+        raise ValueError(f"{text=} is not a memory size such as 1GB or 512MB")
+    return int(float(m.group(1)) * 1024 ** " KMGT".index(m.group(2).upper() or " "))
+
+
+def memory_budget(max_memory: str | None = None) -> int:
+    """The memory (bytes) a log may take when read whole.
+
+    Parameters
+    ----------
+    max_memory : str, optional
+        ``--max-memory`` (:func:`parse_size`); default half the available memory or half the
+        address-space limit (``ulimit -v``, ``RLIMIT_AS``), whichever is smaller.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    VibroscopeError
+        If `max_memory` is not a size.
+    """
+    from vibroscope.errors import VibroscopeError
+
+    if max_memory is not None:
+        try:
+            return parse_size(max_memory)
+        except ValueError as exc:
+            raise VibroscopeError(f"--max-memory {max_memory}: {exc}") from None
+    avail = None
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    avail = int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    if avail is None:
+        import os
+
+        try:
+            avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            avail = 8 << 30
+    budget = avail // 2
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY:
+            budget = min(budget, soft // 2)
+    except (ImportError, OSError, ValueError):
+        pass
+    return int(budget)
+
+
+def whole_read_bytes(log: Path) -> int:
+    """Memory (bytes) that reading `log` whole takes, roughly: the file mapped, plus its chunks
+    decompressed (their sizes from the summary; else three times the file), plus the grid.
+
+    Parameters
+    ----------
+    log : Path
+        The MCAP log.
+
+    Returns
+    -------
+    int
+        0 when the file cannot be looked at (the read then says why).
+    """
+    try:
+        size = Path(log).stat().st_size
+    except OSError:
+        return 0  # the read reports the problem with the file
+    try:
+        from mcap.reader import SeekingReader
+
+        with open(log, "rb") as fh:
+            summ = SeekingReader(fh).get_summary()
+        inner = sum(ci.uncompressed_size for ci in summ.chunk_indexes) if summ and summ.chunk_indexes else 3 * size
+    except Exception:  # noqa: BLE001 - no usable summary: the rough figure
+        inner = 3 * size
+    return int(size + 1.5 * inner)
+
+
+def _stream_kw(args) -> dict:
+    return dict(input=args.input, outputs=args.outputs, fs=args.fs, nperseg=args.nperseg, fmin=args.fmin,
+                fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator,
+                method="auto" if args.method in ("ssi", "polymax") and not args.input else args.method,
+                select=None)
+
+
+def run_stream(args) -> int:
+    """``vibroscope analyse --stream LOG``: the log read block by block (:func:`vibroscope.stream.analyse_stream`);
+    prints the report and writes the ``--json`` summary (no figures or rerun recording: they need the
+    time series).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    int
+        0.
+
+    Raises
+    ------
+    VibroscopeError
+        When the analysis fails (the log named).
+    """
+    from vibroscope.commands.modal import _select_freqs
+    from vibroscope.errors import VibroscopeError
+    from vibroscope.stream import analyse_stream
+
+    kw = _stream_kw(args)
+    kw["select"] = _select_freqs(args.select)
+    if args.method in ("ssi", "polymax"):
+        print(f"--method {args.method} needs the time series: output-only modes by EFDD on the spectra instead")
+    try:
+        an = analyse_stream(args.log, **kw)
+    except ValueError as exc:
+        raise VibroscopeError(f"{args.log}: {exc}") from None
+    print(stream_report_text(an, source=str(args.log)))
+    if args.json:
+        from vibroscope.commands._outputs import AtomicOutputs
+
+        with AtomicOutputs(inputs=[args.log]) as tx:
+            tx.file(args.json).write_text(json.dumps(stream_summary(an, source=str(args.log)), indent=2))
+        print(f"summary: {args.json}")
+    print("streamed: no figures or rerun recording (they need the whole time series)")
+    return 0
+
+
+def stream_report_text(an, *, source: str = "") -> str:
+    """Human-readable report of a :class:`vibroscope.stream.StreamAnalysis`.
+
+    Parameters
+    ----------
+    an : StreamAnalysis
+        The streamed analysis.
+    source : str, optional
+        The log, named on the first line.
+
+    Returns
+    -------
+    str
+    """
+    s = an.settings
+    lines = [f"{source}: {len(an.spectra.channels)} channels x {an.spectra.samples} samples at {an.spectra.fs:g} Hz "
+             f"({an.spectra.samples / an.spectra.fs:.2f} s), streamed; nperseg={s['nperseg']} "
+             f"(df={an.spectra.fs / s['nperseg']:.4g} Hz, {s['n_averages']} averages)"]
+    how = METHOD_NAMES.get(an.modal.method, an.modal.method)
+    lines.append(f"input {s['input']} -> {len(s['outputs'])} outputs, {s['estimator']} FRF, modes by {how}"
+                 if s.get("input") else f"output-only: {len(s['outputs'])} responses, modes by {how}")
+    lines += [f"  warning: {w}" for w in an.warnings]
+    lines.append(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9}  method")
+    for k, (f, z) in enumerate(zip(an.modal.natural_frequencies, an.modal.damping_ratios)):
+        lines.append(f"{k + 1:>4} {f:>10.3f} {100 * z:>9.3f}  {an.modal.method}")
+    if len(an.modal.natural_frequencies) == 0:
+        lines.append("   (no mode passed the physical-mode selection in the band)")
+    return "\n".join(lines)
+
+
+def stream_summary(an, *, source: str | None = None) -> dict:
+    """The ``--json`` summary of a streamed analysis: ``source``, ``fs``, ``n_samples``, ``channels``,
+    ``units``, ``input``, ``outputs``, ``warnings``, ``modes``, ``rejected_modes``, ``settings``
+    (``streamed: true``).
+
+    Parameters
+    ----------
+    an : StreamAnalysis
+        The streamed analysis.
+    source : str, optional
+        The log.
+
+    Returns
+    -------
+    dict
+        JSON-serialisable.
+    """
+    from vibroscope.modal.automatic import modes_document
+    from vibroscope.pipeline import _jsonable
+
+    doc = modes_document(an.modal, an.identification.rejected if an.identification is not None else ())
+    sp = an.spectra
+    return _jsonable({"source": source, "fs": sp.fs, "n_samples": sp.samples, "duration_s": sp.samples / sp.fs,
+                      "channels": list(sp.channels), "units": dict(zip(sp.channels, sp.units)),
+                      "input": an.settings.get("input"), "outputs": an.settings.get("outputs"),
+                      "warnings": list(an.warnings), "modal_method": an.modal.method, "modes": doc["modes"],
+                      "rejected_modes": doc["rejected"],
+                      "settings": {k: v for k, v in an.settings.items() if k != "outputs"}})
+
+
+def run_fleet(args, logs: list) -> int:
+    """``vibroscope analyse [--dask [ADDRESS]] LOG LOG ...``: :func:`vibroscope.fleet.analyse_fleet`; writes
+    ``<out>/fleet.csv``, ``<out>/fleet.json`` (or ``--json``) and ``<out>/fleet_spectra.png``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+    logs : list of Path
+        The logs.
+
+    Returns
+    -------
+    int
+        0.
+
+    Raises
+    ------
+    VibroscopeError
+        When a log cannot be analysed, or Dask is not installed.
+    """
+    from vibroscope.errors import VibroscopeError
+
+    try:
+        from vibroscope.fleet import analyse_fleet
+
+        import dask.distributed  # noqa: F401 - the [dask] extra
+    except ImportError as exc:
+        raise VibroscopeError(f"--dask needs dask.distributed (pip install 'vibroscope[dask]'): {exc}") from None
+    out = Path(args.out) if args.out else Path.cwd()
+    out.mkdir(parents=True, exist_ok=True)
+    chans = None if args.outputs is None else ([args.input] if args.input else []) + list(args.outputs)
+    where = args.dask or "a local cluster"
+    print(f"fleet of {len(logs)} logs on {where}")
+    try:
+        res = analyse_fleet([str(p) for p in logs], client=args.dask or None, channels=chans, input=args.input,
+                            fs=args.fs, nperseg=args.nperseg, method=_stream_kw(args)["method"], fmin=args.fmin,
+                            fmax=args.fmax)
+    except ValueError as exc:
+        raise VibroscopeError(f"fleet analysis: {exc}") from None
+    for r in res.rows:
+        modes = ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in zip(r.frequencies_hz, r.damping_ratios))
+        print(f"{r.log}: {r.duration_s:.1f} s; modes {modes or '(none)'}" + (f"; {r.error}" if r.error else ""))
+    csv_path = res.write_csv(out / "fleet.csv")
+    json_path = res.write_json(args.json or out / "fleet.json")
+    print(f"fleet table: {csv_path}, {json_path}")
+    if not args.no_figures:
+        from vibroscope.viewers.figures import _save
+
+        fig = res.merged.csd().psd().plot()
+        fig = getattr(fig, "figure", fig)
+        print(f"merged spectra: {_save(fig, out / 'fleet_spectra.png')}")
     return 0
 
 

@@ -82,8 +82,12 @@ def _interp_runs(t: np.ndarray, y: np.ndarray, grid_ns: np.ndarray, start: int, 
         covered[g0:g1] = np.isfinite(v).any(axis=0)  # a run too short to low-pass stays NaN
 
 
-def place_topic(s: TopicSamples, start: int, n: int, fs: float) -> tuple[np.ndarray, np.ndarray, bool]:
+def place_topic(s: TopicSamples, start: int, n: int, fs: float, *,
+                first: int = 0) -> tuple[np.ndarray, np.ndarray, bool]:
     """(rows (k, n) with NaN where nothing was logged, covered (n,) bool, resampled) of one topic.
+
+    With `first`, the rows are the grid samples ``first .. first + n - 1`` of the grid that
+    starts at `start` (a block of a longer grid, :mod:`vibroscope.io.blocks`).
 
     Parameters
     ----------
@@ -95,6 +99,8 @@ def place_topic(s: TopicSamples, start: int, n: int, fs: float) -> tuple[np.ndar
         Grid length.
     fs : float
         Grid rate in Hz.
+    first : int, optional
+        Index on the grid of the first sample returned; default 0.
 
     Returns
     -------
@@ -105,6 +111,7 @@ def place_topic(s: TopicSamples, start: int, n: int, fs: float) -> tuple[np.ndar
     covered = np.zeros(n, bool)
     k = _on_grid_index(t, start, fs)
     if k is not None:
+        k = k - first
         i0, i1 = np.searchsorted(k, [0, n])  # k is increasing
         k, y = k[i0:i1], y[:, i0:i1]
         if k.size and k[-1] - k[0] == k.size - 1:  # contiguous: a plain copy
@@ -114,7 +121,7 @@ def place_topic(s: TopicSamples, start: int, n: int, fs: float) -> tuple[np.ndar
             out[:, k] = y
             covered[k] = True
         return out, covered, False
-    grid_ns = start + np.round(np.arange(n) / fs * 1e9).astype(np.int64)
+    grid_ns = start + np.round(np.arange(first, first + n) / fs * 1e9).astype(np.int64)
     fs_src = s.report.fs_est
     if not np.isnan(y).any():
         _interp_runs(t, y, grid_ns, start, fs, fs_src, _runs(t), out, covered)

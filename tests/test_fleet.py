@@ -1,0 +1,132 @@
+"""Scale-out on Dask (vibroscope.fleet): per-log spectra accumulated over time ranges on a
+LocalCluster equal csd_matrix of read_mcap of each log; the merged spectra are the segment-weighted
+mean of the logs'; the fleet table and its CSV/JSON."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("dask.distributed")
+
+from vibroscope.io import read_mcap, write_ros2_mcap  # noqa: E402
+from vibroscope.signals import Signals  # noqa: E402
+from vibroscope.spectral import csd_matrix  # noqa: E402
+
+CHS = [f"/imu.linear_acceleration.{a}" for a in "xyz"]
+
+
+def _log(path, n, seed, f0):
+    """Three axes: a lightly damped resonance at f0 Hz driven by noise, plus noise."""
+    import scipy.signal as ss
+
+    rng = np.random.default_rng(seed)
+    e = rng.standard_normal(n)
+    b, a = ss.iirpeak(f0, 30.0, 500.0)
+    y = ss.lfilter(b, a, e) * 10
+    x = np.vstack([y + 0.1 * rng.standard_normal(n), 0.5 * y + 0.1 * rng.standard_normal(n),
+                   -y + 0.1 * rng.standard_normal(n)])
+    return write_ros2_mcap(path, Signals(x, 500.0, CHS, t0=10.0 * seed), chunk_size=60_000)
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fleet")
+    return [str(_log(d / f"robot{k}.mcap", n, k + 1, f0)) for k, (n, f0) in enumerate([(30_000, 40.0), (24_000, 41.0),
+                                                                                          (36_000, 39.5)])]
+
+
+@pytest.fixture(scope="module")
+def client():
+    from dask.distributed import Client
+
+    from vibroscope.fleet import local_cluster
+
+    with local_cluster(2) as lc, Client(lc) as c:
+        yield c
+
+
+def test_fleet_on_a_local_cluster_equals_in_memory(logs, client):
+    from vibroscope.fleet import analyse_fleet, octave_bands
+
+    res = analyse_fleet(logs, client=client, nperseg=1024, tasks_per_log=3)
+    assert res.settings["tasks"] == 9 and res.settings["workers"] == 2
+    refs = [csd_matrix(read_mcap(p), nperseg=1024) for p in logs]
+    for p, ref in zip(logs, refs):
+        G = res.per_log[p].csd()
+        assert np.array_equal(G.n_averages, ref.n_averages)
+        assert np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    # merged: every segment of every log averaged once
+    K = np.array([r.n_averages[0, 0] for r in refs], float)
+    want = sum(k * r.G for k, r in zip(K, refs)) / K.sum()
+    Gm = res.merged.csd()
+    assert Gm.n_averages[0, 0] == K.sum()
+    assert np.max(np.abs(Gm.G - want)) <= 1e-12 * np.max(np.abs(want))
+    # the table: each log's resonance, and the RMS per octave band from its PSD
+    for row, f0 in zip(res.rows, (40.0, 41.0, 39.5)):
+        assert row.error == "" and len(row.frequencies_hz) >= 1
+        assert min(abs(np.array(row.frequencies_hz) - f0)) < 0.5
+    bands = octave_bands(500.0, 500.0 / 1024)
+    assert res.rows[0].bands_hz == bands
+    ref0 = refs[0]
+    f = ref0.frequencies
+    lo, hi = bands[-3]
+    m = (f >= lo) & (f < hi)
+    want_rms = np.sqrt(ref0.G[m, 0, 0].real.sum() * (f[1] - f[0]))
+    assert res.rows[0].rms[0][len(bands) - 3] == pytest.approx(want_rms, rel=1e-12)
+
+
+def test_tasks_carry_paths_and_ranges_not_arrays(logs, client, monkeypatch):
+    from vibroscope import fleet
+
+    sent = []
+    real = client.submit
+
+    def spy(fn, *args, **kw):
+        sent.append(args)
+        return real(fn, *args, **kw)
+
+    monkeypatch.setattr(client, "submit", spy)
+    fleet.analyse_fleet(logs[:2], client=client, nperseg=512, tasks_per_log=2)
+    assert len(sent) == 4
+    for args in sent:
+        assert not any(isinstance(a, np.ndarray) for a in args)
+        path, channels, fs, t0, n, rng, settings = args
+        assert path in logs and isinstance(rng, tuple) and 0 <= rng[0] < rng[1] <= n and fs == 500.0
+        assert all(isinstance(v, (int, float, str, bool, type(None))) for v in settings.values())
+
+
+def test_table_csv_and_json(logs, client, tmp_path):
+    from vibroscope.fleet import analyse_fleet
+
+    res = analyse_fleet(logs, client=client, nperseg=1024, bands=[(30.0, 50.0), (100.0, 200.0)])
+    rows = list(csv.DictReader(open(res.write_csv(tmp_path / "t.csv"))))
+    assert [r["log"] for r in rows] == logs
+    assert set(rows[0]) >= {"log", "n_samples", "duration_s", "modes_hz", "damping", "rms_30-50Hz", "rms_100-200Hz"}
+    # the resonance band holds most of the motion
+    assert all(float(r["rms_30-50Hz"]) > 3 * float(r["rms_100-200Hz"]) for r in rows)
+    d = json.loads(res.write_json(tmp_path / "t.json").read_text())
+    assert [x["log"] for x in d["logs"]] == logs and d["merged"]["n_segments"] == res.merged.accumulator.n_segments
+    assert abs(d["merged"]["psd_peak_hz"][CHS[0]] - 40.0) < 1.5
+
+
+def test_logs_of_different_rates_are_refused(logs, client, tmp_path):
+    from vibroscope.fleet import analyse_fleet
+
+    x = np.random.default_rng(0).standard_normal((3, 5000))
+    other = write_ros2_mcap(tmp_path / "fast.mcap", Signals(x, 1000.0, CHS, t0=1.0))
+    with pytest.raises(ValueError, match="rate"):
+        analyse_fleet([logs[0], str(other)], client=client)
+
+
+def test_import_vibroscope_and_help_do_not_import_dask():
+    code = ("import sys, vibroscope, vibroscope.stream, vibroscope.io.blocks, vibroscope.commands.analyse; "
+            "from vibroscope.cli import build_parser; build_parser(); "
+            "print(any(m == 'dask' or m.startswith(('dask.', 'distributed')) for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

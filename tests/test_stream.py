@@ -1,0 +1,168 @@
+"""Streaming analysis (vibroscope.stream): ranges split at segment boundaries merge into one pass
+over the record; the modes of the demo structure from the spectra alone; and `vibroscope analyse`
+of a log larger than its address-space limit completes by streaming where the whole read fails."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vibroscope.io import read_mcap, write_ros2_mcap
+from vibroscope.signals import Signals
+from vibroscope.spectral import csd_matrix
+from vibroscope.stream import accumulate_log, analyse_stream, merge_spectra, segment_ranges
+
+CHS = [f"/imu.linear_acceleration.{a}" for a in "xyz"]
+FORCE = "/actuator/force.wrench.force.x"
+RESP = [f"/imu/m{i}.linear_acceleration.x" for i in (1, 2, 3)]
+
+
+@pytest.fixture(scope="module")
+def gappy_log(tmp_path_factory):
+    """Correlated random data at 1000 Hz with one chunk lost (NaN in every channel)."""
+    import struct
+
+    from vibroscope.io._scan import scan
+
+    rng = np.random.default_rng(5)
+    e = rng.standard_normal((2, 30_000))
+    x = np.vstack([e[0], 0.5 * e[0] + e[1], np.convolve(e[1], [1, 0.5, 0.25], "same")])
+    d = tmp_path_factory.mktemp("stream")
+    p = write_ros2_mcap(d / "a.mcap", Signals(x, 1000.0, CHS, t0=5.0), chunk_size=50_000)
+    data = bytearray(p.read_bytes())
+    b = scan(p).blocks[7]
+    end = b.file_offset + 9 + struct.unpack_from("<Q", data, b.file_offset + 1)[0]
+    data[end - 40] ^= 0x01
+    q = d / "lost.mcap"
+    q.write_bytes(bytes(data))
+    return q
+
+
+@pytest.mark.parametrize("parts, block", [(1, 1 << 16), (3, 5000), (7, 1234)])
+def test_ranges_merge_to_one_pass(gappy_log, parts, block):
+    whole = read_mcap(gappy_log)
+    assert np.isnan(whole.data).any()  # the lost chunk
+    ref = csd_matrix(whole, nperseg=1024)
+    n = whole.n_samples
+    rngs = segment_ranges(n, 1024, 512, parts)
+    spectra = [accumulate_log(gappy_log, nperseg=1024, samples=r, block_samples=block) for r in rngs]
+    m = merge_spectra(spectra)
+    G = m.csd()
+    assert np.array_equal(G.n_averages, ref.n_averages)
+    assert np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    one = accumulate_log(gappy_log, nperseg=1024)  # one range, block by block
+    assert np.max(np.abs(one.accumulator._sum - m.accumulator._sum)) <= 1e-12 * np.max(np.abs(one.accumulator._sum))
+    assert m.samples == rngs[-1][1] and len(m.ranges) == len(rngs)
+    lost = int(np.isnan(whole.data[0]).sum())
+    assert any(f"{lost} of {n} grid samples missing" in w for w in one.warnings)
+    assert any("chunk skipped" in w for w in one.warnings)
+    assert spectra[0].accumulator.n_segments == one.accumulator.n_segments or parts > 1
+
+
+def test_segment_ranges_hold_every_segment_once():
+    n, nper, nov = 100_003, 1000, 250
+    step = nper - nov
+    n_seg = (n - nper) // step + 1
+    for parts in (1, 2, 5, 1000):
+        rngs = segment_ranges(n, nper, nov, parts)
+        segs = [s for a, b in rngs for s in range(a // step, (b - nper) // step + 1)]
+        assert segs == list(range(n_seg)) and all(a % step == 0 for a, _ in rngs)
+        assert len(rngs) == min(parts, n_seg)
+    assert segment_ranges(500, 1000, 500, 3) == []
+    with pytest.raises(ValueError, match="parts="):
+        segment_ranges(n, nper, nov, 0)
+
+
+@pytest.fixture(scope="module")
+def demo_log(tmp_path_factory):
+    from vibroscope.commands.demo import make_demo_log
+
+    p = tmp_path_factory.mktemp("demo") / "demo.mcap"
+    model, _sig = make_demo_log(p, duration=40.0)
+    return p, model.modes()
+
+
+def test_analyse_stream_finds_the_demo_modes(demo_log):
+    p, truth = demo_log
+    an = analyse_stream(p, input=FORCE, outputs=RESP)
+    assert an.frf is not None and an.frf.coherence.shape == (an.frf.frequencies.size, 3)
+    assert len(an.modal.natural_frequencies) == 3
+    assert np.allclose(an.modal.natural_frequencies, truth.natural_frequencies, rtol=0.005)
+    assert np.allclose(an.modal.damping_ratios, truth.damping_ratios, rtol=0.1)
+    # output-only: EFDD on the response CSD finds the same three modes
+    oo = analyse_stream(p, outputs=RESP)
+    assert oo.frf is None and oo.modal.method in ("efdd", "fdd")
+    assert np.allclose(oo.modal.natural_frequencies, truth.natural_frequencies, rtol=0.02)
+    with pytest.raises(ValueError, match="time series"):
+        analyse_stream(p, outputs=RESP, method="ssi")
+
+
+def test_cli_stream_option(demo_log, tmp_path, capsys):
+    from vibroscope.cli import main
+
+    p, truth = demo_log
+    js = tmp_path / "s.json"
+    assert main(["analyse", str(p), "--stream", "--input", FORCE, "--outputs", *RESP, "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].startswith(f"streaming {p} block by block: --stream")
+    d = json.loads(js.read_text())
+    assert d["settings"]["streamed"] is True
+    assert np.allclose([m["frequency_hz"] for m in d["modes"]], truth.natural_frequencies, rtol=0.005)
+    assert main(["analyse", str(p), "--max-memory", "1MB", "--outputs", *RESP]) == 0
+    assert "more than the memory budget 1 MiB" in capsys.readouterr().out
+
+
+_CHILD = textwrap.dedent("""
+    import resource, sys
+    mode, log, extra_mb = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    import numpy, scipy.signal, scipy.linalg  # everything the run imports, before the limit
+    import vibroscope.cli, vibroscope.commands.analyse, vibroscope.stream, vibroscope.io.blocks, vibroscope.pipeline
+    import vibroscope.modal.automatic, vibroscope.modal.fdd, vibroscope.modal.selection
+
+    def peak():
+        for line in open("/proc/self/status"):
+            if line.startswith("VmPeak"):
+                return int(line.split()[1]) * 1024
+
+    lim = int(peak() + extra_mb * 2**20)
+    resource.setrlimit(resource.RLIMIT_AS, (lim, lim))
+    args = ["analyse", log, "--no-rrd", "--no-figures"]
+    if mode == "whole":
+        args += ["--max-memory", "100GB"]  # forbid the switch to streaming
+    sys.exit(vibroscope.cli.main(args))
+""")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc are Linux's")
+def test_log_larger_than_the_address_space_limit_streams(tmp_path):
+    """A 150 MB log under an address-space limit 100 MB above what the imports take: reading it
+    whole fails (the file alone does not fit), `vibroscope analyse` switches to streaming by
+    itself and completes."""
+    rng = np.random.default_rng(2)
+    n = 400_000
+    x = np.cumsum(rng.standard_normal((3, n)), axis=1) * 1e-3 + rng.standard_normal((3, n))
+    log = write_ros2_mcap(tmp_path / "big.mcap", Signals(x, 1000.0, CHS, t0=1.0), compression="none")
+    assert log.stat().st_size > 140e6
+    script = tmp_path / "child.py"
+    script.write_text(_CHILD)
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               NUMBA_NUM_THREADS="1", PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+
+    def child(mode):
+        return subprocess.run([sys.executable, str(script), mode, str(log), "100"], capture_output=True, text=True,
+                              env=env, timeout=120, cwd=tmp_path)
+
+    whole = child("whole")
+    assert whole.returncode == 1 and ("memory" in whole.stderr.lower() or "allocate" in whole.stderr.lower()), \
+        whole.stderr[-2000:]
+    streamed = child("stream")
+    assert streamed.returncode == 0, streamed.stderr[-2000:]
+    assert "streaming" in streamed.stdout and "more than the memory budget" in streamed.stdout
+    assert f"3 channels x {n} samples at 1000 Hz" in streamed.stdout

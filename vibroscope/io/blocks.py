@@ -1,0 +1,534 @@
+"""Reading an MCAP log in time blocks on one fixed uniform grid, with memory bounded by the block.
+
+:func:`open_grid` plans the reading once: the chunks of the log with their log-time spans (from the
+summary's chunk indexes; a log without a usable summary is walked once record header by record
+header, each chunk opened in turn to learn its channels and times, one at a time), the channels,
+the grid rate `fs` and its origin ``t0_ns``. :meth:`LogGrid.read` then returns any stretch of grid
+samples ``[i0, i1)`` as :class:`~vibroscope.signals.Signals`, decompressing only the chunks whose
+log times overlap the stretch (widened by ``margin_s`` for header stamps that lag their log time),
+and :func:`iter_blocks` yields consecutive blocks. Every block lies on the same grid, so blocks of
+different time ranges line up exactly and their concatenation is one record.
+
+Placement is that of :func:`~vibroscope.io.read_mcap` (:mod:`vibroscope.io._grid`): a topic whose
+stamps lie on the grid is placed by index (no interpolation; NaN where nothing was logged, e.g. a
+chunk lost to a CRC failure), so for such a topic the concatenated blocks equal ``read_mcap`` of the
+whole log sample for sample when both use the same ``fs`` and origin. An off-grid topic is
+interpolated within the block's stamps (those of the block's chunks, margin included): away from
+the block edges and gaps it agrees with the whole-log read to the spline's accuracy, but not bit
+for bit (the spline and any anti-alias filter see only the block's neighbourhood). Outlier and
+duplicate stamps are dropped per block, and the on-grid decision is taken per block.
+
+Memory: one block's grid ``(n_channels, block samples)`` plus the decompressed chunks overlapping it
+(and its margin); never the whole file (the file is read with ``pread``, not mapped, so a log larger
+than the address space can be read).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+
+from vibroscope.errors import ChannelError, LogFormatError
+from vibroscope.signals import Signals
+
+__all__ = ["ChunkSpan", "LogGrid", "open_grid", "iter_blocks"]
+
+_MAGIC = b"\x89MCAP0\r\n"
+_REC = struct.Struct("<BQ")
+_CHUNK_OP, _SCHEMA_OP, _CHANNEL_OP, _FOOTER_OP, _DATA_END_OP = 0x06, 0x03, 0x04, 0x02, 0x0F
+
+
+@dataclass(frozen=True)
+class ChunkSpan:
+    """One chunk of a log.
+
+    Attributes
+    ----------
+    offset : int
+        Byte offset of the chunk record.
+    length : int
+        Record length in bytes, opcode and length field included.
+    start_ns, end_ns : int
+        Earliest and latest message log time in the chunk, ns.
+    channel_ids : frozenset of int or None
+        Channels with messages in the chunk (None when unknown: then it is read for every topic).
+    """
+
+    offset: int
+    length: int
+    start_ns: int
+    end_ns: int
+    channel_ids: frozenset | None = None
+
+
+def _pread(fd: int, n: int, offset: int) -> bytes:
+    buf = os.pread(fd, n, offset)
+    if len(buf) != n:
+        raise ValueError(f"{n} bytes wanted at byte offset {offset}, {len(buf)} left in the file")
+    return buf
+
+
+def _open_chunk(fd: int, span: ChunkSpan):
+    """(raw bytes, records, (cid, log time, start, length)) of one chunk, CRC checked; raises ValueError."""
+    from vibroscope.io import _scan
+
+    rec = _pread(fd, span.length, span.offset)
+    if rec[0] != _CHUNK_OP:
+        raise ValueError(f"opcode 0x{rec[0]:02x} where a chunk record was expected")
+    chunk = _scan._read_chunk(memoryview(rec), 9, len(rec))
+    raw = _scan._decompress(chunk)  # uncompressed: a view of `rec`, not a copy
+    if len(raw) != chunk.uncompressed_size:
+        raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
+    if chunk.uncompressed_crc != 0 and zlib.crc32(raw) != chunk.uncompressed_crc:
+        raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {zlib.crc32(raw):#010x}")
+    recs: list = []
+    return raw, recs, _scan._index_messages(raw, 0, len(raw), recs, True)
+
+
+def _summary_valid(fd: int, size: int) -> bool:
+    """Whether the footer's summary section lies in the file and matches its CRC-32 (when stored)."""
+    flen = 1 + 8 + 20
+    if size < 8 + flen + 8 or _pread(fd, 8, size - 8) != _MAGIC:
+        return False
+    fpos = size - 8 - flen
+    foot = _pread(fd, flen, fpos)
+    if foot[0] != _FOOTER_OP:
+        return False
+    start, _sos, crc = struct.unpack_from("<QQI", foot, 9)
+    if not 8 <= start <= fpos:
+        return False
+    return crc == 0 or zlib.crc32(_pread(fd, fpos + 9 + 16 - start, start)) == crc
+
+
+def _summary_plan(path: Path, fh: Any):
+    """(schemas, channels, chunk spans, header) from the summary section, or None without a usable one
+    (none, a CRC-32 mismatch, a chunk index not pointing at a chunk record)."""
+    from mcap.reader import SeekingReader
+
+    fd = fh.fileno()
+    if not _summary_valid(fd, os.fstat(fd).st_size):
+        return None
+    try:
+        rd = SeekingReader(fh)
+        header = rd.get_header()
+        summ = rd.get_summary()
+    except Exception:  # noqa: BLE001 - a damaged or absent summary: the linear pass
+        return None
+    if summ is None or not summ.chunk_indexes:
+        return None
+    spans = [ChunkSpan(ci.chunk_start_offset, ci.chunk_length, ci.message_start_time, ci.message_end_time,
+                       frozenset(ci.message_index_offsets) if ci.message_index_offsets else None)
+             for ci in summ.chunk_indexes]
+    if any(_pread(fd, 1, sp.offset)[0] != _CHUNK_OP for sp in spans):
+        return None
+    return dict(summ.schemas), dict(summ.channels), sorted(spans, key=lambda s: s.offset), header
+
+
+def _linear_plan(path: Path, fd: int, size: int, warnings: list[str], skipped: list[tuple[int, str]]):
+    """(schemas, channels, chunk spans, header) by one pass over the record headers, each chunk opened
+    in turn (one at a time) for its channels and times; the pass stops at damage (reported)."""
+    from mcap.data_stream import ReadDataStream
+    from mcap.records import Channel, Header, Schema
+    from io import BytesIO
+
+    schemas, channels, spans, header = {}, {}, [], None
+    pos = 8
+    while pos + 9 <= size:
+        op, length = _REC.unpack(_pread(fd, 9, pos))
+        end = pos + 9 + length
+        if not (0x01 <= op <= 0x0F or op >= 0x80) or end > size:
+            skipped.append((pos, f"damaged record (opcode 0x{op:02x}, length {length}): the blocks end here"))
+            warnings.append(f"{path}: no usable summary and a damaged record at byte offset {pos}: streaming reads "
+                            f"the log up to there only (read_mcap recovers after damage)")
+            break
+        if op in (_FOOTER_OP, _DATA_END_OP):
+            break
+        if op == _CHUNK_OP:
+            span = ChunkSpan(pos, end - pos, 0, 0)
+            try:
+                _raw, recs, (cid, lt, _st, _ln) = _open_chunk(fd, span)
+            except Exception as exc:  # noqa: BLE001 - the chunk is lost; its time span unknown
+                skipped.append((pos, f"chunk skipped: {type(exc).__name__}: {exc}"))
+            else:
+                for r in recs:
+                    (schemas if isinstance(r, Schema) else channels)[r.id] = r
+                if cid.size:
+                    spans.append(ChunkSpan(pos, end - pos, int(lt.min()), int(lt.max()),
+                                           frozenset(np.unique(cid).tolist())))
+        elif op in (_SCHEMA_OP, _CHANNEL_OP, 0x01):
+            body = _pread(fd, length, pos + 9)
+            cls = {_SCHEMA_OP: Schema, _CHANNEL_OP: Channel, 0x01: Header}[op]
+            try:
+                r = cls.read(ReadDataStream(BytesIO(body)))
+            except Exception:  # noqa: BLE001
+                r = None
+            if isinstance(r, Header):
+                header = r
+            elif r is not None:
+                (schemas if op == _SCHEMA_OP else channels)[r.id] = r
+        pos = end
+    return schemas, channels, spans, header
+
+
+@dataclass(eq=False)
+class LogGrid:
+    """A log planned for reading in blocks on one uniform grid (build with :func:`open_grid`).
+
+    Attributes
+    ----------
+    path : Path
+        The log.
+    channels : tuple of str
+        The message paths read, in row order.
+    units : tuple of str
+        Their units.
+    fs : float
+        Grid rate in Hz.
+    t0_ns : int
+        Time of grid sample 0 in ns (sample ``i`` is at ``t0_ns + round(i / fs * 1e9)``).
+    n_samples : int
+        Grid samples up to the end of the shortest topic.
+    chunks : tuple of ChunkSpan
+        The chunks, in file order.
+    margin_s : float
+        Chunks up to this much log time beyond a block are read too (header stamps may lag
+        their log time).
+    indexed : bool
+        Whether the summary's chunk indexes were used (else one linear pass).
+    warnings : list of str
+        What the planning noticed.
+    skipped : list of (int, str)
+        Damage found while planning: byte offset and reason.
+    """
+
+    path: Path
+    channels: tuple
+    units: tuple
+    fs: float
+    t0_ns: int
+    n_samples: int
+    chunks: tuple
+    margin_s: float
+    indexed: bool
+    warnings: list = field(default_factory=list)
+    skipped: list = field(default_factory=list)
+    _schemas: dict = field(default_factory=dict, repr=False)
+    _channels: dict = field(default_factory=dict, repr=False)
+    _header: Any = field(default=None, repr=False)
+    _parsed: list = field(default_factory=list, repr=False)
+
+    @property
+    def duration(self) -> float:
+        """Grid span ``n_samples / fs`` in s."""
+        return self.n_samples / self.fs
+
+    def time_of(self, i: int) -> int:
+        """Time of grid sample `i` in ns.
+
+        Parameters
+        ----------
+        i : int
+            Grid index (may be negative or beyond the end).
+
+        Returns
+        -------
+        int
+        """
+        return int(self.t0_ns + round(i / self.fs * 1e9))
+
+    def index_of(self, t_s: float) -> int:
+        """First grid index at or after the absolute time `t_s` (s, the clock of ``Signals.t0``).
+
+        Parameters
+        ----------
+        t_s : float
+            Time in s.
+
+        Returns
+        -------
+        int
+        """
+        return int(np.ceil(round((t_s * 1e9 - self.t0_ns) * 1e-9 * self.fs, 6)))
+
+    def _index(self, spans: Sequence[ChunkSpan], topics: set[str]):
+        """A LogIndex over the chunks `spans` only (damaged ones skipped and reported)."""
+        from vibroscope.io import _scan
+        from vibroscope.io.log_index import LogIndex
+
+        res = _scan.ScanResult(path=self.path, file_size=0, header=self._header, indexed=self.indexed)
+        res.schemas.update(self._schemas)
+        res.channels.update(self._channels)
+        with open(self.path, "rb") as fh:
+            fd = fh.fileno()
+            for sp in spans:
+                try:
+                    raw, recs, (cid, lt, st, ln) = _open_chunk(fd, sp)
+                except Exception as exc:  # noqa: BLE001 - the chunk is lost: its samples are NaN
+                    res.skipped.append((sp.offset, f"chunk skipped: {type(exc).__name__}: {exc}"))
+                    continue
+                for r in recs:
+                    (res.schemas if isinstance(r, _scan.Schema) else res.channels)[r.id] = r
+                if cid.size:
+                    res.blocks.append(_scan.Block(raw, sp.offset, cid, lt, st, ln))
+        return LogIndex(res, topics)
+
+    def _spans(self, a_ns: int, b_ns: int, cids: set[int]) -> list[ChunkSpan]:
+        m = int(self.margin_s * 1e9)
+        return [c for c in self.chunks if c.end_ns >= a_ns - m and c.start_ns <= b_ns + m
+                and (c.channel_ids is None or c.channel_ids & cids)]
+
+    def read(self, i0: int, i1: int) -> Signals:
+        """Grid samples ``[i0, i1)`` of every channel.
+
+        Parameters
+        ----------
+        i0, i1 : int
+            Grid indices, ``i0 < i1`` (either may lie outside ``[0, n_samples)``: NaN there).
+
+        Returns
+        -------
+        Signals
+            ``data`` (n_channels, i1 - i0), NaN where nothing was logged (gaps, lost chunks);
+            ``t0`` the time of sample `i0` in s; ``meta``: ``source``, ``t0_ns``, ``grid_index``
+            (`i0`), ``warnings`` and ``skipped`` (chunks lost in this block, by byte offset).
+
+        Raises
+        ------
+        ValueError
+            If ``i1 <= i0``.
+        """
+        from vibroscope.io._grid import place_topic
+        from vibroscope.io.mcap_read import _Notes, _read_topic
+
+        if i1 <= i0:
+            raise ValueError(f"{i0=} must be less than {i1=}")
+        n = i1 - i0
+        by_topic: dict[str, list[int]] = {}
+        for k, mp in enumerate(self._parsed):
+            by_topic.setdefault(mp.topic, []).append(k)
+        cids = {c for c, ch in self._channels.items() if ch.topic in by_topic}
+        log = self._index(self._spans(self.time_of(i0), self.time_of(i1 - 1), cids), set(by_topic))
+        notes = _Notes.of_scan(log)
+        data = np.full((len(self._parsed), n), np.nan)
+        fast: dict[str, bool] = {}
+        for topic, rows in by_topic.items():
+            ids = log.by_topic.get(topic)
+            if not ids or not log.count(ids[0]):
+                continue  # nothing of this topic in the block's chunks: NaN
+            got = _read_topic(log, topic, [self._parsed[k].fields for k in rows], notes, False, fast)
+            if got is None:
+                continue
+            out, _cov, _res = place_topic(got, self.t0_ns, n, self.fs, first=i0)
+            data[rows] = out
+        meta = {"source": str(self.path), "t0_ns": self.time_of(i0), "grid_index": int(i0),
+                "warnings": notes.warnings, "skipped": notes.skipped}
+        return Signals(data, self.fs, list(self.channels), list(self.units), self.time_of(i0) * 1e-9, meta)
+
+    def blocks(self, block_samples: int, *, start: int = 0, stop: int | None = None) -> Iterator[Signals]:
+        """Consecutive blocks of `block_samples` grid samples from `start` to `stop` (the last shorter).
+
+        Parameters
+        ----------
+        block_samples : int
+            Samples per block (at least 1).
+        start, stop : int, optional
+            Grid indices; default the whole grid ``[0, n_samples)``.
+
+        Yields
+        ------
+        Signals
+            As :meth:`read`.
+
+        Raises
+        ------
+        ValueError
+            If `block_samples` is not positive.
+        """
+        if block_samples < 1:
+            raise ValueError(f"{block_samples=} must be at least 1")
+        stop = self.n_samples if stop is None else stop
+        for i in range(start, stop, block_samples):
+            yield self.read(i, min(i + block_samples, stop))
+
+
+def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, float]:
+    """(first stamp, last stamp, estimated rate) of a topic from its first and last chunks."""
+    from vibroscope.io.mcap_read import _Notes, _read_topic
+
+    mine = [c for c in grid.chunks if c.channel_ids is None or c.channel_ids & cids]
+    if not mine:
+        raise ChannelError(f"{grid.path}: topic {topic!r} has no messages")
+    mp = next(m for m in grid._parsed if m.topic == topic)
+
+    def first_readable(spans):  # a lost chunk at either end: the next one inwards
+        why = []
+        for span in spans:
+            log = grid._index([span], {topic})
+            notes = _Notes.of_scan(log)
+            got = _read_topic(log, topic, [mp.fields], notes, False, {}) if log.by_topic.get(topic) else None
+            if got is not None:
+                return got
+            why += notes.warnings[-1:]
+        raise ChannelError(f"{grid.path}: topic {topic!r}: no chunk of it reads: " + "; ".join(why[:3]))
+
+    a, b = first_readable(mine), first_readable(mine[::-1])
+    return int(a.t_ns[0]), int(b.t_ns[-1]), float(a.report.fs_est)
+
+
+def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: float | None = None,
+              t0_ns: int | None = None, margin_s: float = 1.0, n_samples: int | None = None) -> LogGrid:
+    """Plan reading a log in blocks on one uniform grid.
+
+    Parameters
+    ----------
+    path : str or Path
+        The MCAP log.
+    channels : sequence of str, optional
+        Message paths. Default: ``linear_acceleration.{x,y,z}`` of every Imu topic (all three
+        axes: an axis that never moves is not dropped here, unlike :func:`read_mcap`).
+    fs : float, optional
+        Grid rate in Hz. Default: the highest topic rate, estimated from the first chunk of
+        each topic and refined over the whole span (the number of periods between the
+        topic's first and last stamps), so that the grid holds over a long log.
+    t0_ns : int, optional
+        Time of grid sample 0 in ns; default the latest first stamp of the topics (as
+        :func:`read_mcap`).
+    margin_s : float, optional
+        Log time (s) read beyond each block's edges, for header stamps that lag their log
+        times; default 1 s.
+    n_samples : int, optional
+        The grid's length when known (a Dask task of :mod:`vibroscope.fleet`): with `fs` and
+        `t0_ns` also given, no chunk is opened to plan the grid. Default: to the end of the
+        shortest topic.
+
+    Returns
+    -------
+    LogGrid
+
+    Raises
+    ------
+    LogFormatError
+        If the file is not an MCAP log or holds no readable chunk.
+    ChannelError
+        If a channel names an unknown topic, a topic has no messages, or (automatic
+        selection) the log has no Imu topic.
+    ValueError
+        If `fs` or `margin_s` is not a positive (non-negative) finite number.
+    """
+    from vibroscope.io.log_index import ACCELERATION_TYPES, LogIndex
+
+    path = Path(path)
+    if fs is not None and not (np.isfinite(fs) and fs > 0):
+        raise ValueError(f"{fs=} must be a positive sampling frequency in Hz")
+    if not (np.isfinite(margin_s) and margin_s >= 0):
+        raise ValueError(f"{margin_s=} must be a non-negative time in s")
+    warnings: list[str] = []
+    skipped: list[tuple[int, str]] = []
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise LogFormatError(f"{path}: cannot read ({exc})") from exc
+    with fh:
+        size = os.fstat(fh.fileno()).st_size
+        if size < 8 or _pread(fh.fileno(), 8, 0) != _MAGIC:
+            raise LogFormatError(f"{path}: not an MCAP file (bad magic at byte offset 0)")
+        plan = _summary_plan(path, fh)
+        indexed = plan is not None
+        if plan is None:
+            warnings.append(f"{path}: no usable summary section: chunks located by one linear pass")
+            plan = _linear_plan(path, fh.fileno(), size, warnings, skipped)
+    schemas, chans, spans, header = plan
+    if not spans:
+        raise LogFormatError(f"{path}: no readable chunk (streaming reads chunked logs)")
+    grid = LogGrid(path, (), (), 1.0, 0, 0, tuple(spans), float(margin_s), indexed, warnings, skipped,
+                   schemas, chans, header)
+    probe = LogIndex(grid._index([], set()).scan)  # channels and schemas only: names and units
+    if channels is None:
+        imu = sorted({ch.topic for cid, ch in chans.items() if ch.schema_id in schemas
+                      and schemas[ch.schema_id].name in ACCELERATION_TYPES})
+        if not imu:
+            raise ChannelError(f"{path}: no sensor_msgs/msg/Imu topic; choose channels (vibroscope info lists them)")
+        channels = [f"{t}.linear_acceleration.{a}" for t in imu for a in "xyz"]
+    grid._parsed = [probe.topic_of(c) for c in channels]
+    grid.channels = tuple(str(m) for m in grid._parsed)
+    grid.units = tuple(probe.unit(m) for m in grid._parsed)
+    if fs is not None and t0_ns is not None and n_samples is not None:
+        grid.fs, grid.t0_ns, grid.n_samples = float(fs), int(t0_ns), int(n_samples)
+        return grid
+    topics = list(dict.fromkeys(m.topic for m in grid._parsed))
+    firsts, lasts, rates, spans_t = [], [], [], []
+    for t in topics:
+        cids = {c for c, ch in chans.items() if ch.topic == t}
+        a, b, r = _first_last(grid, t, cids)
+        if np.isfinite(r) and r > 0 and b > a:  # refine over the whole span: periods between first and last
+            m = round((b - a) * 1e-9 * r)
+            if m > 0 and abs(m / r - (b - a) * 1e-9) > 1e-9 * m ** 0.5:  # beyond the stamps' ns rounding
+                r = m / ((b - a) * 1e-9)
+        firsts.append(a), lasts.append(b), rates.append(r)
+    if fs is None:
+        good = [r for r in rates if np.isfinite(r)]
+        if not good:
+            raise ChannelError(f"{path}: cannot estimate a sample rate (fewer than 2 messages per topic)")
+        fs = max(good)
+    grid.fs = float(fs)
+    grid.t0_ns = int(max(firsts)) if t0_ns is None else int(t0_ns)
+    stop = min(lasts)
+    grid.n_samples = max(0, int(np.floor((stop - grid.t0_ns) * 1e-9 * grid.fs + 1e-6)) + 1)
+    return grid
+
+
+def iter_blocks(path: str | Path, channels: Sequence[str] | None = None, *, fs: float | None = None,
+                block_s: float = 10.0, time_range: tuple[float, float] | None = None,
+                t0_ns: int | None = None) -> Iterator[Signals]:
+    """Consecutive blocks of a log on one fixed uniform grid, each reading only its own chunks.
+
+    Parameters
+    ----------
+    path : str or Path
+        The MCAP log.
+    channels : sequence of str, optional
+        Message paths; default every Imu ``linear_acceleration.{x,y,z}`` (see :func:`open_grid`).
+    fs : float, optional
+        Grid rate in Hz; default the highest topic rate (see :func:`open_grid`).
+    block_s : float, optional
+        Block length in s (rounded to whole samples, at least one); default 10 s.
+    time_range : (float, float), optional
+        Absolute start and stop times in s (the clock of ``Signals.t0``); the grid samples
+        ``t0 <= t < stop`` are read. Default: the whole grid.
+    t0_ns : int, optional
+        Grid origin in ns; default the latest first stamp of the topics.
+
+    Yields
+    ------
+    Signals
+        Shape (n_channels, samples of the block), NaN where nothing was logged, on the grid
+        ``t0_ns + round(i / fs * 1e9)`` common to all blocks (``meta["grid_index"]`` is the index
+        of the block's first sample); see :meth:`LogGrid.read`.
+
+    Raises
+    ------
+    LogFormatError, ChannelError
+        As :func:`open_grid`.
+    ValueError
+        If `block_s` is not positive, or `time_range` is empty.
+
+    Examples
+    --------
+    >>> for block in iter_blocks("run.mcap", block_s=60.0):  # doctest: +SKIP
+    ...     acc.update(block.data)
+    """
+    if not (np.isfinite(block_s) and block_s > 0):
+        raise ValueError(f"{block_s=} must be a positive duration in s")
+    grid = open_grid(path, channels, fs=fs, t0_ns=t0_ns)
+    start, stop = 0, grid.n_samples
+    if time_range is not None:
+        start, stop = grid.index_of(time_range[0]), grid.index_of(time_range[1])
+        if stop <= start:
+            raise ValueError(f"{time_range=} holds no grid sample")
+    yield from grid.blocks(max(1, int(round(block_s * grid.fs))), start=start, stop=stop)
