@@ -486,8 +486,9 @@ def mcap_blocks(path: str | Path, channels: Sequence[str] | None = None, *, fs: 
                 block_s: float = 1.0) -> Iterator[Signals]:
     """Blocks of `block_s` seconds of an MCAP log, for :class:`LiveView`.
 
-    For now the log is read whole by :func:`vibroscope.io.read_mcap` and sliced; a reader that
-    decodes it chunk by chunk yields the same blocks without holding the record.
+    The log is read block by block (:func:`vibroscope.io.blocks.open_grid`: only the chunks that
+    overlap each block are decompressed), on one uniform grid for the whole log, so memory is
+    bounded by the block, not the log; each block's ``meta["n_samples_total"]`` is the grid length.
 
     Parameters
     ----------
@@ -509,14 +510,16 @@ def mcap_blocks(path: str | Path, channels: Sequence[str] | None = None, *, fs: 
     ValueError
         If `block_s` is not positive.
     LogFormatError, ChannelError
-        As :func:`vibroscope.io.read_mcap`.
+        As :func:`vibroscope.io.blocks.open_grid`.
     """
     if not (np.isfinite(block_s) and block_s > 0):
         raise ValueError(f"{block_s=} must be a positive duration in s")
-    from vibroscope.io import read_mcap
+    from vibroscope.io.blocks import open_grid
 
-    sig = read_mcap(path, channels, fs=fs)
-    yield from record_blocks(sig, max(1, int(round(block_s * sig.fs))))
+    grid = open_grid(path, channels, fs=fs)
+    for block in grid.blocks(max(1, int(round(block_s * grid.fs)))):
+        block.meta["n_samples_total"] = grid.n_samples
+        yield block
 
 
 def stream_blocks(blocks: Iterable[Signals], rec, *, input: str | None = None, nperseg: int | None = 4096,
