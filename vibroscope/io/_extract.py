@@ -60,43 +60,9 @@ def _stamp_of(msg: Any) -> int | None:
 
 
 def _block_fast(buf: Any, st: np.ndarray, ln: np.ndarray, tname: str, names: list[str]):
-    """(stamps ns, values (k, m)) of the payloads at `st` (lengths `ln`) of one block, or None when
-    one of them does not fit the fixed layout. Payloads of one length evenly spaced (one topic,
-    or topics interleaved in a fixed pattern) are one strided numpy view; in any other block (frame
-    ids of mixed lengths, irregular interleaving) each field is gathered at its byte offsets."""
-    m = st.size
-    L = int(ln[0])
-    if m == 1 or (ln.min() == ln.max() and (d := np.diff(st)).min() == d.max() and d[0] >= L):
-        lay = _ros2.layout_of_length(tname, L)
-        if lay is None:
-            return None
-        first, dt = lay
-        step = int(st[1] - st[0]) if m > 1 else L
-        p = np.ndarray((m,), dtype=dt, buffer=buf, offset=int(st[0]), strides=(step,))
-        if not (p["_cdr"] == 0x0100).all() or not _ros2.flen_fits(p["_flen"], first):
-            return None
-        stamps = p["header.stamp.sec"].astype(np.int64) * 1_000_000_000 + p["header.stamp.nanosec"]
-        return stamps, [p[n] for n in names]
-    floats = _ros2.FLOAT_FIELDS[tname]
-    nb = len(buf)
-    st, ln = st.astype(np.int64), ln.astype(np.int64)
-    if int(st.min()) < 0 or int(ln.min()) < 16 or int((st + ln).max()) > nb:
-        return None
-
-    def at(dtype: str, offs: np.ndarray) -> np.ndarray:  # values of `dtype` at any byte offsets
-        size = np.dtype(dtype).itemsize
-        return np.ndarray((nb - size + 1,), dtype, buf, 0, (1,))[offs]
-
-    if not (at("<u2", st) == 0x0100).all():
-        return None
-    first = 4 + (12 + at("<u4", st + 12).astype(np.int64) + 7) // 8 * 8
-    if not (first + 8 * len(floats) == ln).all():
-        return None
-    sec, nsec = at("<i4", st + 4), at("<u4", st + 8)
-    first += st
-    cols = {"header.stamp.sec": sec, "header.stamp.nanosec": nsec}
-    vals = [cols[n] if n in cols else at("<f8", first + 8 * floats.index(n)) for n in names]
-    return sec.astype(np.int64) * 1_000_000_000 + nsec, vals
+    """(stamps ns, values) of the payloads at `st` (lengths `ln`) of one block, or None
+    (:func:`vibroscope.io._ros2.decode_block`)."""
+    return _ros2.decode_block(buf, st, ln, tname, names)
 
 
 def fast_extract(log: Any, cid: int, names: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
@@ -105,7 +71,9 @@ def fast_extract(log: Any, cid: int, names: list[str]) -> tuple[np.ndarray, np.n
     It applies to a CDR channel of a fixed-layout type (:data:`~vibroscope.io._ros2.FLOAT_FIELDS`)
     whose every message is one such payload (CDR little-endian, a frame_id of any length, no
     bytes more or less than the layout): block by block (a chunk's bytes, hot in the cache),
-    each block one strided view or one gather per field.
+    each block one strided view or one gather per field. Blocks whose fields the scan
+    decoded already (``Block.decoded``, :func:`vibroscope.io._scan.scan` with `fields`) are
+    taken as they are.
     """
     ch = log.scan.channels[cid]
     tname = log.schema_name(cid)
@@ -123,7 +91,11 @@ def fast_extract(log: Any, cid: int, names: list[str]) -> tuple[np.ndarray, np.n
     o = 0
     for bi, idx in where:
         b = blocks[bi]
-        got = _block_fast(b.buf, b.start[idx], b.length[idx], tname, names)
+        pre = b.decoded.get(cid)  # decoded by the scan's threads right after decompression
+        if pre is not None and pre[0] == tname and pre[1].size == idx.size and all(n in pre[2] for n in names):
+            got = pre[1], [pre[2][n] for n in names]
+        else:
+            got = _block_fast(b.buf, b.start[idx], b.length[idx], tname, names)
         if got is None:
             return None
         m = idx.size

@@ -11,6 +11,7 @@ so a block of equally long payloads is one numpy structured array.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,6 +131,138 @@ def flen_fits(flen: np.ndarray, first: int) -> bool:
     """Whether every frame_id length `flen` (NUL included) puts the first float64 at `first`."""
     lo, hi = int(flen.min()), int(flen.max())
     return _layout(lo) == first and _layout(hi) == first
+
+
+def _gather_fixed(buf, st, ln, nfloats, cols, sec, nsec, out):  # pragma: no cover - compiled by numba
+    """Check and gather fixed-layout payloads in one pass (numba kernel, the GIL released).
+
+    Payload i is ``buf[st[i] : st[i] + ln[i]]``: it must be CDR little-endian with exactly
+    `nfloats` float64 after the place its frame_id length puts the first. Fills `sec`, `nsec`
+    and ``out[k, i]`` with the 8 bytes of float ``cols[k]`` (``out`` is uint64: the bytes are
+    moved, not converted). Returns 0, or 1 at the first payload that does not fit.
+    """
+    nb = buf.size
+    for i in range(st.size):
+        s = st[i]
+        n = ln[i]
+        if s < 0 or n < 16 or s + n > nb or buf[s] != 0 or buf[s + 1] != 1:
+            return 1
+        flen = np.int64(buf[s + 12]) | (np.int64(buf[s + 13]) << 8) | (np.int64(buf[s + 14]) << 16) \
+            | (np.int64(buf[s + 15]) << 24)
+        first = 4 + (12 + flen + 7) // 8 * 8
+        if first + 8 * nfloats != n:
+            return 1
+        sv = np.int64(buf[s + 4]) | (np.int64(buf[s + 5]) << 8) | (np.int64(buf[s + 6]) << 16) \
+            | (np.int64(buf[s + 7]) << 24)
+        sec[i] = sv - ((sv >> 31) << 32)  # int32, two's complement
+        nsec[i] = np.int64(buf[s + 8]) | (np.int64(buf[s + 9]) << 8) | (np.int64(buf[s + 10]) << 16) \
+            | (np.int64(buf[s + 11]) << 24)
+        for k in range(cols.size):
+            a = s + first + 8 * cols[k]
+            v = np.uint64(0)
+            for b in range(8):
+                v |= np.uint64(buf[a + b]) << np.uint64(8 * b)
+            out[k, i] = v
+    return 0
+
+
+_KERNEL: list = []
+_KERNEL_LOCK = threading.Lock()
+
+
+def _gather_kernel():
+    """The compiled :func:`_gather_fixed`, or None without numba."""
+    with _KERNEL_LOCK:
+        if not _KERNEL:
+            try:
+                import numba
+            except ImportError:  # pragma: no cover - numba is a dependency
+                _KERNEL.append(None)
+            else:
+                _KERNEL.append(numba.njit(cache=True, nogil=True)(_gather_fixed))
+        return _KERNEL[0]
+
+
+def decode_block(buf, st: np.ndarray, ln: np.ndarray, tname: str, names: list[str] | tuple[str, ...],
+                 compiled: bool = True):
+    """Stamps and fields of fixed-layout payloads of one block (a chunk's bytes), or None.
+
+    Parameters
+    ----------
+    buf : bytes-like
+        The block's bytes (a decompressed chunk); only ``buf[st[i] : st[i] + ln[i]]`` is read.
+    st : ndarray of int, shape (m,)
+        Byte offset of each payload in `buf` (m >= 1).
+    ln : ndarray of int, shape (m,)
+        Byte length of each payload.
+    tname : str
+        The message type, a key of :data:`FLOAT_FIELDS`.
+    names : sequence of str
+        Fields wanted: :data:`FLOAT_FIELDS` of `tname` or :data:`STAMP_FIELDS`.
+
+    compiled : bool, optional
+        Payloads that are not one strided view (frame ids of mixed lengths, irregular
+        interleaving) are checked and gathered in one pass of a compiled kernel (numba, the GIL
+        released; default); False, or without numba, by numpy gathers (the same result).
+
+    Returns
+    -------
+    (ndarray of int64 shape (m,), list of ndarray shape (m,)) or None
+        ``header.stamp`` in ns and one array per name (float64; int32 / uint32 for the stamp
+        fields), or None when one payload does not fit the fixed layout (CDR little-endian,
+        a frame_id of any length, no byte more or less than the layout). The arrays may be
+        views of `buf`.
+
+    Notes
+    -----
+    Payloads of one length evenly spaced (one topic, or topics interleaved in a fixed
+    pattern) are one strided numpy view; in any other block (frame ids of mixed lengths,
+    irregular interleaving) each field is gathered at its byte offsets.
+    """
+    m = st.size
+    L = int(ln[0])
+    if m == 1 or (ln.min() == ln.max() and (d := np.diff(st)).min() == d.max() and d[0] >= L):
+        lay = layout_of_length(tname, L)
+        if lay is None:
+            return None
+        first, dt = lay
+        step = int(st[1] - st[0]) if m > 1 else L
+        p = np.ndarray((m,), dtype=dt, buffer=buf, offset=int(st[0]), strides=(step,))
+        if not (p["_cdr"] == 0x0100).all() or not flen_fits(p["_flen"], first):
+            return None
+        stamps = p["header.stamp.sec"].astype(np.int64) * 1_000_000_000 + p["header.stamp.nanosec"]
+        return stamps, [p[n] for n in names]
+    floats = FLOAT_FIELDS[tname]
+    kernel = _gather_kernel() if compiled else None
+    if kernel is not None:
+        cols = np.array([floats.index(n) for n in names if n not in STAMP_FIELDS], np.int64)
+        sec, nsec = np.empty(m, np.int32), np.empty(m, np.uint32)
+        out = np.empty((cols.size, m), np.uint64)
+        if kernel(np.frombuffer(buf, np.uint8), st.astype(np.int64, copy=False), ln.astype(np.int64, copy=False),
+                  len(floats), cols, sec, nsec, out):
+            return None
+        f64 = iter(out.view("<f8"))
+        vals = [sec if n == STAMP_FIELDS[0] else nsec if n == STAMP_FIELDS[1] else next(f64) for n in names]
+        return sec.astype(np.int64) * 1_000_000_000 + nsec, vals
+    nb = len(buf)
+    st, ln = st.astype(np.int64), ln.astype(np.int64)
+    if int(st.min()) < 0 or int(ln.min()) < 16 or int((st + ln).max()) > nb:
+        return None
+
+    def at(dtype: str, offs: np.ndarray) -> np.ndarray:  # values of `dtype` at any byte offsets
+        size = np.dtype(dtype).itemsize
+        return np.ndarray((nb - size + 1,), dtype, buf, 0, (1,))[offs]
+
+    if not (at("<u2", st) == 0x0100).all():
+        return None
+    first = 4 + (12 + at("<u4", st + 12).astype(np.int64) + 7) // 8 * 8
+    if not (first + 8 * len(floats) == ln).all():
+        return None
+    sec, nsec = at("<i4", st + 4), at("<u4", st + 8)
+    first += st
+    cols = {"header.stamp.sec": sec, "header.stamp.nanosec": nsec}
+    vals = [cols[n] if n in cols else at("<f8", first + 8 * floats.index(n)) for n in names]
+    return sec.astype(np.int64) * 1_000_000_000 + nsec, vals
 
 
 def encode_fixed(

@@ -45,14 +45,26 @@ summary's statistics count more messages than were found and no damage explains 
 too is reported. Nothing in a damaged byte range is ever decoded, and no message outside
 a chunk is taken from bytes the walk later finds to belong to a chunk.
 
-Message records are not decoded here: they are indexed as arrays (channel id, log time,
-payload offset and length) into their chunk's bytes, so that the decoders can work on
-whole blocks with numpy.
+Message records are indexed as arrays (channel id, log time, payload offset and length)
+into their chunk's bytes, so that the decoders can work on whole blocks with numpy.
+
+Speed (issue 9): chunks are opened (decompressed, CRC-checked, indexed) on a pool of threads
+ahead of the walk, which takes them in file order (the result is that of opening them in
+turn). When the caller names the fields it wants (``fields``, or message paths among
+``topics`` as :func:`~vibroscope.io.read_mcap` passes them), the threads also decode those
+fields of fixed-layout CDR messages (:func:`vibroscope.io._ros2.decode_block`) right after
+decompression, and a zstd or LZ4 chunk whose wanted messages are all decoded is
+decompressed into a buffer each thread reuses (fresh memory for every chunk costs more
+than decompressing it): its bytes are not kept, and ``Block.buf`` decompresses it again if
+they are asked for. A chunk that fails on that path is opened again the usual way, which
+reports it. The CRC-32 is ISA-L's when the ``isal`` package is installed (the same value,
+several times faster), else zlib's.
 """
 
 from __future__ import annotations
 
 import bisect
+import functools
 import mmap
 import os
 import struct
@@ -60,6 +72,7 @@ import threading
 import zlib
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
+from functools import partial
 from io import BytesIO
 from pathlib import Path
 from typing import Any, Literal
@@ -70,6 +83,7 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, ChunkIndex, Header, Metadata, Schema, Statistics
 
 from vibroscope.errors import LogFormatError
+from vibroscope.io import _ros2
 
 MAGIC = b"\x89MCAP0\r\n"
 _MSG_HDR = struct.Struct("<HIQQ")  # channel_id, sequence, log_time, publish_time
@@ -88,9 +102,14 @@ try:  # optional codecs of mcap
 except ImportError:  # pragma: no cover
     _zstd = None
 try:
+    import lz4.block as _lz4_block
     import lz4.frame as _lz4
 except ImportError:  # pragma: no cover
-    _lz4 = None
+    _lz4 = _lz4_block = None
+try:  # optional: CRC-32 of ISA-L, the same value as zlib's, several times faster
+    from isal.isal_zlib import crc32 as _crc32
+except ImportError:  # pragma: no cover - zlib's is the fallback
+    _crc32 = zlib.crc32
 
 
 def _opname(op: int) -> str:
@@ -105,20 +124,70 @@ def _valid_opcode(op: int) -> bool:
     return 0x01 <= op <= 0x0F or op >= 0x80
 
 
-@dataclass
 class Block:
-    """Messages found in one container (a chunk, or the loose messages of the data section)."""
+    """Messages found in one container (a chunk, or the loose messages of the data section).
 
-    buf: bytes
-    file_offset: int  # byte offset of the chunk record (or -1 for loose messages)
-    channel_id: np.ndarray  # uint16 (n,)
-    log_time: np.ndarray  # uint64 (n,)
-    start: np.ndarray  # int64 (n,), payload offset in buf
-    length: np.ndarray  # int64 (n,)
+    Parameters
+    ----------
+    buf : bytes-like or None
+        The container's bytes (a decompressed chunk, or the file for loose messages); None
+        when the scan dropped them after decoding the wanted fields (`reopen` gives them
+        back on first use of :attr:`buf`).
+    file_offset : int
+        Byte offset of the chunk record (-1 for loose messages).
+    channel_id : ndarray of uint16, shape (n,)
+        Channel id of each message.
+    log_time : ndarray of uint64, shape (n,)
+        Log time of each message in ns.
+    start : ndarray of int64, shape (n,)
+        Payload offset of each message in :attr:`buf`.
+    length : ndarray of int64, shape (n,)
+        Payload length of each message in bytes.
+    decoded : dict, optional
+        Fields decoded by the scan's threads: channel id to (message type, stamps ns int64
+        shape (k,), {field name: ndarray shape (k,)}) for the k messages of that channel in
+        this block, in order.
+    reopen : callable, optional
+        Gives the chunk's bytes again (decompressed, size and CRC-32 checked) when `buf`
+        is None.
+    """
+
+    __slots__ = ("_buf", "file_offset", "channel_id", "log_time", "start", "length", "decoded", "_reopen")
+
+    def __init__(self, buf: Any, file_offset: int, channel_id: np.ndarray, log_time: np.ndarray, start: np.ndarray,
+                 length: np.ndarray, decoded: dict | None = None, reopen: Any = None) -> None:
+        if buf is None and reopen is None:
+            raise ValueError("a block without its bytes needs `reopen`")
+        self._buf = buf
+        self.file_offset = file_offset
+        self.channel_id = channel_id
+        self.log_time = log_time
+        self.start = start
+        self.length = length
+        self.decoded = decoded if decoded is not None else {}
+        self._reopen = reopen
+
+    @property
+    def buf(self) -> Any:
+        """The container's bytes (decompressed again, and kept, on first use when dropped).
+
+        Raises
+        ------
+        LogFormatError
+            If the chunk no longer decompresses to its size and CRC-32 (the file changed).
+        """
+        if self._buf is None:
+            self._buf = self._reopen()
+        return self._buf
 
     @property
     def n(self) -> int:
+        """Number of messages."""
         return int(self.channel_id.size)
+
+    def __repr__(self) -> str:
+        return (f"Block(file_offset={self.file_offset}, n={self.n}, decoded={sorted(self.decoded)}, "
+                f"bytes={'kept' if self._buf is not None else 'dropped'})")
 
 
 @dataclass(frozen=True)
@@ -250,7 +319,7 @@ def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
                 ch = _parse(Channel, data[body:end])
                 channels[ch.id] = ch
             elif op == Opcode.CHUNK_INDEX:
-                ci = _parse(ChunkIndex, data[body:end])
+                ci = _chunk_index(data, body, end)
                 o = ci.chunk_start_offset
                 if not (8 <= o and ci.chunk_length >= 9 and o + ci.chunk_length <= summary_start):
                     return None, f"chunk index at byte offset {pos} points outside the data section ({o})"
@@ -267,6 +336,33 @@ def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
 
 def _parse(cls: Any, body: bytes) -> Any:
     return cls.read(ReadDataStream(BytesIO(body)))
+
+
+_CI_HEAD = struct.Struct("<QQQQI")
+_CI_ENTRY = struct.Struct("<HQ")
+
+
+def _chunk_index(data: Any, body: int, end: int) -> ChunkIndex:
+    """The Chunk Index record ``data[body:end]``, parsed with struct (the summary of a long log
+    holds thousands); anything unusual is left to mcap's own parser (and its errors)."""
+    try:
+        t0, t1, off, length, mlen = _CI_HEAD.unpack_from(data, body)
+        p = body + 36
+        if mlen % 10 or p + mlen + 12 > end:
+            raise ValueError
+        offsets = dict(_CI_ENTRY.iter_unpack(data[p : p + mlen]))
+        p += mlen
+        milen, slen = struct.unpack_from("<QI", data, p)
+        p += 12
+        if p + slen + 16 > end:
+            raise ValueError
+        comp = str(data[p : p + slen], "utf-8")
+        csize, usize = struct.unpack_from("<QQ", data, p + slen)
+    except Exception:  # noqa: BLE001 - mcap's parser decides
+        return _parse(ChunkIndex, data[body:end])
+    return ChunkIndex(message_start_time=t0, message_end_time=t1, chunk_start_offset=off, chunk_length=length,
+                      message_index_offsets=offsets, message_index_length=milen, compression=comp,
+                      compressed_size=csize, uncompressed_size=usize)
 
 
 def _read_chunk(mv: memoryview, body: int, end: int) -> Chunk:
@@ -309,6 +405,91 @@ def _decompress(chunk: Chunk) -> bytes:
     raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
 
 
+def _scratch(size: int) -> memoryview:
+    """This thread's reused output buffer, at least `size` bytes (fresh pages for every chunk
+    cost more than decompressing it)."""
+    buf = getattr(_LOCAL, "buf", None)
+    if buf is None or len(buf) < size:
+        buf = _LOCAL.buf = bytearray(max(size, 1 << 20))
+    return memoryview(buf)[:size]
+
+
+def _lz4_into(data: Any, out: memoryview) -> int | None:
+    """Decompress one LZ4 frame block by block into `out`; its size, or None for anything but
+    one plain frame (the caller then decompresses it the usual way)."""
+    d = memoryview(data)
+    n, size = len(d), len(out)
+    if n < 7 or bytes(d[:4]) != b"\x04\x22\x4d\x18":
+        return None
+    flg, bd = d[4], d[5]
+    if flg >> 6 != 1 or flg & 0x02 or flg & 0x01:  # version 01; no reserved bit, no dictionary id
+        return None
+    linked, block_sum, has_size, content_sum = not flg & 0x20, flg & 0x10, flg & 0x08, flg & 0x04
+    bmax = {4: 1 << 16, 5: 1 << 18, 6: 1 << 20, 7: 1 << 22}.get((bd >> 4) & 7)
+    if bmax is None:
+        return None
+    p = 6 + (8 if has_size else 0)
+    if has_size and int.from_bytes(d[6:14], "little") != size:
+        return None
+    p += 1  # header checksum (the chunk's CRC-32 checks the data)
+    o = 0
+    decompress = _lz4_block.decompress
+    while True:
+        if p + 4 > n:
+            return None
+        bs = int.from_bytes(d[p : p + 4], "little")
+        p += 4
+        if bs == 0:
+            break
+        k = bs & 0x7FFFFFFF
+        if p + k > n:
+            return None
+        if bs & 0x80000000:  # stored uncompressed
+            got: Any = d[p : p + k]
+        elif linked:  # the previous 64 KiB of output is the block's dictionary
+            got = decompress(d[p : p + k], uncompressed_size=bmax, dict=out[max(0, o - 65536) : o])
+        else:
+            got = decompress(d[p : p + k], uncompressed_size=bmax)
+        m = len(got)
+        if o + m > size:
+            return None
+        out[o : o + m] = got
+        o += m
+        p += k + (4 if block_sum else 0)
+    p += 4 if content_sum else 0
+    return o if p == n else None
+
+
+def _decompress_into(chunk: Chunk) -> memoryview | None:
+    """The chunk's data decompressed into this thread's reused buffer (a view of it, valid until
+    the thread's next chunk), or None where that does not apply (then :func:`_decompress`, which
+    also gives the error of a damaged chunk)."""
+    size = chunk.uncompressed_size
+    try:
+        if chunk.compression == "zstd" and _zstd is not None:
+            out = _scratch(size)
+            dec = getattr(_LOCAL, "zstd", None)
+            if dec is None:
+                dec = _LOCAL.zstd = _zstd.ZstdDecompressor()
+            reader = dec.stream_reader(chunk.data, read_size=max(len(chunk.data), 1), read_across_frames=False)
+            got = 0
+            while got < size:
+                k = reader.readinto(out[got:])
+                if not k:
+                    break
+                got += k
+            if got != size or reader.read(1):
+                return None
+            return out
+        if chunk.compression == "lz4" and _lz4_block is not None:
+            out = _scratch(size)
+            return out if _lz4_into(chunk.data, out) == size else None
+    except Exception:  # noqa: BLE001 - the usual path decides (and names the fault)
+        return None
+    return None
+
+
+@functools.lru_cache(maxsize=64)
 def _periodic_dtype(stride: int) -> np.dtype:
     """Message records of `stride` bytes laid end to end: opcode, record length, channel id, log time."""
     return np.dtype({"names": ["op", "len", "cid", "log_time"], "formats": ["u1", "<u8", "<u2", "<u8"],
@@ -356,7 +537,7 @@ def _index_messages(buf: bytes, pos: int, end: int, out_records: list, fast: boo
                 if length >= 22 and rest % stride == 0 and rest // stride > 8:
                     m = rest // stride
                     a = np.ndarray((m,), _periodic_dtype(stride), buf, pos)
-                    if (a["op"] == Opcode.MESSAGE).all() and (a["len"] == length).all():
+                    if (a["op"] == _OP_MESSAGE).all() and (a["len"] == length).all():
                         flush_py()
                         cids.append(a["cid"].astype(np.uint16))
                         logs.append(a["log_time"].astype(np.uint64))
@@ -425,6 +606,7 @@ def _walk_records(buf, pos, end, op, start, length, cid, logt):  # pragma: no co
 
 
 _COMPILED: dict[str, Any] = {}
+_OP_MESSAGE, _OP_SCHEMA, _OP_CHANNEL = int(Opcode.MESSAGE), int(Opcode.SCHEMA), int(Opcode.CHANNEL)  # plain ints: fast
 _COMPILE_LOCK = threading.Lock()
 
 
@@ -440,19 +622,21 @@ def _index_compiled(buf: Any, pos: int, end: int, out_records: list) -> tuple[np
                 return None
             walk = _COMPILED["walk"] = numba.njit(cache=True, nogil=True)(_walk_records)
     cap = (end - pos) // 23 + 1  # every record of a chunk (schema, channel, message) has at least 23 bytes
-    op = np.empty(cap, np.uint8)
-    start, length = np.empty(cap, np.int64), np.empty(cap, np.int64)
-    cid, logt = np.empty(cap, np.uint16), np.empty(cap, np.uint64)
+    work = getattr(_LOCAL, "walk", None)  # this thread's arrays, reused (fresh pages cost more than the walk)
+    if work is None or work[0].size < cap:
+        work = _LOCAL.walk = (np.empty(cap, np.uint8), np.empty(cap, np.int64), np.empty(cap, np.int64),
+                              np.empty(cap, np.uint16), np.empty(cap, np.uint64))
+    op, start, length, cid, logt = (a[:cap] for a in work)
     u8 = np.frombuffer(buf, np.uint8, count=end, offset=0)
     m, status = walk(u8, pos, end, op, start, length, cid, logt)
     if status:
         return None
     op = op[:m]
-    msg = op == Opcode.MESSAGE
-    for i in np.flatnonzero((op == Opcode.SCHEMA) | (op == Opcode.CHANNEL)).tolist():
+    msg = op == _OP_MESSAGE
+    for i in np.flatnonzero((op == _OP_SCHEMA) | (op == _OP_CHANNEL)).tolist():
         s, ln = int(start[i]), int(length[i])
-        out_records.append(_parse(Schema if op[i] == Opcode.SCHEMA else Channel, buf[s + 9 : s + 9 + ln]))
-    return cid[:m][msg], logt[:m][msg], start[:m][msg], length[:m][msg]
+        out_records.append(_parse(Schema if op[i] == _OP_SCHEMA else Channel, buf[s + 9 : s + 9 + ln]))
+    return cid[:m][msg], logt[:m][msg], start[:m][msg], length[:m][msg]  # copies (boolean indexing)
 
 
 def _fields_end(data: Any, op: int, body: int, end: int) -> int | None:
@@ -492,12 +676,52 @@ def _open(path: Path) -> Any:
         raise LogFormatError(f"{path}: cannot read ({exc})") from exc
 
 
+def _decode_plan(summary: _Summary | None, topics: Any, fields: Any) -> dict[int, tuple[str, tuple[str, ...]]]:
+    """Channel id -> (message type, field names) that the threads decode right after
+    decompression: channels the summary knows, CDR of a fixed-layout type, with wanted fields
+    (`fields`, else the entries of `topics` that extend a topic by a field path)."""
+    if summary is None or (fields is None and topics is None):
+        return {}
+    plan = {}
+    for cid, ch in summary.channels.items():
+        sc = summary.schemas.get(ch.schema_id)
+        floats = _ros2.FLOAT_FIELDS.get(sc.name) if sc is not None and ch.message_encoding == "cdr" else None
+        if floats is None:
+            continue
+        if fields is not None:
+            names = list(fields.get(ch.topic, ()))
+        else:
+            names = [t[len(ch.topic) + 1 :] for t in topics if len(t) > len(ch.topic) + 1 and t.startswith(ch.topic + ".")]
+        names = sorted({nm for nm in names if nm in floats or nm in _ros2.STAMP_FIELDS})
+        if names:
+            plan[cid] = (sc.name, tuple(names))
+    return plan
+
+
+def _reopen_chunk(mview: memoryview, path: Path, pos: int, end: int, validate_crcs: bool) -> Any:
+    """The bytes of the chunk record at `pos` again (it was read whole and valid before)."""
+    try:
+        chunk = _read_chunk(mview, pos + 9, end)
+        raw = _decompress(chunk)
+    except Exception as exc:  # noqa: BLE001 - only VibroscopeError escapes
+        raise LogFormatError(f"{path}: chunk at byte offset {pos} no longer decompresses ({type(exc).__name__}: "
+                             f"{exc}); the file changed since it was scanned?") from exc
+    if len(raw) != chunk.uncompressed_size or (
+            validate_crcs and chunk.uncompressed_crc != 0 and _crc32(raw) != chunk.uncompressed_crc):
+        raise LogFormatError(f"{path}: chunk at byte offset {pos} no longer matches its size and CRC-32; the file "
+                             f"changed since it was scanned?")
+    return raw
+
+
 class _Scanner:
     """Walks the records of the data section, filling a :class:`ScanResult`."""
 
     def __init__(self, res: ScanResult, data: Any, *, validate_crcs: bool, fast: bool, summary: _Summary | None,
-                 skip_chunks: set[int], search: bool, seek: bool, bar: Any) -> None:
+                 skip_chunks: set[int], search: bool, seek: bool, bar: Any,
+                 plan: dict[int, tuple[str, tuple[str, ...]]] | None = None, unwanted: set[int] | None = None) -> None:
         self.res = res
+        self.plan = plan or {}  # channel id -> (type, fields) decoded on the threads
+        self.unwanted = unwanted or set()  # channel ids whose payloads will not be read
         self.data = data
         self.n = len(data)
         self.mview = memoryview(data)
@@ -519,6 +743,7 @@ class _Scanner:
         self.pending: dict[tuple[int, int], Future] = {}  # (body, end) -> open_chunk(body, end) under way
         self.frontier = 0  # where the look-ahead for chunk records stopped
         self.window = 1
+        self.data_crc: dict[int, Future] = {}  # data end offset -> CRC-32 of the bytes before it, under way
 
     # -- chunks opened ahead of the walk -----------------------------------------------------
     def start_pool(self, workers: int) -> None:
@@ -527,11 +752,21 @@ class _Scanner:
             self.pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="vibroscope-mcap")
             self.window = 2 * workers + 2
 
+    def crc_ahead(self) -> None:
+        """Start the data section CRC-32 on a thread, for a data end record just before the summary
+        (where writers put it); used only when the walk finds the data end record there."""
+        s = self.summary
+        if self.pool is not None and self.validate_crcs and s is not None and s.start >= 8 + 13:
+            op, length = _REC_HDR.unpack_from(self.data, s.start - 13)
+            if op == Opcode.DATA_END and length == 4:
+                self.data_crc[s.start - 13] = self.pool.submit(_crc32, self.mview[: s.start - 13])
+
     def close_pool(self) -> None:
         """Drop what was opened ahead and not used (damage sent the walk elsewhere); stop the threads."""
-        for fut in self.pending.values():
+        for fut in [*self.pending.values(), *self.data_crc.values()]:
             fut.cancel()
         self.pending.clear()
+        self.data_crc.clear()
         if self.pool is not None:
             self.pool.shutdown(wait=True)
             self.pool = None
@@ -765,17 +1000,56 @@ class _Scanner:
         return end
 
     # -- chunks -----------------------------------------------------------------------------
-    def open_chunk(self, body: int, end: int) -> tuple[bytes, list, tuple[np.ndarray, ...]]:
+    def open_chunk(self, body: int, end: int) -> tuple[Any, list, tuple[np.ndarray, ...], dict]:
+        """Decompress, check (size, CRC-32) and index the chunk record ``[body - 9, end)``; decode
+        the fields of :attr:`plan` (runs on the threads).
+
+        Returns (bytes or None, Schema/Channel records, index arrays, decoded): the bytes are
+        None when they were decompressed into this thread's reused buffer and every message that
+        may be wanted later was decoded (:class:`Block` gets them back on use), else a copy.
+        """
         chunk = _read_chunk(self.mview, body, end)
-        raw = _decompress(chunk)
-        if len(raw) != chunk.uncompressed_size:
-            raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
-        if self.validate_crcs and chunk.uncompressed_crc != 0:
-            crc = zlib.crc32(raw)
-            if crc != chunk.uncompressed_crc:
-                raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
+        raw = _decompress_into(chunk) if self.plan else None
+        scratch = raw is not None
+        if scratch and self.validate_crcs and chunk.uncompressed_crc != 0 and _crc32(raw) != chunk.uncompressed_crc:
+            scratch, raw = False, None  # damaged: the usual path below names the fault
+        if raw is None:
+            raw = _decompress(chunk)
+            if len(raw) != chunk.uncompressed_size:
+                raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
+            if self.validate_crcs and chunk.uncompressed_crc != 0:
+                crc = _crc32(raw)
+                if crc != chunk.uncompressed_crc:
+                    raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
         recs: list = []
-        return raw, recs, _index_messages(raw, 0, len(raw), recs, self.fast)
+        idx = _index_messages(raw, 0, len(raw), recs, self.fast)
+        decoded, present = self.decode(raw, idx[0], idx[2], idx[3]) if self.plan else ({}, ())
+        if scratch:  # the bytes are kept (copied out of the reused buffer) while a wanted message is not decoded
+            keep = any(c not in decoded and c not in self.unwanted for c in present)
+            raw = bytes(raw) if keep else None
+        return raw, recs, idx, decoded
+
+    def decode(self, raw: Any, cid: np.ndarray, st: np.ndarray, ln: np.ndarray) -> tuple[dict, list[int]]:
+        """({channel id: (type, stamps, {field: values})} of the :attr:`plan` channels in one chunk
+        whose every message fits the fixed layout (copies, not views of `raw`), the channel ids
+        present)."""
+        out: dict = {}
+        if not cid.size:
+            return out, []
+        lo, hi = int(cid.min()), int(cid.max())
+        present = [lo] if lo == hi else np.unique(cid).tolist()
+        for c in present:
+            got = self.plan.get(c)
+            if got is None:
+                continue
+            tname, names = got
+            idx = np.flatnonzero(cid == c) if len(present) > 1 else None
+            s, n = (st, ln) if idx is None else (st[idx], ln[idx])
+            vals = _ros2.decode_block(raw, s, n, tname, names)
+            if vals is None:
+                continue
+            out[c] = (tname, np.array(vals[0], np.int64), {nm: np.array(v) for nm, v in zip(names, vals[1])})
+        return out, present
 
     def chunk(self, pos: int, body: int, end: int) -> str | None:
         """Decompress, check and index one chunk; returns why it failed, or None."""
@@ -795,13 +1069,15 @@ class _Scanner:
     def take(self, pos: int, opened: tuple, end: int) -> None:
         """Keep the messages of a chunk that validated; a chunk holding fewer messages than its
         message indexes (or the summary's chunk index) list is reported as damaged."""
-        raw, recs, (cid, lt, st, ln) = opened
+        raw, recs, (cid, lt, st, ln), decoded = opened
         self.done.add(pos)
         self.last_good = max(self.last_good, pos + 1)
         for r in recs:
             (self.res.schemas if isinstance(r, Schema) else self.res.channels)[r.id] = r
         if cid.size:
-            self.res.blocks.append(Block(raw, pos, cid, lt, st, ln))
+            reopen = None if raw is not None else partial(_reopen_chunk, self.mview, self.res.path, pos, end,
+                                                          self.validate_crcs)
+            self.res.blocks.append(Block(raw, pos, cid, lt, st, ln, decoded, reopen))
         listed, cids = self.loss_of_chunk(pos, end, self.n)
         if listed is not None and listed > cid.size:
             self.res.damage.append(Damage(pos, f"chunk holds {cid.size} messages where its message indexes list "
@@ -985,7 +1261,8 @@ class _Scanner:
         """Check the data section CRC, when the writer stored one."""
         stored = struct.unpack_from("<I", self.data, body)[0] if length >= 4 else 0
         if self.validate_crcs and stored != 0:
-            crc = zlib.crc32(memoryview(self.data)[:pos])
+            ahead = self.data_crc.pop(pos, None)  # computed on a thread while the chunks were read
+            crc = ahead.result() if ahead is not None else _crc32(memoryview(self.data)[:pos])
             if crc != stored:
                 self.res.warnings.append(
                     f"{self.res.path}: data section CRC-32 mismatch (stored {stored:#010x}, computed {crc:#010x}; "
@@ -1010,6 +1287,7 @@ def scan(
     mode: Literal["auto", "stream", "indexed"] = "auto",
     fast: bool = True,
     workers: int | None = None,
+    fields: Any = None,
 ) -> ScanResult:
     """Scan an MCAP file record by record, recovering after damage.
 
@@ -1043,6 +1321,16 @@ def scan(
     workers : int, optional
         Threads that open (decompress, CRC-check, index) the chunks ahead of the walk; default
         the machine's cores (at most 8); 1 opens each chunk in turn (the same result).
+    fields : mapping of str to sequence of str, optional
+        Topic -> field names (``"linear_acceleration.x"``, ``"header.stamp.sec"``) that the
+        threads decode right after decompressing each chunk, for channels the valid summary
+        knows whose messages are CDR of a fixed-layout type
+        (:data:`vibroscope.io._ros2.FLOAT_FIELDS`): ``Block.decoded``. Default: the entries of
+        `topics` that extend a topic by such a field path (``"/imu.linear_acceleration.x"``,
+        as :func:`~vibroscope.io.read_mcap` passes them). When every message of a chunk that
+        may be wanted later (of a `topics` topic) was decoded, the chunk is decompressed into
+        a buffer reused from chunk to chunk and its bytes are not kept (``Block.buf``
+        decompresses it again on use); the result is otherwise the same.
 
     Returns
     -------
@@ -1077,12 +1365,14 @@ def scan(
     if mode == "indexed" and summary is None:
         res.warnings.append(f"{path}: no valid summary section to read by its chunk indexes; read by a linear pass")
     skip: set[int] = set()
+    unwanted: set[int] = set()  # channels of the summary on no wanted topic
     if summary is not None:
         res.indexed = True
         res.schemas.update(summary.schemas)
         res.channels.update(summary.channels)
         if topics is not None:
             wanted = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
+            unwanted = set(summary.channels) - wanted
             for off, ci in summary.chunks.items():
                 ids = set(ci.message_index_offsets)
                 if ids and ids <= summary.channels.keys() and not ids & wanted:
@@ -1094,9 +1384,11 @@ def scan(
         bar = tqdm(total=n, unit="B", unit_scale=True, desc=path.name)
     stop = summary.start if summary is not None else n
     sc = _Scanner(res, data, validate_crcs=validate_crcs, fast=fast, summary=summary, skip_chunks=skip,
-                  search=mode != "indexed" or summary is None or not summary.chunks, seek=mode == "indexed", bar=bar)
+                  search=mode != "indexed" or summary is None or not summary.chunks, seek=mode == "indexed", bar=bar,
+                  plan=_decode_plan(summary, topics, fields), unwanted=unwanted)
     sc.start_pool(min(os.cpu_count() or 1, _MAX_WORKERS) if workers is None else workers)
     try:
+        sc.crc_ahead()
         if n >= 8 + 9:
             op = data[8]
             if op != Opcode.HEADER:
@@ -1105,6 +1397,8 @@ def scan(
         sc.walk(8, stop)
     finally:
         sc.close_pool()
+        for k in ("buf", "walk"):  # this thread's reused buffers (the pool's went with its threads)
+            _LOCAL.__dict__.pop(k, None)
         if bar is not None:
             bar.update(max(0, n - bar.n))  # the summary and anything passed over
             bar.close()
