@@ -125,6 +125,8 @@ _CHILD = textwrap.dedent("""
     import numpy, scipy.signal, scipy.linalg  # everything the run imports, before the limit
     import vibroscope.cli, vibroscope.commands.analyse, vibroscope.stream, vibroscope.io.blocks, vibroscope.pipeline
     import vibroscope.modal.automatic, vibroscope.modal.fdd, vibroscope.modal.selection
+    import vibroscope.spectral
+    vibroscope.spectral.csd_matrix(numpy.ones((2, 64)), 1.0, nperseg=32)  # loads numba (llvmlite maps ~GBs)
 
     def peak():
         for line in open("/proc/self/status"):
