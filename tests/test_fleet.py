@@ -88,17 +88,21 @@ def test_tasks_carry_paths_and_ranges_not_arrays(logs, client, monkeypatch):
     real = client.submit
 
     def spy(fn, *args, **kw):
-        sent.append(args)
+        sent.append((fn, args))
         return real(fn, *args, **kw)
 
     monkeypatch.setattr(client, "submit", spy)
     fleet.analyse_fleet(logs[:2], client=client, nperseg=512, tasks_per_log=2)
-    assert len(sent) == 4
-    for args in sent:
+    reads = [args for fn, args in sent if fn is fleet._task]
+    rows = [args for fn, args in sent if fn is fleet._log_row]
+    assert len(reads) == 4 and len(rows) == 2 and len(sent) == 6
+    for args in reads:
         assert not any(isinstance(a, np.ndarray) for a in args)
         path, channels, fs, t0, n, rng, settings = args
         assert path in logs and isinstance(rng, tuple) and 0 <= rng[0] < rng[1] <= n and fs == 500.0
         assert all(isinstance(v, (int, float, str, bool, type(None))) for v in settings.values())
+    for path, bands, channels, fs, opts, *parts in rows:  # the per-log task gets its range tasks' futures
+        assert path in logs and len(parts) == 2 and not any(isinstance(a, np.ndarray) for a in parts)
 
 
 def test_table_csv_and_json(logs, client, tmp_path):

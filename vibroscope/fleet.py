@@ -11,9 +11,11 @@ same paths (a shared file system). The sums of a log's ranges merge into exactly
 of the log; the sums of all logs merge into the fleet's spectra (every segment of every log
 averaged once; no segment straddles two logs).
 
-Per log, the fleet table (:class:`FleetRow`) holds the modes identified from the log's spectra
+Per log, one more task (on a worker, after the log's range tasks) merges the ranges and fills the
+log's row of the fleet table (:class:`FleetRow`): the modes identified from the log's spectra
 (:func:`vibroscope.stream.analyse_stream` on them: LSCF with an input, EFDD without) and the RMS of
-each channel in each frequency band (octave bands by default).
+each channel in each frequency band (octave bands by default). The client only plans the logs and
+merges the per-log sums into the fleet's spectra.
 
 Dask is imported here only when :func:`analyse_fleet` runs (the ``[dask]`` extra).
 """
@@ -244,6 +246,25 @@ def _task(path: str, channels: tuple, fs: float, t0_ns: int, n_samples: int, sam
     return accumulate_log(path, channels, fs=fs, t0_ns=t0_ns, n_samples=n_samples, samples=samples, **settings)
 
 
+def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
+             *parts: LogSpectra) -> tuple[LogSpectra, FleetRow]:
+    """One Dask task per log, after its range tasks: merge them and fill its row of the fleet table
+    (band RMS and modes), so that the per-log identification runs on the workers, not the client."""
+    from vibroscope.stream import analyse_stream
+
+    sp = merge_spectra(list(parts))
+    G = sp.csd()
+    P = np.real(np.einsum("fii->if", G.G))
+    rms = band_rms(G.frequencies, P, bands)
+    try:
+        an = analyse_stream(sp, **opts)
+        f_n, z, err = tuple(an.modal.natural_frequencies.tolist()), tuple(an.modal.damping_ratios.tolist()), ""
+    except ValueError as exc:
+        f_n, z, err = (), (), str(exc)
+    return sp, FleetRow(path, sp.samples, sp.samples / fs, f_n, z, bands, tuple(channels),
+                        tuple(tuple(r) for r in rms.tolist()), err)
+
+
 #: glibc's mmap threshold set in worker processes: Dask's nannies set ``MALLOC_TRIM_THRESHOLD_``
 #: (which freezes the threshold at 128 KiB), so every decompressed chunk and block array would be
 #: a fresh mmap and its pages faulted in again: the accumulation ran 1.8x slower than in-process
@@ -339,7 +360,6 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         If ``dask.distributed`` is not installed (the ``[dask]`` extra).
     """
     from vibroscope.io.blocks import open_grid
-    from vibroscope.stream import analyse_stream
 
     paths = [str(p) for p in paths]
     if not paths:
@@ -357,37 +377,26 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
                              f"of one rate together (or give fs= to resample them all)")
         g.fs = fs
     sett = stream_settings(min(g.n_samples for g in grids), fs, nperseg=nperseg, window=window)
+    df = fs / sett["nfft"]
+    bands = tuple(tuple(map(float, b)) for b in (bands if bands is not None else octave_bands(fs, df)))
+    opts = dict(input=input, method=method, fmin=fmin, fmax=fmax)
     c, owned = _client(client)
     try:
         n_workers = max(1, len(c.scheduler_info().get("workers", {})) or 1)
         parts = tasks_per_log or max(1, -(-2 * n_workers // len(paths)))
-        futures, owner = [], []
+        n_tasks, logs = 0, []
         for g in grids:
-            for rng in segment_ranges(g.n_samples, sett["nperseg"], sett["noverlap"], parts):
-                futures.append(c.submit(_task, str(g.path), tuple(channels), fs, g.t0_ns, g.n_samples, rng, sett,
-                                        pure=False))
-                owner.append(str(g.path))
-        results = c.gather(futures)
+            ranges = [c.submit(_task, str(g.path), tuple(channels), fs, g.t0_ns, g.n_samples, rng, sett, pure=False)
+                      for rng in segment_ranges(g.n_samples, sett["nperseg"], sett["noverlap"], parts)]
+            n_tasks += len(ranges)
+            logs.append(c.submit(_log_row, str(g.path), bands, tuple(channels), fs, opts, *ranges, pure=False))
+        results = c.gather(logs)
     finally:
         for o in owned:
             o.close()
-    per_log = {p: merge_spectra([r for r, o in zip(results, owner) if o == p]) for p in paths}
+    per_log = {p: sp for p, (sp, _) in zip(paths, results)}
+    rows = [row for _, row in results]
     merged = merge_spectra([per_log[p] for p in paths])
-    df = fs / sett["nfft"]
-    bands = tuple(tuple(map(float, b)) for b in (bands if bands is not None else octave_bands(fs, df)))
-    rows = []
-    for p in paths:
-        sp = per_log[p]
-        G = sp.csd()
-        P = np.real(np.einsum("fii->if", G.G))
-        rms = band_rms(G.frequencies, P, bands)
-        try:
-            an = analyse_stream(sp, input=input, method=method, fmin=fmin, fmax=fmax)
-            f_n, z, err = tuple(an.modal.natural_frequencies.tolist()), tuple(an.modal.damping_ratios.tolist()), ""
-        except ValueError as exc:
-            f_n, z, err = (), (), str(exc)
-        rows.append(FleetRow(p, sp.samples, sp.samples / fs, f_n, z, bands, tuple(channels),
-                             tuple(tuple(r) for r in rms.tolist()), err))
-    settings = dict(sett, fs=fs, channels=list(channels), bands_hz=[list(b) for b in bands], tasks=len(futures),
+    settings = dict(sett, fs=fs, channels=list(channels), bands_hz=[list(b) for b in bands], tasks=n_tasks,
                     workers=n_workers, input=input)
     return FleetResult(tuple(rows), per_log, merged, settings)
