@@ -134,3 +134,21 @@ def test_import_vibroscope_and_help_do_not_import_dask():
             "print(any(m == 'dask' or m.startswith(('dask.', 'distributed')) for m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+def test_cli_dask_with_a_scheduler_address(logs, client, tmp_path, capsys):
+    """`vibroscope analyse --dask ADDRESS LOG LOG LOG`: the fleet table names every log with its mode
+    (the resonances at 40, 41 and 39.5 Hz), and the JSON and the merged-spectra figure are written."""
+    from vibroscope.cli import main
+
+    addr = client.scheduler.address
+    assert main(["analyse", "--dask", addr, *logs, "--out", str(tmp_path), "--nperseg", "1024"]) == 0
+    out = capsys.readouterr().out
+    assert f"fleet of 3 logs on {addr}" in out
+    rows = list(csv.DictReader(open(tmp_path / "fleet.csv")))
+    assert [r["log"] for r in rows] == logs
+    for r, f0 in zip(rows, (40.0, 41.0, 39.5)):
+        modes = [float(f) for f in r["modes_hz"].split(";") if f]
+        assert modes and min(abs(f - f0) for f in modes) < 0.5, (r["log"], modes)
+    assert json.loads((tmp_path / "fleet.json").read_text())["logs"][0]["log"] == logs[0]
+    assert (tmp_path / "fleet_spectra.png").stat().st_size > 10_000

@@ -468,7 +468,14 @@ def run_fleet(args, logs: list) -> int:
     if not args.no_figures:
         from vibroscope.viewers.figures import _save
 
-        fig = res.merged.csd().psd().plot()
+        import dataclasses
+
+        psd = res.merged.csd().psd()
+        moving = [i for i in range(len(psd.channels)) if np.nanmax(psd.values[i]) > 0]  # an axis that never moves
+        if moving and len(moving) < len(psd.channels):  # is dropped from the figure (it stays in fleet.json)
+            psd = dataclasses.replace(psd, values=psd.values[moving], channels=tuple(psd.channels[i] for i in moving),
+                                      units=tuple(psd.units[i] for i in moving))
+        fig = psd.plot()
         fig = getattr(fig, "figure", fig)
         print(f"merged spectra: {_save(fig, out / 'fleet_spectra.png')}")
     return 0
