@@ -11,12 +11,15 @@ Say what else ran on the machine (``uptime``): a loaded 2-core machine cannot sh
 from __future__ import annotations
 
 import argparse
+import sys
 import os
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best  # noqa: E402
 
 
 def _make_logs(d: Path, n_logs: int, n: int) -> list[str]:
@@ -29,15 +32,6 @@ def _make_logs(d: Path, n_logs: int, n: int) -> list[str]:
         x = np.random.default_rng(k).standard_normal((3, n))
         out.append(str(write_ros2_mcap(d / f"robot{k}.mcap", Signals(x, 1000.0, chs, t0=100.0 * k))))
     return out
-
-
-def _best(fn, repeat: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def main() -> None:
@@ -57,12 +51,12 @@ def main() -> None:
         logs = _make_logs(Path(d), args.logs, args.messages)
         size = sum(Path(p).stat().st_size for p in logs) / 1e6
         print(f"{args.logs} logs x {args.messages} Imu messages (zstd), {size:.0f} MB")
-        seq = _best(lambda: [accumulate_log(p, nperseg=args.nperseg) for p in logs], args.repeat)
+        seq = best(lambda: [accumulate_log(p, nperseg=args.nperseg) for p in logs], args.repeat)
         times = {}
         for workers in (1, 2):
             with local_cluster(workers) as lc, Client(lc) as c:
                 analyse_fleet(logs[:1], client=c, nperseg=args.nperseg)  # warm the workers (imports)
-                times[workers] = _best(lambda: analyse_fleet(logs, client=c, nperseg=args.nperseg), args.repeat)
+                times[workers] = best(lambda: analyse_fleet(logs, client=c, nperseg=args.nperseg), args.repeat)
         msgs = args.logs * args.messages
         print(f"{'case':<34} {'best s':>8} {'M msg/s':>8} {'ratio':>7}")
         print(f"{'in-process, one log after another':<34} {seq:>8.3f} {msgs / seq / 1e6:>8.2f} {1.0:>7.2f}")

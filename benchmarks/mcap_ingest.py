@@ -26,25 +26,16 @@ printed with the rows. Run: ``python benchmarks/mcap_ingest.py`` (``--msgs 1e6``
 from __future__ import annotations
 
 import argparse
-import gc
 import os
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
-
-def _times(fn, repeat: int) -> list[float]:
-    out = []
-    for _ in range(repeat):
-        gc.collect()
-        t = time.perf_counter()
-        fn()
-        out.append(time.perf_counter() - t)
-    return out
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import times  # noqa: E402
 
 
 def _mcap_ros2(path: Path, topic: str, limit: int) -> np.ndarray:
@@ -189,8 +180,8 @@ def bench_formats(n_msgs: int, formats=("json", "protobuf"), repeat: int = 3) ->
             got = read_mcap(path, chans)
             assert np.array_equal(got.data, data), f"{fmt}: read_mcap differs from the values written"
             assert np.array_equal(base(path, topic), data), f"{fmt}: the baseline differs"
-            t_ours = _times(lambda: read_mcap(path, chans), repeat)
-            t_base = min(_times(lambda: base(path, topic), 2))
+            t_ours = times(lambda: read_mcap(path, chans), repeat)
+            t_base = min(times(lambda: base(path, topic), 2))
             best, med = min(t_ours), statistics.median(t_ours)
             rows.append(dict(case="mcap_read", size=f"{n_msgs} messages, {fmt}, zstd", ours_s=best, ours_median_s=med,
                              ours_msgs_per_s=n_msgs / best, baseline_s=t_base, baseline_msgs_per_s=n_msgs / t_base,
@@ -223,17 +214,17 @@ def bench_mcap(n_msgs: int, compressions=("zstd", "lz4"), repeat: int = 5, basel
             got = read_mcap(path, chans)
             assert got.meta["fast_path"][topic] and np.array_equal(got.data, sig.data)
             assert np.array_equal(_plain(path, chans).data, sig.data)
-            t_ours = _times(lambda: read_mcap(path, chans), repeat)
-            t_plain = min(_times(lambda: _plain(path, chans), max(1, repeat // 2)))
+            t_ours = times(lambda: read_mcap(path, chans), repeat)
+            t_plain = min(times(lambda: _plain(path, chans), max(1, repeat // 2)))
             k = min(baseline_msgs, n_msgs)
             ref = _mcap_ros2(path, topic, k)
             assert np.array_equal(ref, got.data[:, :k]), "fast path differs from the mcap_ros2 decoder"
-            t_lib = _times(lambda: _mcap_ros2(path, topic, k), 1)[0] * n_msgs / k
+            t_lib = times(lambda: _mcap_ros2(path, topic, k), 1)[0] * n_msgs / k
             rr = _rerun(path, topic)
             t_rr = None
             if rr is not None:
                 assert np.array_equal(rr, got.data), "rerun's McapReader differs"
-                t_rr = min(_times(lambda: _rerun(path, topic), 3))
+                t_rr = min(times(lambda: _rerun(path, topic), 3))
             best, med = min(t_ours), statistics.median(t_ours)
             what = f"{comp}, frame ids of 0..40 bytes, jittered stamps" if mixed else comp
             row = dict(case="mcap_read", size=f"{n_msgs} Imu messages, {what}", ours_s=best, ours_median_s=med,

@@ -26,21 +26,15 @@ The sizes of the recordings (MB) are printed beside the times.
 from __future__ import annotations
 
 import argparse
+import sys
 import os
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
-
-def _best(fn, repeat: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best  # noqa: E402
 
 
 def main() -> None:
@@ -79,7 +73,7 @@ def main() -> None:
                 fh.flush()
                 os.fsync(fh.fileno())
 
-        base = _best(save_np, args.repeat)
+        base = best(save_np, args.repeat)
         print(f"case=rerun_log  baseline np.save ({n_total:.0e} samples + {args.spectra}x{args.bins} spectra, "
               f"{os.path.getsize(npy) / 1e6:.1f} MB)  best_s={base:.3f}")
 
@@ -93,7 +87,7 @@ def main() -> None:
             rec.flush()
             rec.disconnect()
 
-        t_naive = _best(naive, 1) * n_total / args.naive
+        t_naive = best(naive, 1) * n_total / args.naive
         print(f"case=rerun_log  per-sample rr.log, {n_total:.0e} samples (extrapolated from {args.naive})  "
               f"est_s={t_naive:.1f}  ratio_to_np_save={t_naive / base:.0f}x")
 
@@ -106,7 +100,7 @@ def main() -> None:
             ("total: time series (envelope) + spectra", dict(signals=sig, psd=psd), "total.rrd"),
         ]
         for name, kw, fn in cases:
-            t = _best(lambda: log_analysis(rrd_path=d / fn, **kw), args.repeat)
+            t = best(lambda: log_analysis(rrd_path=d / fn, **kw), args.repeat)
             size = os.path.getsize(d / fn) / 1e6
             print(f"case=rerun_log  {name}  best_s={t:.3f}  ratio_to_np_save={t / base:.1f}x  rrd_MB={size:.1f}")
 
@@ -126,8 +120,8 @@ def main() -> None:
                 rec.disconnect()
                 live.refreshes = len(view.refreshes)
 
-            t_off = _best(offline, 1)
-            t_live = _best(live, 1)
+            t_off = best(offline, 1)
+            t_live = best(live, 1)
             print(f"case=rerun_log  offline csd_matrix + frf (no logging)  best_s={t_off:.3f}")
             print(f"case=rerun_log  live: {args.samples // args.block} blocks of {args.block}, {live.refreshes} "
                   f"refreshes  best_s={t_live:.3f}  ratio_to_offline={t_live / t_off:.1f}x  "

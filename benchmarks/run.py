@@ -25,34 +25,15 @@ simulate_nonlinear
 from __future__ import annotations
 
 import argparse
-import gc
 import json
 import sys
-import time
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
 import scipy.signal
 
-
-def _best(fn, repeat=3):
-    best = np.inf
-    for _ in range(repeat):
-        gc.collect()
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
-
-
-def _peak_mem(fn):
-    gc.collect()
-    tracemalloc.start()
-    fn()
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return peak
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _timing import best, peak_bytes  # noqa: E402
 
 
 def bench_csd(n_ch: int, n: int, nperseg: int = 4096) -> list[dict]:
@@ -93,10 +74,10 @@ def bench_csd(n_ch: int, n: int, nperseg: int = 4096) -> list[dict]:
     scale = np.max(np.abs(ref))
     err = float(np.max(np.abs(ours().G - ref)) / scale)
     err32 = float(np.max(np.abs(ours32().G - ref)) / scale)
-    t_sum = _best(lambda: np.sum(x), 5)
-    t_ours, t_one, t_32 = _best(ours, 5), _best(ours1, 3), _best(ours32, 5)
-    t_scipy = _best(pairwise, 1)
-    m_ours, m_32, m_scipy = _peak_mem(ours), _peak_mem(ours32), _peak_mem(pairwise)
+    t_sum = best(lambda: np.sum(x), 5)
+    t_ours, t_one, t_32 = best(ours, 5), best(ours1, 3), best(ours32, 5)
+    t_scipy = best(pairwise, 1)
+    m_ours, m_32, m_scipy = peak_bytes(ours), peak_bytes(ours32), peak_bytes(pairwise)
     size = f"{n_ch} ch x {n:.0e} samples, nperseg {nperseg}"
     pairs = n_ch * (n_ch + 1) // 2
     return [
@@ -141,8 +122,8 @@ def bench_simulate(seconds: float = 60.0, ref_seconds: float = 6.0) -> list[dict
         model = LumpedModel.chain(nonlinear=nl, **base)
         R = default_oversample(model, fs)
         simulate(model, u[:200], fs)  # compile (or load the on-disk cache)
-        t_new = _best(lambda: simulate(model, u, fs), 3)
-        t_ref = _best(lambda: reference_simulate_fine(model, reconstruct_input(u[:n_ref], fs, R), fs, R), 1)
+        t_new = best(lambda: simulate(model, u, fs), 3)
+        t_ref = best(lambda: reference_simulate_fine(model, reconstruct_input(u[:n_ref], fs, R), fs, R), 1)
         t_ref60 = t_ref * seconds / ref_seconds
         ours = simulate(model, u[:n_ref], fs).data[1:]
         ref = reference_simulate_fine(model, reconstruct_input(u[:n_ref], fs, R), fs, R)

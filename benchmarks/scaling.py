@@ -22,39 +22,23 @@ Times are the best of a few runs; every figure should be read as a ratio (shared
 from __future__ import annotations
 
 import argparse
-import gc
 import json
 import os
 import sys
-import time
-import tracemalloc
 from pathlib import Path
 
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "benchmarks"))
+from _timing import best, peak_bytes  # noqa: E402
+
+
+def _peak_mb(fn) -> float:
+    return peak_bytes(fn) / 1e6
 
 KW = dict(fs=1000.0, nperseg=4096, noverlap=2048, window="hann", detrend="constant")
-
-
-def _best(fn, repeat: int) -> float:
-    best = np.inf
-    for _ in range(repeat):
-        gc.collect()
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
-
-
-def _peak(fn) -> float:
-    gc.collect()
-    tracemalloc.start()
-    fn()
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return peak / 1e6
 
 
 def vs_length(lengths, n_ch=10) -> list[dict]:
@@ -64,9 +48,9 @@ def vs_length(lengths, n_ch=10) -> list[dict]:
     rows = []
     for n in lengths:
         xs = x[:, :n]
-        t = _best(lambda: csd_matrix(xs, **KW), 3 if n <= 10**6 else 2)
-        t_sum = _best(lambda: np.sum(xs), 5)
-        rows.append(dict(panel="length", channels=n_ch, samples=n, time_s=t, peak_MB=_peak(lambda: csd_matrix(xs, **KW)),
+        t = best(lambda: csd_matrix(xs, **KW), 3 if n <= 10**6 else 2)
+        t_sum = best(lambda: np.sum(xs), 5)
+        rows.append(dict(panel="length", channels=n_ch, samples=n, time_s=t, peak_MB=_peak_mb(lambda: csd_matrix(xs, **KW)),
                          x_read_pass=t / t_sum))
     return rows
 
@@ -78,10 +62,10 @@ def vs_channels(channels, n) -> list[dict]:
     rows = []
     for c in channels:
         xs = x[:c]
-        t = _best(lambda: csd_matrix(xs, **KW), 2)
-        row = dict(panel="channels", channels=c, samples=n, time_s=t, peak_MB=_peak(lambda: csd_matrix(xs, **KW)))
+        t = best(lambda: csd_matrix(xs, **KW), 2)
+        row = dict(panel="channels", channels=c, samples=n, time_s=t, peak_MB=_peak_mb(lambda: csd_matrix(xs, **KW)))
         if c > 2:
-            row["ref2_time_s"] = _best(lambda: csd_matrix(xs, references=[0, 1], **KW), 2)
+            row["ref2_time_s"] = best(lambda: csd_matrix(xs, references=[0, 1], **KW), 2)
         rows.append(row)
     return rows
 
@@ -93,8 +77,8 @@ def memory_check(quick: bool) -> list[dict]:
     cases = [(10, 10**6, 10**7)] + ([] if quick else [(1, 10**6, 10**8)])
     for c, n0, n1 in cases:
         x = np.random.default_rng(2).standard_normal((c, n1))
-        p0 = _peak(lambda: csd_matrix(x[:, :n0], **KW))
-        p1 = _peak(lambda: csd_matrix(x, **KW))
+        p0 = _peak_mb(lambda: csd_matrix(x[:, :n0], **KW))
+        p1 = _peak_mb(lambda: csd_matrix(x, **KW))
         rows.append(dict(panel="memory", channels=c, samples=f"{n0:.0e} vs {n1:.0e}", peak_short_MB=p0,
                          peak_long_MB=p1, ratio=p1 / p0))
         del x
@@ -123,7 +107,7 @@ def contraction(channels) -> list[dict]:
 
         kernel()
         blas()
-        tk, tb = _best(kernel, 5), _best(blas, 5)
+        tk, tb = best(kernel, 5), best(blas, 5)
         rows.append(dict(panel="contraction", channels=c, segments=nb, kernel_ms=tk * 1e3, matmul_ms=tb * 1e3,
                          matmul_over_kernel=tb / tk))
     return rows
