@@ -258,3 +258,25 @@ def test_analyse_opens_no_socket(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(socket, "create_connection", no_network)
     assert main(["analyse", str(log), "--input", "/actuator/force.wrench.force.x", "--json", "s.json"]) == 0
     assert not opened and (tmp_path / "t_analyse.rrd").is_file() and (tmp_path / "s.json").is_file()
+
+
+def test_analyse_log_arguments_with_optional_values(tmp_path, capsys):
+    """`--connect`/`--dask` take an optional URL/address: a log right after them is a log, not an
+    address; no log at all, or several logs with --connect, is one clear line (exit 1)."""
+    from vibroscope.io import write_ros2_mcap
+    from vibroscope.signals import Signals
+
+    logs = [str(write_ros2_mcap(tmp_path / f"l{k}.mcap", Signals(np.random.default_rng(k).standard_normal((1, 2000)),
+                                                                     500.0, ["/imu.linear_acceleration.x"])))
+            for k in range(2)]
+    assert main(["analyse"]) == 1
+    assert "no log given" in capsys.readouterr().err
+    assert main(["analyse", "--connect", *logs]) == 1
+    assert "a fleet (--dask or several logs) has no live view" in capsys.readouterr().err
+    # one log after a bare --connect is the log: it gets as far as looking for a viewer on the default port
+    # (the test binds nothing there: a closed port on 127.0.0.1 answers at once)
+    import vibroscope.viewers.rerun_live as live
+
+    code = main(["analyse", "--connect", logs[0], "--no-rrd", "--no-figures"])
+    err = capsys.readouterr().err
+    assert code == 1 and f"no rerun viewer listening at {live.DEFAULT_URL}" in err and logs[0] in err

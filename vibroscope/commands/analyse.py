@@ -38,7 +38,7 @@ def add_parser(sub) -> None:
             "PNG figures and, with --json, a machine-readable summary."
         ),
     )
-    p.add_argument("log", type=Path, nargs="+",
+    p.add_argument("log", type=Path, nargs="*",
                    help="the MCAP log (several logs: a fleet analysis, with --dask or on this machine)")
     p.add_argument("--input", help="force channel (message path), e.g. /actuator/force.wrench.force.x")
     p.add_argument("--outputs", nargs="+", metavar="PATH",
@@ -167,9 +167,26 @@ def run(args) -> int:
     if args.dask is not None and args.dask and (args.dask.endswith(".mcap") or Path(args.dask).is_file()):
         logs.insert(0, Path(args.dask))  # `--dask a.mcap b.mcap`: no address, the first log taken by --dask
         args.dask = ""
+    live = getattr(args, "connect", None) is not None
+    if live and args.connect and (args.connect.endswith(".mcap") or Path(args.connect).is_file()):
+        logs.insert(0, Path(args.connect))  # `--connect a.mcap`: no URL, the log taken by --connect
+        args.connect = ""
+    if not logs:
+        raise VibroscopeError("no log given: vibroscope analyse LOG [LOG ...]")
     if args.dask is not None or len(logs) > 1:
+        if live:
+            raise VibroscopeError("--connect streams one log to a viewer; a fleet (--dask or several logs) has no "
+                                  "live view: give one log, or drop --connect")
         return run_fleet(args, logs)
     args.log = logs[0]
+    if live:  # the live view first, read block by block (vibroscope.viewers.rerun_live), then the analysis
+        from vibroscope.viewers.rerun_live import stream_log
+
+        try:
+            stream_log(args.log, url=args.connect or None, input=args.input, outputs=args.outputs, fs=args.fs,
+                       nperseg=args.nperseg, estimator=args.estimator)
+        except (ValueError, ConnectionError) as exc:
+            raise VibroscopeError(f"{args.log}: {exc}") from None
     budget = memory_budget(args.max_memory)
     need = whole_read_bytes(args.log)
     if args.stream or need > budget:
@@ -183,14 +200,6 @@ def run(args) -> int:
     check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},
                   {"log": args.log, "coordinates": args.coords})
     select = _select_freqs(args.select)
-    if getattr(args, "connect", None) is not None:  # live view first (vibroscope.viewers.rerun_live)
-        from vibroscope.viewers.rerun_live import stream_log
-
-        try:
-            stream_log(args.log, url=args.connect or None, input=args.input, outputs=args.outputs, fs=args.fs,
-                       nperseg=args.nperseg, estimator=args.estimator)
-        except (ValueError, ConnectionError) as exc:
-            raise VibroscopeError(f"{args.log}: {exc}") from None
     try:
         an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
                          nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
