@@ -462,7 +462,7 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         grid.fs, grid.t0_ns, grid.n_samples = float(fs), int(t0_ns), int(n_samples)
         return grid
     topics = list(dict.fromkeys(m.topic for m in grid._parsed))
-    firsts, lasts, rates, spans_t = [], [], [], []
+    firsts, lasts, rates = [], [], []
     for t in topics:
         cids = {c for c, ch in chans.items() if ch.topic == t}
         a, b, r = _first_last(grid, t, cids)
