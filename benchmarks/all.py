@@ -8,7 +8,8 @@ threads, caches and memory do not leak into the next:
                           memory), MCAP read, nonlinear simulation
 ``run.py --samples 1e7``  the CSD cases at 1e7 samples
 ``mcap_ingest.py``        MCAP ingestion: Imu zstd/lz4 (mixed frame ids too), JSON, protobuf
-``fleet.py``              Dask fleet: 1 vs 2 worker processes on a multi-file job
+``fleet.py``              Dask fleet: 1 vs 2 worker processes on a multi-file job (4 logs of 1e6
+                          and of 3e5 messages)
 ``rerun_log.py``          rerun: 1e7 samples + 1000 spectra, envelope, live view
 ``modal_threads.py``      SSI-COV on LUMO, one BLAS thread vs default, idle and loaded
 ``startup.py``            CLI start-up against ``python -c pass``
@@ -39,6 +40,7 @@ def _cases(quick: bool) -> list[list[str]]:
         ["run.py", "--only-csd", "--samples", "1e7"],
         ["mcap_ingest.py", "--msgs", "1e6", "--mixed"],
         ["fleet.py"],
+        ["fleet.py", "--messages", "300000"],
         ["rerun_log.py"],
         ["modal_threads.py"],
         ["startup.py"],

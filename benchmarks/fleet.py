@@ -3,7 +3,7 @@ on a ``LocalCluster`` of 2 single-threaded worker processes against 1, in the sa
 start-up not timed; best of `--repeat`); the in-process sequential accumulation
 (:func:`vibroscope.stream.accumulate_log` of each log in turn) is the baseline beside them::
 
-    python benchmarks/fleet.py [--logs 4] [--messages 300000] [--repeat 3]
+    python benchmarks/fleet.py [--logs 4] [--messages 1000000] [--repeat 3]
 
 Say what else ran on the machine (``uptime``): a loaded 2-core machine cannot show 2x.
 """
@@ -37,7 +37,7 @@ def _make_logs(d: Path, n_logs: int, n: int) -> list[str]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--logs", type=int, default=4, help="logs in the job (default 4)")
-    ap.add_argument("--messages", type=int, default=300_000, help="Imu messages per log (default 3e5)")
+    ap.add_argument("--messages", type=int, default=1_000_000, help="Imu messages per log (default 1e6: 17 min at 1 kHz)")
     ap.add_argument("--repeat", type=int, default=3, help="runs per case, best taken (default 3)")
     ap.add_argument("--nperseg", type=int, default=4096)
     args = ap.parse_args()
