@@ -213,7 +213,7 @@ class FleetResult:
             ``n_samples``, ``n_segments``, ``psd_peak_hz`` per channel).
         """
         G = self.merged.csd()
-        P = np.real(np.einsum("fii->if", G.G))
+        P = G.psd().values
         f = G.frequencies
         peaks = {c: float(f[1 + int(np.nanargmax(p[1:]))]) for c, p in zip(G.channels, P)}
         sett = {k: (v if isinstance(v, (int, float, str, type(None))) else str(v)) for k, v in self.settings.items()}
@@ -254,7 +254,7 @@ def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
 
     sp = merge_spectra(list(parts))
     G = sp.csd()
-    P = np.real(np.einsum("fii->if", G.G))
+    P = G.psd().values
     rms = band_rms(G.frequencies, P, bands)
     try:
         an = analyse_stream(sp, **opts)

@@ -462,13 +462,14 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
     if isinstance(path, LogSpectra):
         sp = path
     else:
+        from vibroscope.io.blocks import open_grid
+
         chans = None if outputs is None and input is None else ([input] if input else []) + list(outputs or [])
         if input and outputs is None:
-            from vibroscope.io.blocks import open_grid
-
             g0 = open_grid(path, None, fs=fs)
             chans = [input] + [c for c in g0.channels if c != input]
-        sp = accumulate_log(path, chans, fs=fs, nperseg=nperseg, window=window, block_samples=block_samples)
+        grid = open_grid(path, chans, fs=fs)  # planned once: the first pass and every refinement read it
+        sp = accumulate_log(path, grid=grid, nperseg=nperseg, window=window, block_samples=block_samples)
     refinements: list[int] = []
     while True:
         G, h, ident, band, outs, notes = _analyse_spectra(sp, input, outputs, fmin=fmin, fmax=fmax, n_modes=n_modes,
@@ -483,7 +484,7 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
                 or len(refinements) >= 3):
             break
         refinements.append(nper)
-        sp = accumulate_log(path, sp.channels, fs=sp.fs, nperseg=2 * nper, window=window, block_samples=block_samples)
+        sp = accumulate_log(path, grid=grid, nperseg=2 * nper, window=window, block_samples=block_samples)
     if refinements:
         notes.append(f"resolution refined for the damping: nperseg {refinements[0]} -> {sp.settings['nperseg']} "
                      f"(df {sp.fs / refinements[0]:.4g} -> {sp.fs / sp.settings['nperseg']:.4g} Hz; one more pass "

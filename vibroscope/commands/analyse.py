@@ -139,6 +139,11 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     return analyse_signals(sig, input=input, **kw)
 
 
+def _takes_log(value: str | None) -> bool:
+    """Whether the optional value of ``--dask``/``--connect`` is a log the option swallowed."""
+    return bool(value) and (value.endswith(".mcap") or Path(value).is_file())
+
+
 def run(args) -> int:
     """Run ``vibroscope analyse``; prints the modes found and where the outputs went.
 
@@ -164,11 +169,11 @@ def run(args) -> int:
     check_out_dir(args.out)
     _check_options(args)
     logs = list(args.log) if isinstance(args.log, (list, tuple)) else [args.log]
-    if args.dask is not None and args.dask and (args.dask.endswith(".mcap") or Path(args.dask).is_file()):
+    if _takes_log(args.dask):
         logs.insert(0, Path(args.dask))  # `--dask a.mcap b.mcap`: no address, the first log taken by --dask
         args.dask = ""
     live = getattr(args, "connect", None) is not None
-    if live and args.connect and (args.connect.endswith(".mcap") or Path(args.connect).is_file()):
+    if live and _takes_log(args.connect):
         logs.insert(0, Path(args.connect))  # `--connect a.mcap`: no URL, the log taken by --connect
         args.connect = ""
     if not logs:

@@ -59,12 +59,6 @@ def _stamp_of(msg: Any) -> int | None:
         return None
 
 
-def _block_fast(buf: Any, st: np.ndarray, ln: np.ndarray, tname: str, names: list[str]):
-    """(stamps ns, values) of the payloads at `st` (lengths `ln`) of one block, or None
-    (:func:`vibroscope.io._ros2.decode_block`)."""
-    return _ros2.decode_block(buf, st, ln, tname, names)
-
-
 def fast_extract(log: Any, cid: int, names: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
     """(stamps ns, values (k, n)) by the numpy fast path, or None when it does not apply.
 
@@ -95,7 +89,7 @@ def fast_extract(log: Any, cid: int, names: list[str]) -> tuple[np.ndarray, np.n
         if pre is not None and pre[0] == tname and pre[1].size == idx.size and all(n in pre[2] for n in names):
             got = pre[1], [pre[2][n] for n in names]
         else:
-            got = _block_fast(b.buf, b.start[idx], b.length[idx], tname, names)
+            got = _ros2.decode_block(b.buf, b.start[idx], b.length[idx], tname, names)
         if got is None:
             return None
         m = idx.size

@@ -12,7 +12,6 @@ so a block of equally long payloads is one numpy structured array.
 from __future__ import annotations
 
 import threading
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -72,32 +71,6 @@ def _layout(frame_len: int) -> int:
     p = 12 + frame_len  # relative to the end of the 4-byte encapsulation header
     p = (p + 7) // 8 * 8
     return 4 + p
-
-
-@dataclass(frozen=True)
-class FastLayout:
-    """The structured dtype of one fixed-layout payload."""
-
-    type_name: str
-    payload_len: int
-    frame_len: int
-    dtype: np.dtype
-
-
-def layout_for(type_name: str, payload: bytes) -> FastLayout | None:
-    """The fixed layout of `type_name` given one sample payload, or None if it does not fit."""
-    floats = FLOAT_FIELDS.get(type_name)
-    if floats is None or len(payload) < 16 or payload[:2] != b"\x00\x01":
-        return None
-    frame_len = int.from_bytes(payload[12:16], "little")
-    first = _layout(frame_len)
-    if first + 8 * len(floats) != len(payload):
-        return None
-    names = ["_cdr", "_flen", "header.stamp.sec", "header.stamp.nanosec", *floats]
-    formats = ["<u2", "<u4", "<i4", "<u4", *(["<f8"] * len(floats))]
-    offsets = [0, 12, 4, 8, *(first + 8 * i for i in range(len(floats)))]
-    dt = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": len(payload)})
-    return FastLayout(type_name, len(payload), frame_len, dt)
 
 
 def layout_of_length(type_name: str, length: int) -> tuple[int, np.dtype] | None:

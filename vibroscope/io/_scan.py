@@ -414,6 +414,17 @@ def _scratch(size: int) -> memoryview:
     return memoryview(buf)[:size]
 
 
+def _checked(chunk: Chunk, validate_crcs: bool = True) -> Any:
+    """The chunk's data decompressed (:func:`_decompress`), its size and (when stored and
+    `validate_crcs`) its CRC-32 checked; raises ValueError naming the fault."""
+    raw = _decompress(chunk)
+    if len(raw) != chunk.uncompressed_size:
+        raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
+    if validate_crcs and chunk.uncompressed_crc != 0 and (crc := _crc32(raw)) != chunk.uncompressed_crc:
+        raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
+    return raw
+
+
 def _lz4_into(data: Any, out: memoryview) -> int | None:
     """Decompress one LZ4 frame block by block into `out`; its size, or None for anything but
     one plain frame (the caller then decompresses it the usual way)."""
@@ -1014,13 +1025,7 @@ class _Scanner:
         if scratch and self.validate_crcs and chunk.uncompressed_crc != 0 and _crc32(raw) != chunk.uncompressed_crc:
             scratch, raw = False, None  # damaged: the usual path below names the fault
         if raw is None:
-            raw = _decompress(chunk)
-            if len(raw) != chunk.uncompressed_size:
-                raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
-            if self.validate_crcs and chunk.uncompressed_crc != 0:
-                crc = _crc32(raw)
-                if crc != chunk.uncompressed_crc:
-                    raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {crc:#010x}")
+            raw = _checked(chunk, self.validate_crcs)
         recs: list = []
         idx = _index_messages(raw, 0, len(raw), recs, self.fast)
         decoded, present = self.decode(raw, idx[0], idx[2], idx[3]) if self.plan else ({}, ())

@@ -82,11 +82,7 @@ def _open_chunk(fd: int, span: ChunkSpan):
     if rec[0] != _CHUNK_OP:
         raise ValueError(f"opcode 0x{rec[0]:02x} where a chunk record was expected")
     chunk = _scan._read_chunk(memoryview(rec), 9, len(rec))
-    raw = _scan._decompress(chunk)  # uncompressed: a view of `rec`, not a copy
-    if len(raw) != chunk.uncompressed_size:
-        raise ValueError(f"uncompressed size {len(raw)} != {chunk.uncompressed_size} stated")
-    if chunk.uncompressed_crc != 0 and zlib.crc32(raw) != chunk.uncompressed_crc:
-        raise ValueError(f"CRC-32 mismatch: stored {chunk.uncompressed_crc:#010x}, computed {zlib.crc32(raw):#010x}")
+    raw = _scan._checked(chunk)  # uncompressed: a view of `rec`, not a copy
     recs: list = []
     return raw, recs, _scan._index_messages(raw, 0, len(raw), recs, True)
 

@@ -325,18 +325,16 @@ class CrossSpectralAccumulator:
         self._bufs = (work, ok, spec)
         return self._bufs
 
-    def _accumulate(self, buf: np.ndarray, n_seg: int, *, release: bool = True) -> None:
+    def _accumulate(self, buf: np.ndarray, n_seg: int) -> None:
         """Add the `n_seg` segments that start at ``0, step, ...`` in `buf` (no carry-over); the
-        block buffers are freed afterwards unless not `release` (a caller feeding several chunks)."""
+        block buffers are freed afterwards."""
         from vibroscope.spectral import _kernels  # numba: loaded on the first pass, not on import
 
         st = self.settings
         n_ch = self.n_channels
-        ftype = np.float32 if self.dtype == "float32" else np.float64
         nb_max = self._block(n_seg)
         work, ok, spec = self._buffers(nb_max)
-        if release:
-            self._bufs = None  # freed with this pass (never pickled or kept between pieces)
+        self._bufs = None  # freed with this pass (never pickled or kept between pieces)
         ii, jj = self._pairs
         acc = self._pair_sum
         ftile = _kernels.frequency_tile(ii.size)

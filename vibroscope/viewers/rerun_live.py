@@ -266,7 +266,7 @@ class LiveView:
         import rerun as rr
 
         from vibroscope.spectral._results import CrossSpectralMatrix
-        from vibroscope.spectral.estimators import frf as frf_of
+        from vibroscope.spectral.estimators import _settings_dict, frf as frf_of
         from vibroscope.viewers.rerun_view import _db
 
         acc = self._acc
@@ -274,11 +274,7 @@ class LiveView:
             raise ValueError(f"no complete segment yet: {self.n_samples} samples fed, nperseg={self.settings.nperseg}")
         st = self.settings
         cnt = acc.n_averages
-        settings = dict(fs=self.fs, nperseg=st.nperseg, noverlap=st.noverlap, nfft=st.nfft,
-                        window=st.window_spec if isinstance(st.window_spec, (str, tuple)) else "custom",
-                        detrend=st.detrend, n_averages=int(cnt.min()))
-        if int(cnt.min()) != acc.n_segments:
-            settings["n_segments"] = acc.n_segments
+        settings = _settings_dict(self.fs, st, int(cnt.min()), acc.n_segments)
         with np.errstate(divide="ignore", invalid="ignore"):
             csd = CrossSpectralMatrix(self.frequencies, acc.result("density"), self.channels, self.units,
                                       "density", settings, cnt)
