@@ -152,3 +152,13 @@ def test_cli_dask_with_a_scheduler_address(logs, client, tmp_path, capsys):
         assert modes and min(abs(f - f0) for f in modes) < 0.5, (r["log"], modes)
     assert json.loads((tmp_path / "fleet.json").read_text())["logs"][0]["log"] == logs[0]
     assert (tmp_path / "fleet_spectra.png").stat().st_size > 10_000
+
+
+def test_a_given_rate_applies_to_every_log(logs, client):
+    """`fs=` (the CLI's --fs) puts every log on that rate, not only the first."""
+    from vibroscope.fleet import analyse_fleet
+
+    res = analyse_fleet(logs, client=client, nperseg=512, fs=400.0)
+    assert res.settings["fs"] == 400.0
+    for row, n500 in zip(res.rows, (30_000, 24_000, 36_000)):
+        assert abs(row.duration_s - n500 / 500.0) < 2.0 and row.n_samples == pytest.approx(row.duration_s * 400.0)

@@ -364,17 +364,18 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no logs given")
+    fs_given = fs  # every log goes onto this rate when given
     first = open_grid(paths[0], channels, fs=fs)
     if channels is None and input is not None:
         channels = [input] + [c for c in first.channels if c != input]
         first = open_grid(paths[0], channels, fs=fs)
     channels = first.channels
     fs = first.fs
-    grids = [first] + [open_grid(p, channels, fs=None) for p in paths[1:]]
+    grids = [first] + [open_grid(p, channels, fs=fs_given) for p in paths[1:]]
     for g in grids[1:]:
         if abs(g.fs - fs) > 1e-9 * fs:
             raise ValueError(f"{g.path}: rate {g.fs:.9g} Hz differs from {fs:.9g} Hz of {paths[0]}: analyse the logs "
-                             f"of one rate together (or give fs= to resample them all)")
+                             f"of one rate together (or give fs= (--fs) to resample them all)")
         g.fs = fs
     sett = stream_settings(min(g.n_samples for g in grids), fs, nperseg=nperseg, window=window)
     df = fs / sett["nfft"]
