@@ -98,8 +98,10 @@ def test_tasks_carry_paths_and_ranges_not_arrays(logs, client, monkeypatch):
     assert len(reads) == 4 and len(rows) == 2 and len(sent) == 6
     for args in reads:
         assert not any(isinstance(a, np.ndarray) for a in args)
-        path, channels, fs, t0, n, rng, settings = args
+        path, channels, fs, t0, n, offsets, rng, settings = args
         assert path in logs and isinstance(rng, tuple) and 0 <= rng[0] < rng[1] <= n and fs == 500.0
+        # each topic's range of stamp - log time (plain ints; 0 here: the writer logs at the stamps)
+        assert offsets == (("/imu", 0, 0),)
         assert all(isinstance(v, (int, float, str, bool, type(None))) for v in settings.values())
     for path, bands, channels, fs, opts, *parts in rows:  # the per-log task gets its range tasks' futures
         assert path in logs and len(parts) == 2 and not any(isinstance(a, np.ndarray) for a in parts)
@@ -162,3 +164,86 @@ def test_a_given_rate_applies_to_every_log(logs, client):
     assert res.settings["fs"] == 400.0
     for row, n500 in zip(res.rows, (30_000, 24_000, 36_000)):
         assert abs(row.duration_s - n500 / 500.0) < 2.0 and row.n_samples == pytest.approx(row.duration_s * 400.0)
+
+
+@pytest.fixture(scope="module")
+def bad_logs(tmp_path_factory):
+    """A garbage file, a log too short for a segment of 1024, and a log whose every segment of 1024
+    touches a lost chunk (every third chunk damaged)."""
+    import struct
+
+    from vibroscope.io._scan import scan
+
+    d = tmp_path_factory.mktemp("badfleet")
+    garbage = d / "garbage.mcap"
+    garbage.write_bytes(b"\x89MCAP0\r\n" + bytes(range(256)) * 4)
+    short = _log(d / "short.mcap", 600, 7, 40.0)
+    holey = _log(d / "holey.mcap", 6000, 8, 40.0)
+    data = bytearray(holey.read_bytes())
+    for b in scan(holey).blocks[1:-1:3]:
+        end = b.file_offset + 9 + struct.unpack_from("<Q", data, b.file_offset + 1)[0]
+        data[end - 40] ^= 0x01
+    holey.write_bytes(bytes(data))
+    return str(garbage), str(short), str(holey)
+
+
+def test_a_log_that_cannot_be_analysed_does_not_fail_the_fleet(logs, bad_logs, client):
+    """Its row carries the error, it is left out of the merged spectra (said in the settings), and the
+    good log's row and spectra are those of a fleet without it."""
+    from vibroscope.fleet import analyse_fleet
+
+    garbage, short, holey = bad_logs
+    res = analyse_fleet([garbage, logs[0], short, holey], client=client, nperseg=1024, tasks_per_log=2)
+    rows = {r.log: r for r in res.rows}
+    assert [r.log for r in res.rows] == [garbage, logs[0], short, holey]
+    assert rows[garbage].error.startswith("not analysed: cannot be planned: LogFormatError")
+    assert garbage in rows[garbage].error
+    assert "600 grid samples" in rows[short].error and rows[short].n_samples == 600
+    assert "no segment" in rows[holey].error and rows[holey].n_samples == 6000
+    for p in (garbage, short, holey):
+        assert rows[p].frequencies_hz == () and np.isnan(np.array(rows[p].rms, float)).all()
+    assert rows[logs[0]].error == "" and min(abs(np.array(rows[logs[0]].frequencies_hz) - 40.0)) < 0.5
+    assert res.settings["excluded"] == [garbage, short, holey] and len(res.settings["warnings"]) == 3
+    assert list(res.per_log) == [logs[0]] and res.merged.sources == (logs[0],)
+    ref = csd_matrix(read_mcap(logs[0]), nperseg=1024)
+    G = res.merged.csd()
+    assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    table = res.to_rows()
+    assert table[0]["error"].startswith("not analysed") and table[0]["rms_22.1-44.19Hz"] == ""
+    assert json.loads(json.dumps(res.to_dict()))["logs"][3]["rms"][CHS[0]]["22.1-44.19Hz"] is None
+    # every log unanalysable: refused, each named
+    with pytest.raises(ValueError, match="no log of the fleet") as err:
+        analyse_fleet([garbage, short], client=client, nperseg=1024)
+    assert garbage in str(err.value) and short in str(err.value)
+
+
+def test_a_failing_range_task_becomes_the_row_error(logs):
+    """A range task returns its failure (here the log vanished after planning) instead of raising, and
+    the per-log task turns it into the row's error."""
+    from vibroscope.fleet import _Failed, _log_row, _task
+
+    sett = dict(nperseg=512, noverlap=256, window="hann", detrend="constant", nfft=512)
+    ok = _task(logs[0], tuple(CHS), 500.0, 10_000_000_000, 30_000, (("/imu", 0, 0),), (0, 4096), sett)
+    gone = _task(logs[0] + ".gone", tuple(CHS), 500.0, 10_000_000_000, 30_000, (("/imu", 0, 0),), (4096 - 256, 8192),
+                 sett)
+    assert isinstance(gone, _Failed) and "LogFormatError" in gone.error and ".gone" in gone.error
+    sp, row = _log_row(logs[0], ((30.0, 50.0),), tuple(CHS), 500.0, {}, ok, gone)
+    assert sp is None and row.error.startswith("not analysed: LogFormatError") and row.frequencies_hz == ()
+    sp, row = _log_row(logs[0], ((30.0, 50.0),), tuple(CHS), 500.0, {}, ok)
+    assert sp is not None and sp.samples == 4096 and np.isfinite(np.array(row.rms, float)).all()
+
+
+def test_capstan_log_with_stamps_46_s_before_logging_on_dask(shared_data, client):
+    """The real log whose joint-state stamps lie 46 s before their log times (given twice): the tasks
+    carry each topic's stamp offsets, so the ranges read their chunks; each log's spectra equal
+    csd_matrix of read_mcap (before: every block NaN and the fleet failed)."""
+    from vibroscope.fleet import analyse_fleet
+
+    p = str(shared_data / "mcap" / "capstan" / "alternate_bagfile_0.mcap")
+    chs = ["/robot/joint_state.velocity[0]", "/robot/joint_state.effort[0]"]
+    res = analyse_fleet([p, p], client=client, channels=chs, nperseg=256, tasks_per_log=2)
+    assert [r.error for r in res.rows] == ["", ""] and res.settings["excluded"] == []
+    ref = csd_matrix(read_mcap(p, chs), nperseg=256)
+    G = res.per_log[p].csd()
+    assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    assert res.merged.accumulator.n_segments == 2 * ref.n_averages[0, 0]

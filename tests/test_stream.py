@@ -80,6 +80,37 @@ def test_segment_ranges_hold_every_segment_once():
         segment_ranges(n, nper, nov, 0)
 
 
+def test_stamps_long_before_their_log_times_stream(tmp_path):
+    """Header stamps 45 s before their log times (as the capstan joint states): the streamed spectra,
+    whole or split into ranges with the offsets carried (a fleet task), equal csd_matrix of read_mcap,
+    and the resonance is found (before: every block NaN, "no non-constant response channel")."""
+    import scipy.signal as ss
+
+    from tests.io._io_helpers import write_imu_log
+
+    fs, n, f0 = 200.0, 4000, 30.0
+    rng = np.random.default_rng(12)
+    b, a = ss.iirpeak(f0, 30.0, fs)
+    x = ss.lfilter(b, a, rng.standard_normal(n)) * 10 + 0.1 * rng.standard_normal(n)
+    t = (5_000_000_000 + np.arange(n) * 5_000_000).astype(np.int64)
+    lt = t + 45_000_000_000 + rng.integers(0, 2_000_000, n)
+    p = tmp_path / "lag.mcap"
+    write_imu_log(p, {"/imu": (t, x)}, chunk_size=10_000, log_times={"/imu": lt})
+    ref = csd_matrix(read_mcap(p, CHS), nperseg=256)
+    one = accumulate_log(p, CHS, nperseg=256, block_samples=300)
+    G = one.csd()
+    assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    from vibroscope.io.blocks import open_grid
+
+    g = open_grid(p, CHS)
+    rngs = segment_ranges(g.n_samples, 256, 128, 3)
+    m = merge_spectra([accumulate_log(p, CHS, fs=g.fs, t0_ns=g.t0_ns, n_samples=g.n_samples, samples=r, nperseg=256,
+                                      stamp_offsets=g.stamp_offsets, block_samples=300) for r in rngs])
+    assert np.max(np.abs(m.csd().G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    an = analyse_stream(p, outputs=CHS[:2])
+    assert min(abs(an.modal.natural_frequencies - f0)) < 0.5
+
+
 @pytest.fixture(scope="module")
 def demo_log(tmp_path_factory):
     from vibroscope.commands.demo import make_demo_log
@@ -168,3 +199,23 @@ def test_log_larger_than_the_address_space_limit_streams(tmp_path):
     assert streamed.returncode == 0, streamed.stderr[-2000:]
     assert "streaming" in streamed.stdout and "more than the memory budget" in streamed.stdout
     assert f"3 channels x {n} samples at 1000 Hz" in streamed.stdout
+
+
+def test_capstan_joint_states_stamped_46_s_before_logging_stream(shared_data):
+    """A real ROS 2 log (capstan, mcap-bag-parser's data) whose /robot/joint_state header stamps lie
+    about 46 s before their log times: streamed, its spectra are csd_matrix of read_mcap's record
+    (before: every block NaN and "no non-constant response channel")."""
+    from vibroscope.io.blocks import open_grid
+
+    p = shared_data / "mcap" / "capstan" / "alternate_bagfile_0.mcap"
+    chs = ["/robot/joint_state.velocity[0]", "/robot/joint_state.effort[0]"]
+    g = open_grid(p, chs)
+    (topic, lo, hi), = g.stamp_offsets
+    assert topic == "/robot/joint_state" and -47e9 < lo <= hi < -45e9
+    whole = read_mcap(p, chs)
+    assert np.array_equal(np.concatenate([b.data for b in g.blocks(500)], axis=1), whole.data, equal_nan=True)
+    an = analyse_stream(p, outputs=chs)
+    ref = csd_matrix(whole, nperseg=an.spectra.settings["nperseg"])
+    G = an.spectra.csd()
+    assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    assert len(an.modal.natural_frequencies) >= 1

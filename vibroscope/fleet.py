@@ -17,6 +17,12 @@ log's row of the fleet table (:class:`FleetRow`): the modes identified from the 
 each channel in each frequency band (octave bands by default). The client only plans the logs and
 merges the per-log sums into the fleet's spectra.
 
+A log that cannot be analysed (it cannot be planned, is shorter than a segment, has no segment
+free of gaps, or a range of it fails to read) does not stop the fleet: its row carries the
+``error`` (its spectra NaN, no modes), it is left out of the merged spectra and ``per_log``, and
+``settings["excluded"]`` and ``settings["warnings"]`` name it. Only when no log can be analysed
+does :func:`analyse_fleet` raise.
+
 Dask is imported here only when :func:`analyse_fleet` runs (the ``[dask]`` extra).
 """
 
@@ -25,7 +31,7 @@ from __future__ import annotations
 import csv
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -108,7 +114,8 @@ class FleetRow:
     rms : tuple of tuple of float
         ``rms[c][b]``: RMS of channel c in band b (the channel's unit).
     error : str
-        Why the modes could not be identified (empty when they were).
+        Why the modes could not be identified, or why the log could not be analysed at all (then
+        `rms` is NaN and the log is not in the merged spectra); empty when all went well.
     """
 
     log: str
@@ -148,11 +155,13 @@ class FleetResult:
     rows : tuple of FleetRow
         The fleet table, one row per log, in the order given.
     per_log : dict of str to LogSpectra
-        Each log's accumulated spectra (exactly one pass over the log).
+        Each analysed log's accumulated spectra (exactly one pass over the log); the logs that
+        could not be analysed are absent.
     merged : LogSpectra
-        All logs' sums merged (every segment of every log averaged once).
+        The analysed logs' sums merged (every segment of every such log averaged once).
     settings : dict
-        Welch settings, rate, channels, bands, tasks and workers.
+        Welch settings, rate, channels, bands, tasks and workers; ``excluded`` (the logs left
+        out of the merged spectra) and ``warnings`` (why, one line each).
     """
 
     rows: tuple
@@ -238,22 +247,50 @@ class FleetResult:
         return path
 
 
-def _task(path: str, channels: tuple, fs: float, t0_ns: int, n_samples: int, samples: tuple,
-          settings: dict) -> LogSpectra:
-    """One Dask task: accumulate grid samples `samples` of the log at `path` (runs on a worker)."""
+@dataclass(frozen=True)
+class _Failed:
+    """What a task returns instead of raising: the log and why (so one bad log does not fail the fleet)."""
+
+    log: str
+    error: str
+
+
+def _task(path: str, channels: tuple, fs: float, t0_ns: int, n_samples: int, stamp_offsets: tuple, samples: tuple,
+          settings: dict) -> LogSpectra | _Failed:
+    """One Dask task: accumulate grid samples `samples` of the log at `path` (runs on a worker); a
+    failure is returned as :class:`_Failed`, not raised."""
     from vibroscope.stream import accumulate_log
 
-    return accumulate_log(path, channels, fs=fs, t0_ns=t0_ns, n_samples=n_samples, samples=samples, **settings)
+    try:
+        return accumulate_log(path, channels, fs=fs, t0_ns=t0_ns, n_samples=n_samples, stamp_offsets=stamp_offsets,
+                              samples=samples, **settings)
+    except Exception as exc:  # noqa: BLE001 - reported in the log's row: the other logs go on
+        return _Failed(path, f"{type(exc).__name__}: {exc}")
+
+
+def _failed_row(path: str, n_samples: int, fs: float, bands: tuple, channels: tuple, error: str) -> FleetRow:
+    """The row of a log that could not be analysed: NaN band RMS, no modes, the error."""
+    nan = tuple(tuple(float("nan") for _ in bands) for _ in channels)
+    return FleetRow(path, int(n_samples), n_samples / fs, (), (), bands, tuple(channels), nan, error)
 
 
 def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
-             *parts: LogSpectra) -> tuple[LogSpectra, FleetRow]:
+             *parts: LogSpectra | _Failed) -> tuple[LogSpectra | None, FleetRow]:
     """One Dask task per log, after its range tasks: merge them and fill its row of the fleet table
-    (band RMS and modes), so that the per-log identification runs on the workers, not the client."""
+    (band RMS and modes), so that the per-log identification runs on the workers, not the client.
+    A log that cannot be analysed gives (None, its row with the error)."""
     from vibroscope.stream import analyse_stream
 
-    sp = merge_spectra(list(parts))
-    G = sp.csd()
+    failed = [p.error for p in parts if isinstance(p, _Failed)]
+    good = [p for p in parts if not isinstance(p, _Failed)]
+    if failed or not good:  # (the client puts the planned length in the row)
+        why = failed[0] if failed else "no complete Welch segment"
+        return None, _failed_row(path, 0, fs, bands, channels, f"not analysed: {why}")
+    sp = merge_spectra(good)
+    try:
+        G = sp.csd()
+    except ValueError as exc:  # no segment free of missing samples
+        return None, _failed_row(path, sp.samples, fs, bands, channels, f"not analysed: {exc}")
     P = G.psd().values
     rms = band_rms(G.frequencies, P, bands)
     try:
@@ -349,35 +386,64 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     Returns
     -------
     FleetResult
+        A log that cannot be analysed has its row's ``error`` filled and is left out of the
+        merged spectra (``settings["excluded"]``, ``settings["warnings"]``).
 
     Raises
     ------
     ValueError
-        If `paths` is empty, or the logs differ in rate.
-    LogFormatError, ChannelError
-        If a log or a channel cannot be read (named).
+        If `paths` is empty, the logs differ in rate, or no log can be analysed (each named
+        with its error).
     ImportError
         If ``dask.distributed`` is not installed (the ``[dask]`` extra).
     """
+    from vibroscope.errors import VibroscopeError
     from vibroscope.io.blocks import open_grid
 
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no logs given")
     fs_given = fs  # every log goes onto this rate when given
-    first = open_grid(paths[0], channels, fs=fs)
-    if channels is None and input is not None:
-        channels = [input] + [c for c in first.channels if c != input]
-        first = open_grid(paths[0], channels, fs=fs)
+    errors: dict[int, str] = {}  # by position in `paths` (a log may be given twice)
+
+    def plan(k, chans, rate):
+        try:
+            return open_grid(paths[k], chans, fs=rate)
+        except (VibroscopeError, ValueError, OSError) as exc:  # this log's row says why; the others go on
+            errors[k] = f"not analysed: cannot be planned: {type(exc).__name__}: {exc}"
+            return None
+
+    def none_left():
+        return ValueError("no log of the fleet can be analysed: " + "; ".join(f"{paths[k]}: {e}"
+                                                                              for k, e in sorted(errors.items())))
+
+    first, k0 = None, 0
+    for k0 in range(len(paths)):  # the first log that plans chooses the channels and the rate
+        first = plan(k0, channels, fs)
+        if first is not None and channels is None and input is not None:
+            first = plan(k0, [input] + [c for c in first.channels if c != input], fs)
+        if first is not None:
+            break
+    if first is None:
+        raise none_left()
     channels = first.channels
     fs = first.fs
-    grids = [first] + [open_grid(p, channels, fs=fs_given) for p in paths[1:]]
-    for g in grids[1:]:
-        if abs(g.fs - fs) > 1e-9 * fs:
-            raise ValueError(f"{g.path}: rate {g.fs:.9g} Hz differs from {fs:.9g} Hz of {paths[0]}: analyse the logs "
+    grids = [None if k < k0 else first if k == k0 else plan(k, channels, fs_given) for k in range(len(paths))]
+    for g in grids:
+        if g is not None and abs(g.fs - fs) > 1e-9 * fs:
+            raise ValueError(f"{g.path}: rate {g.fs:.9g} Hz differs from {fs:.9g} Hz of {paths[k0]}: analyse the logs "
                              f"of one rate together (or give fs= (--fs) to resample them all)")
-        g.fs = fs
-    sett = stream_settings(min(g.n_samples for g in grids), fs, nperseg=nperseg, window=window)
+        if g is not None:
+            g.fs = fs
+    sett = None
+    for k in sorted((k for k, g in enumerate(grids) if g is not None), key=lambda k: grids[k].n_samples):
+        try:  # the shortest log that takes the settings chooses them
+            sett = stream_settings(grids[k].n_samples, fs, nperseg=nperseg, window=window)
+            break
+        except ValueError as exc:
+            errors[k] = f"not analysed: {grids[k].n_samples} grid samples: {exc}"
+    if sett is None:
+        raise none_left()
     df = fs / sett["nfft"]
     bands = tuple(tuple(map(float, b)) for b in (bands if bands is not None else octave_bands(fs, df)))
     opts = dict(input=input, method=method, fmin=fmin, fmax=fmax)
@@ -385,19 +451,42 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     try:
         n_workers = max(1, len(c.scheduler_info().get("workers", {})) or 1)
         parts = tasks_per_log or max(1, -(-2 * n_workers // len(paths)))
-        n_tasks, logs = 0, []
-        for g in grids:
-            ranges = [c.submit(_task, str(g.path), tuple(channels), fs, g.t0_ns, g.n_samples, rng, sett, pure=False)
-                      for rng in segment_ranges(g.n_samples, sett["nperseg"], sett["noverlap"], parts)]
-            n_tasks += len(ranges)
-            logs.append(c.submit(_log_row, str(g.path), bands, tuple(channels), fs, opts, *ranges, pure=False))
-        results = c.gather(logs)
+        n_tasks, logs = 0, {}
+        for k, g in enumerate(grids):
+            if g is None or k in errors:
+                continue
+            ranges = segment_ranges(g.n_samples, sett["nperseg"], sett["noverlap"], parts)
+            if not ranges:
+                errors[k] = (f"not analysed: {g.n_samples} grid samples hold no Welch segment of "
+                             f"nperseg={sett['nperseg']}")
+                continue
+            futs = [c.submit(_task, paths[k], tuple(channels), fs, g.t0_ns, g.n_samples, g.stamp_offsets, rng, sett,
+                             pure=False) for rng in ranges]
+            n_tasks += len(futs)
+            logs[k] = c.submit(_log_row, paths[k], bands, tuple(channels), fs, opts, *futs, pure=False)
+        results = dict(zip(logs, c.gather(list(logs.values())))) if logs else {}
     finally:
         for o in owned:
             o.close()
-    per_log = {p: sp for p, (sp, _) in zip(paths, results)}
-    rows = [row for _, row in results]
-    merged = merge_spectra([per_log[p] for p in paths])
+    rows, good = [], []
+    for k, p in enumerate(paths):
+        n = grids[k].n_samples if grids[k] is not None else 0
+        if k in results:
+            sp, row = results[k]
+            if sp is None:
+                errors[k] = row.error
+                row = replace(row, n_samples=n, duration_s=n / fs)
+            else:
+                good.append(k)
+        else:
+            row = _failed_row(p, n, fs, bands, channels, errors[k])
+        rows.append(row)
+    if not good:
+        raise none_left()
+    per_log = {paths[k]: results[k][0] for k in good}
+    merged = merge_spectra([results[k][0] for k in good])
+    excluded = [p for k, p in enumerate(paths) if k not in good]
+    warns = [f"{paths[k]}: left out of the merged spectra: {e}" for k, e in sorted(errors.items())]
     settings = dict(sett, fs=fs, channels=list(channels), bands_hz=[list(b) for b in bands], tasks=n_tasks,
-                    workers=n_workers, input=input)
+                    workers=n_workers, input=input, excluded=excluded, warnings=warns)
     return FleetResult(tuple(rows), per_log, merged, settings)

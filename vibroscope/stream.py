@@ -197,7 +197,8 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
                    time_range: tuple[float, float] | None = None, nperseg: int | None = None,
                    noverlap: int | None = None, window: Any = "hann", detrend: Any = "constant",
                    nfft: int | None = None, block_samples: int = BLOCK_SAMPLES, common_gaps: bool = True,
-                   grid: Any = None, n_samples: int | None = None) -> LogSpectra:
+                   grid: Any = None, n_samples: int | None = None,
+                   stamp_offsets: Sequence[tuple[str, int, int]] | None = None) -> LogSpectra:
     """Accumulate the cross-spectra of a log (or of a range of it) block by block.
 
     Parameters
@@ -225,10 +226,14 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
         :func:`~vibroscope.pipeline.analyse_signals` does.
     grid : LogGrid, optional
         The log already planned (:func:`~vibroscope.io.blocks.open_grid`); then `path`,
-        `channels`, `fs`, `t0_ns` and `n_samples` are not used.
+        `channels`, `fs`, `t0_ns`, `n_samples` and `stamp_offsets` are not used.
     n_samples : int, optional
         The whole grid's length when known (with `fs` and `t0_ns`: the log is planned without
-        opening a chunk, :func:`~vibroscope.io.blocks.open_grid`).
+        opening a chunk when `stamp_offsets` is given too, :func:`~vibroscope.io.blocks.open_grid`).
+    stamp_offsets : sequence of (str, int, int), optional
+        ``(topic, lo_ns, hi_ns)``: each topic's range of ``stamp - log time`` in ns, as
+        :attr:`~vibroscope.io.blocks.LogGrid.stamp_offsets` of an earlier planning gives it (it
+        chooses the chunks each block reads); default learnt from the log.
 
     Returns
     -------
@@ -243,7 +248,8 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
     """
     from vibroscope.io.blocks import open_grid
 
-    g = grid if grid is not None else open_grid(path, channels, fs=fs, t0_ns=t0_ns, n_samples=n_samples)
+    g = grid if grid is not None else open_grid(path, channels, fs=fs, t0_ns=t0_ns, n_samples=n_samples,
+                                                stamp_offsets=stamp_offsets)
     sett = stream_settings(g.n_samples, g.fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend,
                            nfft=nfft)
     i0, i1 = (0, g.n_samples) if samples is None and time_range is None else (

@@ -164,3 +164,58 @@ def test_damaged_summary_is_not_trusted(imu_log, tmp_path):
     g = open_grid(q)
     assert not g.indexed and any("no usable summary" in w for w in g.warnings)
     assert np.array_equal(np.concatenate([b.data for b in g.blocks(7000)], axis=1), x)
+
+
+def _lagged_log(path, lag_s=30.0):
+    """Two Imu topics at 200 Hz logged `lag_s` (plus 0–3 ms of jitter) after their header stamps:
+    /imu stamped on the grid, /imu2 with jittered (off-grid) stamps. Returns (path, /imu's x, /imu2's x)."""
+    from tests.io._io_helpers import write_imu_log
+
+    n = 2400  # 200 Hz
+    rng = np.random.default_rng(11)
+    t = (10_000_000_000 + np.arange(n) * 5_000_000).astype(np.int64)
+    t2 = t + rng.integers(-1_000_000, 1_000_000, n)
+    x, x2 = rng.standard_normal(n), np.sin(2 * np.pi * 3.0 * (t2 - t2[0]) * 1e-9)
+    lag = int(lag_s * 1e9)
+    lt = {"/imu": t + lag + rng.integers(0, 3_000_000, n), "/imu2": t2 + lag + rng.integers(0, 3_000_000, n)}
+    write_imu_log(path, {"/imu": (t, x), "/imu2": (t2, x2)}, chunk_size=8_000, log_times=lt)
+    return path, x, x2
+
+
+def test_stamps_far_before_their_log_times(tmp_path):
+    """Header stamps 30 s before their log times (the capstan joint states: 46 s): each block reads the
+    chunks holding its stamps (the per-topic offset learnt while planning), not those of its log time,
+    so the blocks are read_mcap's record (before: every block NaN)."""
+    p, x, _ = _lagged_log(tmp_path / "lag.mcap")
+    chs = ["/imu.linear_acceleration.x", "/imu2.linear_acceleration.x"]
+    whole = read_mcap(p, chs, fs=200.0)
+    g = open_grid(p, chs, fs=200.0)
+    assert g.t0_ns == whole.meta["t0_ns"] and g.n_samples == whole.n_samples
+    assert len(g.chunks) > 20
+    got = np.concatenate([b.data for b in g.blocks(150)], axis=1)
+    assert np.array_equal(got[0], whole.data[0]) and np.array_equal(got[0], x[: g.n_samples])
+    off = dict((t, (lo, hi)) for t, lo, hi in g.stamp_offsets)
+    for t in ("/imu", "/imu2"):  # stamp - log time: -30 s and up to 3 ms of jitter
+        assert -30_003_000_000 < off[t][0] <= off[t][1] <= -30_000_000_000
+    # the interpolated topic: one block over the whole grid reads every chunk as read_mcap does
+    assert np.max(np.abs(g.read(0, g.n_samples).data - whole.data)) <= 1e-12
+    # and block by block, away from the edges, to the spline's accuracy (as for any off-grid topic)
+    ok = np.isfinite(got[1])
+    assert ok.mean() > 0.95 and np.max(np.abs(got[1, ok] - whole.data[1, ok])) < 1e-3
+    # a block reads few chunks: those stamped near it, mapped back by the offset
+    opened = []
+    real = blocks_mod._open_chunk
+    import unittest.mock as um
+
+    with um.patch.object(blocks_mod, "_open_chunk", lambda fd, span: (opened.append(span), real(fd, span))[1]):
+        assert np.array_equal(g.read(1000, 1100).data[0], x[1000:1100])
+    assert 0 < len(opened) < len(g.chunks) // 2
+    # the offsets given (a Dask task's path: no chunk opened to plan) read the same
+    opened.clear()
+    with um.patch.object(blocks_mod, "_open_chunk", lambda fd, span: (opened.append(span), real(fd, span))[1]):
+        g2 = open_grid(p, chs, fs=g.fs, t0_ns=g.t0_ns, n_samples=g.n_samples, stamp_offsets=g.stamp_offsets)
+    assert not opened and g2.stamp_offsets == g.stamp_offsets
+    assert np.array_equal(g2.read(500, 700).data, g.read(500, 700).data)
+    # without them, they are learnt from the first and last chunks again
+    g3 = open_grid(p, chs, fs=g.fs, t0_ns=g.t0_ns, n_samples=g.n_samples)
+    assert g3.stamp_offsets == g.stamp_offsets

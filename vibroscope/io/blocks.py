@@ -5,8 +5,15 @@ summary's chunk indexes; a log without a usable summary is walked once record he
 header, each chunk opened in turn to learn its channels and times, one at a time), the channels,
 the grid rate `fs` and its origin ``t0_ns``. :meth:`LogGrid.read` then returns any stretch of grid
 samples ``[i0, i1)`` as :class:`~vibroscope.signals.Signals`, decompressing only the chunks whose
-log times overlap the stretch (widened by ``margin_s`` for header stamps that lag their log time),
-and :func:`iter_blocks` yields consecutive blocks. Every block lies on the same grid, so blocks of
+log times can hold the stretch's messages, and :func:`iter_blocks` yields consecutive blocks.
+
+The grid is on the header stamps, the chunk indexes on the log times, and the two clocks may differ
+by far more than a block (a real log's joint states are stamped 46 s before they were logged). The
+planning therefore learns, per topic, the range ``[lo, hi]`` of the offset ``stamp - log time`` over
+the messages of the topic's first and last readable chunks (:attr:`LogGrid.stamp_offsets`); a block
+whose stamps span ``[a, b]`` reads, per topic, the chunks of that topic whose log times overlap
+``[a - hi, b - lo]`` widened by ``margin_s`` (jitter, and drift of the offset in the middle of the log
+beyond what the end chunks show). Every block lies on the same grid, so blocks of
 different time ranges line up exactly and their concatenation is one record.
 
 Placement is that of :func:`~vibroscope.io.read_mcap` (:mod:`vibroscope.io._grid`): a topic whose
@@ -193,14 +200,18 @@ class LogGrid:
     chunks : tuple of ChunkSpan
         The chunks, in file order.
     margin_s : float
-        Chunks up to this much log time beyond a block are read too (header stamps may lag
-        their log time).
+        Chunks up to this much log time beyond a block's (offset-mapped) span are read too.
     indexed : bool
         Whether the summary's chunk indexes were used (else one linear pass).
     warnings : list of str
         What the planning noticed.
     skipped : list of (int, str)
         Damage found while planning: byte offset and reason.
+    stamp_offsets : tuple of (str, int, int)
+        Per topic read, ``(topic, lo_ns, hi_ns)``: the least and greatest ``stamp - log time``
+        (ns) over the messages of its first and last readable chunks (0, 0 for a topic timed by
+        its log times); a topic not listed is taken as (0, 0). Plain numbers: a Dask task of
+        :mod:`vibroscope.fleet` carries them.
     """
 
     path: Path
@@ -218,6 +229,8 @@ class LogGrid:
     _channels: dict = field(default_factory=dict, repr=False)
     _header: Any = field(default=None, repr=False)
     _parsed: list = field(default_factory=list, repr=False)
+    stamp_offsets: tuple = ()
+    _chunk_times: Any = field(default=None, repr=False)
 
     @property
     def duration(self) -> float:
@@ -274,10 +287,27 @@ class LogGrid:
                     res.blocks.append(_scan.Block(raw, sp.offset, cid, lt, st, ln))
         return LogIndex(res, topics)
 
-    def _spans(self, a_ns: int, b_ns: int, cids: set[int]) -> list[ChunkSpan]:
+    def _topic_cids(self, topic: str) -> set[int]:
+        return {c for c, ch in self._channels.items() if ch.topic == topic}
+
+    def _spans(self, a_ns: int, b_ns: int, topics: Sequence[str]) -> list[ChunkSpan]:
+        """The chunks (file order) that can hold messages of `topics` stamped in ``[a_ns, b_ns]``: per
+        topic, its chunks whose log times overlap ``[a_ns - hi, b_ns - lo]`` (its stamp offsets) widened
+        by the margin."""
+        if self._chunk_times is None or len(self._chunk_times[0]) != len(self.chunks):
+            self._chunk_times = (np.array([c.start_ns for c in self.chunks], np.int64),
+                                 np.array([c.end_ns for c in self.chunks], np.int64), {})
+        starts, ends, holds = self._chunk_times
         m = int(self.margin_s * 1e9)
-        return [c for c in self.chunks if c.end_ns >= a_ns - m and c.start_ns <= b_ns + m
-                and (c.channel_ids is None or c.channel_ids & cids)]
+        off = {t: (int(lo), int(hi)) for t, lo, hi in self.stamp_offsets}
+        take = np.zeros(len(self.chunks), bool)
+        for t in topics:
+            if t not in holds:
+                cids = self._topic_cids(t)
+                holds[t] = np.array([c.channel_ids is None or bool(c.channel_ids & cids) for c in self.chunks], bool)
+            lo, hi = off.get(t, (0, 0))
+            take |= holds[t] & (ends >= a_ns - hi - m) & (starts <= b_ns - lo + m)
+        return [c for c, k in zip(self.chunks, take) if k]
 
     def read(self, i0: int, i1: int) -> Signals:
         """Grid samples ``[i0, i1)`` of every channel.
@@ -308,8 +338,7 @@ class LogGrid:
         by_topic: dict[str, list[int]] = {}
         for k, mp in enumerate(self._parsed):
             by_topic.setdefault(mp.topic, []).append(k)
-        cids = {c for c, ch in self._channels.items() if ch.topic in by_topic}
-        log = self._index(self._spans(self.time_of(i0), self.time_of(i1 - 1), cids), set(by_topic))
+        log = self._index(self._spans(self.time_of(i0), self.time_of(i1 - 1), list(by_topic)), set(by_topic))
         notes = _Notes.of_scan(log)
         data = np.full((len(self._parsed), n), np.nan)
         fast: dict[str, bool] = {}
@@ -353,9 +382,17 @@ class LogGrid:
             yield self.read(i, min(i + block_samples, stop))
 
 
-def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, float]:
-    """(first stamp, last stamp, estimated rate) of a topic from its first and last chunks."""
-    from vibroscope.io.mcap_read import _Notes, _read_topic
+def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, float, int, int]:
+    """(first stamp, last stamp, estimated rate, least and greatest ``stamp - log time``) of a topic
+    from its first and last readable chunks (all in ns but the rate, Hz).
+
+    The stamps are taken as :func:`~vibroscope.io.read_mcap` takes them (header stamps, or the log
+    times where the stamps are unusable; outlier stamps dropped), each paired with its message's log
+    time by the extraction, which returns both in file order.
+    """
+    from vibroscope.io._extract import extract
+    from vibroscope.io.mcap_read import _drop_outliers, _Notes, _usable_stamps
+    from vibroscope.io.timebase import analyse_stamps
 
     mine = [c for c in grid.chunks if c.channel_ids is None or c.channel_ids & cids]
     if not mine:
@@ -367,18 +404,42 @@ def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, fl
         for span in spans:
             log = grid._index([span], {topic})
             notes = _Notes.of_scan(log)
-            got = _read_topic(log, topic, [mp.fields], notes, False, {}) if log.by_topic.get(topic) else None
-            if got is not None:
-                return got
+            ids = log.by_topic.get(topic)
+            if ids:
+                dec, reason = log.decoders.get(log.scan.channels[ids[0]], log.schema(ids[0]))
+                if dec is None:  # the same decoder for every chunk: none of them reads
+                    raise ChannelError(f"{grid.path}: topic {topic!r}: no chunk of it reads: "
+                                       f"{log.schema_name(ids[0])}: {reason}")
+                ex = extract(log, ids[0], [mp.fields], notes.skipped, notes.warnings, False)
+                stamps, source = _usable_stamps(topic, ex.stamps, ex.source, ex.log_times, notes)
+                # the message indices ride along as the values: the kept stamps' own log times
+                idx = np.arange(stamps.size, dtype=float)[None, :]
+                stamps, idx, n_out = _drop_outliers(topic, stamps, idx, source, ex.log_times, notes)
+                if stamps.size:
+                    _order, rep = analyse_stamps(topic, stamps, time_source=source, outliers=n_out)
+                    off = (stamps - ex.log_times[idx[0].astype(np.int64)] if source == "header.stamp"
+                           else np.zeros(1, np.int64))  # timed by the log times: no offset
+                    return int(stamps.min()), int(stamps.max()), float(rep.fs_est), int(off.min()), int(off.max())
+                why.append(f"chunk at byte offset {span.offset}: no usable stamp")
             why += notes.warnings[-1:]
         raise ChannelError(f"{grid.path}: topic {topic!r}: no chunk of it reads: " + "; ".join(why[:3]))
 
     a, b = first_readable(mine), first_readable(mine[::-1])
-    return int(a.t_ns[0]), int(b.t_ns[-1]), float(a.report.fs_est)
+    return a[0], b[1], a[2], min(a[3], b[3]), max(a[4], b[4])
+
+
+def _stamp_offsets(grid: LogGrid) -> tuple:
+    """``(topic, lo_ns, hi_ns)`` per topic of the grid (:func:`_first_last`), without the rest."""
+    out = []
+    for t in dict.fromkeys(m.topic for m in grid._parsed):
+        _a, _b, _r, lo, hi = _first_last(grid, t, grid._topic_cids(t))
+        out.append((t, lo, hi))
+    return tuple(out)
 
 
 def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: float | None = None,
-              t0_ns: int | None = None, margin_s: float = 1.0, n_samples: int | None = None) -> LogGrid:
+              t0_ns: int | None = None, margin_s: float = 1.0, n_samples: int | None = None,
+              stamp_offsets: Sequence[tuple[str, int, int]] | None = None) -> LogGrid:
     """Plan reading a log in blocks on one uniform grid.
 
     Parameters
@@ -396,12 +457,24 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         Time of grid sample 0 in ns; default the latest first stamp of the topics (as
         :func:`read_mcap`).
     margin_s : float, optional
-        Log time (s) read beyond each block's edges, for header stamps that lag their log
-        times; default 1 s.
+        Log time (s) read beyond each block's span, default 1 s. A block stamped ``[a, b]``
+        reads, per topic, the chunks whose log times overlap ``[a - hi - margin_s, b - lo +
+        margin_s]``, where ``[lo, hi]`` is the topic's range of ``stamp - log time`` seen in its
+        first and last readable chunks (:attr:`LogGrid.stamp_offsets`): a constant offset of
+        any size (stamps 46 s before their log times) costs nothing, and jitter or a drift of
+        the offset in the middle of the log is covered up to `margin_s` beyond the range the end
+        chunks show. That is the limit: where the offset wanders further than that inside the
+        log, the messages stamped in a block may lie in chunks that are not read, and those
+        samples come out NaN (:func:`~vibroscope.io.read_mcap` reads them); give a larger
+        `margin_s` for such a log.
     n_samples : int, optional
-        The grid's length when known (a Dask task of :mod:`vibroscope.fleet`): with `fs` and
-        `t0_ns` also given, no chunk is opened to plan the grid. Default: to the end of the
-        shortest topic.
+        The grid's length when known (a Dask task of :mod:`vibroscope.fleet`): with `fs`,
+        `t0_ns` and `stamp_offsets` also given, no chunk is opened to plan the grid (without
+        `stamp_offsets`, the first and last chunks of each topic are opened for them).
+        Default: to the end of the shortest topic.
+    stamp_offsets : sequence of (str, int, int), optional
+        ``(topic, lo_ns, hi_ns)`` per topic, as :attr:`LogGrid.stamp_offsets` of an earlier
+        planning of the same log gives them; default learnt from the log.
 
     Returns
     -------
@@ -456,12 +529,14 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
     grid.units = tuple(probe.unit(m) for m in grid._parsed)
     if fs is not None and t0_ns is not None and n_samples is not None:
         grid.fs, grid.t0_ns, grid.n_samples = float(fs), int(t0_ns), int(n_samples)
+        grid.stamp_offsets = (_stamp_offsets(grid) if stamp_offsets is None
+                              else tuple((str(t), int(lo), int(hi)) for t, lo, hi in stamp_offsets))
         return grid
     topics = list(dict.fromkeys(m.topic for m in grid._parsed))
-    firsts, lasts, rates = [], [], []
+    firsts, lasts, rates, offsets = [], [], [], []
     for t in topics:
-        cids = {c for c, ch in chans.items() if ch.topic == t}
-        a, b, r = _first_last(grid, t, cids)
+        a, b, r, lo, hi = _first_last(grid, t, grid._topic_cids(t))
+        offsets.append((t, lo, hi))
         if np.isfinite(r) and r > 0 and b > a:  # refine over the whole span: periods between first and last
             m = round((b - a) * 1e-9 * r)
             if m > 0 and abs(m / r - (b - a) * 1e-9) > 1e-9 * m ** 0.5:  # beyond the stamps' ns rounding
@@ -473,6 +548,8 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
             raise ChannelError(f"{path}: cannot estimate a sample rate (fewer than 2 messages per topic)")
         fs = max(good)
     grid.fs = float(fs)
+    grid.stamp_offsets = (tuple(offsets) if stamp_offsets is None
+                          else tuple((str(t), int(lo), int(hi)) for t, lo, hi in stamp_offsets))
     grid.t0_ns = int(max(firsts)) if t0_ns is None else int(t0_ns)
     stop = min(lasts)
     grid.n_samples = max(0, int(np.floor((stop - grid.t0_ns) * 1e-9 * grid.fs + 1e-6)) + 1)
