@@ -1,7 +1,7 @@
 """The ingestion speed paths of the MCAP scan (issue 9, target 1) change no value.
 
 Chunks decompressed into a buffer reused from chunk to chunk (zstd through a stream reader,
-LZ4 frames block by block) and the wanted fields decoded on the scan's threads right after
+LZ4 frames through cramjam) and the wanted fields decoded on the scan's threads right after
 decompression: the bytes, the decoded fields and ``read_mcap``'s result equal the plain
 path's, for every LZ4 frame option, for mixed frame ids, irregular stamps, interleaved topics,
 damaged chunks and a file changed after its scan.
@@ -36,23 +36,28 @@ def _payload(rng, n: int) -> bytes:
 @pytest.mark.parametrize("linked", [True, False])
 @pytest.mark.parametrize("checksums", [False, True])
 def test_lz4_frame_into_buffer_equals_lz4(block_size, linked, checksums):
+    """Every LZ4 frame option decompresses into the reused buffer to the bytes ``lz4.frame``
+    gives; a frame cut short, with trailing garbage, not LZ4, or longer than the chunk states is
+    left to the usual path (None)."""
     rng = np.random.default_rng(block_size + 2 * linked + checksums)
-    for n in (0, 1, 1000, 300_000, 1_500_000):
+
+    def chunk(frame, n):
+        return _scan.Chunk(compression="lz4", data=memoryview(frame), message_end_time=0, message_start_time=0,
+                           uncompressed_crc=0, uncompressed_size=n)
+
+    for n in (1, 1000, 300_000, 1_500_000):
         data = _payload(rng, n)
         for store_size in (True, False):
             frame = lz4.frame.compress(data, block_size=block_size, block_linked=linked, content_checksum=checksums,
                                        block_checksum=checksums, store_size=store_size)
-            out = memoryview(bytearray(n + 7))[:n]
-            assert _scan._lz4_into(frame, out) == n
-            assert bytes(out) == data
+            got = _scan._decompress_into(chunk(frame, n))
+            assert got is not None and bytes(got) == data == lz4.frame.decompress(frame)
     data = _payload(rng, 200_000)
     frame = lz4.frame.compress(data, block_size=block_size, block_linked=linked)
-    out = memoryview(bytearray(len(data)))
-    assert _scan._lz4_into(frame[:-3], out) is None  # cut off: the usual path decides
-    assert _scan._lz4_into(frame + b"\0" * 4, out) is None  # a second frame or trailing bytes
-    assert _scan._lz4_into(b"\x05" + frame[1:], out) is None  # not an LZ4 frame
-    small = memoryview(bytearray(len(data) - 1))
-    assert _scan._lz4_into(frame, small) is None  # more data than the chunk states
+    assert _scan._decompress_into(chunk(frame[:-3], len(data))) is None  # cut off: the usual path decides
+    assert _scan._decompress_into(chunk(frame + b"\0" * 4, len(data))) is None  # trailing bytes
+    assert _scan._decompress_into(chunk(b"\x05" + frame[1:], len(data))) is None  # not an LZ4 frame
+    assert _scan._decompress_into(chunk(frame, len(data) - 1)) is None  # more data than the chunk states
 
 
 def _chunk(data: bytes, compression: str) -> _scan.Chunk:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from vibroscope.io import read_mcap
 from vibroscope.io.timebase import analyse_stamps
@@ -100,3 +102,21 @@ def test_no_resample_requires_equal_counts(tmp_path):
     p = _sine_logs(tmp_path)
     with pytest.raises(ValueError, match="resample=False"):
         read_mcap(p, ["/a.linear_acceleration.x", "/b.linear_acceleration.x"], resample=False)
+
+
+@settings(max_examples=60, deadline=None)
+@given(n=st.one_of(st.integers(1, 100), st.integers(16_384, 60_000)), kind=st.sampled_from(["jitter", "normal", "ties", "sorted", "bimodal"]),
+       seed=st.integers(0, 2**32 - 1))
+def test_median_equals_numpy_to_the_bit(n, kind, seed):
+    """The bracketed median of the stamp analysis is ``np.median`` exactly, for integer and float
+    arrays long enough to take the bracketed path (n ≥ 16384) and short ones, with ties, sorted
+    input and two far clusters (where the bracket can miss and numpy decides)."""
+    from vibroscope.io.timebase import median
+
+    rng = np.random.default_rng(seed)
+    x = {"jitter": lambda: rng.integers(-4000, 4000, n) + 1_000_000,
+         "normal": lambda: rng.standard_normal(n),
+         "ties": lambda: rng.integers(0, 3, n),
+         "sorted": lambda: np.sort(rng.integers(0, 10**12, n)),
+         "bimodal": lambda: rng.standard_normal(n) * 1e-9 + (rng.random(n) < 0.5) * 1e3}[kind]()
+    assert median(x) == float(np.median(x))

@@ -102,10 +102,13 @@ try:  # optional codecs of mcap
 except ImportError:  # pragma: no cover
     _zstd = None
 try:
-    import lz4.block as _lz4_block
     import lz4.frame as _lz4
 except ImportError:  # pragma: no cover
-    _lz4 = _lz4_block = None
+    _lz4 = None
+try:  # LZ4 frames decompressed into a given buffer, with the GIL released (lz4's own API has no "into")
+    from cramjam import lz4 as _cramjam_lz4
+except ImportError:  # pragma: no cover - lz4.frame is the fallback
+    _cramjam_lz4 = None
 try:  # optional: CRC-32 of ISA-L, the same value as zlib's, several times faster
     from isal.isal_zlib import crc32 as _crc32
 except ImportError:  # pragma: no cover - zlib's is the fallback
@@ -425,52 +428,6 @@ def _checked(chunk: Chunk, validate_crcs: bool = True) -> Any:
     return raw
 
 
-def _lz4_into(data: Any, out: memoryview) -> int | None:
-    """Decompress one LZ4 frame block by block into `out`; its size, or None for anything but
-    one plain frame (the caller then decompresses it the usual way)."""
-    d = memoryview(data)
-    n, size = len(d), len(out)
-    if n < 7 or bytes(d[:4]) != b"\x04\x22\x4d\x18":
-        return None
-    flg, bd = d[4], d[5]
-    if flg >> 6 != 1 or flg & 0x02 or flg & 0x01:  # version 01; no reserved bit, no dictionary id
-        return None
-    linked, block_sum, has_size, content_sum = not flg & 0x20, flg & 0x10, flg & 0x08, flg & 0x04
-    bmax = {4: 1 << 16, 5: 1 << 18, 6: 1 << 20, 7: 1 << 22}.get((bd >> 4) & 7)
-    if bmax is None:
-        return None
-    p = 6 + (8 if has_size else 0)
-    if has_size and int.from_bytes(d[6:14], "little") != size:
-        return None
-    p += 1  # header checksum (the chunk's CRC-32 checks the data)
-    o = 0
-    decompress = _lz4_block.decompress
-    while True:
-        if p + 4 > n:
-            return None
-        bs = int.from_bytes(d[p : p + 4], "little")
-        p += 4
-        if bs == 0:
-            break
-        k = bs & 0x7FFFFFFF
-        if p + k > n:
-            return None
-        if bs & 0x80000000:  # stored uncompressed
-            got: Any = d[p : p + k]
-        elif linked:  # the previous 64 KiB of output is the block's dictionary
-            got = decompress(d[p : p + k], uncompressed_size=bmax, dict=out[max(0, o - 65536) : o])
-        else:
-            got = decompress(d[p : p + k], uncompressed_size=bmax)
-        m = len(got)
-        if o + m > size:
-            return None
-        out[o : o + m] = got
-        o += m
-        p += k + (4 if block_sum else 0)
-    p += 4 if content_sum else 0
-    return o if p == n else None
-
-
 def _decompress_into(chunk: Chunk) -> memoryview | None:
     """The chunk's data decompressed into this thread's reused buffer (a view of it, valid until
     the thread's next chunk), or None where that does not apply (then :func:`_decompress`, which
@@ -492,9 +449,9 @@ def _decompress_into(chunk: Chunk) -> memoryview | None:
             if got != size or reader.read(1):
                 return None
             return out
-        if chunk.compression == "lz4" and _lz4_block is not None:
+        if chunk.compression == "lz4" and _cramjam_lz4 is not None:
             out = _scratch(size)
-            return out if _lz4_into(chunk.data, out) == size else None
+            return out if _cramjam_lz4.decompress_into(chunk.data, out) == size else None
     except Exception:  # noqa: BLE001 - the usual path decides (and names the fault)
         return None
     return None

@@ -99,6 +99,39 @@ class TimebaseReport:
         return d
 
 
+def median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-D array without NaN (the same value, to the bit), faster on long arrays.
+
+    A sorted strided sample brackets the middle ranks; only the elements inside that bracket are
+    partitioned (the median of stamp increments or offsets lies in a narrow band). Falls back to
+    ``np.median`` when the bracket misses, so the result never depends on the sample.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+        Integer or float values, no NaN.
+
+    Returns
+    -------
+    float
+        The median (mean of the two middle values for even `n`), as ``np.median`` gives it.
+    """
+    x = np.asarray(x)
+    n = x.size
+    if n < 1 << 14:
+        return float(np.median(x))
+    s = np.sort(x[:: max(1, n >> 12)])
+    k, d = s.size // 2, 4 * int(np.sqrt(s.size)) + 2
+    lo, hi = s[max(0, k - d)], s[min(s.size - 1, k + d)]
+    below = int(np.count_nonzero(x < lo))
+    inside = x[(x >= lo) & (x <= hi)]
+    r1, r2 = (n - 1) // 2 - below, n // 2 - below
+    if r1 < 0 or r2 >= inside.size:
+        return float(np.median(x))
+    part = np.partition(inside, (r1, r2))
+    return float(np.mean(part[[r1, r2]]))
+
+
 def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log_time", outliers: int = 0):
     """Sort stamps, drop duplicates and describe the time base.
 
@@ -134,7 +167,7 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
     where: tuple[tuple[float, float], ...] = ()
     if ts.size >= 2:
         dt = np.diff(ts).astype(np.float64) * 1e-9
-        med = float(np.median(dt))
+        med = float(median(dt))
         isgap = dt > GAP_PERIODS * med
         fs_est = _rate(dt[~isgap], med)
         gaps = int(isgap.sum())
@@ -201,10 +234,10 @@ def outlier_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray | None = None
         pos = d[d > 0]
     if pos.size == 0:
         return out
-    thr = max(min_s * 1e9, periods * float(np.median(pos)))
+    thr = max(min_s * 1e9, periods * float(median(pos)))
     if log_times_ns is not None:
         off = t - np.asarray(log_times_ns, np.int64)
-        out |= np.abs(off - np.median(off)) > thr
+        out |= np.abs(off - median(off)) > thr
     jump = np.abs(dt.astype(np.float64)) > thr  # (n-1,)
     if increasing and not jump.any():
         return out  # no increment beyond thr: no isolated jump, no far cluster
