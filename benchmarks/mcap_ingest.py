@@ -211,6 +211,7 @@ def bench_mcap(n_msgs: int, compressions=("zstd", "lz4"), repeat: int = 5, basel
                 _write_mixed(path, sig.data, comp, int(sig.t0 * 1e9), 1_000_000)
             else:
                 write_ros2_mcap(path, sig, compression=comp, frame_id=frame_id)
+            os.sync()  # the kernel's write-back of the new file would otherwise run during the timed reads
             got = read_mcap(path, chans)
             assert got.meta["fast_path"][topic] and np.array_equal(got.data, sig.data)
             assert np.array_equal(_plain(path, chans).data, sig.data)

@@ -49,8 +49,12 @@ def _on_grid_index(t: np.ndarray, start: int, fs: float) -> np.ndarray | None:
     if np.max(np.abs(rel - k), initial=0.0) > ON_GRID_TOL:
         return None
     k = k.astype(np.int64)
-    if k.size > 1 and (np.any(np.diff(k) <= 0) or np.median(np.diff(k)) != 1):
-        return None  # stamps at a multiple of the grid period (upsampling): interpolate
+    if k.size > 1:
+        d = np.diff(k)
+        # increasing, and median step 1 (steps ≥ 1: more than half of them are 1): else stamps at a
+        # multiple of the grid period (upsampling): interpolate
+        if np.any(d <= 0) or 2 * np.count_nonzero(d == 1) <= d.size:
+            return None
     return k
 
 

@@ -387,8 +387,11 @@ class LogIndex:
         -------
         ndarray of int64
         """
-        parts = [self.scan.blocks[bi].log_time[idx] for bi, idx in self.where(cid)]
-        return np.concatenate(parts).astype(np.int64) if parts else np.empty(0, np.int64)
+        parts = []
+        for bi, idx in self.where(cid):
+            lt = self.scan.blocks[bi].log_time
+            parts.append(lt if idx.size == lt.size else lt[idx])  # a block of this channel only: as it is
+        return np.concatenate(parts, dtype=np.int64, casting="unsafe") if parts else np.empty(0, np.int64)
 
     def first_decoded(self, cid: int) -> tuple[Any, str]:
         """(first message of `cid` decoded, "") or (None, why not).

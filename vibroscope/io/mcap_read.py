@@ -180,6 +180,8 @@ def _read_topic(log: LogIndex, topic: str, fields: list[tuple[str | int, ...]], 
         notes.warnings.append(f"topic {topic!r}: {rep.duplicates} messages with duplicate stamps dropped")
     if rep.out_of_order:
         notes.warnings.append(f"topic {topic!r}: {rep.out_of_order} out-of-order stamps (sorted)")
+    if order.size == stamps.size and not rep.out_of_order:  # increasing, no duplicate: order is the identity
+        return TopicSamples(stamps, vals, rep)
     return TopicSamples(stamps[order], vals[:, order], rep)
 
 
@@ -320,7 +322,13 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
     fs = _output_rate(log, fs, topics, reports, resample)
     start, trows, resampled, gaps = (onto_grid(log.path, topics, samples, fs, notes.warnings) if resample
                                      else (*_as_logged(topics, samples, notes), []))
-    data = np.vstack([trows[parsed[i].topic][by_topic[parsed[i].topic].index(i)] for i in keep])
+    picks = [(parsed[i].topic, by_topic[parsed[i].topic].index(i)) for i in keep]
+    one = trows[picks[0][0]] if picks else None
+    if (one is not None and one.ndim == 2 and [p for p in picks] == [(picks[0][0], r) for r in range(one.shape[0])]
+            and one.dtype == np.float64 and one.flags.c_contiguous):
+        data = one  # every row of one topic, in order: its grid block as it is (no copy of the record)
+    else:
+        data = np.vstack([trows[t][r] for t, r in picks])
     names = [str(parsed[i]) for i in keep]
     meta = _meta(log, notes, reports, resampled, fast_path, start, gaps, names, data)
     return Signals(data, fs, names, [log.unit(parsed[i]) for i in keep], start * 1e-9, meta)

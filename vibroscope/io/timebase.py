@@ -124,12 +124,16 @@ def median(x: np.ndarray) -> float:
     k, d = s.size // 2, 4 * int(np.sqrt(s.size)) + 2
     lo, hi = s[max(0, k - d)], s[min(s.size - 1, k + d)]
     below = int(np.count_nonzero(x < lo))
-    inside = x[(x >= lo) & (x <= hi)]
     r1, r2 = (n - 1) // 2 - below, n // 2 - below
+    if lo == hi:  # one value fills the bracket (stamps exactly on a grid): count it, no partition
+        if r1 >= 0 and r2 < np.count_nonzero(x == lo):
+            return float(np.mean(np.array([lo, lo])))
+        return float(np.median(x))
+    inside = x[(x >= lo) & (x <= hi)]
     if r1 < 0 or r2 >= inside.size:
         return float(np.median(x))
-    part = np.partition(inside, (r1, r2))
-    return float(np.mean(part[[r1, r2]]))
+    inside.partition((r1, r2))  # a copy already: in place
+    return float(np.mean(inside[[r1, r2]]))
 
 
 def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log_time", outliers: int = 0):
@@ -154,14 +158,17 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
     """
     t = np.asarray(stamps_ns, np.int64)
     n = t.size
-    out_of_order = int(np.count_nonzero(np.diff(t) < 0)) if n > 1 else 0
-    order = np.argsort(t, kind="stable")
-    ts = t[order]
-    keep = np.ones(n, bool)
-    if n > 1:
+    d = np.diff(t)
+    out_of_order = int(np.count_nonzero(d < 0)) if n > 1 else 0
+    if n < 2 or d.min() > 0:  # the usual case: increasing, no duplicate (no sort, no gather)
+        order, ts, duplicates = np.arange(n), t, 0
+    else:
+        order = np.argsort(t, kind="stable")
+        ts = t[order]
+        keep = np.ones(n, bool)
         keep[1:] = ts[1:] != ts[:-1]
-    duplicates = int(n - keep.sum())
-    order, ts = order[keep], ts[keep]
+        duplicates = int(n - keep.sum())
+        order, ts = order[keep], ts[keep]
     fs_est = jitter = max_dev = gap_time = float("nan")
     gaps = 0
     where: tuple[tuple[float, float], ...] = ()
