@@ -243,7 +243,9 @@ def test_capstan_log_with_stamps_46_s_before_logging_on_dask(shared_data, client
     chs = ["/robot/joint_state.velocity[0]", "/robot/joint_state.effort[0]"]
     res = analyse_fleet([p, p], client=client, channels=chs, nperseg=256, tasks_per_log=2)
     assert [r.error for r in res.rows] == ["", ""] and res.settings["excluded"] == []
-    ref = csd_matrix(read_mcap(p, chs), nperseg=256)
+    whole = read_mcap(p, chs)
+    ref = csd_matrix(whole, nperseg=256)
+    assert [r.n_samples for r in res.rows] == [whole.n_samples] * 2  # the log's grid, not its ranges' sum
     G = res.per_log[p].csd()
     assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
     assert res.merged.accumulator.n_segments == 2 * ref.n_averages[0, 0]

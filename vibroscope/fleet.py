@@ -102,7 +102,7 @@ class FleetRow:
     log : str
         The log's path.
     n_samples : int
-        Grid samples analysed.
+        Grid samples of the log (its Welch segments leave out less than one hop at the end).
     duration_s : float
         ``n_samples / fs``.
     frequencies_hz, damping_ratios : tuple of float
@@ -473,9 +473,9 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         n = grids[k].n_samples if grids[k] is not None else 0
         if k in results:
             sp, row = results[k]
+            row = replace(row, n_samples=n, duration_s=n / fs)  # the log's grid, not only its whole segments
             if sp is None:
                 errors[k] = row.error
-                row = replace(row, n_samples=n, duration_s=n / fs)
             else:
                 good.append(k)
         else:
