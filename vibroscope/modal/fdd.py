@@ -370,17 +370,20 @@ class _Peak:
     hi: int
 
 
-def _bell(U: np.ndarray, S: np.ndarray, k: int, q: int, phi: np.ndarray, mac_min: float):
+def _bell(U: np.ndarray, S: np.ndarray, k: int, q: int, phi: np.ndarray, mac_min: float,
+          limits: tuple[int, int] | None = None):
     """The SDOF bell of the peak of ``s_q`` at bin `k` with shape `phi`: the singular values over
     the full axis (zero outside) and its index range ``[lo, hi]``. A neighbouring bin belongs to it
-    while ``u1`` (else ``u2``) there has MAC > `mac_min` with `phi`."""
+    while ``u1`` (else ``u2``) there has MAC > `mac_min` with `phi`, and lies within `limits`
+    (inclusive bins: the minima of ``s_q`` towards the neighbouring peaks, :func:`_valley_limits`)."""
     n = S.shape[0]
     b = np.zeros(n)
     b[k] = S[k, q]
     lo = hi = k
+    first, last = (1, n - 1) if limits is None else limits
     for step in (-1, 1):
         j = k + step
-        while 0 < j < n:
+        while 0 < j < n and first <= j <= last:
             m1 = mac(phi, U[j, :, 0])[0, 0]
             m2 = mac(phi, U[j, :, 1])[0, 0] if U.shape[2] > 1 else 0.0
             if m1 > mac_min:
@@ -397,19 +400,33 @@ def _bell(U: np.ndarray, S: np.ndarray, k: int, q: int, phi: np.ndarray, mac_min
     return b, lo, hi
 
 
+def _valley_limits(s: np.ndarray, k: int, tops: np.ndarray) -> tuple[int, int]:
+    """Bins ``(first, last)`` a bell around the peak at `k` may span: up to the lowest value of `s`
+    between `k` and the nearest other peak `tops` on each side (the whole axis where there is none).
+    With two or three channels, nearby modes can keep MAC above the threshold across both peaks,
+    and a bell spanning two peaks gives a frequency between them (Brincker & Ventura, *Introduction
+    to Operational Modal Analysis*, 2015, §10.3: the bell is one mode's neighbourhood)."""
+    n = s.size
+    left, right = tops[tops < k], tops[tops > k]
+    first = 1 if left.size == 0 else int(left[-1] + np.argmin(s[left[-1] : k + 1]))
+    last = n - 1 if right.size == 0 else int(k + np.argmin(s[k : right[0] + 1]))
+    return first, last
+
+
 def _distinct_peaks(candidates, U, S, mac_min: float, mac_duplicate: float, min_bell_bins: int,
                     n_modes: int | None) -> list[_Peak]:
     """Accept candidates in order, skipping duplicates of accepted modes (MAC > `mac_duplicate`
     inside their bell), second-singular-value peaks on an accepted bin, and bells narrower than
     `min_bell_bins` (noise); at most `n_modes`. Returned by increasing frequency."""
     accepted: list[_Peak] = []
+    tops = np.array(sorted({k for k, _p, q in candidates if q == 0}), dtype=int)
     for k, prom, q in candidates:
         phi = U[k, :, q]
         if any(mac(phi, a.shape)[0, 0] > mac_duplicate and a.lo <= k <= a.hi for a in accepted):
             continue
         if q > 0 and any(a.k == k for a in accepted):
             continue
-        bell, lo, hi = _bell(U, S, k, q, phi, mac_min)
+        bell, lo, hi = _bell(U, S, k, q, phi, mac_min, _valley_limits(S[:, q], k, tops))
         if hi - lo + 1 < min_bell_bins:  # incoherent from bin to bin: noise, not a mode
             continue
         accepted.append(_Peak(k, q, phi, prom, bell, lo, hi))
