@@ -283,7 +283,7 @@ def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
 
     failed = [p.error for p in parts if isinstance(p, _Failed)]
     good = [p for p in parts if not isinstance(p, _Failed)]
-    if failed or not good:  # (the client puts the planned length in the row)
+    if failed or not good:
         why = failed[0] if failed else "no complete Welch segment"
         return None, _failed_row(path, 0, fs, bands, channels, f"not analysed: {why}")
     sp = merge_spectra(good)
@@ -429,12 +429,11 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     channels = first.channels
     fs = first.fs
     grids = [None if k < k0 else first if k == k0 else plan(k, channels, fs_given) for k in range(len(paths))]
-    for g in grids:
-        if g is not None and abs(g.fs - fs) > 1e-9 * fs:
+    for g in filter(None, grids):
+        if abs(g.fs - fs) > 1e-9 * fs:
             raise ValueError(f"{g.path}: rate {g.fs:.9g} Hz differs from {fs:.9g} Hz of {paths[k0]}: analyse the logs "
                              f"of one rate together (or give fs= (--fs) to resample them all)")
-        if g is not None:
-            g.fs = fs
+        g.fs = fs
     sett = None
     for k in sorted((k for k, g in enumerate(grids) if g is not None), key=lambda k: grids[k].n_samples):
         try:  # the shortest log that takes the settings chooses them

@@ -509,7 +509,7 @@ def _analyse_spectra(sp: LogSpectra, input, outputs, **kw):
     """(G of input + responses, FRF or None, Identification, band, responses, notes) of accumulated spectra."""
     notes = list(dict.fromkeys(sp.warnings))
     acc = sp.accumulator
-    diag = np.real(np.einsum("fii->i", acc._sum)) if acc.n_segments else np.zeros(len(sp.channels))
+    diag = acc._auto_sums()
     outs = [c for c in sp.channels if c != input] if outputs is None else list(outputs)
     flat = [c for c in outs if diag[sp.channels.index(c)] == 0]
     if flat:

@@ -294,7 +294,7 @@ class LogGrid:
         """The chunks (file order) that can hold messages of `topics` stamped in ``[a_ns, b_ns]``: per
         topic, its chunks whose log times overlap ``[a_ns - hi, b_ns - lo]`` (its stamp offsets) widened
         by the margin."""
-        if self._chunk_times is None or len(self._chunk_times[0]) != len(self.chunks):
+        if self._chunk_times is None:  # the chunks are fixed once planned
             self._chunk_times = (np.array([c.start_ns for c in self.chunks], np.int64),
                                  np.array([c.end_ns for c in self.chunks], np.int64), {})
         starts, ends, holds = self._chunk_times

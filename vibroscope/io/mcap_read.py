@@ -324,7 +324,7 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
                                      else (*_as_logged(topics, samples, notes), []))
     picks = [(parsed[i].topic, by_topic[parsed[i].topic].index(i)) for i in keep]
     one = trows[picks[0][0]] if picks else None
-    if (one is not None and one.ndim == 2 and [p for p in picks] == [(picks[0][0], r) for r in range(one.shape[0])]
+    if (one is not None and picks == [(picks[0][0], r) for r in range(len(one))]
             and one.dtype == np.float64 and one.flags.c_contiguous):
         data = one  # every row of one topic, in order: its grid block as it is (no copy of the record)
     else:
