@@ -217,6 +217,23 @@ def test_a_log_that_cannot_be_analysed_does_not_fail_the_fleet(logs, bad_logs, c
     assert garbage in str(err.value) and short in str(err.value)
 
 
+def test_default_resolution_from_the_median_log_not_the_shortest(logs, bad_logs, client):
+    """With no nperseg, the median-length log chooses the Welch settings: one very short log does not
+    coarsen every other log's resolution (on the capstan logs the shortest, 2.5 s, gave nperseg 16);
+    it is left out with its reason instead."""
+    from vibroscope.fleet import analyse_fleet
+    from vibroscope.stream import stream_settings
+
+    _garbage, short, _holey = bad_logs
+    res = analyse_fleet([short, *logs], client=client)
+    median_n = sorted(read_mcap(p).n_samples for p in logs)[1]
+    assert res.settings["nperseg"] == stream_settings(median_n, 500.0)["nperseg"] > 600
+    rows = {r.log: r for r in res.rows}
+    assert "no Welch segment" in rows[short].error and res.settings["excluded"] == [short]
+    for p in logs:
+        assert rows[p].error == "" and min(abs(np.array(rows[p].frequencies_hz) - 40.0)) < 1.5
+
+
 def test_a_failing_range_task_becomes_the_row_error(logs):
     """A range task returns its failure (here the log vanished after planning) instead of raising, and
     the per-log task turns it into the row's error."""

@@ -371,7 +371,9 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         Grid rate in Hz; default the first log's. Every log must have it (else ValueError).
     nperseg : int, optional
         Welch segment length for all logs; default :func:`vibroscope.stream.stream_settings` of
-        the shortest log.
+        the median-length log (a log shorter than one segment then gets its row's error and is
+        left out of the merged spectra); given, the shortest log that holds a segment decides the
+        rest of the settings.
     window : str, optional
         Welch window; default Hann.
     bands : sequence of (float, float), optional
@@ -434,9 +436,14 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
             raise ValueError(f"{g.path}: rate {g.fs:.9g} Hz differs from {fs:.9g} Hz of {paths[k0]}: analyse the logs "
                              f"of one rate together (or give fs= (--fs) to resample them all)")
         g.fs = fs
+    by_len = sorted((k for k, g in enumerate(grids) if g is not None), key=lambda k: grids[k].n_samples)
+    if nperseg is None:  # the median log chooses the resolution (the shortest would coarsen every log's:
+        # a 2.5 s log among 40 s ones gave nperseg 16); a log too short for it is left out, with the reason
+        mid = (len(by_len) - 1) // 2
+        by_len = by_len[mid:] + by_len[:mid][::-1]
     sett = None
-    for k in sorted((k for k, g in enumerate(grids) if g is not None), key=lambda k: grids[k].n_samples):
-        try:  # the shortest log that takes the settings chooses them
+    for k in by_len:
+        try:  # the first log in that order that takes the settings chooses them
             sett = stream_settings(grids[k].n_samples, fs, nperseg=nperseg, window=window)
             break
         except ValueError as exc:
