@@ -121,13 +121,39 @@ def test_table_csv_and_json(logs, client, tmp_path):
     assert abs(d["merged"]["psd_peak_hz"][CHS[0]] - 40.0) < 1.5
 
 
-def test_logs_of_different_rates_are_refused(logs, client, tmp_path):
+def test_a_log_of_another_rate_is_left_out_and_one_a_little_off_resampled(logs, client, tmp_path):
+    """The fleet's rate is the median log's: a 1000 Hz log among 500 Hz ones gets its row's error
+    (it names the rates and --fs) and stays out of the merged spectra; a log at 501 Hz (its clock
+    0.2 % off) is resampled onto 500 Hz and analysed (its resonance still found)."""
     from vibroscope.fleet import analyse_fleet
 
     x = np.random.default_rng(0).standard_normal((3, 5000))
-    other = write_ros2_mcap(tmp_path / "fast.mcap", Signals(x, 1000.0, CHS, t0=1.0))
-    with pytest.raises(ValueError, match="rate"):
-        analyse_fleet([logs[0], str(other)], client=client)
+    fast = str(write_ros2_mcap(tmp_path / "fast.mcap", Signals(x, 1000.0, CHS, t0=1.0)))
+    near = str(write_ros2_mcap(tmp_path / "near.mcap", Signals(read_mcap(logs[0]).data, 501.0, CHS, t0=2.0)))
+    res = analyse_fleet([logs[0], fast, near, logs[1]], client=client, nperseg=1024)
+    assert res.settings["fs"] == 500.0
+    err = res.rows[1].error
+    assert "rate 1000 Hz differs from the fleet's 500 Hz" in err and "--fs" in err
+    assert res.settings["excluded"] == [fast] and not res.rows[2].error
+    assert any("resampled onto the fleet's 500 Hz" in w and "near.mcap (501 Hz)" in w for w in res.settings["warnings"])
+    modes = res.rows[2].frequencies_hz
+    assert len(modes) and min(abs(f - 40.0 * 501 / 500) for f in modes) < 0.5
+    assert res.merged.sources == (logs[0], near, logs[1])
+
+
+def test_capstan_fleet_with_no_options(shared_data, client):
+    """The five capstan logs (no Imu) as a fleet with no option: the first log chooses the moving
+    joint-state fields; alternate_bagfile_0 is analysed, and each other log's row says why not
+    (another rate, a field it lacks) instead of stopping the fleet."""
+    from vibroscope.fleet import analyse_fleet
+
+    paths = sorted(str(p) for p in (shared_data / "mcap" / "capstan").glob("*.mcap"))
+    res = analyse_fleet(paths, client=client)
+    rows = {r.log.rsplit("/", 1)[-1]: r for r in res.rows}
+    assert not rows["alternate_bagfile_0.mcap"].error and rows["alternate_bagfile_0.mcap"].duration_s > 37
+    assert all(c.startswith("/robot/joint_state.") for c in res.settings["channels"])
+    assert "differs from the fleet's" in rows["torque_ripple_data_0.mcap"].error
+    assert all(r.error for k, r in rows.items() if k != "alternate_bagfile_0.mcap")
 
 
 def test_import_vibroscope_and_help_do_not_import_dask():

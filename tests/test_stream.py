@@ -219,3 +219,121 @@ def test_capstan_joint_states_stamped_46_s_before_logging_stream(shared_data):
     G = an.spectra.csd()
     assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
     assert len(an.modal.natural_frequencies) >= 1
+
+
+# ---- automatic channels and gaps: `--stream` with no options on logs without an Imu topic ----
+
+def _joint_log(path, *, gaps=False):
+    """A JSON log with no Imu: /robot/joint (two moving fields of a 35 Hz resonance, a constant one
+    and a sequence counter) at 400 Hz, and a less busy-scoring /robot/temp (one field); with
+    `gaps`, NaN in every field for 40 samples every 700."""
+    import scipy.signal as ss
+
+    rng = np.random.default_rng(11)
+    n, fs = 24_000, 400.0
+    b, a = ss.iirpeak(35.0, 25.0, fs)
+    y = ss.lfilter(b, a, rng.standard_normal(n)) * 5
+    x = np.vstack([y + 0.05 * rng.standard_normal(n), -0.7 * y + 0.05 * rng.standard_normal(n),
+                   np.full(n, 3.0), np.arange(n, dtype=float), 20 + 0.01 * rng.standard_normal(n)])
+    if gaps:
+        for s in range(300, n, 700):
+            x[:, s : s + 40] = np.nan
+    names = ["/robot/joint.pos", "/robot/joint.vel", "/robot/joint.mode_value", "/robot/joint.seq", "/robot/temp.t"]
+    return write_ros2_mcap(path, Signals(x, fs, names, t0=3.0), chunk_size=40_000)
+
+
+def test_stream_without_channels_takes_the_moving_fields_of_the_busiest_topic(tmp_path, monkeypatch):
+    """No Imu: the streamed analysis with no channel given chooses what the whole read chooses
+    (the busiest topic's measurement fields that move: not the constant one, not the counter) from
+    the summary and the first and last chunks, with the same messages counted when the summary has
+    no statistics; its spectra are csd_matrix of read_mcap of those channels."""
+    from vibroscope.commands.analyse import analyse_log
+    from vibroscope.io import blocks
+    from vibroscope.io.blocks import open_grid
+
+    p = _joint_log(tmp_path / "joint.mcap")
+    g = open_grid(p)
+    assert g.channels == ("/robot/joint.pos", "/robot/joint.vel")
+    assert any("channels chosen automatically" in w and "/robot/joint" in w for w in g.warnings)
+    whole = analyse_log(p, method="fdd")
+    assert tuple(whole.signals.channels) == g.channels  # the whole read's choice
+    plan = blocks._summary_plan
+    monkeypatch.setattr(blocks, "_summary_plan", lambda path, fh: (*plan(path, fh)[:4], None))
+    assert open_grid(p).channels == g.channels  # counts estimated from the sampled chunks
+    monkeypatch.undo()
+    an = analyse_stream(p)
+    ref = csd_matrix(read_mcap(p, list(g.channels)), nperseg=an.spectra.settings["nperseg"])
+    G = an.spectra.csd()
+    assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
+    assert min(abs(f - 35.0) for f in an.modal.natural_frequencies) < 0.5
+
+
+def test_streamed_nperseg_shortened_to_fit_between_gaps_as_the_whole_read(tmp_path):
+    """Gaps every 700 samples: the automatic segment (4096 samples for the record's length) holds
+    none; the streamed analysis halves it as analyse_signals does (_nperseg_for: 8 segments free
+    of gaps) from the stretches the first pass saw, and reads the log again with it."""
+    from vibroscope.pipeline import _nperseg_for
+    from vibroscope.stream import stream_settings
+
+    p = _joint_log(tmp_path / "gappy.mcap", gaps=True)
+    chs = ["/robot/joint.pos", "/robot/joint.vel"]
+    whole = read_mcap(p, chs)
+    first = stream_settings(whole.n_samples, whole.fs)["nperseg"]
+    want = _nperseg_for(whole, first)
+    assert want < first
+    an = analyse_stream(p, outputs=chs)
+    assert an.spectra.settings["nperseg"] == want
+    assert any(f"nperseg {first} -> {want}" in w for w in an.spectra.warnings)
+    ref = csd_matrix(whole, nperseg=want)
+    assert np.array_equal(an.spectra.csd().n_averages, ref.n_averages)
+    with pytest.raises(ValueError, match="free of gaps"):
+        analyse_stream(p, outputs=chs, nperseg=1024)  # given: kept, and no segment fits
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_gap_free_stretches_across_blocks_count_the_segments(seed):
+    """_GapFree over random block splits gives the stretches of the whole mask, and
+    _fitting_segments counts exactly the segments (50 % overlap) free of gaps."""
+    from vibroscope.signals import true_runs
+    from vibroscope.stream import _fitting_segments, _GapFree
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(50, 3000))
+    good = np.ones(n, bool)
+    for _ in range(int(rng.integers(0, 12))):
+        a = int(rng.integers(0, n))
+        good[a : a + int(rng.integers(1, 60))] = False
+    start = int(rng.integers(0, 100))
+    acc = _GapFree(start)
+    cuts = np.sort(rng.choice(np.arange(1, n), size=min(n - 1, int(rng.integers(0, 8))), replace=False))
+    for piece in np.split(good, cuts):
+        acc.add(piece)
+    runs = acc.result()
+    a, b = true_runs(good)
+    keep = b - a >= 16
+    assert np.array_equal(runs, np.stack([a[keep], b[keep]], axis=1) + start)
+    for nper in (16, 32, 50, 128, 512):
+        step = nper - nper // 2
+        brute = sum(good[i : i + nper].all() for i in range(0, n - nper + 1, step))
+        assert _fitting_segments(runs, start, nper) == brute
+
+
+def test_capstan_logs_stream_with_no_options(shared_data):
+    """Every capstan log (joint states, no Imu) streams with no channel and no setting given: the
+    moving fields of the busiest topic, as the whole read chooses them (alternate_bagfile_0: the
+    same 17 fields), and for the gappy logs a segment short enough to fit between the gaps."""
+    from vibroscope.io.select import auto_channels
+
+    d = shared_data / "mcap" / "capstan"
+    for name in ("alternate_bagfile_0", "bagfile_0", "controlled_data_0", "torque_ripple_data_0",
+                 "uncontrolled_data_0"):
+        an = analyse_stream(d / f"{name}.mcap")
+        chosen = an.spectra.channels
+        assert chosen and set(chosen) <= set(auto_channels(d / f"{name}.mcap").channels), name
+        assert an.csd.G.shape[1] >= 1 and np.isfinite(an.psd.values).any(), name
+        if name == "alternate_bagfile_0":
+            whole = read_mcap(d / f"{name}.mcap", list(auto_channels(d / f"{name}.mcap").channels))
+            moving = [c for c in whole.channels if np.nanmax(whole[c]) > np.nanmin(whole[c])]
+            assert list(chosen) == moving[:32]
+        if name == "torque_ripple_data_0":  # 20 Hz with 715 gaps: the automatic 2048 holds no segment
+            assert an.spectra.settings["nperseg"] < 256

@@ -18,7 +18,8 @@ each channel in each frequency band (octave bands by default). The client only p
 merges the per-log sums into the fleet's spectra.
 
 A log that cannot be analysed (it cannot be planned, is shorter than a segment, has no segment
-free of gaps, or a range of it fails to read) does not stop the fleet: its row carries the
+free of gaps, its rate is more than :data:`RATE_TOLERANCE` off the fleet's, or a range of it fails to
+read) does not stop the fleet: its row carries the
 ``error`` (its spectra NaN, no modes), it is left out of the merged spectra and ``per_log``, and
 ``settings["excluded"]`` and ``settings["warnings"]`` name it. Only when no log can be analysed
 does :func:`analyse_fleet` raise.
@@ -39,7 +40,11 @@ import numpy as np
 
 from vibroscope.stream import LogSpectra, merge_spectra, segment_ranges, stream_settings
 
-__all__ = ["FleetRow", "FleetResult", "analyse_fleet", "local_cluster", "octave_bands", "band_rms", "WORKER_ENV"]
+__all__ = ["FleetRow", "FleetResult", "analyse_fleet", "local_cluster", "octave_bands", "band_rms", "WORKER_ENV",
+           "RATE_TOLERANCE"]
+
+#: a log whose rate is within this fraction of the fleet's is resampled onto it; further off, left out
+RATE_TOLERANCE = 0.05
 
 
 def octave_bands(fs: float, df: float) -> tuple[tuple[float, float], ...]:
@@ -363,12 +368,16 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         A client, or a scheduler address (``"tcp://host:8786"``); default
         :func:`local_cluster` (one single-threaded worker process per core, closed at the end).
     channels : sequence of str, optional
-        Message paths, the same in every log; default the Imu ``linear_acceleration`` fields of
-        the first log (with `input` first when given).
+        Message paths, the same in every log; default those
+        :func:`~vibroscope.io.blocks.open_grid` chooses in the first log that plans (the Imu
+        ``linear_acceleration`` fields, else the moving measurement fields of its busiest topic),
+        with `input` first when given.
     input : str, optional
         The force channel, for FRFs and LSCF per log.
     fs : float, optional
-        Grid rate in Hz; default the first log's. Every log must have it (else ValueError).
+        Grid rate in Hz, every log resampled onto it. Default the median of the logs' rates: a
+        log within :data:`RATE_TOLERANCE` of it is put on it (the rates of logs of one nominal
+        rate differ in their estimates), a log further off gets its row's error and is left out.
     nperseg : int, optional
         Welch segment length for all logs; default :func:`vibroscope.stream.stream_settings` of
         the median-length log (a log shorter than one segment then gets its row's error and is
@@ -394,8 +403,7 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     Raises
     ------
     ValueError
-        If `paths` is empty, the logs differ in rate, or no log can be analysed (each named
-        with its error).
+        If `paths` is empty, or no log can be analysed (each named with its error).
     ImportError
         If ``dask.distributed`` is not installed (the ``[dask]`` extra).
     """
@@ -408,9 +416,9 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     fs_given = fs  # every log goes onto this rate when given
     errors: dict[int, str] = {}  # by position in `paths` (a log may be given twice)
 
-    def plan(k, chans, rate):
+    def plan(k, chans, rate, exclude=()):
         try:
-            return open_grid(paths[k], chans, fs=rate)
+            return open_grid(paths[k], chans, fs=rate, exclude_topics=exclude)
         except (VibroscopeError, ValueError, OSError) as exc:  # this log's row says why; the others go on
             errors[k] = f"not analysed: cannot be planned: {type(exc).__name__}: {exc}"
             return None
@@ -421,7 +429,7 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
 
     first, k0 = None, 0
     for k0 in range(len(paths)):  # the first log that plans chooses the channels and the rate
-        first = plan(k0, channels, fs)
+        first = plan(k0, channels, fs, (input.split(".", 1)[0],) if input and channels is None else ())
         if first is not None and channels is None and input is not None:
             first = plan(k0, [input] + [c for c in first.channels if c != input], fs)
         if first is not None:
@@ -429,17 +437,27 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     if first is None:
         raise none_left()
     channels = first.channels
-    fs = first.fs
     grids = [None if k < k0 else first if k == k0 else plan(k, channels, fs_given) for k in range(len(paths))]
+    rates = [g.fs for g in grids if g is not None]
+    fs = fs_given if fs_given is not None else sorted(rates)[(len(rates) - 1) // 2]  # the median log's rate
+    resampled = []
+    for k, g in enumerate(grids):
+        if g is None or abs(g.fs - fs) <= 1e-9 * fs:
+            continue
+        if abs(g.fs - fs) > RATE_TOLERANCE * fs:  # another kind of log (or a broken clock): not mixed in
+            errors[k] = (f"not analysed: rate {g.fs:.6g} Hz differs from the fleet's {fs:.6g} Hz (the median log's) "
+                         f"by more than {100 * RATE_TOLERANCE:g} %: analyse the logs of one rate together, or give "
+                         f"fs= (--fs) to resample every log")
+            grids[k] = None
+        else:  # the same nominal rate, each log's estimate a little off: onto the fleet's grid rate
+            resampled.append(f"{paths[k]} ({g.fs:.6g} Hz)")
+            grids[k] = plan(k, channels, fs)
     for g in filter(None, grids):
-        if abs(g.fs - fs) > 1e-9 * fs:
-            raise ValueError(f"{g.path}: rate {g.fs:.9g} Hz differs from {fs:.9g} Hz of {paths[k0]}: analyse the logs "
-                             f"of one rate together (or give fs= (--fs) to resample them all)")
         g.fs = fs
     by_len = sorted((k for k, g in enumerate(grids) if g is not None), key=lambda k: grids[k].n_samples)
     if nperseg is None:  # the median log chooses the resolution (the shortest would coarsen every log's:
         # a 2.5 s log among 40 s ones gave nperseg 16); a log too short for it is left out, with the reason
-        mid = (len(by_len) - 1) // 2
+        mid = len(by_len) // 2  # of two middle logs, the longer
         by_len = by_len[mid:] + by_len[:mid][::-1]
     sett = None
     for k in by_len:
@@ -493,6 +511,9 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     merged = merge_spectra([results[k][0] for k in good])
     excluded = [p for k, p in enumerate(paths) if k not in good]
     warns = [f"{paths[k]}: left out of the merged spectra: {e}" for k, e in sorted(errors.items())]
+    if resampled:
+        warns.append(f"resampled onto the fleet's {fs:.6g} Hz (rate within {100 * RATE_TOLERANCE:g} %): "
+                     + ", ".join(resampled))
     settings = dict(sett, fs=fs, channels=list(channels), bands_hz=[list(b) for b in bands], tasks=n_tasks,
                     workers=n_workers, input=input, excluded=excluded, warnings=warns)
     return FleetResult(tuple(rows), per_log, merged, settings)

@@ -145,6 +145,11 @@ class LogSpectra:
         (log, first grid index, stop index) of every range accumulated.
     t0_ns : int
         Grid origin of the first log in ns.
+    gap_free : ndarray of int64, shape (k, 2), or None
+        The stretches ``[a, b)`` (grid indices) of at least 16 samples with no channel missing,
+        of one range read by :func:`accumulate_log` (with ``common_gaps``); None for merged
+        spectra. They tell how many segments a shorter `nperseg` would fit between the gaps
+        (:func:`analyse_stream` shortens the automatic one) without another pass.
     """
 
     sources: tuple
@@ -157,6 +162,7 @@ class LogSpectra:
     warnings: tuple = ()
     ranges: tuple = ()
     t0_ns: int = 0
+    gap_free: Any = field(default=None, repr=False)
 
     def csd(self, scaling: str = "density") -> CrossSpectralMatrix:
         """The cross-spectral matrix (as :func:`~vibroscope.spectral.csd_matrix` gives it).
@@ -261,10 +267,12 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
     acc = _new_accumulator(len(g.channels), g.fs, sett)
     notes: list[str] = list(g.warnings)
     missing = 0
+    runs = _GapFree(i0)
     for blk in g.blocks(block_samples, start=i0, stop=i1):
         d = blk.data
         bad = ~np.isfinite(d).all(axis=0)
         missing += int(bad.sum())
+        runs.add(~bad)
         if common_gaps:
             if bad.any():
                 d = np.array(d)
@@ -277,7 +285,58 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
         notes.append(f"{g.path}: {missing} of {i1 - i0} grid samples missing in at least one channel (gaps, lost "
                      f"chunks; never interpolated): the Welch segments touching them are skipped")
     return LogSpectra((str(g.path),), g.channels, g.units, g.fs, i1 - i0, acc, sett, tuple(notes),
-                      ((str(g.path), int(i0), int(i1)),), g.t0_ns)
+                      ((str(g.path), int(i0), int(i1)),), g.t0_ns, runs.result() if common_gaps else None)
+
+
+class _GapFree:
+    """The stretches of at least 16 samples free of gaps, from the masks of consecutive blocks."""
+
+    def __init__(self, start: int):
+        self.pos, self.open, self.runs = int(start), None, []
+
+    def add(self, good: np.ndarray) -> None:
+        from vibroscope.signals import true_runs
+
+        a, b = true_runs(good)
+        a, b = a + self.pos, b + self.pos
+        if self.open is not None:
+            if a.size and a[0] == self.pos:  # the stretch goes on across the block boundary
+                a[0] = self.open
+            elif self.pos - self.open >= 16:
+                self.runs.append((self.open, self.pos))
+            self.open = None
+        end = self.pos + good.size
+        if b.size and b[-1] == end:  # may go on in the next block
+            self.open, a, b = int(a[-1]), a[:-1], b[:-1]
+        long = b - a >= 16
+        self.runs += zip(a[long].tolist(), b[long].tolist())
+        self.pos = end
+
+    def result(self) -> np.ndarray:
+        runs = self.runs + ([(self.open, self.pos)] if self.open is not None and self.pos - self.open >= 16 else [])
+        return np.array(runs, np.int64).reshape(-1, 2)
+
+
+def _fitting_segments(gap_free: np.ndarray, start: int, nperseg: int) -> int:
+    """Welch segments of `nperseg` (50 % overlap, starting at grid index `start`) inside the
+    gap-free stretches."""
+    step = nperseg - nperseg // 2
+    first = -(-(gap_free[:, 0] - start) // step)  # first segment starting in the stretch
+    last = (gap_free[:, 1] - nperseg - start) // step  # last one ending in it
+    return int(np.maximum(last - first + 1, 0).sum())
+
+
+def _fit_between_gaps(sp: LogSpectra) -> int:
+    """The automatic `nperseg` of `sp`, halved (a power of two, at least 16) until at least 8
+    segments fit between the gaps (:func:`vibroscope.pipeline._nperseg_for`, from the gap-free
+    stretches instead of the samples)."""
+    n = int(sp.settings["nperseg"])
+    if sp.gap_free is None:
+        return n
+    start = sp.ranges[0][1]
+    while n > 16 and _fitting_segments(sp.gap_free, start, n) < 8:
+        n //= 2
+    return n
 
 
 def merge_spectra(parts: Sequence[LogSpectra]) -> LogSpectra:
@@ -400,6 +459,12 @@ def _modes_from_spectra(G: CrossSpectralMatrix, input: str | None, outputs: list
     if fmax is None:
         notes.append(f"band from the response: lowest resonance {f_low:.4g} Hz, 95 % of the variance below "
                      f"{hi_r:.4g} Hz")
+        from vibroscope.modal._peaks import MIN_BAND_LINES
+
+        lines = f[(f > 0) & (f >= (fmin or 0.0))]
+        if lines.size > MIN_BAND_LINES and np.count_nonzero(lines <= hi) < 2 * MIN_BAND_LINES:
+            hi = float(lines[min(2 * MIN_BAND_LINES, lines.size) - 1])  # a band of a few lines holds no peak
+            notes.append(f"band widened to {hi:.4g} Hz: {2 * MIN_BAND_LINES} frequency lines at least")
     if method == "auto":
         notes.append("output-only modes by EFDD on the spectra (SSI-COV needs the time series, which a streamed "
                      "analysis does not hold)")
@@ -423,8 +488,9 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
     input : str, optional
         The force channel (message path); with it FRFs and LSCF + LSFD, without it FDD/EFDD.
     outputs : sequence of str, optional
-        Response channels; default every Imu ``linear_acceleration`` field (and, with a log,
-        channels that never move are left out).
+        Response channels; default every Imu ``linear_acceleration`` field, or in a log with no
+        Imu topic the moving measurement fields of its busiest topic
+        (:func:`vibroscope.io.blocks.open_grid`); with a log, channels that never move are left out.
     fs : float, optional
         Grid rate in Hz; default the highest topic rate.
     nperseg : int, optional
@@ -472,10 +538,18 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
 
         chans = None if outputs is None and input is None else ([input] if input else []) + list(outputs or [])
         if input and outputs is None:
-            g0 = open_grid(path, None, fs=fs)
+            g0 = open_grid(path, None, fs=fs, exclude_topics=(input.split(".", 1)[0],))  # a force is no response
             chans = [input] + [c for c in g0.channels if c != input]
         grid = open_grid(path, chans, fs=fs)  # planned once: the first pass and every refinement read it
         sp = accumulate_log(path, grid=grid, nperseg=nperseg, window=window, block_samples=block_samples)
+        nfit = sp.settings["nperseg"] if nperseg is not None else _fit_between_gaps(sp)
+        if nfit < sp.settings["nperseg"]:  # as analyse_signals: the automatic segment shortened to fit
+            # between the gaps (the first pass learnt where they are): one more pass over the log
+            first = sp.settings["nperseg"]
+            sp = accumulate_log(path, grid=grid, nperseg=nfit, window=window, block_samples=block_samples)
+            sp = replace(sp, warnings=sp.warnings + (
+                f"nperseg {first} -> {nfit} (df {sp.fs / first:.4g} -> {sp.fs / nfit:.4g} Hz) so that 8 or more "
+                f"segments fit between the gaps (one more pass over the log)",))
     refinements: list[int] = []
     while True:
         G, h, ident, band, outs, notes = _analyse_spectra(sp, input, outputs, fmin=fmin, fmax=fmax, n_modes=n_modes,
@@ -511,7 +585,15 @@ def _analyse_spectra(sp: LogSpectra, input, outputs, **kw):
     acc = sp.accumulator
     diag = acc._auto_sums()
     outs = [c for c in sp.channels if c != input] if outputs is None else list(outputs)
-    flat = [c for c in outs if diag[sp.channels.index(c)] == 0]
+    count = np.diag(acc.n_averages)
+    none = [c for c in outs if count[sp.channels.index(c)] == 0]
+    if none and len(none) == len(outs):
+        raise ValueError(f"no response channel has a segment of nperseg={sp.settings['nperseg']} samples free of "
+                         f"gaps ({none[:3]}{' ...' if len(none) > 3 else ''}): give a smaller --nperseg")
+    flat = [c for c in outs if diag[sp.channels.index(c)] == 0 and c not in none]
+    if none:
+        notes.append(f"{len(none)} channels with no segment free of gaps skipped: {none[:3]}")
+        outs = [c for c in outs if c not in none]
     if flat:
         notes.append(f"{len(flat)} constant channels skipped (no vibration): {flat[:3]}")
         outs = [c for c in outs if c not in flat]

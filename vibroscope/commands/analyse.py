@@ -10,9 +10,6 @@ import numpy as np
 __all__ = ["add_parser", "run", "analyse_log", "run_stream", "run_fleet", "memory_budget", "whole_read_bytes",
            "parse_size", "stream_report_text", "stream_summary"]
 
-#: most channels an automatic (non-IMU) selection analyses
-MAX_AUTO_CHANNELS = 32
-
 #: how the report names each identification method
 METHOD_NAMES = {"lscf": "LSCF/polyMAX + LSFD", "ssi_cov": "SSI-COV", "fdd": "FDD", "efdd": "EFDD",
                 "peak_picking": "peak picking", "polymax_oma": "polyMAX on the output spectra"}
@@ -114,7 +111,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     Analysis
     """
     from vibroscope.io import LogIndex, read_mcap
-    from vibroscope.io.select import auto_channels
+    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels
     from vibroscope.pipeline import analyse_signals
 
     notes, fallback, source = [], False, log

@@ -110,8 +110,9 @@ def _summary_valid(fd: int, size: int) -> bool:
 
 
 def _summary_plan(path: Path, fh: Any):
-    """(schemas, channels, chunk spans, header) from the summary section, or None without a usable one
-    (none, a CRC-32 mismatch, a chunk index not pointing at a chunk record)."""
+    """(schemas, channels, chunk spans, header, messages per channel id or None) from the summary
+    section (the counts from its statistics record), or None without a usable one (none, a CRC-32
+    mismatch, a chunk index not pointing at a chunk record)."""
     from mcap.reader import SeekingReader
 
     fd = fh.fileno()
@@ -130,17 +131,19 @@ def _summary_plan(path: Path, fh: Any):
              for ci in summ.chunk_indexes]
     if any(_pread(fd, 1, sp.offset)[0] != _CHUNK_OP for sp in spans):
         return None
-    return dict(summ.schemas), dict(summ.channels), sorted(spans, key=lambda s: s.offset), header
+    counts = dict(summ.statistics.channel_message_counts) if summ.statistics is not None else None
+    return dict(summ.schemas), dict(summ.channels), sorted(spans, key=lambda s: s.offset), header, counts
 
 
 def _linear_plan(path: Path, fd: int, size: int, warnings: list[str], skipped: list[tuple[int, str]]):
-    """(schemas, channels, chunk spans, header) by one pass over the record headers, each chunk opened
-    in turn (one at a time) for its channels and times; the pass stops at damage (reported)."""
+    """(schemas, channels, chunk spans, header, messages per channel id) by one pass over the record
+    headers, each chunk opened in turn (one at a time) for its channels and times; the pass stops at
+    damage (reported)."""
     from mcap.data_stream import ReadDataStream
     from mcap.records import Channel, Header, Schema
     from io import BytesIO
 
-    schemas, channels, spans, header = {}, {}, [], None
+    schemas, channels, spans, header, counts = {}, {}, [], None, {}
     pos = 8
     while pos + 9 <= size:
         op, length = _REC.unpack(_pread(fd, 9, pos))
@@ -162,8 +165,10 @@ def _linear_plan(path: Path, fd: int, size: int, warnings: list[str], skipped: l
                 for r in recs:
                     (schemas if isinstance(r, Schema) else channels)[r.id] = r
                 if cid.size:
-                    spans.append(ChunkSpan(pos, end - pos, int(lt.min()), int(lt.max()),
-                                           frozenset(np.unique(cid).tolist())))
+                    ids, n = np.unique(cid, return_counts=True)
+                    for c, k in zip(ids.tolist(), n.tolist()):
+                        counts[c] = counts.get(c, 0) + k
+                    spans.append(ChunkSpan(pos, end - pos, int(lt.min()), int(lt.max()), frozenset(ids.tolist())))
         elif op in (_SCHEMA_OP, _CHANNEL_OP, 0x01):
             body = _pread(fd, length, pos + 9)
             cls = {_SCHEMA_OP: Schema, _CHANNEL_OP: Channel, 0x01: Header}[op]
@@ -176,7 +181,7 @@ def _linear_plan(path: Path, fd: int, size: int, warnings: list[str], skipped: l
             elif r is not None:
                 (schemas if op == _SCHEMA_OP else channels)[r.id] = r
         pos = end
-    return schemas, channels, spans, header
+    return schemas, channels, spans, header, counts
 
 
 @dataclass(eq=False)
@@ -231,6 +236,7 @@ class LogGrid:
     _parsed: list = field(default_factory=list, repr=False)
     stamp_offsets: tuple = ()
     _chunk_times: Any = field(default=None, repr=False)
+    _counts: Any = field(default=None, repr=False)  # messages per channel id (None: the summary has none)
 
     @property
     def duration(self) -> float:
@@ -428,6 +434,64 @@ def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, fl
     return a[0], b[1], a[2], min(a[3], b[3]), max(a[4], b[4])
 
 
+def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
+    """The channels of a log given none, chosen as the whole read chooses them
+    (:func:`vibroscope.io.select.auto_channels`) without reading the whole log.
+
+    1. ``linear_acceleration.{x,y,z}`` of every Imu topic (from the schemas alone).
+    2. Else the measurement fields of the busiest decodable topic (messages × fields), the
+       messages counted by the summary's statistics (else the chunks' own message indexes, or
+       estimated from the sampled chunks), its fields found in its first message; of those, the
+       fields that move within the first and last chunks of the topic, at most
+       :data:`~vibroscope.io.select.MAX_AUTO_CHANNELS` in field order. Only those chunks (per
+       channel) are decompressed: a field that moves only in the middle of the log is not chosen
+       (the warning says so; name it with ``--outputs``).
+    """
+    from vibroscope.io._extract import extract
+    from vibroscope.io.log_index import ACCELERATION_TYPES
+    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels
+
+    chans, schemas = grid._channels, grid._schemas
+    imu = sorted({ch.topic for ch in chans.values() if ch.schema_id in schemas and ch.topic not in exclude_topics
+                  and schemas[ch.schema_id].name in ACCELERATION_TYPES})
+    if imu:
+        return [f"{t}.linear_acceleration.{a}" for t in imu for a in "xyz"]
+    held = {cid: [c for c in grid.chunks if c.channel_ids is None or cid in c.channel_ids] for cid in chans}
+    ends = {cid: {sp[0].offset: sp[0], sp[-1].offset: sp[-1]} for cid, sp in held.items() if sp}
+    sample = sorted({o: c for e in ends.values() for o, c in e.items()}.values(), key=lambda c: c.offset)
+    log = grid._index(sample, None)
+    by_topic: dict[str, int] = {}
+    for cid, ch in chans.items():
+        if grid._counts is not None:
+            n = int(grid._counts.get(cid, 0))
+        else:  # no statistics: the sampled chunks' messages scaled to all chunks holding the channel
+            n = round(log.log_times(cid).size * len(held.get(cid, ())) / max(1, len(ends.get(cid, ()))))
+        by_topic[ch.topic] = by_topic.get(ch.topic, 0) + n
+    try:
+        sel = auto_channels(log, message_counts=by_topic, exclude_topics=exclude_topics)
+    except ChannelError as exc:
+        raise ChannelError(f"{exc} (automatic choice from the summary and the first and last chunks)") from None
+    topic = log.topic_of(sel.channels[0]).topic
+    fields = [log.topic_of(c).fields for c in sel.channels]
+    vals = np.concatenate([extract(log, cid, fields, [], [], False).values for cid in log.by_topic[topic]], axis=1)
+    moving = []
+    for c, v in zip(sel.channels, vals):
+        v = v[np.isfinite(v)]  # NaN marks a message without the field, not a value
+        if v.size and v.max() > v.min():
+            moving.append(c)
+    if not moving:
+        raise ChannelError(f"{grid.path}: no Imu topic, and none of the {len(sel.channels)} measurement fields of "
+                           f"{topic} moves in its first and last chunks; choose channels (vibroscope info lists "
+                           f"the topics)")
+    grid.warnings.append(
+        f"channels chosen automatically: {sel.reason}: the {min(len(moving), MAX_AUTO_CHANNELS)} that move in "
+        f"its first and last chunks" + (f" (the first {MAX_AUTO_CHANNELS} of {len(moving)})"
+                                       if len(moving) > MAX_AUTO_CHANNELS else "")
+        + f"; {len(sel.channels) - len(moving)} fields constant there not analysed")
+    grid.warnings += [f"{what}: skipped: {why}" for what, why in sel.skipped]
+    return moving[:MAX_AUTO_CHANNELS]
+
+
 def _stamp_offsets(grid: LogGrid) -> tuple:
     """``(topic, lo_ns, hi_ns)`` per topic of the grid (:func:`_first_last`), without the rest."""
     out = []
@@ -439,7 +503,8 @@ def _stamp_offsets(grid: LogGrid) -> tuple:
 
 def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: float | None = None,
               t0_ns: int | None = None, margin_s: float = 1.0, n_samples: int | None = None,
-              stamp_offsets: Sequence[tuple[str, int, int]] | None = None) -> LogGrid:
+              stamp_offsets: Sequence[tuple[str, int, int]] | None = None,
+              exclude_topics: Sequence[str] = ()) -> LogGrid:
     """Plan reading a log in blocks on one uniform grid.
 
     Parameters
@@ -448,7 +513,10 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         The MCAP log.
     channels : sequence of str, optional
         Message paths. Default: ``linear_acceleration.{x,y,z}`` of every Imu topic (all three
-        axes: an axis that never moves is not dropped here, unlike :func:`read_mcap`).
+        axes: an axis that never moves is not dropped here, unlike :func:`read_mcap`); in a log
+        with no Imu topic, the measurement fields of the busiest topic that move, chosen from
+        the summary and a few chunks (:func:`_automatic_channels`; the choice goes into
+        :attr:`LogGrid.warnings`).
     fs : float, optional
         Grid rate in Hz. Default: the highest topic rate, estimated from the first chunk of
         each topic and refined over the whole span (the number of periods between the
@@ -475,6 +543,8 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
     stamp_offsets : sequence of (str, int, int), optional
         ``(topic, lo_ns, hi_ns)`` per topic, as :attr:`LogGrid.stamp_offsets` of an earlier
         planning of the same log gives them; default learnt from the log.
+    exclude_topics : sequence of str, optional
+        Topics the automatic choice leaves out (the input's: a force is not a response).
 
     Returns
     -------
@@ -486,11 +556,12 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         If the file is not an MCAP log or holds no readable chunk.
     ChannelError
         If a channel names an unknown topic, a topic has no messages, or (automatic
-        selection) the log has no Imu topic.
+        selection) the log has no Imu topic and no decodable topic with moving measurement
+        fields.
     ValueError
         If `fs` or `margin_s` is not a positive (non-negative) finite number.
     """
-    from vibroscope.io.log_index import ACCELERATION_TYPES, LogIndex
+    from vibroscope.io.log_index import LogIndex
 
     path = Path(path)
     if fs is not None and not (np.isfinite(fs) and fs > 0):
@@ -512,18 +583,15 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         if plan is None:
             warnings.append(f"{path}: no usable summary section: chunks located by one linear pass")
             plan = _linear_plan(path, fh.fileno(), size, warnings, skipped)
-    schemas, chans, spans, header = plan
+    schemas, chans, spans, header, counts = plan
     if not spans:
         raise LogFormatError(f"{path}: no readable chunk (streaming reads chunked logs)")
     grid = LogGrid(path, (), (), 1.0, 0, 0, tuple(spans), float(margin_s), indexed, warnings, skipped,
                    schemas, chans, header)
+    grid._counts = counts
     probe = LogIndex(grid._index([], set()).scan)  # channels and schemas only: names and units
     if channels is None:
-        imu = sorted({ch.topic for cid, ch in chans.items() if ch.schema_id in schemas
-                      and schemas[ch.schema_id].name in ACCELERATION_TYPES})
-        if not imu:
-            raise ChannelError(f"{path}: no sensor_msgs/msg/Imu topic; choose channels (vibroscope info lists them)")
-        channels = [f"{t}.linear_acceleration.{a}" for t in imu for a in "xyz"]
+        channels = _automatic_channels(grid, tuple(exclude_topics))
     grid._parsed = [probe.topic_of(c) for c in channels]
     grid.channels = tuple(str(m) for m in grid._parsed)
     grid.units = tuple(probe.unit(m) for m in grid._parsed)

@@ -8,7 +8,10 @@ from pathlib import Path
 
 from vibroscope.io.log_index import LogIndex, select_acceleration_channels
 
-__all__ = ["AutoSelection", "auto_channels", "is_bookkeeping"]
+__all__ = ["AutoSelection", "auto_channels", "is_bookkeeping", "MAX_AUTO_CHANNELS"]
+
+#: most channels an automatic (non-IMU) selection analyses (the fields that move, in field order)
+MAX_AUTO_CHANNELS = 32
 
 #: fields that count messages, stamp them or name things: never vibration data
 _BOOKKEEPING = re.compile(
@@ -57,7 +60,7 @@ class AutoSelection:
 
 
 def auto_channels(path: str | Path | LogIndex, *, min_messages: int = 64, max_channels: int = 32,
-                  exclude_topics: tuple = ()) -> AutoSelection:
+                  exclude_topics: tuple = (), message_counts: dict | None = None) -> AutoSelection:
     """Choose what to analyse in a log with no channel given.
 
     1. Every ``linear_acceleration.{x,y,z}`` of the ``sensor_msgs/msg/Imu`` topics.
@@ -76,6 +79,10 @@ def auto_channels(path: str | Path | LogIndex, *, min_messages: int = 64, max_ch
         Field count beyond which a topic scores no higher (default 32).
     exclude_topics : tuple of str, optional
         Topics never chosen as responses (e.g. the input's: a force is not a response).
+    message_counts : dict of str to int, optional
+        Messages per topic in the whole log, for an index that holds only some of its chunks
+        (:func:`vibroscope.io.blocks.open_grid` samples the first and last chunks); default the
+        index's own counts.
 
     Returns
     -------
@@ -96,7 +103,8 @@ def auto_channels(path: str | Path | LogIndex, *, min_messages: int = 64, max_ch
     acc, _ = select_acceleration_channels(info)
     if acc:
         return AutoSelection(tuple(acc), "linear_acceleration of every sensor_msgs/msg/Imu topic", undecodable)
-    counts = {t.topic: t.message_count for t in info.topics if t.decodable}
+    counts = {t.topic: (t.message_count if message_counts is None else int(message_counts.get(t.topic, 0)))
+              for t in info.topics if t.decodable}
     fields = log.discover_fields()
     best, best_key = None, None
     for topic, paths in fields.items():

@@ -39,7 +39,10 @@ def band_indices(frequencies: np.ndarray, fmin: float | None, fmax: float | None
         band &= f <= fmax
     idx = np.flatnonzero(band)
     if idx.size < MIN_BAND_LINES:
-        raise ValueError(f"the band {fmin=} .. {fmax=} Hz holds {idx.size} bins; at least {MIN_BAND_LINES} are needed")
+        lo = "0" if fmin is None else f"{float(fmin):.6g}"
+        hi = f"{f[-1]:.6g}" if fmax is None else f"{float(fmax):.6g}"
+        raise ValueError(f"the band {lo}–{hi} Hz holds {idx.size} frequency lines (spacing {f[1] - f[0]:.4g} Hz); at "
+                         f"least {MIN_BAND_LINES} are needed: widen the band or lengthen nperseg")
     return idx
 
 
