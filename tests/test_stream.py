@@ -140,13 +140,24 @@ def test_cli_stream_option(demo_log, tmp_path, capsys):
 
     p, truth = demo_log
     js = tmp_path / "s.json"
-    assert main(["analyse", str(p), "--stream", "--input", FORCE, "--outputs", *RESP, "--json", str(js)]) == 0
+    out_dir = tmp_path / "out"
+    assert main(["analyse", str(p), "--stream", "--input", FORCE, "--outputs", *RESP, "--json", str(js),
+                 "--out", str(out_dir)]) == 0
     out = capsys.readouterr().out
     assert out.splitlines()[0].startswith(f"streaming {p} block by block: --stream")
     d = json.loads(js.read_text())
     assert d["settings"]["streamed"] is True
     assert np.allclose([m["frequency_hz"] for m in d["modes"]], truth.natural_frequencies, rtol=0.005)
-    assert main(["analyse", str(p), "--max-memory", "1MB", "--outputs", *RESP]) == 0
+    # the figures and the recording of the spectra, FRFs and modes; none of the time series
+    figs = out_dir / f"{p.stem}_analyse_figures"
+    assert sorted(f.name for f in figs.glob("*.png")) == ["frf.png", "frf_synthesis.png", "modes.png", "psd.png",
+                                                          "singular_values.png", "stabilization.png"]
+    from vibroscope.viewers.rerun_view import read_rrd
+
+    ents = read_rrd(out_dir / f"{p.stem}_analyse.rrd")
+    assert {"/psd", "/frf", "/modes", "/csd"} <= {"/" + e.split("/")[1] for e in ents}
+    assert not [e for e in ents if e.startswith("/signals")]
+    assert main(["analyse", str(p), "--max-memory", "1MB", "--outputs", *RESP, "--no-rrd", "--no-figures"]) == 0
     assert "more than the memory budget 1 MiB" in capsys.readouterr().out
 
 

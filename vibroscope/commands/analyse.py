@@ -69,7 +69,8 @@ def add_parser(sub) -> None:
     p.add_argument("--progress", action="store_true", help="progress bar while reading")
     p.add_argument("--stream", action="store_true",
                    help="read the log block by block into the spectral accumulators (memory bounded by the block; "
-                        "spectra, FRFs and modes from the spectra; no figures or rerun recording). Chosen "
+                        "spectra, FRFs and modes from the spectra, drawn and recorded without the time series). "
+                        "Chosen "
                         "automatically when the log needs more than --max-memory")
     p.add_argument("--max-memory", metavar="SIZE",
                    help="memory budget for reading a log whole, e.g. 1GB, 512MB (default: half the available "
@@ -329,8 +330,9 @@ def _stream_kw(args) -> dict:
 
 def run_stream(args) -> int:
     """``vibroscope analyse --stream LOG``: the log read block by block (:func:`vibroscope.stream.analyse_stream`);
-    prints the report and writes the ``--json`` summary (no figures or rerun recording: they need the
-    time series).
+    prints the report and writes the ``--json`` summary, the figures and the rerun recording of the
+    spectra, FRFs and modes (:func:`write_outputs`; no time-series figure or entity: a streamed
+    analysis never holds the record).
 
     Parameters
     ----------
@@ -347,10 +349,15 @@ def run_stream(args) -> int:
     VibroscopeError
         When the analysis fails (the log named).
     """
+    from vibroscope.commands._outputs import check_outputs, default_output
     from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
     from vibroscope.stream import analyse_stream
 
+    rrd = None if args.no_rrd else (args.rrd or default_output(args.log, "analyse", ".rrd", args.out))
+    figures = None if args.no_figures else (args.figures or default_output(args.log, "analyse", "_figures", args.out))
+    check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},
+                  {"log": args.log, "coordinates": args.coords})
     kw = _stream_kw(args)
     kw["select"] = _select_freqs(args.select)
     if args.method in ("ssi", "polymax"):
@@ -366,7 +373,9 @@ def run_stream(args) -> int:
         with AtomicOutputs(inputs=[args.log]) as tx:
             tx.file(args.json).write_text(json.dumps(stream_summary(an, source=str(args.log)), indent=2))
         print(f"summary: {args.json}")
-    print("streamed: no figures or rerun recording (they need the whole time series)")
+    # the spectra, FRFs, modes and stabilization diagram need no time series: drawn and recorded as
+    # for a whole read (no signals.png, kinematics.png or /signals entities)
+    write_outputs(an, args.log, coords=args.coords, rrd=rrd, figures=figures, spawn=args.spawn, ods=args.ods)
     return 0
 
 
@@ -581,8 +590,11 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
 
     Parameters
     ----------
-    an : Analysis
-        The analysis (:func:`vibroscope.pipeline.analyse_signals`).
+    an : Analysis or StreamAnalysis
+        The analysis (:func:`vibroscope.pipeline.analyse_signals`), or a streamed one
+        (:func:`vibroscope.stream.analyse_stream`: no time series, so no ``signals.png``,
+        ``kinematics.png`` or ``/signals`` entities, and no `json_path`: see
+        :func:`stream_summary`).
     log : Path
         The analysed log (named in the summary and the recording; never written).
     coords : Path, optional
@@ -621,7 +633,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     ident = getattr(an, "identification", None)
     stab = ident.stabilization if ident is not None else None
     synth = ident.lsfd.synthesize() if ident is not None and ident.lsfd is not None and an.frf is not None else None
-    acc = [c for c, u in zip(an.signals.channels, an.signals.units) if c in outs and u in ("m/s^2", "m/s²")]
+    sig = getattr(an, "signals", None)  # a streamed analysis holds the spectra only
+    acc = [] if sig is None else [c for c, u in zip(sig.channels, sig.units) if c in outs and u in ("m/s^2", "m/s²")]
     ods_shapes = []
     if ods:
         from vibroscope.spectral.integration import ods as ods_at
@@ -648,7 +661,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             from vibroscope.viewers.figures import _save, summary_figures
 
             tmp = tx.directory(figures)
-            paths = summary_figures(tmp, signals=an.signals, psd=an.psd, frf=an.frf, modal=an.modal,
+            paths = summary_figures(tmp, signals=sig, psd=an.psd, frf=an.frf, modal=an.modal,
                                     sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
                                     stabilization=stab, synthesized=synth)
             if acc:
@@ -669,7 +682,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 a = an.signals.select(acc)
                 kin = (integrate(a, order=1), integrate(a, order=2))
             modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
-            path = log_analysis(kinematics=kin, signals=an.signals, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
+            path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
                                 coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None, spawn=spawn,
                                 recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
             written["rrd"] = tx.final(path) if path is not None else None
