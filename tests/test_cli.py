@@ -280,3 +280,27 @@ def test_analyse_log_arguments_with_optional_values(tmp_path, capsys):
     code = main(["analyse", "--connect", logs[0], "--no-rrd", "--no-figures"])
     err = capsys.readouterr().err
     assert code == 1 and f"no rerun viewer listening at {live.DEFAULT_URL}" in err and logs[0] in err
+
+
+def test_analyse_of_an_imu_log_with_a_lost_stretch_writes_every_output(tmp_path, capsys, check_png):
+    """Accelerations with 0.3 s missing (a lost chunk): the modes, and every figure and the recording
+    are written; the kinematics integrate each stretch between the gaps (before: the run stopped at
+    the outputs with "array must not contain infs or NaNs")."""
+    import scipy.signal as ss
+
+    from vibroscope.io import write_ros2_mcap
+    from vibroscope.signals import Signals
+
+    rng = np.random.default_rng(1)
+    b, a = ss.iirpeak(37.0, 30, 1000.0)
+    y = ss.lfilter(b, a, rng.standard_normal(30_000))
+    x = np.vstack([y, 0.5 * y, -y]) + 0.01 * rng.standard_normal((3, 30_000))
+    x[:, 12_000:12_300] = np.nan
+    log = write_ros2_mcap(tmp_path / "gap.mcap", Signals(x, 1000.0, [f"/imu.linear_acceleration.{c}" for c in "xyz"],
+                                                          ["m/s^2"] * 3, t0=1.0))
+    assert main(["analyse", str(log), "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    f = [float(ln.split()[1]) for ln in out.splitlines() if ln.strip().startswith("1 ")]
+    assert f and abs(f[0] - 37.0) < 0.5
+    check_png(tmp_path / "gap_analyse_figures" / "kinematics.png")
+    assert (tmp_path / "gap_analyse.rrd").stat().st_size > 10_000

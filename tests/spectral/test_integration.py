@@ -262,3 +262,29 @@ def test_log_ods_writes_an_animated_recording(demo_frf, tmp_path):
     model, h = demo_frf
     path = log_ods(ods(h, model.modes().natural_frequencies[0]), rrd_path=tmp_path / "ods.rrd")
     assert path.exists() and path.stat().st_size > 1000
+
+
+@pytest.mark.parametrize("method", ["frequency", "highpass"])
+def test_integrate_does_not_bridge_gaps(sines, method):
+    """A record with gaps (NaN: a lost chunk) integrates stretch by stretch: the missing samples and
+    a stretch under 4 samples stay NaN, each stretch equals the integral of that stretch alone, and
+    away from the stretches' edge zones (3 / f_cut) the velocity is the analytic one (before: scipy's
+    "array must not contain infs or NaNs", and `vibroscope analyse` of such a log failed)."""
+    sig, v, _d = sines
+    x = np.array(sig.data)
+    x[:, 25_000:25_300] = np.nan  # a lost chunk
+    x[1, 40_000:40_002] = np.nan  # one row only, leaving a 3-sample stretch after it
+    x[1, 40_005:40_006] = np.nan
+    out = integrate(Signals(x, FS, sig.channels, sig.units), order=1, f_cut=F_CUT, method=method)
+    assert np.array_equal(np.isnan(out.data), np.isnan(x) | (np.arange(x.shape[1]) >= 40_002)
+                          & (np.arange(x.shape[1]) < 40_005) & (np.arange(2) == 1)[:, None])
+    for row, (a, b) in ((0, (25_300, x.shape[1])), (1, (25_300, 40_000))):
+        alone = integrate(Signals(x[row : row + 1, a:b], FS, sig.channels[:1], sig.units[:1]), order=1,
+                          f_cut=F_CUT, method=method)
+        assert np.array_equal(out.data[row, a:b], alone.data[0])
+    k = int(3 * FS / F_CUT)
+    for a, b in ((0, 25_000), (25_300, 40_000)):
+        inner = slice(a + k, b - k)
+        assert _rel_rms(out.data[0, inner], v[inner]) < 0.01
+    assert "stretches between missing samples" in out.meta["integration"]["gaps"]
+    assert "gaps" not in integrate(sig, order=1, f_cut=F_CUT).meta["integration"]

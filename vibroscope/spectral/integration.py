@@ -17,7 +17,7 @@ import scipy.signal
 from scipy.integrate import cumulative_trapezoid
 
 from vibroscope._checks import check_option, read_only
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, true_runs
 from vibroscope.spectral._results import FRF, CrossSpectralMatrix, channel_index
 
 __all__ = ["integrate", "default_f_cut", "vibration_severity", "Severity", "ods", "OperatingShape",
@@ -168,6 +168,11 @@ def integrate(signals: Signals, *, order: Literal[1, 2] = 1, f_cut: float | None
         If `order` or `method` is not an allowed value, `f_cut` is not between 0 and ``fs / 2``,
         or the record has fewer than 4 samples.
 
+    Missing samples (NaN, a gap in the log) are never bridged: each stretch of finite samples of
+    a row is detrended and integrated on its own, as a record of its own (with its own edge
+    zones, below), and the missing samples stay NaN (as do stretches of fewer than 4 samples);
+    ``meta["integration"]["gaps"]`` then says so.
+
     Notes
     -----
     The high-pass, applied once per integration in both methods, is
@@ -222,10 +227,27 @@ def integrate(signals: Signals, *, order: Literal[1, 2] = 1, f_cut: float | None
     if n < 4:
         raise ValueError(f"the record is too short to integrate: {n=} samples")
     f_cut = _check_f_cut(f_cut, fs, n)
-    x = scipy.signal.detrend(np.asarray(signals.data, dtype=float), axis=-1, type="linear")
     step = _integrate_frequency if method == "frequency" else _integrate_highpass
-    for _ in range(order):
-        x = step(x, fs, f_cut)
+
+    def run(x: np.ndarray) -> np.ndarray:
+        x = scipy.signal.detrend(x, axis=-1, type="linear")
+        for _ in range(order):
+            x = step(x, fs, f_cut)
+        return x
+
+    data = np.asarray(signals.data, dtype=float)
+    finite = np.isfinite(data)
+    stretches = None
+    if finite.all():
+        x = run(data)
+    else:  # a gap is not bridged: each stretch between gaps is integrated on its own, the gaps stay NaN
+        x = np.full(data.shape, np.nan)
+        stretches = 0
+        for r in range(data.shape[0]):
+            for a, b in zip(*true_runs(finite[r])):
+                if b - a >= 4:  # shorter: too short to integrate, left NaN
+                    x[r, a:b] = run(data[r : r + 1, a:b])[0]
+                    stretches += 1
     info = {
         "order": int(order),
         "f_cut_hz": f_cut,
@@ -234,6 +256,9 @@ def integrate(signals: Signals, *, order: Literal[1, 2] = 1, f_cut: float | None
                     f"|W|=1/(1+(f_cut/f)^{2 * BUTTER_ORDER}), -6 dB at {f_cut:.4g} Hz",
         "detrend": "linear",
     }
+    if stretches is not None:
+        info["gaps"] = (f"{stretches} stretches between missing samples integrated one by one (each detrended, "
+                        f"with its own edge zones); missing samples and stretches under 4 samples are NaN")
     return Signals(x, fs, signals.channels, [_integral_unit(u, order) for u in signals.units], signals.t0,
                    {**signals.meta, "integration": info})
 

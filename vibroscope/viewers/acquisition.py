@@ -14,6 +14,7 @@ from typing import Any, Literal, Mapping
 
 import numpy as np
 
+from vibroscope.signals import true_runs
 from vibroscope.spectral.integration import OperatingShape, integrate
 from vibroscope.viewers.figures import _distinct_labels, _pyplot, _short, plot_mode_shapes
 
@@ -56,7 +57,8 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
     (drift-free, high-passed at `f_cut`). Each row shares its y axis across the channels, in
     the SI unit with the prefix that suits the largest value (m/s², mm/s, µm, ...). The first
     and last ``1 / f_cut`` s, where the integrals depend on the unknown signal outside the
-    record, are shaded.
+    record, are shaded; with gaps (NaN), those of every stretch between gaps (each integrated
+    on its own), and the gaps are red. Peak and RMS are over the samples present.
 
     Parameters
     ----------
@@ -107,16 +109,25 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
         # one prefix per row (shared y axis); units may differ per channel only if unknown
         units = set(sig.units)
         unit = units.pop() if len(units) == 1 else ""
-        fac, ulabel = _display_unit(unit, float(np.max(np.abs(data))) if data.size else 0.0)
+        top = np.abs(data[np.isfinite(data)])
+        fac, ulabel = _display_unit(unit, float(top.max()) if top.size else 0.0)
         for c in range(nc):
             ax = axes[r, c]
             x = data[c] * fac
             _trace(ax, t, x, f"C{r}", max_points)
-            if 2 * edge < 0.5 * T:
-                for a, b in ((0.0, edge), (T - edge, T)):
-                    ax.axvspan(a, b, color="0.85", lw=0, zorder=0)
-            rms = float(np.sqrt(np.mean(x ** 2))) if x.size else float("nan")
-            ax.text(0.01, 0.97, f"peak {np.max(np.abs(x)):.3g}, rms {rms:.3g} {ulabel}", transform=ax.transAxes,
+            # every stretch between gaps is integrated as a record of its own: edge zones at both of its
+            # ends; the gaps themselves (missing, never bridged) in red
+            a_s, b_s = true_runs(np.isfinite(np.asarray(acc.data[c])))
+            for k, (a, b) in enumerate(zip(a_s[:200] / acc.fs, b_s[:200] / acc.fs)):
+                if 2 * edge < 0.5 * (b - a):
+                    for lo, hi in ((a, a + edge), (b - edge, b)):
+                        ax.axvspan(lo, hi, color="0.85", lw=0, zorder=0)
+                if k and a > b_s[k - 1] / acc.fs:
+                    ax.axvspan(b_s[k - 1] / acc.fs, a, color="tab:red", alpha=0.25, lw=0, zorder=0)
+            fin = x[np.isfinite(x)]
+            rms = float(np.sqrt(np.mean(fin ** 2))) if fin.size else float("nan")
+            peak = float(np.max(np.abs(fin))) if fin.size else float("nan")
+            ax.text(0.01, 0.97, f"peak {peak:.3g}, rms {rms:.3g} {ulabel}", transform=ax.transAxes,
                     ha="left", va="top", fontsize=7, bbox=dict(fc="white", ec="none", alpha=0.75, pad=1.5))
             ax.grid(True, alpha=0.4)
             if c == 0:
@@ -131,7 +142,9 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
     axes[-1, 0].xaxis.set_major_locator(MaxNLocator(nbins=5 if nc > 1 else 8))
     more = f"; first {nc} of {acc_signals.n_channels} channels" if acc_signals.n_channels > nc else ""
     fig.suptitle(f"Acceleration, velocity, displacement (integrated by the {method} method, high-pass "
-                 f"f_cut = {fc:.3g} Hz, zero-phase Butterworth 4, −6 dB; shaded: 1/f_cut edge zones{more})",
+                 f"f_cut = {fc:.3g} Hz, zero-phase Butterworth 4, −6 dB)\n(shaded: 1/f_cut edge zones"
+                 + ("; red: missing, each stretch between gaps integrated apart" if not np.isfinite(acc.data).all()
+                    else "") + f"{more})",
                  fontsize=9.5)
     return fig
 
