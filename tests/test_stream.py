@@ -333,12 +333,17 @@ def test_capstan_logs_stream_with_no_options(shared_data):
     """Every capstan log (joint states, no Imu) streams with no channel and no setting given: the
     moving fields of the busiest topic, as the whole read chooses them (alternate_bagfile_0: the
     same 17 fields), and for the gappy logs a segment short enough to fit between the gaps."""
+    from vibroscope.commands.analyse import stream_report_text
     from vibroscope.io.select import auto_channels
 
     d = shared_data / "mcap" / "capstan"
     for name in ("alternate_bagfile_0", "bagfile_0", "controlled_data_0", "torque_ripple_data_0",
                  "uncontrolled_data_0"):
         an = analyse_stream(d / f"{name}.mcap")
+        text = stream_report_text(an)
+        assert " nan " not in text, text  # a damping not estimated reads "-", and says why
+        if not np.isfinite(an.modal.damping_ratios).all():
+            assert "zeta -: not estimated" in text
         chosen = an.spectra.channels
         assert chosen and set(chosen) <= set(auto_channels(d / f"{name}.mcap").channels), name
         assert an.csd.G.shape[1] >= 1 and np.isfinite(an.psd.values).any(), name

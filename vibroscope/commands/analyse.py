@@ -403,10 +403,27 @@ def stream_report_text(an, *, source: str = "") -> str:
     lines += [f"  warning: {w}" for w in an.warnings]
     lines.append(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9}  method")
     for k, (f, z) in enumerate(zip(an.modal.natural_frequencies, an.modal.damping_ratios)):
-        lines.append(f"{k + 1:>4} {f:>10.3f} {100 * z:>9.3f}  {an.modal.method}")
+        lines.append(f"{k + 1:>4} {f:>10.3f} {_percent(z):>9}  {an.modal.method}")
     if len(an.modal.natural_frequencies) == 0:
         lines.append("   (no mode passed the physical-mode selection in the band)")
+    elif not np.isfinite(an.modal.damping_ratios).all():
+        lines.append(_not_estimated(an.modal.method))
     return "\n".join(lines)
+
+
+def _percent(z: float) -> str:
+    """A damping ratio in % with 3 decimals, or "-" when it was not estimated (NaN)."""
+    return f"{100 * z:.3f}" if np.isfinite(z) else "-"
+
+
+def _not_estimated(method: str) -> str:
+    """The report's line saying why a damping ratio reads "-"."""
+    if method == "fdd":
+        return "   (zeta -: FDD gives no damping; --method efdd estimates it)"
+    if method == "efdd":
+        return ("   (zeta -: not estimated; EFDD found no decaying correlation in the peak's bell, the frequency "
+                "is the peak's)")
+    return "   (zeta -: not estimated)"
 
 
 def stream_summary(an, *, source: str | None = None) -> dict:
@@ -551,7 +568,7 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
                  + (f" {'true f_n':>10} {'err [%]':>8} {'true zeta':>9}" if true_modes is not None else "") + "  method")
     for k in range(len(mm.natural_frequencies)):
         f, z = mm.natural_frequencies[k], mm.damping_ratios[k]
-        row = f"{k + 1:>4} {f:>10.3f}" + (f" {fstd[k]:>7.3f}" if unc else "") + f" {100 * z:>9.3f}" \
+        row = f"{k + 1:>4} {f:>10.3f}" + (f" {fstd[k]:>7.3f}" if unc else "") + f" {_percent(z):>9}" \
             + (f" {100 * zstd[k]:>7.3f}" if unc else "")
         if true_modes is not None:
             tf = true_modes.natural_frequencies
@@ -560,6 +577,8 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
         lines.append(row + f"  {mm.method}")
     if len(mm.natural_frequencies) == 0:
         lines.append("   (no mode passed the physical-mode selection in the band)")
+    elif not np.isfinite(mm.damping_ratios).all():
+        lines.append(_not_estimated(mm.method))
     ident = getattr(an, "identification", None)
     if ident is not None and ident.rejected:
         lines.append(f"  {len(ident.rejected)} candidates rejected (listed in the --json summary), e.g.:")
