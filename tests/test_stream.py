@@ -353,3 +353,25 @@ def test_capstan_logs_stream_with_no_options(shared_data):
             assert list(chosen) == moving[:32]
         if name == "torque_ripple_data_0":  # 20 Hz with 715 gaps: the automatic 2048 holds no segment
             assert an.spectra.settings["nperseg"] < 256
+
+
+def test_refinement_for_the_damping_stops_where_segments_no_longer_fit_between_gaps(tmp_path):
+    """Force and two responses of a 35 Hz resonance (ζ ≈ 1.7 %) with 40 samples missing every 700:
+    the automatic segment is shortened to 512 to fit between the gaps; the damping refinement,
+    which doubles it, stops there (1024 holds no segment: before, the run failed with "no response
+    channel has a segment of nperseg=1024 free of gaps"), and the mode is found."""
+    import scipy.signal as ss
+
+    rng = np.random.default_rng(3)
+    n, fs = 24_000, 400.0
+    f = rng.standard_normal(n)
+    b, a = ss.iirpeak(35.0, 30.0, fs)
+    y = ss.lfilter(b, a, f) * 20 + 0.01 * rng.standard_normal(n)
+    x = np.vstack([f, y, 0.5 * y + 0.01 * rng.standard_normal(n)])
+    for s in range(300, n, 700):
+        x[:, s : s + 40] = np.nan
+    chs = ["/ft.wrench.force.x", "/imu.linear_acceleration.x", "/imu.linear_acceleration.y"]
+    p = write_ros2_mcap(tmp_path / "refine.mcap", Signals(x, fs, chs, ["N", "m/s^2", "m/s^2"], t0=2.0))
+    an = analyse_stream(p, input=chs[0], outputs=chs[1:])
+    assert an.spectra.settings["nperseg"] == 512
+    assert len(an.modal.natural_frequencies) == 1 and abs(an.modal.natural_frequencies[0] - 35.0) < 0.5

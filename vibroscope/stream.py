@@ -561,6 +561,7 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
         nper = sp.settings["nperseg"]
         if (isinstance(path, LogSpectra) or nperseg is not None or not input
                 or not np.any(np.isfinite(bw) & (bw < 8 * sp.fs / nper)) or 2 * nper > 2 * sp.samples / 6
+                or (sp.gap_free is not None and _fitting_segments(sp.gap_free, sp.ranges[0][1], 2 * nper) < 5)
                 or len(refinements) >= 3):
             break
         refinements.append(nper)
