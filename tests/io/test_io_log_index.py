@@ -142,3 +142,22 @@ def test_channels_only_inside_chunks_read_on_the_filtered_path(tmp_path, count_s
     assert len(count_scans) <= 2
     with pytest.raises(ChannelError, match="no such topic"):
         read_mcap(p, ["/c.v"])
+
+
+def test_auto_channels_of_a_json_log_of_accelerometers(tmp_path):
+    """A JSON log (no Imu schema) of three accelerometer topics and a force: the automatic choice
+    takes the acceleration fields of every topic (m/s² by the stored units), not the busiest topic
+    alone, and never the force (before: /imu/m1 only with the force as input, and without an input
+    the force itself as the response); the streamed planning chooses the same."""
+    from vibroscope.io.blocks import open_grid
+    from vibroscope.io.mcap_write import write_json_mcap
+
+    rng = np.random.default_rng(4)
+    chans = ["/actuator/force.wrench.force.x"] + [f"/imu/m{k}.linear_acceleration.x" for k in (1, 2, 3)]
+    p = write_json_mcap(tmp_path / "j.mcap", Signals(rng.standard_normal((4, 3000)), 1000.0, chans,
+                                                     ["N"] + ["m/s^2"] * 3, t0=5.0))
+    acc = tuple(chans[1:])
+    assert auto_channels(p).channels == acc
+    assert auto_channels(p, exclude_topics=("/actuator/force",)).channels == acc
+    assert open_grid(p).channels == acc
+    assert "acceleration fields" in auto_channels(p).reason

@@ -130,7 +130,8 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         if len(moving) > MAX_AUTO_CHANNELS:
             notes.append(f"{len(moving) - MAX_AUTO_CHANNELS} varying fields beyond the first {MAX_AUTO_CHANNELS} "
                          f"not analysed (from {moving[MAX_AUTO_CHANNELS]}); choose with --outputs")
-        notes.append(f"{len(outputs) - len(moving)} constant fields not analysed")
+        if len(outputs) > len(moving):
+            notes.append(f"{len(outputs) - len(moving)} constant fields not analysed")
         sig = sig.select(([input] if input else []) + moving[:MAX_AUTO_CHANNELS])
     if notes:
         sig = sig.with_meta(warnings=notes + list(sig.meta.get("warnings", [])))

@@ -64,10 +64,14 @@ def auto_channels(path: str | Path | LogIndex, *, min_messages: int = 64, max_ch
     """Choose what to analyse in a log with no channel given.
 
     1. Every ``linear_acceleration.{x,y,z}`` of the ``sensor_msgs/msg/Imu`` topics.
-    2. Else (no IMU, e.g. a robot's joint-state log): the numeric measurement fields of the
-       decodable topic with the largest ``messages × min(fields, max_channels)`` (at least
-       `min_messages` messages), leaving out bookkeeping (:func:`is_bookkeeping`). All its fields
-       are returned; the caller drops constant ones and keeps at most `max_channels`.
+    2. Else the acceleration fields of every decodable topic of another schema (a JSON or
+       protobuf log of accelerometers): fields whose unit is m/s² (stored by the writer, or
+       :func:`~vibroscope.io.log_index.unit_for` their name: ``linear_acceleration.*``), of
+       topics with at least `min_messages` messages.
+    3. Else (no acceleration, e.g. a robot's joint-state log): the numeric measurement fields of
+       the decodable topic with the largest ``messages × min(fields, max_channels)`` (at least
+       `min_messages` messages), leaving out bookkeeping (:func:`is_bookkeeping`). All its
+       fields are returned; the caller drops constant ones and keeps at most `max_channels`.
 
     Parameters
     ----------
@@ -106,6 +110,13 @@ def auto_channels(path: str | Path | LogIndex, *, min_messages: int = 64, max_ch
     counts = {t.topic: (t.message_count if message_counts is None else int(message_counts.get(t.topic, 0)))
               for t in info.topics if t.decodable}
     fields = log.discover_fields()
+    accel = [p for topic, paths in fields.items() if topic not in exclude_topics and counts.get(topic, 0) >= min_messages
+             for p in paths if log.unit(log.topic_of(p)) in ("m/s^2", "m/s²")]
+    if accel:
+        topics = list(dict.fromkeys(log.topic_of(p).topic for p in accel))
+        return AutoSelection(tuple(accel), f"no Imu topic: the {len(accel)} acceleration fields (unit m/s^2) of "
+                                           f"{len(topics)} topics ({', '.join(topics[:4])}{' ...' if len(topics) > 4 else ''})",
+                             undecodable, fallback=True)
     best, best_key = None, None
     for topic, paths in fields.items():
         if topic in exclude_topics:
