@@ -292,3 +292,39 @@ def test_capstan_log_with_stamps_46_s_before_logging_on_dask(shared_data, client
     G = res.per_log[p].csd()
     assert np.array_equal(G.n_averages, ref.n_averages) and np.max(np.abs(G.G - ref.G)) <= 1e-12 * np.max(np.abs(ref.G))
     assert res.merged.accumulator.n_segments == 2 * ref.n_averages[0, 0]
+
+
+def test_rows_carry_what_reading_noticed_and_the_json_is_plain(logs, bad_logs, client, tmp_path):
+    """The holey log (every third chunk lost) analysed at nperseg 256: its row lists the lost chunks
+    and missing samples (before: nothing in fleet.json); the settings are JSON lists, not Python
+    reprs; a channel that never moves has no PSD peak (null, not the first bin)."""
+    from vibroscope.fleet import analyse_fleet
+
+    _garbage, _short, holey = bad_logs
+    res = analyse_fleet([logs[0], holey], client=client, nperseg=256)
+    rows = {r.log: r for r in res.rows}
+    assert rows[logs[0]].warnings == ()
+    w = " ".join(rows[holey].warnings)
+    assert "missing" in w and "chunk" in w
+    assert res.to_rows()[1]["warnings"] == " | ".join(rows[holey].warnings)
+    d = json.loads(res.write_json(tmp_path / "f.json").read_text())
+    assert d["settings"]["channels"] == CHS and d["logs"][1]["warnings"] == list(rows[holey].warnings)
+    assert all(isinstance(b, list) and len(b) == 2 for b in d["settings"]["bands_hz"])
+    flat = str(_log(tmp_path / "flat.mcap", 6000, 9, 40.0))
+    x = read_mcap(flat)
+    still = write_ros2_mcap(tmp_path / "still.mcap", Signals(np.vstack([x.data[:2], np.zeros((1, 6000))]), 500.0, CHS,
+                                                             t0=90.0), chunk_size=60_000)
+    d2 = analyse_fleet([str(still)], client=client, nperseg=256).to_dict()
+    assert d2["merged"]["psd_peak_hz"][CHS[2]] is None and abs(d2["merged"]["psd_peak_hz"][CHS[0]] - 40.0) < 2.0
+
+
+def test_cli_fleet_exits_1_when_no_log_was_analysed_without_error(logs, client, tmp_path, capsys):
+    """Every log's identification fails (a band above the Nyquist frequency): the table is written,
+    each row says why, and the exit status is 1 (before: 0)."""
+    from vibroscope.cli import main
+
+    rc = main(["analyse", "--dask", client.scheduler.address, logs[0], logs[1], "--out", str(tmp_path),
+               "--nperseg", "512", "--fmin", "300", "--fmax", "400", "--no-figures"])
+    cap = capsys.readouterr()
+    assert rc == 1 and "none of the 2 logs was analysed without error" in cap.err
+    assert len(list(csv.DictReader(open(tmp_path / "fleet.csv")))) == 2

@@ -121,6 +121,9 @@ class FleetRow:
     error : str
         Why the modes could not be identified, or why the log could not be analysed at all (then
         `rms` is NaN and the log is not in the merged spectra); empty when all went well.
+    warnings : tuple of str
+        What reading the log noticed (samples missing in gaps or lost chunks, damage skipped,
+        stamps), one line each, without repeats.
     """
 
     log: str
@@ -132,6 +135,7 @@ class FleetRow:
     channels: tuple
     rms: tuple
     error: str = ""
+    warnings: tuple = ()
 
     def to_dict(self) -> dict:
         """A JSON-serialisable dict (NaN as None).
@@ -148,7 +152,7 @@ class FleetRow:
                           for f, z in zip(self.frequencies_hz, self.damping_ratios)],
                 "rms": {c: {f"{lo:.4g}-{hi:.4g}Hz": num(v) for (lo, hi), v in zip(self.bands_hz, r)}
                         for c, r in zip(self.channels, self.rms)},
-                "error": self.error}
+                "error": self.error, "warnings": list(self.warnings)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -181,8 +185,8 @@ class FleetResult:
         -------
         list of dict
             ``log``, ``n_samples``, ``duration_s``, ``modes_hz`` and ``damping`` (``;``-joined),
-            then per band ``rms_<lo>-<hi>Hz``: the largest channel RMS in the band, and
-            ``error``.
+            then per band ``rms_<lo>-<hi>Hz``: the largest channel RMS in the band, ``error``
+            and ``warnings`` (`` | ``-joined).
         """
         out = []
         for r in self.rows:
@@ -194,6 +198,7 @@ class FleetResult:
                 col = rms[:, k]
                 d[f"rms_{lo:.4g}-{hi:.4g}Hz"] = f"{np.nanmax(col):.6g}" if np.isfinite(col).any() else ""
             d["error"] = r.error
+            d["warnings"] = " | ".join(r.warnings)
             out.append(d)
         return out
 
@@ -224,14 +229,15 @@ class FleetResult:
         -------
         dict
             ``logs`` (:meth:`FleetRow.to_dict` each), ``settings``, ``merged`` (``channels``,
-            ``n_samples``, ``n_segments``, ``psd_peak_hz`` per channel).
+            ``n_samples``, ``n_segments``, ``psd_peak_hz`` per channel: None for a channel that
+            never moves or has no segment).
         """
         G = self.merged.csd()
         P = G.psd().values
         f = G.frequencies
-        peaks = {c: float(f[1 + int(np.nanargmax(p[1:]))]) for c, p in zip(G.channels, P)}
-        sett = {k: (v if isinstance(v, (int, float, str, type(None))) else str(v)) for k, v in self.settings.items()}
-        return {"logs": [r.to_dict() for r in self.rows], "settings": sett,
+        peaks = {c: (float(f[1 + int(np.nanargmax(p[1:]))]) if np.nanmax(p[1:], initial=0.0) > 0 else None)
+                 for c, p in zip(G.channels, np.nan_to_num(P, nan=0.0))}
+        return {"logs": [r.to_dict() for r in self.rows], "settings": _plain(self.settings),
                 "merged": {"channels": list(G.channels), "n_samples": self.merged.samples,
                            "n_segments": self.merged.accumulator.n_segments, "psd_peak_hz": peaks}}
 
@@ -250,6 +256,21 @@ class FleetResult:
         path = Path(path)
         path.write_text(json.dumps(self.to_dict(), indent=2))
         return path
+
+
+def _plain(v: Any) -> Any:
+    """`v` as JSON values: lists for tuples and arrays, Python numbers (NaN as None), str otherwise."""
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_plain(x) for x in v]
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        return float(v) if np.isfinite(v) else None
+    return v if v is None or isinstance(v, str) else str(v)
 
 
 @dataclass(frozen=True)
@@ -304,7 +325,7 @@ def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
     except ValueError as exc:
         f_n, z, err = (), (), str(exc)
     return sp, FleetRow(path, sp.samples, sp.samples / fs, f_n, z, bands, tuple(channels),
-                        tuple(tuple(r) for r in rms.tolist()), err)
+                        tuple(tuple(r) for r in rms.tolist()), err, tuple(dict.fromkeys(sp.warnings)))
 
 
 #: glibc's mmap threshold set in worker processes: Dask's nannies set ``MALLOC_TRIM_THRESHOLD_``

@@ -476,7 +476,8 @@ def run_fleet(args, logs: list) -> int:
     Raises
     ------
     VibroscopeError
-        When a log cannot be analysed, or Dask is not installed.
+        When no log can be analysed, or every row of the table holds an error (after writing the
+        table), or Dask is not installed.
     """
     from vibroscope.errors import VibroscopeError
 
@@ -498,8 +499,12 @@ def run_fleet(args, logs: list) -> int:
     except ValueError as exc:
         raise VibroscopeError(f"fleet analysis: {exc}") from None
     for r in res.rows:
-        modes = ", ".join(f"{f:.3f} Hz ({100 * z:.2f} %)" for f, z in zip(r.frequencies_hz, r.damping_ratios))
+        modes = ", ".join(f"{f:.3f} Hz ({_percent(z)} %)" for f, z in zip(r.frequencies_hz, r.damping_ratios))
         print(f"{r.log}: {r.duration_s:.1f} s; modes {modes or '(none)'}" + (f"; {r.error}" if r.error else ""))
+        for w in r.warnings[:3]:
+            print(f"  warning: {w}")
+        if len(r.warnings) > 3:
+            print(f"  ({len(r.warnings) - 3} more warnings in the fleet table)")
     csv_path = res.write_csv(out / "fleet.csv")
     json_path = res.write_json(args.json or out / "fleet.json")
     print(f"fleet table: {csv_path}, {json_path}")
@@ -516,6 +521,9 @@ def run_fleet(args, logs: list) -> int:
         fig = psd.plot()
         fig = getattr(fig, "figure", fig)
         print(f"merged spectra: {_save(fig, out / 'fleet_spectra.png')}")
+    if all(r.error for r in res.rows):  # the table says why for each; the run did not do its job
+        raise VibroscopeError(f"fleet analysis: none of the {len(res.rows)} logs was analysed without error "
+                              f"(each row of {csv_path} says why)")
     return 0
 
 
