@@ -292,3 +292,13 @@ def test_analyse_of_a_recording_is_not_an_mcap_file(tiny_log, tmp_path, monkeypa
     err = _err_lines(capsys)
     assert len(err) == 1 and err[0].startswith("vibroscope analyse: error: ") and "MCAP" in err[0], err
     assert x.read_bytes() == data and sorted(p.name for p in tmp_path.iterdir()) == listing
+
+
+def test_export_model_with_no_mode_says_so(tiny_log, tmp_path, capsys):
+    """An input given but no mode in the band: the error says no mode was identified (before: "needs
+    residues: an input", though an input was given); nothing is written."""
+    out = tmp_path / "m.toml"
+    assert main(["modal", str(tiny_log), "--input", "/actuator/force.wrench.force.x", "--fmin", "4", "--fmax", "9",
+                 "--export-model", str(out), "--no-rrd", "--no-figures"]) == 1
+    err = _err_lines(capsys)
+    assert len(err) == 1 and "--export-model: no mode was identified" in err[0] and not out.exists()

@@ -270,6 +270,9 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
         raise VibroscopeError("--uff58 needs FRFs: give --input for a log")
     if args.uff55 and not len(mm):
         raise VibroscopeError("--uff55: no mode was identified, nothing to write (try --fmin/--fmax or --select)")
+    if args.export_model and not len(mm):
+        raise VibroscopeError("--export-model: no mode was identified, nothing to export (try --fmin/--fmax or "
+                              "--select)")
     if args.export_model and ident.lsfd is None:
         raise VibroscopeError("--export-model needs residues: an input (LSCF + LSFD), not an output-only method")
     done = []
