@@ -95,6 +95,9 @@ def simulate_to_signals(model, *, excitation=None, input_log=None, fs=None, dura
     ------
     ValueError
         If neither or both of `excitation` and `input_log` are given, or `noise` < 0.
+    vibroscope.errors.ChannelError
+        If an input channel of `input_log` has missing samples (a gap, a lost chunk): the
+        message names the log, the channel and the first gap.
     """
     import numpy as np
 
@@ -119,8 +122,27 @@ def simulate_to_signals(model, *, excitation=None, input_log=None, fs=None, dura
     from vibroscope.io import read_mcap
 
     log = read_mcap(input_log, channels=model.input_channels(), fs=fs)
+    for c, row in zip(log.channels, log.data):
+        bad = ~np.isfinite(row)
+        if bad.any():  # a model is not driven through a gap: the input there is unknown, never invented
+            from vibroscope.errors import ChannelError
+            from vibroscope.signals import true_runs
+
+            a, b = true_runs(bad)
+            raise ChannelError(
+                f"{input_log}: input {c}: {int(bad.sum())} of {row.size} samples missing in {a.size} gap(s), the first "
+                f"{a[0] / log.fs:.4g}–{b[0] / log.fs:.4g} s after the start: a model cannot be driven through a gap; "
+                f"simulate a stretch without one (the longest is {_longest(~bad) / log.fs:.4g} s)")
     sig = simulate(model, log.data, log.fs, t0=log.t0, noise=noise, seed=seed)
     return sig.with_meta(input_log=str(input_log))
+
+
+def _longest(good: np.ndarray) -> int:
+    """Samples of the longest run of True in `good`."""
+    from vibroscope.signals import true_runs
+
+    a, b = true_runs(good)
+    return int((b - a).max(initial=0))
 
 
 def _check_options(args) -> None:
