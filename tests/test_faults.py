@@ -171,3 +171,30 @@ def test_fault_lines_one_line_per_kind():
     assert lines[0].startswith("nan in 4 channels (/c0, /c1, /c2 and 1 more); e.g. /c0: 10 missing samples")
     assert lines[1].startswith("dc_offset in /c4: ")
     assert sum(f.kind == "nan" for f in faults) == 4  # every fault kept in full
+
+
+def test_a_value_beyond_any_measurement_is_masked_like_inf():
+    """One sample of 1e300 (a corrupted value): an ``overflow`` fault naming the channel and the time,
+    masked as missing (before: its square overflowed and the analysis stopped with "Eigenvalues did
+    not converge" or LAPACK's "DLASCL parameter number 4 had an illegal value"); the other checks see
+    it as missing (no drift of "inf times")."""
+    from vibroscope.faults import OVERFLOW_LIMIT
+    from vibroscope.pipeline import analyse_signals
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((2, 8000))
+    x[0, 3000] = 1e300
+    x[1, 5000] = -1e101
+    sig = Signals(x, 1000.0, ["a", "b"], ["m/s^2", "m/s^2"])
+    faults = [f for f in detect_faults(sig, nperseg=512)]
+    over = [f for f in faults if f.kind == "overflow"]
+    assert [(f.channel, f.spans, f.action) for f in over] == [("a", ((3000, 3001),), "mask"), ("b", ((5000, 5001),),
+                                                                                              "mask")]
+    assert "3–3.001 s" in over[0].message and f"{OVERFLOW_LIMIT:.0e}" in over[0].message
+    assert not [f for f in faults if f.kind == "drift"]
+    masked = apply_faults(sig, faults)
+    assert np.isnan(masked.data[0, 3000]) and np.isnan(masked.data[1, 5000])
+    assert np.array_equal(np.isnan(masked.data).sum(axis=1), [1, 1])
+    with np.errstate(over="raise", invalid="raise"):
+        an = analyse_signals(sig, nperseg=512, method="fdd")
+    assert np.isfinite(an.psd.values).all()

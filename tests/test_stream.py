@@ -375,3 +375,17 @@ def test_refinement_for_the_damping_stops_where_segments_no_longer_fit_between_g
     an = analyse_stream(p, input=chs[0], outputs=chs[1:])
     assert an.spectra.settings["nperseg"] == 512
     assert len(an.modal.natural_frequencies) == 1 and abs(an.modal.natural_frequencies[0] - 35.0) < 0.5
+
+
+def test_streamed_value_beyond_any_measurement_is_missing(tmp_path):
+    """One 1e300 sample: the streamed spectra are those of the log with that sample missing (before:
+    the squares overflowed and EFDD stopped with "Eigenvalues did not converge")."""
+    rng = np.random.default_rng(8)
+    x = rng.standard_normal((3, 20_000))
+    bad, nan = x.copy(), x.copy()
+    bad[1, 7000], nan[1, 7000] = 1e300, np.nan
+    a = accumulate_log(write_ros2_mcap(tmp_path / "huge.mcap", Signals(bad, 1000.0, CHS, t0=1.0)), nperseg=1024)
+    b = accumulate_log(write_ros2_mcap(tmp_path / "nan.mcap", Signals(nan, 1000.0, CHS, t0=1.0)), nperseg=1024)
+    assert np.array_equal(a.csd().G, b.csd().G) and np.array_equal(a.csd().n_averages, b.csd().n_averages)
+    assert any("1 samples beyond" in w for w in a.warnings)
+    analyse_stream(tmp_path / "huge.mcap")  # completes

@@ -12,6 +12,8 @@ kind               rule                                                        a
                    are the NaN runs. A channel with no NaN-free stretch of      (``stop`` when
                    `nperseg` samples, or all NaN, cannot be analysed.          nothing remains)
 ``inf``            ±Inf samples                                                ``mask``
+``overflow``       finite samples beyond ±:data:`OVERFLOW_LIMIT` (no physical   ``mask``
+                   quantity in SI units; their squares overflow the spectra)
 ``clipping``       the largest (smallest) value is held for runs of at least   ``mask``
                    :data:`CLIP_MIN_RUN` samples and occurs at least
                    :data:`CLIP_RATIO` times as often as the next distinct
@@ -57,7 +59,7 @@ from vibroscope.signals import Signals, true_runs
 
 __all__ = ["fault_lines", "Fault", "FAULT_KINDS", "detect_faults", "apply_faults", "nan_spans"]
 
-FAULT_KINDS = ("nan", "inf", "clipping", "dropout", "dc_offset", "drift", "missing_unit", "constant",
+FAULT_KINDS = ("nan", "inf", "overflow", "clipping", "dropout", "dc_offset", "drift", "missing_unit", "constant",
                "zero_input", "short_record")
 Action = Literal["skip_segments", "mask", "detrend", "report", "drop", "stop"]
 
@@ -75,6 +77,9 @@ DROPOUT_MAX_FRACTION = 0.5
 DROPOUT_MIN_RUN = 16
 #: dropout: chance odds (over the whole record) below which a run of equal samples is a fault
 DROPOUT_ODDS = 1e-3
+#: overflow: a finite sample beyond this magnitude is no measurement (a corrupted value: its square,
+#: near 1e200 and beyond, overflows float64 spectra and covariances)
+OVERFLOW_LIMIT = 1e100
 #: dc_offset: |mean| larger than this many standard deviations
 DC_RATIO = 1.0
 #: drift: std of the block means larger than this times the median within-block std
@@ -306,6 +311,18 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
             spans = list(zip(a, b))
             faults.append(_fault(ch, "inf", f"{int(inf.sum())} infinite samples in {_where(spans, fs)}; "
                                  f"treated as missing (NaN), their segments skipped", "mask", spans, fs, inf.sum()))
+        huge = finite & (np.abs(np.where(finite, x, 0.0)) > OVERFLOW_LIMIT)
+        if huge.any():
+            a, b = true_runs(huge)
+            spans = list(zip(a, b))
+            big = float(np.abs(x[huge]).max())
+            faults.append(_fault(ch, "overflow", f"{int(huge.sum())} samples beyond ±{OVERFLOW_LIMIT:.0e} (up to "
+                                 f"{big:.3g}) in {_where(spans, fs)}: no measurement; treated as missing (NaN), their "
+                                 f"segments skipped", "mask", spans, fs, huge.sum()))
+            finite = finite & ~huge
+            x = np.where(huge, np.nan, x)  # the checks below see them as missing, as the analysis will
+            all_finite = False
+            n_fin = int(np.count_nonzero(finite))
         if n_fin == 0:
             continue
         xf = x if all_finite else x[finite]
@@ -386,7 +403,7 @@ def apply_faults(signals: Signals, faults: tuple[Fault, ...] | list[Fault]) -> S
     Returns
     -------
     Signals
-        The record with the ``mask`` spans (Inf, clipping, dropouts) set to NaN and the ``drop``
+        The record with the ``mask`` spans (Inf, overflow, clipping, dropouts) set to NaN and the ``drop``
         channels removed; `signals` itself when nothing changes. Never a replaced sample: a
         masked one is NaN.
 

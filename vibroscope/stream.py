@@ -268,8 +268,15 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
     notes: list[str] = list(g.warnings)
     missing = 0
     runs = _GapFree(i0)
+    from vibroscope.faults import OVERFLOW_LIMIT
+
+    huge = 0
     for blk in g.blocks(block_samples, start=i0, stop=i1):
         d = blk.data
+        over = np.abs(np.nan_to_num(d, posinf=0.0, neginf=0.0)) > OVERFLOW_LIMIT
+        if over.any():  # no measurement (a corrupted value): missing, as the whole read masks it
+            huge += int(over.sum())
+            d = np.where(over, np.nan, d)
         bad = ~np.isfinite(d).all(axis=0)
         missing += int(bad.sum())
         runs.add(~bad)
@@ -281,6 +288,8 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
         for j in range(0, d.shape[1], piece):
             acc.update(d[:, j : j + piece])
         notes += blk.meta["warnings"]
+    if huge:
+        notes.append(f"{g.path}: {huge} samples beyond ±{OVERFLOW_LIMIT:.0e} (no measurement) treated as missing")
     if missing:
         notes.append(f"{g.path}: {missing} of {i1 - i0} grid samples missing in at least one channel (gaps, lost "
                      f"chunks; never interpolated): the Welch segments touching them are skipped")
