@@ -282,3 +282,23 @@ def test_uff_geometry_places_dof_named_channels(tmp_path):
     np.testing.assert_allclose(sc.directions, [[1, 0, 0], [0, 0, -1]])
     with pytest.raises(Exception, match="not a DOF"):
         read_coords(geo, ["/imu/a.linear_acceleration.x"])
+
+
+def test_non_finite_lines_are_reported(tmp_path):
+    """NaN lines in one output and one Inf: a warning per output naming the count, the frequencies and
+    the rows (before: accepted silently), also in ``settings["warnings"]``; the finite lines are read
+    as they are."""
+    f = np.arange(1, 41) * 0.5
+    h = _sdof_frf(f, 10.0, 0.05)
+    cols = [h.astype(complex), 2 * h.astype(complex)]
+    cols[0][10:15] = np.nan
+    cols[1][30] = np.inf
+    p = tmp_path / "holes.csv"
+    p.write_text("f,a,b\n" + "".join(f"{x},{a},{b}\n" for x, a, b in zip(f, *cols)))
+    with pytest.warns(UserWarning) as rec:
+        frf = read_frf(p)
+    msgs = [str(w.message) for w in rec]
+    assert len(msgs) == 2 and "output 'a': 5 of 40 values not finite" in msgs[0] and "5.5–7.5 Hz (rows 10–14)" in msgs[0]
+    assert "output 'b': 1 of 40" in msgs[1] and "15.5–15.5 Hz (rows 30–30)" in msgs[1]
+    assert frf.settings["warnings"] == [m.split(": ", 1)[1] for m in msgs]
+    assert np.array_equal(frf.H[:10, 0, 0], cols[0][:10])

@@ -596,7 +596,33 @@ def read_frf(
     units = _KIND_UNITS[k] if k is not None else t.units
     settings = {"source": [str(p) for p in paths] if len(paths) > 1 else str(paths[0]), "format": t.fmt,
                 **t.extra}
+    notes = _non_finite_notes(t.f, t.H, outputs, inputs)
+    if notes:
+        import warnings
+
+        settings["warnings"] = notes
+        for line in notes:
+            warnings.warn(f"{settings['source']}: {line}", stacklevel=2)
     return FRF(t.f, t.H, t.coh, inputs, outputs, "unknown", k, units, settings)
+
+
+def _non_finite_notes(f: np.ndarray, H: np.ndarray, outputs: list, inputs: list) -> list[str]:
+    """One line per output/input pair that holds some NaN or Inf values (not every one: a pair a
+    UFF file lacks is NaN throughout by design): how many, and at which frequencies and rows."""
+    from vibroscope.signals import true_runs
+
+    out = []
+    bad = ~np.isfinite(H)
+    for o in range(H.shape[1]):
+        for i in range(H.shape[2]):
+            b = bad[:, o, i]
+            if b.any() and not b.all():
+                a, e = true_runs(b)
+                where = ", ".join(f"{f[x]:.6g}–{f[y - 1]:.6g} Hz (rows {x}–{y - 1})" for x, y in zip(a[:3], e[:3]))
+                out.append(f"output {outputs[o]!r}" + (f" / input {inputs[i]!r}" if len(inputs) > 1 else "")
+                           + f": {int(b.sum())} of {b.size} values not finite (NaN/Inf) at {where}"
+                           + (" ..." if a.size > 3 else "") + "; the modal fit skips those lines")
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
