@@ -167,3 +167,15 @@ def test_bands_locate_an_added_mode_region(u20):
     b = r.bands[0]
     assert b.f_lo_hz < 25.5 and b.f_hi_hz > 24.0
     assert b.share > 0.4
+
+
+def test_a_log_too_gappy_to_diagnose_is_named(u20):
+    """Gaps every 1.5 s leave no stretch of the 8 s the diagnosis needs: the error names the log (its
+    ``source``), the channels and what is needed, and gives advice the CLI can follow."""
+    sig = log_of(nominal(), u20)
+    x = np.array(sig.data)
+    for s in range(1000, sig.n_samples, 1500):
+        x[1:, s : s + 20] = np.nan
+    gappy = Signals(x, sig.fs, sig.channels, sig.units, sig.t0, {"source": "run7.mcap"})
+    with pytest.raises(ValueError, match=r"^run7\.mcap: missing samples .* needs .*: give a log with fewer gaps"):
+        diagnose(nominal(), [gappy])

@@ -146,10 +146,11 @@ def _split_at_gaps(model, sigs: list, nperseg: int | None) -> list:
         keep = [(a, b) for a, b in zip(starts, stops) if b - a >= min_len]
         if not keep:
             longest = int((stops - starts).max()) if starts.size else 0
-            raise ValueError(f"missing samples (NaN) in channel(s) {bad}: the longest stretch without one is "
-                             f"{longest} samples ({longest / sig.fs:.3g} s), the gap diagnosis needs "
-                             f"{min_len} ({min_len / sig.fs:.3g} s); give a smaller nperseg or a log "
-                             f"with fewer gaps")
+            src = sig.meta.get("source")
+            raise ValueError(f"{src + ': ' if src else ''}missing samples (NaN) in channel(s) {bad}: the longest "
+                             f"stretch without one is {longest} samples ({longest / sig.fs:.3g} s), the gap "
+                             f"diagnosis needs {min_len} ({min_len / sig.fs:.3g} s): give a log with fewer gaps "
+                             f"(or, in the API, a smaller nperseg)")
         used = sum(b - a for a, b in keep)
         warnings.warn(f"missing samples (NaN) in channel(s) {bad}: the log is diagnosed as {len(keep)} "
                       f"gap-free stretches ({used} of {sig.n_samples} samples; stretches shorter than "
