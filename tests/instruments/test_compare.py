@@ -66,3 +66,14 @@ def test_compare_toml_model(tmp_path, capsys):
     assert "| dof.m1.mass=2, element.0.k=50000 |" in out and "| 0.5 |" in out
     sweep.write_text("dof.m9.mass\n2\n")
     assert main(["compare", str(model), "--sweep", str(sweep), "--out", str(tmp_path)]) == 1
+
+
+def test_compare_parameters_the_model_cannot_take(tmp_path, capsys):
+    """A mass of 1e300 kg: no rise time, no cut-off: the row is named and the run fails (before: exit 0,
+    a row of 'nan', scipy's "Badly conditioned filter coefficients" and a figure)."""
+    sweep = tmp_path / "s.csv"
+    sweep.write_text("A,V,m\n0.006,0.00075,1e300\n")
+    assert main(["compare", "pneumatic", "--sweep", str(sweep), "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "line 2 (A=0.006, V=0.00075, m=1e+300)" in err[0] and "'t_r'" in err[0]
+    assert not (tmp_path / "compare_pneumatic.png").exists()

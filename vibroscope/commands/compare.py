@@ -136,10 +136,23 @@ def run(args) -> int:
     png_path = out / f"compare_{model.name}.png"
     check_outputs({"--out": png_path}, inputs)
     header, cases = _read_sweep(Path(args.sweep))
+    import warnings
+
+    import numpy as np
+
     try:
-        result = sweep(model, header, cases)
+        with warnings.catch_warnings():  # a badly conditioned model is judged by its criteria below
+            warnings.simplefilter("ignore", category=Warning)
+            result = sweep(model, header, cases)
     except ValueError as exc:
         raise VibroscopeError(f"{args.sweep}: {exc}") from None
+    for k, (case, crit) in enumerate(zip(cases, result.criteria), start=2):
+        bad = [n for n, v in crit.items() if not np.isfinite(v)]
+        if {"t_r", "nu_c"} <= set(bad):  # no rise time and no cut-off (nu_r alone may be absent: no
+            # resonance): parameters the model cannot take (a mass of 1e300 kg), no number to compare
+            raise VibroscopeError(f"{args.sweep}: line {k} ({', '.join(f'{h}={v:g}' for h, v in case.items())}): the "
+                                  f"model's criteria {bad} are not finite numbers with these parameters (values far "
+                                  f"outside the model's range?)")
 
     done = []
     with AtomicOutputs(inputs=[p for p in inputs.values() if p]) as tx:
