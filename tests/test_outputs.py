@@ -302,3 +302,14 @@ def test_export_model_with_no_mode_says_so(tiny_log, tmp_path, capsys):
                  "--export-model", str(out), "--no-rrd", "--no-figures"]) == 1
     err = _err_lines(capsys)
     assert len(err) == 1 and "--export-model: no mode was identified" in err[0] and not out.exists()
+
+
+def test_ods_above_the_band_is_refused_before_the_report(tiny_log, tmp_path, capsys):
+    """--ods beyond the analysed band: one error line and no modes table printed as if all went well
+    (before: the report, then the error); --ods beyond --fs / 2 is refused before the log is read."""
+    assert main(["analyse", str(tiny_log), "--ods", "150", "--out", str(tmp_path)]) == 1
+    cap = capsys.readouterr()
+    assert "f_n [Hz]" not in cap.out and "--ods 150: above the analysed band's top" in cap.err
+    assert main(["analyse", str(tiny_log), "--fs", "200", "--ods", "150", "--out", str(tmp_path)]) == 1
+    assert "above the Nyquist frequency 100 Hz of --fs 200" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

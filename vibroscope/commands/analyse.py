@@ -210,6 +210,11 @@ def run(args) -> int:
                          estimator=args.estimator, method=args.method, select=select)
     except ValueError as exc:
         raise VibroscopeError(f"{args.log}: {exc}") from None
+    nyq = an.psd.frequencies[-1]
+    for f in args.ods or ():  # before the report: nothing is printed as done that will not be written
+        if f > nyq:
+            raise VibroscopeError(f"--ods {f:g}: above the analysed band's top, {nyq:g} Hz (the Nyquist frequency of "
+                                  f"{an.signals.fs:g} Hz)")
     print(report_text(an, source=str(args.log)))
     write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
                   spawn=args.spawn, ods=args.ods)
@@ -540,6 +545,8 @@ def _check_options(args) -> None:
     for f in getattr(args, "ods", None) or ():
         if not (math.isfinite(f) and f > 0):
             raise VibroscopeError(f"--ods {f:g}: frequencies must be positive and finite (Hz)")
+        if getattr(args, "fs", None) is not None and f > args.fs / 2:
+            raise VibroscopeError(f"--ods {f:g}: above the Nyquist frequency {args.fs / 2:g} Hz of --fs {args.fs:g}")
 
 
 def report_text(an, *, source: str = "", true_modes=None) -> str:
