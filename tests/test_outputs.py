@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from vibroscope.cli import main
@@ -313,3 +314,16 @@ def test_ods_above_the_band_is_refused_before_the_report(tiny_log, tmp_path, cap
     assert main(["analyse", str(tiny_log), "--fs", "200", "--ods", "150", "--out", str(tmp_path)]) == 1
     assert "above the Nyquist frequency 100 Hz of --fs 200" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+def test_a_log_of_a_few_samples_is_too_short(tmp_path, capsys):
+    """Two samples: the error says the log is too short (before: "fmin=500.0 must be below
+    fmax=500.0 (Hz)", though no band was given)."""
+    from vibroscope.io import write_ros2_mcap
+    from vibroscope.signals import Signals
+
+    log = write_ros2_mcap(tmp_path / "two.mcap", Signals(np.ones((3, 2)) * [[1], [2], [3]] + [[0, 1]], 1000.0,
+                                                         [f"/imu.linear_acceleration.{a}" for a in "xyz"], t0=1.0))
+    assert main(["analyse", str(log), "--out", str(tmp_path / "o")]) == 1
+    err = _err_lines(capsys)
+    assert len(err) == 1 and "too short to analyse: 2 samples" in err[0]

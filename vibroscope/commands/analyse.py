@@ -124,6 +124,9 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         notes += [f"{what}: skipped: {why}" for what, why in sel.skipped]
         outputs, fallback = [c for c in sel.channels if c != input], sel.fallback
     sig = read_mcap(source, [input, *outputs] if input else list(outputs), fs=fs, progress=progress)
+    if sig.n_samples < 16:  # not one Welch segment of the shortest length
+        raise ValueError(f"the log is too short to analyse: {sig.n_samples} samples on the common grid "
+                         f"({sig.duration:.3g} s at {sig.fs:g} Hz); at least 16 are needed")
     if fallback:  # automatic non-IMU choice: keep the fields that move, at most MAX_AUTO_CHANNELS
         finite = {c: sig[c][np.isfinite(sig[c])] for c in outputs}  # NaN marks a gap, not a value
         moving = [c for c in outputs if finite[c].size and finite[c].max() > finite[c].min()]
