@@ -335,3 +335,19 @@ def test_units_pairs_may_name_channels_not_selected(tmp_path):
     with pytest.raises(ValueError, match=r"no channel 'c' \(not among the columns read\)"):
         read_csv(p, fs=1.0, columns="0,1", channels="c")
     assert read_csv(p, fs=1.0, columns="0,1", units="c=V,a=N").units == ("N", "")
+
+
+def test_nan_and_inf_cells_are_said(tmp_path):
+    """Cells written as inf or beyond float64 (1e400) are missing samples: read as they are, with a
+    warning naming the count and the first line (before: silently); a ragged row's error counts
+    lines as the file does (it said "line 7: ... at row 5")."""
+    p = tmp_path / "a.csv"
+    rows = [f"{k / 100},{np.sin(k / 7)}" for k in range(200)]
+    rows[50], rows[120] = "0.5,inf", "1.2,1e400"
+    p.write_text("t,acc\n" + "\n".join(rows) + "\n")
+    with pytest.warns(UserWarning, match=r"2 cells are NaN or ±Inf .* first at line 52"):
+        read_csv(p)
+    q = tmp_path / "b.csv"
+    q.write_text("t,acc\n" + "\n".join(rows[:5] + ["0.05"] + rows[6:10]) + "\n")
+    with pytest.raises(LogFormatError, match=r"line 7: not a numeric CSV file \(.*at line 7"):
+        read_csv(q)

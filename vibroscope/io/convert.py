@@ -250,6 +250,18 @@ def select_channels(
 _TIME_HEADER = re.compile(r"(?i:time|times|time_s|seconds|time\s*[\[(]\s*s\s*[\])])|t|t_s|t\s*[\[(]\s*s\s*[\])]")
 
 
+def _said_non_finite(a: np.ndarray, path: Path, skip: int) -> np.ndarray:
+    """`a`, with a warning when cells are NaN or ±Inf as written (``nan``, ``inf``, ``1e400``)."""
+    import warnings
+
+    bad = ~np.isfinite(a)
+    if bad.any():  # missing samples, said (the reader's NaN of empty cells is said by the caller)
+        rows = np.flatnonzero(bad.any(axis=1))
+        warnings.warn(f"{path}: {int(bad.sum())} cells are NaN or ±Inf (written so, or beyond float64), first at "
+                      f"line {rows[0] + 1 + skip}: missing samples; nothing is filled in", stacklevel=4)
+    return a
+
+
 def _loadtxt(path: Path, delimiter: str | None, skip: int) -> np.ndarray:
     """The numbers of a CSV file, shape (n_rows, n_columns); an empty cell is a missing
     sample: NaN, with a warning that counts them."""
@@ -257,21 +269,30 @@ def _loadtxt(path: Path, delimiter: str | None, skip: int) -> np.ndarray:
 
     def fail(exc: ValueError) -> LogFormatError:
         m = re.search(r"at row (\d+)", str(exc))
-        where = f"line {int(m.group(1)) + 1 + skip}: " if m else ""
-        return LogFormatError(f"{path}: {where}not a numeric CSV file ({exc})")
+        if not m:
+            return LogFormatError(f"{path}: not a numeric CSV file ({exc})")
+        # numpy counts data rows from 0 in a conversion error but from 1 in a column-count error
+        line = int(m.group(1)) + skip + (0 if "number of columns changed" in str(exc) else 1)
+        what = str(exc).replace(m.group(0), f"at line {line}")
+        return LogFormatError(f"{path}: line {line}: not a numeric CSV file ({what})")
 
+    empty = False
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "input contained no data": checked by the caller
         try:
-            return np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2, dtype=np.float64)
+            a = np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2, dtype=np.float64)
         except ValueError as exc:
             if "string ''" not in str(exc) or delimiter is None:
                 raise fail(exc) from None
-        try:
-            a = np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2, dtype=np.float64,
-                           converters=lambda c: float(c) if c.strip() else np.nan)
-        except ValueError as exc:
-            raise fail(exc) from None
+            empty = True
+        if empty:
+            try:
+                a = np.loadtxt(path, delimiter=delimiter, skiprows=skip, ndmin=2, dtype=np.float64,
+                               converters=lambda c: float(c) if c.strip() else np.nan)
+            except ValueError as exc:
+                raise fail(exc) from None
+    if not empty:
+        return _said_non_finite(a, path, skip)
     n = int(np.isnan(a).sum())
     warnings.warn(f"{path}: {n} empty cells read as missing samples (NaN); nothing is filled in", stacklevel=3)
     return a
