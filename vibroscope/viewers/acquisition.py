@@ -141,11 +141,14 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
 
     axes[-1, 0].xaxis.set_major_locator(MaxNLocator(nbins=5 if nc > 1 else 8))
     more = f"; first {nc} of {acc_signals.n_channels} channels" if acc_signals.n_channels > nc else ""
-    fig.suptitle(f"Acceleration, velocity, displacement (integrated by the {method} method, high-pass "
-                 f"f_cut = {fc:.3g} Hz, zero-phase Butterworth 4, −6 dB)\n(shaded: 1/f_cut edge zones"
-                 + ("; red: missing, each stretch between gaps integrated apart" if not np.isfinite(acc.data).all()
-                    else "") + f"{more})",
-                 fontsize=9.5)
+    import textwrap
+
+    width = int(fig.get_figwidth() * 14)  # characters of 9.5 pt text across the figure
+    lines = [f"Acceleration, velocity, displacement (integrated by the {method} method, high-pass f_cut = {fc:.3g} Hz, "
+             f"zero-phase Butterworth 4, −6 dB)",
+             "(shaded: 1/f_cut edge zones" + ("; red: missing, each stretch between gaps integrated apart"
+                                              if not np.isfinite(acc.data).all() else "") + f"{more})"]
+    fig.suptitle("\n".join(w for line in lines for w in textwrap.wrap(line, width)), fontsize=9.5)
     return fig
 
 
