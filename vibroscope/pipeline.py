@@ -218,7 +218,7 @@ class IdentifySettings:
 def _identify(sig: Signals, s: IdentifySettings):
     """One identification pass at one resolution: (CSD of all channels, FRF or None, Identification)."""
     from vibroscope import modal
-    from vibroscope.modal.automatic import Identification, auto_lscf, auto_ssi
+    from vibroscope.modal.automatic import Identification, _line_spacing, auto_lscf, auto_ssi
     from vibroscope.modal.selection import select_modes
 
     G = csd_matrix(sig, nperseg=s.nperseg, window=s.window)
@@ -233,7 +233,8 @@ def _identify(sig: Signals, s: IdentifySettings):
             h = frf_periodic(sig, s.input, outputs, period=s.period, drop_periods=1)
         if s.method == "peak":
             mm = modal.peak_picking(h, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax)
-            sel = select_modes(mm, fmin=lo, fmax=hi, coherence=(h.frequencies, h.coherence))
+            sel = select_modes(mm, fmin=lo, fmax=hi, coherence=(h.frequencies, h.coherence),
+                               resolution_hz=_line_spacing(h.frequencies))
             return G, h, Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria})
         if s.method in ("ssi", "polymax", "fdd", "efdd"):
             raise ValueError(f"method={s.method!r} is output-only; with an input use 'lscf' or 'peak'")
@@ -250,7 +251,7 @@ def _identify(sig: Signals, s: IdentifySettings):
     # two singular values: close modes (e.g. a tower's two bending directions) both show
     mm = modal.fdd(Gout, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax, n_singular=min(2, len(outputs)),
                    prominence=s.prominence, efdd=s.method == "efdd")
-    sel = select_modes(mm, fmin=s.fmin, fmax=hi)
+    sel = select_modes(mm, fmin=s.fmin, fmax=hi, resolution_hz=_line_spacing(Gout.frequencies))
     return G, None, Identification(sel.modes, sel.rejected, None, {"method": mm.method, **sel.criteria})
 
 
@@ -290,8 +291,8 @@ def analyse_signals(
     nperseg : int, optional
         Welch segment length; default :func:`default_nperseg` (fine enough for the band's lowest
         frequency), then, with an input, doubled while an identified mode's half-power band
-        ``2 ζ f_n`` spans fewer than 8 bins and at least 5 averages remain (the damping needs the
-        resolution; a warning says so).
+        ``2 ζ f_n`` spans fewer than 8 bins and at least 5 averages remain -- with gaps, at least
+        5 segments free of missing samples (the damping needs the resolution; a warning says so).
     window : str, optional
         Welch window (default Hann).
     fmin, fmax : float, optional
@@ -453,12 +454,13 @@ def analyse_signals(
             G, h, ident = _identify(sig, s)
         mm = ident.modes
         # half-power bands should span several bins for the damping to be resolved (Brandt 2011,
-        # §14.3): refine the resolution while that is not so and >= 5 averages remain. FRFs only:
-        # output-only FDD loses more to the fewer averages than it gains in resolution
+        # §14.3): refine the resolution while that is not so and >= 5 averages remain (with gaps:
+        # >= 5 segments free of missing samples). FRFs only: output-only FDD loses more to the
+        # fewer averages than it gains in resolution
         bw = 2 * np.asarray(mm.damping_ratios) * np.asarray(mm.natural_frequencies)
         df = sig.fs / nperseg
         if (not auto or not input or period or not np.any(np.isfinite(bw) & (bw < 8 * df))
-                or 2 * nperseg > 2 * sig.n_samples / 6 or _nperseg_for(sig, 2 * nperseg) < 2 * nperseg):
+                or 2 * nperseg > 2 * sig.n_samples / 6 or (gappy and _clean_segments(sig, 2 * nperseg) < 5)):
             break
         refinements.append(nperseg)
         nperseg *= 2

@@ -8,8 +8,9 @@
   (:mod:`vibroscope.modal.selection`) and block-bootstrap uncertainties
   (:mod:`vibroscope.modal.uncertainty`).
 - With an input (:func:`auto_lscf`): LSCF/polyMAX over the excited band, clustering of stable
-  poles, physical-mode selection (excited band, coherence), LSFD residues with lower and upper
-  residuals, and the synthesized FRFs.
+  poles, physical-mode selection (excited band, coherence, and one mode for candidates within two
+  lines of the FRF with the same shape: a lightly damped mode that a coarse resolution splits),
+  LSFD residues with lower and upper residuals, and the synthesized FRFs.
 """
 
 from __future__ import annotations
@@ -201,6 +202,13 @@ def ssi_lags(fs: float, f_low: float, n_samples: int, *, periods: float = 2.0) -
     return int(max(20, min(want, 300, n_samples // 40)))
 
 
+def _line_spacing(frequencies: np.ndarray) -> float | None:
+    """The median line spacing (Hz) of a frequency axis; None when it has fewer than two lines."""
+    d = np.diff(np.asarray(frequencies, float))
+    d = d[np.isfinite(d) & (d > 0)]
+    return float(np.median(d)) if d.size else None
+
+
 def _add_quality(mm: ModalModel) -> ModalModel:
     """`mm` with per-mode ``mpc`` and ``mpd_deg`` in its ``extra``."""
     from vibroscope.modal._results import mpc
@@ -316,6 +324,10 @@ def auto_lscf(
 ) -> Identification:
     """Modes from FRFs by LSCF/polyMAX, automatic pole selection and LSFD.
 
+    Candidates within two lines of the FRF whose shapes agree (MAC ≥ 0.9) are one mode: the
+    cluster that stands alone at the most model orders is kept, the others are rejected as its
+    duplicates (``resolution_hz`` of :func:`vibroscope.modal.selection.select_modes`).
+
     Parameters
     ----------
     frf : FRF
@@ -370,8 +382,9 @@ def auto_lscf(
         coh = None
         if np.any(np.isfinite(frf.coherence)):
             coh = (f, frf.coherence)
+        # candidates within two lines of the FRF with the same shape are one (split) mode
         sel = select_modes(cand, fmin=lo, fmax=hi, damping_range=damping_range, min_mpc=min_mpc, coherence=coh,
-                           min_coherence=min_coherence, rejected=unstable)
+                           min_coherence=min_coherence, rejected=unstable, resolution_hz=_line_spacing(f))
     kept = sel.modes
     rejected = list(sel.rejected)
     res = None
@@ -505,7 +518,7 @@ def polymax_oma(signals: Signals, *, f_low: float, fmin: float | None = None, fm
     st = dataclasses.replace(st, frequency=f, damping=z,
                              settings={**st.settings, "method": "polymax_oma", "window_sigma": sigma})
     cand, unstable = cluster_poles(st)
-    sel = select_modes(cand, fmin=fmin, fmax=fmax, rejected=unstable)
+    sel = select_modes(cand, fmin=fmin, fmax=fmax, rejected=unstable, resolution_hz=_line_spacing(h.frequencies))
     mm = _add_quality(sel.modes)
     settings = {"method": "polymax_oma", "n_lags": n_lags, "window_sigma_per_s": sigma,
                 "references": [signals.channels[i] for i in ref], "band_hz": [fmin, fmax],

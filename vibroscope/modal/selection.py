@@ -13,7 +13,19 @@ peaks for peak picking and FDD). A candidate is reported as a mode only when it 
   1993) — a lightly, proportionally damped structure has nearly real modes,
 - **inside the band the test excites**: with a measured input, where the input's PSD is within
   20 dB of its maximum and the coherence at the mode is at least `min_coherence`; without one,
-  inside the analysis band.
+  inside the analysis band,
+- **not a duplicate**: candidates closer in frequency than the spectra resolve (within
+  `duplicate_bins` = 2 lines of the FRF/CSD: the half-width of the Hann window's main lobe, so
+  two peaks nearer than that are one peak of the estimate) whose shapes agree (MAC ≥
+  `duplicate_mac` = 0.9) are one mode. At a coarse resolution LSCF splits a lightly damped mode
+  into two poles of the same model order that bracket it (the extra poles fit the noise of the
+  few lines across the peak), and each of them forms its own stable cluster. A physical mode is
+  one pole per model order -- the premise of the stabilization diagram -- so the candidate kept
+  is the one whose cluster stands alone at the most orders (no duplicate has a pole at those
+  orders), then the largest cluster, then the best MPC; the others are rejected as duplicates
+  of it. This is the pole distance of Reynders et al. (2012) (frequency distance plus
+  ``1 − MAC``) with the frequency tolerance set by the spectral resolution; two real close modes
+  (different shapes, or farther apart than two lines) are kept.
 
 The others are listed with the reason (:class:`RejectedMode`), so that an engineer can see what
 was dropped. This is the automated scheme of Reynders, Houbrechts & De Roeck (2012) and
@@ -42,12 +54,16 @@ from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.modal.mac import mac
 
 __all__ = ["RejectedMode", "Selection", "select_modes", "cluster_poles", "pick_poles", "excited_band", "response_band",
-           "DAMPING_RANGE", "MIN_MPC"]
+           "DAMPING_RANGE", "MIN_MPC", "DUPLICATE_BINS", "DUPLICATE_MAC"]
 
 #: physically plausible viscous damping ratios (dimensionless) of a structural mode
 DAMPING_RANGE = (1e-4, 0.10)
 #: smallest modal phase collinearity of a reported mode
 MIN_MPC = 0.5
+#: candidates within this many spectral lines of each other (and with similar shapes) are one mode
+DUPLICATE_BINS = 2.0
+#: smallest MAC between two candidates within :data:`DUPLICATE_BINS` lines that makes them one mode
+DUPLICATE_MAC = 0.9
 
 
 @dataclass(frozen=True)
@@ -217,7 +233,9 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
     (ModalModel, list of RejectedMode)
         ``extra``: ``cluster_size``, ``damping_std`` and ``frequency_std_hz`` (spread over the
         cluster's orders, not a statistical uncertainty), ``mpc``, ``order`` (of the
-        representative pole) and ``settings``.
+        representative pole), ``cluster_orders`` (object array of frozensets: the model orders
+        of each cluster's poles, which :func:`select_modes` uses to tell a split mode from the
+        mode) and ``settings``.
     """
     st = stabilization
     n_orders = len(st.settings.get("orders", ())) or int(np.unique(st.order).size)
@@ -252,7 +270,8 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
             used[members] = True
             rep = p[np.argmin(np.abs(st.frequency[p] - fmed))]
             modes.append((fmed, float(np.median(st.damping[p])), st.shapes[rep], len(p),
-                          float(np.std(st.damping[p])), float(np.std(st.frequency[p])), int(st.order[rep])))
+                          float(np.std(st.damping[p])), float(np.std(st.frequency[p])), int(st.order[rep]),
+                          frozenset(int(o) for o in st.order[p])))
         elif len(members) >= 2:
             used[members] = True
             rejected.append(RejectedMode(fmed, float(np.median(st.damping[p])),
@@ -262,12 +281,16 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
         empty = np.zeros(0)
         return ModalModel(empty, empty, np.zeros((0, len(st.points))), st.points, method,
                           {"cluster_size": np.zeros(0, int), "damping_std": empty, "frequency_std_hz": empty,
-                           "mpc": empty, "order": np.zeros(0, int), "settings": settings}), rejected
-    f, z, s, c, zs, fsd, o = zip(*modes)
+                           "mpc": empty, "order": np.zeros(0, int), "cluster_orders": np.empty(0, object),
+                           "settings": settings}), rejected
+    f, z, s, c, zs, fsd, o, co = zip(*modes)
     shapes = normalize_shapes(np.array(s))
+    orders = np.empty(len(co), object)
+    orders[:] = co
     return ModalModel(np.array(f), np.array(z), shapes, st.points, method,
                       {"cluster_size": np.array(c), "damping_std": np.array(zs), "frequency_std_hz": np.array(fsd),
-                       "mpc": mpc(shapes), "order": np.array(o), "settings": settings}), rejected
+                       "mpc": mpc(shapes), "order": np.array(o), "cluster_orders": orders,
+                       "settings": settings}), rejected
 
 
 def select_modes(
@@ -280,6 +303,9 @@ def select_modes(
     coherence: tuple[np.ndarray, np.ndarray] | None = None,
     min_coherence: float = 0.5,
     rejected: Sequence[RejectedMode] = (),
+    resolution_hz: float | None = None,
+    duplicate_bins: float = DUPLICATE_BINS,
+    duplicate_mac: float = DUPLICATE_MAC,
 ) -> Selection:
     """Keep the physical modes of an identified model; list the others with the reason.
 
@@ -302,11 +328,27 @@ def select_modes(
         Default 0.5.
     rejected : sequence of RejectedMode, optional
         Candidates already rejected upstream (e.g. unstable clusters); carried into the result.
+    resolution_hz : float, optional
+        Line spacing (Hz) of the spectra the candidates were identified from (FRF or CSD). With
+        it, candidates that pass the criteria above but lie within ``duplicate_bins ·
+        resolution_hz`` of each other with MAC ≥ `duplicate_mac` are one mode: the one whose
+        cluster stands alone at the most model orders (``extra["cluster_orders"]``), then the
+        largest cluster (``extra["cluster_size"]``), then the best MPC is kept and the others are
+        rejected as its duplicates (see the module notes). Default None: no merging.
+    duplicate_bins : float, optional
+        Frequency tolerance in lines of `resolution_hz`; default :data:`DUPLICATE_BINS` (2).
+    duplicate_mac : float, optional
+        Smallest MAC of duplicates; default :data:`DUPLICATE_MAC` (0.9).
 
     Returns
     -------
     Selection
         ``modes`` ascending in frequency with ``extra["stable"]`` True, ``rejected`` with reasons.
+
+    Raises
+    ------
+    ValueError
+        If `resolution_hz` is given and is not a positive, finite number.
     """
     f = model.natural_frequencies
     z = model.damping_ratios
@@ -335,12 +377,74 @@ def select_modes(
             keep.append(r)
         else:
             out.append(RejectedMode(float(f[r]), float(z[r]), why))
+    duplicate = None
+    if resolution_hz is not None:
+        if not (np.isfinite(resolution_hz) and resolution_hz > 0):
+            raise ValueError(f"{resolution_hz=} Hz must be a positive, finite line spacing")
+        keep, dups = _drop_duplicates(model, keep, float(resolution_hz), duplicate_bins, duplicate_mac, m)
+        out += dups
+        duplicate = {"resolution_hz": float(resolution_hz), "bins": duplicate_bins, "mac_min": duplicate_mac}
     kept = _subset(model, np.array(keep, dtype=int))
     kept = dataclasses.replace(kept, extra={**kept.extra, "stable": np.ones(len(kept), bool)})
     out.sort(key=lambda x: x.frequency_hz)
     criteria = {"band_hz": [fmin, fmax], "damping_range": list(damping_range), "min_mpc": min_mpc,
-                "min_coherence": min_coherence if coherence is not None else None}
+                "min_coherence": min_coherence if coherence is not None else None, "duplicates": duplicate}
     return Selection(kept, tuple(out), criteria)
+
+
+def _drop_duplicates(model: ModalModel, keep: list, df: float, bins: float, mac_min: float,
+                     m: np.ndarray) -> tuple[list, list]:
+    """Candidates `keep` (indices into `model`) without duplicates: (kept indices ascending, rejected).
+
+    Two candidates are duplicates when within `bins` lines of `df` Hz and with MAC ≥ `mac_min`.
+    Candidates are ranked by the model orders at which their cluster stands alone (no duplicate
+    has a pole there), then cluster size, then MPC `m`; each in turn is kept unless a duplicate of
+    one already kept (a greedy suppression: the best-supported candidate of a group survives).
+    """
+    if len(keep) < 2:
+        return list(keep), []
+    tol_hz = bins * df
+    idx = np.asarray(keep, dtype=int)
+    f = model.natural_frequencies[idx]
+    z = model.damping_ratios[idx]
+    M = mac(model.shapes[idx], model.shapes[idx])
+    near = (np.abs(f[:, None] - f[None, :]) <= tol_hz) & (M >= mac_min)
+    np.fill_diagonal(near, False)
+    if not near.any():
+        return list(keep), []
+    ex = model.extra
+    n = len(model)
+
+    def per_mode(key):
+        v = ex.get(key)
+        return v[idx] if isinstance(v, np.ndarray) and v.shape[:1] == (n,) else None
+
+    orders, size = per_mode("cluster_orders"), per_mode("cluster_size")
+    lone = np.zeros(len(idx), int)
+    if orders is not None:
+        for i in range(len(idx)):
+            others = set().union(*(orders[j] for j in np.flatnonzero(near[i])))
+            lone[i] = len(set(orders[i]) - others)
+    size = np.zeros(len(idx), int) if size is None else np.asarray(size, int)
+    q = np.nan_to_num(np.asarray(m, float)[idx], nan=0.0) if len(m) else np.zeros(len(idx))
+    ranked = sorted(range(len(idx)), key=lambda i: (lone[i], size[i], q[i]), reverse=True)
+    kept_local, rejected = [], []
+    for i in ranked:
+        twin = next((j for j in kept_local if near[i, j]), None)
+        if twin is None:
+            kept_local.append(i)
+            continue
+        if lone[twin] > lone[i]:
+            support = f"; {f[twin]:.5g} Hz is the group's only pole at {lone[twin]} model orders, this one at {lone[i]}"
+        elif size[twin] > size[i]:
+            support = f"; {f[twin]:.5g} Hz has the larger cluster ({size[twin]} poles against {size[i]})"
+        else:
+            support = f"; {f[twin]:.5g} Hz has the better MPC ({q[twin]:.3f} against {q[i]:.3f})"
+        rejected.append(RejectedMode(float(f[i]), float(z[i]),
+                                     f"duplicate of {f[twin]:.5g} Hz: {abs(f[i] - f[twin]):.3g} Hz apart, within "
+                                     f"{bins:g} lines of {df:.4g} Hz (not separable), MAC {M[i, twin]:.3f}"
+                                     f"{support}"))
+    return sorted(int(idx[i]) for i in kept_local), rejected
 
 
 def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float = 0.05,
