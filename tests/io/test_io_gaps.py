@@ -228,7 +228,7 @@ def test_one_bad_message_gives_nan_not_a_lost_channel(tmp_path):
 from hypothesis import given, settings, strategies as hst  # noqa: E402
 
 from vibroscope.io._grid import TopicSamples, onto_grid  # noqa: E402
-from vibroscope.io.timebase import analyse_stamps  # noqa: E402
+from vibroscope.io.timebase import analyse_stamps, fit_stamps  # noqa: E402
 
 
 @settings(max_examples=60, deadline=None)
@@ -257,9 +257,9 @@ def test_grid_never_fills_a_gap(n, seed, p_drop, jitter):
         k = np.rint((t - start) * 1e-6).astype(int)
         assert np.array_equal(out[:, k], y) and nan.sum() == m - k.size
         return
-    # interpolated: finite exactly where a run (increments <= 1.5 median periods, >= 2 samples) brackets
-    dt = np.diff(t)
-    cut = np.flatnonzero(dt > 1.5 * np.median(dt))
+    # interpolated: finite exactly where a run (no gap of fit_stamps, >= 2 samples) brackets
+    cut = np.flatnonzero(fit_stamps(t).gap)
+    assert rep.gaps == cut.size
     firsts, lasts = np.r_[0, cut + 1], np.r_[cut, t.size - 1]
     inside = np.zeros(m, bool)
     down = rep.fs_est > 1000.0 * 1.01  # anti-alias filtered: a run needs 28 samples at fs_est

@@ -4,7 +4,8 @@ A topic whose stamps lie on the grid (within :data:`~vibroscope.io.timebase.ON_G
 a period, at the grid's rate) is placed by index, ``k = round((t - start) fs)``: no
 interpolation at all, NaN where nothing was logged. Any other topic is interpolated
 (:func:`~vibroscope.io.timebase.resample_to_grid`) within each contiguous run of its stamps
-(increments of at most :data:`~vibroscope.io.timebase.GAP_PERIODS` median periods), so the
+(no increment holding a missing message, :func:`~vibroscope.io.timebase.fit_stamps`: jitter
+of the stamps is not a gap), so the
 spline and the anti-alias filter never span a gap; the grid samples in a gap are NaN. Chunks
 lost to damage are gaps like any other. Every gap is reported.
 """
@@ -17,7 +18,8 @@ from typing import Any
 import numpy as np
 
 from vibroscope.errors import ChannelError
-from vibroscope.io.timebase import DOWNSAMPLE_RATIO, GAP_PERIODS, ON_GRID_TOL, TimebaseReport, grid_for, resample_to_grid
+from vibroscope.io.timebase import (DOWNSAMPLE_RATIO, ON_GRID_TOL, TimebaseReport, fit_stamps, grid_for,
+                                    resample_to_grid)
 
 #: refuse a grid with more samples than this many times the messages read (x the rate ratio)
 MAX_GRID_FACTOR = 10
@@ -59,12 +61,11 @@ def _on_grid_index(t: np.ndarray, start: int, fs: float) -> np.ndarray | None:
 
 
 def _runs(t: np.ndarray) -> list[tuple[int, int]]:
-    """(first, last) indices of the contiguous runs of increasing stamps `t`."""
+    """(first, last) indices of the contiguous runs of increasing stamps `t` (split at the gaps
+    of :func:`~vibroscope.io.timebase.fit_stamps`)."""
     if t.size < 2:
         return [(0, t.size - 1)] if t.size else []
-    dt = np.diff(t)
-    med = float(np.median(dt))
-    cut = np.flatnonzero(dt > GAP_PERIODS * med)
+    cut = np.flatnonzero(fit_stamps(t).gap)
     firsts = np.r_[0, cut + 1]
     lasts = np.r_[cut, t.size - 1]
     return list(zip(firsts.tolist(), lasts.tolist()))
@@ -132,12 +133,13 @@ def place_topic(s: TopicSamples, start: int, n: int, fs: float, *,
         out[:, ~covered] = np.nan
         return out, covered, True
     # NaN samples (fields missing in some messages): each row's runs end at its NaN samples too
+    all_runs = _runs(t)
     for r in range(y.shape[0]):
         ok = np.isfinite(y[r])
         cov_r = np.zeros(n, bool)
         brk = np.flatnonzero(~ok)
         runs = []
-        for a, b in _runs(t):
+        for a, b in all_runs:
             edges = [a - 1, *brk[(brk >= a) & (brk <= b)].tolist(), b + 1]
             runs += [(e0 + 1, e1 - 1) for e0, e1 in zip(edges[:-1], edges[1:]) if e1 - 1 >= e0 + 1]
         _interp_runs(t, y[r : r + 1], grid_ns, start, fs, fs_src, runs, out[r : r + 1], cov_r)

@@ -42,6 +42,7 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from vibroscope.errors import ChannelError, LogFormatError
+from vibroscope.io.timebase import _snap
 from vibroscope.signals import Signals
 
 __all__ = ["ChunkSpan", "LogGrid", "open_grid", "iter_blocks"]
@@ -388,9 +389,17 @@ class LogGrid:
             yield self.read(i, min(i + block_samples, stop))
 
 
-def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, float, int, int]:
-    """(first stamp, last stamp, estimated rate, least and greatest ``stamp - log time``) of a topic
-    from its first and last readable chunks (all in ns but the rate, Hz).
+def _first_last(grid: LogGrid, topic: str, cids: set[int], *,
+                probe: bool = False) -> tuple[int, int, float, int, int, tuple]:
+    """(first stamp, last stamp, estimated rate, least and greatest ``stamp - log time``, line) of a
+    topic from its first and last readable chunks (all in ns but the rate, Hz); ``line`` is (the
+    stamps (ns, increasing) of the first gap-free run of the first chunk; a list of runs of stamps
+    further on, ending with the last run of the last chunk; the larger jitter of the stamps of the
+    first and last chunks about their fitted lines in s, 0 when regular;
+    :func:`~vibroscope.io.timebase.fit_stamps`). With `probe` and stamps with jitter, the list
+    also holds the first runs of the topic's chunks 1, 2, 4, 8, ... (in increasing order): each
+    of them at most twice as far from the first chunk as the one before, so that the count of
+    periods to each is resolved by the rate refined on the one before.
 
     The stamps are taken as :func:`~vibroscope.io.read_mcap` takes them (header stamps, or the log
     times where the stamps are unusable; outlier stamps dropped), each paired with its message's log
@@ -398,7 +407,7 @@ def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, fl
     """
     from vibroscope.io._extract import extract
     from vibroscope.io.mcap_read import _drop_outliers, _Notes, _usable_stamps
-    from vibroscope.io.timebase import analyse_stamps
+    from vibroscope.io.timebase import analyse_stamps, fit_stamps
 
     mine = [c for c in grid.chunks if c.channel_ids is None or c.channel_ids & cids]
     if not mine:
@@ -422,16 +431,61 @@ def _first_last(grid: LogGrid, topic: str, cids: set[int]) -> tuple[int, int, fl
                 idx = np.arange(stamps.size, dtype=float)[None, :]
                 stamps, idx, n_out = _drop_outliers(topic, stamps, idx, source, ex.log_times, notes)
                 if stamps.size:
-                    _order, rep = analyse_stamps(topic, stamps, time_source=source, outliers=n_out)
+                    order, rep = analyse_stamps(topic, stamps, time_source=source, outliers=n_out)
                     off = (stamps - ex.log_times[idx[0].astype(np.int64)] if source == "header.stamp"
                            else np.zeros(1, np.int64))  # timed by the log times: no offset
-                    return int(stamps.min()), int(stamps.max()), float(rep.fs_est), int(off.min()), int(off.max())
+                    ts = stamps[order]
+                    line = (ts, ts, 0.0)
+                    if ts.size >= 2:  # the first and last gap-free runs of stamps, the jitter about their line
+                        fit = fit_stamps(ts)
+                        cut = np.flatnonzero(fit.gap)
+                        first = ts[: cut[0] + 1] if cut.size else ts
+                        last = ts[cut[-1] + 1 :] if cut.size else ts
+                        line = (first, last, fit.jitter_s)
+                    return (int(stamps.min()), int(stamps.max()), float(rep.fs_est), int(off.min()), int(off.max()),
+                            line)
                 why.append(f"chunk at byte offset {span.offset}: no usable stamp")
             why += notes.warnings[-1:]
         raise ChannelError(f"{grid.path}: topic {topic!r}: no chunk of it reads: " + "; ".join(why[:3]))
 
     a, b = first_readable(mine), first_readable(mine[::-1])
-    return a[0], b[1], a[2], min(a[3], b[3]), max(a[4], b[4])
+    jit = max(a[5][2], b[5][2])
+    runs = []
+    if probe and jit > 0:  # jittered stamps: chunks 1, 2, 4, 8, ... on the way to the last one
+        i = 1
+        while i < len(mine) - 1:
+            try:
+                runs.append(first_readable([mine[i]])[5][0])
+            except ChannelError:  # a lost chunk: the next probe
+                pass
+            i *= 2
+    line = (a[5][0], runs + [b[5][1]], jit)
+    return a[0], b[1], a[2], min(a[3], b[3]), max(a[4], b[4]), line
+
+
+def _refine_jittered(ta: np.ndarray, tb: np.ndarray, r: float, jit: float, *, snap: bool = True) -> float:
+    """The rate `r` (Hz, from the first chunk) refined over the span of a topic whose stamps jitter.
+
+    `ta` are the stamps (ns) of the first gap-free run of the first chunk, `tb` those of the last
+    run of the last chunk. Each run's line at the refined period, ``mean(t_i - i T)``, places its
+    first and last stamp to ``jit / sqrt(n)`` (a jittered stamp itself only to `jit`); the whole
+    number of periods between them gives the rate, three times (the lines move with the period).
+    With `snap`, the result is rounded within three standard errors of the span. A count off by one
+    (the rate given wrong by half a period over the span) is not detected here: the caller refines
+    over chunks ever further away (:func:`_first_last`).
+    """
+    rel_a = (ta - ta[0]).astype(np.float64) * 1e-9
+    rel_b = (tb - ta[0]).astype(np.float64) * 1e-9  # both relative to one stamp: float64 keeps the ns
+    for _ in range(3):
+        T = 1.0 / r
+        a0 = float(np.mean(rel_a - T * np.arange(rel_a.size)))
+        b1 = float(np.mean(rel_b - T * np.arange(rel_b.size))) + T * (rel_b.size - 1)
+        span = b1 - a0
+        m = round(span * r)
+        if m <= 0 or span <= 0:
+            return r
+        r = m / span
+    return _snap(r, 3.0 * jit * (1.0 / rel_a.size + 1.0 / rel_b.size) ** 0.5 / span) if snap else r
 
 
 def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
@@ -496,7 +550,7 @@ def _stamp_offsets(grid: LogGrid) -> tuple:
     """``(topic, lo_ns, hi_ns)`` per topic of the grid (:func:`_first_last`), without the rest."""
     out = []
     for t in dict.fromkeys(m.topic for m in grid._parsed):
-        _a, _b, _r, lo, hi = _first_last(grid, t, grid._topic_cids(t))
+        _a, _b, _r, lo, hi, _line = _first_last(grid, t, grid._topic_cids(t))
         out.append((t, lo, hi))
     return tuple(out)
 
@@ -520,7 +574,11 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
     fs : float, optional
         Grid rate in Hz. Default: the highest topic rate, estimated from the first chunk of
         each topic and refined over the whole span (the number of periods between the
-        topic's first and last stamps), so that the grid holds over a long log.
+        topic's first and last stamps), so that the grid holds over a long log. For stamps
+        with jitter the first and last stamps are taken on the lines fitted to the first and
+        last chunks (:func:`~vibroscope.io.timebase.fit_stamps`), the count of periods between
+        them resolved over the topic's chunks 1, 2, 4, 8, ... (a few more chunks opened), and
+        the rate is rounded within three standard errors of that span.
     t0_ns : int, optional
         Time of grid sample 0 in ns; default the latest first stamp of the topics (as
         :func:`read_mcap`).
@@ -603,9 +661,13 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
     topics = list(dict.fromkeys(m.topic for m in grid._parsed))
     firsts, lasts, rates, offsets = [], [], [], []
     for t in topics:
-        a, b, r, lo, hi = _first_last(grid, t, grid._topic_cids(t))
+        a, b, r, lo, hi, (ta, runs, jit) = _first_last(grid, t, grid._topic_cids(t), probe=True)
         offsets.append((t, lo, hi))
-        if np.isfinite(r) and r > 0 and b > a:  # refine over the whole span: periods between first and last
+        if np.isfinite(r) and r > 0 and b > a and jit > 0:
+            for k, tb in enumerate(runs):  # chunks ever further, the last one last
+                if tb[0] > ta[-1]:
+                    r = _refine_jittered(ta, tb, r, jit, snap=k == len(runs) - 1)
+        elif np.isfinite(r) and r > 0 and b > a:  # refine over the whole span: periods between first and last
             m = round((b - a) * 1e-9 * r)
             if m > 0 and abs(m / r - (b - a) * 1e-9) > 1e-9 * m ** 0.5:  # beyond the stamps' ns rounding
                 r = m / ((b - a) * 1e-9)

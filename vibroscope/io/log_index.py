@@ -21,7 +21,7 @@ import numpy as np
 from vibroscope.errors import ChannelError
 from vibroscope.io import _scan
 from vibroscope.io.paths import MessagePath, format_path, parse_path
-from vibroscope.io.timebase import GAP_PERIODS, outlier_stamps
+from vibroscope.io.timebase import fit_stamps, outlier_stamps
 
 __all__ = [
     "LogIndex",
@@ -528,15 +528,18 @@ class LogIndex:
 
 
 def _gap_counts(lt: np.ndarray) -> tuple[int, float]:
-    """(gaps, time missing in s) of log times: increments over 1.5 median periods."""
+    """(gaps, time missing in s) of log times, as :func:`~vibroscope.io.timebase.fit_stamps` finds
+    them (increments over 1.5 periods, and for stamps with jitter only those holding a whole
+    missing period), after sorting and dropping repeated log times."""
     if lt.size < 3:
         return 0, 0.0
-    dt = np.diff(np.sort(lt)).astype(np.float64) * 1e-9
-    med = float(np.median(dt))
-    if med <= 0:
+    ts = np.unique(lt)
+    if ts.size < 3:
         return 0, 0.0
-    g = dt > GAP_PERIODS * med
-    return int(g.sum()), float(np.sum(dt[g] - med))
+    fit = fit_stamps(ts)
+    dt = np.diff(ts).astype(np.float64) * 1e-9
+    g = fit.gap
+    return int(g.sum()), float(np.sum(dt[g] - fit.period_s))
 
 
 def _info(log: LogIndex) -> LogInfo:

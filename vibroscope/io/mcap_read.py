@@ -16,8 +16,11 @@ are dropped and reported; the rest are sorted, equal stamps dropped (first kept)
 whose stamps lie on the output grid within 1 % of a period is placed by index (no
 interpolation; NaN where a message is missing); any other is interpolated (cubic spline,
 after an anti-alias low-pass when its rate exceeds `fs` by 1 %,
-:func:`~vibroscope.io.timebase.resample_to_grid`) within each run of stamps no more than
-1.5 median periods apart, and is NaN in the gaps between runs and in lost chunks.
+:func:`~vibroscope.io.timebase.resample_to_grid`) within each run of stamps without a
+missing message (:func:`~vibroscope.io.timebase.fit_stamps`: increments over 1.5 median
+periods; for stamps with jitter, the rate is the slope of the stamps against the message count
+and an increment is a gap only where a whole period is missing, not where the jitter of its
+two stamps lengthens it), and is NaN in the gaps between runs and in lost chunks.
 
 ``Signals.meta`` of :func:`read_mcap`
 -------------------------------------

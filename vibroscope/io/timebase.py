@@ -2,11 +2,12 @@
 resampling topics of different rates onto one uniform grid, never across a gap.
 
 Tolerances (documented here, used by :mod:`vibroscope.io._grid`): consecutive stamps more
-than :data:`GAP_PERIODS` median periods apart bracket a *gap*, and nothing is interpolated
-in it (the grid samples there are NaN); a stamp within :data:`ON_GRID_TOL` of a period of a
-grid point *is on the grid*; a stamp more than :data:`OUTLIER_PERIODS` periods (and at least
-:data:`OUTLIER_MIN_S`) away from its neighbours or its own log time is an *outlier*
-(:func:`outlier_stamps`) and dropped.
+than :data:`GAP_PERIODS` median periods apart bracket a *gap* (for stamps with jitter only
+when the stamps around them are a whole period later than their message count says,
+:func:`fit_stamps`), and nothing is interpolated in it (the grid samples there are NaN); a
+stamp within :data:`ON_GRID_TOL` of a period of a grid point *is on the grid*; a stamp more
+than :data:`OUTLIER_PERIODS` periods (and at least :data:`OUTLIER_MIN_S`) away from its
+neighbours or its own log time is an *outlier* (:func:`outlier_stamps`) and dropped.
 
 :func:`resample_to_grid` is the resampler for *time-stamped* samples (jitter, gaps, any rate
 ratio). Integer-factor rate changes of uniform records are elsewhere, for reasons given in
@@ -21,8 +22,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["TimebaseReport", "analyse_stamps", "outlier_stamps", "resample_to_grid", "GAP_PERIODS",
-           "ON_GRID_TOL", "OUTLIER_PERIODS", "OUTLIER_MIN_S", "DOWNSAMPLE_RATIO"]
+__all__ = ["TimebaseReport", "StampFit", "analyse_stamps", "fit_stamps", "outlier_stamps", "resample_to_grid",
+           "GAP_PERIODS", "GAP_WINDOW", "GAP_SIGMAS", "ON_GRID_TOL", "OUTLIER_PERIODS", "OUTLIER_MIN_S",
+           "DOWNSAMPLE_RATIO"]
 
 #: increments longer than this many median periods are gaps: no interpolation across them
 GAP_PERIODS = 1.5
@@ -48,19 +50,24 @@ class TimebaseReport:
     n_messages : int
         Messages read (before dropping duplicates).
     fs_est : float
-        Estimated sample rate in Hz: 1 / mean of the increments dt outside gaps, rounded to
-        the fewest decimals that stay within the ns rounding of the stamps (``nan`` with
-        fewer than 2 stamps).
+        Estimated sample rate in Hz (:func:`fit_stamps`): for regular stamps 1 / mean of the
+        increments dt outside gaps, rounded to the fewest decimals that stay within the ns
+        rounding of the stamps; for stamps with jitter 1 / the slope of the stamps against
+        the message count within the gap-free runs, rounded within three standard errors of
+        the slope (``nan`` with fewer than 2 stamps).
     jitter_s : float
         Standard deviation of the stamp increments dt in s (gaps excluded).
     max_dev_s : float
         Largest ``|dt - median(dt)|`` in s (gaps excluded).
     gaps : int
-        Increments longer than :data:`GAP_PERIODS` (1.5) median periods. On the output grid
+        Increments that hold missing messages (:func:`fit_stamps`: longer than
+        :data:`GAP_PERIODS` (1.5) median periods for regular stamps; for stamps with jitter,
+        only where the stamps around are a whole period later than their count). On the output grid
         nothing is interpolated across them: the grid samples inside are NaN and listed in
         ``Signals.meta["gaps"]``.
     gap_time_s : float
-        Time missing in gaps, ``sum(dt - median)`` over gaps, in s.
+        Time missing in gaps, ``sum(dt - T)`` over gaps, in s (``T`` the median increment,
+        or for stamps with jitter the fitted period, :func:`fit_stamps`).
     gap_where_s : tuple of (float, float)
         (start time relative to the first stamp in s, increment across the gap in s) of the
         first 20 gaps.
@@ -76,6 +83,8 @@ class TimebaseReport:
     outliers : int
         Messages dropped before this analysis because their stamp was an outlier
         (:func:`outlier_stamps`); default 0.
+    missing : int
+        Messages missing in the gaps (:func:`fit_stamps`); default 0.
     """
 
     topic: str
@@ -91,6 +100,7 @@ class TimebaseReport:
     time_source: str = "log_time"
     resampled: bool = False
     outliers: int = 0
+    missing: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         """A plain dict (JSON-serialisable)."""
@@ -155,6 +165,11 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
     order : ndarray of int, shape (m,)
         Indices into `stamps_ns` of the kept messages, in increasing stamp order.
     report : TimebaseReport
+
+    Notes
+    -----
+    The rate and the gaps are those of :func:`fit_stamps` (a line fit of the stamps against
+    the message count for stamps with jitter).
     """
     t = np.asarray(stamps_ns, np.int64)
     n = t.size
@@ -170,25 +185,229 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
         duplicates = int(n - keep.sum())
         order, ts = order[keep], ts[keep]
     fs_est = jitter = max_dev = gap_time = float("nan")
-    gaps = 0
+    gaps = missing = 0
     where: tuple[tuple[float, float], ...] = ()
     if ts.size >= 2:
+        fit = fit_stamps(ts)
         dt = np.diff(ts).astype(np.float64) * 1e-9
-        med = float(median(dt))
-        isgap = dt > GAP_PERIODS * med
-        fs_est = _rate(dt[~isgap], med)
+        isgap = fit.gap
+        fs_est = fit.fs
         gaps = int(isgap.sum())
-        gap_time = float(np.sum(dt[isgap] - med))
+        missing = int(fit.missing.sum())
+        gap_time = float(np.sum(dt[isgap] - fit.period_s))
         idx = np.flatnonzero(isgap)[:20]
         where = tuple((float((ts[i] - ts[0]) * 1e-9), float(dt[i])) for i in idx)
         reg = dt[~isgap]
         jitter = float(np.std(reg)) if reg.size else 0.0
-        max_dev = float(np.max(np.abs(reg - med))) if reg.size else 0.0
+        max_dev = float(np.max(np.abs(reg - fit.median_s))) if reg.size else 0.0
     rep = TimebaseReport(
         topic, n, fs_est, jitter, max_dev, gaps, gap_time, where, duplicates, out_of_order, time_source,
-        outliers=outliers,
+        outliers=outliers, missing=missing,
     )
     return order, rep
+
+
+@dataclass(frozen=True)
+class StampFit:
+    """The time base of one stream of increasing stamps (:func:`fit_stamps`).
+
+    Attributes
+    ----------
+    fs : float
+        Rate in Hz, ``1 / period_s`` rounded to the fewest decimals within its uncertainty
+        (the ns rounding of the stamps, or three standard errors of the fitted slope).
+    period_s : float
+        Period in s, unrounded (the median increment for regular stamps).
+    median_s : float
+        Median stamp increment in s.
+    jitter_s : float
+        Robust standard deviation (1.4826 MAD) in s of the stamps about the fitted line
+        (0 for regular stamps).
+    regular : bool
+        Whether the increments outside gaps are all within :data:`ON_GRID_TOL` of a period
+        of the median (then no line is fitted: the rate is that of the mean increment).
+    gap : ndarray of bool, shape (n - 1,)
+        Whether each increment holds missing messages.
+    missing : ndarray of int, shape (n - 1,)
+        Messages missing in each increment (0 outside gaps).
+    """
+
+    fs: float
+    period_s: float
+    median_s: float
+    jitter_s: float
+    regular: bool
+    gap: np.ndarray
+    missing: np.ndarray
+
+
+def _window_means(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Means of ``x[lo:hi]`` per pair (``hi > lo``), by a cumulative sum."""
+    c = np.r_[0.0, np.cumsum(x)]
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+def fit_stamps(ts_ns: np.ndarray) -> StampFit:
+    """Rate, gaps and jitter of increasing stamps: a line fit against the message count.
+
+    Parameters
+    ----------
+    ts_ns : ndarray of int64, shape (n,)
+        Stamps in ns, strictly increasing, ``n >= 2``.
+
+    Returns
+    -------
+    StampFit
+
+    Notes
+    -----
+    Let ``T0`` be the median increment. *Regular stamps* (every increment that is not a gap
+    within :data:`ON_GRID_TOL` of ``T0``): an increment over :data:`GAP_PERIODS` ``T0`` is a
+    gap, the rate is 1 / the mean increment outside gaps (exactly as before jitter was
+    considered; clean logs keep their results to the bit).
+
+    *Stamps with jitter* (``t_i = a_r + T n_i + e_i``: message count ``n_i``, one intercept
+    ``a_r`` per gap-free run ``r``, jitter ``e_i``): an increment over :data:`GAP_PERIODS`
+    periods is only a candidate, since the jitter of its two stamps can make it so. It is a gap
+    when the stamps around it, averaged over up to :data:`GAP_WINDOW` stamps on each side
+    (first not beyond the neighbouring candidates, then, twice more, not beyond the
+    neighbouring gaps found), lie at least half a period further apart than
+    their message count says: ``shift = mean(t - T n)_after - mean(t - T n)_before >= T / 2``;
+    or, where a side has fewer than ``GAP_WINDOW / 4`` stamps to average (gaps or candidates
+    close by), when the increment itself exceeds ``T + 6 sqrt(2) sigma`` (:data:`GAP_SIGMAS`;
+    ``sigma`` the jitter of the stamps about the line, so ``sqrt(2) sigma`` that of an
+    increment: a candidate the jitter of its two stamps cannot explain).
+    A missing message shifts every later stamp by a whole period ``T``, while the jitter of
+    the averages is ``sigma sqrt(2 / L)``, so jitter of a few tenths of a period (``sigma``
+    0.2 T: 7 standard deviations at L = 16) is not a gap and a lost message is. Missing
+    messages in a gap: ``round(shift / T)`` when the stamps around show the step, else
+    ``round(dt / T) - 1`` (at least 1; the same for stamps without jitter).
+    Where the gaps so found come more often than every :data:`GAP_WINDOW` messages on average,
+    the stamps are not a clock with jitter and lost messages (bursts of log times, messages
+    kept at irregular multiples of a base period): the rule and rate of regular stamps apply
+    (gaps over 1.5 median increments, 1 / the mean increment outside them).
+    The period ``T`` is the least-squares slope of the stamps against the message count with
+    one intercept per gap-free run, refitted once without stamps more than 6 robust standard
+    deviations off the line. It starts from the runs between increments over 1.5 ``Tw``
+    (``Tw`` the median increment over :data:`GAP_WINDOW` messages, divided by their number:
+    robust to bursts), and gaps and line are iterated three times.
+    """
+    ts = np.asarray(ts_ns, np.int64)
+    n = ts.size
+    dt = np.diff(ts).astype(np.float64) * 1e-9
+    med = float(median(dt))
+    isgap = dt > GAP_PERIODS * med
+    reg = dt[~isgap]
+    if reg.size == 0 or np.max(np.abs(reg - med)) <= ON_GRID_TOL * med:
+        miss = np.where(isgap, np.maximum(1, np.rint(dt / med) - 1), 0).astype(np.int64)
+        return StampFit(_rate(reg, med), med, med, 0.0, True, isgap, miss)
+    rel = (ts - ts[0]).astype(np.float64) * 1e-9  # s from the first stamp
+    w = min(GAP_WINDOW, n - 1)  # the median increment over w messages / w: robust to bursts of stamps
+    tw = float(median(ts[w:] - ts[:-w])) * 1e-9 / w
+    isgap = dt > GAP_PERIODS * tw
+    T, jit = _fit_period(rel, isgap)  # first from the runs between increments over 1.5 such periods
+    miss = np.zeros(n - 1, np.int64)
+    bounds = None
+    for _ in range(3):
+        cand = np.flatnonzero(dt > GAP_PERIODS * T)
+        isgap = np.zeros(n - 1, bool)
+        miss = np.zeros(n - 1, np.int64)
+        if cand.size:
+            resid = rel - T * np.arange(n)  # count without gaps: a lost message is a step of T
+            b = cand if bounds is None else bounds  # windows end at the candidates, then at the gaps found
+            j = np.searchsorted(b, cand)  # b[j] == cand when cand is in b
+            prev = np.where(j > 0, b[np.maximum(j - 1, 0)] if b.size else -1, -1)
+            k = np.searchsorted(b, cand, "right")
+            nxt = np.where(k < b.size, b[np.minimum(k, b.size - 1)] if b.size else n - 1, n - 1)
+            lo = np.maximum(prev + 1, cand + 1 - GAP_WINDOW)
+            hi = np.minimum(nxt, cand + GAP_WINDOW)  # right window: stamps cand+1 .. hi
+            shift = _window_means(resid, cand + 1, hi + 1) - _window_means(resid, lo, cand + 1)
+            step = shift >= 0.5 * T
+            # with few stamps on a side to average, an increment beyond what the jitter of 2 stamps explains
+            short = np.minimum(cand + 1 - lo, hi - cand) < GAP_WINDOW // 4
+            long = short & (dt[cand] > T + GAP_SIGMAS * np.sqrt(2.0) * jit)
+            m = np.where(step, np.rint(shift / T), np.rint(dt[cand] / T) - 1).astype(np.int64)
+            ok = step | long
+            isgap[cand[ok]] = True
+            miss[cand[ok]] = np.maximum(1, m[ok])
+        bounds = np.flatnonzero(isgap)
+        T, jit = _fit_period(rel, isgap)
+    if (isgap.sum() + 1) * GAP_WINDOW > n:  # runs shorter than the window on average: not a clock with
+        isgap = dt > GAP_PERIODS * med  # jitter and lost messages (bursts): the rule of regular stamps
+        miss = np.where(isgap, np.maximum(1, np.rint(dt / med) - 1), 0).astype(np.int64)
+        return StampFit(_rate(dt[~isgap], med), med, med, jit, False, isgap, miss)
+    snap = 3.0 * _slope_se(rel, isgap, jit) / T if np.isfinite(jit) else 0.0
+    fs = _snap(1.0 / T, max(1.5e-9 / max(rel[-1], 1e-300), snap))
+    return StampFit(fs, T, med, jit, False, isgap, miss)
+
+
+#: stamps averaged on each side of a candidate gap (:func:`fit_stamps`)
+GAP_WINDOW = 16
+#: an increment this many standard deviations of the increments' jitter over the period is a gap
+#: (where too few stamps around it can be averaged, :func:`fit_stamps`)
+GAP_SIGMAS = 6.0
+
+
+def _run_ids(isgap: np.ndarray) -> np.ndarray:
+    """Run number of each stamp (n,) from the gap flags of the increments (n - 1,)."""
+    return np.r_[0, np.cumsum(isgap)]
+
+
+def _fit_period(rel: np.ndarray, isgap: np.ndarray) -> tuple[float, float]:
+    """(period, robust residual std) in s: slope of `rel` against the count within runs, one
+    intercept per run; refitted once without the stamps more than 6 robust std off the line."""
+    run = _run_ids(isgap)
+    nr = int(run[-1]) + 1
+    idx = np.arange(rel.size, dtype=np.float64)
+    if nr > 1:
+        idx -= np.flatnonzero(np.r_[True, isgap])[run]  # count within its run
+    w = None
+    T = jit = 0.0
+    for _ in range(2):
+        if nr == 1:  # one run (no gap): plain means
+            sel = slice(None) if w is None else w
+            mi, mt = np.mean(idx[sel]), np.mean(rel[sel])
+            di, dtm = idx - mi, rel - mt
+        else:
+            wf = None if w is None else w.astype(np.float64)
+            cnt = np.bincount(run, wf, nr)
+            cnt[cnt == 0] = 1
+            mi = np.bincount(run, idx if wf is None else wf * idx, nr) / cnt
+            mt = np.bincount(run, rel if wf is None else wf * rel, nr) / cnt
+            di, dtm = idx - mi[run], rel - mt[run]
+        sxx = float(np.dot(di, di) if w is None else np.dot(di[w], di[w]))
+        if sxx <= 0:  # every run a single stamp: no slope to fit
+            d = np.diff(rel)
+            T = float(np.median(d[~isgap])) if (~isgap).any() else float(np.median(d))
+        else:
+            T = float(np.dot(di, dtm) if w is None else np.dot(di[w], dtm[w])) / sxx
+        r = dtm - T * di
+        jit = 1.4826 * float(median(np.abs(r - median(r))))
+        keep = np.abs(r) <= 6.0 * jit
+        if jit <= 0 or keep.all():
+            break
+        w = keep
+    return T, jit
+
+
+def _slope_se(rel: np.ndarray, isgap: np.ndarray, jit: float) -> float:
+    """Standard error in s of the fitted period: jitter / sqrt(sum of squared centred counts)."""
+    run = _run_ids(isgap)
+    idx = np.arange(rel.size) - np.flatnonzero(np.r_[True, isgap])[run]
+    nr = run.max() + 1
+    cnt = np.bincount(run, None, nr)
+    mi = np.bincount(run, idx, nr) / np.where(cnt > 0, cnt, 1)
+    sxx = float(np.sum((idx - mi[run]) ** 2))
+    return jit / np.sqrt(sxx) if sxx > 0 else float("inf")
+
+
+def _snap(fs: float, rel_tol: float) -> float:
+    """`fs` rounded to the fewest decimals (0 to 6) within the relative tolerance `rel_tol`."""
+    for d in range(0, 7):
+        r = round(fs, d)
+        if r > 0 and abs(r - fs) <= rel_tol * fs:
+            return r
+    return fs
 
 
 def outlier_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray | None = None, *,
