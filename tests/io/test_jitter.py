@@ -147,3 +147,27 @@ def test_fit_finds_each_lost_message_and_the_rate(fs, rel_sigma, seed, drops):
     # of the stamps, 1 ns per run over the span, and the rounding of fs within 1.5 ns over the span
     span = (t[-1] - t[0]) * 1e-9
     assert abs(fit.fs - fs) <= fs * max(9 * se, (len(where) + 2.5) * 1e-9 / span)
+
+
+def test_header_clock_stepping_back_falls_back_to_log_time(tmp_path):
+    """Header stamps that jump back 3 s halfway (a clock reset) while the log times go on: read on
+    the log times, with a warning naming the step (before: every stamp was an outlier of the
+    stamp-to-log-time offset and the topic read as "no messages")."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from _io_helpers import write_imu_log
+
+    from vibroscope.io import read_mcap
+
+    n = 4000
+    lt = 10_000_000_000 + np.arange(n, dtype=np.int64) * 1_000_000
+    st = lt.copy()
+    st[2000:] -= 3_000_000_000
+    ax = np.sin(np.arange(n) / 9.0)
+    p = tmp_path / "clock.mcap"
+    write_imu_log(p, {"/imu": (st, ax)}, log_times={"/imu": lt})
+    sig = read_mcap(p, ["/imu.linear_acceleration.x"])
+    assert sig.n_samples == n and np.array_equal(sig.data[0], ax) and sig.fs == 1000.0
+    assert any("steps back by 2.999 s after message 2000" in w and "using log_time" in w for w in sig.meta["warnings"])

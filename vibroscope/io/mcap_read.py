@@ -131,13 +131,30 @@ def _automatic_channels(log: LogIndex, notes: _Notes) -> list[str]:
 
 
 def _usable_stamps(topic: str, stamps: np.ndarray, source: str, logt: np.ndarray, notes: _Notes):
-    """(stamps, source): the log times instead of header stamps that are mostly equal."""
-    if source == "header.stamp" and stamps.size > 1 and np.count_nonzero(np.diff(stamps) == 0) > 0.5 * (stamps.size - 1):
+    """(stamps, source): the log times instead of header stamps that are mostly equal, or whose
+    clock steps back by more than 10 periods while the log times go on (a clock reset or a jump:
+    sorting such stamps would interleave two stretches of the record)."""
+    if source != "header.stamp" or stamps.size < 2:
+        return stamps, source
+    d = np.diff(stamps)
+    if np.count_nonzero(d == 0) > 0.5 * (stamps.size - 1):
         notes.warnings.append(
             f"topic {topic!r}: header.stamp unusable (most consecutive stamps equal, e.g. {int(stamps[0])} ns, "
             f"in {stamps.size} messages); using log_time"
         )
         return logt, "log_time"
+    if d.min() < 0:  # out of order somewhere: a step back of many periods is a clock, not jitter
+        pos = d[d > 0]
+        per = float(np.median(pos)) if pos.size else 0.0
+        back = np.flatnonzero(d < -10 * per) if per > 0 else np.zeros(0, np.int64)
+        lt = np.asarray(logt, np.int64)
+        if back.size and np.all(lt[back + 1] >= lt[back]):
+            k = int(back[0])
+            notes.warnings.append(
+                f"topic {topic!r}: header.stamp steps back by {-d[k] * 1e-9:.6g} s after message {k + 1} (log time "
+                f"{int(lt[k + 1])} ns){f' and {back.size - 1} more times' if back.size > 1 else ''} while the log "
+                f"times go on: a clock reset or jump; using log_time")
+            return logt, "log_time"
     return stamps, source
 
 
