@@ -290,3 +290,23 @@ def test_bad_message_in_a_resampled_topic_is_nan_around_its_stamp(tmp_path):
     assert np.max(np.abs(r.data[0, ok] - _sine(grid[ok]))) < 1e-4
     assert r.meta["gaps"] == []  # the topic has no gap; the NaN is the field's, counted per channel
     assert r.meta["nan_samples"] == {"/j.a": int(expect.sum()), "/j.c": 0}
+
+
+def test_a_topic_cropped_to_the_common_span_is_said(tmp_path):
+    """/imu/a runs 10 s, /imu/b stops after 4 s: the record is their common 4 s and the warning says
+    that 6 s of /imu/a are not analysed (before: silently cropped); a topic of one message is named
+    when nothing overlaps."""
+    from _io_helpers import write_imu_log
+
+    t = 5_000_000_000 + np.arange(10_000, dtype=np.int64) * 1_000_000
+    ax = np.sin(np.arange(10_000) / 7.0)
+    p = tmp_path / "crop.mcap"
+    write_imu_log(p, {"/imu/a": (t, ax), "/imu/b": (t[:4000], ax[:4000])})
+    sig = read_mcap(p, ["/imu/a.linear_acceleration.x", "/imu/b.linear_acceleration.x"])
+    assert sig.n_samples == 4000
+    w = [x for x in sig.meta["warnings"] if "outside the span all topics cover" in x]
+    assert len(w) == 1 and w[0].startswith("topic '/imu/a': 6 s of its 9.999 s")
+    q = tmp_path / "one.mcap"
+    write_imu_log(q, {"/imu/a": (t, ax), "/imu/b": (t[:1], ax[:1])})
+    with pytest.raises(ChannelError, match=r"do not overlap in time: /imu/b \(1 message\)"):
+        read_mcap(q, ["/imu/a.linear_acceleration.x", "/imu/b.linear_acceleration.x"])

@@ -215,10 +215,21 @@ def onto_grid(path: Any, topics: list[str], samples: dict[str, TopicSamples], fs
         If the topics do not overlap in time, or the grid would be far larger than the
         messages read (:func:`check_grid_size`).
     """
-    start, n = grid_for([(int(samples[t].t_ns[0]), int(samples[t].t_ns[-1])) for t in topics], fs)
+    spans = {t: (int(samples[t].t_ns[0]), int(samples[t].t_ns[-1])) for t in topics}
+    start, n = grid_for(list(spans.values()), fs)
     if n < 2:
-        raise ChannelError(f"{path}: the topics {topics} do not overlap in time")
+        few = [f"{t} ({samples[t].t_ns.size} message{'s' if samples[t].t_ns.size != 1 else ''})" for t in topics
+               if samples[t].t_ns.size < 2]
+        raise ChannelError(f"{path}: the topics {topics} do not overlap in time"
+                           + (f": {', '.join(few)}" if few else ""))
     check_grid_size(path, topics, samples, n, fs)
+    stop = start + (n - 1) / fs * 1e9
+    for t, (a, b) in spans.items():  # the record is the topics' common span: say what it leaves out
+        cut = max(0, start - a) + max(0.0, b - stop)
+        if cut * 1e-9 > max(1.0 / fs, 0.01 * (b - a) * 1e-9):
+            warnings.append(f"topic {t!r}: {cut * 1e-9:.4g} s of its {(b - a) * 1e-9:.4g} s lie outside the span all "
+                            f"topics cover ({start * 1e-9:.6f}–{stop * 1e-9:.6f} s) and are not analysed; read it "
+                            f"alone (or without the shorter topics) to keep them")
     rows: dict[str, np.ndarray] = {}
     resampled: dict[str, bool] = {}
     gaps: list[dict] = []

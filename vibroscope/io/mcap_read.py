@@ -148,6 +148,14 @@ def _usable_stamps(topic: str, stamps: np.ndarray, source: str, logt: np.ndarray
         per = float(np.median(pos)) if pos.size else 0.0
         back = np.flatnonzero(d < -10 * per) if per > 0 else np.zeros(0, np.int64)
         lt = np.asarray(logt, np.int64)
+        off = stamps - lt
+
+        def lasting(k: int) -> bool:  # the stamp clock stays shifted against the log times (8+ messages on
+            # each side): a reset, not one corrupted stamp (an outlier, dropped later) that comes back
+            a, b = off[max(0, k - 63) : k + 1], off[k + 1 : k + 65]
+            return a.size >= 8 and b.size >= 8 and abs(float(np.median(b)) - float(np.median(a))) > 10 * per
+
+        back = np.array([k for k in back[:64] if lasting(int(k))], np.int64)
         if back.size and np.all(lt[back + 1] >= lt[back]):
             k = int(back[0])
             notes.warnings.append(
