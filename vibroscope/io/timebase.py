@@ -188,8 +188,8 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
     gaps = missing = 0
     where: tuple[tuple[float, float], ...] = ()
     if ts.size >= 2:
-        fit = fit_stamps(ts)
         dt = np.diff(ts).astype(np.float64) * 1e-9
+        fit = fit_stamps(ts, dt_s=dt)
         isgap = fit.gap
         fs_est = fit.fs
         gaps = int(isgap.sum())
@@ -197,9 +197,10 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
         gap_time = float(np.sum(dt[isgap] - fit.period_s))
         idx = np.flatnonzero(isgap)[:20]
         where = tuple((float((ts[i] - ts[0]) * 1e-9), float(dt[i])) for i in idx)
-        reg = dt[~isgap]
+        reg = dt[~isgap] if isgap.any() else dt
         jitter = float(np.std(reg)) if reg.size else 0.0
-        max_dev = float(np.max(np.abs(reg - fit.median_s))) if reg.size else 0.0
+        max_dev = (fit.max_dev_s if np.isfinite(fit.max_dev_s) else
+                   float(np.max(np.abs(reg - fit.median_s))) if reg.size else 0.0)
     rep = TimebaseReport(
         topic, n, fs_est, jitter, max_dev, gaps, gap_time, where, duplicates, out_of_order, time_source,
         outliers=outliers, missing=missing,
@@ -230,6 +231,9 @@ class StampFit:
         Whether each increment holds missing messages.
     missing : ndarray of int, shape (n - 1,)
         Messages missing in each increment (0 outside gaps).
+    max_dev_s : float
+        Largest deviation in s of an increment outside the gaps from the median increment
+        (regular stamps; NaN when a line was fitted).
     """
 
     fs: float
@@ -239,6 +243,7 @@ class StampFit:
     regular: bool
     gap: np.ndarray
     missing: np.ndarray
+    max_dev_s: float = float("nan")
 
 
 def _window_means(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -247,13 +252,15 @@ def _window_means(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
-def fit_stamps(ts_ns: np.ndarray) -> StampFit:
+def fit_stamps(ts_ns: np.ndarray, dt_s: np.ndarray | None = None) -> StampFit:
     """Rate, gaps and jitter of increasing stamps: a line fit against the message count.
 
     Parameters
     ----------
     ts_ns : ndarray of int64, shape (n,)
         Stamps in ns, strictly increasing, ``n >= 2``.
+    dt_s : ndarray of float64, shape (n - 1,), optional
+        Their increments in s, ``np.diff(ts_ns) * 1e-9``, when the caller has them already.
 
     Returns
     -------
@@ -294,13 +301,16 @@ def fit_stamps(ts_ns: np.ndarray) -> StampFit:
     """
     ts = np.asarray(ts_ns, np.int64)
     n = ts.size
-    dt = np.diff(ts).astype(np.float64) * 1e-9
+    dt = np.diff(ts).astype(np.float64) * 1e-9 if dt_s is None else dt_s
     med = float(median(dt))
     isgap = dt > GAP_PERIODS * med
-    reg = dt[~isgap]
-    if reg.size == 0 or np.max(np.abs(reg - med)) <= ON_GRID_TOL * med:
-        miss = np.where(isgap, np.maximum(1, np.rint(dt / med) - 1), 0).astype(np.int64)
-        return StampFit(_rate(reg, med), med, med, 0.0, True, isgap, miss)
+    anygap = bool(isgap.any())
+    reg = dt[~isgap] if anygap else dt
+    dev = float(max(reg.max() - med, med - reg.min())) if reg.size else 0.0
+    if dev <= ON_GRID_TOL * med:
+        miss = (np.where(isgap, np.maximum(1, np.rint(dt / med) - 1), 0).astype(np.int64) if anygap
+                else np.zeros(n - 1, np.int64))
+        return StampFit(_rate(reg, med), med, med, 0.0, True, isgap, miss, dev)
     rel = (ts - ts[0]).astype(np.float64) * 1e-9  # s from the first stamp
     w = min(GAP_WINDOW, n - 1)  # the median increment over w messages / w: robust to bursts of stamps
     tw = float(median(ts[w:] - ts[:-w])) * 1e-9 / w
