@@ -237,7 +237,9 @@ class FleetResult:
         f = G.frequencies
         peaks = {c: (float(f[1 + int(np.nanargmax(p[1:]))]) if np.nanmax(p[1:], initial=0.0) > 0 else None)
                  for c, p in zip(G.channels, np.nan_to_num(P, nan=0.0))}
-        return {"logs": [r.to_dict() for r in self.rows], "settings": _plain(self.settings),
+        from vibroscope.pipeline import _jsonable
+
+        return {"logs": [r.to_dict() for r in self.rows], "settings": _jsonable(self.settings),
                 "merged": {"channels": list(G.channels), "n_samples": self.merged.samples,
                            "n_segments": self.merged.accumulator.n_segments, "psd_peak_hz": peaks}}
 
@@ -256,21 +258,6 @@ class FleetResult:
         path = Path(path)
         path.write_text(json.dumps(self.to_dict(), indent=2))
         return path
-
-
-def _plain(v: Any) -> Any:
-    """`v` as JSON values: lists for tuples and arrays, Python numbers (NaN as None), str otherwise."""
-    if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple, np.ndarray)):
-        return [_plain(x) for x in v]
-    if isinstance(v, (bool, np.bool_)):
-        return bool(v)
-    if isinstance(v, (int, np.integer)):
-        return int(v)
-    if isinstance(v, (float, np.floating)):
-        return float(v) if np.isfinite(v) else None
-    return v if v is None or isinstance(v, str) else str(v)
 
 
 @dataclass(frozen=True)

@@ -26,6 +26,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from vibroscope.signals import true_runs
 from vibroscope.spectral import CrossSpectralMatrix, FRF, Spectrum, frf
 from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
 
@@ -273,11 +274,14 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
     huge = 0
     for blk in g.blocks(block_samples, start=i0, stop=i1):
         d = blk.data
-        over = np.abs(np.nan_to_num(d, posinf=0.0, neginf=0.0)) > OVERFLOW_LIMIT
+        fin = np.isfinite(d)
+        over = np.abs(d) > OVERFLOW_LIMIT  # ±Inf too: already missing, not counted below
+        over &= fin
         if over.any():  # no measurement (a corrupted value): missing, as the whole read masks it
             huge += int(over.sum())
             d = np.where(over, np.nan, d)
-        bad = ~np.isfinite(d).all(axis=0)
+            fin &= ~over
+        bad = ~fin.all(axis=0)
         missing += int(bad.sum())
         runs.add(~bad)
         if common_gaps:
@@ -304,8 +308,6 @@ class _GapFree:
         self.pos, self.open, self.runs = int(start), None, []
 
     def add(self, good: np.ndarray) -> None:
-        from vibroscope.signals import true_runs
-
         a, b = true_runs(good)
         a, b = a + self.pos, b + self.pos
         if self.open is not None:
