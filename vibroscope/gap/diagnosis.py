@@ -51,7 +51,14 @@ import numpy as np
 from scipy import signal as sps
 
 from vibroscope.errors import ChannelError
-from vibroscope.gap.effects import LinearParams, candidate_specs, connections, pair_name
+from vibroscope.gap.effects import (
+    EFFECT_TABLE,
+    FRICTION_V_EPS,
+    LinearParams,
+    candidate_specs,
+    connections,
+    pair_name,
+)
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
 from vibroscope.gap.measure import (
     input_levels,
@@ -64,7 +71,8 @@ from vibroscope.gap.measure import (
 )
 from vibroscope.gap.report import Candidate, ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.gap.signatures import run_signatures
-from vibroscope.models.lumped import Dof, LumpedModel, Output
+from vibroscope.models.elements import GROUND
+from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
 from vibroscope.models.elements import Damper, Spring
 from vibroscope.signals import Signals, true_runs
 
@@ -74,6 +82,15 @@ __all__ = ["diagnose", "fit_linear_model", "as_lumped"]
 NONE_FACTOR = 1.3
 #: complexity penalty: the held-out excess gap is scored as e * (1 + PENALTY * n_effect_parameters)
 PENALTY = 0.1
+#: the BLA depends on the level when more than this fraction of its well-excited lines changes by
+#: more than 3 standard deviations between the lowest and the highest level
+LEVEL_FRACTION = 0.01
+#: the best admissible candidate must explain at least this share of the excess gap (its score),
+#: else the verdict is ``unexplained``
+UNEXPLAINED_SCORE = 0.3
+#: forward selection keeps a further effect when the penalised held-out excess gap falls below
+#: this factor times the current one
+ADD_FACTOR = 0.7
 
 
 def as_lumped(model) -> LumpedModel:
@@ -361,6 +378,155 @@ def diagnose(
                          workers=workers, n_full=n_full, progress=progress)
 
 
+def _level_groups(us, masks, fs):
+    """Excitation-level groups across logs: ``(log, sample mask, input RMS)``, lowest first.
+
+    Within a log, the levels of :func:`~vibroscope.gap.measure.input_levels`; across logs, a
+    log's groups are taken as they are (several logs at different levels are levels)."""
+    groups = []
+    for i, (u, m) in enumerate(zip(us, masks)):
+        if not m.any():
+            continue
+        labels, lv = input_levels(u, fs)
+        for k in range(len(lv)):
+            mk = m & (labels == k)
+            if mk.sum() > 0:
+                groups.append((i, mk, float(np.sqrt(np.mean(u[0, mk] ** 2)))))
+    groups.sort(key=lambda g: g[2])
+    return groups
+
+
+def _bla_levels(us, ys, groups, fs, nperseg, f_sel):
+    """H1 (n_sel, n_out), coherence and averages per level group, interpolated on `f_sel`."""
+    out = []
+    for i, mk, rms in groups:
+        runs = np.diff(np.nonzero(np.diff(np.concatenate([[False], mk, [False]]).astype(int)) != 0)[0])[::2]
+        # segments of about half a typical stretch of the level: more averages, a tighter H1
+        typical = int(np.median(runs)) if runs.size else 0
+        nps = _pow2(min(nperseg, max(typical // 2, 256)))
+        d = _frf_data([us[i]], [ys[i]], [mk], fs, nps)
+        if d is None:
+            continue
+        f, H, coh, _, n_avg = d
+        Hi = np.array([np.interp(f_sel, f, H[:, c].real) + 1j * np.interp(f_sel, f, H[:, c].imag)
+                       for c in range(H.shape[1])]).T
+        ci = np.array([np.interp(f_sel, f, coh[:, c]) for c in range(H.shape[1])]).T
+        out.append((rms, Hi, ci, n_avg))
+    return out
+
+
+def _level_test(f, blas):
+    """Does the BLA change with the excitation level beyond its own uncertainty?
+
+    Per line and output, ``z^2 = |H_hi - H_lo|^2 / (var_hi + var_lo)`` with the H1 variance
+    ``|H|^2 (1 - gamma^2) / (n_d gamma^2)`` (Bendat & Piersol, *Random Data*, 4th ed., eq.
+    9.90: nonlinear distortion counts as noise there, so the test is conservative); the
+    statistic is the fraction of the well-excited lines (coherence >= 0.5 at both levels)
+    with ``z > 3`` (about 1e-4 for a linear system: ``z^2`` is ``chi^2_2 / 2``). Flagged when
+    at least 5 lines and :data:`LEVEL_FRACTION` of them are. The trend compares the frequency of the
+    largest peak of ``sum |H|`` at the lowest and highest level.
+
+    Returns dict: ``stat``, ``flagged``, ``trend`` (``hardening``, ``softening``, ``none``),
+    ``shift`` (relative frequency change), ``levels_rms``."""
+    if len(blas) < 2:
+        return {"stat": float("nan"), "flagged": False, "trend": "none", "shift": 0.0,
+                "levels_rms": [b[0] for b in blas]}
+    lo, hi = blas[0], blas[-1]
+    if hi[0] < 1.5 * lo[0]:
+        return {"stat": float("nan"), "flagged": False, "trend": "none", "shift": 0.0,
+                "levels_rms": [b[0] for b in blas]}
+    (_, H0, c0, n0), (_, H1, c1, n1) = lo, hi
+    c0c = np.clip(c0, 1e-6, 1 - 1e-9)
+    c1c = np.clip(c1, 1e-6, 1 - 1e-9)
+    v0 = np.abs(H0) ** 2 * (1 - c0c) / (max(n0, 1) * c0c)
+    v1 = np.abs(H1) ** 2 * (1 - c1c) / (max(n1, 1) * c1c)
+    ok = (c0 >= 0.5) & (c1 >= 0.5)
+    z2 = np.abs(H1 - H0) ** 2 / np.maximum(v0 + v1, 1e-300)
+    n_ok = int(ok.sum())
+    n_out = int(np.sum(z2[ok] > 9.0))
+    stat = n_out / n_ok if n_ok >= 20 else float("nan")
+    flagged = bool(np.isfinite(stat) and n_out >= max(5, LEVEL_FRACTION * n_ok))
+    a0 = np.sum(np.abs(H0), axis=1)
+    a1 = np.sum(np.abs(H1), axis=1)
+    k0, k1 = int(np.argmax(a0)), int(np.argmax(a1))
+    shift = 0.0
+    if f.size > 2:
+        f0, f1 = float(f[k0]), float(f[k1])
+        # compare near the low-level peak: the high-level peak within 30 %
+        win = np.abs(f - f0) <= 0.3 * f0
+        if win.any():
+            k1w = int(np.nonzero(win)[0][np.argmax(a1[win])])
+            f1 = float(f[k1w])
+        shift = (f1 - f0) / f0 if f0 > 0 else 0.0
+    dfl = float(np.median(np.diff(f))) if f.size > 1 else 0.0
+    trend = "none"
+    if flagged and abs(shift) * (f[k0] if f.size else 0) > 1.5 * dfl and abs(shift) > 0.005:
+        trend = "hardening" if shift > 0 else "softening"
+    return {"stat": stat, "flagged": flagged, "trend": trend, "shift": float(shift),
+            "levels_rms": [b[0] for b in blas], "lines": n_ok, "lines_beyond_3_sigma": n_out}
+
+
+def _pair_force_model(model: LumpedModel, pair) -> LumpedModel:
+    """`model` with its inputs replaced by a force pair at the ends of `pair`: ``-f`` on the
+    first end, ``+f`` on the second (an element's force); ground ends are left out."""
+    ins = tuple(Input(d, channel=f"/basis/{d}") for d in pair if d != GROUND)
+    return replace(model, inputs=ins)
+
+
+def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
+    """Start values from the residual: each element law's force, computed on the refitted
+    model's relative motion, is applied to the refitted model, and the residual (measured -
+    refitted) is regressed on the responses (a linear-in-the-parameters estimate, Kerschen et
+    al. 2006, sec. 5; NARMAX-like). Returns ``{(effect, pair or None): estimate}``."""
+    from vibroscope.models.simulate import simulate
+
+    out = {}
+    r = (ys[fit_log][:, :n] - y_ref[fit_log][:, :n]).ravel()
+    if not np.all(np.isfinite(r)) or n < 16:
+        return out
+
+    def resp(m, forces):
+        try:
+            s = simulate(m, forces, fs)
+            y = np.asarray(s.data[len(m.inputs):])
+            return y.ravel() if np.all(np.isfinite(y)) else None
+        except Exception:  # noqa: BLE001 - a start value only
+            return None
+
+    def ls(cols):
+        A = np.vstack(cols).T
+        sol, *_ = np.linalg.lstsq(A, r, rcond=None)
+        return sol
+
+    for pair in connections(refit):
+        key = pair_name(pair)
+        if key not in rel:
+            continue
+        d, v = rel[key]
+        d, v = d[:n], v[:n]
+        m = _pair_force_model(refit, pair)
+        sgn = np.array([-1.0 if e == pair[0] else 1.0 for e in pair if e != GROUND])[:, None]
+        t = np.tanh(v / FRICTION_V_EPS)
+        cols = {}
+        for name, g in (("t", t), ("t2", t * t), ("d3", d**3)):
+            y = resp(m, sgn * g[None, :])
+            if y is not None:
+                cols[name] = y
+        if "t" in cols and ({"coulomb_friction"} & effects):
+            out[("coulomb_friction", key)] = abs(float(ls([cols["t"]])[0]))
+        if "t" in cols and "t2" in cols and ({"asymmetric_friction"} & effects):
+            fa, fd = ls([cols["t"], cols["t2"]])
+            out[("asymmetric_friction", key)] = (abs(fa + fd), abs(fa - fd))
+        if "d3" in cols and ({"cubic_stiffness"} & effects):
+            out[("cubic_stiffness", key)] = float(ls([cols["d3"]])[0])
+    if "offset" in effects and refit.inputs:
+        m = replace(refit, inputs=refit.inputs[:1])
+        y = resp(m, np.ones((1, n)))
+        if y is not None:
+            out[("offset", None)] = float(ls([y])[0])
+    return out
+
+
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress) -> GapReport:
     from tqdm.auto import tqdm
 
@@ -385,6 +551,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     sims = [LogSimulator(u, fs) for u in us]
     n_min = min(u.shape[1] for u in us)
     nps = nperseg or _pow2(min(4 * fs, n_min / 8))
+    effect_set = set(EFFECT_TABLE) if effects is None else set(effects)
 
     # 1. nominal -------------------------------------------------------------------------------
     t = time.perf_counter()
@@ -400,6 +567,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     timings["nominal"] = time.perf_counter() - t
 
     # 2. FRF of the fitting data and the linear refit ------------------------------------------
+    # started from the FRF fit and from the nominal; the better on the fitting data is kept, and
+    # the refit is never worse there than the nominal model itself
     t = time.perf_counter()
     fd = _frf_data(us, ys, split.fit, fs, nps)
     if fd is None:
@@ -412,29 +581,54 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     lo_l, hi_l = np.full(len(lin), -2.5), np.full(len(lin), 2.5)
     # time-domain polish on up to 20 s of the fitting data (the FRF fit is biased by leakage)
     ns_pol = [min(n, max(s_, int(20 * fs))) if n else 0 for n, s_ in zip(ns_fit, split.screen_prefix)]
-    theta, _, _ = fit_time_domain(lambda x: lin.apply(model, x), theta0, lo_l, hi_l, sims, ys, split.fit, ns_pol,
+
+    def fit_gap(x):
+        m_ = lin.apply(model, x)
+        yh = [sim.run(m_, n) if n else None for sim, n in zip(sims, ns_pol)]
+        g = nrmse([y[:, :n] for y, n in zip(ys, ns_pol) if n], [h for h in yh if h is not None],
+                  [mk[:n] for mk, n in zip(split.fit, ns_pol) if n])
+        return g if np.isfinite(g) else float("inf")
+
+    zeros = np.zeros(len(lin))
+    g_nom_fit = fit_gap(zeros)
+    g_frf_fit = fit_gap(theta0)
+    x_start = theta0 if g_frf_fit <= g_nom_fit else zeros
+    theta, _, _ = fit_time_domain(lambda x: lin.apply(model, x), x_start, lo_l, hi_l, sims, ys, split.fit, ns_pol,
                                   fast=False, max_nfev=6)
+    g_ref_fit = fit_gap(theta)
+    refit_note = "FRF fit then time-domain polish" if x_start is theta0 else "time-domain fit from the nominal"
+    if not g_ref_fit <= g_nom_fit:
+        theta, g_ref_fit, refit_note = zeros, g_nom_fit, "the nominal parameters (no refit was better on the fitting data)"
     refit = lin.apply(model, theta)
     y_ref = [sim.run(refit) for sim in sims]
     gap_refit = nrmse(ys, y_ref, split.validation)
     timings["refit"] = time.perf_counter() - t
 
-    # 3. scales, signatures --------------------------------------------------------------------
+    # 3. scales, signatures, level evidence ------------------------------------------------------
     t = time.perf_counter()
     fit_log = next(i for i, n in enumerate(ns_fit) if n)
-    st = sims[fit_log].run(_states_model(refit), ns_fit[fit_log])
-    nd = refit.n_dofs
-    X, V = st[:nd], st[nd:]
-    rel = _relative(refit, X, V)
-    u_fit = us[fit_log][0, : ns_fit[fit_log]]
+    n_sc = ns_fit[fit_log]
+    scales: dict = {"fs": fs}
+    rels = []
+    for base in (refit, model):
+        st = sims[fit_log].run(_states_model(base), n_sc)
+        nd = base.n_dofs
+        rels.append(_relative(base, st[:nd], st[nd:]))
+    rel = rels[0]
+    u_fit = us[fit_log][0, :n_sc]
     au = np.abs(u_fit)
-    scales = {
+    mfit0 = split.fit[fit_log][:n_sc]
+    scales.update({
         "u_rms": float(np.sqrt(np.mean(u_fit**2))),
         "u_max": float(au.max()),
-        "u_quantiles": [float(np.quantile(au, q)) for q in (0.999, 0.99, 0.95, 0.85)],
-        "d_rms": {k: float(np.std(d)) for k, (d, v) in rel.items()},
-        "v_rms": {k: float(np.std(v)) for k, (d, v) in rel.items()},
-    }
+        "u_quantiles": [float(np.quantile(au, q)) for q in (0.999, 0.99, 0.95, 0.85, 0.7, 0.5)],
+        "u_abs_sorted": np.sort(np.abs(np.concatenate([u[0] for u in us]))),
+        # the larger of the refitted and the nominal model's motion (a strong nonlinearity makes
+        # the refit's the wrong scale)
+        "d_rms": {k: float(max(np.std(d[mfit0]), np.std(rels[1][k][0][mfit0]))) for k, (d, v) in rel.items()},
+        "v_rms": {k: float(max(np.std(v[mfit0]), np.std(rels[1][k][1][mfit0]))) for k, (d, v) in rel.items()},
+        "d_quantiles": {k: [float(np.quantile(np.abs(d[mfit0]), q)) for q in (0.5, 0.8, 0.95)] for k, (d, v) in rel.items()},
+    })
     f_s, H_s, coh_s = f[sel], H[sel], coh[sel]
     H_refit = refit.frf(f_s, quantity=None)[:, :, 0]
     # start frequencies of an extra mode: where measured / model deviates most significantly
@@ -451,41 +645,36 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             if all(abs(fc - o) > 0.03 * o for o in starts):
                 starts.append(fc)
     scales["f_extra"] = starts
-    # levels and level-wise H1
-    labels, lv_rms = input_levels(us[fit_log], fs)
-    runs = np.diff(np.nonzero(np.diff(np.concatenate([[-9], labels, [-9]])) != 0)[0])
-    np_lv = _pow2(min(nps, max(int(np.min(runs)) if runs.size else nps, 128)))
-    H_lv = []
-    for k in range(len(lv_rms)):
-        mk = split.fit[fit_log] & (labels == k)
-        d = _frf_data([us[fit_log]], [ys[fit_log]], [mk], fs, np_lv)
-        if d is not None:
-            H_lv.append(np.array([np.interp(f_s, d[0], d[1][:, c].real) + 1j * np.interp(f_s, d[0], d[1][:, c].imag)
-                                  for c in range(len(out_ch))]).T)
+    # levels (within and across logs) and level-wise H1: the BLA's level dependence
+    groups = _level_groups(us, all_masks, fs)
+    blas = _bla_levels(us, ys, groups, fs, nps, f_s)
+    level = _level_test(f_s, blas)
+    scales["level_trend"] = level["trend"]
+    H_lv = [b[1] for b in blas]
+    lv_rms = [b[0] for b in blas]
     # coherence that the noise floor alone would leave (output PSDs of the fitting data, fd[3])
     noise_coh = np.clip(1 - nf.psd_level[None, :] / np.maximum(fd[3][sel], 1e-300), 0, 1)
-    resid = ys[fit_log][:, : ns_fit[fit_log]] - y_ref[fit_log][:, : ns_fit[fit_log]]
-    mfit = split.fit[fit_log][: ns_fit[fit_log]]
-    rel_fit = {k: (d[mfit], v[mfit]) for k, (d, v) in rel.items()}
+    resid = ys[fit_log][:, :n_sc] - y_ref[fit_log][:, :n_sc]
+    rel_fit = {k: (d[mfit0], v[mfit0]) for k, (d, v) in rel.items()}
     sigs_tests = run_signatures(
-        f=f_s, H_levels=H_lv, level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s, noise_coh=noise_coh,
-        resid=resid[:, mfit], u=u_fit[mfit], states={"relative": rel_fit}, fs=fs, out_channels=out_ch)
+        f=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
+        noise_coh=noise_coh, resid=resid[:, mfit0], u=u_fit[mfit0], states={"relative": rel_fit}, fs=fs,
+        out_channels=out_ch, level_stat=level)
     tau = next((s.value for s in sigs_tests if s.name == "phase_slope"), 0.0)
     scales["delay0"] = float(min(max(tau, 1e-4), 0.05))
+    n_reg = min(n_sc, int(20 * fs))
+    scales["regress"] = _regression_starts(refit, rel, ys, y_ref, fit_log, n_reg, fs, effect_set)
     timings["signatures"] = time.perf_counter() - t
 
     # 4. candidates ------------------------------------------------------------------------------
     t = time.perf_counter()
-    specs = candidate_specs(refit, scales)
-    if effects is not None:
-        specs = [s for s in specs if s.effect in set(effects)]
-    if gap_before <= NONE_FACTOR * floor:  # within the noise: nothing to explain, no effect is fitted
-        specs = []
+    none_ok = gap_before <= NONE_FACTOR * floor
+    specs = [] if none_ok else candidate_specs(refit, scales, effect_set)  # within the noise: nothing to explain
     lin_specs = [s for s in specs if s.linear]
     nl_specs = [s for s in specs if not s.linear]
     bar = tqdm(total=len(specs) + min(n_full, len({s.effect for s in nl_specs})), desc="gap candidates",
                disable=not progress, leave=False)
-    results = []  # (spec, model, gap_fit, n_sims)
+    results = []  # (spec, augmented model, p, gap_fit, base model without the effect)
 
     # linear effects: FRF fit jointly with the linear parameters, best per effect polished in time
     best_lin: dict[str, tuple] = {}
@@ -504,7 +693,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
         x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns_fit, fast=False, max_nfev=6)
-        results.append((s, build(x), x[nl:], gfit))
+        results.append((s, build(x), x[nl:], gfit, lin.apply(refit, x[:nl])))
 
     # nonlinear effects: screening at every location with the linear parameters at the refit
     sp = split.screen_prefix
@@ -514,7 +703,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         # BLA, so the refit can be the wrong base for it): the best start of each base is
         # refined, the better result kept
         out = None
-        for base in (refit, model):
+        for base in ((refit, model) if theta.any() else (refit,)):
             best = None
             for p0 in s.starts:
                 try:
@@ -542,7 +731,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     screened = []
     with ThreadPoolExecutor(max(1, workers)) as ex:
         for res in ex.map(screen, nl_specs):
-            screened.append(res)
+            if res is not None:
+                screened.append(res)
             bar.update(1)
     # best location per class, then the best classes fitted jointly with the linear parameters
     per_class: dict[str, tuple] = {}
@@ -564,7 +754,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
         x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, joint_n, fast=True, max_nfev=6)
-        return s, build(x), x[nl:], g
+        return s, build(x), x[nl:], g, lin.apply(model, x[:nl])
 
     with ThreadPoolExecutor(max(1, workers)) as ex:
         for res in ex.map(joint, full):
@@ -573,7 +763,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     done = {r[0].effect for r in results}
     for s, p, g, base in screened:  # the other classes and locations as screened
         if s.effect not in done or s is not per_class[s.effect][0]:
-            results.append((s, s.apply(base, p), p, g))
+            results.append((s, s.apply(base, p), p, g, base))
     bar.close()
     timings["candidates"] = time.perf_counter() - t
 
@@ -581,59 +771,97 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     t = time.perf_counter()
     val_logs = [i for i, m in enumerate(split.validation) if m.any()]
 
-    def evaluate(item):
-        s, m_aug, p, gfit = item
-        yh = {i: sims[i].run(m_aug) for i in val_logs}
+    def held_out(m_):
+        yh = {i: sims[i].run(m_) for i in val_logs}
         g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
-        return s, m_aug, p, gfit, (g if np.isfinite(g) else float("inf")), yh
+        return (g if np.isfinite(g) else float("inf")), yh
 
-    # only the best location of each class (and every linear fit) needs the held-out check in full;
-    # the other screened locations are evaluated too, they are cheap at this size
+    def evaluate(item):
+        s, m_aug, p, gfit, base = item
+        g, yh = held_out(m_aug)
+        # how much the effect itself changes the held-out outputs (against its own linear base)
+        yb = {i: sims[i].run(base) for i in val_logs}
+        contrib = nrmse([yh[i] for i in val_logs], [yb[i] for i in val_logs],
+                        [split.validation[i] for i in val_logs]) if np.isfinite(g) else float("nan")
+        return s, m_aug, p, gfit, g, yh, contrib
+
     with ThreadPoolExecutor(max(1, workers)) as ex:
         evaluated = list(ex.map(evaluate, results))
-    spec_of: dict = {}
-    cands = []
+
     def key(g, n):
         """Penalised held-out excess gap (lower is better)."""
         return max(_excess(g, floor), 0.15 * floor) * (1 + PENALTY * n)
 
     k_before = key(gap_before, 0)
-    for s, m_aug, p, gfit, g, yh in evaluated:
+    cands = []  # (Candidate, model, held-out outputs, spec, p)
+    for s, m_aug, p, gfit, g, yh, contrib in evaluated:
+        reason = s.vanishes(p)
+        if reason is None and np.isfinite(contrib) and np.isfinite(floor) and contrib < floor:
+            reason = (f"the effect changes the held-out outputs by nrmse {contrib:.3g}, within the noise floor "
+                      f"{floor:.3g}")
+        where = dict(s.where) | s.qualifiers(p)
+        if s.effect == "extra_mode":
+            where["frequency_hz"] = s.describe(p).get("frequency_hz")
         expl = 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0
-        cands.append((Candidate(s.effect, s.where | ({"frequency_hz": s.describe(p).get("frequency_hz")}
-                                                      if s.effect == "extra_mode" else {}),
-                                s.describe(p), g, expl, gfit, s.n,
-                                _dumps(m_aug)), m_aug, yh))
-        spec_of[id(cands[-1][0])] = (s, p)
+        c = Candidate(s.effect, where, s.describe(p), g, expl, gfit, s.n, _dumps(m_aug), vanished=reason or "")
+        cands.append((c, m_aug, yh, s, p))
     changed = lin.changed(theta)
     pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
     expl_pm = 1.0 - key(gap_refit, 0) / k_before if k_before > 0 else 0.0
     cands.append((Candidate("parameter_mismatch", {"parameters": changed}, pm_params, gap_refit, expl_pm,
-                            float("nan"), 0, _dumps(refit)), refit, {i: y_ref[i] for i in val_logs}))
-    # keep the best location per effect first, then the rest (every effect tried is listed)
+                            g_ref_fit, 0, _dumps(refit),
+                            vanished="" if changed else "no linear parameter changed by more than 3 %"),
+                  refit, {i: y_ref[i] for i in val_logs}, None, None))
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
-    none_ok = gap_before <= NONE_FACTOR * floor
-    if cands and not none_ok and id(cands[0][0]) in spec_of and not spec_of[id(cands[0][0])][0].linear:
-        cands[0] = _polish(cands[0], spec_of[id(cands[0][0])], model, lin, lo_l, hi_l, sims, ys, split, fs,
-                           val_logs, key, k_before)
-    none_c = (Candidate("none", {}, {}, gap_before, 0.0, float("nan"), 0, _dumps(model)), model,
-              {i: y_nom[i] for i in val_logs})
-    if none_ok or not cands or cands[0][0].score <= 0.05:
+
+    def admissible(c):
+        """Not vanished, and not a linear explanation of a BLA that changes with the level."""
+        if c[0].vanished:
+            return False
+        kind = EFFECT_TABLE[c[0].effect].kind
+        return not (level["flagged"] and kind in ("linear", "reference"))
+
+    best_i = next((i for i, c in enumerate(cands) if admissible(c)), None)
+    if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:
+        cands[best_i] = _polish(cands[best_i], model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before)
+    none_c = (Candidate("none", {}, {}, gap_before, 0.0, g_nom_fit, 0, _dumps(model)), model,
+              {i: y_nom[i] for i in val_logs}, None, None)
+    chosen = []
+    if none_ok:
         verdict = "none"
         ordered = [none_c] + cands
-    else:
-        verdict = cands[0][0].effect
+    elif best_i is None or cands[best_i][0].score < UNEXPLAINED_SCORE:
+        verdict = "unexplained"
         ordered = cands + [none_c]
-    best_c, best_m, best_y = ordered[0]
-    gap_after = best_c.gap_after
+    else:
+        first = cands.pop(best_i)
+        ordered = [first] + cands + [none_c]
+        chosen = [first]
+        verdict = first[0].effect
     timings["validation"] = time.perf_counter() - t
+
+    # 5b. forward selection: a second (third) effect is kept when it closes significantly more -----
+    t = time.perf_counter()
+    shares = []
+    if chosen and chosen[0][3] is not None:
+        chosen, shares = _forward_selection(chosen[0], per_class, screened, sims, ys, split, held_out, key, k_before,
+                                            floor, gap_before, workers)
+        if len(chosen) > 1:
+            added = {c[0].effect for c in chosen[1:]}
+            ordered = chosen + [c for c in ordered[1:] if c[0].effect not in added]
+    timings["forward_selection"] = time.perf_counter() - t
+    verdicts = [c[0].effect for c in chosen] if chosen else [verdict]
+    last = chosen[-1] if chosen else ordered[0]
+    best_c, best_m, best_y = last[0], last[1], last[2]
+    gap_after = best_c.gap_after
 
     # 6. localisation and figures' data -----------------------------------------------------------
     t = time.perf_counter()
     tr = val_logs[-1] if val_logs else 0
     vmask = split.validation[tr]
     y_aug_full = best_y.get(tr) if best_y.get(tr) is not None else sims[tr].run(best_m)
+
     def _rms(a):
         return float(np.sqrt(np.mean(a[vmask] ** 2))) if vmask.any() else float("nan")
 
@@ -677,24 +905,102 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         regimes=regimes,
         candidates=tuple(c[0] for c in ordered),
         signatures=sigs_tests,
-        verdict=verdict,
+        verdict=verdict if len(verdicts) == 1 else verdicts[0],
+        verdicts=tuple(verdicts),
+        shares=tuple(shares),
         model_name=model.name,
         augmented_model_toml=best_c.model_toml,
         traces=traces,
         spectrum=spectrum,
         timings=timings,
-        meta={"fs_hz": fs, "nperseg": nps, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs), "transient_samples": skips,
-              "levels": split.levels, "excited_band_hz": list(nf.excited_band),
+        meta={"fs_hz": fs, "nperseg": nps, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
+              "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
+              "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
+              "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
+                                   for k, v in level.items()},
+              "start_values": {f"{k[0]}@{k[1]}" if k[1] else k[0]: (list(v) if isinstance(v, tuple) else v)
+                               for k, v in scales.get("regress", {}).items()},
               "localisation": "bands, channels and regimes of the nominal model on the held-out log "
                               "(the nominal model is fitted on nothing)"},
     )
 
 
-def _polish(cand, spec_p, model, lin, lo_l, hi_l, sims, ys, split, fs, val_logs, key, k_before):
+def _forward_selection(first, per_class, screened, sims, ys, split, held_out, key, k_before, floor, gap_before,
+                       workers):
+    """Forward selection of further effects on top of the winner [Ljung 1999, sec. 16.4].
+
+    Each other effect class (its best screened location) is added to the current augmented
+    model and only its own parameters are fitted (screening prefix, coarse integration); the
+    best addition is kept when its penalised held-out excess gap falls below
+    :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
+    floor explain); then the next, up to three effects. Returns the chosen candidates
+    (cumulative: the last holds the combined model) and each effect's share of the shrink."""
+    chosen = [first]
+    cur_c, cur_m = first[0], first[1]
+    n_par = cur_c.n_parameters
+    used = {cur_c.effect}
+    sp = split.screen_prefix
+    shares_g = [gap_before, cur_c.gap_after]
+    while len(chosen) < 3:
+        if _excess(cur_c.gap_after, floor) <= 0.5 * floor:
+            break
+        # one member of a nested family only (asymmetric friction contains Coulomb friction)
+        families = [{"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"}]
+        cands = [s_ for eff, (s_, p_, g_, b_) in per_class.items()
+                 if eff not in used and not any(eff in fam and used & fam for fam in families)]
+        if not cands:
+            break
+
+        def add(s, cur_m=cur_m):
+            p0s = [per_class[s.effect][1]] + list(s.starts[:2])
+            best = None
+            for p0 in p0s:
+                try:
+                    m0 = s.apply(cur_m, p0)
+                except ValueError:
+                    continue
+                yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
+                g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
+                          [m[:n] for m, n in zip(split.fit, sp) if n])
+                if np.isfinite(g) and (best is None or g < best[1]):
+                    best = (p0, g)
+            if best is None:
+                return None
+
+            def build(p, s=s):
+                return s.apply(cur_m, p)
+
+            p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
+                                         max_nfev=4 + 2 * s.n)
+            m_new = build(p)
+            g, yh = held_out(m_new)
+            return s, p, m_new, g, yh, gfit
+
+        with ThreadPoolExecutor(max(1, workers)) as ex:
+            tries = [r for r in ex.map(add, cands) if r is not None]
+        tries = [r for r in tries if r[0].vanishes(r[1]) is None]
+        if not tries:
+            break
+        s, p, m_new, g, yh, gfit = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
+        if not key(g, n_par + s.n) < ADD_FACTOR * key(cur_c.gap_after, n_par):
+            break
+        n_par += s.n
+        used.add(s.effect)
+        c_new = Candidate(s.effect, dict(s.where) | s.qualifiers(p), s.describe(p), g,
+                          1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0, gfit, s.n, _dumps(m_new))
+        chosen.append((c_new, m_new, yh, s, p))
+        cur_c, cur_m = c_new, m_new
+        shares_g.append(g)
+    total = shares_g[0] - shares_g[-1]
+    shares = [float((shares_g[i] - shares_g[i + 1]) / total) if total > 0 else 0.0 for i in range(len(shares_g) - 1)]
+    return chosen, shares
+
+
+def _polish(cand, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before):
     """Refine the winning nonlinear candidate jointly with the linear parameters on up to 60 s
-    of the fitting data at the full integration accuracy; held-out gap recomputed."""
-    c, m_aug, _ = cand
-    s, p = spec_p
+    of the fitting data at the full integration accuracy; held-out gap recomputed. The polished
+    model is kept only when its held-out gap is not worse."""
+    c, m_aug, _, s, p = cand
     nl = len(lin)
     v0, v1 = lin.values(model), lin.values(m_aug)
     th = np.array([math.log(v1[k] / v0[k]) if v0[k] > 0 and v1[k] > 0 else 0.0 for k in lin.names])
@@ -708,15 +1014,14 @@ def _polish(cand, spec_p, model, lin, lo_l, hi_l, sims, ys, split, fs, val_logs,
     hi = np.concatenate([hi_l, s.upper])
     x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns, fast=False, max_nfev=4)
     m_new = build(x)
-    yh = {i: sims[i].run(m_new) for i in val_logs}
-    g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
-    if not np.isfinite(g):
+    g, yh = held_out(m_new)
+    if not np.isfinite(g) or g > c.gap_after:
         return cand
     pn = x[nl:]
-    c_new = Candidate(c.effect, c.where, s.describe(pn), g, 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0,
-                      gfit, s.n, _dumps(m_new))
-    return (c_new, m_new, yh)
-
+    c_new = Candidate(c.effect, dict(s.where) | s.qualifiers(pn) | ({k: v for k, v in c.where.items() if k == "frequency_hz"}),
+                      s.describe(pn), g, 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0,
+                      gfit, s.n, _dumps(m_new), vanished=s.vanishes(pn) or "")
+    return (c_new, m_new, yh, s, pn)
 
 def _dumps(model) -> str:
     from vibroscope.models.modelfile import dumps_model

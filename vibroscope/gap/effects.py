@@ -1,26 +1,45 @@
-"""Candidate effects of the gap diagnosis and the parameter vectors the fits move.
+"""Candidate effects of the gap diagnosis, declared once, and the parameter vectors the fits move.
 
-Each candidate is an :class:`EffectSpec`: an effect of :data:`~vibroscope.gap.report.EFFECTS`
-at a location, with a small vector ``p`` of effect parameters (log-scaled where the
-parameter is positive), its bounds and start values, and :meth:`EffectSpec.apply`, which
-returns the lumped model augmented with the effect in today's model-file vocabulary:
+:data:`EFFECT_TABLE` is the vocabulary: one :class:`EffectDef` per word (its kind, where it
+sits, its parameters with units, whether it makes the best linear approximation depend on the
+excitation level, and the factory of its candidates). The report (:data:`EFFECTS
+<vibroscope.gap.report.EFFECTS>`), the CLI's ``--effects``, the signature ranking and the
+benchmark generator read it; adding an effect is one factory and one entry here.
 
-=================  ==========================================================================
-effect             model change
-=================  ==========================================================================
-time_delay         ``[[input]] delay`` (``delay_s``)
-saturation         ``[[input]] saturation`` (``limit_N``)
-coulomb_friction   a ``friction`` element at a connection (``Fc_N``; ``v_eps`` fixed)
-backlash           the connection's spring replaced by a ``backlash`` element (``gap_m``)
-hysteresis         a ``bouc_wen`` element at a connection (``alpha_N_per_m``, ``beta_per_m``,
-                   ``gamma``, ``delta``; nu = 1)
-cubic_stiffness    a ``cubic_spring`` (k = 0) at a connection (``k3_N_per_m3``)
-extra_mode         an extra DOF joined to a DOF by spring + damper (``mass_kg``,
-                   ``frequency_hz``, ``damping_ratio``)
-=================  ==========================================================================
+Each candidate is an :class:`EffectSpec`: an effect at a location, with a small vector ``p``
+of effect parameters (log-scaled where the parameter is positive), its bounds and start
+values (derived from the data first), :meth:`EffectSpec.apply`, which returns the lumped
+model augmented with the effect in the model-file vocabulary, and
+:meth:`EffectSpec.vanishes`, which says when fitted parameters make the effect vanish:
+
+===================  ========================================================================
+effect               model change
+===================  ========================================================================
+time_delay           ``[[input]] delay`` (``delay_s``)
+offset               ``[[input]] offset`` (``offset_N``)
+saturation           ``[[input]] saturation`` (``limit_N``)
+coulomb_friction     a ``friction`` element at a connection (``Fc_N``; ``v_eps`` fixed)
+asymmetric_friction  a ``friction`` element with ``force_neg`` (``Fc_pos_N``, ``Fc_neg_N``)
+joint_friction       a share of the connection's spring replaced by a smooth Jenkins element
+                     (``bouc_wen`` with gamma = delta = 1/2; ``joint_share``, ``slip_force_N``)
+backlash             the connection's spring replaced by a ``backlash`` element (``gap_m``)
+hysteresis           a ``bouc_wen`` element at a connection (``alpha_N_per_m``, ``beta_per_m``,
+                     ``gamma``, ``delta``; nu = 1)
+cubic_stiffness      a ``cubic_spring`` (k = 0) at a connection (``k3_N_per_m3``; hardening or
+                     softening by its sign)
+extra_mode           an extra DOF joined to a DOF by spring + damper (``mass_kg``,
+                     ``frequency_hz``, ``damping_ratio``)
+===================  ========================================================================
 
 The linear parameters (masses, spring stiffnesses, damper coefficients) are moved by
 :class:`LinearParams` as log factors on the nominal values.
+
+References
+----------
+.. [1] G. Kerschen, K. Worden, A. F. Vakakis, J.-C. Golinval, "Past, present and future of
+   nonlinear system identification in structural dynamics", MSSP 20(3):505-592, 2006.
+.. [2] D. J. Segalman, "A four-parameter Iwan model for lap-type joints", J. Appl. Mech.
+   72(5):752-760, 2005 (Jenkins and Iwan elements of bolted joints).
 """
 
 from __future__ import annotations
@@ -41,7 +60,8 @@ from vibroscope.models.elements import (
 )
 from vibroscope.models.lumped import Dof, LumpedModel
 
-__all__ = ["LinearParams", "EffectSpec", "connections", "candidate_specs", "FRICTION_V_EPS"]
+__all__ = ["LinearParams", "EffectSpec", "EffectDef", "EFFECT_TABLE", "VERDICT_WORDS", "connections",
+           "candidate_specs", "FRICTION_V_EPS"]
 
 #: regularisation velocity of fitted friction elements (m/s)
 FRICTION_V_EPS = 1e-3
@@ -200,11 +220,13 @@ class EffectSpec:
     Attributes
     ----------
     effect : str
+        A name of :data:`EFFECT_TABLE`.
     where : dict
+        ``{"between": [a, b]}``, ``{"dof": name, ...}`` or ``{"side": "input"}``.
     n : int
         Number of effect parameters ``p``.
     starts : list of ndarray
-        Start vectors for the fit (a coarse grid).
+        Start vectors for the fit (data-derived first, then a coarse grid).
     lower, upper : ndarray
         Bounds of ``p``.
     build : callable (model, p) -> LumpedModel
@@ -212,6 +234,12 @@ class EffectSpec:
         The SI parameters of the report.
     linear : bool
         True when the augmented model is linear (fitted on the FRF, no time simulation).
+    vanish : callable p -> str or None, optional
+        The reason why the fitted parameters make the effect vanish (a delay below half a
+        sample, a clearance far below the rms deflection ...), None when they do not.
+    character : callable p -> dict, optional
+        Words that qualify the fitted effect (``{"character": "softening"}``), added to the
+        candidate's ``where``.
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -226,6 +254,8 @@ class EffectSpec:
     build: Callable
     describe: Callable
     linear: bool = False
+    vanish: Callable | None = None
+    character: Callable | None = None
     meta: dict = field(default_factory=dict)
 
     def apply(self, model: LumpedModel, p) -> LumpedModel:
@@ -243,6 +273,14 @@ class EffectSpec:
         LumpedModel
         """
         return self.build(model, np.asarray(p, float))
+
+    def vanishes(self, p) -> str | None:
+        """Why the parameters `p` make the effect vanish, or None (see :attr:`vanish`)."""
+        return self.vanish(np.asarray(p, float)) if self.vanish is not None else None
+
+    def qualifiers(self, p) -> dict:
+        """Words that qualify the fitted effect (see :attr:`character`); empty by default."""
+        return dict(self.character(np.asarray(p, float))) if self.character is not None else {}
 
     @property
     def label(self) -> str:
@@ -267,93 +305,204 @@ def _k_at(model, between) -> float:
     return float(np.max(np.diag(model.K)))
 
 
-def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
-    """Every candidate effect for `model` (except ``none`` and ``parameter_mismatch``).
+def _starts_1d(values, lo, hi):
+    """Start vectors of a one-parameter effect: unique finite values clipped inside the bounds."""
+    out = []
+    for v in values:
+        if v is None or not np.isfinite(v):
+            continue
+        v = float(np.clip(v, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo)))
+        if all(abs(v - o[0]) > 1e-3 * (hi - lo) for o in out):
+            out.append(np.array([v]))
+    return out
 
-    Parameters
-    ----------
-    model : LumpedModel
-        The refitted nominal model.
-    scales : dict
-        Magnitudes from a simulation of `model` on the log: ``u_rms``, ``u_max`` (N),
-        ``d_rms[pair]`` (m), ``v_rms[pair]`` (m/s) per connection, ``f_extra`` (list of
-        start frequencies in Hz for extra modes), ``delay0`` (start delay, s).
-    """
-    specs: list[EffectSpec] = []
-    u_max = scales["u_max"]
 
-    # -- input side ---------------------------------------------------------------------------
-    def build_delay(m, p):
+# ---------------------------------------------------------------------------------------------
+# one factory per effect: (model, scales) -> list of EffectSpec
+# ---------------------------------------------------------------------------------------------
+def _time_delay(model, scales):
+    fs = scales.get("fs", 1000.0)
+
+    def build(m, p):
         return replace(m, inputs=tuple(replace(i, delay=float(max(p[0], 0.0))) for i in m.inputs))
 
+    def vanish(p):
+        d = float(max(p[0], 0.0))
+        return f"delay {d:.3g} s is below half a sample ({0.5 / fs:.3g} s)" if d < 0.5 / fs else None
+
     d0 = scales.get("delay0", 0.002)
-    specs.append(EffectSpec(
+    return [EffectSpec(
         "time_delay", {"side": "input"}, 1,
         [np.array([max(d0, 1e-4)]), np.array([0.002]), np.array([0.008])],
         np.array([0.0]), np.array([0.1]),
-        build_delay, lambda p: {"delay_s": float(max(p[0], 0.0))}, linear=True,
-    ))
+        build, lambda p: {"delay_s": float(max(p[0], 0.0))}, linear=True, vanish=vanish,
+    )]
 
-    def build_sat(m, p):
+
+def _offset(model, scales):
+    from vibroscope.models.lumped import Input
+
+    if "offset" not in Input.__dataclass_fields__:  # pragma: no cover - a model room without input offsets
+        return []
+    u_rms = max(scales.get("u_rms", 1.0), 1e-12)
+
+    def build(m, p):
+        return replace(m, inputs=tuple(replace(i, offset=float(p[0] * u_rms)) for i in m.inputs))
+
+    est = scales.get("regress", {}).get(("offset", None))
+    starts = _starts_1d([est / u_rms if est is not None else None, 0.05, -0.05, 0.2, -0.2], -2.0, 2.0)
+    return [EffectSpec(
+        "offset", {"side": "input"}, 1, starts, np.array([-2.0]), np.array([2.0]),
+        build, lambda p: {"offset_N": float(p[0] * u_rms)},
+    )]
+
+
+def _saturation(model, scales):
+    u_max = scales["u_max"]
+    au = scales.get("u_abs_sorted")
+
+    def build(m, p):
         lim = float(math.exp(p[0]))
         return replace(m, inputs=tuple(replace(i, saturation=lim) for i in m.inputs))
 
+    def vanish(p):
+        lim = math.exp(p[0])
+        if au is None or au.size == 0:
+            return None
+        frac = 1.0 - np.searchsorted(au, lim) / au.size
+        return f"the limit {lim:.4g} N clips {100 * frac:.2g} % of the input samples" if frac < 1e-3 else None
+
     qs = scales.get("u_quantiles", [u_max * f for f in (0.9, 0.7, 0.5, 0.35)])
-    specs.append(EffectSpec(
+    return [EffectSpec(
         "saturation", {"side": "input"}, 1,
-        [np.array([math.log(q)]) for q in qs],
+        [np.array([math.log(q)]) for q in qs if q > 0],
         np.array([math.log(0.02 * u_max)]), np.array([math.log(1.2 * u_max)]),
-        build_sat, lambda p: {"limit_N": float(math.exp(p[0]))},
-    ))
+        build, lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish,
+    )]
 
-    # -- elements at connections ------------------------------------------------------------
+
+def _pair_scales(model, scales, pair):
+    key = pair_name(pair)
+    d_rms = max(scales["d_rms"].get(key, 1e-6), 1e-12)
+    v_rms = max(scales.get("v_rms", {}).get(key, 1e-6), 1e-12)
+    return key, d_rms, v_rms, _k_at(model, pair)
+
+
+def _coulomb_friction(model, scales):
+    specs = []
     for pair in connections(model):
-        key = pair_name(pair)
-        d_rms = max(scales["d_rms"].get(key, 1e-6), 1e-12)
-        k_loc = _k_at(model, pair)
-        where = {"between": [pair[0], pair[1]]}
-
-        # Coulomb friction: F = Fc tanh(v / v_eps)
+        key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
         f_ref = k_loc * d_rms  # the spring force scale at this connection
+        est = scales.get("regress", {}).get(("coulomb_friction", key))
 
-        def build_fric(m, p, pair=pair):
+        def build(m, p, pair=pair):
             return replace(m, elements=m.elements + (Friction(pair, force_=float(math.exp(p[0])), v_eps=FRICTION_V_EPS),))
 
+        lo, hi = math.log(f_ref * 1e-4), math.log(max(f_ref, scales["u_max"]) * 3)
+        vals = [math.log(est) if est and est > 0 else None] + [math.log(f_ref * r) for r in (0.01, 0.03, 0.1, 0.3, 1.0)]
         specs.append(EffectSpec(
-            "coulomb_friction", where, 1,
-            [np.array([math.log(f_ref * r)]) for r in (0.01, 0.03, 0.1, 0.3, 1.0)],
-            np.array([math.log(f_ref * 1e-4)]), np.array([math.log(max(f_ref, u_max) * 3)]),
-            build_fric, lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": FRICTION_V_EPS},
+            "coulomb_friction", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi),
+            np.array([lo]), np.array([hi]),
+            build, lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": FRICTION_V_EPS},
         ))
+    return specs
 
-        # backlash: the spring at the connection gets a clearance
+
+def _asymmetric_friction(model, scales):
+    if "force_neg" not in Friction.__dataclass_fields__:  # pragma: no cover - no asymmetric friction element
+        return []
+    specs = []
+    for pair in connections(model):
+        key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
+        f_ref = k_loc * d_rms
+        est = scales.get("regress", {}).get(("asymmetric_friction", key))
+
+        def build(m, p, pair=pair):
+            return replace(m, elements=m.elements + (
+                Friction(pair, force_=float(math.exp(p[0])), v_eps=FRICTION_V_EPS, force_neg=float(math.exp(p[1]))),))
+
+        lo, hi = math.log(f_ref * 1e-4), math.log(max(f_ref, scales["u_max"]) * 3)
+        starts = []
+        if est is not None and est[0] > 0 and est[1] > 0:
+            starts.append(np.clip(np.log(np.asarray(est, float)), lo + 1e-6, hi - 1e-6))
+        for r in (0.03, 0.1, 0.3):
+            for a in (2.0, 0.5):
+                starts.append(np.clip(np.array([math.log(f_ref * r * a), math.log(f_ref * r)]), lo + 1e-6, hi - 1e-6))
+
+        def vanish(p):
+            fp, fn = math.exp(p[0]), math.exp(p[1])
+            return (f"the two sliding forces {fp:.4g} N and {fn:.4g} N are within 10 % of each other (symmetric "
+                    f"friction)") if abs(fp - fn) < 0.1 * max(fp, fn) else None
+
+        specs.append(EffectSpec(
+            "asymmetric_friction", {"between": [pair[0], pair[1]]}, 2, starts,
+            np.array([lo, lo]), np.array([hi, hi]),
+            build, lambda p: {"Fc_pos_N": float(math.exp(p[0])), "Fc_neg_N": float(math.exp(p[1])),
+                              "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish,
+        ))
+    return specs
+
+
+def _backlash(model, scales):
+    specs = []
+    for pair in connections(model):
+        key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
         j, spring = _spring_at(model, pair)
-        if spring is not None:
-            def build_bl(m, p, pair=pair):
-                jj, sp = _spring_at(m, pair)
-                els = list(m.elements)
-                els[jj] = Backlash(sp.between, k=sp.k, gap=float(math.exp(p[0])))
-                return replace(m, elements=tuple(els))
+        if spring is None:
+            continue
 
-            specs.append(EffectSpec(
-                "backlash", where, 1,
-                [np.array([math.log(d_rms * r)]) for r in (0.03, 0.1, 0.3, 1.0, 2.0)],
-                np.array([math.log(d_rms * 1e-4)]), np.array([math.log(d_rms * 5)]),
-                build_bl, lambda p: {"gap_m": float(math.exp(p[0]))},
-            ))
+        def build(m, p, pair=pair):
+            jj, sp = _spring_at(m, pair)
+            els = list(m.elements)
+            els[jj] = Backlash(sp.between, k=sp.k, gap=float(math.exp(p[0])))
+            return replace(m, elements=tuple(els))
 
-        # cubic stiffness: k3 = q k / d_rms^2, q signed
-        def build_cubic(m, p, pair=pair, k_loc=k_loc, d_rms=d_rms):
+        def vanish(p, d_rms=d_rms):
+            g = math.exp(p[0])
+            return (f"clearance {g:.3g} m is far below the rms deflection {d_rms:.3g} m" if g < 0.02 * d_rms
+                    else None)
+
+        dq = scales.get("d_quantiles", {}).get(key, [])
+        lo, hi = math.log(d_rms * 1e-4), math.log(d_rms * 5)
+        vals = [math.log(q) for q in dq if q > 0] + [math.log(d_rms * r) for r in (0.03, 0.1, 0.3, 1.0, 2.0)]
+        specs.append(EffectSpec(
+            "backlash", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi)[:7],
+            np.array([lo]), np.array([hi]),
+            build, lambda p: {"gap_m": float(math.exp(p[0]))}, vanish=vanish,
+        ))
+    return specs
+
+
+def _cubic_stiffness(model, scales):
+    specs = []
+    trend = scales.get("level_trend", "none")
+    for pair in connections(model):
+        key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
+        est = scales.get("regress", {}).get(("cubic_stiffness", key))
+
+        # k3 = q k / d_rms^2, q signed
+        def build(m, p, pair=pair, k_loc=k_loc, d_rms=d_rms):
             return replace(m, elements=m.elements + (CubicSpring(pair, k3=float(p[0] * k_loc / d_rms**2), k=0.0),))
 
+        pos = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0]
+        neg = [-0.01, -0.03, -0.1, -0.2]
+        grid = (neg + pos) if trend == "softening" else (pos + neg)
+        q_est = est * d_rms**2 / k_loc if est is not None else None
         specs.append(EffectSpec(
-            "cubic_stiffness", where, 1,
-            [np.array([q]) for q in (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, -0.01, -0.03, -0.1)],
+            "cubic_stiffness", {"between": [pair[0], pair[1]]}, 1, _starts_1d([q_est] + grid, -0.5, 300.0),
             np.array([-0.5]), np.array([300.0]),
-            build_cubic, lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
+            build, lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
+            character=lambda p: {"character": "hardening" if p[0] >= 0 else "softening"},
         ))
+    return specs
 
-        # Bouc-Wen hysteresis: z' = alpha v - beta (gamma |v| z + delta v |z|), nu = 1;
+
+def _hysteresis(model, scales):
+    specs = []
+    for pair in connections(model):
+        key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
+
+        # Bouc-Wen: z' = alpha v - beta (gamma |v| z + delta v |z|), nu = 1;
         # p = [log(alpha / k), log(beta d_rms), phi] with gamma = cos(phi), delta = sin(phi)
         def bw_coeffs(p, k_loc=k_loc, d_rms=d_rms):
             alpha = k_loc * math.exp(p[0])
@@ -361,25 +510,72 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
             phi = float(np.clip(p[2], -1.45, 1.45))
             return alpha, beta, math.cos(phi), math.sin(phi)
 
-        def build_bw(m, p, pair=pair, bw_coeffs=bw_coeffs):
+        def build(m, p, pair=pair, bw_coeffs=bw_coeffs):
             alpha, beta, gamma, delta = bw_coeffs(p)
             return replace(m, elements=m.elements + (BoucWen(pair, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=1.0),))
 
-        def desc_bw(p, bw_coeffs=bw_coeffs):
+        def desc(p, bw_coeffs=bw_coeffs):
             alpha, beta, gamma, delta = bw_coeffs(p)
             return {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": 1.0}
 
         specs.append(EffectSpec(
-            "hysteresis", where, 3,
+            "hysteresis", {"between": [pair[0], pair[1]]}, 3,
             [np.array([math.log(a), math.log(b), s]) for a, b, s in ((0.3, 1.0, -0.9), (1.0, 3.0, -0.9), (0.3, 1.0, 0.6))],
             np.array([math.log(1e-3), math.log(1e-3), -1.45]), np.array([math.log(10.0), math.log(1e3), 1.45]),
-            build_bw, desc_bw,
+            build, desc,
         ))
+    return specs
 
-    # -- extra mode on each DOF -----------------------------------------------------------------
+
+def _joint_friction(model, scales):
+    """Microslip of a joint: a share ``r`` of the connection's spring becomes a smooth Jenkins
+    element (a spring ``r k`` in series with a slider of slip force ``Fs``, written as a
+    Bouc-Wen element with ``gamma = delta = 1/2``, ``nu = 1``, ``alpha = r k``,
+    ``beta = alpha / Fs``): stiff at low amplitude, softer and more damped as it slips."""
+    specs = []
+    for pair in connections(model):
+        key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
+        j, spring = _spring_at(model, pair)
+        if spring is None:
+            continue
+
+        def coeffs(p, k_loc=k_loc, d_rms=d_rms):
+            r = 1.0 / (1.0 + math.exp(-p[0]))
+            fs_ = k_loc * d_rms * math.exp(p[1])
+            return r, fs_
+
+        def build(m, p, pair=pair, coeffs=coeffs):
+            jj, sp = _spring_at(m, pair)
+            r, fs_ = coeffs(p)
+            alpha = r * sp.k
+            els = list(m.elements)
+            els[jj] = Spring(sp.between, k=(1.0 - r) * sp.k)
+            els.append(BoucWen(sp.between, alpha=alpha, beta=alpha / max(fs_, 1e-300), gamma=0.5, delta=0.5, nu=1.0))
+            return replace(m, elements=tuple(els))
+
+        def desc(p, coeffs=coeffs):
+            r, fs_ = coeffs(p)
+            return {"joint_share": r, "slip_force_N": fs_}
+
+        def vanish(p, coeffs=coeffs):
+            r, _ = coeffs(p)
+            return f"the joint holds {100 * r:.2g} % of the connection's stiffness" if r < 0.01 else None
+
+        lo = np.array([-5.0, math.log(1e-3)])
+        hi = np.array([5.0, math.log(20.0)])
+        starts = [np.array([math.log(r / (1 - r)), math.log(s)]) for r, s in ((0.3, 0.3), (0.5, 1.0), (0.3, 0.05))]
+        specs.append(EffectSpec(
+            "joint_friction", {"between": [pair[0], pair[1]]}, 2, starts, lo, hi, build, desc, vanish=vanish,
+            character=lambda p: {"character": "softening"},
+        ))
+    return specs
+
+
+def _extra_mode(model, scales):
+    specs = []
     for f0 in scales.get("f_extra", [])[:6]:
         for d in model.dofs:
-            def build_em(m, p, dof=d.name):
+            def build(m, p, dof=d.name):
                 md = m.dofs[m.dof_index(dof)].mass
                 me = md * math.exp(p[0])
                 f = math.exp(p[1])
@@ -392,7 +588,7 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
                     elements=m.elements + (Spring((EXTRA_DOF, dof), k=ke), Damper((EXTRA_DOF, dof), c=ce)),
                 )
 
-            def desc_em(p, dof=d.name, md=d.mass):
+            def desc(p, md=d.mass):
                 return {"mass_kg": md * math.exp(p[0]), "frequency_hz": math.exp(p[1]), "damping_ratio": math.exp(p[2])}
 
             specs.append(EffectSpec(
@@ -400,6 +596,111 @@ def candidate_specs(model: LumpedModel, scales: dict) -> list[EffectSpec]:
                 [np.array([math.log(r), math.log(f0), math.log(0.02)]) for r in (0.03, 0.1)],
                 np.array([math.log(1e-3), math.log(f0 / 1.5), math.log(0.002)]),
                 np.array([math.log(1.0), math.log(f0 * 1.5), math.log(0.2)]),
-                build_em, desc_em, linear=True,
+                build, desc, linear=True,
+                vanish=lambda p: (f"the extra mass is {100 * math.exp(p[0]):.2g} % of its DOF's" if p[0] < math.log(2e-3)
+                                  else None),
             ))
+    return specs
+
+
+# ---------------------------------------------------------------------------------------------
+# the one table of the vocabulary
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class EffectDef:
+    """One word of the gap vocabulary.
+
+    Attributes
+    ----------
+    name : str
+        The effect's name (report, CLI ``--effects``, benchmark classes).
+    kind : {"reference", "linear", "nonlinear"}
+        ``reference``: not an added effect (``none``, ``parameter_mismatch``); ``linear``: the
+        augmented model stays linear (fitted on the FRF first); ``nonlinear``: fitted in time.
+    where : {"model", "input", "connection", "dof"}
+        Where the effect sits.
+    parameters : tuple of (str, str)
+        The report's parameter keys and their units.
+    level_dependent : bool
+        True when the effect makes the best linear approximation change with the excitation
+        level (a linear explanation cannot be the verdict when the BLA does).
+    trend : {"hardening", "softening", "either", "none"}
+        How the effect moves a resonance as the level grows (the signature evidence).
+    description : str
+        One line for people (``--help``, the README).
+    factory : callable (model, scales) -> list of EffectSpec, or None
+        The candidates of this effect for a model (None for ``reference`` words).
+    """
+
+    name: str
+    kind: str
+    where: str
+    parameters: tuple
+    level_dependent: bool
+    trend: str
+    description: str
+    factory: Callable | None = None
+
+
+#: every effect, once: the candidates, the signatures, the report, the CLI and the benchmark read it
+EFFECT_TABLE: dict[str, EffectDef] = {d.name: d for d in (
+    EffectDef("none", "reference", "model", (), False, "none",
+              "the nominal model is within the noise floor"),
+    EffectDef("parameter_mismatch", "reference", "model", (("m:<dof>", "kg"), ("k:<a>-<b>", "N/m"), ("c:<a>-<b>", "N s/m")),
+              False, "none", "masses, stiffnesses or dampings differ from the nominal values"),
+    EffectDef("extra_mode", "linear", "dof", (("mass_kg", "kg"), ("frequency_hz", "Hz"), ("damping_ratio", "1")),
+              False, "none", "an unmodelled mode: an extra mass on a spring and damper at a DOF", _extra_mode),
+    EffectDef("time_delay", "linear", "input", (("delay_s", "s"),), False, "none",
+              "a transport delay of the input", _time_delay),
+    EffectDef("offset", "nonlinear", "input", (("offset_N", "N"),), False, "none",
+              "a constant force bias added to the input", _offset),
+    EffectDef("saturation", "nonlinear", "input", (("limit_N", "N"),), True, "none",
+              "the actuator force is clipped at a limit", _saturation),
+    EffectDef("coulomb_friction", "nonlinear", "connection", (("Fc_N", "N"), ("v_eps_m_per_s", "m/s")), True, "either",
+              "Coulomb friction F tanh(v / v_eps) at a connection", _coulomb_friction),
+    EffectDef("asymmetric_friction", "nonlinear", "connection",
+              (("Fc_pos_N", "N"), ("Fc_neg_N", "N"), ("v_eps_m_per_s", "m/s")), True, "either",
+              "Coulomb friction with different sliding forces for positive and negative velocity",
+              _asymmetric_friction),
+    EffectDef("joint_friction", "nonlinear", "connection", (("joint_share", "1"), ("slip_force_N", "N")), True,
+              "softening", "microslip of a joint: part of a spring in series with a slider (Jenkins), softening and "
+              "more damped with amplitude", _joint_friction),
+    EffectDef("backlash", "nonlinear", "connection", (("gap_m", "m"),), True, "either",
+              "a clearance in a connection's spring", _backlash),
+    EffectDef("hysteresis", "nonlinear", "connection",
+              (("alpha_N_per_m", "N/m"), ("beta_per_m", "1/m"), ("gamma", "1"), ("delta", "1"), ("nu", "1")), True,
+              "either", "a Bouc-Wen hysteretic force added at a connection", _hysteresis),
+    EffectDef("cubic_stiffness", "nonlinear", "connection", (("k3_N_per_m3", "N/m^3"),), True, "either",
+              "a cubic spring k3 d^3 at a connection (hardening k3 > 0, softening k3 < 0)", _cubic_stiffness),
+)}
+
+#: verdict words that are not effects
+VERDICT_WORDS = ("unexplained",)
+
+
+def candidate_specs(model: LumpedModel, scales: dict, effects=None) -> list[EffectSpec]:
+    """Every candidate effect of :data:`EFFECT_TABLE` for `model` (reference words excepted).
+
+    Parameters
+    ----------
+    model : LumpedModel
+        The refitted nominal model.
+    scales : dict
+        Magnitudes from a simulation of `model` on the log: ``fs`` (Hz), ``u_rms``,
+        ``u_max`` (N), ``u_quantiles`` (N, start limits of a saturation), ``u_abs_sorted``,
+        ``d_rms[pair]`` (m), ``v_rms[pair]`` (m/s), ``d_quantiles[pair]`` (m) per connection,
+        ``f_extra`` (start frequencies in Hz of extra modes), ``delay0`` (start delay, s),
+        ``regress`` (data-derived start values by ``(effect, pair)``), ``level_trend``.
+    effects : iterable of str, optional
+        Restrict to these effects (default: all).
+
+    Returns
+    -------
+    list of EffectSpec
+    """
+    keep = set(EFFECT_TABLE) if effects is None else set(effects)
+    specs: list[EffectSpec] = []
+    for name, d in EFFECT_TABLE.items():
+        if d.factory is not None and name in keep:
+            specs.extend(d.factory(model, scales))
     return specs

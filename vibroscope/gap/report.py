@@ -19,6 +19,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from vibroscope._checks import read_only as _ro
+from vibroscope.gap.effects import EFFECT_TABLE
 
 __all__ = [
     "EFFECTS",
@@ -32,18 +33,8 @@ __all__ = [
     "GapReport",
 ]
 
-#: the fixed effect vocabulary
-EFFECTS = (
-    "none",
-    "parameter_mismatch",
-    "extra_mode",
-    "time_delay",
-    "coulomb_friction",
-    "backlash",
-    "hysteresis",
-    "cubic_stiffness",
-    "saturation",
-)
+#: the effect vocabulary, read from its one table (:data:`vibroscope.gap.effects.EFFECT_TABLE`)
+EFFECTS = tuple(EFFECT_TABLE)
 
 
 def _num(x):
@@ -161,6 +152,11 @@ class Candidate:
         Number of effect parameters fitted (besides the linear ones).
     model_toml : str
         The augmented model as a model file.
+    vanished : str
+        Why the fitted parameters make the effect vanish (a delay below half a sample, a
+        clearance far below the rms deflection, an effect that changes the held-out outputs
+        by less than the noise floor ...); such a candidate is never the verdict. Empty when
+        it does not vanish.
     """
 
     effect: str
@@ -171,10 +167,12 @@ class Candidate:
     gap_fit: float = float("nan")
     n_parameters: int = 0
     model_toml: str = ""
+    vanished: str = ""
 
     def to_dict(self) -> dict:
         """The candidate as a JSON-ready dict: ``effect``, ``where``, ``parameters``, ``gap_after``, ``score``,
-        ``gap_fit``, ``n_parameters`` (not ``model_toml``); NaN and inf become None."""
+        ``gap_fit``, ``n_parameters``, ``vanished`` (the reason, or None) and ``model_toml`` (the fitted
+        model as a model file); NaN and inf become None."""
         return {
             "effect": self.effect,
             "where": dict(self.where),
@@ -183,6 +181,8 @@ class Candidate:
             "score": _num(self.score),
             "gap_fit": _num(self.gap_fit),
             "n_parameters": int(self.n_parameters),
+            "vanished": self.vanished or None,
+            "model_toml": self.model_toml,
         }
 
 
@@ -342,7 +342,15 @@ class GapReport:
         Every effect tried, best first.
     signatures : tuple of SignatureTest
     verdict : str
-        The winning effect, ``"none"`` when no candidate beats the noise floor.
+        The winning effect (the first, when several are named); ``"none"`` when the nominal
+        model is within the noise floor; ``"unexplained"`` when the gap is above the floor
+        and no admissible candidate explains enough of it on held-out data.
+    verdicts : tuple of str
+        Every effect named, in the order forward selection added them (one for a single
+        effect, ``("none",)`` or ``("unexplained",)`` otherwise).
+    shares : tuple of float
+        Each named effect's share of the shrink of the held-out gap (sums to 1); empty
+        without an effect.
     model_name : str
     augmented_model_toml : str
         The augmented (verdict) model as a model file (``--export-model``).
@@ -368,6 +376,8 @@ class GapReport:
     candidates: tuple[Candidate, ...]
     signatures: tuple[SignatureTest, ...]
     verdict: str
+    verdicts: tuple[str, ...] = ()
+    shares: tuple[float, ...] = ()
     model_name: str = ""
     augmented_model_toml: str = ""
     traces: GapTraces | None = None
@@ -396,7 +406,8 @@ class GapReport:
             "regimes": [r.to_dict() for r in self.regimes],
             "candidates": [c.to_dict() for c in self.candidates],
             "signatures": [s.to_dict() for s in self.signatures],
-            "verdict": self.verdict,
+            "verdict": list(self.verdicts) if len(self.verdicts) > 1 else self.verdict,
+            "shares": [_num(x) for x in self.shares],
             "model": self.model_name,
             "timings_s": {k: _num(v) for k, v in self.timings.items()},
             "meta": dict(self.meta),
@@ -404,8 +415,11 @@ class GapReport:
 
     def summary(self) -> str:
         """A few lines for people: verdict, gaps, bands, the top candidates."""
+        named = self.verdicts if len(self.verdicts) > 1 else (self.verdict,)
+        share = (" (" + ", ".join(f"{e} {100 * x:.0f} %" for e, x in zip(named, self.shares)) + " of the shrink)"
+                 if len(named) > 1 and self.shares else "")
         lines = [
-            f"verdict: {self.verdict}",
+            f"verdict: {' + '.join(named)}{share}",
             f"gap (nrmse, {self.validation}): nominal {self.gap_before:.4f}, refit {self.gap_refit:.4f}, "
             f"augmented {self.gap_after:.4f} (shrink {100 * self.shrink:.1f} %), noise floor {self.noise_floor:.4f}",
         ]
@@ -414,7 +428,8 @@ class GapReport:
         for i, c in enumerate(self.candidates[:5], 1):
             where = ", ".join(f"{k}={v}" for k, v in c.where.items())
             par = ", ".join(f"{k}={v:.4g}" for k, v in c.parameters.items())
-            lines.append(f"  {i}. {c.effect:<18} gap {c.gap_after:.4f}  score {c.score:+.3f}  [{where}] {par}")
+            van = f"  (vanishes: {c.vanished})" if c.vanished else ""
+            lines.append(f"  {i}. {c.effect:<18} gap {c.gap_after:.4f}  score {c.score:+.3f}  [{where}] {par}{van}")
         return "\n".join(lines)
 
     def __repr__(self) -> str:

@@ -17,11 +17,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from vibroscope.gap.effects import EFFECT_TABLE
 from vibroscope.gap.report import SignatureTest
 
 __all__ = ["run_signatures"]
 
-_NONLIN = ("coulomb_friction", "backlash", "hysteresis", "cubic_stiffness", "saturation")
+#: the effects that make the BLA depend on the excitation level (read from the one table)
+_NONLIN = tuple(n for n, d in EFFECT_TABLE.items() if d.level_dependent)
+
+
+def _by_trend(trend: str) -> tuple[str, ...]:
+    """The level-dependent effects that can move a resonance the way `trend` says."""
+    if trend not in ("hardening", "softening"):
+        return _NONLIN
+    return tuple(n for n in _NONLIN if EFFECT_TABLE[n].trend in (trend, "either") or EFFECT_TABLE[n].trend == "none")
 
 
 def _binned(x, y, nb=25):
@@ -43,7 +52,7 @@ def _corr(a, b) -> float:
 
 
 def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, resid, u, states, fs,
-                   out_channels) -> tuple[SignatureTest, ...]:
+                   out_channels, level_stat=None) -> tuple[SignatureTest, ...]:
     """The signature tests.
 
     Parameters
@@ -67,10 +76,25 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         ``relative``: dict pair -> (d, v).
     fs : float
     out_channels : list of str
+    level_stat : dict, optional
+        The BLA level test of the diagnosis (``stat``: the fraction of lines whose change
+        between the lowest and highest level exceeds 3 standard deviations, ``flagged``, ``trend``,
+        ``shift``); when given, it is the level-dependence test's statistic.
     """
     tests = []
     # 1. level dependence of the BLA
-    if len(H_levels) >= 2:
+    if len(H_levels) >= 2 and level_stat is not None and np.isfinite(level_stat.get("stat", np.nan)):
+        lo, hi = H_levels[0], H_levels[-1]
+        ratio_db = 20 * np.log10(np.maximum(np.abs(hi), 1e-300) / np.maximum(np.abs(lo), 1e-300))
+        val = float(level_stat["stat"])
+        trend = level_stat.get("trend", "none")
+        tests.append(SignatureTest(
+            "level_dependence", val, 0.01, bool(level_stat.get("flagged")), _by_trend(trend),
+            f"BLA change from the lowest to the highest level (input RMS {level_rms[0]:.3g} -> {level_rms[-1]:.3g} N): "
+            f"{100 * val:.1f} % of the lines beyond 3 standard deviations; resonance {trend} "
+            f"({100 * level_stat.get('shift', 0.0):+.2f} %)",
+            f, np.mean(ratio_db, axis=1), "frequency [Hz]", "H1 high / low level [dB]"))
+    elif len(H_levels) >= 2:
         lo, hi = H_levels[0], H_levels[-1]
         w = np.clip(np.mean(coh, axis=1), 0, 1)
         ratio_db = 20 * np.log10(np.maximum(np.abs(hi), 1e-300) / np.maximum(np.abs(lo), 1e-300))
