@@ -20,10 +20,10 @@ Schema (fixed)::
     quantity = "acceleration"       # acceleration | velocity | displacement
 
 Element parameters: spring ``k``; damper ``c``; cubic_spring ``k3`` (``k`` optional);
-backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional); bouc_wen ``alpha``,
-``beta``, ``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A)
-and optionally the Spencer et al. (1997) coefficients (see
-:class:`vibroscope.models.elements.MRDamper`).
+backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional; ``force_neg``, the sliding
+force for negative velocity, optional, default ``force``); bouc_wen ``alpha``, ``beta``,
+``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A) and optionally
+the Spencer et al. (1997) coefficients (see :class:`vibroscope.models.elements.MRDamper`).
 
 ``kind = "transfer_function"``: ``num`` and ``den`` (coefficients of s, highest power
 first), one ``[[input]]`` and one ``[[output]]`` (``channel``, ``quantity``).
@@ -275,7 +275,7 @@ def _tables(ctx, doc, table):
     return v
 
 
-_NONNEG = {"k", "c", "gap", "force", "k0", "k1"}
+_NONNEG = {"k", "c", "gap", "force", "force_neg", "k0", "k1"}
 _POSITIVE = {"v_eps", "nu", "n"}
 
 
@@ -623,7 +623,9 @@ def dumps_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel) -
             if attr in seen:
                 continue
             seen.add(attr)
-            lines.append(f"{fkey} = {_fmt(getattr(e, attr))}")
+            value = getattr(e, attr)
+            if value is not None:  # an optional parameter left unset (friction force_neg)
+                lines.append(f"{fkey} = {_fmt(value)}")
     lines += _io_lines(model.inputs, model.outputs)
     return "\n".join(lines) + "\n"
 
