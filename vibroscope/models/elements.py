@@ -369,31 +369,46 @@ class Backlash(Element):
 
 @dataclass(frozen=True)
 class Friction(Element):
-    """Regularised Coulomb friction ``f = force tanh(v / v_eps)``.
+    """Regularised Coulomb friction, symmetric ``f = force tanh(v / v_eps)`` or asymmetric.
 
-    `force` is the sliding friction force in N, `v_eps` (m/s) the regularisation velocity
-    (default 1e-3 m/s).
+    `force` is the sliding friction force in N for positive relative velocity, `force_neg`
+    (N) the one for negative relative velocity (None: the same, symmetric), `v_eps` (m/s)
+    the regularisation velocity (default 1e-3 m/s). With ``t = tanh(v / v_eps)``,
+    ``Fa = (force + force_neg) / 2`` and ``Fd = (force - force_neg) / 2``::
+
+        f = t (Fa + Fd t)
+
+    so ``f -> +force`` for ``v >> v_eps`` and ``f -> -force_neg`` for ``v << -v_eps``; for
+    ``force_neg = force`` (or None) ``Fd = 0`` and ``f = force t`` exactly. The law is
+    monotonic in `v` for ``1/3 <= force_neg / force <= 3``; beyond, the parabola in ``t``
+    overshoots the smaller sliding force (its extreme ``-Fa^2 / (4 Fd)`` lies at
+    ``t = -Fa / (2 Fd)`` inside (-1, 1)), e.g. ``force_neg = 0`` gives ``f < 0`` for
+    ``v < 0`` down to ``-force / 8`` before it returns to 0.
 
     Parameters
     ----------
     between : tuple of (str, str)
         The two ends: two DOF names, or a DOF name and ``"ground"``.
     force_ : float, optional
-        Sliding (Coulomb) friction force (N), finite and >= 0; default 0. Stored under the
-        trailing-underscore name because :meth:`force` is the method; the model-file key
-        (and :meth:`params`) call it ``force``.
+        Sliding (Coulomb) friction force (N) for positive relative velocity, finite and
+        >= 0; default 0. Stored under the trailing-underscore name because :meth:`force` is
+        the method; the model-file key (and :meth:`params`) call it ``force``.
     v_eps : float, optional
         Regularisation velocity (m/s), > 0; default 1e-3.
+    force_neg : float or None, optional
+        Sliding friction force (N) for negative relative velocity, finite and >= 0; default
+        None (symmetric: ``force_``). Model-file key ``force_neg``, omitted when None.
 
     Raises
     ------
     ValueError
-        If `between` is invalid (see :class:`Element`), `force_` is negative or not finite,
-        or `v_eps` is not > 0.
+        If `between` is invalid (see :class:`Element`), `force_` or `force_neg` is negative
+        or not finite, or `v_eps` is not > 0.
     """
 
     force_: float = 0.0
     v_eps: float = 1e-3
+    force_neg: float | None = None
     type: ClassVar[str] = "friction"
 
     def __post_init__(self) -> None:
@@ -403,9 +418,19 @@ class Friction(Element):
         if not np.isfinite(v_eps) or v_eps <= 0:
             raise ValueError(f"{v_eps=} must be > 0")
         object.__setattr__(self, "v_eps", v_eps)
+        if self.force_neg is not None:
+            object.__setattr__(self, "force_neg", _nonneg("force_neg", self.force_neg))
+
+    @property
+    def force_negative(self) -> float:
+        """Sliding force (N) for negative relative velocity: `force_neg`, or `force_` if None."""
+        return self.force_ if self.force_neg is None else self.force_neg
 
     def force(self, d, v, state=None):
-        """Element force (N) ``force_ tanh(v / v_eps)``; it does not depend on `d`.
+        """Element force (N) ``t (Fa + Fd t)``, ``t = tanh(v / v_eps)``; it does not depend on `d`.
+
+        ``Fa = (force_ + force_neg) / 2``, ``Fd = (force_ - force_neg) / 2``; symmetric
+        (``force_neg`` None) it is ``force_ t``.
 
         Parameters
         ----------
@@ -421,10 +446,20 @@ class Friction(Element):
         float
             The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
         """
-        return self.force_ * math.tanh(v / self.v_eps)
+        t = math.tanh(v / self.v_eps)
+        if self.force_neg is None:
+            return self.force_ * t
+        fa = 0.5 * (self.force_ + self.force_neg)
+        fd = 0.5 * (self.force_ - self.force_neg)
+        return t * (fa + fd * t)
 
     def params(self) -> dict:
-        return {"force": self.force_, "v_eps": self.v_eps}
+        """The parameters under their model-file keys: ``force``, ``v_eps`` and, when not
+        None, ``force_neg`` (N)."""
+        p = {"force": self.force_, "v_eps": self.v_eps}
+        if self.force_neg is not None:
+            p["force_neg"] = self.force_neg
+        return p
 
 
 @dataclass(frozen=True)
@@ -736,7 +771,7 @@ ELEMENT_TYPES: dict[str, tuple[type, dict[str, str], tuple[str, ...]]] = {
     "damper": (Damper, {"c": "c"}, ("c",)),
     "cubic_spring": (CubicSpring, {"k": "k", "k3": "k3"}, ("k3",)),
     "backlash": (Backlash, {"k": "k", "gap": "gap"}, ("k", "gap")),
-    "friction": (Friction, {"force": "force_", "v_eps": "v_eps"}, ("force",)),
+    "friction": (Friction, {"force": "force_", "v_eps": "v_eps", "force_neg": "force_neg"}, ("force",)),
     "bouc_wen": (
         BoucWen,
         {k: k for k in ("alpha", "beta", "gamma", "delta", "nu")},
@@ -762,7 +797,8 @@ def make_element(type: str, between, **params) -> Element:
         The two ends: two DOF names, or a DOF name and ``"ground"``.
     **params : float
         The element's parameters under their model-file keys (e.g. ``k``, ``c``; ``force``
-        for friction, ``i`` for the MR damper's current), in SI units; converted to float.
+        and ``force_neg`` for friction, ``i`` for the MR damper's current), in SI units;
+        converted to float (a friction's ``force_neg=None`` is passed as None).
 
     Returns
     -------
@@ -783,4 +819,4 @@ def make_element(type: str, between, **params) -> Element:
     for key in required:
         if key not in params:
             raise ValueError(f"missing parameter {key!r} for element type {type!r}")
-    return cls(between=between, **{keys[k]: float(v) for k, v in params.items()})
+    return cls(between=between, **{keys[k]: None if v is None else float(v) for k, v in params.items()})

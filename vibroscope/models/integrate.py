@@ -84,7 +84,7 @@ class FlatModel:
         Element types, :data:`ELEMENT_CODES`.
     params : ndarray, shape (n_e, 9)
         Parameter rows (SI): cubic ``k, k3``; backlash ``k, gap``; friction ``force,
-        v_eps``; Bouc-Wen ``alpha, beta, gamma, delta, nu``; MR damper ``alpha, c0, c1,
+        v_eps, force_neg`` (``force_neg = force`` when symmetric); Bouc-Wen ``alpha, beta, gamma, delta, nu``; MR damper ``alpha, c0, c1,
         k0, k1, gamma, beta, A, n`` (at the element's current). Unused entries are 0.
     k_lin, c_lin : ndarray, shape (n_e,)
         Linear parts (N/m, N s/m) the elements put in ``K`` and ``C``.
@@ -129,7 +129,7 @@ def _param_row(e: Element) -> np.ndarray:
     elif isinstance(e, Backlash):
         row[:2] = e.k, e.gap
     elif isinstance(e, Friction):
-        row[:2] = e.force_, e.v_eps
+        row[:3] = e.force_, e.v_eps, e.force_negative
     elif isinstance(e, BoucWen):
         row[:5] = e.alpha, e.beta, e.gamma, e.delta, e.nu
     elif isinstance(e, MRDamper):
@@ -270,12 +270,14 @@ def _element(code, prm, i, kl, cl, d, v, s0, s1):
         r = f - kl * d - cl * v
         rd = fd - kl
         rv = -cl
-    elif code == 2:  # friction: F tanh(v / v_eps)
-        F, ve = prm[i, 0], prm[i, 1]
+    elif code == 2:  # friction: t (Fa + Fd t), t = tanh(v / v_eps); symmetric (Fd = 0): F t
+        F, ve, Fn = prm[i, 0], prm[i, 1], prm[i, 2]
         t = math.tanh(v / ve)
-        r = F * t - kl * d - cl * v
+        Fa = 0.5 * (F + Fn)  # == F exactly when Fn == F
+        Fd = 0.5 * (F - Fn)
+        r = t * (Fa + Fd * t) - kl * d - cl * v
         rd = -kl
-        rv = F / ve * (1.0 - t * t) - cl
+        rv = (Fa + 2.0 * Fd * t) / ve * (1.0 - t * t) - cl
     elif code == 3:  # Bouc-Wen: force z, z' = alpha v - beta (gamma |v| |z|^(nu-1) z + delta v |z|^nu)
         alpha, beta, gamma, delta, nu = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3], prm[i, 4]
         r = s0 - kl * d - cl * v

@@ -80,6 +80,17 @@ class Input:
         Actuator limit in N: the applied force is ``clip(u, -saturation, saturation)``.
     delay : float
         Input (transport) delay in s, >= 0.
+    offset : float
+        Constant force bias in N (finite, either sign; default 0.0) added to the logged
+        input: the applied force is ``clip(u(t - delay) + offset, -saturation, saturation)``.
+        A constant, so it leaves :meth:`LumpedModel.frf` unchanged and keeps a linear
+        model linear (affine): the time response adds the static deflection to it.
+
+    Raises
+    ------
+    ValueError
+        If `quantity` is not ``"force"``, `saturation` is not a positive finite force,
+        `delay` is negative or not finite, or `offset` is not finite.
     """
 
     dof: str
@@ -87,6 +98,7 @@ class Input:
     channel: str | None = None
     saturation: float | None = None
     delay: float = 0.0
+    offset: float = 0.0
 
     def __post_init__(self) -> None:
         if self.quantity != "force":
@@ -100,6 +112,10 @@ class Input:
         if not np.isfinite(d) or d < 0:
             raise ValueError(f"delay={d} must be >= 0 s")
         object.__setattr__(self, "delay", d)
+        o = float(self.offset)
+        if not np.isfinite(o):
+            raise ValueError(f"offset={o} must be a finite force in N")
+        object.__setattr__(self, "offset", o)
 
 
 @dataclass(frozen=True)
@@ -264,7 +280,8 @@ class LumpedModel:
 
     @property
     def is_linear(self) -> bool:
-        """True when every element is linear and no input saturates."""
+        """True when every element is linear and no input saturates (an input ``offset``
+        keeps the model linear: affine, simulated on the linear path)."""
         return all(e.is_linear for e in self.elements) and all(i.saturation is None for i in self.inputs)
 
     @property

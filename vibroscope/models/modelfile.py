@@ -13,17 +13,17 @@ Schema (fixed)::
     [[input]]
     channel = "/actuator/force_cmd.wrench.force.x"
     dof = "m1"
-    quantity = "force"              # N; optional: saturation = N, delay = s
+    quantity = "force"              # N; optional: saturation = N, delay = s, offset = N
     [[output]]
     channel = "/imu/m1.linear_acceleration.x"
     dof = "m1"
     quantity = "acceleration"       # acceleration | velocity | displacement
 
 Element parameters: spring ``k``; damper ``c``; cubic_spring ``k3`` (``k`` optional);
-backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional); bouc_wen ``alpha``,
-``beta``, ``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A)
-and optionally the Spencer et al. (1997) coefficients (see
-:class:`vibroscope.models.elements.MRDamper`).
+backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional; ``force_neg``, the sliding
+force for negative velocity, optional, default ``force``); bouc_wen ``alpha``, ``beta``,
+``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A) and optionally
+the Spencer et al. (1997) coefficients (see :class:`vibroscope.models.elements.MRDamper`).
 
 ``kind = "transfer_function"``: ``num`` and ``den`` (coefficients of s, highest power
 first), one ``[[input]]`` and one ``[[output]]`` (``channel``, ``quantity``).
@@ -35,7 +35,7 @@ e.g. an identified LSCF + LSFD model::
     name = "frame, identified by LSCF"
     [[input]]
     channel = "/actuator/force.wrench.force.x"
-    quantity = "force"                  # optional: saturation = N, delay = s
+    quantity = "force"                  # optional: saturation = N, delay = s, offset = N
     [[output]]
     channel = "/imu/m1.linear_acceleration.x"
     quantity = "acceleration"           # the quantity the residues refer to
@@ -275,14 +275,14 @@ def _tables(ctx, doc, table):
     return v
 
 
-_NONNEG = {"k", "c", "gap", "force", "k0", "k1"}
+_NONNEG = {"k", "c", "gap", "force", "force_neg", "k0", "k1"}
 _POSITIVE = {"v_eps", "nu", "n"}
 
 
 def _parse_io(ctx, doc, dof_names):
     inputs, outputs = [], []
     for i, t in enumerate(_tables(ctx, doc, "input")):
-        _unknown(ctx, t, "input", i, {"channel", "dof", "quantity", "saturation", "delay"})
+        _unknown(ctx, t, "input", i, {"channel", "dof", "quantity", "saturation", "delay", "offset"})
         ch = _string(ctx, t, "input", i, "channel")
         dof = _string(ctx, t, "input", i, "dof", required=dof_names is not None, default="u")
         if dof_names is not None and dof not in dof_names:
@@ -292,7 +292,8 @@ def _parse_io(ctx, doc, dof_names):
             raise ctx.error(f"quantity={q!r} must be 'force'", "input", i, "quantity")
         sat = _number(ctx, t, "input", i, "saturation", positive=True, required=False)
         delay = _number(ctx, t, "input", i, "delay", nonneg=True, required=False, default=0.0)
-        inputs.append(Input(dof, q, ch, sat, delay))
+        offset = _number(ctx, t, "input", i, "offset", required=False, default=0.0)
+        inputs.append(Input(dof, q, ch, sat, delay, offset))
     for i, t in enumerate(_tables(ctx, doc, "output")):
         _unknown(ctx, t, "output", i, {"channel", "dof", "quantity"})
         ch = _string(ctx, t, "output", i, "channel")
@@ -557,6 +558,8 @@ def _io_lines(inputs, outputs, with_dof=True) -> list[str]:
             out.append(f"saturation = {_fmt(i.saturation)}")
         if i.delay:
             out.append(f"delay = {_fmt(i.delay)}")
+        if i.offset:
+            out.append(f"offset = {_fmt(i.offset)}")
     for o in outputs:
         out += ["", "[[output]]", f"channel = {_fmt(o.channel or '/output.x')}"]
         if with_dof is True or (with_dof == "label" and o.dof != "y"):
@@ -620,7 +623,9 @@ def dumps_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel) -
             if attr in seen:
                 continue
             seen.add(attr)
-            lines.append(f"{fkey} = {_fmt(getattr(e, attr))}")
+            value = getattr(e, attr)
+            if value is not None:  # an optional parameter left unset (friction force_neg)
+                lines.append(f"{fkey} = {_fmt(value)}")
     lines += _io_lines(model.inputs, model.outputs)
     return "\n".join(lines) + "\n"
 

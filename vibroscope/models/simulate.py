@@ -1,5 +1,5 @@
 """Time simulation of lumped models: input reconstruction and input physics (delay,
-saturation) on a fine grid, then either the exact first-order-hold discretisation of a
+offset, saturation) on a fine grid, then either the exact first-order-hold discretisation of a
 linear model (:mod:`vibroscope.models.linear_sim`) or the compiled implicit trapezoidal
 (Newmark average-acceleration) integrator (:mod:`vibroscope.models.integrate`), and the
 assembly of the outputs.
@@ -8,7 +8,7 @@ Conventions
 -----------
 * The input is sampled at `fs`; between samples it is *not* held constant: it is
   reconstructed on a grid ``oversample`` times finer (band-limited by default,
-  :func:`reconstruct_input`). Input delay and saturation act on that continuous
+  :func:`reconstruct_input`). Input delay, offset and saturation act on that continuous
   (fine-grid) force, as an actuator does.
 * Output sample ``k`` belongs to input sample ``k`` (no half-sample delay).
 * The returned :class:`~vibroscope.signals.Signals` holds the input channels first (N),
@@ -195,15 +195,18 @@ def _apply_input_physics(
     model: LumpedModel, U: np.ndarray, fs_fine: float, fs: float, periodic: bool = False
 ) -> np.ndarray:
     """The applied force on the fine grid: each input's reconstruction delayed by its
-    ``delay`` (pure time shift, zero before the start; circular if `periodic`) and clipped at
-    its ``saturation``. Returns `U` itself when no input has either, else a new array."""
-    if not any(i.delay or i.saturation is not None for i in model.inputs):
+    ``delay`` (pure time shift, zero before the start; circular if `periodic`), plus its
+    ``offset``, then clipped at its ``saturation``. Returns `U` itself when no input has
+    any of the three, else a new array."""
+    if not any(i.delay or i.offset or i.saturation is not None for i in model.inputs):
         return U
     U = np.array(U, dtype=float)
     for j, inp in enumerate(model.inputs):
         if inp.delay:
             R = fs_fine / fs if fs else 1.0
             U[j] = _delay_fine(U[j], inp.delay * fs_fine, periodic, cutoff=0.5 if R >= 4 else 1.0)
+        if inp.offset:
+            U[j] += inp.offset
         if inp.saturation is not None:
             np.clip(U[j], -inp.saturation, inp.saturation, out=U[j])
     return U
@@ -213,7 +216,8 @@ def _applied_samples(model: LumpedModel, u: np.ndarray, U_app: np.ndarray, fs: f
     """The input rows returned with the outputs: the logged samples as applied. Undelayed
     inputs: the logged samples (clipped at the saturation); an integer-sample delay shifts the
     logged samples exactly (zeros before); a fractional one takes the delayed fine-grid
-    reconstruction at the sample instants. Then clipped at the saturation."""
+    reconstruction at the sample instants (already offset and clipped). Then the ``offset``
+    added and clipped at the saturation."""
     out = u.copy()
     n = u.shape[1]
     for j, inp in enumerate(model.inputs):
@@ -226,6 +230,9 @@ def _applied_samples(model: LumpedModel, u: np.ndarray, U_app: np.ndarray, fs: f
                     out[j, m:] = u[j, : n - m]
             else:
                 out[j] = U_app[j, ::R][:n]
+                continue
+        if inp.offset:
+            out[j] += inp.offset
         if inp.saturation is not None:
             np.clip(out[j], -inp.saturation, inp.saturation, out=out[j])
     return out
@@ -267,10 +274,11 @@ def simulate(
     (:func:`reconstruct_input`, or `fine_input`); (2) each input's ``delay`` shifts its
     fine-grid force in time (integer fine samples by indexing, the fractional rest by a
     48-tap Kaiser-windowed-sinc fractional-delay filter, low-passed at half the fine
-    Nyquist for ``oversample >= 4``; zero before the start), then its
-    ``saturation`` clips it: the actuator limits the continuous force, not the logged
-    samples; (3) the model is integrated over that applied fine-grid force; (4) the outputs
-    are brought back to `fs`.
+    Nyquist for ``oversample >= 4``; zero before the start), then its ``offset`` (N) is
+    added (from ``t = 0``) and its ``saturation`` clips the sum, ``clip(u(t - delay) +
+    offset)``: the actuator limits the continuous force, not the logged samples; (3) the
+    model is integrated over that applied fine-grid force; (4) the outputs are brought back
+    to `fs`.
 
     Parameters
     ----------
@@ -306,8 +314,9 @@ def simulate(
         ``a = 1/2``, ``b = 1/4``, internal states ``c = 1/2``; second order, A-stable) [1]_
         (:func:`vibroscope.models.integrate.integrate`) at ``fs * oversample`` on the applied
         fine-grid force, the outputs low-passed and decimated (:func:`decimate_fir`).
-        ``"auto"``: linear when every element is linear (whatever the inputs' saturation
-        and delay), else nonlinear.
+        ``"auto"``: linear when every element is linear (whatever the inputs' saturation,
+        delay and offset; an offset is a constant force, whose response is the static
+        deflection plus the transient of its onset at ``t = 0``), else nonlinear.
     oversample : int, optional
         Sub-steps per sample: linear path default 8, nonlinear path default
         :func:`default_oversample`. With `fine_input` it defaults to
@@ -322,16 +331,16 @@ def simulate(
         Seed of the noise generator.
     fine_input : array_like, shape (n_inputs, n_samples * R), optional
         A precomputed :func:`reconstruct_input` ``(u, fs, R, upsampling=...)`` of the same
-        `u` (raw: delay and saturation are applied here). Skips the reconstruction; the
-        results are identical to passing none. It is not modified.
+        `u` (raw: delay, offset and saturation are applied here). Skips the reconstruction;
+        the results are identical to passing none. It is not modified.
 
     Returns
     -------
     Signals
         Inputs then outputs, ``n_samples`` each; output sample ``k`` is the response at the
         time of input sample ``k``. The input rows are the logged samples as applied:
-        clipped at the saturation and delayed (an integer-sample delay shifts the logged
-        samples exactly, zeros before; a fractional one takes the delayed fine-grid
+        delayed, offset and clipped at the saturation (an integer-sample delay shifts the
+        logged samples exactly, zeros before; a fractional one takes the delayed fine-grid
         reconstruction at the sample instants). ``meta`` holds ``simulator``
         (``"foh-exact"`` or ``"trapezoidal"``), ``oversample``, ``upsampling``, ``model``
         and, for the trapezoidal path, ``newton_failures`` (steps whose Newton iteration did
@@ -441,11 +450,12 @@ def simulate_periodic(
     """Steady-state response to a periodic input: simulate `n_periods` periods and return the last.
 
     Models with nonlinear elements, saturated or delayed inputs: the input period is
-    upsampled by ideal band-limited (FFT) interpolation, delayed circularly and clipped on
-    the fine grid (as in :func:`simulate`), the model is integrated over `n_periods` periods
-    from rest with the compiled trapezoidal kernel, and the fine-grid outputs of the last
-    period are low-passed circularly and decimated (:func:`decimate_fir`). Other linear
-    models use the exact discretisation (:func:`simulate`) on `n_periods` periods.
+    upsampled by ideal band-limited (FFT) interpolation, delayed circularly, offset and
+    clipped on the fine grid (as in :func:`simulate`), the model is integrated over
+    `n_periods` periods from rest with the compiled trapezoidal kernel, and the fine-grid
+    outputs of the last period are low-passed circularly and decimated
+    (:func:`decimate_fir`). Other linear models (an input offset included) use the exact
+    discretisation (:func:`simulate`) on `n_periods` periods.
 
     Parameters
     ----------
