@@ -373,17 +373,14 @@ class Friction(Element):
 
     `force` is the sliding friction force in N for positive relative velocity, `force_neg`
     (N) the one for negative relative velocity (None: the same, symmetric), `v_eps` (m/s)
-    the regularisation velocity (default 1e-3 m/s). With ``t = tanh(v / v_eps)``,
-    ``Fa = (force + force_neg) / 2`` and ``Fd = (force - force_neg) / 2``::
+    the regularisation velocity (default 1e-3 m/s). With ``t = tanh(v / v_eps)``::
 
-        f = t (Fa + Fd t)
+        f = force t        (v >= 0)
+        f = force_neg t    (v < 0)
 
-    so ``f -> +force`` for ``v >> v_eps`` and ``f -> -force_neg`` for ``v << -v_eps``; for
-    ``force_neg = force`` (or None) ``Fd = 0`` and ``f = force t`` exactly. The law is
-    monotonic in `v` for ``1/3 <= force_neg / force <= 3``; beyond, the parabola in ``t``
-    overshoots the smaller sliding force (its extreme ``-Fa^2 / (4 Fd)`` lies at
-    ``t = -Fa / (2 Fd)`` inside (-1, 1)), e.g. ``force_neg = 0`` gives ``f < 0`` for
-    ``v < 0`` down to ``-force / 8`` before it returns to 0.
+    continuous (``t = 0`` at ``v = 0``) and monotonic in `v` for any pair of forces, with
+    ``f -> +force`` for ``v >> v_eps`` and ``f -> -force_neg`` for ``v << -v_eps``; for
+    ``force_neg = force`` (or None) it is ``force t`` exactly.
 
     Parameters
     ----------
@@ -427,10 +424,9 @@ class Friction(Element):
         return self.force_ if self.force_neg is None else self.force_neg
 
     def force(self, d, v, state=None):
-        """Element force (N) ``t (Fa + Fd t)``, ``t = tanh(v / v_eps)``; it does not depend on `d`.
-
-        ``Fa = (force_ + force_neg) / 2``, ``Fd = (force_ - force_neg) / 2``; symmetric
-        (``force_neg`` None) it is ``force_ t``.
+        """Element force (N) ``force_ t`` for ``v >= 0`` and ``force_neg t`` for ``v < 0``,
+        ``t = tanh(v / v_eps)``; it does not depend on `d` (symmetric, ``force_neg`` None:
+        ``force_ t``).
 
         Parameters
         ----------
@@ -449,9 +445,7 @@ class Friction(Element):
         t = math.tanh(v / self.v_eps)
         if self.force_neg is None:
             return self.force_ * t
-        fa = 0.5 * (self.force_ + self.force_neg)
-        fd = 0.5 * (self.force_ - self.force_neg)
-        return t * (fa + fd * t)
+        return (self.force_ if v >= 0 else self.force_neg) * t
 
     def params(self) -> dict:
         """The parameters under their model-file keys: ``force``, ``v_eps`` and, when not

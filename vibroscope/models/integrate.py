@@ -270,14 +270,13 @@ def _element(code, prm, i, kl, cl, d, v, s0, s1):
         r = f - kl * d - cl * v
         rd = fd - kl
         rv = -cl
-    elif code == 2:  # friction: t (Fa + Fd t), t = tanh(v / v_eps); symmetric (Fd = 0): F t
+    elif code == 2:  # friction: F t for v >= 0, Fn t for v < 0, t = tanh(v / v_eps); symmetric: F t
         F, ve, Fn = prm[i, 0], prm[i, 1], prm[i, 2]
         t = math.tanh(v / ve)
-        Fa = 0.5 * (F + Fn)  # == F exactly when Fn == F
-        Fd = 0.5 * (F - Fn)
-        r = t * (Fa + Fd * t) - kl * d - cl * v
+        Fb = F if v >= 0.0 else Fn
+        r = Fb * t - kl * d - cl * v
         rd = -kl
-        rv = (Fa + 2.0 * Fd * t) / ve * (1.0 - t * t) - cl
+        rv = Fb / ve * (1.0 - t * t) - cl
     elif code == 3:  # Bouc-Wen: force z, z' = alpha v - beta (gamma |v| |z|^(nu-1) z + delta v |z|^nu)
         alpha, beta, gamma, delta, nu = prm[i, 0], prm[i, 1], prm[i, 2], prm[i, 3], prm[i, 4]
         r = s0 - kl * d - cl * v
