@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import pytest
 from scipy import signal
@@ -43,6 +45,7 @@ def logs(k3: float, duration_s: float, seed: int = 0):
     return us, ys
 
 
+@lru_cache(maxsize=4)
 def evidence(k3, duration_s):
     us, ys = logs(k3, duration_s)
     nperseg, _ = frf_segment_length(us[0], FS, mode_bandwidths_hz=[2 * ZETA * FN])
@@ -65,6 +68,13 @@ def test_hardening_cubic_spring():
     m = ev.modes[0]
     assert ev.level_dependent and ev.trend == "hardening" and m.trend == "hardening"
     assert m.frequency_change > 0.02 and m.frequency_z > 3
+
+
+def test_level_figure_is_written(tmp_path):
+    pytest.importorskip("matplotlib")
+    ev = evidence(1e5, 60.0)
+    path = ev.plot(out_path=tmp_path / "levels.png")
+    assert path.exists() and path.stat().st_size > 10_000
 
 
 def test_softening_cubic_spring():
