@@ -33,7 +33,7 @@ from vibroscope.viewers.figures import _pyplot, _save, _short
 
 __all__ = ["plot_gap_report", "plot_gap_time", "plot_gap_frf", "plot_gap_spectrum", "plot_gap_evidence",
            "plot_gap_candidates", "where_label", "candidate_label", "verdict_index", "zoom_window",
-           "held_out_spans", "FIGURES"]
+           "held_out_spans", "FIGURES", "plot_level_evidence"]
 
 #: names of the figures, in the order :func:`plot_gap_report` draws them
 FIGURES = ("gap_time", "gap_frf", "gap_spectrum", "gap_evidence", "gap_candidates")
@@ -634,3 +634,97 @@ def plot_gap_report(report, out_dir: str | Path | None = None, *,
         if out is not None:
             _save(fig, out / f"{name}.png")
     return figs
+
+
+# --------------------------------------------------------------------------------------------
+# level dependence of the BLA (:func:`vibroscope.gap.levels.level_blas`)
+# --------------------------------------------------------------------------------------------
+
+def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None):
+    """|H| per excitation level, and each mode's natural frequency and damping ratio vs level.
+
+    Parameters
+    ----------
+    evidence : vibroscope.gap.levels.LevelEvidence
+    ax : sequence of 3 matplotlib Axes, optional
+        Where to draw: |H| (dB) per level, ``f_n`` vs input RMS, ``zeta`` vs input RMS; default
+        a new figure (|H| on top, the two parameter panels below).
+    out_path : str or Path, optional
+        Write the figure as a PNG there (and close it).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        (or the written Path with `out_path`).
+
+    Notes
+    -----
+    Top: ``20 log10 |H1|`` of the output fitted for the first mode, one curve per level
+    (lowest dark blue to highest orange), within the band around the modes (+-20 % of the outermost
+    natural frequencies, clipped to the analysed band). Bottom: per mode, ``f_n`` and
+    ``zeta`` against the input RMS (log axis) with +-1 standard deviation error bars; the
+    title states the test's verdict.
+    """
+    plt = _pyplot()
+    if ax is None:
+        fig = plt.figure(figsize=(9.5, 7.0), layout="constrained")
+        gs = fig.add_gridspec(2, 2, height_ratios=[1.2, 1.0])
+        axes = [fig.add_subplot(gs[0, :]), fig.add_subplot(gs[1, 0]), fig.add_subplot(gs[1, 1])]
+    else:
+        axes = list(ax)
+        fig = axes[0].figure
+    levels = evidence.levels
+    modes = evidence.modes
+    n_l = len(levels)
+    cmap = plt.get_cmap("plasma")
+    cols = [cmap(0.0 if n_l == 1 else 0.85 * i / (n_l - 1)) for i in range(n_l)]
+    o = modes[0].output if modes else 0
+    f_all = [m.frequency_hz for m in modes if np.isfinite(m.frequency_hz)]
+    a0 = axes[0]
+    for lv, c in zip(levels, cols):
+        f = lv.frequencies
+        sel = np.ones(f.size, bool)
+        if f_all:
+            sel = (f >= 0.8 * min(f_all)) & (f <= 1.2 * max(f_all))
+        a0.plot(f[sel], _db(np.abs(lv.H[sel, o])), color=c, lw=1.2,
+                label=f"log {lv.log + 1}" + (f", level {lv.level + 1}" if lv.level else "") + f": {lv.rms:.3g} N RMS")
+    for fm in f_all:
+        a0.axvline(fm, color="0.6", lw=0.8, ls=":")
+    a0.set_xlabel("frequency [Hz]")
+    a0.set_ylabel(f"|H1| output {o + 1} [dB]")
+    a0.grid(True, alpha=0.3)
+    a0.legend(fontsize=8, loc="best")
+    verdict = (f"level dependent: {evidence.trend}" if evidence.level_dependent else "no level dependence")
+    if evidence.damping_rises:
+        verdict += ", damping rises"
+    a0.set_title(f"BLA per excitation level ({evidence.window}, nperseg {evidence.nperseg}, "
+                 f"{evidence.fs / evidence.nperseg:.3g} Hz lines) — {verdict}", fontsize=10)
+    rms = np.array([lv.rms for lv in levels])
+    for j, m in enumerate(modes):
+        fn = np.array([lv.natural_frequencies[j] for lv in levels])
+        sf = np.array([lv.natural_frequency_std[j] for lv in levels])
+        ze = np.array([lv.damping_ratios[j] for lv in levels])
+        sz = np.array([lv.damping_std[j] for lv in levels])
+        lab = f"mode {j + 1} ({m.frequency_hz:.4g} Hz)" + (f": {m.trend}" if m.trend != "none" else "")
+        axes[1].errorbar(rms, fn, yerr=sf, marker="o", capsize=3, color=f"C{j}", label=lab)
+        axes[2].errorbar(rms, 100 * ze, yerr=100 * sz, marker="o", capsize=3, color=f"C{j}", label=lab)
+    from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullLocator
+
+    for a, yl in ((axes[1], "natural frequency f_n [Hz]"), (axes[2], "damping ratio ζ [%]")):
+        a.set_xscale("log")
+        if rms.size:
+            a.xaxis.set_major_locator(FixedLocator(np.unique(rms)))
+            a.xaxis.set_minor_locator(NullLocator())
+            a.xaxis.set_major_formatter(FormatStrFormatter("%.3g"))
+        a.set_xlabel("input RMS [N]")
+        a.set_ylabel(yl)
+        a.grid(True, which="both", alpha=0.3)
+        if modes:
+            a.legend(fontsize=8, loc="best")
+    if not modes:
+        axes[1].text(0.5, 0.5, "no resonance found", transform=axes[1].transAxes, ha="center")
+    if out_path is not None:
+        path = Path(out_path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return _save(fig, path)
+    return fig

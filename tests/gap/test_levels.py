@@ -1,0 +1,123 @@
+"""Level dependence of the BLA, the period of a periodic input and the FRF segment length
+(vibroscope.gap.levels), against a 1-DOF (Duffing) model's known truth."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from vibroscope.gap.levels import detect_period, frf_segment_length, level_blas
+from vibroscope.models.elements import CubicSpring, Damper, Spring
+from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
+from vibroscope.models.simulate import simulate
+
+FS = 200.0
+FN, ZETA = 10.0, 0.02  # the linear part: 10 Hz, 2 %, half-power bandwidth 0.4 Hz
+K = (2 * np.pi * FN) ** 2
+C = 2 * ZETA * np.sqrt(K)
+LEVELS = (10.0, 25.0, 60.0)  # input RMS, N (1 : 2.5 : 6)
+
+
+def duffing(k3: float) -> LumpedModel:
+    el = [Spring(("m", "ground"), k=K), Damper(("m", "ground"), c=C)]
+    if k3:
+        el.append(CubicSpring(("m", "ground"), k3=k3))
+    return LumpedModel((Dof("m", 1.0),), tuple(el), (Input("m", channel="/u.x"),),
+                       (Output("m", "acceleration", "/a.x"),), "duffing")
+
+
+def logs(k3: float, duration_s: float, seed: int = 0):
+    """Three logs, one level each: band-limited random force (2-40 Hz), 2 % output noise."""
+    rng = np.random.default_rng(seed)
+    b, a = signal.butter(4, [2 / (FS / 2), 40 / (FS / 2)], "band")
+    n = int(duration_s * FS)
+    us, ys = [], []
+    for lev in LEVELS:
+        u = signal.lfilter(b, a, rng.standard_normal(n))
+        u = u / np.std(u) * lev
+        y = np.asarray(simulate(duffing(k3), u, FS).data[1:])
+        y = y + 0.02 * np.std(y) * rng.standard_normal(y.shape)
+        us.append(u[None])
+        ys.append(y)
+    return us, ys
+
+
+@lru_cache(maxsize=4)
+def evidence(k3, duration_s):
+    us, ys = logs(k3, duration_s)
+    nperseg, _ = frf_segment_length(us[0], FS, mode_bandwidths_hz=[2 * ZETA * FN])
+    return level_blas(us, ys, [None] * 3, FS, nperseg)
+
+
+def test_linear_system_is_level_independent_and_recovers_the_mode():
+    ev = evidence(0.0, 120.0)
+    assert len(ev.levels) == 3 and len(ev.modes) == 1
+    assert not ev.level_dependent and ev.trend == "none"
+    for lv in ev.levels:
+        assert lv.natural_frequencies[0] == pytest.approx(FN, rel=0.01)
+        assert lv.damping_ratios[0] == pytest.approx(ZETA, rel=0.08)
+        assert 0 < lv.natural_frequency_std[0] < 0.02 and 0 < lv.damping_std[0] < 0.002
+    np.testing.assert_allclose([lv.rms for lv in ev.levels], LEVELS, rtol=1e-6)
+
+
+def test_hardening_cubic_spring():
+    ev = evidence(1e5, 60.0)
+    m = ev.modes[0]
+    assert ev.level_dependent and ev.trend == "hardening" and m.trend == "hardening"
+    assert m.frequency_change > 0.02 and m.frequency_z > 3
+
+
+def test_level_figure_is_written(tmp_path):
+    pytest.importorskip("matplotlib")
+    ev = evidence(1e5, 60.0)
+    path = ev.plot(out_path=tmp_path / "levels.png")
+    assert path.exists() and path.stat().st_size > 10_000
+
+
+def test_softening_cubic_spring():
+    ev = evidence(-2e4, 90.0)
+    m = ev.modes[0]
+    assert ev.level_dependent and ev.trend == "softening"
+    assert np.nanmin(m.frequency_changes) < -0.005
+
+
+def multisine(period: int, fs: float, f_lo: float, f_hi: float, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    f = np.fft.rfftfreq(period, 1 / fs)
+    X = np.where((f >= f_lo) & (f <= f_hi), np.exp(2j * np.pi * rng.random(f.size)), 0)
+    x = np.fft.irfft(X, period)
+    return x / np.std(x)
+
+
+def test_detect_period_of_a_repeated_multisine_and_not_of_noise():
+    one = multisine(8192, 400.0, 0.5, 100.0)
+    assert detect_period(np.tile(one, 5), 400.0) == 8192
+    # level steps between periods: still the period
+    assert detect_period(np.tile(one, 5) * np.repeat([1.0, 1.0, 3.0, 3.0, 8.0], 8192), 400.0) == 8192
+    # a little noise
+    rng = np.random.default_rng(4)
+    assert detect_period(np.tile(one, 5) + 0.01 * rng.standard_normal(5 * 8192), 400.0) == 8192
+    assert detect_period(rng.standard_normal(5 * 8192), 400.0) is None
+    b, a = signal.butter(4, 0.2)
+    assert detect_period(signal.lfilter(b, a, rng.standard_normal(5 * 8192)), 400.0) is None
+
+
+def test_segment_length_resolves_a_narrow_mode_or_takes_the_period():
+    rng = np.random.default_rng(5)
+    fs = 400.0
+    u = rng.standard_normal(int(600 * fs))
+    nperseg, reason = frf_segment_length(u, fs, mode_bandwidths_hz=[0.07, 1.0])
+    assert fs / nperseg <= 0.07 / 4 and "bandwidth" in reason
+    assert (u.size - nperseg) // (nperseg // 2) + 1 >= 8
+    # too short a record for that: capped at 8 averages, and the reason says so
+    nperseg, reason = frf_segment_length(u[: int(60 * fs)], fs, mode_bandwidths_hz=[0.07])
+    assert (int(60 * fs) - nperseg) // (nperseg // 2) + 1 >= 8 and "capped" in reason
+    # periodic: one period
+    per = np.tile(multisine(8192, fs, 0.5, 100.0), 6)
+    nperseg, reason = frf_segment_length(per, fs, mode_bandwidths_hz=[0.07])
+    assert nperseg == 8192 and "period" in reason
+    # neither: the power-of-two default about 4 s
+    assert frf_segment_length(u, fs)[0] == 1024  # diagnose's default: 2**floor(log2(min(4 fs, n/8)))
