@@ -37,7 +37,15 @@ def add_parser(sub) -> None:
     p.add_argument("--rrd", type=Path, metavar="FILE", help="write a rerun recording of the diagnosis")
     p.add_argument("--figures", type=Path, metavar="DIR", help="write PNG figures there")
     p.add_argument("--export-model", type=Path, metavar="FILE", help="write the augmented model file")
-    p.add_argument("--effects", help="comma-separated effects to try (default: the whole vocabulary)")
+    from vibroscope.gap.effects import EFFECT_TABLE
+
+    p.add_argument("--effects", help="comma-separated effects to try (default: the whole vocabulary: "
+                   + ", ".join(EFFECT_TABLE) + ")")
+    p.add_argument("--nperseg", type=int, metavar="N",
+                   help="FRF segment length in samples (default: one period of a periodic input, else a quarter "
+                        "of the nominal model's narrowest half-power bandwidth per line)")
+    p.add_argument("--workers", type=int, default=2, metavar="N",
+                   help="parallel candidate fits (default 2)")
     p.add_argument("--transient", type=float, metavar="S", help="seconds left out at the start of each log")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -79,7 +87,10 @@ def run(args) -> int:
     channels = list(model.input_channels()) + list(model.output_channels())
     sigs = [read_mcap(log, channels, progress=not args.no_progress).with_meta(source=str(log)) for log in args.logs]
     try:
-        report = diagnose(model, sigs, effects=effects, transient_s=args.transient, progress=not args.no_progress)
+        if args.nperseg is not None and args.nperseg < 16:
+            raise ValueError(f"--nperseg {args.nperseg} must be at least 16 samples")
+        report = diagnose(model, sigs, effects=effects, transient_s=args.transient, nperseg=args.nperseg,
+                          workers=max(1, args.workers), progress=not args.no_progress)
     except ValueError as exc:
         raise ModelFileError(f"{args.model}: cannot diagnose: {exc}") from None
     print(report.summary())

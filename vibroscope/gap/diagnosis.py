@@ -60,6 +60,7 @@ from vibroscope.gap.effects import (
     pair_name,
 )
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
+from vibroscope.gap.levels import frf_segment_length
 from vibroscope.gap.measure import (
     input_levels,
     locate_bands,
@@ -195,7 +196,7 @@ def _split_channels(model: LumpedModel, sig: Signals):
     return u, y
 
 
-def _frf_data(us, ys, masks, fs, nperseg):
+def _frf_data(us, ys, masks, fs, nperseg, window="hann"):
     """H1 (n_f, n_out) and coherence from the masked samples of several logs (pooled spectra)."""
     G = None
     tot = 0
@@ -203,7 +204,7 @@ def _frf_data(us, ys, masks, fs, nperseg):
     for u, y, m in zip(us, ys, masks):
         if not m.any():
             continue
-        f, g, n_avg = masked_csd(np.vstack([u[:1], y]), m, fs, nperseg)
+        f, g, n_avg = masked_csd(np.vstack([u[:1], y]), m, fs, nperseg, window)
         if n_avg:
             G = g * n_avg if G is None else G + g * n_avg
             tot += n_avg
@@ -336,7 +337,11 @@ def diagnose(
         Seconds at the start of each log left out of every metric (default: three time
         constants of the slowest mode, at most 5 % of the record).
     nperseg : int, optional
-        Welch segment length for FRFs and spectra (default about 4 s of samples).
+        Welch segment length (samples) for FRFs and spectra. Default
+        (:func:`~vibroscope.gap.levels.frf_segment_length`): one period of a periodic input
+        (rectangular window, no overlap), else a line spacing of a quarter of the nominal
+        model's narrowest half-power bandwidth ``2 zeta f_n`` (at least 8 averages), else
+        about 4 s; the report's ``meta["nperseg_reason"]`` says which.
     workers : int
         Threads for the candidate fits (the simulation kernel releases the GIL).
     n_full : int
@@ -550,7 +555,22 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     split = make_split(us, fs, skip=skips)
     sims = [LogSimulator(u, fs) for u in us]
     n_min = min(u.shape[1] for u in us)
-    nps = nperseg or _pow2(min(4 * fs, n_min / 8))
+    window = "hann"
+    if nperseg:
+        nps, nps_reason = int(nperseg), f"given: nperseg = {int(nperseg)} samples"
+    else:
+        # the FRF resolves the modes it fits: whole periods of a periodic input, else a line
+        # spacing of a quarter of the nominal model's narrowest half-power bandwidth
+        try:
+            md = model.modes()
+            bw = 2 * np.asarray(md.damping_ratios) * np.asarray(md.natural_frequencies)
+        except Exception:  # noqa: BLE001 - no modes (a free body): the default length
+            bw = None
+        n_fit = max(int(np.sum(m)) for m in split.fit)
+        nps, nps_reason = frf_segment_length(us[0], fs, mode_bandwidths_hz=bw, n_samples=n_fit)
+        if nps_reason.startswith("one period"):
+            window = "boxcar"
+        nps = min(nps, max(n_min // 2, 64))
     effect_set = set(EFFECT_TABLE) if effects is None else set(effects)
 
     # 1. nominal -------------------------------------------------------------------------------
@@ -570,7 +590,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # started from the FRF fit and from the nominal; the better on the fitting data is kept, and
     # the refit is never worse there than the nominal model itself
     t = time.perf_counter()
-    fd = _frf_data(us, ys, split.fit, fs, nps)
+    fd = _frf_data(us, ys, split.fit, fs, nps, window)
     if fd is None:
         raise ValueError(f"too little fitting data for nperseg={nps}")
     f, H, coh, _, _ = fd
@@ -888,6 +908,15 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     spectrum = GapSpectrum(fr, Pm, Pb, Pr, Pa, noise_psd, fdt[0], fdt[1], fdn[1], fda[1], fdt[2])
     traces = GapTraces(fs, float(sigs[tr].t0), tuple(out_ch), tuple(units), ys[tr], y_nom[tr], y_ref[tr],
                        y_aug_full, vmask, us[tr][0], str(sigs[tr].meta.get("source", "")) if sigs[tr].meta else "")
+    level_ev = None
+    if len(groups) >= 2:
+        try:
+            from vibroscope.gap.levels import level_blas
+
+            np_ev = _pow2(min(nps, max(min(int(np.sum(g[1])) for g in groups) // 4, 256)))
+            level_ev = level_blas(us, ys, all_masks, fs, np_ev, f_band=tuple(nf.excited_band))
+        except (ValueError, np.linalg.LinAlgError):  # evidence only: the report goes on without it
+            level_ev = None
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
     shrink = 1.0 - gap_after / gap_before if gap_before > 0 else 0.0
@@ -913,7 +942,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         traces=traces,
         spectrum=spectrum,
         timings=timings,
-        meta={"fs_hz": fs, "nperseg": nps, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
+        level_evidence=level_ev,
+        meta={"fs_hz": fs, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)

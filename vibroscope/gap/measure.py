@@ -235,7 +235,7 @@ def _screen_prefix(labels, n_fit, fs, screen_s, skip):
     return n_fit
 
 
-def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int):
+def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int, window: str = "hann"):
     """Welch auto/cross spectra over the segments that lie wholly inside `mask`.
 
     Parameters
@@ -244,6 +244,10 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int):
     mask : ndarray of bool, shape (n_samples,)
     fs : float
     nperseg : int
+    window : {"hann", "boxcar"}, optional
+        ``"hann"`` (default): Hann window, 50 % overlap; ``"boxcar"``: rectangular window
+        without overlap (leakage-free when `nperseg` is a whole number of periods of a
+        periodic input).
 
     Returns
     -------
@@ -255,8 +259,8 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int):
         Segments averaged.
     """
     n = x.shape[1]
-    step = nperseg // 2
-    win = signal.get_window("hann", nperseg)
+    step = nperseg if window == "boxcar" else nperseg // 2
+    win = signal.get_window(window, nperseg)
     scale = 1.0 / (fs * np.sum(win**2))
     starts = [s for s in range(0, n - nperseg + 1, step) if mask[s : s + nperseg].all()]
     nf = nperseg // 2 + 1

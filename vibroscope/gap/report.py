@@ -45,6 +45,23 @@ def _num(x):
     return x if np.isfinite(x) else None
 
 
+def _levels_dict(ev) -> dict | None:
+    """The level evidence as JSON: per level its input RMS, per mode f_n and zeta (with std)."""
+    if ev is None:
+        return None
+    return {
+        "level_dependent": bool(ev.level_dependent),
+        "trend": ev.trend,
+        "damping_rises": bool(ev.damping_rises),
+        "description": ev.description,
+        "levels": [{"log": int(lv.log), "level": int(lv.level), "input_rms": _num(lv.rms),
+                    "natural_frequencies_hz": [_num(x) for x in lv.natural_frequencies],
+                    "natural_frequency_std_hz": [_num(x) for x in lv.natural_frequency_std],
+                    "damping_ratios": [_num(x) for x in lv.damping_ratios],
+                    "damping_std": [_num(x) for x in lv.damping_std]} for lv in ev.levels],
+    }
+
+
 @dataclass(frozen=True)
 class Band:
     """A frequency band holding a share of the gap energy.
@@ -360,6 +377,10 @@ class GapReport:
         Seconds per stage.
     meta : dict
         Settings and provenance.
+    level_evidence : LevelEvidence or None
+        The BLA per log and excitation level with each resonance's natural frequency and
+        damping ratio per level (:func:`vibroscope.gap.levels.level_blas`); None when it could
+        not be estimated.
     """
 
     metric: str
@@ -384,6 +405,7 @@ class GapReport:
     spectrum: GapSpectrum | None = None
     timings: Mapping[str, float] = field(default_factory=dict)
     meta: Mapping[str, Any] = field(default_factory=dict)
+    level_evidence: Any = None
 
     @property
     def best(self) -> Candidate | None:
@@ -411,6 +433,7 @@ class GapReport:
             "model": self.model_name,
             "timings_s": {k: _num(v) for k, v in self.timings.items()},
             "meta": dict(self.meta),
+            "levels": _levels_dict(self.level_evidence),
         }
 
     def summary(self) -> str:

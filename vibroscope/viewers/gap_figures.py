@@ -36,7 +36,7 @@ __all__ = ["plot_gap_report", "plot_gap_time", "plot_gap_frf", "plot_gap_spectru
            "held_out_spans", "FIGURES", "plot_level_evidence"]
 
 #: names of the figures, in the order :func:`plot_gap_report` draws them
-FIGURES = ("gap_time", "gap_frf", "gap_spectrum", "gap_evidence", "gap_candidates")
+FIGURES = ("gap_time", "gap_frf", "gap_spectrum", "gap_evidence", "gap_candidates", "gap_levels")
 
 #: line colours of the traces (the same in every figure)
 COLORS = {"measured": "k", "nominal": "C3", "refit": "C1", "augmented": "C2", "noise": "0.45"}
@@ -591,7 +591,16 @@ def plot_gap_candidates(report, *, fig=None):
     return fig
 
 
-_PLOTTERS = {"gap_time": plot_gap_time, "gap_frf": plot_gap_frf, "gap_spectrum": plot_gap_spectrum,
+def plot_gap_levels(report, *, fig=None):
+    """The BLA per excitation level (the report's ``level_evidence``,
+    :func:`plot_level_evidence`); None when the logs hold a single level."""
+    ev = getattr(report, "level_evidence", None)
+    if ev is None or len(ev.levels) < 2:
+        return None
+    return plot_level_evidence(ev)
+
+
+_PLOTTERS = {"gap_levels": plot_gap_levels, "gap_time": plot_gap_time, "gap_frf": plot_gap_frf, "gap_spectrum": plot_gap_spectrum,
              "gap_evidence": plot_gap_evidence, "gap_candidates": plot_gap_candidates}
 
 
