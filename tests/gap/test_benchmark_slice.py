@@ -232,6 +232,22 @@ def test_scorer_location_rules():
     assert score.score_case({"verdict": "none", "candidates": [{"effect": "backlash"}]}, t_none)["top2"]
     m = score.score_case({"verdict": "backlash", "candidates": [{"effect": "backlash"}, {"effect": "none"}]}, t_none)
     assert not m["top1"] and m["top2"]
+    # "unexplained" on a none case is a false alarm; on an effect class simply wrong
+    assert not score.score_case({"verdict": "unexplained", "candidates": []}, t_none)["top1"]
+    assert not score.score_case({"verdict": "unexplained", "candidates": []}, t_el)["top1"]
+    # two effects: top-1 = first named effect in the truth set, both = all named
+    t2 = {"effect": ["offset", "backlash"], "class": "two_effects", "where": [{"side": "input"}, {"between": ["m1", "ground"]}]}
+    r2 = {"verdict": ["backlash", "offset"], "candidates": [{"effect": "backlash", "where": {"between": ["ground", "m1"]}},
+                                                         {"effect": "offset", "where": {"side": "input"}}]}
+    m = score.score_case(r2, t2)
+    assert m["top1"] and m["both"] and m["top2"] and m["location"] and m["effect"] == "two_effects"
+    m = score.score_case(dict(r2, verdict="backlash"), t2)
+    assert m["top1"] and not m["both"]
+    # a verdict whose winning candidate makes the effect vanish
+    rv = {"verdict": "time_delay", "candidates": [{"effect": "time_delay", "parameters": {"delay_s": 1e-4}}]}
+    assert score.score_case(rv, {"effect": "time_delay", "where": {"side": "input"}})["vanishing"]
+    rv["candidates"][0]["parameters"]["delay_s"] = 2e-3
+    assert not score.score_case(rv, {"effect": "time_delay", "where": {"side": "input"}})["vanishing"]
 
 
 # ---------------------------------------------------------------------------------------------
