@@ -1,26 +1,36 @@
 """Withheld-effect benchmark for the sim-to-real gap diagnoser: case generator.
 
-Every case is a random lumped chain model (the *nominal* model, written as ``nominal.toml``)
-and a ROS 2 MCAP log (``log.mcap``) of the *truth*: the nominal model with one hidden effect
-added (or none), driven by a known band-limited force, with measurement noise on the outputs.
-What the hidden effect is, where, and how strong, is written apart, in ``truth/``::
+Every case is a random lumped network model (the *nominal* model, written as ``nominal.toml``)
+and one or three ROS 2 MCAP logs of the *truth*: the nominal model with a hidden effect added
+(none, one, or two), driven by a known band-limited force, with measurement noise on the
+outputs. What the hidden effect is, where, and how strong, is written apart, in ``truth/``::
 
     python benchmarks/gap/generate.py --out DIR [--per-class 10] [--classes ...] [--seed 0]
-                                      [--duration 60] [--jobs 1]
+                                      [--duration 60] [--jobs 1] [--integrator {lsoda,rk4}]
+                                      [--multi-log 0.25]
 
     DIR/cases/case_NNN/nominal.toml     the nominal model (vibroscope model file)
-    DIR/cases/case_NNN/log.mcap         input (WrenchStamped) + outputs (Imu), 1 kHz
-    DIR/truth/case_NNN.json             effect, where, parameters (SI), the true model as
-                                        TOML, noise level, input, noise-free nominal gap
+    DIR/cases/case_NNN/log.mcap         input (WrenchStamped) + outputs (Imu; displacement as
+                                        JSON /laser/<dof>), 1 kHz, levels 1 : 2.5 : 6 cycling
+      or log_1.mcap, log_2.mcap, log_3.mcap   multi-log case: one level each (1, 2.5, 6)
+    DIR/truth/case_NNN.json             effect (a name, or the list of two), where, parameters
+                                        (SI), the true model as TOML (null where the model file
+                                        cannot express it), integrator, noise, input, gaps
     DIR/generate.json                   the command-line arguments (no truth in it)
 
-The truth is simulated with an integrator independent of :mod:`vibroscope.models.simulate`:
-LSODA (:func:`scipy.integrate.odeint`, rtol 1e-10) on a numba-compiled right-hand side that
-re-implements the element laws, driven by the *continuous* input (a not-a-knot cubic spline
-through the force designed on a 16 kHz grid, band-limited below 300 Hz; the logged 1 kHz
-samples are every 16th fine sample, so they are exact samples of that force). Delay and
-saturation act on the continuous force. Outputs are the accelerations at the log's sample
-times, plus white Gaussian noise of 1-3 % of each output's RMS.
+Two truth integrators, both independent of :mod:`vibroscope.models.simulate`, on the same
+numba-compiled right-hand side that re-implements the element laws (plus laws the model file
+lacks: asymmetric friction, Iwan joints, a force offset), driven by the *continuous* input (a
+not-a-knot cubic spline through the force designed on a 16 kHz grid, band-limited below 300
+Hz; the logged 1 kHz samples are exact samples of it):
+
+- ``lsoda``: :func:`scipy.integrate.odeint` (LSODA), rtol 1e-9;
+- ``rk4``: fixed-step classic Runge-Kutta at 10 kHz (sub-stepped by an integer factor only
+  where a stiff regularised law would make 10 kHz unstable; the factor is recorded).
+
+By default :func:`generate` alternates them per case. Delay, offset and saturation act on the
+continuous force. Outputs are sampled at the log's times, plus white Gaussian noise of 1-3 %
+of each output's RMS.
 
 Each case depends only on (seed, class, index within class), so a subset of classes
 regenerates the same cases. The module is importable (the tests use :func:`make_case`,
@@ -56,26 +66,60 @@ from vibroscope.models.modelfile import dumps_model
 
 __all__ = [
     "EFFECTS",
+    "CLASSES",
+    "SINGLE_EFFECTS",
+    "PAIR_EFFECTS",
     "ELEMENT_EFFECTS",
     "INPUT_CHANNEL",
     "FS",
     "OVERSAMPLE",
+    "INTEGRATORS",
     "ContinuousInput",
+    "AsymFriction",
+    "IwanJoint",
+    "TruthModel",
     "Case",
     "random_chain_model",
     "make_input",
     "simulate_truth",
     "nrmse",
+    "gap",
     "make_case",
     "write_case",
     "generate",
     "main",
 ]
 
-#: the effect vocabulary (fixed)
-from vibroscope.gap.report import EFFECTS  # noqa: E402 - the fixed vocabulary, one definition
+#: the diagnoser's effect vocabulary (one definition, in vibroscope)
+from vibroscope.gap.report import EFFECTS  # noqa: E402
+
+#: every single-effect class this generator draws (the first nine in their historic order,
+#: so that ``case_rng`` of those classes is unchanged)
+SINGLE_EFFECTS = (
+    "none",
+    "parameter_mismatch",
+    "extra_mode",
+    "time_delay",
+    "coulomb_friction",
+    "backlash",
+    "hysteresis",
+    "cubic_stiffness",
+    "saturation",
+    "asymmetric_friction",
+    "joint_friction",
+    "offset",
+)
+#: the classes: the single effects plus two hidden effects at once
+CLASSES = SINGLE_EFFECTS + ("two_effects",)
+#: the effects a two-effect case draws its (distinct) pair from
+PAIR_EFFECTS = ("coulomb_friction", "offset", "backlash", "cubic_stiffness", "saturation", "time_delay",
+                "hysteresis", "asymmetric_friction")
 #: effects that sit on a connection (``where = {"between": [a, b]}``)
-ELEMENT_EFFECTS = ("coulomb_friction", "backlash", "hysteresis", "cubic_stiffness")
+ELEMENT_EFFECTS = ("coulomb_friction", "backlash", "hysteresis", "cubic_stiffness", "asymmetric_friction",
+                   "joint_friction")
+#: effects the vibroscope model file does not express (the truth's TOML is null)
+NOT_EXPRESSIBLE = ("asymmetric_friction", "joint_friction", "offset")
+INTEGRATORS = ("lsoda", "rk4")
 
 INPUT_CHANNEL = "/actuator/force_cmd.wrench.force.x"
 FS = 1000.0  # log rate, Hz
@@ -84,15 +128,22 @@ F_BAND_EDGE = 300.0  # the force has no content at or above this frequency, Hz
 F_LO = 2.0  # lower band edge of the random part, Hz
 LEVELS = (1.0, 2.5, 6.0)  # RMS ratios of the three excitation levels
 T0_LOG = 1.7e9  # first header stamp of the logs, s
-RTOL = 1e-9  # truth integrator tolerance (relative; absolute is RTOL times each state's scale)
-RTOL_CAL = 1e-6  # looser tolerance for the strength calibration runs
-CAL_SECONDS = 14.0  # strength calibration runs on this first part of the record
+RTOL = 1e-9  # LSODA tolerance (relative; absolute is RTOL times each state's scale)
+RTOL_CAL = 1e-6  # looser tolerance for the strength calibration runs (always LSODA)
+RK4_HZ = 10000.0  # the fixed-step integrator's base step rate
+CAL_SECONDS = 14.0  # strength calibration runs on this first part of the record (split over logs)
 GAP_MIN = 0.05  # every non-none case has at least this noise-free gap
-GAP_AIM = (0.08, 0.6)  # calibration-window gaps outside this are redrawn (first 3 attempts)
+TARGET = (0.1, 1.0)  # noise-free nominal gap targets, drawn log-uniform
+AIM_FACTOR = 1.6  # calibrated gaps off the target by more than this factor are redrawn (first 3 tries)
+PAIR_SHARE = 0.3  # in a two-effect case each effect alone gives >= this share of the pair's gap
+DISPLACEMENT_SHARE = 0.3  # share of cases with a displacement sensor (offset cases always)
 V_EPS = 1e-3  # friction regularisation velocity, m/s
+JENKINS_EXP = 20  # the Jenkins slider's regularisation exponent
 
 
-def output_channel(dof: str) -> str:
+def output_channel(dof: str, quantity: str = "acceleration") -> str:
+    if quantity == "displacement":
+        return f"/laser/{dof}.displacement.x"
     return f"/imu/{dof}.linear_acceleration.x"
 
 
@@ -178,6 +229,7 @@ def make_input(
     f_hi: float = 200.0,
     levels: bool = True,
     period_s: float = 2.0,
+    fade: bool = False,
     fs: float = FS,
     oversample: int = OVERSAMPLE,
 ) -> ContinuousInput:
@@ -188,8 +240,10 @@ def make_input(
     With `levels`, the force is scaled in blocks of 2-4 s cycling over the three levels
     1 : 2.5 : 6 (each cycle a random order), with 0.1 s raised-cosine transitions and a
     0.2 s fade-in and fade-out; the result is low-passed below 300 Hz on the fine grid
-    (periodic brick wall), so it is exactly band-limited. Without `levels` (a steady
-    multisine, for tests) nothing is tapered.
+    (periodic brick wall), so it is exactly band-limited. Without `levels` the level is
+    constant; it is tapered (0.2 s fade-in and fade-out, then low-passed the same way) only
+    with `fade` (the single-level logs of multi-log cases), not otherwise (a steady multisine,
+    for tests).
     """
     n = int(round(duration * fs))
     fsf = fs * oversample
@@ -236,28 +290,78 @@ def make_input(
         x = _brickwall(base * env, fsf, None, F_BAND_EDGE)
         info["levels"] = list(LEVELS)
         info["blocks"] = blocks
+    elif fade:
+        env = np.ones(nf)
+        nfade = int(0.2 * fsf)
+        env[:nfade] *= _raised_cosine(nfade)
+        env[nf - nfade :] *= _raised_cosine(nfade)[::-1]
+        x = _brickwall(base * env, fsf, None, F_BAND_EDGE)
     else:
         x = base
     return ContinuousInput(x, fs, oversample, info)
 
 
 # ---------------------------------------------------------------------------------------------
-# truth integrator (independent of vibroscope.models.simulate)
+# truth models: a LumpedModel plus what the model file cannot say
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class AsymFriction:
+    """Coulomb friction with different sliding forces per direction of the relative velocity
+    v = v(between[0]) - v(between[1]): ``f = tanh(v / v_eps) * (fp if v > 0 else fn)`` (the
+    force on between[0] is -f), i.e. f = fp for v > 0 and -fn for v < 0."""
+
+    between: tuple
+    fp: float
+    fn: float
+    v_eps: float = V_EPS
+
+
+@dataclass(frozen=True)
+class IwanJoint:
+    """Iwan element on a connection: parallel Jenkins elements (spring ``k[i]`` in series with
+    a Coulomb slider of slip force ``fs[i]``). State: each element's force z,
+    ``zdot = k v (1 - H(v z) |z / fs|^JENKINS_EXP)``."""
+
+    between: tuple
+    k: tuple
+    fs: tuple
+
+
+@dataclass(frozen=True)
+class TruthModel:
+    """The true model: `model` (a vibroscope LumpedModel) plus `extra` elements the model file
+    cannot express and a constant force `offset` (N) added to the input force."""
+
+    model: LumpedModel
+    extra: tuple = ()
+    offset: float = 0.0
+
+    @property
+    def expressible(self) -> bool:
+        return not self.extra and self.offset == 0.0
+
+
+def _tm(m) -> TruthModel:
+    return m if isinstance(m, TruthModel) else TruthModel(m)
+
+
+# ---------------------------------------------------------------------------------------------
+# truth integrators (independent of vibroscope.models.simulate)
 # ---------------------------------------------------------------------------------------------
 # element codes
-_SPRING, _DAMPER, _CUBIC, _BACKLASH, _FRICTION, _BOUCWEN = range(6)
+_SPRING, _DAMPER, _CUBIC, _BACKLASH, _FRICTION, _BOUCWEN, _AFRICTION, _JENKINS = range(8)
 
 
 # all constants of a model packed into one float array P (one argument: cheap numba dispatch
 # from odeint's callback): [fs_fine, delay, saturation, input dof, n_dofs, n_elements, n_z,
-# 1/m (n_dofs), then per element: type, a, b, state index, p0..p4]
-_HEAD = 7
+# offset, 1/m (n_dofs), then per element: type, a, b, state index, p0..p4]
+_HEAD = 8
 _EW = 9
 
 
 @numba.njit(cache=False)
 def _forces(y, t, C, P, F, dz):
-    """Net force on every DOF (into F) and Bouc-Wen state derivatives (into dz); returns u."""
+    """Net force on every DOF (into F) and internal-state derivatives (into dz); returns u."""
     fsf, delay, sat = P[0], P[1], P[2]
     in_dof, ndof, nel = int(P[3]), int(P[4]), int(P[5])
     ts = t - delay
@@ -265,6 +369,7 @@ def _forces(y, t, C, P, F, dz):
         u = 0.0
     else:
         u = _spline_eval(C, fsf, ts)
+    u += P[7]
     if sat > 0.0:
         if u > sat:
             u = sat
@@ -304,6 +409,19 @@ def _forces(y, t, C, P, F, dz):
                 f = 0.0
         elif typ == _FRICTION:
             f = p0 * math.tanh(v / p1)
+        elif typ == _AFRICTION:  # p0 = Fp, p1 = v_eps, p2 = Fn
+            if v > 0.0:
+                f = p0 * math.tanh(v / p1)
+            else:
+                f = P[o + 6] * math.tanh(v / p1)
+        elif typ == _JENKINS:  # p0 = k, p1 = slip force, p2 = exponent; state = element force
+            s = int(P[o + 3])
+            z = y[2 * ndof + s]
+            if v * z > 0.0:
+                dz[s] = p0 * v * (1.0 - abs(z / p1) ** P[o + 6])
+            else:
+                dz[s] = p0 * v
+            f = z
         else:  # Bouc-Wen: force z, zdot = alpha v - beta (gamma |v| |z|^(nu-1) z + delta v |z|^nu)
             s = int(P[o + 3])
             z = y[2 * ndof + s]
@@ -323,7 +441,7 @@ def _forces(y, t, C, P, F, dz):
 
 @numba.njit(cache=False)
 def _rhs(y, t, C, P):
-    ndof, nz = int(P[4]), int(P[6])
+    ndof = int(P[4])
     out = np.empty(y.size)
     F = out[ndof : 2 * ndof]
     dz = out[2 * ndof :]
@@ -332,6 +450,26 @@ def _rhs(y, t, C, P):
         out[i] = y[ndof + i]
         out[ndof + i] *= P[_HEAD + i]
     return out
+
+
+@numba.njit(cache=False)
+def _rk4(y0, C, P, h, steps_per_sample, n):
+    """Classic RK4 with step h from rest; the state every `steps_per_sample` steps (n rows)."""
+    Y = np.empty((n, y0.size))
+    y = y0.copy()
+    Y[0] = y
+    t = 0.0
+    for k in range(1, n):
+        for _ in range(steps_per_sample):
+            k1 = _rhs(y, t, C, P)
+            k2 = _rhs(y + 0.5 * h * k1, t + 0.5 * h, C, P)
+            k3 = _rhs(y + 0.5 * h * k2, t + 0.5 * h, C, P)
+            k4 = _rhs(y + h * k3, t + h, C, P)
+            y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            t += h
+        t = k * (h * steps_per_sample)  # no drift of the sample times
+        Y[k] = y
+    return Y
 
 
 @numba.njit(cache=False)
@@ -347,49 +485,54 @@ def _accelerations(Y, t, C, P):
     return A
 
 
-def _compile(model: LumpedModel):
+def _compile(tm: TruthModel):
+    model = tm.model
     names = model.dof_names
     idx = {n: i for i, n in enumerate(names)}
     idx[GROUND] = -1
-    etype, ea, eb, ep, estate = [], [], [], [], []
-    nz = 0
-    for e in model.elements:
+    rows, nz = [], 0
+    for e in tuple(model.elements) + tuple(tm.extra):
+        subs = []
         p = np.zeros(5)
         if isinstance(e, Spring):
-            code, p[0] = _SPRING, e.k
+            p[0] = e.k
+            subs.append((_SPRING, p))
         elif isinstance(e, Damper):
-            code, p[0] = _DAMPER, e.c
+            p[0] = e.c
+            subs.append((_DAMPER, p))
         elif isinstance(e, CubicSpring):
-            code, p[0], p[1] = _CUBIC, e.k, e.k3
+            p[0], p[1] = e.k, e.k3
+            subs.append((_CUBIC, p))
         elif isinstance(e, Backlash):
-            code, p[0], p[1] = _BACKLASH, e.k, e.gap
+            p[0], p[1] = e.k, e.gap
+            subs.append((_BACKLASH, p))
         elif isinstance(e, Friction):
-            code, p[0], p[1] = _FRICTION, e.force_, e.v_eps
+            p[0], p[1] = e.force_, e.v_eps
+            subs.append((_FRICTION, p))
         elif isinstance(e, BoucWen):
-            code, p[:] = _BOUCWEN, (e.alpha, e.beta, e.gamma, e.delta, e.nu)
+            p[:] = (e.alpha, e.beta, e.gamma, e.delta, e.nu)
+            subs.append((_BOUCWEN, p))
+        elif isinstance(e, AsymFriction):
+            p[0], p[1], p[2] = e.fp, e.v_eps, e.fn
+            subs.append((_AFRICTION, p))
+        elif isinstance(e, IwanJoint):
+            for kj, fs in zip(e.k, e.fs):
+                subs.append((_JENKINS, np.array([kj, fs, JENKINS_EXP, 0.0, 0.0])))
         else:
-            raise ValueError(f"the truth integrator does not support element type {e.type!r}")
-        etype.append(code)
-        ea.append(idx[e.between[0]])
-        eb.append(idx[e.between[1]])
-        ep.append(p)
-        estate.append(nz if code == _BOUCWEN else -1)
-        nz += code == _BOUCWEN
+            raise ValueError(f"the truth integrator does not support element {type(e).__name__}")
+        for code, pp in subs:
+            st = -1
+            if code in (_BOUCWEN, _JENKINS):
+                st, nz = nz, nz + 1
+            rows.append([code, idx[e.between[0]], idx[e.between[1]], st, *pp])
     if len(model.inputs) != 1:
         raise ValueError("the truth integrator supports exactly one force input")
     inp = model.inputs[0]
-    return dict(
-        delay=float(inp.delay),
-        sat=float(inp.saturation or 0.0),
-        in_dof=int(idx[inp.dof]),
-        minv=1.0 / np.array([d.mass for d in model.dofs]),
-        etype=np.array(etype, np.int64),
-        ea=np.array(ea, np.int64),
-        eb=np.array(eb, np.int64),
-        ep=np.array(ep, float).reshape(-1, 5),
-        estate=np.array(estate, np.int64),
-        nz=int(nz),
-    )
+    E = np.array(rows, float).reshape(-1, _EW)
+    P = np.concatenate([[0.0, float(inp.delay), float(inp.saturation or 0.0), idx[inp.dof], model.n_dofs,
+                         E.shape[0], nz, float(tm.offset)], 1.0 / np.array([d.mass for d in model.dofs]),
+                        E.ravel()])
+    return P, nz
 
 
 @dataclass
@@ -404,50 +547,92 @@ class TruthRun:
     applied_force: np.ndarray
     nfe: int
     seconds: float
+    integrator: dict = field(default_factory=dict)
+
+
+def _rk4_substeps(tm: TruthModel, scales: np.ndarray) -> int:
+    """Integer sub-steps of the 10 kHz RK4 step that keep the stiffest regularised law
+    stable: h * rate <= 1.5 (the real-axis stability limit of RK4 is 2.78)."""
+    model = tm.model
+    nd = model.n_dofs
+    vs = np.asarray(scales[nd : 2 * nd], float)
+    minv = {d.name: 1.0 / d.mass for d in model.dofs}
+    rate = 0.0
+    for e in tuple(model.elements) + tuple(tm.extra):
+        a, b = e.between
+        vmax = 4.0 * sum(vs[model.dof_index(x)] for x in (a, b) if x != GROUND)  # ~ peak relative velocity
+        wm = sum(minv.get(x, 0.0) for x in (a, b))
+        if isinstance(e, Friction):
+            rate = max(rate, e.force_ / e.v_eps * wm)
+        elif isinstance(e, AsymFriction):
+            rate = max(rate, max(e.fp, e.fn) / e.v_eps * wm)
+        elif isinstance(e, BoucWen):
+            rate = max(rate, e.beta * (abs(e.gamma) + abs(e.delta)) * vmax)
+        elif isinstance(e, IwanJoint):
+            rate = max(rate, max(JENKINS_EXP * kj * vmax / fs for kj, fs in zip(e.k, e.fs)))
+    h = 1.0 / RK4_HZ
+    return max(1, int(math.ceil(h * rate / 1.5)))
 
 
 def simulate_truth(
-    model: LumpedModel,
+    model,
     u: ContinuousInput,
     n_samples: int | None = None,
     *,
     scales: np.ndarray | None = None,
     rtol: float = RTOL,
+    integrator: str = "lsoda",
 ) -> TruthRun:
-    """Integrate `model` from rest under the continuous force `u` with LSODA and return the
-    configured outputs at ``t_k = k / u.fs``, k < n_samples (default: the whole input).
+    """Integrate `model` (a LumpedModel or a :class:`TruthModel`) from rest under the
+    continuous force `u` and return the configured outputs at ``t_k = k / u.fs``,
+    k < n_samples (default: the whole input).
 
-    `scales`: typical magnitude of each state (absolute tolerance = rtol * scale); default
-    from the linear part's response to `u`.
+    integrator "lsoda": odeint, absolute tolerance ``rtol * scales`` (`scales`: typical
+    magnitude of each state, default from the linear part's response to `u`); "rk4": fixed
+    step at 10 kHz (times an integer sub-step factor where a stiff law needs it).
     """
+    tm = _tm(model)
+    model = tm.model
     n = u.fine.size // u.oversample if n_samples is None else int(n_samples)
     t = np.arange(n) / u.fs
-    cm = _compile(model)
+    P, nz = _compile(tm)
+    P[0] = u.fs_fine
     nd = model.n_dofs
     if scales is None:
-        scales = _state_scales(model, u)
-    atol = rtol * np.asarray(scales, float)
-    E = np.column_stack([cm["etype"], cm["ea"], cm["eb"], cm["estate"], cm["ep"]]).astype(float).reshape(-1, _EW)
-    P = np.concatenate([[u.fs_fine, cm["delay"], cm["sat"], cm["in_dof"], nd, E.shape[0], cm["nz"]], cm["minv"],
-                        E.ravel()])
+        scales = _scales_for(tm, _state_scales(model, u))
     args = (u.coeffs, P)
-    y0 = np.zeros(2 * nd + cm["nz"])
+    y0 = np.zeros(2 * nd + nz)
     tic = time.perf_counter()
-    Y, info = odeint(_rhs, y0, t, args=args, rtol=rtol, atol=atol, mxstep=200000, full_output=True)
-    if info["message"] != "Integration successful.":
-        raise RuntimeError(f"truth integration failed: {info['message']}")
+    if integrator == "lsoda":
+        atol = rtol * np.asarray(scales, float)
+        Y, info = odeint(_rhs, y0, t, args=args, rtol=rtol, atol=atol, mxstep=200000, full_output=True)
+        if info["message"] != "Integration successful.":
+            raise RuntimeError(f"truth integration failed: {info['message']}")
+        nfe = int(info["nfe"][-1])
+        meta = {"method": "scipy.integrate.odeint (LSODA)", "rtol": rtol, "nfe": nfe}
+    elif integrator == "rk4":
+        base = int(round(RK4_HZ / u.fs))
+        sub = _rk4_substeps(tm, scales)
+        m = base * sub
+        Y = _rk4(y0, u.coeffs, P, 1.0 / (u.fs * m), m, n)
+        if not np.all(np.isfinite(Y)):
+            raise RuntimeError("truth integration failed: RK4 diverged")
+        nfe = 4 * m * (n - 1)
+        meta = {"method": "classic RK4, fixed step", "step_hz": u.fs * m, "substeps": sub, "nfe": nfe}
+    else:
+        raise ValueError(f"integrator={integrator!r} must be one of {INTEGRATORS}")
     A = _accelerations(Y, t, *args)
     sec = time.perf_counter() - tic
     # applied force
-    ts = t - cm["delay"]
-    fa = np.where(ts < 0, 0.0, u(np.maximum(ts, 0.0)))
-    if cm["sat"] > 0:
-        fa = np.clip(fa, -cm["sat"], cm["sat"])
+    ts = t - P[1]
+    fa = np.where(ts < 0, 0.0, u(np.maximum(ts, 0.0))) + tm.offset
+    if P[2] > 0:
+        fa = np.clip(fa, -P[2], P[2])
     rows = []
     for o in model.outputs:
         i = model.dof_index(o.dof)
         rows.append({"acceleration": A[:, i], "velocity": Y[:, nd + i], "displacement": Y[:, i]}[o.quantity])
-    return TruthRun(t, Y, A, np.array(rows), fa, int(info["nfe"][-1]), sec)
+    return TruthRun(t, Y, A, np.array(rows), fa, nfe, sec, meta)
 
 
 def _state_scales(model: LumpedModel, u: ContinuousInput) -> np.ndarray:
@@ -492,32 +677,94 @@ def nrmse(y: np.ndarray, yhat: np.ndarray) -> float:
     return float(np.sqrt(np.sum((y - yhat) ** 2)) / np.sqrt(np.sum(y**2)))
 
 
+def gap(y, yhat) -> float:
+    """The benchmark's gap: the RMS over output channels of each channel's nrmse
+    (``sqrt(mean_i sum_t (y_i - yhat_i)^2 / sum_t y_i^2)``), so that channels of different
+    units (acceleration, displacement) weigh alike. `y`, `yhat`: (n_outputs, n) arrays or
+    lists of them (several logs, concatenated in time)."""
+    if isinstance(y, (list, tuple)):
+        y, yhat = np.hstack(y), np.hstack(yhat)
+    y, yhat = np.asarray(y, float), np.asarray(yhat, float)
+    num = np.sum((y - yhat) ** 2, axis=1)
+    den = np.maximum(np.sum(y**2, axis=1), 1e-300)
+    return float(np.sqrt(np.mean(num / den)))
+
+
 # ---------------------------------------------------------------------------------------------
 # random nominal models
 # ---------------------------------------------------------------------------------------------
 def _chain_ends(n: int) -> list[tuple[str, str]]:
+    """The historic chain m1-ground, m2-m1, m3-m2 (kept for tests and callers)."""
     return [("m1", GROUND)] + [(f"m{i + 1}", f"m{i}") for i in range(1, n)]
 
 
-def _chain_model(masses, ks, cs, in_dof: str, name: str = "") -> LumpedModel:
-    n = len(masses)
+def model_connections(model: LumpedModel) -> list[tuple[str, str]]:
+    """The connections (spring ends) of `model`, in element order."""
+    return [tuple(e.between) for e in model.elements if isinstance(e, Spring)]
+
+
+def _net_model(masses, conns, ks, cs, in_dof: str, name: str = "", outputs=None) -> LumpedModel:
     dofs = tuple(Dof(f"m{i + 1}", float(m)) for i, m in enumerate(masses))
     els = []
-    for (a, b), k, c in zip(_chain_ends(n), ks, cs):
+    for (a, b), k, c in zip(conns, ks, cs):
         els += [Spring((a, b), float(k)), Damper((a, b), float(c))]
-    outs = tuple(Output(d.name, "acceleration", output_channel(d.name)) for d in dofs)
-    return LumpedModel(dofs, tuple(els), (Input(in_dof, "force", INPUT_CHANNEL),), outs, name)
+    if outputs is None:
+        outputs = tuple(Output(d.name, "acceleration", output_channel(d.name)) for d in dofs)
+    return LumpedModel(dofs, tuple(els), (Input(in_dof, "force", INPUT_CHANNEL),), tuple(outputs), name)
 
 
-def random_chain_model(rng: np.random.Generator, n_dofs: int | None = None, name: str = "") -> LumpedModel:
-    """A random chain m1-ground, m2-m1, m3-m2 (1-3 DOFs): masses 0.5-5 kg, modes in 8-120 Hz
-    at least 15 % apart, modal damping 1-4 % (dampers solved for drawn modal targets)."""
+def _chain_model(masses, ks, cs, in_dof: str, name: str = "") -> LumpedModel:
+    return _net_model(masses, _chain_ends(len(masses)), ks, cs, in_dof, name)
+
+
+def _random_connections(rng: np.random.Generator, n: int) -> list[tuple[str, str]]:
+    """A chain through the DOFs in random order, grounded at a random DOF of it, plus a
+    ground link on each other DOF with probability 1/4; each pair in random orientation."""
+    order = [f"m{i + 1}" for i in rng.permutation(n)]
+    pairs = [(order[i + 1], order[i]) for i in range(n - 1)]
+    g = order[int(rng.integers(n))]
+    pairs.insert(int(rng.integers(len(pairs) + 1)), (g, GROUND))
+    for d in order:
+        if d != g and rng.random() < 0.25:
+            pairs.append((d, GROUND))
+    return [p if (p[1] == GROUND or rng.random() < 0.5) else (p[1], p[0]) for p in pairs]
+
+
+def _random_outputs(rng: np.random.Generator, names: list[str], displacement: bool | None = None):
+    """Acceleration sensors on every DOF (half the cases) or on a random non-empty subset;
+    with `displacement` (default: with probability DISPLACEMENT_SHARE) one displacement
+    sensor on a random DOF as well."""
+    if rng.random() < 0.5 or len(names) == 1:
+        acc = list(names)
+    else:
+        k = int(rng.integers(1, len(names)))
+        acc = sorted(rng.choice(names, k, replace=False).tolist())
+    if displacement is None:
+        displacement = bool(rng.random() < DISPLACEMENT_SHARE)
+    outs = [Output(d, "acceleration", output_channel(d)) for d in acc]
+    if displacement:
+        d = str(rng.choice(names))
+        outs.append(Output(d, "displacement", output_channel(d, "displacement")))
+    return tuple(outs)
+
+
+def random_chain_model(rng: np.random.Generator, n_dofs: int | None = None, name: str = "",
+                       displacement: bool | None = None) -> LumpedModel:
+    """A random network of 1-3 DOFs (see :func:`_random_connections`): masses 0.5-5 kg, modes
+    in 8-120 Hz at least 15 % apart, modal damping 1-4 % (dampers solved for drawn modal
+    targets), the force input on a random DOF, sensors by :func:`_random_outputs`."""
+    from scipy.optimize import nnls
+
     n = int(rng.integers(1, 4)) if n_dofs is None else int(n_dofs)
     for _ in range(1000):
         masses = rng.uniform(0.5, 5.0, n)
-        ks = masses * (2 * np.pi * np.exp(rng.uniform(np.log(8.0), np.log(120.0), n))) ** 2
-        lin = _chain_model(masses, ks, np.zeros(n), "m1")
+        conns = _random_connections(rng, n)
+        ks = np.exp(rng.uniform(np.log(8.0), np.log(120.0), len(conns)))
+        ks = masses.mean() * (2 * np.pi * ks) ** 2 * rng.uniform(0.5, 2.0, len(conns))
+        lin = _net_model(masses, conns, ks, np.zeros(len(conns)), "m1")
         w2, phi = _undamped_modes(lin)
+        if np.any(w2 <= 0):
+            continue
         f = np.sqrt(w2) / (2 * np.pi)
         if f.min() < 8.0 or f.max() > 120.0 or (n > 1 and np.min(f[1:] / f[:-1]) < 1.15):
             continue
@@ -527,18 +774,24 @@ def random_chain_model(rng: np.random.Generator, n_dofs: int | None = None, name
         A = ((L @ phi) ** 2).T / (2 * np.sqrt(w2) * mr)[:, None]
         for _ in range(30):
             target = rng.uniform(0.012, 0.038, n)
-            try:
-                cs = np.linalg.solve(A, target)
-            except np.linalg.LinAlgError:
-                break
+            if A.shape[1] == n:
+                try:
+                    cs = np.linalg.solve(A, target)
+                except np.linalg.LinAlgError:
+                    break
+            else:
+                cs = nnls(A, target)[0]
+                cs = np.maximum(cs, 1e-3 * cs.max())
             if np.any(cs <= 0):
                 continue
-            model = _chain_model(masses, ks, cs, f"m{int(rng.integers(1, n + 1))}", name)
+            in_dof = f"m{int(rng.integers(1, n + 1))}"
+            outs = _random_outputs(rng, [f"m{i + 1}" for i in range(n)], displacement)
+            model = _net_model(masses, conns, ks, cs, in_dof, name, outs)
             modes = model.modes()
             if (len(modes) == n and np.all(modes.damping_ratios >= 0.01) and np.all(modes.damping_ratios <= 0.04)
                     and modes.natural_frequencies.min() >= 8.0 and modes.natural_frequencies.max() <= 120.0):
                 return model
-    raise RuntimeError("could not draw a chain model")  # pragma: no cover
+    raise RuntimeError("could not draw a network model")  # pragma: no cover
 
 
 def _undamped_modes(model: LumpedModel):
@@ -561,45 +814,55 @@ def _connection_elements(model: LumpedModel, ends):
     return k, c
 
 
-def _with_elements(model: LumpedModel, add=(), replace_spring: tuple | None = None, new_spring=None) -> LumpedModel:
+def _with_elements(tm: TruthModel, add=(), replace_spring: tuple | None = None, new_spring=None,
+                   extra=()) -> TruthModel:
+    model = tm.model
     els = []
     for e in model.elements:
         if replace_spring is not None and isinstance(e, Spring) and e.between == replace_spring:
-            els.append(new_spring)
+            if new_spring is not None:
+                els.append(new_spring)
         else:
             els.append(e)
-    return replace(model, elements=tuple(els) + tuple(add))
+    return replace(tm, model=replace(model, elements=tuple(els) + tuple(add)), extra=tuple(tm.extra) + tuple(extra))
 
 
-def _with_input(model: LumpedModel, **kw) -> LumpedModel:
-    return replace(model, inputs=(replace(model.inputs[0], **kw),))
+def _with_input(tm: TruthModel, **kw) -> TruthModel:
+    return replace(tm, model=replace(tm.model, inputs=(replace(tm.model.inputs[0], **kw),)))
+
+
+def _always(runs, s):
+    return True
 
 
 def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator, ref: dict):
-    """Draw the effect's configuration; return (build(s) -> (truth model, where, parameters,
-    details), (s_lo, s_hi), stable(truth run, s) -> bool)."""
+    """Draw the effect's configuration; return (build(s, base) -> (truth, where, parameters,
+    details), (s_lo, s_hi), stable(truth runs, s) -> bool). `base` is the TruthModel the
+    effect is added to (the nominal, or the nominal with another effect)."""
     n = nominal.n_dofs
-    conns = _chain_ends(n)
+    conns = model_connections(nominal)
     ends = conns[int(rng.integers(len(conns)))]
     k_c, c_c = _connection_elements(nominal, ends)
     lv = nominal.element_vector(Spring(ends, 1.0))
-    d_rms = float(np.sqrt(np.mean((ref["states"][:, :n] @ lv) ** 2)))
-    d_max = float(np.max(np.abs(ref["states"][:, :n] @ lv)))
-    v_rms = float(np.sqrt(np.mean((ref["states"][:, n : 2 * n] @ lv) ** 2)))
-    f_conn = float(np.sqrt(np.mean((ref["states"][:, :n] @ lv * k_c + ref["states"][:, n : 2 * n] @ lv * c_c) ** 2)))
+    X = ref["states"]
+    d = X[:, :n] @ lv
+    v = X[:, n : 2 * n] @ lv
+    d_rms = float(np.sqrt(np.mean(d**2)))
+    d_max = float(np.max(np.abs(d)))
+    f_conn = float(np.sqrt(np.mean((d * k_c + v * c_c) ** 2)))
+    u_rms = ref["u_rms"]
     where_el = {"between": list(ends)}
-    always = lambda run, s: True  # noqa: E731
 
     if effect == "parameter_mismatch":
-        names = [f"m:{d.name}" for d in nominal.dofs]
+        names = [f"m:{dd.name}" for dd in nominal.dofs]
         names += [f"k:{_pair(*e)}" for e in conns] + [f"c:{_pair(*e)}" for e in conns]
         count = int(rng.integers(1, 3)) if len(names) > 1 else 1
         chosen = [names[i] for i in rng.choice(len(names), count, replace=False)]
         signs = rng.choice([-1.0, 1.0], count)
         jitter = np.concatenate([[1.0], rng.uniform(0.8, 1.0, count - 1)])
 
-        def build(s):
-            masses = {d.name: d.mass for d in nominal.dofs}
+        def build(s, base):
+            masses = {dd.name: dd.mass for dd in nominal.dofs}
             kk = {_pair(*e): _connection_elements(nominal, e)[0] for e in conns}
             cc = {_pair(*e): _connection_elements(nominal, e)[1] for e in conns}
             nominal_vals, true_vals, ratios = {}, {}, {}
@@ -611,12 +874,13 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
                 table[key] = table[key] * r
                 true_vals[nm] = table[key]
                 ratios[nm] = r
-            masses_l = [masses[d.name] for d in nominal.dofs]
-            truth = _chain_model(masses_l, [kk[_pair(*e)] for e in conns], [cc[_pair(*e)] for e in conns],
-                                 nominal.inputs[0].dof, nominal.name)
-            return truth, {"parameters": list(chosen)}, true_vals, {"nominal": nominal_vals, "ratio": ratios}
+            truth = _net_model([masses[dd.name] for dd in nominal.dofs], conns, [kk[_pair(*e)] for e in conns],
+                               [cc[_pair(*e)] for e in conns], nominal.inputs[0].dof, nominal.name, nominal.outputs)
+            truth = replace(truth, inputs=base.model.inputs)
+            return (replace(base, model=truth), {"parameters": list(chosen)}, true_vals,
+                    {"nominal": nominal_vals, "ratio": ratios})
 
-        return build, (0.15, 0.40), always
+        return build, (0.15, 0.5), _always
 
     if effect == "extra_mode":
         attach = nominal.dof_names[int(rng.integers(n))]
@@ -628,55 +892,98 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
                 break
         zeta = float(rng.uniform(0.01, 0.04))
 
-        def build(mu):
+        def build(mu, base):
             me = mu * m_att
             k = me * (2 * np.pi * f) ** 2
             c = 2 * zeta * math.sqrt(k * me)
-            dofs = nominal.dofs + (Dof("extra", me),)
-            els = nominal.elements + (Spring(("extra", attach), k), Damper(("extra", attach), c))
-            truth = replace(nominal, dofs=dofs, elements=els)
+            m = base.model
+            truth = replace(m, dofs=m.dofs + (Dof("extra", me),),
+                            elements=m.elements + (Spring(("extra", attach), k), Damper(("extra", attach), c)))
             params = {"mass_kg": me, "k_N_per_m": k, "c_N_s_per_m": c, "frequency_hz": f, "zeta": zeta}
-            return truth, {"dof": attach, "frequency_hz": f}, params, {"mass_ratio": mu, "extra_dof": "extra"}
+            return (replace(base, model=truth), {"dof": attach, "frequency_hz": f}, params,
+                    {"mass_ratio": mu, "extra_dof": "extra"})
 
-        return build, (0.03, 0.15), always
+        return build, (0.03, 0.4), _always
 
     if effect == "time_delay":
 
-        def build(tau):
-            return _with_input(nominal, delay=tau), {"side": "input"}, {"delay_s": tau}, {}
+        def build(tau, base):
+            return _with_input(base, delay=tau), {"side": "input"}, {"delay_s": tau}, {}
 
-        return build, (1e-3, 15e-3), always
+        return build, (1e-3, 25e-3), _always
 
     if effect == "saturation":
-        uf = ref["u"].fine
-        a = np.abs(uf)
+        a = np.abs(np.concatenate([uu.fine for uu in ref["u"]]))
         pk = a[1:-1][(a[1:-1] >= a[:-2]) & (a[1:-1] > a[2:])]
         pk = np.sort(pk)[::-1]
 
-        def build(p):
+        def build(p, base):
             limit = float(pk[max(int(round(p * pk.size)) - 1, 0)])
-            return (_with_input(nominal, saturation=limit), {"side": "input"}, {"limit_N": limit},
+            return (_with_input(base, saturation=limit), {"side": "input"}, {"limit_N": limit},
                     {"clipped_peak_fraction": p, "input_peak_N": float(pk[0])})
 
-        return build, (0.02, 0.30), always
+        return build, (0.02, 0.8), _always
+
+    if effect == "offset":
+        sign = float(rng.choice([-1.0, 1.0]))
+
+        def build(s, base):
+            f0 = sign * s * u_rms
+            return replace(base, offset=f0), {"side": "input"}, {"offset_N": f0}, {"offset_over_input_rms": sign * s}
+
+        return build, (0.02, 0.2), _always
 
     if effect == "coulomb_friction":
 
-        def build(fc_rel):
+        def build(fc_rel, base):
             fc = fc_rel * f_conn
-            truth = _with_elements(nominal, add=(Friction(ends, force_=fc, v_eps=V_EPS),))
+            truth = _with_elements(base, add=(Friction(ends, force_=fc, v_eps=V_EPS),))
             return truth, where_el, {"Fc_N": fc, "v_eps_m_per_s": V_EPS}, {"Fc_over_rms_connection_force": fc_rel}
 
-        return build, (0.003, 0.6), always
+        return build, (0.003, 2.0), _always
+
+    if effect == "asymmetric_friction":
+        ratio = float(rng.uniform(1.5, 4.0))
+        pos_big = bool(rng.random() < 0.5)
+
+        def build(f_rel, base):
+            big = f_rel * f_conn
+            fp, fn = (big, big / ratio) if pos_big else (big / ratio, big)
+            truth = _with_elements(base, extra=(AsymFriction(ends, fp, fn, V_EPS),))
+            params = {"Fp_N": fp, "Fn_N": fn, "v_eps_m_per_s": V_EPS}
+            return truth, where_el, params, {"F_larger_over_rms_connection_force": f_rel, "ratio": ratio,
+                                             "law": "f = tanh(v/v_eps) * (Fp if v > 0 else Fn), v = v[a] - v[b]"}
+
+        return build, (0.003, 2.0), _always
+
+    if effect == "joint_friction":
+        r = float(rng.uniform(0.2, 0.6))
+        nj = int(rng.integers(3, 6))
+        spread = float(rng.uniform(2.0, 8.0))  # Fmax / Fmin
+        rel = np.exp(np.linspace(0.0, math.log(spread), nj))[::-1] / spread  # slip displacement / largest
+        kj = r * k_c / nj
+
+        def build(s, base):
+            dmax = d_rms / s  # largest slip displacement
+            fs = tuple(float(kj * dmax * x) for x in rel)
+            truth = _with_elements(base, replace_spring=ends, new_spring=Spring(ends, (1.0 - r) * k_c),
+                                   extra=(IwanJoint(ends, (kj,) * nj, fs),))
+            params = {"k_N_per_m": k_c, "r": r, "n_jenkins": float(nj), "k_jenkins_N_per_m": kj,
+                      "slip_forces_N": list(fs), "F_min_N": min(fs), "F_max_N": max(fs),
+                      "k_remaining_N_per_m": (1.0 - r) * k_c}
+            return truth, where_el, params, {"rms_deflection_over_largest_slip_displacement": s,
+                                             "law": "zdot = kj v (1 - H(v z) |z/Fs|^%d)" % JENKINS_EXP}
+
+        return build, (0.1, 100.0), _always
 
     if effect == "backlash":
 
-        def build(g_rel):
-            gap = g_rel * d_rms
-            truth = _with_elements(nominal, replace_spring=ends, new_spring=Backlash(ends, k=k_c, gap=gap))
-            return truth, where_el, {"k_N_per_m": k_c, "gap_m": gap}, {"gap_over_rms_deflection": g_rel}
+        def build(g_rel, base):
+            gp = g_rel * d_rms
+            truth = _with_elements(base, replace_spring=ends, new_spring=Backlash(ends, k=k_c, gap=gp))
+            return truth, where_el, {"k_N_per_m": k_c, "gap_m": gp}, {"gap_over_rms_deflection": g_rel}
 
-        return build, (0.01, 2.0), always
+        return build, (0.01, 5.0), _always
 
     if effect == "hysteresis":
         gamma = float(rng.uniform(0.3, 0.9))
@@ -684,50 +991,52 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
         c_y = float(rng.uniform(0.2, 1.0))  # yield displacement / rms deflection
         beta = 1.0 / ((gamma + delta) * c_y * d_rms)
 
-        def build(a_rel):
+        def build(a_rel, base):
             alpha = a_rel * k_c
-            truth = _with_elements(nominal, add=(BoucWen(ends, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=1.0),))
+            truth = _with_elements(base, add=(BoucWen(ends, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=1.0),))
             params = {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": 1.0}
             return truth, where_el, params, {"alpha_over_k": a_rel, "yield_over_rms_deflection": c_y}
 
-        return build, (0.01, 1.5), always
+        return build, (0.01, 3.0), _always
 
     if effect == "cubic_stiffness":
         sign = float(rng.choice([-1.0, 1.0]))
         ratio = d_max / max(d_rms, 1e-300)
-        hi = 3.0 if sign > 0 else 0.45 / (3.0 * ratio**2)
+        # softening: down to about a fifth of the connection's tangent stiffness at the peak
+        hi = 30.0 if sign > 0 else 0.8 / (3.0 * ratio**2)
+        variant = "hardening" if sign > 0 else "softening"
 
-        def build(r):
+        def build(r, base):
             k3 = sign * r * k_c / d_rms**2
-            truth = _with_elements(nominal, add=(CubicSpring(ends, k3=k3, k=0.0),))
-            return truth, where_el, {"k3_N_per_m3": k3}, {"k3_d_rms2_over_k": sign * r}
+            truth = _with_elements(base, add=(CubicSpring(ends, k3=k3, k=0.0),))
+            return truth, where_el, {"k3_N_per_m3": k3}, {"k3_d_rms2_over_k": sign * r, "sign": variant}
 
-        def stable(run, r):
+        def stable(runs, r):
             if sign > 0:
                 return True
             k3 = r * k_c / d_rms**2
             d_star = math.sqrt(k_c / (3.0 * k3))  # softening: tangent stiffness of the connection vanishes
-            d = run.states[:, :n] @ lv
-            return bool(np.all(np.isfinite(d)) and np.max(np.abs(d)) < 0.8 * d_star)
+            for run in runs:
+                dd = run.states[:, :n] @ lv
+                if not (np.all(np.isfinite(dd)) and np.max(np.abs(dd)) < 0.9 * d_star):
+                    return False
+            return True
 
         return build, (1e-3 * hi, hi), stable
 
     raise ValueError(f"unknown effect {effect!r}")
 
 
-def _calibrate(build, bounds, stable, target, u, n_cal, y_nom_cal, scales, max_iter=7):
+def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
     """Strength s in bounds (geometric) whose calibration-window gap is close to `target`
-    (gap assumed increasing in s). Returns (s, gap) or (s_hi, gap) when even s_hi falls short."""
+    (gap assumed increasing in s). ``gap_of(build(s)[0]) -> (gap, runs)``. Returns (s, gap),
+    (s_hi, gap) when even s_hi falls short, or (s_lo, gap) when s_lo overshoots."""
 
     def gap_at(s):
-        truth = build(s)[0]
-        try:
-            run = simulate_truth(truth, u, n_cal, scales=_scales_for(truth, scales), rtol=RTOL_CAL)
-        except RuntimeError:
+        g, runs = gap_of(build(s)[0])
+        if runs is None or not stable(runs, s):
             return math.inf
-        if not stable(run, s) or not np.all(np.isfinite(run.outputs)):
-            return math.inf
-        return nrmse(run.outputs, y_nom_cal)
+        return g
 
     lo, hi = bounds
     g_hi = gap_at(hi)
@@ -742,6 +1051,7 @@ def _calibrate(build, bounds, stable, target, u, n_cal, y_nom_cal, scales, max_i
     s, g = hi, g_hi
     llo, lhi, glo, ghi = math.log(lo), math.log(hi), math.log(max(g_lo, 1e-12)), math.log(g_hi)
     lt = math.log(target)
+    best = (hi, g_hi)
     for _ in range(max_iter):
         # interpolate in log-log, guarded towards bisection
         w = (lt - glo) / (ghi - glo) if ghi > glo else 0.5
@@ -752,29 +1062,34 @@ def _calibrate(build, bounds, stable, target, u, n_cal, y_nom_cal, scales, max_i
         if not math.isfinite(g):
             lhi, ghi = ls, math.log(1e3)
             continue
-        if abs(math.log(g) - lt) < 0.12:
+        if abs(math.log(g) - lt) < abs(math.log(best[1]) - lt):
+            best = (s, g)
+        if abs(math.log(g) - lt) < 0.1:
             break
         if g < target:
             llo, glo = ls, math.log(g)
         else:
             lhi, ghi = ls, math.log(g)
-    if not math.isfinite(g):
-        s, g = math.exp(llo), math.exp(glo)
-    return s, g
+    return best
 
 
-def _scales_for(truth: LumpedModel, nominal_scales: np.ndarray) -> np.ndarray:
-    """Tolerance scales for `truth`: the nominal DOFs' scales; an extra DOF gets the largest;
-    Bouc-Wen states alpha times the largest displacement scale."""
+def _scales_for(truth, nominal_scales: np.ndarray) -> np.ndarray:
+    """Tolerance scales for `truth` (LumpedModel or TruthModel): the nominal DOFs' scales; an
+    extra DOF gets the largest; Bouc-Wen states alpha times the largest displacement scale;
+    Jenkins states their slip force."""
+    tm = _tm(truth)
     nd_nom = (len(nominal_scales)) // 2
     xs, vs = list(nominal_scales[:nd_nom]), list(nominal_scales[nd_nom : 2 * nd_nom])
-    while len(xs) < truth.n_dofs:
+    while len(xs) < tm.model.n_dofs:
         xs.append(max(xs))
         vs.append(max(vs))
     sc = xs + vs
-    for e in truth.elements:
+    for e in tm.model.elements:
         if isinstance(e, BoucWen):
             sc.append(max(e.alpha * max(xs), 1e-12))
+    for e in tm.extra:
+        if isinstance(e, IwanJoint):
+            sc.extend(max(f, 1e-12) for f in e.fs)
     return np.array(sc)
 
 
@@ -784,103 +1099,208 @@ def _scales_for(truth: LumpedModel, nominal_scales: np.ndarray) -> np.ndarray:
 @dataclass
 class Case:
     nominal: LumpedModel
-    truth_model: LumpedModel
-    u: ContinuousInput
-    outputs: np.ndarray  # noisy, (n_outputs, n)
+    truth_model: TruthModel
+    u: ContinuousInput  # the first log's force
+    outputs: np.ndarray  # the first log's noisy outputs, (n_outputs, n)
     outputs_clean: np.ndarray
     truth: dict
+    logs: list = field(default_factory=list)  # [(u, noisy outputs, clean outputs)] per log
 
-    def signals(self):
+    def signals(self, i: int = 0):
+        """The `i`-th log as Signals (input channel first, then the outputs)."""
         from vibroscope.signals import Signals
 
-        data = np.vstack([self.u.coarse[None, : self.outputs.shape[1]], self.outputs])
+        u, y = (self.u, self.outputs) if not self.logs else (self.logs[i][0], self.logs[i][1])
+        data = np.vstack([u.coarse[None, : y.shape[1]], y])
         chans = self.nominal.input_channels() + self.nominal.output_channels()
-        units = ["N"] + ["m/s^2"] * self.outputs.shape[0]
-        return Signals(data=data, fs=self.u.fs, channels=chans, units=units, t0=T0_LOG)
+        units = ["N"] + [{"acceleration": "m/s^2", "velocity": "m/s", "displacement": "m"}[o.quantity]
+                         for o in self.nominal.outputs]
+        return Signals(data=data, fs=u.fs, channels=chans, units=units, t0=T0_LOG)
+
+    def signals_list(self) -> list:
+        return [self.signals(i) for i in range(max(len(self.logs), 1))]
 
 
 def case_rng(seed: int, effect: str, index: int) -> np.random.Generator:
     """The generator of case `index` of class `effect` (independent of the other classes)."""
-    return np.random.default_rng([int(seed), EFFECTS.index(effect), int(index)])
+    return np.random.default_rng([int(seed), CLASSES.index(effect), int(index)])
 
 
-def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0) -> Case:
-    """Draw one case of class `effect` (see the module docstring)."""
-    if effect not in EFFECTS:
-        raise ValueError(f"effect={effect!r} must be one of {EFFECTS}")
+def _log_uniform(rng, lo, hi) -> float:
+    return float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
+
+
+def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, integrator: str = "lsoda",
+              multi_log: bool = False) -> Case:
+    """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
+
+    `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
+    duration / 3 each, at one excitation level each (1, 2.5, 6), instead of one log cycling
+    the levels.
+    """
+    if effect not in CLASSES:
+        raise ValueError(f"effect={effect!r} must be one of {CLASSES}")
+    if integrator not in INTEGRATORS:
+        raise ValueError(f"integrator={integrator!r} must be one of {INTEGRATORS}")
     tic = time.perf_counter()
-    n = int(round(duration * FS))
-    n_cal = min(n, int(round(CAL_SECONDS * FS)))
-    for attempt in range(8):
-        nominal = random_chain_model(rng)
+    nlog = 3 if multi_log else 1
+    n = int(round(duration / nlog * FS))
+    n_cal = min(n, int(round(CAL_SECONDS / nlog * FS)))
+    for attempt in range(10):
+        if effect == "two_effects":
+            pair = [PAIR_EFFECTS[i] for i in rng.choice(len(PAIR_EFFECTS), 2, replace=False)]
+        else:
+            pair = [effect]
+        nominal = random_chain_model(rng, displacement=True if "offset" in pair else None)
         f_max = float(nominal.modes().natural_frequencies.max())
         kind = str(rng.choice(["random", "multisine"]))
         f_hi = float(rng.uniform(max(150.0, 1.25 * f_max), 280.0))
-        u = make_input(rng, duration, kind=kind, f_hi=f_hi)
-        # scale the force so that the pooled output RMS is 5-20 m/s^2
-        scales = _state_scales(nominal, u)
-        probe = nominal.frf(np.fft.rfftfreq(n, 1 / FS))[:, :, 0]
-        Y = np.fft.irfft(probe * np.fft.rfft(u.coarse)[:, None], n, axis=0)
-        a_target = float(np.exp(rng.uniform(np.log(5.0), np.log(20.0))))
-        gain = a_target / np.sqrt(np.mean(Y**2))
-        u = u.scaled(gain)
-        u.info["rms_N"] = float(np.sqrt(np.mean(u.coarse**2)))
-        scales = scales * gain
-        nom = simulate_truth(nominal, u, n, scales=scales)
-        ref = {"states": nom.states[:n_cal], "u": u}
+        if multi_log:
+            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, levels=False, fade=True).scaled(lv) for lv in LEVELS]
+            for uu, lv in zip(us, LEVELS):
+                uu.info["level"] = lv
+        else:
+            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi)]
+        # scale the force so that the pooled acceleration RMS of the sensed DOFs is 5-20 m/s^2
+        acc_probe = replace(nominal, outputs=tuple(Output(o.dof, "acceleration") for o in nominal.outputs))
+        H = acc_probe.frf(np.fft.rfftfreq(n, 1 / FS))[:, :, 0]
+        ms = np.mean([np.mean(np.fft.irfft(H * np.fft.rfft(uu.coarse)[:, None], n, axis=0) ** 2) for uu in us])
+        gain = _log_uniform(rng, 5.0, 20.0) / np.sqrt(ms)
+        us = [uu.scaled(gain) for uu in us]
+        for uu in us:
+            uu.info["rms_N"] = float(np.sqrt(np.mean(uu.coarse**2)))
+        scales = [_state_scales(nominal, uu) for uu in us]
+        try:
+            nom = [simulate_truth(nominal, uu, n, scales=sc, integrator=integrator) for uu, sc in zip(us, scales)]
+        except RuntimeError:
+            continue
+        nom_cal = [r.outputs[:, :n_cal] for r in nom]
+        u_all = np.concatenate([uu.coarse for uu in us])
+        ref = {"states": np.vstack([r.states[:n_cal] for r in nom]), "u": us,
+               "u_rms": float(np.sqrt(np.mean(u_all**2)))}
+        base0 = TruthModel(nominal)
+
+        def gap_of(tm):
+            try:
+                runs = [simulate_truth(tm, uu, n_cal, scales=_scales_for(tm, sc), rtol=RTOL_CAL)
+                        for uu, sc in zip(us, scales)]
+            except RuntimeError:
+                return math.inf, None
+            if not all(np.all(np.isfinite(r.outputs)) for r in runs):
+                return math.inf, None
+            return gap([r.outputs for r in runs], nom_cal), runs
+
         if effect == "none":
-            truth_model, where, params, details, gap_cal = nominal, {}, {}, {}, 0.0
-            strength = None
-            run = nom
+            tm, wheres, params, details, strengths, gap_cal, target = base0, [{}], [{}], [{}], [None], 0.0, None
+            runs = nom
             break
-        target = float(rng.uniform(0.12, 0.45))
-        build, bounds, stable = _effect_builder(effect, nominal, rng, ref)
-        strength, gap_cal = _calibrate(build, bounds, stable, target, u, n_cal, nom.outputs[:, :n_cal], scales)
+        target = _log_uniform(rng, *TARGET)
+        builders = [_effect_builder(e, nominal, rng, ref) for e in pair]
+        if len(pair) == 1:
+            targets = [target]
+        else:
+            w = float(rng.uniform(0.35, 0.65))
+            targets = [target * math.sqrt(w), target * math.sqrt(1.0 - w)]
+        strengths, alone = [], []
+        for (build, bounds, stable), tg in zip(builders, targets):
+            s, g = _calibrate(lambda s, b=build: b(s, base0), bounds, stable, tg, gap_of)
+            strengths.append(s)
+            alone.append(g)
+
+        def build_all(ss):
+            tm_, ws, ps, ds = base0, [], [], []
+            for (b, _, _), s in zip(builders, ss):
+                tm_, w_, p_, d_ = b(s, tm_)
+                ws.append(w_), ps.append(p_), ds.append(d_)
+            return tm_, ws, ps, ds
+
+        def all_stable(rs, ss):
+            return all(st(rs, s) for (_, _, st), s in zip(builders, ss))
+
+        if len(pair) == 1:
+            gap_cal = alone[0]
+        else:
+            gap_cal, rs = gap_of(build_all(strengths)[0])
+            if rs is None or not all_stable(rs, strengths):
+                continue
+            if min(alone) < PAIR_SHARE * gap_cal:
+                continue  # one effect would hide behind the other: redraw
         if gap_cal < GAP_MIN or not math.isfinite(gap_cal):
             continue  # too weak (or unstable) even at full strength: draw another case
-        if not (GAP_AIM[0] <= gap_cal <= GAP_AIM[1]) and attempt < 3:
-            continue  # outside the aimed spread at the bounds of the strength range: redraw (3 tries)
-        truth_model, where, params, details = build(strength)
-        run = simulate_truth(truth_model, u, n, scales=_scales_for(truth_model, scales))
-        gap = nrmse(run.outputs, nom.outputs)
+        if not (target / AIM_FACTOR <= gap_cal <= target * AIM_FACTOR) and attempt < 3:
+            continue  # the strength range cannot reach the target on this model: redraw (3 tries)
+        tm, wheres, params, details = build_all(strengths)
+        try:
+            runs = [simulate_truth(tm, uu, n, scales=_scales_for(tm, sc), integrator=integrator)
+                    for uu, sc in zip(us, scales)]
+        except RuntimeError:
+            continue
+        g_full = gap([r.outputs for r in runs], [r.outputs for r in nom])
         grow = 0
-        while gap < GAP_MIN and grow < 3 and strength < bounds[1]:
-            strength = min(strength * 1.4, bounds[1])
-            truth_model, where, params, details = build(strength)
-            run = simulate_truth(truth_model, u, n, scales=_scales_for(truth_model, scales))
-            gap = nrmse(run.outputs, nom.outputs)
+        while len(pair) == 1 and g_full < GAP_MIN and grow < 3 and strengths[0] < builders[0][1][1]:
+            strengths[0] = min(strengths[0] * 1.4, builders[0][1][1])
+            tm, wheres, params, details = build_all(strengths)
+            try:
+                runs = [simulate_truth(tm, uu, n, scales=_scales_for(tm, sc), integrator=integrator)
+                        for uu, sc in zip(us, scales)]
+            except RuntimeError:
+                break
+            g_full = gap([r.outputs for r in runs], [r.outputs for r in nom])
             grow += 1
-        if gap >= GAP_MIN and stable(run, strength) and np.all(np.isfinite(run.outputs)):
-            details = dict(details, target_gap=target)
+        if (g_full >= GAP_MIN and all_stable(runs, strengths)
+                and all(np.all(np.isfinite(r.outputs)) for r in runs)):
             break
     else:
         raise RuntimeError(f"could not draw a {effect} case with a gap >= {GAP_MIN}")
-    gap = nrmse(run.outputs, nom.outputs)
-    clean = run.outputs
+    clean = [r.outputs for r in runs]
+    g_clean = gap(clean, [r.outputs for r in nom])
     noise_rel = float(rng.uniform(0.01, 0.03))
-    rms = np.sqrt(np.mean(clean**2, axis=1))
-    noisy = clean + noise_rel * rms[:, None] * rng.standard_normal(clean.shape)
+    noisy, sigmas = [], []
+    for c in clean:
+        rms = np.sqrt(np.mean(c**2, axis=1))
+        noisy.append(c + noise_rel * rms[:, None] * rng.standard_normal(c.shape))
+        sigmas.append([float(s) for s in noise_rel * rms])
+    single = len(pair) == 1
+    pick = (lambda xs: xs[0]) if single else (lambda xs: list(xs))
+    toml = dumps_model(tm.model) if tm.expressible else None
+    logs = ["log.mcap"] if nlog == 1 else [f"log_{i + 1}.mcap" for i in range(nlog)]
     truth = {
-        "effect": effect,
-        "where": where,
-        "parameters": {k: float(v) for k, v in params.items()},
-        "details": _jsonable(details),
-        "strength": strength,
-        "truth_model": dumps_model(truth_model),
-        "noise": {"relative_rms": noise_rel, "sigma": [float(s) for s in noise_rel * rms]},
-        "input": _jsonable(u.info),
-        "gap_nominal_noise_free": gap,
-        "gap_nominal_noisy": nrmse(noisy, nom.outputs),
+        "effect": effect if effect != "two_effects" else list(pair),
+        "class": effect,
+        "where": pick(wheres),
+        "parameters": pick([_jsonable(p) for p in params]),
+        "details": pick([_jsonable(dict(d, target_gap=tg)) if effect != "none" else {}
+                         for d, tg in zip(details, targets if effect != "none" else [None])]),
+        "strength": pick(strengths),
+        "target_gap": target,
+        "truth_model": toml,
+        "true_model_toml": toml,
+        "noise": {"relative_rms": noise_rel, "sigma": sigmas[0] if nlog == 1 else sigmas},
+        "input": _jsonable(us[0].info) if nlog == 1 else [_jsonable(uu.info) for uu in us],
+        "logs": logs,
+        "multi_log": bool(multi_log),
+        "outputs": [{"dof": o.dof, "quantity": o.quantity, "channel": ch}
+                    for o, ch in zip(nominal.outputs, nominal.output_channels())],
+        "gap_metric": "rms over output channels of each channel's nrmse (all logs concatenated)",
+        "gap_nominal_noise_free": g_clean,
+        "gap_nominal_noisy": gap(noisy, [r.outputs for r in nom]),
         "gap_calibration_window": float(gap_cal),
-        "duration_s": n / FS,
+        "duration_s": nlog * n / FS,
         "n_dofs": nominal.n_dofs,
+        "connections": [list(c) for c in model_connections(nominal)],
         "nominal_modes_hz": [float(x) for x in nominal.modes().natural_frequencies],
         "nominal_damping": [float(x) for x in nominal.modes().damping_ratios],
         "attempts": attempt + 1,
-        "integrator": {"method": "scipy.integrate.odeint (LSODA)", "rtol": RTOL, "nfe": run.nfe},
+        "integrator": dict(runs[0].integrator, name=integrator),
         "generation_s": time.perf_counter() - tic,
     }
-    return Case(nominal, truth_model, u, noisy, clean, truth)
+    if effect == "two_effects":
+        truth["gap_each_alone_calibration_window"] = [float(g) for g in alone]
+    for e, d in zip(pair, details):
+        if e == "cubic_stiffness":
+            truth["variant"] = d["sign"]  # "hardening" / "softening"
+    logs_data = [(uu, y, c) for uu, y, c in zip(us, noisy, clean)]
+    return Case(nominal, tm, us[0], noisy[0], clean[0], truth, logs_data)
 
 
 def _jsonable(x):
@@ -896,43 +1316,55 @@ def _jsonable(x):
 
 
 def write_case(out: Path, name: str, case: Case) -> None:
-    """``out/cases/<name>/{nominal.toml, log.mcap}`` and ``out/truth/<name>.json``."""
+    """``out/cases/<name>/{nominal.toml, log.mcap or log_1..3.mcap}`` and ``out/truth/<name>.json``."""
     from vibroscope.io import write_ros2_mcap
 
     cdir = Path(out) / "cases" / name
     cdir.mkdir(parents=True, exist_ok=True)
     (cdir / "nominal.toml").write_text(dumps_model(case.nominal), encoding="utf-8")
-    write_ros2_mcap(cdir / "log.mcap", case.signals())
+    names = case.truth.get("logs") or ["log.mcap"]
+    for i, fn in enumerate(names):
+        write_ros2_mcap(cdir / fn, case.signals(i))
     tdir = Path(out) / "truth"
     tdir.mkdir(parents=True, exist_ok=True)
     (tdir / f"{name}.json").write_text(json.dumps(dict(case.truth, case=name), indent=2) + "\n", encoding="utf-8")
 
 
 def _one(job):
-    out, name, effect, seed, index, duration = job
+    out, name, effect, seed, index, duration, integrator, multi = job
     tic = time.perf_counter()
-    case = make_case(effect, case_rng(seed, effect, index), duration)
+    case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
-    return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic
+    return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
 
 
-def generate(out, per_class: int = 10, classes=EFFECTS, seed: int = 0, duration: float = 60.0, jobs: int = 1,
-             verbose: bool = False) -> list[tuple]:
+def _line(r) -> str:
+    return (f"{r[0]}  {r[1]:<20s} gap {r[2]:.3f}  {r[4]:<5s} {'3 logs' if r[5] else '1 log '}  {r[3]:.1f} s")
+
+
+def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration: float = 60.0, jobs: int = 1,
+             verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
-    (case_000 = first class, case_001 = second class, ...). Returns (name, effect, gap, s)."""
+    (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
+    lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
+    from (seed, class, index)). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
-        if c not in EFFECTS:
-            raise ValueError(f"unknown class {c!r}; classes are {EFFECTS}")
+        if c not in CLASSES:
+            raise ValueError(f"unknown class {c!r}; classes are {CLASSES}")
     out.mkdir(parents=True, exist_ok=True)
     (out / "generate.json").write_text(json.dumps({"per_class": per_class, "classes": classes, "seed": seed,
-                                                   "duration": duration}, indent=2) + "\n")
+                                                   "duration": duration, "integrator": integrator,
+                                                   "multi_log": multi_log}, indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
         for c in classes:
-            jobs_list.append((str(out), f"case_{len(jobs_list):03d}", c, seed, j, duration))
+            k = len(jobs_list)
+            integ = integrator or INTEGRATORS[k % 2]
+            multi = bool(np.random.default_rng([int(seed), CLASSES.index(c), j, 1]).random() < multi_log)
+            jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -943,13 +1375,13 @@ def generate(out, per_class: int = 10, classes=EFFECTS, seed: int = 0, duration:
             for r in pool.imap(_one, jobs_list):
                 results.append(r)
                 if verbose:
-                    print(f"{r[0]}  {r[1]:<20s} gap {r[2]:.3f}  {r[3]:.1f} s", flush=True)
+                    print(_line(r), flush=True)
     else:
         for job in jobs_list:
             r = _one(job)
             results.append(r)
             if verbose:
-                print(f"{r[0]}  {r[1]:<20s} gap {r[2]:.3f}  {r[3]:.1f} s", flush=True)
+                print(_line(r), flush=True)
     return results
 
 
@@ -957,14 +1389,20 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--per-class", type=int, default=10, help="cases per class (default 10)")
-    p.add_argument("--classes", nargs="+", default=list(EFFECTS), choices=EFFECTS, metavar="CLASS",
-                   help=f"classes to generate (default all: {' '.join(EFFECTS)})")
+    p.add_argument("--classes", nargs="+", default=list(CLASSES), choices=CLASSES, metavar="CLASS",
+                   help=f"classes to generate (default all: {' '.join(CLASSES)})")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, default=60.0, help="record length in s (default 60)")
+    p.add_argument("--duration", type=float, default=60.0, help="record length in s (default 60; a multi-log "
+                   "case splits it over its three logs)")
     p.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
+    p.add_argument("--integrator", choices=INTEGRATORS, default=None,
+                   help="truth integrator (default: alternate lsoda / rk4 per case)")
+    p.add_argument("--multi-log", type=float, default=0.25, metavar="SHARE",
+                   help="share of cases written as three single-level logs (default 0.25)")
     a = p.parse_args(argv)
     tic = time.perf_counter()
-    res = generate(a.out, a.per_class, a.classes, a.seed, a.duration, a.jobs, verbose=True)
+    res = generate(a.out, a.per_class, a.classes, a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
+                   multi_log=a.multi_log)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")

@@ -18,15 +18,22 @@ def _truth(signals) -> dict:
 
 
 def oracle(model, signals, **_):
-    t = _truth(signals)
+    t = _truth(signals[0] if isinstance(signals, (list, tuple)) else signals)
     g = float(t["gap_nominal_noise_free"])
-    cand = {"effect": t["effect"], "where": t["where"], "parameters": t["parameters"], "gap_after": 0.0, "score": 1.0}
+    if isinstance(t["effect"], list):  # two effects: verdict = the list, one candidate each
+        cands = [{"effect": e, "where": w, "parameters": p, "gap_after": 0.0, "score": 1.0}
+                 for e, w, p in zip(t["effect"], t["where"], t["parameters"])]
+    elif t["effect"] != "none":
+        cands = [{"effect": t["effect"], "where": t["where"], "parameters": t["parameters"], "gap_after": 0.0,
+                  "score": 1.0}]
+    else:
+        cands = []
     return {
         "metric": "nrmse",
         "gap_before": g,
         "gap_after": 0.0 if t["effect"] != "none" else g,
         "shrink": 1.0 if t["effect"] != "none" else 0.0,
-        "candidates": [cand] if t["effect"] != "none" else [],
+        "candidates": cands,
         "verdict": t["effect"],
     }
 
