@@ -28,7 +28,7 @@ with it fitted the arrow error is 0.46 mV (0.39 mV with an output offset too, th
 quadratic term plus an output offset).
 
     python examples/gap/silverbox_limits.py [--data ../shared/data/silverbox] [--json out.json]
-    python examples/gap/silverbox_limits.py --refine [cubic] [cubic+u0] [cubic+u0+y0]
+    python examples/gap/silverbox_limits.py --refine [cubic] [cubic+u0] [cubic+u0+y0] [--seconds S] [--max-nfev N] [--fast]
 """
 
 from __future__ import annotations
@@ -194,9 +194,13 @@ def main(argv=None) -> int:
     ap.add_argument("--refine", nargs="*", choices=("cubic", "cubic+u0", "cubic+u0+y0"),
                     help="only these variants of the cubic model (default all three), fitted by "
                          "vibroscope.gap.refine_model with vibroscope's simulator")
+    ap.add_argument("--seconds", type=float, help="--refine: fit on the first SECONDS of the estimation part only")
+    ap.add_argument("--max-nfev", type=int, default=50, help="--refine: least_squares' max_nfev (default 50)")
+    ap.add_argument("--fast", action="store_true", help="--refine: the screening integration accuracy")
     a = ap.parse_args(argv)
     if a.refine is not None:
-        res = refine_demo(a.data, a.skip, tuple(a.refine) or ("cubic", "cubic+u0", "cubic+u0+y0"))
+        res = refine_demo(a.data, a.skip, tuple(a.refine) or ("cubic", "cubic+u0", "cubic+u0+y0"),
+                          max_nfev=a.max_nfev, seconds=a.seconds, fast=a.fast)
         if a.json:
             a.json.write_text(json.dumps(res, indent=1))
         return 0
@@ -278,7 +282,7 @@ def cubic_model(m, d, a, b3):
 
 
 def refine_demo(data: Path, skip: int, which=("cubic", "cubic+u0", "cubic+u0+y0"),
-                start=(5.487e-6, 2.2526e-4, 1.01098, 4.0746), max_nfev=50) -> dict:
+                start=(5.487e-6, 2.2526e-4, 1.01098, 4.0746), max_nfev=50, seconds=None, fast=False) -> dict:
     """The cubic model (m, d, a, b3) and an input offset fitted with
     :func:`vibroscope.gap.refine.refine_model` (vibroscope's own simulator) on the whole
     estimation part; arrow error with :func:`vibroscope.gap.refine.simulate_with_offsets`.
@@ -303,8 +307,9 @@ def refine_demo(data: Path, skip: int, which=("cubic", "cubic+u0", "cubic+u0+y0"
     for name in which:
         off, yoff = variants[name]
         c = time.process_time()
-        r = refine_model(build, np.ones(4), np.full(4, 0.2), np.full(4, 5.0), [LogSimulator(ue, FS)], [ye], [me],
-                         input_offset=off, output_offset=yoff, max_nfev=max_nfev)
+        ns = None if seconds is None else [min(ue.shape[1], int(seconds * FS))]
+        r = refine_model(build, np.ones(4), np.full(4, 0.2), np.full(4, 5.0), [LogSimulator(ue, FS)], [ye], [me], ns,
+                         input_offset=off, output_offset=yoff, max_nfev=max_nfev, fast=fast)
         cpu = time.process_time() - c
         ya_h = simulate_with_offsets(LogSimulator(ua, FS), r.model, input_offset=r.input_offset,
                                      output_offset=r.output_offset)
