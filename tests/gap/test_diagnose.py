@@ -59,14 +59,18 @@ def u20():
     return excitation(20000)
 
 
-def test_nrmse_pooled_definition():
+def test_nrmse_normalises_each_channel_by_its_own_energy():
     y = np.array([[1.0, -1.0, 1.0, -1.0], [2.0, 2.0, -2.0, -2.0]])
     yh = y * 0.9
     assert nrmse(y, yh) == pytest.approx(0.1)
-    # pooled, not averaged: channel 2 holds 4x the energy
+    # channel 1 missed entirely (its nrmse 1), channel 2 exact: sqrt((1 + 0) / 2), whatever the
+    # channels' units (channel 1 in m beside channel 2 in m/s^2 counts the same)
     yh2 = y.copy()
     yh2[0] = 0
-    assert nrmse(y, yh2) == pytest.approx(np.sqrt(4 / 20))
+    assert nrmse(y, yh2) == pytest.approx(np.sqrt(0.5))
+    assert nrmse(y * np.array([[1e-6], [1.0]]), yh2 * np.array([[1e-6], [1.0]])) == pytest.approx(np.sqrt(0.5))
+    # several logs pool their samples per channel
+    assert nrmse([y, y], [yh2, y]) == pytest.approx(np.sqrt(0.5 * 0.5))
 
 
 def test_levels_and_split_keep_every_level_on_both_sides(u20):

@@ -33,8 +33,13 @@ def test_silverbox_names_cubic_stiffness(shared_data):
     assert r.verdict == "cubic_stiffness", r.summary()
     ch = r.channels[0]
     print(f"Silverbox arrow part: nominal {1e3 * ch.rms_error:.2f} mV, augmented {1e3 * ch.rms_error_after:.2f} mV")
+    print(r.summary())
     assert 13.5e-3 < ch.rms_error < 16.5e-3
-    assert ch.rms_error_after < 6e-3
+    # the cubic spring and the input's DC bias (forward selection: cubic_stiffness + offset); the
+    # exported model below 1 mV RMS on the arrow part (published: PNLSS 0.26 mV, pNARX 2.25 mV)
+    assert "offset" in r.verdicts, r.summary()
+    assert ch.rms_error_after < 1e-3
+    assert next(c for c in r.candidates if c.effect == "cubic_stiffness").where["character"] == "hardening"
     assert "held-out log" in r.validation
 
 
@@ -45,7 +50,7 @@ def test_boucwen_names_hysteresis(shared_data):
     r = diagnose(bw.nominal(), [ms, sw], transient_s=bw.PERIOD_S)
     print(r.summary())
     assert r.verdict == "hysteresis", r.summary()
-    assert r.shrink > 0.9
+    assert r.shrink > 0.95
     best = r.candidates[0]
     assert best.where == {"between": ["m", "ground"]}
     json.dumps(r.to_dict())

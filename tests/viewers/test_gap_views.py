@@ -139,8 +139,10 @@ def test_lazy_registry_names_the_gap_viewers():
 
 def test_every_figure_written_as_png(tmp_path, report):
     figs = plot_gap_report(report, out_dir=tmp_path / "figs")
-    assert list(figs) == list(gap_figures.FIGURES)
-    for name in gap_figures.FIGURES:
+    # every figure but the levels' one, which needs the BLA of several excitation levels
+    assert list(figs) == [n for n in gap_figures.FIGURES if n != "gap_levels"]
+    assert not (tmp_path / "figs" / "gap_levels.png").exists()
+    for name in figs:
         p = tmp_path / "figs" / f"{name}.png"
         assert p.is_file(), name
         assert 10_000 < p.stat().st_size < 400_000, (name, p.stat().st_size)

@@ -92,6 +92,8 @@ UNEXPLAINED_SCORE = 0.3
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
 ADD_FACTOR = 0.7
+#: locations of each nonlinear class refined after probing the start values
+N_LOCATIONS = 2
 
 
 def as_lumped(model) -> LumpedModel:
@@ -486,14 +488,16 @@ def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
     from vibroscope.models.simulate import simulate
 
     out = {}
-    r = (ys[fit_log][:, :n] - y_ref[fit_log][:, :n]).ravel()
+    # each channel weighted by its own RMS (the metric of nrmse: channels of any unit alike)
+    wc = 1.0 / np.maximum(np.sqrt(np.mean(ys[fit_log][:, :n] ** 2, axis=1)), 1e-300)[:, None]
+    r = ((ys[fit_log][:, :n] - y_ref[fit_log][:, :n]) * wc).ravel()
     if not np.all(np.isfinite(r)) or n < 16:
         return out
 
     def resp(m, forces):
         try:
             s = simulate(m, forces, fs)
-            y = np.asarray(s.data[len(m.inputs):])
+            y = np.asarray(s.data[len(m.inputs):]) * wc
             return y.ravel() if np.all(np.isfinite(y)) else None
         except Exception:  # noqa: BLE001 - a start value only
             return None
@@ -718,13 +722,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # nonlinear effects: screening at every location with the linear parameters at the refit
     sp = split.screen_prefix
 
-    def screen(s):
-        # from the refitted and from the nominal linear parameters (a nonlinearity shifts the
-        # BLA, so the refit can be the wrong base for it): the best start of each base is
-        # refined, the better result kept
-        out = None
+    def probe(s):
+        """The best start of `s` on the screening prefix, from the refitted and from the nominal
+        linear parameters (a nonlinearity shifts the BLA, so the refit can be the wrong base)."""
+        best = None
         for base in ((refit, model) if theta.any() else (refit,)):
-            best = None
             for p0 in s.starts:
                 try:
                     m0 = s.apply(base, p0)
@@ -734,26 +736,39 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                 g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
                           [m[:n] for m, n in zip(split.fit, sp) if n])
                 g = g if np.isfinite(g) else 1e9
-                if best is None or g < best[1]:
-                    best = (p0, g)
-            if best is None:
-                continue
+                if best is None or g < best[2]:
+                    best = (s, np.asarray(p0, float), g, base)
+        return best
 
-            def build(p, s=s, base=base):
-                return s.apply(base, p)
+    def refine(item):
+        """The probed start refined on the screening prefix (effect parameters only)."""
+        s, p0, g0, base = item
 
-            p, g, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
-                                      max_nfev=4 + 2 * s.n)
-            if out is None or g < out[2]:
-                out = (s, p, g, base)
-        return out
+        def build(p, s=s, base=base):
+            return s.apply(base, p)
 
-    screened = []
+        p, g, _ = fit_time_domain(build, p0, s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
+                                  max_nfev=4 + 2 * s.n)
+        return (s, p, g, base) if g <= g0 else item
+
     with ThreadPoolExecutor(max(1, workers)) as ex:
-        for res in ex.map(screen, nl_specs):
+        probed = []
+        for res in ex.map(probe, nl_specs):
             if res is not None:
-                screened.append(res)
+                probed.append(res)
             bar.update(1)
+        # only the most promising locations of each class are refined (the others keep their best start)
+        by_class: dict[str, list] = {}
+        for item in probed:
+            by_class.setdefault(item[0].effect, []).append(item)
+        to_refine, kept = [], []
+        for eff, items in by_class.items():
+            items.sort(key=lambda r: r[2])
+            # a second location only when its best start is nearly as good as the first's
+            n_ref = 1 + sum(1 for r in items[1:N_LOCATIONS] if r[2] <= 1.15 * items[0][2])
+            to_refine += items[:n_ref]
+            kept += items[n_ref:]
+        screened = list(ex.map(refine, to_refine)) + kept
     # best location per class, then the best classes fitted jointly with the linear parameters
     per_class: dict[str, tuple] = {}
     for s, p, g, base in screened:
@@ -776,9 +791,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, joint_n, fast=True, max_nfev=6)
         return s, build(x), x[nl:], g, lin.apply(model, x[:nl])
 
+    keep_ids = {id(r) for r in results}  # the linear fits
     with ThreadPoolExecutor(max(1, workers)) as ex:
         for res in ex.map(joint, full):
             results.append(res)
+            keep_ids.add(id(res))
             bar.update(1)
     done = {r[0].effect for r in results}
     for s, p, g, base in screened:  # the other classes and locations as screened
@@ -791,20 +808,27 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     t = time.perf_counter()
     val_logs = [i for i, m in enumerate(split.validation) if m.any()]
 
-    def held_out(m_):
-        yh = {i: sims[i].run(m_) for i in val_logs}
+    def held_out(m_, fast=False):
+        yh = {i: sims[i].run(m_, fast=fast) for i in val_logs}
         g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
         return (g if np.isfinite(g) else float("inf")), yh
 
     def evaluate(item):
         s, m_aug, p, gfit, base = item
-        g, yh = held_out(m_aug)
+        g, yh = held_out(m_aug, fast=True)  # the winner is re-run at full accuracy (_polish)
         # how much the effect itself changes the held-out outputs (against its own linear base)
         yb = {i: sims[i].run(base) for i in val_logs}
         contrib = nrmse([yh[i] for i in val_logs], [yb[i] for i in val_logs],
                         [split.validation[i] for i in val_logs]) if np.isfinite(g) else float("nan")
-        return s, m_aug, p, gfit, g, yh, contrib
+        return s, m_aug, p, gfit, g, yh, contrib, base
 
+    # every linear and jointly fitted result is checked on held-out data, and of the screened ones
+    # those within 1.5 times their class's best fitting gap (the rest cannot win)
+    cls_best: dict[str, float] = {}
+    for r in results:
+        if id(r) not in keep_ids:
+            cls_best[r[0].effect] = min(cls_best.get(r[0].effect, np.inf), r[3])
+    results = [r for r in results if id(r) in keep_ids or r[3] <= 1.5 * cls_best[r[0].effect]]
     with ThreadPoolExecutor(max(1, workers)) as ex:
         evaluated = list(ex.map(evaluate, results))
 
@@ -814,7 +838,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
 
     k_before = key(gap_before, 0)
     cands = []  # (Candidate, model, held-out outputs, spec, p)
-    for s, m_aug, p, gfit, g, yh, contrib in evaluated:
+    for s, m_aug, p, gfit, g, yh, contrib, base in evaluated:
         reason = s.vanishes(p)
         if reason is None and np.isfinite(contrib) and np.isfinite(floor) and contrib < floor:
             reason = (f"the effect changes the held-out outputs by nrmse {contrib:.3g}, within the noise floor "
@@ -824,14 +848,14 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             where["frequency_hz"] = s.describe(p).get("frequency_hz")
         expl = 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0
         c = Candidate(s.effect, where, s.describe(p), g, expl, gfit, s.n, _dumps(m_aug), vanished=reason or "")
-        cands.append((c, m_aug, yh, s, p))
+        cands.append((c, m_aug, yh, s, p, base))
     changed = lin.changed(theta)
     pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
     expl_pm = 1.0 - key(gap_refit, 0) / k_before if k_before > 0 else 0.0
     cands.append((Candidate("parameter_mismatch", {"parameters": changed}, pm_params, gap_refit, expl_pm,
                             g_ref_fit, 0, _dumps(refit),
                             vanished="" if changed else "no linear parameter changed by more than 3 %"),
-                  refit, {i: y_ref[i] for i in val_logs}, None, None))
+                  refit, {i: y_ref[i] for i in val_logs}, None, None, refit))
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
 
@@ -843,10 +867,12 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         return not (level["flagged"] and kind in ("linear", "reference"))
 
     best_i = next((i for i, c in enumerate(cands) if admissible(c)), None)
+    polish = dict(model=model, lin=lin, lo_l=lo_l, hi_l=hi_l, sims=sims, ys=ys, split=split, fs=fs,
+                  held_out=held_out, key=key, k_before=k_before)
     if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:
-        cands[best_i] = _polish(cands[best_i], model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before)
+        cands[best_i] = _polish(cands[best_i], [(cands[best_i][3], cands[best_i][4])], **polish)
     none_c = (Candidate("none", {}, {}, gap_before, 0.0, g_nom_fit, 0, _dumps(model)), model,
-              {i: y_nom[i] for i in val_logs}, None, None)
+              {i: y_nom[i] for i in val_logs}, None, None, model)
     chosen = []
     if none_ok:
         verdict = "none"
@@ -865,9 +891,12 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     t = time.perf_counter()
     shares = []
     if chosen and chosen[0][3] is not None:
-        chosen, shares = _forward_selection(chosen[0], per_class, screened, sims, ys, split, held_out, key, k_before,
+        chosen, shares = _forward_selection(chosen[0], per_class, sims, ys, split, held_out, key, k_before,
                                             floor, gap_before, workers)
         if len(chosen) > 1:
+            # the combination polished jointly with the linear parameters, at full accuracy
+            chain = [(c[3], c[4]) for c in chosen]
+            chosen[-1] = _polish(chosen[-1], chain, **polish)
             added = {c[0].effect for c in chosen[1:]}
             ordered = chosen + [c for c in ordered[1:] if c[0].effect not in added]
     timings["forward_selection"] = time.perf_counter() - t
@@ -955,8 +984,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     )
 
 
-def _forward_selection(first, per_class, screened, sims, ys, split, held_out, key, k_before, floor, gap_before,
-                       workers):
+def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers):
     """Forward selection of further effects on top of the winner [Ljung 1999, sec. 16.4].
 
     Each other effect class (its best screened location) is added to the current augmented
@@ -976,8 +1004,8 @@ def _forward_selection(first, per_class, screened, sims, ys, split, held_out, ke
             break
         # one member of a nested family only (asymmetric friction contains Coulomb friction)
         families = [{"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"}]
-        cands = [s_ for eff, (s_, p_, g_, b_) in per_class.items()
-                 if eff not in used and not any(eff in fam and used & fam for fam in families)]
+        cands = [s_ for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
+                 if eff not in used and not any(eff in fam and used & fam for fam in families)][:4]
         if not cands:
             break
 
@@ -987,8 +1015,8 @@ def _forward_selection(first, per_class, screened, sims, ys, split, held_out, ke
             for p0 in p0s:
                 try:
                     m0 = s.apply(cur_m, p0)
-                except ValueError:
-                    continue
+                except (ValueError, TypeError):  # e.g. a second clearance where no spring is left
+                    return None
                 yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
                 g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
                           [m[:n] for m, n in zip(split.fit, sp) if n])
@@ -1003,7 +1031,7 @@ def _forward_selection(first, per_class, screened, sims, ys, split, held_out, ke
             p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
                                          max_nfev=4 + 2 * s.n)
             m_new = build(p)
-            g, yh = held_out(m_new)
+            g, yh = held_out(m_new, fast=True)
             return s, p, m_new, g, yh, gfit
 
         with ThreadPoolExecutor(max(1, workers)) as ex:
@@ -1018,7 +1046,7 @@ def _forward_selection(first, per_class, screened, sims, ys, split, held_out, ke
         used.add(s.effect)
         c_new = Candidate(s.effect, dict(s.where) | s.qualifiers(p), s.describe(p), g,
                           1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0, gfit, s.n, _dumps(m_new))
-        chosen.append((c_new, m_new, yh, s, p))
+        chosen.append((c_new, m_new, yh, s, p, first[5]))
         cur_c, cur_m = c_new, m_new
         shares_g.append(g)
     total = shares_g[0] - shares_g[-1]
@@ -1026,32 +1054,45 @@ def _forward_selection(first, per_class, screened, sims, ys, split, held_out, ke
     return chosen, shares
 
 
-def _polish(cand, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before):
-    """Refine the winning nonlinear candidate jointly with the linear parameters on up to 60 s
-    of the fitting data at the full integration accuracy; held-out gap recomputed. The polished
-    model is kept only when its held-out gap is not worse."""
-    c, m_aug, _, s, p = cand
+def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before):
+    """Refine the winning candidate's effects (`chain`: ``(spec, p)`` applied in order to the
+    linear model) jointly with the linear parameters on up to 60 s of the fitting data at the
+    full integration accuracy (Ljung 1999, output error); the held-out gap is recomputed at
+    full accuracy. The polished model is kept only when its held-out gap is not worse."""
+    c, m_aug, _, s_last, p_last, base = cand
     nl = len(lin)
-    v0, v1 = lin.values(model), lin.values(m_aug)
+    v0, v1 = lin.values(model), lin.values(base)
     th = np.array([math.log(v1[k] / v0[k]) if v0[k] > 0 and v1[k] > 0 else 0.0 for k in lin.names])
+    sizes = [s_.n for s_, _ in chain]
+    offs = np.cumsum([nl] + sizes)
 
     def build(x):
-        return s.apply(lin.apply(model, x[:nl]), x[nl:])
+        m = lin.apply(model, x[:nl])
+        for (s_, _), a_, b_ in zip(chain, offs[:-1], offs[1:]):
+            m = s_.apply(m, x[a_:b_])
+        return m
 
     ns = [min(n, int(60 * fs)) if n else 0 for n in split.fit_prefix]
-    x0 = np.concatenate([th, p])
-    lo = np.concatenate([lo_l, s.lower])
-    hi = np.concatenate([hi_l, s.upper])
+    x0 = np.concatenate([th] + [np.asarray(p_, float) for _, p_ in chain])
+    lo = np.concatenate([lo_l] + [s_.lower for s_, _ in chain])
+    hi = np.concatenate([hi_l] + [s_.upper for s_, _ in chain])
     x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns, fast=False, max_nfev=4)
     m_new = build(x)
     g, yh = held_out(m_new)
-    if not np.isfinite(g) or g > c.gap_after:
-        return cand
-    pn = x[nl:]
-    c_new = Candidate(c.effect, dict(s.where) | s.qualifiers(pn) | ({k: v for k, v in c.where.items() if k == "frequency_hz"}),
-                      s.describe(pn), g, 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0,
-                      gfit, s.n, _dumps(m_new), vanished=s.vanishes(pn) or "")
-    return (c_new, m_new, yh, s, pn)
+    g0, yh0 = held_out(m_aug)  # the candidate itself at full accuracy
+    n_par = sum(sizes)
+    if not np.isfinite(g) or (np.isfinite(g0) and g > g0):
+        if not np.isfinite(g0):
+            return cand
+        return (replace(c, gap_after=g0, score=1.0 - key(g0, n_par) / k_before if k_before > 0 else 0.0),
+                m_aug, yh0, s_last, p_last, base)
+    pn = x[offs[-2]:offs[-1]]
+    keep = {k: v for k, v in c.where.items() if k == "frequency_hz"}
+    c_new = Candidate(c.effect, dict(s_last.where) | s_last.qualifiers(pn) | keep, s_last.describe(pn), g,
+                      1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0, gfit, s_last.n, _dumps(m_new),
+                      vanished=s_last.vanishes(pn) or "")
+    return (c_new, m_new, yh, s_last, pn, lin.apply(model, x[:nl]))
+
 
 def _dumps(model) -> str:
     from vibroscope.models.modelfile import dumps_model

@@ -399,7 +399,7 @@ def _coulomb_friction(model, scales):
             return replace(m, elements=m.elements + (Friction(pair, force_=float(math.exp(p[0])), v_eps=FRICTION_V_EPS),))
 
         lo, hi = math.log(f_ref * 1e-4), math.log(max(f_ref, scales["u_max"]) * 3)
-        vals = [math.log(est) if est and est > 0 else None] + [math.log(f_ref * r) for r in (0.01, 0.03, 0.1, 0.3, 1.0)]
+        vals = [math.log(est) if est and est > 0 else None] + [math.log(f_ref * r) for r in (0.01, 0.1, 1.0)]
         specs.append(EffectSpec(
             "coulomb_friction", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi),
             np.array([lo]), np.array([hi]),
@@ -425,7 +425,7 @@ def _asymmetric_friction(model, scales):
         starts = []
         if est is not None and est[0] > 0 and est[1] > 0:
             starts.append(np.clip(np.log(np.asarray(est, float)), lo + 1e-6, hi - 1e-6))
-        for r in (0.03, 0.1, 0.3):
+        for r in (0.03, 0.3):
             for a in (2.0, 0.5):
                 starts.append(np.clip(np.array([math.log(f_ref * r * a), math.log(f_ref * r)]), lo + 1e-6, hi - 1e-6))
 
@@ -464,9 +464,9 @@ def _backlash(model, scales):
 
         dq = scales.get("d_quantiles", {}).get(key, [])
         lo, hi = math.log(d_rms * 1e-4), math.log(d_rms * 5)
-        vals = [math.log(q) for q in dq if q > 0] + [math.log(d_rms * r) for r in (0.03, 0.1, 0.3, 1.0, 2.0)]
+        vals = [math.log(q) for q in dq if q > 0] + [math.log(d_rms * r) for r in (0.1, 2.0)]
         specs.append(EffectSpec(
-            "backlash", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi)[:7],
+            "backlash", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi)[:5],
             np.array([lo]), np.array([hi]),
             build, lambda p: {"gap_m": float(math.exp(p[0]))}, vanish=vanish,
         ))
@@ -484,8 +484,8 @@ def _cubic_stiffness(model, scales):
         def build(m, p, pair=pair, k_loc=k_loc, d_rms=d_rms):
             return replace(m, elements=m.elements + (CubicSpring(pair, k3=float(p[0] * k_loc / d_rms**2), k=0.0),))
 
-        pos = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0]
-        neg = [-0.01, -0.03, -0.1, -0.2]
+        pos = [0.03, 0.3, 3.0]
+        neg = [-0.03, -0.15]
         grid = (neg + pos) if trend == "softening" else (pos + neg)
         q_est = est * d_rms**2 / k_loc if est is not None else None
         specs.append(EffectSpec(
@@ -520,7 +520,8 @@ def _hysteresis(model, scales):
 
         specs.append(EffectSpec(
             "hysteresis", {"between": [pair[0], pair[1]]}, 3,
-            [np.array([math.log(a), math.log(b), s]) for a, b, s in ((0.3, 1.0, -0.9), (1.0, 3.0, -0.9), (0.3, 1.0, 0.6))],
+            [np.array([math.log(a), math.log(b), s])
+             for a, b, s in ((0.3, 1.0, 0.0), (1.0, 1.0, 0.0), (0.3, 1.0, -0.9), (0.3, 1.0, 0.6))],
             np.array([math.log(1e-3), math.log(1e-3), -1.45]), np.array([math.log(10.0), math.log(1e3), 1.45]),
             build, desc,
         ))

@@ -210,7 +210,9 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
     -------
     (x, nrmse on the fitting samples, number of simulations)
     """
-    den = math.sqrt(sum(float(np.sum(y[:, :n][:, m[:n]] ** 2)) for y, m, n in zip(ys, masks, ns) if n))
+    # each channel normalised by its own energy (the metric of vibroscope.gap.measure.nrmse)
+    den_c = sum(np.sum(y[:, :n][:, m[:n]] ** 2, axis=1) for y, m, n in zip(ys, masks, ns) if n)
+    den = np.sqrt(np.maximum(np.asarray(den_c, float), 1e-300) * len(np.atleast_1d(den_c)))[:, None]
     count = [0]
 
     def res(x):

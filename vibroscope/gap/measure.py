@@ -23,7 +23,12 @@ __all__ = ["nrmse", "Split", "make_split", "input_levels", "NoiseFloor", "noise_
 
 
 def nrmse(measured, simulated, mask=None) -> float:
-    """Pooled normalised RMS error ``sqrt(sum (y - yhat)^2 / sum y^2)``.
+    """Normalised RMS error, each output channel normalised by its own energy:
+    ``sqrt(mean_c (sum_k (y_ck - yhat_ck)^2 / sum_k y_ck^2))``.
+
+    Channels of different units (an accelerometer in m/s^2 beside a displacement sensor in m)
+    count alike; for one channel it is ``RMS(y - yhat) / RMS(y)``. Samples of several logs are
+    pooled per channel.
 
     Parameters
     ----------
@@ -33,16 +38,20 @@ def nrmse(measured, simulated, mask=None) -> float:
 
     Returns
     -------
-    float (NaN when the measured energy is 0)
+    float (NaN when a channel's measured energy is 0)
     """
     if isinstance(measured, (list, tuple)):
         masks = mask if mask is not None else [None] * len(measured)
-        num = den = 0.0
+        num = den = None
         for y, yh, m in zip(measured, simulated, masks):
             sl = slice(None) if m is None else m
-            num += float(np.sum((y[:, sl] - yh[:, sl]) ** 2))
-            den += float(np.sum(y[:, sl] ** 2))
-        return float(np.sqrt(num / den)) if den > 0 else float("nan")
+            a = np.sum((y[:, sl] - yh[:, sl]) ** 2, axis=1)
+            b = np.sum(y[:, sl] ** 2, axis=1)
+            num = a if num is None else num + a
+            den = b if den is None else den + b
+        if num is None or not np.all(den > 0):
+            return float("nan")
+        return float(np.sqrt(np.mean(num / den)))
     return nrmse([measured], [simulated], None if mask is None else [mask])
 
 
@@ -280,13 +289,14 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int, window:
 
 @dataclass(frozen=True)
 class NoiseFloor:
-    """Noise estimate: per-channel noise PSD level and the pooled nrmse it implies.
+    """Noise estimate: per-channel noise PSD level and the nrmse it implies.
 
     Attributes
     ----------
     nrmse : float
-        The noise floor as a normalised RMS error: ``sqrt(sum noise variance x samples /
-        sum y^2)`` pooled over channels and logs; NaN without data.
+        The noise floor as a normalised RMS error, in the metric of :func:`nrmse`:
+        ``sqrt(mean_c (noise variance_c x samples / sum y_c^2))``, logs pooled per channel;
+        NaN without data.
     method : str
         How it was estimated (the methods used, ``"; "``-joined).
     psd_level : ndarray, shape (n_outputs,)
@@ -343,7 +353,8 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> Noi
     NoiseFloor
     """
     fb = excited_band(np.concatenate([u for u in us], axis=1), fs, nperseg)
-    num = den = 0.0
+    num_c: dict = {}
+    den_c: dict = {}
     levels = []
     methods = set()
     for y, u, m in zip(ys, us, masks):
@@ -370,10 +381,11 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> Noi
                 level = var / (fs / 2)
                 methods.add("non-coherent output power (1 - coherence) Gyy in the excited band")
             lev.append(level)
-            num += var * m.sum()
-            den += float(np.sum(y[c, m] ** 2))
+            num_c[c] = num_c.get(c, 0.0) + var * m.sum()
+            den_c[c] = den_c.get(c, 0.0) + float(np.sum(y[c, m] ** 2))
         levels.append(lev)
-    nr = float(np.sqrt(num / den)) if den > 0 else float("nan")
+    ok = den_c and all(v > 0 for v in den_c.values())
+    nr = float(np.sqrt(np.mean([num_c[c] / den_c[c] for c in den_c]))) if ok else float("nan")
     lv = np.mean(np.array(levels), axis=0) if levels else np.zeros(ys[0].shape[0])
     return NoiseFloor(nr, "; ".join(sorted(methods)), lv, fb)
 

@@ -6,8 +6,9 @@ fixed report keys (:meth:`GapReport.to_dict`) and the traces and spectra its fig
 
 Metric
 ------
-``nrmse = RMS(measured - simulated) / RMS(measured)``, pooled over the output channels:
-``sqrt(sum_c sum_k (y_ck - yhat_ck)^2 / sum_c sum_k y_ck^2)``, evaluated on held-out
+``nrmse = sqrt(mean_c (sum_k (y_ck - yhat_ck)^2 / sum_k y_ck^2))``: each output channel's
+squared error normalised by its own energy, averaged over the channels (channels of different
+units count alike; one channel: ``RMS(y - yhat) / RMS(y)``), evaluated on held-out
 (validation) samples only.
 """
 

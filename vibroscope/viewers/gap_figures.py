@@ -280,7 +280,7 @@ def plot_gap_time(report, *, fig=None, zoom_s: float = 0.75, max_points: int = 4
     units = _units(report, n_ch)
     series = [("measured", meas, 1.0), ("nominal", np.atleast_2d(tr.nominal), 0.9),
               ("augmented", np.atleast_2d(tr.augmented), 0.9)]
-    aug_name = f"augmented ({report.verdict})"
+    aug_name = f"augmented ({_verdict_words(report)})"
     spans = held_out_spans(tr.validation)
     z0, z1, peak = zoom_window(tr, zoom_s)
     envelope = n > max_points
@@ -336,6 +336,33 @@ def plot_gap_time(report, *, fig=None, zoom_s: float = 0.75, max_points: int = 4
     return fig
 
 
+def focus_band(report, f) -> tuple[float, float]:
+    """The frequency range the gap figures show (Hz): the located bands widened by a factor
+    1.6 on each side (a band of at least a tenth of the largest band edge), else the input's
+    excited band, clipped to the frequencies `f` (0 to Nyquist only when nothing is known)."""
+    f = np.asarray(f, dtype=float)
+    f0, f1 = (float(f[1]) if f.size > 1 else 0.0), float(f[-1]) if f.size else 1.0
+    bands = [b for b in getattr(report, "bands", ()) if np.isfinite(b.f_lo_hz) and np.isfinite(b.f_hi_hz)]
+    if bands:
+        lo = min(b.f_lo_hz for b in bands)
+        hi = max(b.f_hi_hz for b in bands)
+        lo, hi = lo / 1.6, hi * 1.6
+        if hi - lo < 0.1 * hi:
+            lo = max(hi * 0.9, 0.0)
+    else:
+        eb = (getattr(report, "meta", None) or {}).get("excited_band_hz")
+        if not eb:
+            return (f0, f1)
+        lo, hi = 0.8 * float(eb[0]), 1.1 * float(eb[1])
+    lo, hi = max(lo, f0), min(hi, f1)
+    return (lo, hi) if hi > lo else (f0, f1)
+
+
+def _verdict_words(report) -> str:
+    v = tuple(getattr(report, "verdicts", ()) or ())
+    return " + ".join(v) if len(v) > 1 else report.verdict
+
+
 def plot_gap_frf(report, *, fig=None):
     """Bode plots of the measured H1, the nominal and the augmented model, per output.
 
@@ -366,11 +393,16 @@ def plot_gap_frf(report, *, fig=None):
     units = _units(report, n_out)
     fig = _new_figure((min(5.2 * n_out + 1.0, 16), 7.2), fig)
     axes = fig.subplots(3, n_out, squeeze=False, sharex="col", gridspec_kw={"height_ratios": [2.2, 1.3, 1]})
+    lo, hi = focus_band(report, f)
+    inb = (f >= lo) & (f <= hi)
     for o in range(n_out):
         axm, axp, axc = axes[:, o]
+        for b in report.bands:
+            for a in (axm, axp, axc):
+                a.axvspan(b.f_lo_hz, b.f_hi_hz, color=BAND, alpha=0.12, lw=0, zorder=0)
         for what, H in (("measured", Hm), ("nominal", Hn), ("augmented", Ha)):
             label = {"measured": "measured H1", "nominal": "nominal model",
-                     "augmented": f"augmented ({report.verdict})"}[what]
+                     "augmented": f"augmented ({_verdict_words(report)})"}[what]
             ls = "-" if what == "measured" else "--"
             axm.plot(f, _db(H[:, o]), color=COLORS[what], lw=1.2 if what == "measured" else 1.0, ls=ls, label=label)
             axp.plot(f, np.degrees(np.angle(H[:, o])), color=COLORS[what], lw=1.0, ls=ls, label=label)
@@ -385,10 +417,16 @@ def plot_gap_frf(report, *, fig=None):
         axm.set_title(f"{_short(names[o], 40)} / first input [N]", fontsize=9)
         for a in (axm, axp, axc):
             a.grid(True, alpha=0.35)
-        axc.set_xlim(f[0], f[-1])
+        axc.set_xlim(lo, hi)
+        if inb.any():  # the magnitude axis fitted to the lines shown
+            vals = np.concatenate([_db(H[inb, o]) for H in (Hm, Hn, Ha)])
+            vals = vals[np.isfinite(vals)]
+            if vals.size:
+                axm.set_ylim(vals.min() - 3, vals.max() + 3)
         if o == 0:
             axm.legend(fontsize=7, loc="best")
-    fig.suptitle("FRF from the first input: measured H1 vs nominal vs augmented model", fontsize=10)
+    fig.suptitle(f"FRF from the first input: measured H1 vs nominal vs augmented model ({lo:.3g}–{hi:.3g} Hz: "
+                 "the located bands, shaded)", fontsize=10)
     return fig
 
 
@@ -425,7 +463,7 @@ def plot_gap_spectrum(report, *, fig=None):
     curves = (("measured", sp.measured, COLORS["measured"], "-", 1.1),
               ("residual before (nominal)", sp.residual_before, COLORS["nominal"], "-", 1.0),
               ("residual refit (linear)", sp.residual_refit, COLORS["refit"], "--", 1.0),
-              (f"residual after (augmented: {report.verdict})", sp.residual_after, COLORS["augmented"], "-", 1.0),
+              (f"residual after (augmented: {_verdict_words(report)})", sp.residual_after, COLORS["augmented"], "-", 1.0),
               ("noise floor", sp.noise, COLORS["noise"], ":", 1.4))
     for c, ax in enumerate(axes):
         for k, b in enumerate(report.bands):
@@ -450,7 +488,7 @@ def plot_gap_spectrum(report, *, fig=None):
         ax.set_title(f"{_short(names[c], 48)}{gap}", fontsize=9, loc="left")
         ax.grid(True, which="major", alpha=0.35)
         ax.grid(True, which="minor", alpha=0.1)
-        ax.set_xlim(f[0], f[-1])
+        ax.set_xlim(*focus_band(report, f))
     fig.legend(*axes[0].get_legend_handles_labels(), fontsize=8, ncol=3, loc="outside lower center", frameon=False)
     axes[-1].set_xlabel("frequency [Hz]")
     bands = ", ".join(f"{b.f_lo_hz:.3g}–{b.f_hi_hz:.3g} Hz" for b in report.bands) or "none located"

@@ -1,0 +1,161 @@
+"""The gap vocabulary is one table, every candidate it makes builds a model that simulates, and the
+rules that keep a vanishing effect or a linear explanation of a level-dependent BLA from being a
+verdict, against analytic cases."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from vibroscope.gap.diagnosis import LEVEL_FRACTION, _level_test, _regression_starts, _relative, _states_model
+from vibroscope.gap.effects import EFFECT_TABLE, VERDICT_WORDS, candidate_specs, connections
+from vibroscope.gap.fit import LogSimulator
+from vibroscope.gap.report import EFFECTS, Candidate
+from vibroscope.models.elements import Friction, Spring
+from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
+from vibroscope.models.modelfile import dumps_model, loads_model
+
+FS = 1000.0
+
+
+def chain() -> LumpedModel:
+    from vibroscope.models.elements import Damper
+
+    return LumpedModel(
+        (Dof("m1", 1.0), Dof("m2", 0.5)),
+        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
+         Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
+        (Input("m1", channel="/u.x"),),
+        (Output("m1", "acceleration", "/y1.x"), Output("m2", "acceleration", "/y2.x")),
+        "chain",
+    )
+
+
+def scales(model):
+    u = np.random.default_rng(0).standard_normal(4000) * 10
+    return {"fs": FS, "u_rms": 10.0, "u_max": float(np.abs(u).max()),
+            "u_quantiles": [float(np.quantile(np.abs(u), q)) for q in (0.99, 0.9)],
+            "u_abs_sorted": np.sort(np.abs(u)),
+            "d_rms": {"m1-ground": 1e-4, "m2-m1": 5e-5}, "v_rms": {"m1-ground": 0.02, "m2-m1": 0.01},
+            "f_extra": [80.0], "delay0": 0.002}
+
+
+def test_the_report_vocabulary_is_the_table():
+    assert EFFECTS == tuple(EFFECT_TABLE)
+    assert EFFECTS[:2] == ("none", "parameter_mismatch")
+    assert not set(VERDICT_WORDS) & set(EFFECTS)
+    for d in EFFECT_TABLE.values():
+        assert d.kind in ("reference", "linear", "nonlinear")
+        assert (d.factory is None) == (d.kind == "reference")
+        assert d.trend in ("hardening", "softening", "either", "none")
+    # linear explanations do not make the BLA depend on the level; element nonlinearities do
+    assert not any(EFFECT_TABLE[e].level_dependent for e in ("extra_mode", "time_delay", "offset"))
+    assert all(EFFECT_TABLE[e].level_dependent for e in ("coulomb_friction", "backlash", "cubic_stiffness",
+                                                         "saturation", "joint_friction"))
+
+
+def test_every_candidate_builds_a_model_that_simulates_and_round_trips():
+    model = chain()
+    specs = candidate_specs(model, scales(model))
+    made = {s.effect for s in specs}
+    assert made == {n for n, d in EFFECT_TABLE.items() if d.factory is not None}
+    sim = LogSimulator(np.random.default_rng(1).standard_normal((1, 500)) * 10, FS)
+    for s in specs:
+        assert len(s.lower) == len(s.upper) == s.n and s.starts, s.label
+        for p0 in s.starts:
+            assert np.all(np.asarray(p0) >= s.lower) and np.all(np.asarray(p0) <= s.upper), s.label
+        m = s.apply(model, s.starts[0])
+        y = sim.run(m)
+        assert y.shape == (2, 500) and np.all(np.isfinite(y)), s.label
+        # the reported parameters are the table's keys
+        keys = {k for k, _ in EFFECT_TABLE[s.effect].parameters}
+        assert set(s.describe(s.starts[0])) <= keys, (s.effect, set(s.describe(s.starts[0])), keys)
+        # the augmented model is a model file
+        assert loads_model(dumps_model(m)).n_dofs == m.n_dofs
+    # element effects sit at every connection
+    for eff in ("coulomb_friction", "backlash", "cubic_stiffness", "joint_friction", "asymmetric_friction"):
+        where = sorted(tuple(s.where["between"]) for s in specs if s.effect == eff)
+        assert where == sorted(tuple(c) for c in connections(model))
+
+
+def test_vanishing_parameters_are_named():
+    model = chain()
+    by = {}
+    for s in candidate_specs(model, scales(model)):
+        by.setdefault(s.effect, s)
+    assert "half a sample" in by["time_delay"].vanishes([0.4 / FS])
+    assert by["time_delay"].vanishes([2.0 / FS]) is None
+    assert "far below the rms deflection" in by["backlash"].vanishes([math.log(1e-8)])
+    assert by["backlash"].vanishes([math.log(1e-4)]) is None
+    assert "clips" in by["saturation"].vanishes([math.log(1e3)])
+    assert by["saturation"].vanishes([math.log(5.0)]) is None
+    assert "symmetric" in by["asymmetric_friction"].vanishes([0.0, 0.02])
+    assert by["asymmetric_friction"].vanishes([0.0, math.log(3.0)]) is None
+    assert by["cubic_stiffness"].qualifiers([-0.1]) == {"character": "softening"}
+    assert by["cubic_stiffness"].qualifiers([0.1]) == {"character": "hardening"}
+
+
+def test_joint_friction_softens_a_connection_and_keeps_its_small_amplitude_stiffness():
+    """The Jenkins joint replaces a share r of the spring: stiffness k at small amplitude (the
+    slider sticks), (1 - r) k once it slips."""
+    model = chain()
+    s = next(s for s in candidate_specs(model, scales(model)) if s.effect == "joint_friction"
+             and s.where["between"] == ["m1", "ground"])
+    r, fslip = 0.4, 2.0
+    p = np.array([math.log(r / (1 - r)), math.log(fslip / (4e4 * 1e-4))])
+    m = s.apply(model, p)
+    spring = next(e for e in m.elements if isinstance(e, Spring) and e.between == ("m1", "ground"))
+    bw = m.elements[-1]
+    assert spring.k == pytest.approx((1 - r) * 4e4)
+    assert bw.alpha == pytest.approx(r * 4e4) and bw.alpha / bw.beta == pytest.approx(fslip)
+    assert s.describe(p) == pytest.approx({"joint_share": r, "slip_force_N": fslip})
+
+
+def test_level_test_flags_a_changing_bla_and_not_a_constant_one():
+    rng = np.random.default_rng(3)
+    f = np.linspace(5, 100, 400)
+    H = 1.0 / (1 - (f / 40) ** 2 + 0.04j * f / 40)[:, None]
+    coh = np.full((f.size, 1), 0.95)
+    n_avg = 30
+    sd = np.abs(H) * np.sqrt((1 - 0.95) / (n_avg * 0.95) / 2)
+
+    def noisy():
+        return H + sd * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape))
+
+    same = _level_test(f, [(1.0, noisy(), coh, n_avg), (6.0, noisy(), coh, n_avg)])
+    assert not same["flagged"] and same["stat"] < LEVEL_FRACTION and same["trend"] == "none"
+    H_hi = 1.0 / (1 - (f / 43) ** 2 + 0.04j * f / 43)[:, None]  # the resonance 7.5 % higher at 6x the level
+    moved = _level_test(f, [(1.0, noisy(), coh, n_avg), (6.0, H_hi, coh, n_avg)])
+    assert moved["flagged"] and moved["trend"] == "hardening" and moved["shift"] == pytest.approx(0.075, abs=0.01)
+    # one level only: nothing to compare
+    assert not _level_test(f, [(1.0, H, coh, n_avg)])["flagged"]
+
+
+def test_residual_regression_recovers_a_friction_force():
+    """The start value of a friction candidate: the residual of the linear model regressed on
+    the response to tanh(v / v_eps) at the connection recovers the true Coulomb force."""
+    model = chain()
+    truth = model.replace(elements=model.elements + (Friction(("m1", "ground"), force_=3.0, v_eps=1e-3),))
+    rng = np.random.default_rng(4)
+    from scipy import signal
+
+    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
+    u = signal.lfilter(b, a, rng.standard_normal((1, 8000)), axis=1)
+    u *= 40.0 / np.std(u)
+    sim = LogSimulator(u, FS)
+    y = sim.run(truth)
+    y_lin = sim.run(model)
+    st = sim.run(_states_model(model))
+    rel = _relative(model, st[:2], st[2:])
+    est = _regression_starts(model, rel, [y], [y_lin], 0, u.shape[1], FS, {"coulomb_friction"})
+    assert est[("coulomb_friction", "m1-ground")] == pytest.approx(3.0, rel=0.35)
+
+
+def test_candidate_json_holds_its_model_file_and_the_vanishing_reason():
+    c = Candidate("time_delay", {"side": "input"}, {"delay_s": 1e-7}, 0.1, 0.5, model_toml="x = 1\n",
+                  vanished="delay below half a sample")
+    d = c.to_dict()
+    assert d["model_toml"] == "x = 1\n" and d["vanished"] == "delay below half a sample"
+    assert Candidate("none", {}, {}, 0.1, 0.0).to_dict()["vanished"] is None
