@@ -4,31 +4,50 @@
 simulation and the log disagree (channels, frequency bands, excitation levels, state
 regimes) against a noise floor estimated from the data, runs signature tests on the
 residual of the re-estimated linear model, fits the model augmented with every candidate
-effect of the vocabulary (:data:`~vibroscope.gap.report.EFFECTS`), and ranks the candidates
-by the share of the gap they close on held-out data, with a complexity penalty.
+effect of the vocabulary (:data:`~vibroscope.gap.effects.EFFECT_TABLE`), ranks the candidates
+by the share of the gap they close on held-out data, and adds further effects while they
+close significantly more (forward selection).
 
 Procedure
 ---------
 1. **Split** (:func:`~vibroscope.gap.measure.make_split`): one log: a time split that keeps
    every excitation level on both sides; several logs: the last one is held out.
 2. **Nominal**: simulate the model with the logged input (band-limited reconstruction,
-   output sample k aligned with input sample k); gap = held-out nrmse.
+   output sample k aligned with input sample k); gap = held-out nrmse (each channel
+   normalised by its own energy, :func:`~vibroscope.gap.measure.nrmse`).
 3. **Noise floor** (:func:`~vibroscope.gap.measure.noise_floor`).
 4. **Refit**: the nominal structure's masses, stiffnesses and dampings re-estimated on the
-   fitting data: first on the measured H1 (the BLA), then polished on the time response.
-   Parameter errors would otherwise masquerade as nonlinearity.
-5. **Candidates**: linear effects (time delay, extra mode) fitted jointly with the linear
-   parameters on the FRF, then polished in time; nonlinear effects (friction, backlash,
-   hysteresis, cubic stiffness, saturation) screened at every location with the linear
-   parameters held at the refit (a short prefix of the fitting data, coarser integration),
-   then the best location of the leading classes fitted jointly with the linear parameters
-   in the time domain (:func:`scipy.optimize.least_squares`).
-6. **Score**: every candidate simulated on the held-out data; with ``e(g) = sqrt(g^2 -
+   fitting data, on the measured H1 (segment length from the record:
+   :func:`~vibroscope.gap.levels.frf_segment_length`) and then on the time response, started
+   from the FRF fit or from the nominal, whichever fits better; the refit is never worse on
+   the fitting data than the nominal itself (both are reported in ``meta["refit"]``).
+5. **Level evidence**: the BLA per log and excitation level; its change from the lowest to
+   the highest level is tested against the H1 uncertainty (Bendat & Piersol), and the
+   resonances' natural frequency and damping per level are estimated
+   (:func:`~vibroscope.gap.levels.level_blas`).
+6. **Candidates**: start values derived from the data (the residual regressed on each element
+   law's force computed from the refitted motion; clearance and limit levels from the
+   distributions of the relative displacement and of the input); linear effects (time
+   delay, extra mode) fitted jointly with the linear parameters on the FRF, then in time;
+   nonlinear effects probed from the refitted and from the nominal linear parameters at
+   every location, the most promising locations refined (a short prefix of the fitting
+   data, coarser integration), the best classes fitted jointly with the linear parameters.
+7. **Score**: every candidate simulated on the held-out data; with ``e(g) = sqrt(g^2 -
    floor^2)`` the excess over the noise floor, candidates are ranked by
    ``max(e(gap_after), 0.15 floor) (1 + 0.1 n)`` with ``n`` the number of effect parameters
-   (fewer parameters win once gaps reach the noise floor) and ``score = 1 - that /
-   e(gap_before)``. The verdict is ``none`` when the nominal gap is within 1.3 times the
-   noise floor (then no effect is fitted), else the best candidate.
+   and ``score = 1 - that / e(gap_before)``. A candidate whose fitted parameters make the
+   effect vanish (:meth:`~vibroscope.gap.effects.EffectSpec.vanishes`, or an effect that
+   changes the held-out outputs by less than the noise floor) is never the verdict; nor is a
+   linear explanation (parameter mismatch, delay, extra mode) when the BLA depends on the
+   level; without that evidence a nonlinear effect must beat the best linear explanation by
+   :data:`NL_MARGIN`. The verdict is ``none`` when the nominal gap is within
+   :data:`NONE_FACTOR` times the noise floor (no effect is fitted), ``unexplained`` when the
+   best admissible candidate's score is below :data:`UNEXPLAINED_SCORE`, else that candidate,
+   polished jointly with the linear parameters at full accuracy.
+8. **Forward selection**: each other class is added to the verdict's model (its own
+   parameters fitted); the best is kept when the penalised excess falls below
+   :data:`ADD_FACTOR` times the current one, up to three effects, then the combination is
+   polished jointly; each effect's share of the shrink is reported.
 
 References
 ----------
@@ -38,6 +57,8 @@ References
    2nd ed., 2012 (best linear approximation, level dependence, noise floor).
 .. [3] G. Kerschen, K. Worden, A. F. Vakakis, J.-C. Golinval, "Past, present and future of
    nonlinear system identification in structural dynamics", MSSP 20(3):505-592, 2006.
+.. [4] J. S. Bendat, A. G. Piersol, *Random Data: Analysis and Measurement Procedures*, 4th
+   ed., Wiley, 2010, sec. 9.2 (random error of H1 and coherence estimates).
 """
 
 from __future__ import annotations
@@ -92,6 +113,9 @@ UNEXPLAINED_SCORE = 0.3
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
 ADD_FACTOR = 0.7
+#: without level dependence of the BLA, a nonlinear verdict needs a penalised held-out excess gap
+#: below this factor times the best linear explanation's
+NL_MARGIN = 0.8
 #: locations of each nonlinear class refined after probing the start values
 N_LOCATIONS = 2
 
@@ -867,6 +891,13 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         return not (level["flagged"] and kind in ("linear", "reference"))
 
     best_i = next((i for i, c in enumerate(cands) if admissible(c)), None)
+    if best_i is not None and not level["flagged"] and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear":
+        # without level evidence a nonlinear effect must beat the best linear explanation clearly
+        j = next((i for i, c in enumerate(cands) if admissible(c)
+                  and EFFECT_TABLE[c[0].effect].kind in ("linear", "reference")), None)
+        if j is not None and (key(cands[best_i][0].gap_after, cands[best_i][0].n_parameters)
+                              > NL_MARGIN * key(cands[j][0].gap_after, cands[j][0].n_parameters)):
+            best_i = j
     polish = dict(model=model, lin=lin, lo_l=lo_l, hi_l=hi_l, sims=sims, ys=ys, split=split, fs=fs,
                   held_out=held_out, key=key, k_before=k_before)
     if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:

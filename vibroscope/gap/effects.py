@@ -275,11 +275,35 @@ class EffectSpec:
         return self.build(model, np.asarray(p, float))
 
     def vanishes(self, p) -> str | None:
-        """Why the parameters `p` make the effect vanish, or None (see :attr:`vanish`)."""
+        """Why the parameters `p` make the effect vanish, or None (see :attr:`vanish`).
+
+        Parameters
+        ----------
+        p : array_like, shape (n,)
+            The fitted effect parameters.
+
+        Returns
+        -------
+        str or None
+            The reason for people (``"delay 4.2e-06 s is below half a sample (0.0005 s)"``),
+            None when the effect does not vanish or the spec has no rule.
+        """
         return self.vanish(np.asarray(p, float)) if self.vanish is not None else None
 
     def qualifiers(self, p) -> dict:
-        """Words that qualify the fitted effect (see :attr:`character`); empty by default."""
+        """Words that qualify the fitted effect (see :attr:`character`).
+
+        Parameters
+        ----------
+        p : array_like, shape (n,)
+            The fitted effect parameters.
+
+        Returns
+        -------
+        dict of str to str
+            E.g. ``{"character": "softening"}`` for a cubic spring with ``k3 < 0``; empty
+            when the spec has no qualifier.
+        """
         return dict(self.character(np.asarray(p, float))) if self.character is not None else {}
 
     @property

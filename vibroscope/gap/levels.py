@@ -387,7 +387,20 @@ class LevelEvidence:
     description: str
 
     def plot(self, ax=None, *, out_path=None):
-        """The figure (lazy matplotlib, :func:`vibroscope.viewers.gap_figures.plot_level_evidence`)."""
+        """The figure (lazy matplotlib, :func:`vibroscope.viewers.gap_figures.plot_level_evidence`).
+
+        Parameters
+        ----------
+        ax : sequence of three matplotlib Axes, optional
+            Where to draw (|H| per level, natural frequency and damping ratio vs level); a new
+            figure when None.
+        out_path : str or Path, optional
+            Also write the figure there as PNG.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
         from vibroscope.viewers.gap_figures import plot_level_evidence
 
         return plot_level_evidence(self, ax=ax, out_path=out_path)
