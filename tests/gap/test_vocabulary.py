@@ -104,7 +104,7 @@ def test_joint_friction_softens_a_connection_and_keeps_its_small_amplitude_stiff
     s = next(s for s in candidate_specs(model, scales(model)) if s.effect == "joint_friction"
              and s.where["between"] == ["m1", "ground"])
     r, fslip = 0.4, 2.0
-    p = np.array([math.log(r / (1 - r)), math.log(fslip / (4e4 * 1e-4))])
+    p = np.array([math.log(r / (1 - r)), math.log(fslip / 10.0)])
     m = s.apply(model, p)
     spring = next(e for e in m.elements if isinstance(e, Spring) and e.between == ("m1", "ground"))
     bw = m.elements[-1]

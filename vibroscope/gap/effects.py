@@ -523,13 +523,15 @@ def _cubic_stiffness(model, scales):
 
 def _hysteresis(model, scales):
     specs = []
+    u_ref = max(scales.get("u_rms", 1.0), 1e-12)
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
 
         # Bouc-Wen: z' = alpha v - beta (gamma |v| z + delta v |z|), nu = 1;
-        # p = [log(alpha / k), log(beta d_rms), phi] with gamma = cos(phi), delta = sin(phi)
-        def bw_coeffs(p, k_loc=k_loc, d_rms=d_rms):
-            alpha = k_loc * math.exp(p[0])
+        # p = [log(alpha d_rms / u_rms), log(beta d_rms), phi] with gamma = cos(phi), delta = sin(phi):
+        # the hysteretic force scaled by the input's RMS force, whatever the connection's stiffness
+        def bw_coeffs(p, d_rms=d_rms):
+            alpha = u_ref * math.exp(p[0]) / d_rms
             beta = math.exp(p[1]) / d_rms
             phi = float(np.clip(p[2], -1.45, 1.45))
             return alpha, beta, math.cos(phi), math.sin(phi)
@@ -545,8 +547,9 @@ def _hysteresis(model, scales):
         specs.append(EffectSpec(
             "hysteresis", {"between": [pair[0], pair[1]]}, 3,
             [np.array([math.log(a), math.log(b), s])
-             for a, b, s in ((0.3, 1.0, 0.0), (1.0, 1.0, 0.0), (0.3, 1.0, -0.9), (0.3, 1.0, 0.6))],
-            np.array([math.log(1e-3), math.log(1e-3), -1.45]), np.array([math.log(10.0), math.log(1e3), 1.45]),
+             for a, b, s in ((0.1, 1.0, 0.0), (0.03, 1.0, 0.0), (0.3, 1.0, 0.0), (0.1, 3.0, 0.0), (0.1, 1.0, -0.9),
+                             (0.1, 1.0, 0.6))],
+            np.array([math.log(1e-4), math.log(1e-3), -1.45]), np.array([math.log(100.0), math.log(1e3), 1.45]),
             build, desc,
         ))
     return specs
@@ -564,9 +567,11 @@ def _joint_friction(model, scales):
         if spring is None:
             continue
 
-        def coeffs(p, k_loc=k_loc, d_rms=d_rms):
+        u_ref = max(scales.get("u_rms", 1.0), 1e-12)
+
+        def coeffs(p, u_ref=u_ref):
             r = 1.0 / (1.0 + math.exp(-p[0]))
-            fs_ = k_loc * d_rms * math.exp(p[1])
+            fs_ = u_ref * math.exp(p[1])  # the slip force scaled by the input's RMS force
             return r, fs_
 
         def build(m, p, pair=pair, coeffs=coeffs):
@@ -586,9 +591,9 @@ def _joint_friction(model, scales):
             r, _ = coeffs(p)
             return f"the joint holds {100 * r:.2g} % of the connection's stiffness" if r < 0.01 else None
 
-        lo = np.array([-5.0, math.log(1e-3)])
-        hi = np.array([5.0, math.log(20.0)])
-        starts = [np.array([math.log(r / (1 - r)), math.log(s)]) for r, s in ((0.3, 0.3), (0.5, 1.0), (0.3, 0.05))]
+        lo = np.array([-5.0, math.log(1e-4)])
+        hi = np.array([5.0, math.log(100.0)])
+        starts = [np.array([math.log(r / (1 - r)), math.log(s)]) for r, s in ((0.3, 0.1), (0.5, 0.3), (0.3, 0.02))]
         specs.append(EffectSpec(
             "joint_friction", {"between": [pair[0], pair[1]]}, 2, starts, lo, hi, build, desc, vanish=vanish,
             character=lambda p: {"character": "softening"},

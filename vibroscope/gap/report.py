@@ -449,11 +449,13 @@ class GapReport:
         ]
         if self.bands:
             lines.append("bands: " + ", ".join(f"{b.f_lo_hz:.1f}-{b.f_hi_hz:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
-        for i, c in enumerate(self.candidates[:5], 1):
+        n_named = len(named) if len(named) > 1 else 1
+        for i, c in enumerate(self.candidates[:max(5, n_named + 2)], 1):
             where = ", ".join(f"{k}={v}" for k, v in c.where.items())
             par = ", ".join(f"{k}={v:.4g}" for k, v in c.parameters.items())
             van = f"  (vanishes: {c.vanished})" if c.vanished else ""
-            lines.append(f"  {i}. {c.effect:<18} gap {c.gap_after:.4f}  score {c.score:+.3f}  [{where}] {par}{van}")
+            name = f"+ {c.effect}" if 1 < i <= n_named else c.effect  # added by forward selection: the combined gap
+            lines.append(f"  {i}. {name:<18} gap {c.gap_after:.4f}  score {c.score:+.3f}  [{where}] {par}{van}")
         return "\n".join(lines)
 
     def __repr__(self) -> str:

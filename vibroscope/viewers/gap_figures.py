@@ -425,8 +425,8 @@ def plot_gap_frf(report, *, fig=None):
                 axm.set_ylim(vals.min() - 3, vals.max() + 3)
         if o == 0:
             axm.legend(fontsize=7, loc="best")
-    fig.suptitle(f"FRF from the first input: measured H1 vs nominal vs augmented model ({lo:.3g}–{hi:.3g} Hz: "
-                 "the located bands, shaded)", fontsize=10)
+    fig.suptitle(f"FRF from the first input: measured H1, nominal, augmented\n{lo:.3g}–{hi:.3g} Hz around the "
+                 "located bands (shaded)", fontsize=10)
     return fig
 
 
@@ -760,7 +760,12 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
     for a, yl in ((axes[1], "natural frequency f_n [Hz]"), (axes[2], "damping ratio ζ [%]")):
         a.set_xscale("log")
         if rms.size:
-            a.xaxis.set_major_locator(FixedLocator(np.unique(rms)))
+            # one tick per level, thinned where two levels lie within 15 % (labels would collide)
+            ticks = []
+            for r in np.unique(rms):
+                if not ticks or r > 1.15 * ticks[-1]:
+                    ticks.append(float(r))
+            a.xaxis.set_major_locator(FixedLocator(ticks))
             a.xaxis.set_minor_locator(NullLocator())
             a.xaxis.set_major_formatter(FormatStrFormatter("%.3g"))
         a.set_xlabel("input RMS [N]")
