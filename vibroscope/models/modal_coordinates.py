@@ -275,7 +275,7 @@ def from_transfer_function(model, *, rtol: float = 1e-6) -> ModalCoordinatesMode
     num = np.asarray(model.num, float)
     den = np.asarray(model.den, float)
     p = QUANTITY_ORDER[model.output.quantity]
-    form = (f"the gap diagnosis needs a transfer function s^{p} sum_r A_r / (s^2 + 2 zeta_r w_r s + w_r^2) "
+    form = (f"the gap diagnosis needs a second-order transfer function or one of the modal form s^{p} sum_r A_r / (s^2 + 2 zeta_r w_r s + w_r^2) "
             f"with real A_r ({model.output.quantity} output)")
     poles = np.roots(den)
     if den.size < 3 or np.any(np.abs(poles.imag) <= 1e-12 * np.maximum(np.abs(poles), 1.0)) or np.any(poles.real > 0):
