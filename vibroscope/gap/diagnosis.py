@@ -97,8 +97,24 @@ N_LOCATIONS = 2
 
 
 def as_lumped(model) -> LumpedModel:
-    """`model` as a :class:`LumpedModel`: see :func:`vibroscope.gap.physical.as_lumped`
-    (transfer functions of any order, modal models with a driving point)."""
+    """`model` as a :class:`LumpedModel` (:func:`vibroscope.gap.physical.as_lumped`).
+
+    Parameters
+    ----------
+    model : LumpedModel, TransferFunctionModel or PoleResidueModel
+        A lumped model, a transfer function (second order: one mass; higher: modes), or a
+        modal model with a driving point.
+
+    Returns
+    -------
+    LumpedModel
+        `model`, one mass, or a modal-coordinates model with the measured points.
+
+    Raises
+    ------
+    ValueError
+        For a transfer function not of the modal form or a modal model with no driving point.
+    """
     from vibroscope.gap.physical import as_lumped as _as_lumped
 
     return _as_lumped(model)
