@@ -353,7 +353,7 @@ def _with_ods(mm, ods):
     return ModalModel(f, z, s, mm.points, mm.method + "+ods")
 
 
-def export_modal_model(res, path: Path, *, name: str = "", frf=None) -> Path:
+def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_points=None) -> Path:
     """Write an LSFD result as a ``kind = "modal"`` model file (pole-residue form).
 
     Parameters
@@ -367,6 +367,12 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None) -> Path:
     frf : FRF, optional
         The measured FRFs: residues and residuals are refitted in the file's plain pole-residue
         form (:func:`vibroscope.modal.lsfd.pole_residue_form`); without it, LSFD's are written.
+    driving_points : dict of str to str, optional
+        Input channel -> the output channel at the same point. Inputs not named are matched
+        automatically: the one output whose receptance modal constants
+        (:func:`~vibroscope.models.modal_coordinates.modal_constants`) are all positive and
+        nearly real, if exactly one is. A matched input gets its output's ``dof`` label
+        (``out<k>``), the mark of a driving point that ``vibroscope gap`` needs.
 
     Returns
     -------
@@ -382,11 +388,35 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None) -> Path:
         from vibroscope.modal.lsfd import pole_residue_form
 
         R, LR, UR = pole_residue_form(frf, res)
-    inputs = tuple(Input(f"in{i + 1}", channel=c) for i, c in enumerate(res.inputs))
     outputs = tuple(Output(f"out{o + 1}", q, c) for o, c in enumerate(res.outputs))
+    labels = [f"in{i + 1}" for i in range(len(res.inputs))]
+    probe = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
+                                                 inputs=[Input(lb, channel=c) for lb, c in zip(labels, res.inputs)],
+                                                 outputs=outputs)
+    labels = _driving_labels(probe, dict(driving_points or {}))
+    inputs = tuple(Input(lb, channel=c) for lb, c in zip(labels, res.inputs))
     model = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
                                                  inputs=inputs, outputs=outputs, lower=LR, upper=UR, name=name)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     dump_model(model, path)
     return path
+
+
+def _driving_labels(model, given: dict) -> list[str]:
+    """Input labels: the ``dof`` label of the output at each input's point (given by channel,
+    or the single output with positive, nearly real modal constants), else ``in<k>``."""
+    from vibroscope.models.modal_coordinates import COMPLEXITY_WARN, modal_constants
+
+    A = modal_constants(model)
+    out_ch = [o.channel for o in model.outputs]
+    labels = []
+    for i, inp in enumerate(model.inputs):
+        if inp.channel in given:
+            labels.append(model.outputs[out_ch.index(given[inp.channel])].dof)
+            continue
+        a = A[:, :, i]
+        ok = np.all((a.real > 0) & (np.abs(a.imag) <= COMPLEXITY_WARN * np.abs(a)), axis=0)
+        hits = np.nonzero(ok)[0]
+        labels.append(model.outputs[int(hits[0])].dof if hits.size == 1 else inp.dof)
+    return labels

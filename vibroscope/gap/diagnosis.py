@@ -94,8 +94,8 @@ from vibroscope.gap.measure import (
 from vibroscope.gap.report import Candidate, ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.gap.signatures import run_signatures
 from vibroscope.models.elements import GROUND
-from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
-from vibroscope.models.elements import Damper, Spring
+from vibroscope.models.lumped import Input, LumpedModel, Output
+from vibroscope.models.elements import Spring
 from vibroscope.signals import Signals, true_runs
 
 __all__ = ["diagnose", "fit_linear_model", "as_lumped"]
@@ -121,45 +121,27 @@ N_LOCATIONS = 2
 
 
 def as_lumped(model) -> LumpedModel:
-    """`model` as a :class:`LumpedModel`; a second-order transfer function
-    ``b / (a2 s^2 + a1 s + a0)`` (times ``s`` or ``s^2`` for velocity or acceleration
-    outputs) becomes one mass ``a2 / b``, damper ``a1 / b`` and spring ``a0 / b``.
+    """`model` as a :class:`LumpedModel` (:func:`vibroscope.gap.physical.as_lumped`).
 
     Parameters
     ----------
-    model : LumpedModel or TransferFunctionModel
-        A lumped model (returned as is) or a second-order transfer function of that form.
+    model : LumpedModel, TransferFunctionModel or PoleResidueModel
+        A lumped model, a transfer function (second order: one mass; higher: modes), or a
+        modal model with a driving point.
 
     Returns
     -------
     LumpedModel
-        For a transfer function: one DOF ``m1`` tied to ground, with the transfer function's
-        input (moved to ``m1``) and output.
+        `model`, one mass, or a modal-coordinates model with the measured points.
 
     Raises
     ------
     ValueError
-        For a transfer function of another form.
+        For a transfer function not of the modal form or a modal model with no driving point.
     """
-    if isinstance(model, LumpedModel):
-        return model
-    num = np.trim_zeros(np.asarray(getattr(model, "num", []), float), "f")
-    den = np.trim_zeros(np.asarray(getattr(model, "den", []), float), "f")
-    q = model.output.quantity
-    lead = {"displacement": 0, "velocity": 1, "acceleration": 2}[q]
-    if den.size != 3 or num.size != 1 + lead or np.any(num[1:] != 0) or num[0] == 0:
-        raise ValueError(
-            f"the gap diagnosis needs a lumped model or a second-order transfer function b/(a2 s^2 + a1 s + a0) "
-            f"(times s^{lead} for {q} output); got num={num.tolist()}, den={den.tolist()}")
-    b = num[0]
-    m, c, k = den / b
-    return LumpedModel(
-        (Dof("m1", m),),
-        (Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c)),
-        (replace(model.input, dof="m1"),),
-        (replace(model.output, dof="m1"),),
-        model.name,
-    )
+    from vibroscope.gap.physical import as_lumped as _as_lumped
+
+    return _as_lumped(model)
 
 
 def _split_at_gaps(model, sigs: list, nperseg: int | None) -> list:

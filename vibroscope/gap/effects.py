@@ -85,9 +85,19 @@ def connections(model: LumpedModel) -> list[tuple[str, str]]:
     Returns
     -------
     list of tuple of (str, str)
-        Each element's ``between`` once; ``(a, b)`` and ``(b, a)`` count as one location,
+        For a model with points (:meth:`~vibroscope.models.LumpedModel.point_names`, a
+        modal-coordinates model): each point to ground, then each pair of points that move
+        differently. Otherwise each element's ``between`` once; ``(a, b)`` and ``(b, a)`` count as one location,
         kept as first written.
     """
+    points = model.point_names()
+    if points:  # a modal-coordinates model: its measured points, to ground and pairwise
+        out = [(a, "ground") for a in points]
+        for i, a in enumerate(points):
+            for b in points[i + 1:]:
+                if np.any(model.point_vector(a) != model.point_vector(b)):
+                    out.append((a, b))
+        return out
     out: list[tuple[str, str]] = []
     for e in model.elements:
         if e.between not in out and (e.between[1], e.between[0]) not in out:
@@ -326,7 +336,23 @@ def _k_at(model, between) -> float:
     j, e = _spring_at(model, between)
     if e is not None:
         return e.k
+    if model.point_names():  # the static stiffness seen across the connection
+        lv = model.element_vector(Spring(tuple(between), k=0.0))
+        try:
+            flex = float(lv @ np.linalg.solve(model.K, lv))
+        except np.linalg.LinAlgError:
+            flex = 0.0
+        if flex > 0:
+            return 1.0 / flex
     return float(np.max(np.diag(model.K)))
+
+
+def _mass_at(model, name) -> float:
+    """The DOF's mass, or for a point the mass ``1 / sum_j v_j^2 / m_j`` it carries."""
+    if name in model.dof_names:
+        return model.dofs[model.dof_index(name)].mass
+    v = model.point_vector(name)
+    return float(1.0 / np.sum(v**2 / np.diag(model.M)))
 
 
 def _starts_1d(values, lo, hi):
@@ -604,9 +630,10 @@ def _joint_friction(model, scales):
 def _extra_mode(model, scales):
     specs = []
     for f0 in scales.get("f_extra", [])[:6]:
-        for d in model.dofs:
-            def build(m, p, dof=d.name):
-                md = m.dofs[m.dof_index(dof)].mass
+        where = [(p, _mass_at(model, p)) for p in model.point_names()] or [(d.name, d.mass) for d in model.dofs]
+        for d_name, d_mass in where:
+            def build(m, p, dof=d_name):
+                md = _mass_at(m, dof)
                 me = md * math.exp(p[0])
                 f = math.exp(p[1])
                 zeta = math.exp(p[2])
@@ -618,11 +645,11 @@ def _extra_mode(model, scales):
                     elements=m.elements + (Spring((EXTRA_DOF, dof), k=ke), Damper((EXTRA_DOF, dof), c=ce)),
                 )
 
-            def desc(p, md=d.mass):
+            def desc(p, md=d_mass):
                 return {"mass_kg": md * math.exp(p[0]), "frequency_hz": math.exp(p[1]), "damping_ratio": math.exp(p[2])}
 
             specs.append(EffectSpec(
-                "extra_mode", {"dof": d.name, "frequency_hz": float(f0)}, 3,
+                "extra_mode", {"dof": d_name, "frequency_hz": float(f0)}, 3,
                 [np.array([math.log(r), math.log(f0), math.log(0.02)]) for r in (0.03, 0.1)],
                 np.array([math.log(1e-3), math.log(f0 / 1.5), math.log(0.002)]),
                 np.array([math.log(1.0), math.log(f0 * 1.5), math.log(0.2)]),

@@ -79,7 +79,10 @@ class FlatModel:
         ``d+`` and ``v+`` of element ``i`` change by ``Sd[i, j]`` (m/N), ``Sv[i, j]``
         (m/s/N) per N of remainder force ``g+`` of element ``j``.
     ends : ndarray of int64, shape (n_e, 2)
-        DOF index of each element's ends ``(a, b)``; ``-1`` is ground. ``d = x_a - x_b``.
+        DOF index of each element's ends ``(a, b)``; ``-1`` is ground, ``-2`` a point that
+        is a combination of DOFs (:meth:`~vibroscope.models.LumpedModel.point_vector`).
+    L : ndarray, shape (n_e, n)
+        Element vectors: ``d_i = L[i] @ x``, ``v_i = L[i] @ xdot`` (what the kernel uses).
     codes : ndarray of int64, shape (n_e,)
         Element types, :data:`ELEMENT_CODES`.
     params : ndarray, shape (n_e, 9)
@@ -102,6 +105,7 @@ class FlatModel:
     Sd: np.ndarray
     Sv: np.ndarray
     ends: np.ndarray
+    L: np.ndarray
     codes: np.ndarray
     params: np.ndarray
     k_lin: np.ndarray
@@ -186,15 +190,14 @@ def flatten_model(model: LumpedModel, dt: float) -> FlatModel:
     for i, e in enumerate(els):
         for j, end in enumerate(e.between):
             if end != GROUND:
-                ends[i, j] = model.dof_index(end)
+                ends[i, j] = model.dof_index(end) if end in model.dof_names else -2
     offsets = np.zeros(n_e + 1, dtype=np.int64)
     for i, e in enumerate(els):
         offsets[i + 1] = offsets[i] + e.n_states
     Hy = np.zeros((len(model.outputs), n_e))
     for r, o in enumerate(model.outputs):
         if o.quantity == "acceleration":
-            k = model.dof_index(o.dof)
-            Hy[r] = -minv[k] * L[:, k]
+            Hy[r] = -(model.point_vector(o.dof) * minv) @ L.T
     c = np.ascontiguousarray
     return FlatModel(
         dt=dt,
@@ -205,6 +208,7 @@ def flatten_model(model: LumpedModel, dt: float) -> FlatModel:
         Sd=c(S[0::2].reshape(n_e, n_e)),
         Sv=c(S[1::2].reshape(n_e, n_e)),
         ends=ends,
+        L=c(L),
         codes=np.array([ELEMENT_CODES[e.type] for e in els], dtype=np.int64),
         params=c(np.array([_param_row(e) for e in els]).reshape(n_e, N_PARAMS)),
         k_lin=np.array([e.linear_stiffness for e in els], dtype=float),
@@ -352,24 +356,22 @@ def _solve_small(J, F, m):
 
 
 @numba.njit(**_JIT)
-def _kinematics(q, ends, n, i):
-    a, b = ends[i, 0], ends[i, 1]
+def _kinematics(q, L, n, i):
     d = 0.0
     v = 0.0
-    if a >= 0:
-        d += q[a]
-        v += q[n + a]
-    if b >= 0:
-        d -= q[b]
-        v -= q[n + b]
+    for j in range(n):
+        lij = L[i, j]
+        if lij != 0.0:
+            d += lij * q[j]
+            v += lij * q[n + j]
     return d, v
 
 
 @numba.njit(**_JIT)
-def _eval_all(q, x, n_e, ends, codes, prm, klin, clin, soff, n, g_out, sd_out):
+def _eval_all(q, x, n_e, Lk, codes, prm, klin, clin, soff, n, g_out, sd_out):
     """Remainder forces and state derivatives at state q, internal states x[n_e:]."""
     for i in range(n_e):
-        d, v = _kinematics(q, ends, n, i)
+        d, v = _kinematics(q, Lk, n, i)
         o = soff[i]
         ns = soff[i + 1] - o
         s0 = x[n_e + o] if ns > 0 else 0.0
@@ -396,7 +398,7 @@ def _outputs(Y, k, q, U, g, Cy, Dy, Hy):
 
 
 @numba.njit(**_JIT)
-def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, ends, codes, prm, klin, clin, soff, Cy, Dy, Hy,
+def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, Dy, Hy,
                       U, q0, s0, dt, tol, max_iter, Y, Qo, Go, So):  # fmt: skip
     """Integrate over the fine-grid input ``U`` (n_in, N) from ``q0`` (2n), ``s0`` (n_s).
 
@@ -426,7 +428,7 @@ def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, ends, codes, prm, klin, clin, soff, Cy,
     J = np.zeros((m, m))
     for j in range(n_s):
         x[n_e + j] = s0[j]
-    _eval_all(q, x, n_e, ends, codes, prm, klin, clin, soff, n, g, sd)
+    _eval_all(q, x, n_e, Lk, codes, prm, klin, clin, soff, n, g, sd)
     _outputs(Y, 0, q, U, g, Cy, Dy, Hy)
     if store:
         for j in range(n2):
@@ -450,7 +452,7 @@ def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, ends, codes, prm, klin, clin, soff, Cy,
             qp[r] = acc
         if m > 0:
             for i in range(n_e):
-                epd[i], epv[i] = _kinematics(qp, ends, n, i)
+                epd[i], epv[i] = _kinematics(qp, Lk, n, i)
                 x[i] = g[i]
             for j in range(n_s):
                 base[j] = x[n_e + j] + half * sd[j]
@@ -520,7 +522,7 @@ def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, ends, codes, prm, klin, clin, soff, Cy,
             for j in range(n_e):
                 acc += Gf[r, j] * g[j]
             q[r] = acc
-        _eval_all(q, x, n_e, ends, codes, prm, klin, clin, soff, n, g, sd)
+        _eval_all(q, x, n_e, Lk, codes, prm, klin, clin, soff, n, g, sd)
         _outputs(Y, k + 1, q, U, g, Cy, Dy, Hy)
         if store:
             for j in range(n2):
@@ -653,7 +655,7 @@ def integrate(
     Go = np.empty((fm.n_elements, ns))
     So = np.empty((fm.n_states, ns))
     fails, iters = _trapezoid_kernel(
-        fm.P, fm.Gu, fm.Gf, fm.Sd, fm.Sv, fm.ends, fm.codes, fm.params, fm.k_lin, fm.c_lin,
+        fm.P, fm.Gu, fm.Gf, fm.Sd, fm.Sv, fm.L, fm.codes, fm.params, fm.k_lin, fm.c_lin,
         fm.state_offsets, fm.Cy, fm.Dy, fm.Hy, U, q0, s0, fm.dt, float(tol), max_iter,
         Y, Qo, Go, So,
     )  # fmt: skip

@@ -223,7 +223,8 @@ class LumpedModel:
         names = [d.name for d in dofs]
         if len(set(names)) != len(names):
             raise ValueError(f"DOF names repeat: {names=}")
-        known = set(names) | {GROUND}
+        points = set(self.point_names())
+        known = set(names) | {GROUND} | points
         elements = tuple(self.elements)
         for e in elements:
             if not isinstance(e, Element):
@@ -234,8 +235,9 @@ class LumpedModel:
         inputs = tuple(self.inputs)
         outputs = tuple(self.outputs)
         for io in inputs + outputs:
-            if io.dof not in names:
-                raise ValueError(f"{type(io).__name__} on unknown DOF {io.dof!r}; DOFs are {names}")
+            if io.dof not in names and io.dof not in points:
+                raise ValueError(f"{type(io).__name__} on unknown DOF {io.dof!r}; DOFs are {names}"
+                                 + (f", points are {sorted(points)}" if points else ""))
         chans = [io.channel for io in inputs + outputs if io.channel is not None]
         if len(set(chans)) != len(chans):
             raise ValueError(f"channel names repeat: {chans}")
@@ -278,6 +280,34 @@ class LumpedModel:
         except ValueError:
             raise KeyError(f"no DOF {name!r}; DOFs are {list(self.dof_names)}") from None
 
+    def point_names(self) -> tuple[str, ...]:
+        """Names of further points, besides the DOFs, that elements, inputs and outputs may
+        name; none for a plain lumped model (see
+        :class:`vibroscope.gap.physical.ModalCoordinatesModel`)."""
+        return ()
+
+    def point_vector(self, name: str) -> np.ndarray:
+        """Displacement of DOF or point `name` as a combination of the DOFs: ``x_name = v @ x``.
+
+        Parameters
+        ----------
+        name : str
+            A DOF name (or a point of :meth:`point_names`).
+
+        Returns
+        -------
+        ndarray, shape (n_dofs,)
+            The unit vector of the DOF for a plain lumped model.
+
+        Raises
+        ------
+        KeyError
+            If there is no such DOF.
+        """
+        v = np.zeros(self.n_dofs)
+        v[self.dof_index(name)] = 1.0
+        return v
+
     @property
     def is_linear(self) -> bool:
         """True when every element is linear and no input saturates (an input ``offset``
@@ -310,9 +340,9 @@ class LumpedModel:
         lv = np.zeros(self.n_dofs)
         a, b = element.between
         if a != GROUND:
-            lv[self.dof_index(a)] += 1.0
+            lv += self.point_vector(a)
         if b != GROUND:
-            lv[self.dof_index(b)] -= 1.0
+            lv -= self.point_vector(b)
         return lv
 
     def input_channels(self) -> list[str]:
@@ -359,7 +389,7 @@ class LumpedModel:
         """Force distribution matrix, shape (n_dofs, n_inputs): ``f = B u``."""
         B = np.zeros((self.n_dofs, len(self.inputs)))
         for j, i in enumerate(self.inputs):
-            B[self.dof_index(i.dof), j] = 1.0
+            B[:, j] = self.point_vector(i.dof)
         return _ro(B)
 
     def state_matrices(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -385,14 +415,14 @@ class LumpedModel:
         Cq = np.zeros((len(self.outputs), 2 * n))
         Dq = np.zeros((len(self.outputs), len(self.inputs)))
         for r, o in enumerate(self.outputs):
-            k = self.dof_index(o.dof)
+            v = self.point_vector(o.dof)
             if o.quantity == "displacement":
-                Cq[r, k] = 1.0
+                Cq[r, :n] = v
             elif o.quantity == "velocity":
-                Cq[r, n + k] = 1.0
+                Cq[r, n:] = v
             else:
-                Cq[r] = A[n + k]
-                Dq[r] = Bq[n + k]
+                Cq[r] = v @ A[n:]
+                Dq[r] = v @ Bq[n:]
         return A, Bq, Cq, Dq
 
     # -- analysis ------------------------------------------------------------------------------
@@ -458,8 +488,8 @@ class LumpedModel:
         Z = K[None] - (w**2)[:, None, None] * M[None] + 1j * w[:, None, None] * C[None]
         B = self.B
         G = np.linalg.solve(Z, np.broadcast_to(B, (len(f),) + B.shape))  # (n_f, n_dofs, n_in)
-        rows = [self.dof_index(o.dof) for o in self.outputs]
-        H = G[:, rows, :]
+        rows = np.array([self.point_vector(o.dof) for o in self.outputs]).reshape(len(self.outputs), self.n_dofs)
+        H = np.einsum("od,fdi->foi", rows, G)
         for r, o in enumerate(self.outputs):
             q = quantity or o.quantity
             if q == "acceleration":

@@ -25,6 +25,16 @@ force for negative velocity, optional, default ``force``); bouc_wen ``alpha``, `
 ``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A) and optionally
 the Spencer et al. (1997) coefficients (see :class:`vibroscope.models.elements.MRDamper`).
 
+A lumped model in modal coordinates
+(:class:`vibroscope.models.modal_coordinates.ModalCoordinatesModel`, what the gap diagnosis
+makes of a modal model) adds measured points, each a combination of the DOFs
+``x_point = sum_r shape[r] x_r`` over the first DOFs (further DOFs do not move it); elements,
+inputs and outputs may name a point::
+
+    [[point]]
+    name = "out1"
+    shape = [0.21, -0.48, 0.63]     # 1/sqrt(kg) per modal DOF, in [[dof]] order
+
 ``kind = "transfer_function"``: ``num`` and ``den`` (coefficients of s, highest power
 first), one ``[[input]]`` and one ``[[output]]`` (``channel``, ``quantity``).
 
@@ -434,7 +444,7 @@ def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | Po
     if kind is None:
         raise ctx.error(f"missing required key 'kind' (one of {', '.join(map(repr, KINDS))})", missing="kind")
     if kind == "lumped":
-        _unknown(ctx, doc, None, 0, {"kind", "name", "dof", "element", "input", "output"})
+        _unknown(ctx, doc, None, 0, {"kind", "name", "dof", "element", "input", "output", "point"})
         dofs = []
         for i, t in enumerate(_tables(ctx, doc, "dof")):
             _unknown(ctx, t, "dof", i, {"name", "mass"})
@@ -447,6 +457,22 @@ def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | Po
         if not dofs:
             raise ctx.error("a lumped model needs at least one [[dof]]")
         names = {d.name for d in dofs}
+        points, shapes = [], []
+        for i, t in enumerate(_tables(ctx, doc, "point")):
+            _unknown(ctx, t, "point", i, {"name", "shape"})
+            pname = _string(ctx, t, "point", i, "name")
+            if pname == GROUND or pname in names or pname in points:
+                raise ctx.error(f"point {pname!r} is 'ground', a DOF or repeated", "point", i, "name")
+            if "shape" not in t:
+                raise ctx.error("missing required key 'shape'", "point", i, None, missing="shape")
+            sh = t["shape"]
+            if _shape_of(sh) is None or len(_shape_of(sh)) != 1 or not 0 < len(sh) <= len(dofs):
+                raise ctx.error(f"shape={_short(sh)} must be a list of 1 to {len(dofs)} numbers", "point", i, "shape")
+            if (shapes and len(sh) != len(shapes[0])) or not all(math.isfinite(x) for x in sh):
+                raise ctx.error("shape must be finite and as long as the other points' shapes", "point", i, "shape")
+            points.append(pname)
+            shapes.append(tuple(float(x) for x in sh))
+        names = names | set(points)
         elements: list[Element] = []
         for i, t in enumerate(_tables(ctx, doc, "element")):
             etype = _string(ctx, t, "element", i, "type")
@@ -478,6 +504,11 @@ def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | Po
                 key = {"force_": "force", "current": "i"}.get(key, key)
                 raise ctx.error(str(exc), "element", i, key) from None
         inputs, outputs = _parse_io(ctx, doc, names)
+        if points:
+            from vibroscope.models.modal_coordinates import ModalCoordinatesModel
+
+            return ModalCoordinatesModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs),
+                                         str(doc.get("name", "")), points=tuple(points), shapes=tuple(shapes))
         return LumpedModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs), str(doc.get("name", "")))
     if kind == "transfer_function":
         _unknown(ctx, doc, None, 0, {"kind", "name", "num", "den", "input", "output"})
@@ -615,6 +646,8 @@ def dumps_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel) -
         lines.append(f"name = {_fmt(model.name)}")
     for d in model.dofs:
         lines += ["", "[[dof]]", f"name = {_fmt(d.name)}", f"mass = {_fmt(d.mass)}  # kg"]
+    for pname, shape in zip(model.point_names(), getattr(model, "shapes", ())):
+        lines += ["", "[[point]]", f"name = {_fmt(pname)}", f"shape = {_fmt(shape)}"]
     for e in model.elements:
         _, keys, _ = ELEMENT_TYPES[e.type]
         lines += ["", "[[element]]", f"type = {_fmt(e.type)}", f"between = {_fmt(list(e.between))}"]
