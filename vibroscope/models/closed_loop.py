@@ -25,6 +25,7 @@ References
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import replace
 from typing import Literal
@@ -183,7 +184,10 @@ def simulate_closed_loop(
         trapezoidal sub-steps per controller period.
     oversample : int, optional
         Trapezoidal sub-steps per controller period (nonlinear path); default
-        ``max(20, ceil(40 f_max / rate_hz))`` (:func:`vibroscope.models.simulate.default_oversample`).
+        ``max(4, ceil(40 f_max / rate_hz))`` with ``f_max`` the highest natural frequency of
+        the open plant's linear part (the held command is constant within a period, so the
+        sub-steps only resolve the plant; on the EMPS drive with friction at 1 kHz, 4
+        sub-steps differ from 80 by 2e-3 % in the command).
     noise : float
         Gaussian noise of ``noise x RMS`` added to each output and command row.
     seed : int, optional
@@ -246,9 +250,11 @@ def simulate_closed_loop(
     elif oversample is not None:
         R = int(oversample)
     else:
-        from vibroscope.models.simulate import default_oversample
-
-        R = default_oversample(model, rate)
+        try:
+            fmax = float(np.max(model.modes().natural_frequencies))
+        except ValueError:
+            fmax = 0.0
+        R = max(4, int(math.ceil(40.0 * fmax / rate)))
     if R < 1:
         raise ValueError(f"{oversample=} must be >= 1")
     Ref, FF, Uol = _hold_rows(model, u, m, rate)
