@@ -5,6 +5,7 @@ and model files.
 :mod:`vibroscope.errors`.
 """
 
+from vibroscope.models.controller import Controller
 from vibroscope.models.elements import (
     Backlash,
     BoucWen,
@@ -26,6 +27,7 @@ __all__ = [
     "Output",
     "Modes",
     "LumpedModel",
+    "Controller",
     "PoleResidueModel",
     "demo_model",
     "demo_model_5dof",

@@ -50,7 +50,7 @@ import numpy as np
 from vibroscope.models.elements import GROUND, Backlash, BoucWen, CubicSpring, Element, Friction, MRDamper
 from vibroscope.models.lumped import LumpedModel
 
-__all__ = ["ELEMENT_CODES", "FlatModel", "IntegrationResult", "flatten_model", "integrate"]
+__all__ = ["ELEMENT_CODES", "FlatModel", "IntegrationResult", "closed_loop_kernel", "flatten_model", "integrate"]
 
 #: element type name -> integer code used by the kernel
 ELEMENT_CODES = {"cubic_spring": 0, "backlash": 1, "friction": 2, "bouc_wen": 3, "mr_damper": 4}
@@ -398,6 +398,106 @@ def _outputs(Y, k, q, U, g, Cy, Dy, Hy):
 
 
 @numba.njit(**_JIT)
+def _trap_step(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, U, k, q, qp, x, x_old,
+               g, sd, base, epd, epv, F, J, half, tol, max_iter):  # fmt: skip
+    """One trapezoidal step from ``t_k`` to ``t_{k+1}`` over the inputs ``U[:, k]``,
+    ``U[:, k + 1]``, in place: ``q`` (2n) and the remainder forces ``g`` become those of the
+    new step (``g`` then still to be re-evaluated by :func:`_eval_all`, which also refreshes
+    ``sd``), ``x`` holds ``[g+, s+]``; the rest are work arrays. Returns ``(converged,
+    newton_iterations)`` (converged is True when there is nothing nonlinear to solve).
+    """
+    n2 = P.shape[0]
+    n = n2 // 2
+    n_in = U.shape[0]
+    n_e = codes.shape[0]
+    n_s = soff[n_e]
+    m = n_e + n_s
+    iters = 0
+    converged = True
+    # predictor: linear part with g+ = 0
+    for r in range(n2):
+        acc = 0.0
+        for j in range(n2):
+            acc += P[r, j] * q[j]
+        for j in range(n_in):
+            acc += Gu[r, j] * (U[j, k] + U[j, k + 1])
+        for j in range(n_e):
+            acc += Gf[r, j] * g[j]
+        qp[r] = acc
+    if m > 0:
+        for i in range(n_e):
+            epd[i], epv[i] = _kinematics(qp, Lk, n, i)
+            x[i] = g[i]
+        for j in range(n_s):
+            base[j] = x[n_e + j] + half * sd[j]
+        converged = False
+        for it in range(max_iter):
+            iters += 1
+            for r in range(m):
+                for c in range(m):
+                    J[r, c] = 0.0
+            for i in range(n_e):
+                d = epd[i]
+                v = epv[i]
+                for j in range(n_e):
+                    d += Sd[i, j] * x[j]
+                    v += Sv[i, j] * x[j]
+                o = soff[i]
+                ns = soff[i + 1] - o
+                s_0 = x[n_e + o] if ns > 0 else 0.0
+                s_1 = x[n_e + o + 1] if ns > 1 else 0.0
+                (rr, rd, rv, rs0, rs1, h0, h0d, h0v, h0s0, h0s1,
+                 h1, h1d, h1v, h1s0, h1s1) = _element(codes[i], prm, i, klin[i], clin[i], d, v, s_0, s_1)  # fmt: skip
+                F[i] = x[i] - rr
+                for j in range(n_e):
+                    J[i, j] = -(rd * Sd[i, j] + rv * Sv[i, j])
+                J[i, i] += 1.0
+                if ns > 0:
+                    row = n_e + o
+                    J[i, row] = -rs0
+                    F[row] = x[row] - base[o] - half * h0
+                    for j in range(n_e):
+                        J[row, j] = -half * (h0d * Sd[i, j] + h0v * Sv[i, j])
+                    J[row, row] = 1.0 - half * h0s0
+                    if ns > 1:
+                        J[row, row + 1] = -half * h0s1
+                if ns > 1:
+                    row = n_e + o + 1
+                    J[i, row] = -rs1
+                    F[row] = x[row] - base[o + 1] - half * h1
+                    for j in range(n_e):
+                        J[row, j] = -half * (h1d * Sd[i, j] + h1v * Sv[i, j])
+                    J[row, row - 1] = -half * h1s0
+                    J[row, row] = 1.0 - half * h1s1
+            if not _solve_small(J, F, m):
+                break
+            ok = True
+            finite = True
+            for j in range(m):
+                x_old[j] = x[j]
+                x[j] -= F[j]
+                if not math.isfinite(x[j]):
+                    finite = False
+                if abs(F[j]) > tol * max(1.0, abs(x[j])):
+                    ok = False
+            if not finite:
+                for j in range(m):
+                    x[j] = x_old[j]
+                break
+            if ok:
+                converged = True
+                break
+        for i in range(n_e):
+            g[i] = x[i]
+    for r in range(n2):
+        acc = qp[r]
+        for j in range(n_e):
+            acc += Gf[r, j] * g[j]
+        q[r] = acc
+    return converged, iters
+
+
+@numba.njit(**_JIT)
 def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, Dy, Hy,
                       U, q0, s0, dt, tol, max_iter, Y, Qo, Go, So):  # fmt: skip
     """Integrate over the fine-grid input ``U`` (n_in, N) from ``q0`` (2n), ``s0`` (n_s).
@@ -440,88 +540,11 @@ def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, D
     fails = 0
     iters = 0
     for k in range(N - 1):
-        # predictor: linear part with g+ = 0
-        for r in range(n2):
-            acc = 0.0
-            for j in range(n2):
-                acc += P[r, j] * q[j]
-            for j in range(n_in):
-                acc += Gu[r, j] * (U[j, k] + U[j, k + 1])
-            for j in range(n_e):
-                acc += Gf[r, j] * g[j]
-            qp[r] = acc
-        if m > 0:
-            for i in range(n_e):
-                epd[i], epv[i] = _kinematics(qp, Lk, n, i)
-                x[i] = g[i]
-            for j in range(n_s):
-                base[j] = x[n_e + j] + half * sd[j]
-            converged = False
-            for it in range(max_iter):
-                iters += 1
-                for r in range(m):
-                    for c in range(m):
-                        J[r, c] = 0.0
-                for i in range(n_e):
-                    d = epd[i]
-                    v = epv[i]
-                    for j in range(n_e):
-                        d += Sd[i, j] * x[j]
-                        v += Sv[i, j] * x[j]
-                    o = soff[i]
-                    ns = soff[i + 1] - o
-                    s_0 = x[n_e + o] if ns > 0 else 0.0
-                    s_1 = x[n_e + o + 1] if ns > 1 else 0.0
-                    (rr, rd, rv, rs0, rs1, h0, h0d, h0v, h0s0, h0s1,
-                     h1, h1d, h1v, h1s0, h1s1) = _element(codes[i], prm, i, klin[i], clin[i], d, v, s_0, s_1)  # fmt: skip
-                    F[i] = x[i] - rr
-                    for j in range(n_e):
-                        J[i, j] = -(rd * Sd[i, j] + rv * Sv[i, j])
-                    J[i, i] += 1.0
-                    if ns > 0:
-                        row = n_e + o
-                        J[i, row] = -rs0
-                        F[row] = x[row] - base[o] - half * h0
-                        for j in range(n_e):
-                            J[row, j] = -half * (h0d * Sd[i, j] + h0v * Sv[i, j])
-                        J[row, row] = 1.0 - half * h0s0
-                        if ns > 1:
-                            J[row, row + 1] = -half * h0s1
-                    if ns > 1:
-                        row = n_e + o + 1
-                        J[i, row] = -rs1
-                        F[row] = x[row] - base[o + 1] - half * h1
-                        for j in range(n_e):
-                            J[row, j] = -half * (h1d * Sd[i, j] + h1v * Sv[i, j])
-                        J[row, row - 1] = -half * h1s0
-                        J[row, row] = 1.0 - half * h1s1
-                if not _solve_small(J, F, m):
-                    break
-                ok = True
-                finite = True
-                for j in range(m):
-                    x_old[j] = x[j]
-                    x[j] -= F[j]
-                    if not math.isfinite(x[j]):
-                        finite = False
-                    if abs(F[j]) > tol * max(1.0, abs(x[j])):
-                        ok = False
-                if not finite:
-                    for j in range(m):
-                        x[j] = x_old[j]
-                    break
-                if ok:
-                    converged = True
-                    break
-            if not converged:
-                fails += 1
-            for i in range(n_e):
-                g[i] = x[i]
-        for r in range(n2):
-            acc = qp[r]
-            for j in range(n_e):
-                acc += Gf[r, j] * g[j]
-            q[r] = acc
+        ok, it = _trap_step(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, U, k, q, qp, x, x_old,
+                            g, sd, base, epd, epv, F, J, half, tol, max_iter)  # fmt: skip
+        iters += it
+        if not ok:
+            fails += 1
         _eval_all(q, x, n_e, Lk, codes, prm, klin, clin, soff, n, g, sd)
         _outputs(Y, k + 1, q, U, g, Cy, Dy, Hy)
         if store:
@@ -531,6 +554,151 @@ def _trapezoid_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, D
                 Go[j, k + 1] = g[j]
             for j in range(n_s):
                 So[j, k + 1] = x[n_e + j]
+    return fails, iters
+
+
+@numba.njit(**_JIT)
+def _row(Cm, Dm, Hm, r, q, u, g):
+    """``Cm[r] q + Dm[r] u + Hm[r] g``: a measured quantity."""
+    acc = 0.0
+    for j in range(Cm.shape[1]):
+        acc += Cm[r, j] * q[j]
+    for j in range(Dm.shape[1]):
+        acc += Dm[r, j] * u[j]
+    for j in range(Hm.shape[1]):
+        acc += Hm[r, j] * g[j]
+    return acc
+
+
+@numba.njit(**_JIT)
+def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, Dy, Hy,
+                        Cm, Dm, Hm, claw, cgain, cflags, taps, ntaps, cdrive, csat, act_gain,
+                        in_off, in_sat, Ref, FF, Uol, T, R, tol, max_iter, Y, Cout):  # fmt: skip
+    """Closed loop: plant states, controller states and nonlinear elements, from rest.
+
+    Per controller tick ``k`` (period ``T``, ``Nt`` ticks): the outputs ``Y[:, k]`` and the
+    measurements (rows ``3c, 3c+1, 3c+2`` of ``Cm, Dm, Hm``: position, velocity,
+    acceleration of controller ``c``'s DOF) at the state of tick k with the input held over
+    the previous period; each controller's command ``Cout[c, k]`` (law ``claw[c]``, gains
+    ``cgain[c] = (kp, ki, kd, ka, td, t1, kv)``, ``cflags[c] = (sampled velocity, sampled
+    acceleration)``, FIR ``taps[c, :ntaps[c]]``, plus feed-forward ``FF[c, k]``, clipped at
+    ``csat[c]``); then the held inputs (open-loop ``Uol[:, k]``; driven column
+    ``cdrive[c]``: ``clip(act_gain[c] Cout + in_off, -in_sat, in_sat)``) and ``R``
+    trapezoidal steps of ``T / R`` over them (with ``R = 1`` and the exact ZOH ``P``, ``Gu``
+    of a linear plant, the exact discretisation). Returns ``(newton_failures,
+    newton_iterations)``.
+    """
+    n2 = P.shape[0]
+    n = n2 // 2
+    n_in = Uol.shape[0]
+    Nt = Ref.shape[1]
+    n_e = codes.shape[0]
+    n_s = soff[n_e]
+    m = n_e + n_s
+    n_c = claw.shape[0]
+    half = 0.5 * T / R
+    q = np.zeros(n2)
+    qp = np.empty(n2)
+    x = np.zeros(m)
+    x_old = np.zeros(m)
+    g = np.zeros(n_e)
+    sd = np.zeros(n_s)
+    base = np.zeros(n_s)
+    epd = np.zeros(n_e)
+    epv = np.zeros(n_e)
+    F = np.zeros(m)
+    J = np.zeros((m, m))
+    ub = np.zeros((n_in, 2))
+    ucur = np.zeros(n_in)
+    unew = np.zeros(n_in)
+    maxt = taps.shape[1]
+    qh = np.zeros((n_c, maxt))
+    pf_prev = np.zeros(n_c)
+    v_prev = np.zeros(n_c)
+    integ = np.zeros(n_c)
+    e_prev = np.zeros(n_c)
+    w_prev = np.zeros(n_c)
+    c_prev = np.zeros(n_c)
+    _eval_all(q, x, n_e, Lk, codes, prm, klin, clin, soff, n, g, sd)
+    for c in range(n_c):  # at rest at the first measured position
+        p0 = _row(Cm, Dm, Hm, 3 * c, q, ucur, g)
+        sh = 0.0
+        for i in range(ntaps[c]):
+            qh[c, i] = p0
+            sh += taps[c, i]
+        pf_prev[c] = sh * p0
+    fails = 0
+    iters = 0
+    for k in range(Nt):
+        for r in range(Y.shape[0]):
+            Y[r, k] = _row(Cy, Dy, Hy, r, q, ucur, g)
+        for c in range(n_c):
+            pos = _row(Cm, Dm, Hm, 3 * c, q, ucur, g)
+            for i in range(ntaps[c] - 1, 0, -1):
+                qh[c, i] = qh[c, i - 1]
+            qh[c, 0] = pos
+            pf = 0.0
+            for i in range(ntaps[c]):
+                pf += taps[c, i] * qh[c, i]
+            vd = (pf - pf_prev[c]) / T
+            ad = (vd - v_prev[c]) / T
+            pf_prev[c] = pf
+            v_prev[c] = vd
+            vel = _row(Cm, Dm, Hm, 3 * c + 1, q, ucur, g) if cflags[c, 0] else vd
+            acc = _row(Cm, Dm, Hm, 3 * c + 2, q, ucur, g) if cflags[c, 1] else ad
+            kp, ki, kd, ka = cgain[c, 0], cgain[c, 1], cgain[c, 2], cgain[c, 3]
+            td, t1, kv = cgain[c, 4], cgain[c, 5], cgain[c, 6]
+            e = Ref[c, k] - pos
+            law = claw[c]
+            if law == 0:  # P
+                cmd = kp * e
+            elif law == 1:  # PD
+                cmd = kp * e - kd * vel
+            elif law == 2:  # PID
+                integ[c] += 0.5 * ki * T * (e + e_prev[c])
+                cmd = kp * e + integ[c] - kd * vel
+            elif law == 3:  # PD2
+                cmd = kp * e - kd * vel - ka * acc
+            elif law == 4:  # PI + PDT1 (Tustin)
+                integ[c] += 0.5 * ki * T * (e + e_prev[c])
+                w = kp * e + integ[c]
+                a1 = 2.0 * t1 / T
+                b1 = 2.0 * td / T
+                cmd = ((1.0 + b1) * w + (1.0 - b1) * w_prev[c] - (1.0 - a1) * c_prev[c]) / (1.0 + a1)
+                w_prev[c] = w
+                c_prev[c] = cmd
+            else:  # cascade
+                cmd = kp * kv * e - kv * vel
+            e_prev[c] = e
+            cmd += FF[c, k]
+            if cmd > csat[c]:
+                cmd = csat[c]
+            elif cmd < -csat[c]:
+                cmd = -csat[c]
+            Cout[c, k] = cmd
+        if k == Nt - 1:
+            break
+        for j in range(n_in):
+            unew[j] = Uol[j, k]
+        for c in range(n_c):
+            j = cdrive[c]
+            f = act_gain[c] * Cout[c, k] + in_off[j]
+            if f > in_sat[j]:
+                f = in_sat[j]
+            elif f < -in_sat[j]:
+                f = -in_sat[j]
+            unew[j] = f
+        for j in range(n_in):
+            ub[j, 0] = unew[j]
+            ub[j, 1] = unew[j]
+            ucur[j] = unew[j]
+        for r in range(R):
+            ok, it = _trap_step(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, ub, 0, q, qp, x, x_old,
+                                g, sd, base, epd, epv, F, J, half, tol, max_iter)  # fmt: skip
+            iters += it
+            if not ok:
+                fails += 1
+            _eval_all(q, x, n_e, Lk, codes, prm, klin, clin, soff, n, g, sd)
     return fails, iters
 
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from vibroscope._checks import read_only as _ro
 
+from vibroscope.models.controller import Controller
 from vibroscope.models.elements import GROUND, Damper, Element, Spring
 
 __all__ = ["Dof", "Input", "Output", "Modes", "LumpedModel", "demo_model", "demo_model_5dof", "close_modes_model"]
@@ -195,11 +196,18 @@ class LumpedModel:
         Responses, the rows of the output equation.
     name : str
         Free label.
+    controllers : sequence of Controller, optional
+        Discrete controllers closing loops around the model
+        (:mod:`vibroscope.models.controller`); default none. Each drives one input; the
+        analytic methods (:meth:`modes`, :meth:`frf`, :meth:`state_matrices`) describe the
+        open plant, :func:`vibroscope.models.simulate.simulate` the closed loop.
 
     Raises
     ------
     ValueError
-        If names repeat, or an element, input or output names an unknown DOF.
+        If names repeat, an element, input, output or controller names an unknown DOF, a
+        controller drives an unknown input or one another controller drives, or channels
+        repeat.
 
     Examples
     --------
@@ -215,6 +223,7 @@ class LumpedModel:
     inputs: tuple[Input, ...] = ()
     outputs: tuple[Output, ...] = ()
     name: str = ""
+    controllers: tuple[Controller, ...] = ()
 
     def __post_init__(self) -> None:
         dofs = tuple(d if isinstance(d, Dof) else Dof(*d) for d in self.dofs)
@@ -239,8 +248,29 @@ class LumpedModel:
                 raise ValueError(f"{type(io).__name__} on unknown DOF {io.dof!r}; DOFs are {names}"
                                  + (f", points are {sorted(points)}" if points else ""))
         chans = [io.channel for io in inputs + outputs if io.channel is not None]
+        controllers = tuple(self.controllers)
+        driven = []
+        for c in controllers:
+            if not isinstance(c, Controller):
+                raise TypeError(f"{c!r} is not a Controller")
+            if c.dof not in names:
+                raise ValueError(f"controller {c.name!r} measures unknown DOF {c.dof!r}; DOFs are {names}")
+            j = _input_index(inputs, c.drives)
+            if j is None:
+                raise ValueError(f"controller {c.name!r} drives={c.drives!r}: no such input (index or channel) "
+                                 f"among {len(inputs)} inputs")
+            if j in driven:
+                raise ValueError(f"controller {c.name!r} drives input {j}, which another controller drives")
+            if inputs[j].delay:
+                raise ValueError(f"controller {c.name!r} drives input {j} with delay={inputs[j].delay}; "
+                                 "a driven input cannot be delayed")
+            driven.append(j)
+            chans += [ch for ch in (c.reference, c.feedforward, c.command_channel) if ch is not None]
+        if len({c.name for c in controllers}) != len(controllers):
+            raise ValueError(f"controller names repeat: {[c.name for c in controllers]}")
         if len(set(chans)) != len(chans):
             raise ValueError(f"channel names repeat: {chans}")
+        object.__setattr__(self, "controllers", controllers)
         object.__setattr__(self, "dofs", dofs)
         object.__setattr__(self, "elements", elements)
         object.__setattr__(self, "inputs", inputs)
@@ -307,6 +337,29 @@ class LumpedModel:
         v = np.zeros(self.n_dofs)
         v[self.dof_index(name)] = 1.0
         return v
+
+    def driven_input(self, controller: Controller) -> int:
+        """Index of the input `controller` drives.
+
+        Parameters
+        ----------
+        controller : Controller
+            One of :attr:`controllers`.
+
+        Returns
+        -------
+        int
+            Its column of ``B``.
+
+        Raises
+        ------
+        ValueError
+            If it drives no input of this model.
+        """
+        j = _input_index(self.inputs, controller.drives)
+        if j is None:
+            raise ValueError(f"controller {controller.name!r} drives={controller.drives!r}: no such input")
+        return j
 
     @property
     def is_linear(self) -> bool:
@@ -596,10 +649,21 @@ class LumpedModel:
         return cls(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs), name)
 
     def replace(self, **changes) -> "LumpedModel":
-        """A copy with fields replaced (``dofs``, ``elements``, ``inputs``, ``outputs``, ``name``)."""
+        """A copy with fields replaced (``dofs``, ``elements``, ``inputs``, ``outputs``, ``name``,
+        ``controllers``)."""
         from dataclasses import replace
 
         return replace(self, **changes)
+
+
+def _input_index(inputs, drives) -> int | None:
+    """The input index `drives` names (an index, or an input's channel); None if none."""
+    if isinstance(drives, int) and not isinstance(drives, bool):
+        return drives if 0 <= drives < len(inputs) else None
+    for j, i in enumerate(inputs):
+        if i.channel == drives:
+            return j
+    return None
 
 
 def _signal_name(channel: str) -> str:

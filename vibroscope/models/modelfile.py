@@ -18,6 +18,29 @@ Schema (fixed)::
     channel = "/imu/m1.linear_acceleration.x"
     dof = "m1"
     quantity = "acceleration"       # acceleration | velocity | displacement
+    [[controller]]                  # optional: a discrete loop around the model
+    name = "position"
+    law = "cascade"                 # P | PD | PID | PD2 | PI_PDT1 | cascade
+    gains = {kp = 160.18, kv = 243.45}   # per law (below); u = the command's unit
+    rate_hz = 1000.0                # Hz; zero-order hold on the command
+    dof = "m1"                      # the measured DOF
+    drives = "/actuator/force_cmd.wrench.force.x"   # the [[input]] driven: channel or index
+    reference = "/emps/qg.x"        # optional: logged position reference (m); else 0
+    measures = ["position"]         # optional: + "velocity", "acceleration" sampled states
+    velocity_filter = {type = "fir", taps = [0.5, 0.5]}   # optional, before differencing
+    gain = 35.15                    # N per command unit (actuator / drive gain)
+    saturation = 10.0               # optional: command limit, command unit
+    output_channel = "/emps/vir.x"  # optional: logged command, compared as an output
+    output_unit = "V"               # optional, default "1"
+    feedforward = "/emps/pulses.x"  # optional: logged channel added to the command
+
+Controller laws and gains (:data:`vibroscope.models.controller.LAWS`, difference equations
+in :mod:`vibroscope.models.controller`): P ``kp`` (u/m); PD ``kp``, ``kd`` (u s/m); PID
+``kp``, ``ki`` (u/(m s)), ``kd``; PD2 ``kp``, ``ka`` (u s^2/m), ``kd`` optional; PI_PDT1
+``kp``, ``ki``, ``t1`` (s), ``td`` (s) optional; cascade ``kp`` (1/s), ``kv`` (u s/m): the
+command ``kp kv (r - q) - kv qdot``. A model with controllers is simulated in closed loop:
+its logged rows are the references, then the feed-forwards, then the inputs no controller
+drives.
 
 Element parameters: spring ``k``; damper ``c``; cubic_spring ``k3`` (``k`` optional);
 backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional; ``force_neg``, the sliding
@@ -79,6 +102,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroscope.errors import ModelFileError
+from vibroscope.models.controller import LAWS, MEASURES, Controller
 from vibroscope.models.elements import ELEMENT_TYPES, GROUND, Element, make_element
 from vibroscope.models.lumped import QUANTITIES, Dof, Input, LumpedModel, Output
 from vibroscope.models.modal_model import PoleResidueModel
@@ -323,6 +347,89 @@ def _parse_io(ctx, doc, dof_names):
     return inputs, outputs
 
 
+_CONTROLLER_KEYS = {"name", "law", "gains", "rate_hz", "dof", "drives", "reference", "measures", "velocity_filter",
+                    "gain", "saturation", "output_channel", "output_unit", "feedforward"}
+
+
+def _parse_controllers(ctx, doc, names, inputs):
+    out = []
+    tbl = "controller"
+    for i, t in enumerate(_tables(ctx, doc, tbl)):
+        _unknown(ctx, t, tbl, i, _CONTROLLER_KEYS)
+        name = _string(ctx, t, tbl, i, "name")
+        law = _string(ctx, t, tbl, i, "law")
+        if law not in LAWS:
+            raise ctx.error(f"law={law!r} must be one of {tuple(LAWS)}", tbl, i, "law")
+        if "gains" not in t:
+            raise ctx.error("missing required key 'gains'", tbl, i, None, missing="gains")
+        gains = t["gains"]
+        if not isinstance(gains, dict):
+            raise ctx.error(f"gains={_short(gains)} must be a table {{kp = ..., ...}}", tbl, i, "gains")
+        for k, v in gains.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ctx.error(f"gain {k}={_short(v)} must be a finite number", tbl, i, "gains")
+        rate = _number(ctx, t, tbl, i, "rate_hz", positive=True)
+        dof = _string(ctx, t, tbl, i, "dof")
+        if dof not in names:
+            raise ctx.error(f"unknown DOF {dof!r}; DOFs are {sorted(names)}", tbl, i, "dof")
+        drives = t.get("drives", 0)
+        if isinstance(drives, bool) or not isinstance(drives, (int, str)):
+            raise ctx.error(f"drives={_short(drives)} must be an [[input]] channel or index", tbl, i, "drives")
+        if isinstance(drives, int) and not 0 <= drives < len(inputs):
+            raise ctx.error(f"drives={drives} must index one of the {len(inputs)} [[input]] tables", tbl, i, "drives")
+        if isinstance(drives, str) and drives not in [x.channel for x in inputs]:
+            raise ctx.error(f"drives={drives!r} is no [[input]] channel", tbl, i, "drives")
+        meas = t.get("measures", ["position"])
+        if isinstance(meas, str):
+            meas = [meas]
+        if not isinstance(meas, list) or not all(m in MEASURES for m in meas):
+            raise ctx.error(f"measures={_short(meas)} must be a list of {MEASURES}", tbl, i, "measures")
+        taps = None
+        if "velocity_filter" in t:
+            vf = t["velocity_filter"]
+            ok = isinstance(vf, dict) and vf.get("type") == "fir" and set(vf) <= {"type", "taps"}
+            ok = ok and isinstance(vf.get("taps"), list) and len(vf["taps"]) > 0
+            ok = ok and all(isinstance(h, (int, float)) and not isinstance(h, bool) and math.isfinite(h) for h in vf["taps"])
+            if not ok:
+                raise ctx.error(f"velocity_filter={_short(vf)} must be {{type = \"fir\", taps = [numbers]}}",
+                                tbl, i, "velocity_filter")
+            taps = tuple(float(h) for h in vf["taps"])
+        gain = _number(ctx, t, tbl, i, "gain", required=False, default=1.0)
+        if gain == 0:
+            raise ctx.error("gain=0 must be nonzero (N per command unit)", tbl, i, "gain")
+        sat = _number(ctx, t, tbl, i, "saturation", positive=True, required=False)
+        chans = {k: _string(ctx, t, tbl, i, k, required=False) for k in ("reference", "output_channel", "feedforward")}
+        unit = _string(ctx, t, tbl, i, "output_unit", required=False, default="1")
+        try:
+            out.append(Controller(name, law, gains, rate, dof, drives, chans["reference"], tuple(meas), taps, gain, sat,
+                                  chans["output_channel"], unit, chans["feedforward"]))
+        except ValueError as exc:
+            raise ctx.error(str(exc), tbl, i, "gains") from None
+    return out
+
+
+def _controller_lines(model) -> list[str]:
+    out = []
+    for c in model.controllers:
+        out += ["", "[[controller]]", f"name = {_fmt(c.name)}", f"law = {_fmt(c.law)}",
+                "gains = {" + ", ".join(f"{k} = {_fmt(v)}" for k, v in c.gains) + "}",
+                f"rate_hz = {_fmt(c.rate_hz)}", f"dof = {_fmt(c.dof)}",
+                f"drives = {c.drives if isinstance(c.drives, int) else _fmt(c.drives)}"]  # fmt: skip
+        if c.reference is not None:
+            out.append(f"reference = {_fmt(c.reference)}")
+        if c.measures != ("position",):
+            out.append(f"measures = {_fmt(list(c.measures))}")
+        if c.velocity_filter is not None:
+            out.append(f'velocity_filter = {{type = "fir", taps = {_fmt(list(c.velocity_filter))}}}')
+        out.append(f"gain = {_fmt(c.gain)}")
+        for key in ("saturation", "output_channel", "feedforward"):
+            if getattr(c, key) is not None:
+                out.append(f"{key} = {_fmt(getattr(c, key))}")
+        if c.output_unit != "1":
+            out.append(f"output_unit = {_fmt(c.output_unit)}")
+    return out
+
+
 def _shape_of(v):
     """Shape of a regular nested list (numbers at the leaves), or None if ragged / not numeric."""
     if isinstance(v, list):
@@ -444,7 +551,7 @@ def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | Po
     if kind is None:
         raise ctx.error(f"missing required key 'kind' (one of {', '.join(map(repr, KINDS))})", missing="kind")
     if kind == "lumped":
-        _unknown(ctx, doc, None, 0, {"kind", "name", "dof", "element", "input", "output", "point"})
+        _unknown(ctx, doc, None, 0, {"kind", "name", "dof", "element", "input", "output", "point", "controller"})
         dofs = []
         for i, t in enumerate(_tables(ctx, doc, "dof")):
             _unknown(ctx, t, "dof", i, {"name", "mass"})
@@ -504,12 +611,20 @@ def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | Po
                 key = {"force_": "force", "current": "i"}.get(key, key)
                 raise ctx.error(str(exc), "element", i, key) from None
         inputs, outputs = _parse_io(ctx, doc, names)
-        if points:
-            from vibroscope.models.modal_coordinates import ModalCoordinatesModel
+        controllers = _parse_controllers(ctx, doc, names, inputs)
+        try:
+            if points:
+                from vibroscope.models.modal_coordinates import ModalCoordinatesModel
 
-            return ModalCoordinatesModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs),
-                                         str(doc.get("name", "")), points=tuple(points), shapes=tuple(shapes))
-        return LumpedModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs), str(doc.get("name", "")))
+                return ModalCoordinatesModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs),
+                                             str(doc.get("name", "")), tuple(controllers), points=tuple(points),
+                                             shapes=tuple(shapes))
+            return LumpedModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs), str(doc.get("name", "")),
+                               tuple(controllers))
+        except ValueError as exc:
+            if not controllers:
+                raise
+            raise ctx.error(str(exc), "controller", 0, None) from None
     if kind == "transfer_function":
         _unknown(ctx, doc, None, 0, {"kind", "name", "num", "den", "input", "output"})
         coeffs = {}
@@ -660,6 +775,7 @@ def dumps_model(model: LumpedModel | TransferFunctionModel | PoleResidueModel) -
             if value is not None:  # an optional parameter left unset (friction force_neg)
                 lines.append(f"{fkey} = {_fmt(value)}")
     lines += _io_lines(model.inputs, model.outputs)
+    lines += _controller_lines(model)
     return "\n".join(lines) + "\n"
 
 

@@ -280,6 +280,15 @@ def simulate(
     model is integrated over that applied fine-grid force; (4) the outputs are brought back
     to `fs`.
 
+    A model with ``controllers`` is simulated in closed loop instead
+    (:func:`vibroscope.models.closed_loop.simulate_closed_loop`): `u` then holds the logged
+    references (m), feed-forwards and the forces of the inputs no controller drives
+    (:func:`~vibroscope.models.closed_loop.loop_inputs`), the controllers tick at their
+    ``rate_hz`` with a zero-order hold on their commands, the plant is stepped by its exact
+    ZOH discretisation (linear) or by trapezoidal sub-steps (`oversample`, nonlinear), and
+    the result adds each controller's command as a channel; `upsampling` and `fine_input`
+    do not apply.
+
     Parameters
     ----------
     model : LumpedModel, TransferFunctionModel or PoleResidueModel
@@ -372,6 +381,12 @@ def simulate(
     fs = float(fs)
     if not np.isfinite(fs) or fs <= 0:
         raise ValueError(f"{fs=} must be positive")
+    if getattr(model, "controllers", ()):
+        if fine_input is not None:
+            raise ValueError("fine_input is not used in a closed-loop simulation (the model has controllers)")
+        from vibroscope.models.closed_loop import simulate_closed_loop
+
+        return simulate_closed_loop(model, u, fs, t0=t0, method=method, oversample=oversample, noise=noise, seed=seed)
     u = _check_u(model, u)
     n = u.shape[1]
     linear = _is_linear(model)
@@ -474,12 +489,19 @@ def simulate_periodic(
     Signals
         One steady-state period, inputs (the logged period) then outputs.
 
+    Raises
+    ------
+    ValueError
+        If the model has controllers (closed loops run in :func:`simulate` only).
+
     Warns
     -----
     RuntimeWarning
         Once, if Newton's iteration failed at some steps (``meta["newton_failures"]``).
     """
     fs = float(fs)
+    if getattr(model, "controllers", ()):
+        raise ValueError("simulate_periodic does not run closed loops (the model has controllers); use simulate")
     u = _check_u(model, u_period)
     n = u.shape[1]
     linear = _is_linear(model) and all(i.saturation is None and not i.delay for i in model.inputs)
