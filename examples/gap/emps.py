@@ -4,13 +4,14 @@ Writes, from ``../shared/data/emps/DATA_EMPS.mat`` and ``DATA_EMPS_PULSES.mat`` 
 
 * ``OUT/emps_estimation.mcap`` and ``OUT/emps_pulses.mcap``: ROS 2 / JSON MCAP logs with
   ``/emps/qg.x`` (reference, m), ``/emps/qm.x`` (motor position, m), ``/emps/vir.x``
-  (controller output, V) and, in the validation log, ``/emps/pulses.x`` (the pulses,
-  added to the command: ``vir`` jumps by them; V);
+  (controller output, V) and ``/emps/pulses.x`` (the validation log's pulses, added to the
+  command: ``vir`` jumps by them, V; zero in the estimation log, so that both logs drive
+  the same model);
 * ``OUT/emps_nominal.toml``: a rigid mass M = 95.1089 kg with viscous friction
   Fv = 203.5034 N s/m (IDIM-LS, description sec. 3.4) in the cascade controller
   ``vir = kp kv (qg - qm) - kv qm'`` (eq. 6; kp = 160.18 1/s, kv = 243.45 V s/m, velocity
   from the two-tap average ``0.5 qm(k) + 0.5 qm(k-1)`` differenced, 1 kHz, saturation
-  10 V), force ``gtau vir`` (gtau = 35.15 N/V);
+  10 V, the pulses as its feed-forward), force ``gtau vir`` (gtau = 35.15 N/V);
 * ``OUT/emps_friction.toml``: the same with Coulomb friction Fc = 20.3935 N (a
   ``friction`` element) and the IDM offset -3.1648 N (an input ``offset`` of +3.1648 N:
   ``M q'' = gtau vir - Fv q' - Fc sign(q') - offset``, eq. 3).
@@ -57,12 +58,14 @@ def signals(d: dict):
     """The log of one record as Signals."""
     from vibroscope.signals import Signals
 
-    keys = ["qg", "qm", "vir"] + (["pulses"] if "pulses" in d else [])
+    keys = ["qg", "qm", "vir", "pulses"]
     units = {"qg": "m", "qm": "m", "vir": "V", "pulses": "V"}
-    return Signals(np.vstack([d[k] for k in keys]), FS, [CH[k] for k in keys], [units[k] for k in keys])
+    # the estimation log has no pulses: a zero channel, so that both logs drive one model
+    rows = [d[k] if k in d else np.zeros_like(d["qg"]) for k in keys]
+    return Signals(np.vstack(rows), FS, [CH[k] for k in keys], [units[k] for k in keys])
 
 
-def model(d: dict, *, friction: bool, pulses: bool = False):
+def model(d: dict, *, friction: bool, pulses: bool = True):
     """The EMPS drive in its cascade loop (nominal, or with Coulomb friction and offset)."""
     from vibroscope.models import Damper, Dof, Input, LumpedModel, Output, make_element
     from vibroscope.models.controller import Controller
@@ -87,9 +90,8 @@ def reproduce(d: dict, *, friction: bool) -> tuple[float, float]:
     """Relative errors (%) of qm and vir when the model is driven by the logged qg (and pulses)."""
     from vibroscope.models.simulate import simulate
 
-    pulses = "pulses" in d
-    m = model(d, friction=friction, pulses=pulses)
-    u = np.vstack([d["qg"]] + ([d["pulses"]] if pulses else []))
+    m = model(d, friction=friction)
+    u = np.vstack([d["qg"], d.get("pulses", np.zeros_like(d["qg"]))])
     s = simulate(m, u, FS)
     ch = list(s.channels)
     return relerr(d["qm"], s.data[ch.index(CH["qm"])]), relerr(d["vir"], s.data[ch.index(CH["vir"])])

@@ -84,7 +84,9 @@ def run(args) -> int:
         bad = [e for e in effects if e not in EFFECTS]
         if bad:
             raise ModelFileError(f"--effects: unknown effect(s) {bad}; known: {list(EFFECTS)}")
-    channels = list(model.input_channels()) + list(model.output_channels())
+    from vibroscope.gap.closed_loop import log_channels
+
+    channels = sum(log_channels(model), [])  # closed loop: references in; outputs and commands out
     sigs = [read_mcap(log, channels, progress=not args.no_progress).with_meta(source=str(log)) for log in args.logs]
     try:
         if args.nperseg is not None and args.nperseg < 16:

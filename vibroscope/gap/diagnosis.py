@@ -72,6 +72,15 @@ import numpy as np
 from scipy import signal as sps
 
 from vibroscope.errors import ChannelError
+from vibroscope.gap.closed_loop import (
+    CLOSED_LOOP_EXCLUDED,
+    actuator_force,
+    basis_model,
+    basis_rows,
+    is_closed_loop,
+    log_channels,
+    measured_rows,
+)
 from vibroscope.gap.effects import (
     EFFECT_TABLE,
     FRICTION_V_EPS,
@@ -80,7 +89,7 @@ from vibroscope.gap.effects import (
     connections,
     pair_name,
 )
-from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
+from vibroscope.gap.fit import LogSimulator, best_start, fit_linear_frf, fit_time_domain
 from vibroscope.gap.levels import frf_segment_length
 from vibroscope.gap.measure import (
     input_levels,
@@ -154,7 +163,7 @@ def _split_at_gaps(model, sigs: list, nperseg: int | None) -> list:
     """
     import warnings
 
-    chans = model.input_channels() + model.output_channels()
+    chans = sum(log_channels(model), [])
     out = []
     for sig in sigs:
         rows = [list(sig.channels).index(c) for c in chans if c in sig.channels]
@@ -190,16 +199,17 @@ def _split_at_gaps(model, sigs: list, nperseg: int | None) -> list:
 def _split_channels(model: LumpedModel, sig: Signals):
     idx = {c: i for i, c in enumerate(sig.channels)}
     rows = []
-    for ch in model.input_channels() + model.output_channels():
+    ins, outs = log_channels(model)  # closed loop: references... in, plant outputs and commands out
+    for ch in ins + outs:
         if ch not in idx:
             src = sig.meta.get("source", "the log") if hasattr(sig, "meta") else "the log"
             raise ChannelError(f"{src}: channel {ch!r} of the model is not in the log; channels: {list(sig.channels)}")
         rows.append(idx[ch])
     data = np.asarray(sig.data)[rows]
-    n_in = len(model.inputs)
+    n_in = len(ins)
     u, y = data[:n_in], data[n_in:]
     if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
-        bad = [ch for ch, r in zip(model.input_channels() + model.output_channels(), data) if not np.all(np.isfinite(r))]
+        bad = [ch for ch, r in zip(ins + outs, data) if not np.all(np.isfinite(r))]
         raise ValueError(f"non-finite samples in channel(s) {bad}: the gap diagnosis needs gap-free records")
     return u, y
 
@@ -291,7 +301,10 @@ def fit_linear_model(model, signals, *, nperseg: int | None = None, time_polish:
     lin = LinearParams(model)
     f, H, coh = fd[0], fd[1], fd[2]
     sel, w = _frf_weights(f, coh, us, fs, nps)
-    m1, theta, _, _ = fit_linear_frf(model, lin, f[sel], H[sel], w[sel])
+    if is_closed_loop(model):  # the open plant's FRF is not what the loop's log measures: fit in time
+        m1, theta = model, np.zeros(len(lin))
+    else:
+        m1, theta, _, _ = fit_linear_frf(model, lin, f[sel], H[sel], w[sel])
     if not time_polish:
         return m1
     sims = [LogSimulator(u, fs) for u in us]
@@ -482,8 +495,7 @@ def _level_test(f, blas):
 def _pair_force_model(model: LumpedModel, pair) -> LumpedModel:
     """`model` with its inputs replaced by a force pair at the ends of `pair`: ``-f`` on the
     first end, ``+f`` on the second (an element's force); ground ends are left out."""
-    ins = tuple(Input(d, channel=f"/basis/{d}") for d in pair if d != GROUND)
-    return replace(model, inputs=ins)
+    return basis_model(model, [d for d in pair if d != GROUND])
 
 
 def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
@@ -502,8 +514,8 @@ def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
 
     def resp(m, forces):
         try:
-            s = simulate(m, forces, fs)
-            y = np.asarray(s.data[len(m.inputs):]) * wc
+            s = simulate(m, basis_rows(m, forces), fs)
+            y = measured_rows(m, s) * wc
             return y.ravel() if np.all(np.isfinite(y)) else None
         except Exception:  # noqa: BLE001 - a start value only
             return None
@@ -535,7 +547,8 @@ def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
         if "d3" in cols and ({"cubic_stiffness"} & effects):
             out[("cubic_stiffness", key)] = float(ls([cols["d3"]])[0])
     if "offset" in effects and refit.inputs:
-        m = replace(refit, inputs=refit.inputs[:1])
+        m = (basis_model(refit, [refit.inputs[0].dof]) if is_closed_loop(refit)
+             else replace(refit, inputs=refit.inputs[:1]))
         y = resp(m, np.ones((1, n)))
         if y is not None:
             out[("offset", None)] = float(ls([y])[0])
@@ -559,7 +572,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     pairs = [_split_channels(model, s) for s in sigs]
     us = [p[0] for p in pairs]
     ys = [p[1] for p in pairs]
-    out_ch = model.output_channels()
+    out_ch = log_channels(model)[1]
+    closed = is_closed_loop(model)
     units = [sigs[0].units[list(sigs[0].channels).index(c)] if sigs[0].units else "" for c in out_ch]
     skips = [_skip_samples(model, fs, u.shape[1], transient_s) for u in us]
     split = make_split(us, fs, skip=skips)
@@ -582,6 +596,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             window = "boxcar"
         nps = min(nps, max(n_min // 2, 64))
     effect_set = set(EFFECT_TABLE) if effects is None else set(effects)
+    excluded = {e: why for e, why in CLOSED_LOOP_EXCLUDED.items() if e in effect_set} if closed else {}
+    effect_set -= set(excluded)
 
     # 1. nominal -------------------------------------------------------------------------------
     t = time.perf_counter()
@@ -606,7 +622,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     f, H, coh, _, _ = fd
     sel, w = _frf_weights(f, coh, us, fs, nps)
     lin = LinearParams(model)
-    refit0, theta0, _, _ = fit_linear_frf(model, lin, f[sel], H[sel], w[sel])
+    # closed loop: the open plant's FRF is not the loop's (reference to outputs): time domain only
+    theta0 = None if closed else fit_linear_frf(model, lin, f[sel], H[sel], w[sel])[1]
     ns_fit = split.fit_prefix
     lo_l, hi_l = np.full(len(lin), -2.5), np.full(len(lin), 2.5)
     # time-domain polish on up to 20 s of the fitting data (the FRF fit is biased by leakage)
@@ -621,12 +638,14 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
 
     zeros = np.zeros(len(lin))
     g_nom_fit = fit_gap(zeros)
-    g_frf_fit = fit_gap(theta0)
+    g_frf_fit = fit_gap(theta0) if theta0 is not None else float("inf")
     x_start = theta0 if g_frf_fit <= g_nom_fit else zeros
     theta, _, _ = fit_time_domain(lambda x: lin.apply(model, x), x_start, lo_l, hi_l, sims, ys, split.fit, ns_pol,
                                   fast=False, max_nfev=6)
     g_ref_fit = fit_gap(theta)
     refit_note = "FRF fit then time-domain polish" if x_start is theta0 else "time-domain fit from the nominal"
+    if closed:
+        refit_note += " (closed loop: the open plant's FRF does not apply)"
     if not g_ref_fit <= g_nom_fit:
         theta, g_ref_fit, refit_note = zeros, g_nom_fit, "the nominal parameters (no refit was better on the fitting data)"
     refit = lin.apply(model, theta)
@@ -643,16 +662,18 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     for base in (refit, model):
         st = sims[fit_log].run(_states_model(base), n_sc)
         nd = base.n_dofs
-        rels.append(_relative(base, st[:nd], st[nd:]))
+        rels.append(_relative(base, st[:nd], st[nd:2 * nd]))
     rel = rels[0]
-    u_fit = us[fit_log][0, :n_sc]
+    # the input-side scales are forces (closed loop: the actuator's, gain x command)
+    u_force = [actuator_force(model, u, y, fs) for u, y in zip(us, ys)]
+    u_fit = u_force[fit_log][:n_sc]
     au = np.abs(u_fit)
     mfit0 = split.fit[fit_log][:n_sc]
     scales.update({
         "u_rms": float(np.sqrt(np.mean(u_fit**2))),
         "u_max": float(au.max()),
         "u_quantiles": [float(np.quantile(au, q)) for q in (0.999, 0.99, 0.95, 0.85, 0.7, 0.5)],
-        "u_abs_sorted": np.sort(np.abs(np.concatenate([u[0] for u in us]))),
+        "u_abs_sorted": np.sort(np.abs(np.concatenate(u_force))),
         # the larger of the refitted and the nominal model's motion (a strong nonlinearity makes
         # the refit's the wrong scale)
         "d_rms": {k: float(max(np.std(d[mfit0]), np.std(rels[1][k][0][mfit0]))) for k, (d, v) in rel.items()},
@@ -660,12 +681,20 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         "d_quantiles": {k: [float(np.quantile(np.abs(d[mfit0]), q)) for q in (0.5, 0.8, 0.95)] for k, (d, v) in rel.items()},
     })
     f_s, H_s, coh_s = f[sel], H[sel], coh[sel]
-    H_refit = refit.frf(f_s, quantity=None)[:, :, 0]
+
+    def model_frf(m_, y_m):
+        """The model's FRF to the first input: the open plant's, or (closed loop) the H1 of its
+        simulation `y_m` under the logged references on the fitting samples."""
+        if closed:
+            return _frf_data(us, y_m, split.fit, fs, nps, window)[1][sel]
+        return m_.frf(f_s, quantity=None)[:, :, 0]
+
+    H_refit = model_frf(refit, y_ref)
     # start frequencies of an extra mode: where measured / model deviates most significantly
     # (deviation in dB times the coherence weight), against the refitted and the nominal model
     starts: list[float] = []
-    for ref_m in (refit, model):
-        Hr = ref_m.frf(f_s, quantity=None)[:, :, 0]
+    for ref_m, y_m in ((refit, y_ref), (model, y_nom)):
+        Hr = model_frf(ref_m, y_m)
         rt = H_s / np.where(np.abs(Hr) > 0, Hr, 1)
         dev = np.mean(np.abs(20 * np.log10(np.maximum(np.abs(rt), 1e-300))) * w[sel], axis=1)
         pk, props = sps.find_peaks(dev, prominence=0.05 * max(float(dev.max()), 1e-12))
@@ -708,8 +737,13 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
 
     # linear effects: FRF fit jointly with the linear parameters, best per effect polished in time
     best_lin: dict[str, tuple] = {}
+    sp = split.screen_prefix
     for s in lin_specs:
-        m_s, th_s, p_s, cost = fit_linear_frf(refit, lin, f_s, H_s, w[sel], spec=s, p_starts=s.starts)
+        if closed:  # no FRF of the loop to fit: the start that fits the screening prefix best
+            p_s, cost = best_start(lambda p, s=s: s.apply(refit, p), s.starts, sims, ys, split.fit, sp)
+            th_s = np.zeros(len(lin))
+        else:
+            m_s, th_s, p_s, cost = fit_linear_frf(refit, lin, f_s, H_s, w[sel], spec=s, p_starts=s.starts)
         if s.effect not in best_lin or cost < best_lin[s.effect][3]:
             best_lin[s.effect] = (s, th_s, p_s, cost)
         bar.update(1)
@@ -942,7 +976,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     bands = locate_bands(fr, np.sum(Pb / var[:, None], axis=0), np.sum(noise_psd / var[:, None], axis=0))
     st_nom = sims[tr].run(_states_model(model))
     regimes = regime_gaps(ys[tr], y_nom[tr], vmask, {"displacement": st_nom[:model.n_dofs],
-                                                      "velocity": st_nom[model.n_dofs:]},
+                                                      "velocity": st_nom[model.n_dofs:2 * model.n_dofs]},
                           us[tr], input_levels(us[tr], fs)[0])
     fdt = _frf_data([us[tr]], [ys[tr]], [all_masks[tr]], fs, nps)
     fdn = _frf_data([us[tr]], [y_nom[tr]], [all_masks[tr]], fs, nps)
@@ -992,6 +1026,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                                    for k, v in level.items()},
               "start_values": {f"{k[0]}@{k[1]}" if k[1] else k[0]: (list(v) if isinstance(v, tuple) else v)
                                for k, v in scales.get("regress", {}).items()},
+              "closed_loop": ({"inputs": log_channels(model)[0], "outputs": out_ch,
+                               "excluded_effects": excluded} if closed else None),
               "localisation": "bands, channels and regimes of the nominal model on the held-out log "
                               "(the nominal model is fitted on nothing)"},
     )

@@ -438,11 +438,17 @@ def _pair_scales(model, scales, pair):
     return key, d_rms, v_rms, _k_at(model, pair)
 
 
+def _force_ref(scales, f_spring: float) -> float:
+    """The force scale of a connection: its spring force, or (no stiffness: a rigid body on a
+    damper, a drive) the input's RMS force."""
+    return f_spring if f_spring > 0 else max(scales.get("u_rms", 1.0), 1e-12)
+
+
 def _coulomb_friction(model, scales):
     specs = []
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
-        f_ref = k_loc * d_rms  # the spring force scale at this connection
+        f_ref = _force_ref(scales, k_loc * d_rms)  # the spring force scale at this connection
         est = scales.get("regress", {}).get(("coulomb_friction", key))
 
         def build(m, p, pair=pair):
@@ -464,7 +470,7 @@ def _asymmetric_friction(model, scales):
     specs = []
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
-        f_ref = k_loc * d_rms
+        f_ref = _force_ref(scales, k_loc * d_rms)
         est = scales.get("regress", {}).get(("asymmetric_friction", key))
 
         def build(m, p, pair=pair):

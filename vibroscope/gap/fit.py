@@ -25,11 +25,12 @@ import warnings
 import numpy as np
 from scipy.optimize import least_squares
 
+from vibroscope.gap.closed_loop import is_closed_loop, log_channels, measured_rows
 from vibroscope.models.lumped import LumpedModel
 from vibroscope.models.simulate import default_oversample, reconstruct_input
 from vibroscope.models.simulate import simulate as _sim
 
-__all__ = ["LogSimulator", "fit_linear_frf", "fit_time_domain", "frf_residual"]
+__all__ = ["LogSimulator", "best_start", "fit_linear_frf", "fit_time_domain", "frf_residual"]
 
 
 def _oversample_for(model: LumpedModel, fs: float, fast: bool) -> int:
@@ -49,7 +50,8 @@ class LogSimulator:
     Parameters
     ----------
     u : ndarray, shape (n_inputs, n_samples)
-        Logged input (N).
+        Logged input (N); for a model with controllers, the rows of
+        :func:`~vibroscope.models.closed_loop.loop_inputs` (references first).
     fs : float
         Hz.
     """
@@ -79,10 +81,22 @@ class LogSimulator:
         -------
         ndarray, shape (n_outputs, n)
             Simulated outputs in their units; all NaN when the simulation fails or is not
-            finite.
+            finite. For a model with controllers: the plant outputs, then the commands of
+            the controllers with an ``output_channel``
+            (:func:`~vibroscope.gap.closed_loop.measured_rows`), simulated in closed loop
+            at the controllers' rate (`fast` is not used).
         """
         n = self.u.shape[1] if n is None else int(n)
         u = self.u[:, :n]
+        if is_closed_loop(model):
+            # the loop runs at the controllers' ticks (ZOH): no band-limited reconstruction
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    y = measured_rows(model, _sim(model, u, self.fs))
+            except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
+                y = np.full((len(log_channels(model)[1]), n), np.nan)
+            return y if np.all(np.isfinite(y)) else np.full_like(y, np.nan)
         linear = all(e.is_linear for e in model.elements)
         kw = {}
         # linear models: the exact FOH path at 8 sub-steps; nonlinear: the trapezoidal kernel
@@ -233,3 +247,44 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
     sol = least_squares(res, x0, bounds=(lower, upper), method="trf", x_scale=1.0, diff_step=diff_step,
                         max_nfev=max_nfev)
     return sol.x, float(math.sqrt(2 * sol.cost)), count[0]
+
+
+def best_start(build, starts, sims, ys, masks, ns):
+    """The start vector of `starts` whose model ``build(p)`` fits the outputs best.
+
+    Used where no FRF fit gives a start (a model inside its controllers: the measured FRF
+    is the loop's, not the open plant's).
+
+    Parameters
+    ----------
+    build : callable
+        Parameter vector -> model.
+    starts : list of array_like
+        Candidate start vectors.
+    sims : list of LogSimulator
+    ys : list of ndarray, shape (n_outputs, n_samples)
+        Measured outputs per log.
+    masks : list of ndarray of bool
+        Samples that count, per log.
+    ns : list of int
+        Samples to simulate per log (0 skips the log).
+
+    Returns
+    -------
+    (p, nrmse)
+        The best start (``starts[0]`` when none simulates) and its nrmse (inf then).
+    """
+    from vibroscope.gap.measure import nrmse
+
+    best = (np.asarray(starts[0], float), float("inf"))
+    for p0 in starts:
+        try:
+            m = build(np.asarray(p0, float))
+        except (ValueError, TypeError):
+            continue
+        yh = [sim.run(m, n, fast=True) if n else None for sim, n in zip(sims, ns)]
+        g = nrmse([y[:, :n] for y, n in zip(ys, ns) if n], [h for h in yh if h is not None],
+                  [mk[:n] for mk, n in zip(masks, ns) if n])
+        if np.isfinite(g) and g < best[1]:
+            best = (np.asarray(p0, float), float(g))
+    return best
