@@ -534,6 +534,7 @@ def _cubic_stiffness(model, scales):
     trend = scales.get("level_trend", "none")
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
+        k_loc = _force_ref(scales, k_loc * d_rms) / d_rms  # no stiffness there: the input's force scale
         est = scales.get("regress", {}).get(("cubic_stiffness", key))
 
         # k3 = q k / d_rms^2, q signed
