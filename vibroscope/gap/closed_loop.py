@@ -41,12 +41,32 @@ CLOSED_LOOP_EXCLUDED = {
 
 
 def is_closed_loop(model) -> bool:
-    """True when `model` has controllers."""
+    """True when `model` has controllers.
+
+    Parameters
+    ----------
+    model : LumpedModel or any model
+        Models without a ``controllers`` attribute are open loop.
+
+    Returns
+    -------
+    bool
+    """
     return bool(getattr(model, "controllers", ()))
 
 
 def command_channels(model: LumpedModel) -> list[str]:
-    """The logged command channels of `model`: each controller's ``output_channel`` that is set."""
+    """The logged command channels of `model`: each controller's ``output_channel`` that is set.
+
+    Parameters
+    ----------
+    model : LumpedModel
+
+    Returns
+    -------
+    list of str
+        In controller order (empty for an open-loop model).
+    """
     return [c.output_channel for c in getattr(model, "controllers", ()) if c.output_channel]
 
 
@@ -82,6 +102,17 @@ def measured_rows(model: LumpedModel, sim) -> np.ndarray:
     :func:`~vibroscope.models.closed_loop.loop_inputs` rows), then the commands of the
     controllers with an ``output_channel`` (``simulate`` returns every controller's command
     last, in controller order).
+
+    Parameters
+    ----------
+    model : LumpedModel
+        The simulated model.
+    sim : Signals
+        Its simulation result.
+
+    Returns
+    -------
+    ndarray, shape (n_outputs, n_samples)
     """
     data = np.asarray(sim.data)
     if not is_closed_loop(model):
@@ -134,6 +165,16 @@ def basis_model(model: LumpedModel, dofs) -> LumpedModel:
     Open loop: the inputs are replaced by them. Closed loop: they are added as inputs no
     controller drives (the loop stays closed: the response is the closed loop's to a force
     at `dofs`, a disturbance the controller fights), fed by :func:`basis_rows`.
+
+    Parameters
+    ----------
+    model : LumpedModel
+    dofs : sequence of str
+        DOF (or point) names, one unit force input each.
+
+    Returns
+    -------
+    LumpedModel
     """
     ins = tuple(Input(d, channel=f"/basis/{d}") for d in dofs)
     if not is_closed_loop(model):
@@ -146,6 +187,17 @@ def basis_rows(model: LumpedModel, forces: np.ndarray) -> np.ndarray:
 
     Open loop: `forces`. Closed loop: zero references, feed-forwards and other undriven
     inputs, then `forces` (the basis inputs are the last rows of ``loop_inputs``).
+
+    Parameters
+    ----------
+    model : LumpedModel
+        A :func:`basis_model`.
+    forces : array_like, shape (n_basis, n_samples)
+        The basis forces, N.
+
+    Returns
+    -------
+    ndarray, shape (n_rows, n_samples)
     """
     forces = np.atleast_2d(np.asarray(forces, float))
     if not is_closed_loop(model):
