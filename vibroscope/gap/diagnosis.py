@@ -121,7 +121,7 @@ LEVEL_FRACTION = 0.01
 UNEXPLAINED_SCORE = 0.3
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
-ADD_FACTOR = 0.7
+ADD_FACTOR = 0.5
 #: without level dependence of the BLA, a nonlinear verdict needs a penalised held-out excess gap
 #: below this factor times the best linear explanation's
 NL_MARGIN = 0.8
@@ -667,7 +667,9 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # the input-side scales are forces (closed loop: the actuator's, gain x command)
     u_force = [actuator_force(model, u, y, fs) for u, y in zip(us, ys)]
     u_fit = u_force[fit_log][:n_sc]
-    au = np.abs(u_fit)
+    # the input's distribution over every fitting sample of every log (several logs at different
+    # levels: a limit is sought among all the levels the fit sees)
+    au = np.abs(np.concatenate([uf[m_[:uf.size]] for uf, m_ in zip(u_force, split.fit) if m_.any()]))
     mfit0 = split.fit[fit_log][:n_sc]
     scales.update({
         "u_rms": float(np.sqrt(np.mean(u_fit**2))),

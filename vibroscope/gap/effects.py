@@ -541,7 +541,7 @@ def _cubic_stiffness(model, scales):
         def build(m, p, pair=pair, k_loc=k_loc, d_rms=d_rms):
             return replace(m, elements=m.elements + (CubicSpring(pair, k3=float(p[0] * k_loc / d_rms**2), k=0.0),))
 
-        pos = [0.03, 0.3, 3.0]
+        pos = [0.03, 0.3, 3.0, 20.0]
         neg = [-0.03, -0.15]
         grid = (neg + pos) if trend == "softening" else (pos + neg)
         q_est = est * d_rms**2 / k_loc if est is not None else None
