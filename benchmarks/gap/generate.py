@@ -67,6 +67,10 @@ from vibroscope.models.modelfile import dumps_model
 __all__ = [
     "EFFECTS",
     "CLASSES",
+    "ALL_CLASSES",
+    "CLOSED_LOOP_CLASSES",
+    "MODAL_CLASSES",
+    "KINDS",
     "SINGLE_EFFECTS",
     "PAIR_EFFECTS",
     "ELEMENT_EFFECTS",
@@ -85,6 +89,12 @@ __all__ = [
     "nrmse",
     "gap",
     "make_case",
+    "make_closed_loop_case",
+    "simulate_closed_loop_truth",
+    "random_drive",
+    "closed_loop_nominal",
+    "random_modal_truth",
+    "exact_pole_residue",
     "write_case",
     "generate",
     "main",
@@ -111,6 +121,14 @@ SINGLE_EFFECTS = (
 )
 #: the classes: the single effects plus two hidden effects at once
 CLASSES = SINGLE_EFFECTS + ("two_effects",)
+#: closed-loop classes (``--kind closed_loop``): a position-controlled 1-2 DOF drive
+CLOSED_LOOP_EFFECTS = ("none", "coulomb_friction", "backlash", "time_delay", "saturation", "offset")
+CLOSED_LOOP_CLASSES = tuple(f"closed_loop_{e}" for e in CLOSED_LOOP_EFFECTS)
+#: modal classes (``--kind modal``): the open-loop truth, the nominal as its exact pole-residue model
+MODAL_CLASSES = tuple(f"modal_{e}" for e in CLASSES)
+#: every class, in the order that seeds :func:`case_rng` (the open-loop ones first: unchanged)
+ALL_CLASSES = CLASSES + CLOSED_LOOP_CLASSES + MODAL_CLASSES
+KINDS = {"open": CLASSES, "closed_loop": CLOSED_LOOP_CLASSES, "modal": MODAL_CLASSES}
 #: the effects a two-effect case draws its (distinct) pair from
 PAIR_EFFECTS = ("coulomb_friction", "offset", "backlash", "cubic_stiffness", "saturation", "time_delay",
                 "hysteresis", "asymmetric_friction")
@@ -1105,6 +1123,9 @@ class Case:
     outputs_clean: np.ndarray
     truth: dict
     logs: list = field(default_factory=list)  # [(u, noisy outputs, clean outputs)] per log
+    nominal_text: str | None = None  # the nominal file's text when it is not dumps_model(nominal) (modal)
+    log_channels: list | None = None  # closed loop: [reference] + outputs + [command]
+    log_units: list | None = None
 
     def signals(self, i: int = 0):
         """The `i`-th log as Signals (input channel first, then the outputs)."""
@@ -1112,6 +1133,8 @@ class Case:
 
         u, y = (self.u, self.outputs) if not self.logs else (self.logs[i][0], self.logs[i][1])
         data = np.vstack([u.coarse[None, : y.shape[1]], y])
+        if self.log_channels is not None:
+            return Signals(data=data, fs=u.fs, channels=list(self.log_channels), units=list(self.log_units), t0=T0_LOG)
         chans = self.nominal.input_channels() + self.nominal.output_channels()
         units = ["N"] + [{"acceleration": "m/s^2", "velocity": "m/s", "displacement": "m"}[o.quantity]
                          for o in self.nominal.outputs]
@@ -1123,7 +1146,7 @@ class Case:
 
 def case_rng(seed: int, effect: str, index: int) -> np.random.Generator:
     """The generator of case `index` of class `effect` (independent of the other classes)."""
-    return np.random.default_rng([int(seed), CLASSES.index(effect), int(index)])
+    return np.random.default_rng([int(seed), ALL_CLASSES.index(effect), int(index)])
 
 
 def _log_uniform(rng, lo, hi) -> float:
@@ -1138,8 +1161,14 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     duration / 3 each, at one excitation level each (1, 2.5, 6), instead of one log cycling
     the levels.
     """
+    cls = effect
+    if effect.startswith("closed_loop_"):
+        return make_closed_loop_case(effect, rng, duration, multi_log=multi_log)
+    modal = effect.startswith("modal_")
+    if modal:
+        effect = effect[len("modal_"):]
     if effect not in CLASSES:
-        raise ValueError(f"effect={effect!r} must be one of {CLASSES}")
+        raise ValueError(f"effect={cls!r} must be one of {ALL_CLASSES}")
     if integrator not in INTEGRATORS:
         raise ValueError(f"integrator={integrator!r} must be one of {INTEGRATORS}")
     tic = time.perf_counter()
@@ -1151,7 +1180,10 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
             pair = [PAIR_EFFECTS[i] for i in rng.choice(len(PAIR_EFFECTS), 2, replace=False)]
         else:
             pair = [effect]
-        nominal = random_chain_model(rng, displacement=True if "offset" in pair else None)
+        if modal:
+            nominal = random_modal_truth(rng, displacement=True if "offset" in pair else None)
+        else:
+            nominal = random_chain_model(rng, displacement=True if "offset" in pair else None)
         f_max = float(nominal.modes().natural_frequencies.max())
         kind = str(rng.choice(["random", "multisine"]))
         f_hi = float(rng.uniform(max(150.0, 1.25 * f_max), 280.0))
@@ -1266,7 +1298,8 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     logs = ["log.mcap"] if nlog == 1 else [f"log_{i + 1}.mcap" for i in range(nlog)]
     truth = {
         "effect": effect if effect != "two_effects" else list(pair),
-        "class": effect,
+        "class": cls,
+        "kind": "modal" if modal else "open",
         "where": pick(wheres),
         "parameters": pick([_jsonable(p) for p in params]),
         "details": pick([_jsonable(dict(d, target_gap=tg)) if effect != "none" else {}
@@ -1300,7 +1333,399 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         if e == "cubic_stiffness":
             truth["variant"] = d["sign"]  # "hardening" / "softening"
     logs_data = [(uu, y, c) for uu, y, c in zip(us, noisy, clean)]
-    return Case(nominal, tm, us[0], noisy[0], clean[0], truth, logs_data)
+    text = None
+    if modal:
+        text = dumps_model(exact_pole_residue(nominal))
+        truth["nominal_lumped_toml"] = dumps_model(nominal)
+    return Case(nominal, tm, us[0], noisy[0], clean[0], truth, logs_data, nominal_text=text)
+
+
+# ---------------------------------------------------------------------------------------------
+# modal kind: the nominal as the exact pole-residue model of the truth without its effect
+# ---------------------------------------------------------------------------------------------
+def random_modal_truth(rng: np.random.Generator, displacement: bool | None = None) -> LumpedModel:
+    """A :func:`random_chain_model` network made modally exact: the dampers of each connection
+    replaced by ``beta k`` (stiffness-proportional damping, real modes; ``beta`` drawn so the
+    lowest mode has 1-4 % and the highest at most 4 %, which needs modes within a factor 4),
+    an acceleration sensor on every DOF (so the input DOF is a driving point and every effect
+    sits between measured points), plus a displacement sensor as :func:`_random_outputs`."""
+    for _ in range(500):
+        m = random_chain_model(rng, displacement=False)
+        f = m.modes().natural_frequencies
+        if f.max() / f.min() > 4.0:
+            continue
+        z_lo = float(rng.uniform(0.01, 0.04 * f.min() / f.max()))
+        beta = 2.0 * z_lo / (2 * np.pi * f.min())
+        els = []
+        for e in m.elements:
+            if isinstance(e, Spring):
+                els += [e, Damper(e.between, beta * e.k)]
+        names = m.dof_names
+        outs = [Output(d, "acceleration", output_channel(d)) for d in names]
+        if displacement is None:
+            displacement = bool(rng.random() < DISPLACEMENT_SHARE)
+        if displacement:
+            d = str(rng.choice(names))
+            outs.append(Output(d, "displacement", output_channel(d, "displacement")))
+        return replace(m, elements=tuple(els), outputs=tuple(outs), name=f"modal truth, beta={beta:.6g}")
+    raise RuntimeError("could not draw a modal truth")  # pragma: no cover
+
+
+def exact_pole_residue(model: LumpedModel):
+    """The exact pole-residue model (``kind = "modal"``) of a stiffness-proportionally damped
+    `model` (``C = beta K``): poles ``lambda_r`` from the mass-normalised real modes, residues
+    ``phi_o phi_i / (2 j w_d) lambda^p`` (p = 0, 1, 2 for displacement, velocity,
+    acceleration), accelerance lower residual ``sum_r phi_o phi_i``; outputs and input labelled
+    by DOF (the input's DOF is a driving point)."""
+    import scipy.linalg as sl
+
+    from vibroscope.models.modal_model import PoleResidueModel
+
+    K, M, C = np.asarray(model.K), np.asarray(model.M), np.asarray(model.C)
+    w2, V = sl.eigh(K, M)
+    w = np.sqrt(w2)
+    beta = float(np.median(np.diag(V.T @ C @ V) / w2))
+    if not np.allclose(V.T @ C @ V, np.diag(beta * w2), rtol=1e-9, atol=1e-9 * np.max(np.abs(C))):
+        raise ValueError("exact_pole_residue needs stiffness-proportional damping")
+    z = beta * w / 2
+    lam = -z * w + 1j * w * np.sqrt(1 - z**2)
+    i = model.dof_index(model.inputs[0].dof)
+    R, lower = [], []
+    for o in model.outputs:
+        A = V[model.dof_index(o.dof)] * V[i]  # (modes,)
+        p = {"displacement": 0, "velocity": 1, "acceleration": 2}[o.quantity]
+        R.append(A / (2j * lam.imag) * lam**p)
+        lower.append(A.sum() if p == 2 else 0.0)
+    R = np.array(R).T[:, :, None]
+    inp = Input(model.inputs[0].dof, "force", model.inputs[0].channel)
+    outs = [Output(o.dof, o.quantity, o.channel) for o in model.outputs]
+    return PoleResidueModel.from_poles_residues(w / (2 * np.pi), z, R, inputs=[inp], outputs=outs,
+                                                lower=np.array(lower, complex)[:, None], name="identified modes")
+
+
+# ---------------------------------------------------------------------------------------------
+# closed-loop kind: a position-controlled drive
+# ---------------------------------------------------------------------------------------------
+CL_FORCE_CHANNEL = "/drive/force.x"  # the driven input (not logged)
+CL_REFERENCE_CHANNEL = "/drive/reference.x"  # logged position reference, m
+CL_COMMAND_CHANNEL = "/drive/command.x"  # logged controller output, V
+CL_RATE = 1000.0  # controller rate, Hz (= the log rate)
+CL_TAPS = (0.5, 0.5)  # the velocity estimate's FIR filter (EMPS)
+CL_SUB = 10  # RK4 sub-steps per controller tick (10 kHz; times the stiffness factor)
+
+
+@numba.njit(cache=False)
+def _cl_rk4(y0, C, P, ref, kp, kv, gain, idof, taps, sub, n):
+    """The closed loop, from rest: at tick k (T = 1 / CL_RATE) the position ``q = y[idof]``,
+    FIR-filtered ``p_k = sum h_i q_{k-i}``, velocity ``(p_k - p_{k-1}) / T``, command
+    ``c_k = kp kv (r_k - q_k) - kv v_k``, force ``gain c_k`` written into the piecewise-constant
+    input table C (row k); then `sub` RK4 steps over the tick (stage times nudged inside the
+    interval, so each step sees the force held over it). Returns states at the ticks and the
+    commands."""
+    T = 1.0 / CL_RATE
+    h = T / sub
+    eps = 1e-7 * h
+    Y = np.empty((n, y0.size))
+    cmd_out = np.empty(n)
+    y = y0.copy()
+    nt = taps.size
+    hist = np.zeros(nt)
+    for i in range(nt):
+        hist[i] = y[idof]
+    pf_prev = 0.0
+    for i in range(nt):
+        pf_prev += taps[i] * hist[i]
+    for k in range(n):
+        Y[k] = y
+        for i in range(nt - 1, 0, -1):
+            hist[i] = hist[i - 1]
+        hist[0] = y[idof]
+        pf = 0.0
+        for i in range(nt):
+            pf += taps[i] * hist[i]
+        v = (pf - pf_prev) / T
+        pf_prev = pf
+        c = kp * kv * (ref[k] - y[idof]) - kv * v
+        cmd_out[k] = c
+        C[k, 3] = gain * c
+        if k == n - 1:
+            break
+        t0 = k * T
+        for s in range(sub):
+            t = t0 + s * h
+            k1 = _rhs(y, t + eps, C, P)
+            k2 = _rhs(y + 0.5 * h * k1, t + 0.5 * h, C, P)
+            k3 = _rhs(y + 0.5 * h * k2, t + 0.5 * h, C, P)
+            k4 = _rhs(y + h * k3, t + h - eps, C, P)
+            y = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return Y, cmd_out
+
+
+@dataclass(frozen=True)
+class DriveController:
+    """The truth's copy of the drive's cascade controller (1 kHz, ZOH, EMPS velocity filter)."""
+
+    kp: float  # 1/s
+    kv: float  # V s/m
+    gain: float  # N/V
+    dof: str = "m1"
+
+    def vibroscope(self):
+        from vibroscope.models.controller import Controller
+
+        return Controller("position", "cascade", {"kp": self.kp, "kv": self.kv}, CL_RATE, self.dof,
+                          drives=CL_FORCE_CHANNEL, reference=CL_REFERENCE_CHANNEL, velocity_filter=CL_TAPS,
+                          gain=self.gain, output_channel=CL_COMMAND_CHANNEL, output_unit="V")
+
+
+def simulate_closed_loop_truth(model, ctl: DriveController, ref: np.ndarray, n: int | None = None,
+                               *, substeps: int | None = None) -> TruthRun:
+    """The truth's closed loop (independent of vibroscope): `model` (LumpedModel or
+    TruthModel; its input's delay, saturation and the TruthModel offset act on the actuator
+    force) driven by its cascade controller `ctl` tracking the reference `ref` (m, one sample
+    per tick). Outputs at the ticks: the model's outputs (an acceleration is the left limit,
+    with the force held over the previous tick) and, last row, the command (V)."""
+    tm = _tm(model)
+    m = tm.model
+    n = ref.size if n is None else int(n)
+    P, nz = _compile(tm)
+    P[0] = CL_RATE
+    sub = CL_SUB if substeps is None else int(substeps)
+    C = np.zeros((n, 4))
+    y0 = np.zeros(2 * m.n_dofs + nz)
+    tic = time.perf_counter()
+    Y, cmd = _cl_rk4(y0, C, P, np.ascontiguousarray(ref[:n], dtype=float), ctl.kp, ctl.kv, ctl.gain,
+                     m.dof_index(ctl.dof), np.array(CL_TAPS), sub, n)
+    if not np.all(np.isfinite(Y)):
+        raise RuntimeError("truth integration failed: the closed loop diverged")
+    t = np.arange(n) / CL_RATE
+    tl = np.maximum(t - 1e-7 / (CL_RATE * sub), 0.0)
+    tl[0] = -1e-9
+    A = _accelerations(Y, tl, C, P)
+    nd = m.n_dofs
+    rows = []
+    for o in m.outputs:
+        i = m.dof_index(o.dof)
+        rows.append({"acceleration": A[:, i], "velocity": Y[:, nd + i], "displacement": Y[:, i]}[o.quantity])
+    rows.append(cmd)
+    fa = np.array([_spline_eval(C, CL_RATE, tt - P[1]) if tt - P[1] >= 0 else 0.0 for tt in t + 0.5 / CL_RATE])
+    meta = {"method": "classic RK4, fixed step, between controller ticks", "step_hz": CL_RATE * sub,
+            "substeps_per_tick": sub, "nfe": 4 * sub * (n - 1)}
+    fa = fa + tm.offset
+    if P[2] > 0:
+        fa = np.clip(fa, -P[2], P[2])
+    return TruthRun(t, Y, A, np.array(rows), fa, 4 * sub * (n - 1), time.perf_counter() - tic, meta)
+
+
+def random_drive(rng: np.random.Generator, two_dof: bool | None = None):
+    """A drive: m1 (2-20 kg, the motor side, viscous friction to ground 1-10 m1 N s/m) and,
+    with `two_dof` (default: probability 1/2), a load m2 = (0.2-1) m1 on a spring (clamped
+    load mode 20-100 Hz, damping 1-4 %). Force input on m1; sensors: m1 displacement, every
+    DOF's acceleration. Controller: cascade, velocity-loop bandwidth kv gain / m1 = 2 pi
+    (8-30 Hz), kp = that / (3-6), actuator gain 5-50 N/V."""
+    if two_dof is None:
+        two_dof = bool(rng.random() < 0.5)
+    m1 = _log_uniform(rng, 2.0, 20.0)
+    dofs = [Dof("m1", m1)]
+    els = [Damper(("m1", GROUND), m1 * float(rng.uniform(1.0, 10.0)))]
+    if two_dof:
+        m2 = m1 * float(rng.uniform(0.2, 1.0))
+        fm = _log_uniform(rng, 20.0, 100.0)
+        k = m2 * (2 * np.pi * fm) ** 2
+        c = 2 * float(rng.uniform(0.01, 0.04)) * math.sqrt(k * m2)
+        dofs.append(Dof("m2", m2))
+        els += [Spring(("m2", "m1"), k), Damper(("m2", "m1"), c)]
+    outs = [Output("m1", "displacement", output_channel("m1", "displacement"))]
+    outs += [Output(d.name, "acceleration", output_channel(d.name)) for d in dofs]
+    gain = _log_uniform(rng, 5.0, 50.0)
+    wv = 2 * np.pi * _log_uniform(rng, 8.0, 30.0)
+    kv = wv * m1 / gain
+    kp = wv / float(rng.uniform(3.0, 6.0))
+    ctl = DriveController(kp, kv, gain)
+    model = LumpedModel(tuple(dofs), tuple(els), (Input("m1", "force", CL_FORCE_CHANNEL),), tuple(outs),
+                        "drive" + (" + load" if two_dof else ""))
+    return model, ctl
+
+
+def closed_loop_nominal(model: LumpedModel, ctl: DriveController) -> LumpedModel:
+    """`model` with the vibroscope ``[[controller]]`` of `ctl` (what nominal.toml holds)."""
+    return replace(model, controllers=(ctl.vibroscope(),))
+
+
+def make_reference(rng: np.random.Generator, n: int, *, multi_log: bool = False) -> list:
+    """Position references (ContinuousInput, unit RMS times 1-5 mm) band-limited to 2 Hz - f_r
+    (f_r 5-15 Hz), levels 1 : 2.5 : 6 (cycling in one log, or one per log)."""
+    f_r = float(rng.uniform(5.0, 15.0))
+    amp = _log_uniform(rng, 1e-3, 5e-3)
+    if multi_log:
+        rs = [make_input(rng, n / FS, f_hi=f_r, levels=False, fade=True).scaled(amp * lv) for lv in LEVELS]
+        for r, lv in zip(rs, LEVELS):
+            r.info["level"] = lv
+    else:
+        rs = [make_input(rng, n / FS, f_hi=f_r).scaled(amp)]
+    for r in rs:
+        r.info["quantity"] = "position reference (m)"
+        r.info["rms_m"] = float(np.sqrt(np.mean(r.coarse**2)))
+    return rs
+
+
+def make_closed_loop_case(cls: str, rng: np.random.Generator, duration: float = 60.0, *,
+                          multi_log: bool = False) -> Case:
+    """One case of a closed-loop class ``closed_loop_<effect>`` (:data:`CLOSED_LOOP_CLASSES`):
+    :func:`random_drive` under its controller, reference :func:`make_reference`, the hidden
+    effect on the actuator force (time_delay, saturation, offset) or on a connection
+    (coulomb_friction on m1-ground or m2-m1; backlash in the m2-m1 spring), strength
+    calibrated like the open-loop classes, the truth by :func:`simulate_closed_loop_truth`."""
+    effect = cls[len("closed_loop_"):]
+    if effect not in CLOSED_LOOP_EFFECTS:
+        raise ValueError(f"class={cls!r} must be one of {CLOSED_LOOP_CLASSES}")
+    tic = time.perf_counter()
+    nlog = 3 if multi_log else 1
+    n = int(round(duration / nlog * FS))
+    n_cal = min(n, int(round(CAL_SECONDS / nlog * FS)))
+    for attempt in range(10):
+        model, ctl = random_drive(rng, two_dof=True if effect == "backlash" else None)
+        refs = make_reference(rng, n, multi_log=multi_log)
+        base0 = TruthModel(model)
+        try:
+            nom = [simulate_closed_loop_truth(base0, ctl, r.coarse) for r in refs]
+        except RuntimeError:
+            continue
+        r_max = max(float(np.max(np.abs(r.coarse))) for r in refs)
+        if max(float(np.max(np.abs(run.states[:, 0]))) for run in nom) > 5 * r_max:
+            continue  # the loop is not stable enough
+        F = np.concatenate([run.applied_force for run in nom])
+        f_rms = float(np.sqrt(np.mean(F**2)))
+        vs = np.array([float(np.sqrt(np.mean(np.concatenate([run.states[:, model.n_dofs + i] for run in nom]) ** 2)))
+                       for i in range(model.n_dofs)])
+        sub = CL_SUB * _rk4_substeps(TruthModel(model, extra=(AsymFriction(("m1", GROUND), 2 * f_rms, 2 * f_rms),)),
+                                     np.concatenate([vs, vs]))
+        nom_cal = [run.outputs[:, :n_cal] for run in nom]
+
+        def stable(runs):
+            return all(np.all(np.isfinite(r.outputs)) and np.max(np.abs(r.states[:, 0])) < 5 * r_max for r in runs)
+
+        def gap_of(tm, n_=n_cal):
+            try:
+                runs = [simulate_closed_loop_truth(tm, ctl, r.coarse, n_, substeps=sub) for r in refs]
+            except RuntimeError:
+                return math.inf, None
+            if not stable(runs):
+                return math.inf, None
+            return gap([r.outputs for r in runs], [o[:, :n_] for o in (run.outputs for run in nom)]), runs
+
+        if effect == "none":
+            tm, where, params, details, strength, gap_cal, target = base0, {}, {}, {}, None, 0.0, None
+            runs = nom
+            break
+        target = _log_uniform(rng, *TARGET)
+        if effect == "coulomb_friction":
+            ends = ("m1", GROUND) if model.n_dofs == 1 or rng.random() < 0.5 else ("m2", "m1")
+
+            def build(s, base, ends=ends):
+                fc = s * f_rms
+                return (_with_elements(base, add=(Friction(ends, force_=fc, v_eps=V_EPS),)), {"between": list(ends)},
+                        {"Fc_N": fc, "v_eps_m_per_s": V_EPS}, {"Fc_over_rms_actuator_force": s})
+
+            bounds = (0.003, 1.0)
+        elif effect == "backlash":
+            k_c = _connection_elements(model, ("m2", "m1"))[0]
+            d = np.concatenate([run.states[:, 1] - run.states[:, 0] for run in nom])
+            d_rms = float(np.sqrt(np.mean(d**2)))
+
+            def build(s, base):
+                gp = s * d_rms
+                return (_with_elements(base, replace_spring=("m2", "m1"), new_spring=Backlash(("m2", "m1"), k=k_c, gap=gp)),
+                        {"between": ["m2", "m1"]}, {"k_N_per_m": k_c, "gap_m": gp}, {"gap_over_rms_deflection": s})
+
+            bounds = (0.01, 5.0)
+        elif effect == "time_delay":
+
+            def build(s, base):
+                tau = max(round(s * CL_RATE * sub), 1) / (CL_RATE * sub)  # on the RK4 grid
+                return _with_input(base, delay=tau), {"side": "input"}, {"delay_s": tau}, {"acts_on": "actuator force"}
+
+            bounds = (2e-4, 10e-3)
+        elif effect == "saturation":
+            a = np.abs(F)
+            pk = np.sort(a[1:-1][(a[1:-1] >= a[:-2]) & (a[1:-1] > a[2:])])[::-1]
+
+            def build(p, base):
+                limit = float(pk[max(int(round(p * pk.size)) - 1, 0)])
+                return (_with_input(base, saturation=limit), {"side": "input"}, {"limit_N": limit},
+                        {"clipped_peak_fraction": p, "actuator_peak_N": float(pk[0])})
+
+            bounds = (0.02, 0.8)
+        else:  # offset
+            sign = float(rng.choice([-1.0, 1.0]))
+
+            def build(s, base):
+                f0 = sign * s * f_rms
+                return replace(base, offset=f0), {"side": "input"}, {"offset_N": f0}, {"offset_over_rms_actuator_force": sign * s}
+
+            bounds = (0.01, 1.0)
+        strength, gap_cal = _calibrate(lambda s: build(s, base0), bounds, lambda runs, s: True, target, gap_of)
+        if gap_cal < GAP_MIN or not math.isfinite(gap_cal):
+            continue
+        if not (target / AIM_FACTOR <= gap_cal <= target * AIM_FACTOR) and attempt < 3:
+            continue
+        tm, where, params, details = build(strength, base0)
+        g_full, runs = gap_of(tm, n)
+        if runs is not None and g_full >= GAP_MIN:
+            break
+    else:
+        raise RuntimeError(f"could not draw a {cls} case with a gap >= {GAP_MIN}")
+    nominal = closed_loop_nominal(model, ctl)
+    clean = [r.outputs for r in runs]
+    g_clean = gap(clean, [r.outputs for r in nom])
+    noise_rel = float(rng.uniform(0.01, 0.03))
+    noisy, sigmas = [], []
+    for c in clean:  # sensor noise on the plant outputs; the logged command is the controller's own number
+        rms = np.sqrt(np.mean(c**2, axis=1))
+        sig = noise_rel * rms
+        sig[-1] = 0.0
+        noisy.append(c + sig[:, None] * rng.standard_normal(c.shape))
+        sigmas.append([float(x) for x in sig])
+    toml = dumps_model(closed_loop_nominal(tm.model, ctl)) if tm.expressible and effect != "time_delay" else None
+    logs = ["log.mcap"] if nlog == 1 else [f"log_{i + 1}.mcap" for i in range(nlog)]
+    outs = [{"dof": o.dof, "quantity": o.quantity, "channel": ch} for o, ch in zip(model.outputs, model.output_channels())]
+    outs.append({"dof": ctl.dof, "quantity": "command", "channel": CL_COMMAND_CHANNEL})
+    truth = {
+        "effect": effect,
+        "class": cls,
+        "kind": "closed_loop",
+        "where": where,
+        "parameters": _jsonable(params),
+        "details": _jsonable(dict(details, target_gap=target)) if effect != "none" else {},
+        "strength": strength,
+        "target_gap": target,
+        "truth_model": toml,
+        "true_model_toml": toml,
+        "controller": {"law": "cascade", "kp_per_s": ctl.kp, "kv_V_s_per_m": ctl.kv, "gain_N_per_V": ctl.gain,
+                       "rate_hz": CL_RATE, "velocity_filter": list(CL_TAPS), "dof": ctl.dof},
+        "noise": {"relative_rms": noise_rel, "sigma": sigmas[0] if nlog == 1 else sigmas,
+                  "note": "no noise on the logged command"},
+        "input": _jsonable(refs[0].info) if nlog == 1 else [_jsonable(r.info) for r in refs],
+        "actuator_force_rms_N": f_rms,
+        "logs": logs,
+        "multi_log": bool(multi_log),
+        "outputs": outs,
+        "gap_metric": "rms over output channels (plant outputs and the command) of each channel's nrmse",
+        "gap_nominal_noise_free": g_clean,
+        "gap_nominal_noisy": gap(noisy, [r.outputs for r in nom]),
+        "gap_calibration_window": float(gap_cal),
+        "duration_s": nlog * n / FS,
+        "n_dofs": model.n_dofs,
+        "connections": [list(c) for c in model_connections(model)],
+        "attempts": attempt + 1,
+        "integrator": dict(runs[0].integrator, name="rk4"),
+        "generation_s": time.perf_counter() - tic,
+    }
+    chans = [CL_REFERENCE_CHANNEL] + model.output_channels() + [CL_COMMAND_CHANNEL]
+    units = ["m"] + [{"acceleration": "m/s^2", "velocity": "m/s", "displacement": "m"}[o.quantity]
+                     for o in model.outputs] + ["V"]
+    logs_data = [(r, y, c) for r, y, c in zip(refs, noisy, clean)]
+    return Case(nominal, tm, refs[0], noisy[0], clean[0], truth, logs_data, log_channels=chans, log_units=units)
 
 
 def _jsonable(x):
@@ -1321,7 +1746,8 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
     cdir = Path(out) / "cases" / name
     cdir.mkdir(parents=True, exist_ok=True)
-    (cdir / "nominal.toml").write_text(dumps_model(case.nominal), encoding="utf-8")
+    text = case.nominal_text if case.nominal_text is not None else dumps_model(case.nominal)
+    (cdir / "nominal.toml").write_text(text, encoding="utf-8")
     names = case.truth.get("logs") or ["log.mcap"]
     for i, fn in enumerate(names):
         write_ros2_mcap(cdir / fn, case.signals(i))
@@ -1352,8 +1778,8 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
     out = Path(out)
     classes = list(classes)
     for c in classes:
-        if c not in CLASSES:
-            raise ValueError(f"unknown class {c!r}; classes are {CLASSES}")
+        if c not in ALL_CLASSES:
+            raise ValueError(f"unknown class {c!r}; classes are {ALL_CLASSES}")
     out.mkdir(parents=True, exist_ok=True)
     (out / "generate.json").write_text(json.dumps({"per_class": per_class, "classes": classes, "seed": seed,
                                                    "duration": duration, "integrator": integrator,
@@ -1362,8 +1788,8 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
     for j in range(per_class):
         for c in classes:
             k = len(jobs_list)
-            integ = integrator or INTEGRATORS[k % 2]
-            multi = bool(np.random.default_rng([int(seed), CLASSES.index(c), j, 1]).random() < multi_log)
+            integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
+            multi = bool(np.random.default_rng([int(seed), ALL_CLASSES.index(c), j, 1]).random() < multi_log)
             jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi))
     results = []
     if jobs > 1:
@@ -1389,8 +1815,13 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, type=Path, help="output folder")
     p.add_argument("--per-class", type=int, default=10, help="cases per class (default 10)")
-    p.add_argument("--classes", nargs="+", default=list(CLASSES), choices=CLASSES, metavar="CLASS",
-                   help=f"classes to generate (default all: {' '.join(CLASSES)})")
+    p.add_argument("--kind", choices=tuple(KINDS), default="open",
+                   help="open (default: the open-loop classes), closed_loop (closed_loop_<effect>: a "
+                   "position-controlled drive) or modal (modal_<effect>: the nominal as the truth's exact "
+                   "pole-residue model)")
+    p.add_argument("--classes", nargs="+", default=None, choices=ALL_CLASSES, metavar="CLASS",
+                   help=f"classes to generate (default: every class of --kind; open: {' '.join(CLASSES)}; "
+                   f"closed_loop: {' '.join(CLOSED_LOOP_CLASSES)}; modal: modal_<open class>)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, default=60.0, help="record length in s (default 60; a multi-log "
                    "case splits it over its three logs)")
@@ -1401,7 +1832,7 @@ def main(argv=None) -> int:
                    help="share of cases written as three single-level logs (default 0.25)")
     a = p.parse_args(argv)
     tic = time.perf_counter()
-    res = generate(a.out, a.per_class, a.classes, a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
+    res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
                    multi_log=a.multi_log)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
