@@ -284,3 +284,37 @@ def test_benchmark_slice(tmp_path):
     print("unpredictable cases:", unpredictable)
     assert len(unpredictable) <= 2, unpredictable
     assert not wrong, "; ".join(wrong)
+
+
+# ---------------------------------------------------------------------------------------------
+# closed-loop and modal kinds
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("two_dof", [False, True])
+def test_closed_loop_truth_matches_vibroscope_without_effect(two_dof):
+    """The generator's own closed loop (RK4 between controller ticks) and vibroscope's
+    simulation of the written nominal file agree on a 5 s case (measured: 1-DOF 6e-15, 2-DOF
+    3.6e-9 worst channel nrmse)."""
+    from vibroscope.gap.closed_loop import measured_rows
+    from vibroscope.models.simulate import simulate
+
+    rng = np.random.default_rng(1 if two_dof else 0)
+    model, ctl = gen.random_drive(rng, two_dof=two_dof)
+    ref = gen.make_reference(rng, 5000)[0].coarse
+    run = gen.simulate_closed_loop_truth(model, ctl, ref)
+    nominal = loads_model(gen.dumps_model(gen.closed_loop_nominal(model, ctl)), "nominal.toml")
+    assert nominal.controllers and nominal.controllers[0].output_channel == gen.CL_COMMAND_CHANNEL
+    y = measured_rows(nominal, simulate(nominal, ref[None], gen.FS))
+    assert y.shape == run.outputs.shape
+    assert max(gen.nrmse(a, b) for a, b in zip(run.outputs, y)) < 1e-4
+
+
+def test_modal_nominal_is_the_exact_pole_residue_model():
+    from vibroscope.gap.physical import as_lumped
+
+    rng = np.random.default_rng(3)
+    truth = gen.random_modal_truth(rng)
+    m = as_lumped(loads_model(gen.dumps_model(gen.exact_pole_residue(truth)), "nominal.toml"))
+    f = np.linspace(1.0, 200.0, 400)
+    H, Hm = truth.frf(f), m.frf(f)
+    assert np.max(np.abs(Hm - H)) / np.max(np.abs(H)) < 1e-8
+    assert set(m.points) == set(truth.dof_names)
