@@ -32,6 +32,11 @@ By default :func:`generate` alternates them per case. Delay, offset and saturati
 continuous force. Outputs are sampled at the log's times, plus white Gaussian noise of 1-3 %
 of each output's RMS.
 
+``--kind closed_loop`` (classes ``closed_loop_<effect>``: a position-controlled 1-2 DOF drive,
+the truth by :func:`simulate_closed_loop_truth`) and ``--kind modal`` (classes
+``modal_<class>``: the nominal written as the truth's exact pole-residue model) add two more
+kinds; see benchmarks/gap/README.md. The default (open) is unchanged.
+
 Each case depends only on (seed, class, index within class), so a subset of classes
 regenerates the same cases. The module is importable (the tests use :func:`make_case`,
 :func:`simulate_truth`, :func:`make_input`).
