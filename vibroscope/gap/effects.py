@@ -515,14 +515,15 @@ def _backlash(model, scales):
 
         def vanish(p, d_rms=d_rms):
             g = math.exp(p[0])
-            return (f"clearance {g:.3g} m is far below the rms deflection {d_rms:.3g} m" if g < 0.02 * d_rms
+            return (f"clearance {g:.3g} m is far below the rms deflection {d_rms:.3g} m" if g < 0.005 * d_rms
                     else None)
 
         dq = scales.get("d_quantiles", {}).get(key, [])
         lo, hi = math.log(d_rms * 1e-4), math.log(d_rms * 5)
-        vals = [math.log(q) for q in dq if q > 0] + [math.log(d_rms * r) for r in (0.1, 2.0)]
+        vals = ([math.log(d_rms * r) for r in (0.02, 0.1)] + [math.log(q) for q in dq if q > 0]
+                + [math.log(d_rms * 2.0)])
         specs.append(EffectSpec(
-            "backlash", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi)[:5],
+            "backlash", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi)[:6],
             np.array([lo]), np.array([hi]),
             build, lambda p: {"gap_m": float(math.exp(p[0]))}, vanish=vanish,
         ))
