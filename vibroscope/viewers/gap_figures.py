@@ -82,7 +82,7 @@ def where_label(where: Mapping[str, Any]) -> str:
             names = [str(x) for x in v]
             bits.append(", ".join(names[:4]) + (f" +{len(names) - 4}" if len(names) > 4 else "") if names
                         else "no change")
-        elif k in ("dof", "side"):
+        elif k in ("dof", "side", "character"):
             bits.append(str(v))
         else:
             bits.append(f"{k}={v}")
@@ -604,7 +604,14 @@ def plot_gap_candidates(report, *, fig=None):
         score = f"  (score {float(cands[k].score):+.2f})" if np.isfinite(float(cands[k].score)) else ""
         ax.text(widths[k], y[k], f" {_fmt(g[k], '.4f')}{score}" if fin[k] else " failed", va="center", fontsize=7,
                 fontweight="bold" if k == vi else "normal", clip_on=False)
-    ax.set_yticks(y, [_short(candidate_label(c), 44) for c in cands], fontsize=8)
+    n_added = max(len(tuple(getattr(report, "verdicts", ()) or ())) - 1, 0)  # forward selection's additions
+    added = set(range(1, 1 + n_added)) if vi == 0 else set()
+    for k in added:  # an added effect's bar is the combined model's gap
+        bars[k].set_facecolor(BAR_VERDICT)
+        bars[k].set_alpha(0.55)
+        bars[k].set_edgecolor("k")
+    ax.set_yticks(y, [("+ " if k in added else "") + _short(candidate_label(c), 44) for k, c in enumerate(cands)],
+                  fontsize=8)
     for k, lab in enumerate(ax.get_yticklabels()):
         if k == vi:
             lab.set_fontweight("bold")
@@ -618,12 +625,14 @@ def plot_gap_candidates(report, *, fig=None):
             handles.append(ax.axvline(float(x), color=col, ls=ls, lw=1.5, zorder=3,
                                       label=f"{label} {float(x):.4f}"))
     handles = [Patch(facecolor=BAR_VERDICT, edgecolor="k", label=f"verdict: {report.verdict}"),
+               *([Patch(facecolor=BAR_VERDICT, alpha=0.55, edgecolor="k",
+                        label="+ added by forward selection (gap of the combination)")] if added else []),
                Patch(facecolor=BAR, label="other candidates"), *handles]
     fig.legend(handles=handles, fontsize=8, ncol=3, loc="outside lower center", frameon=False)
     ax.set_xlim(0, top * 1.12)
     ax.set_xlabel(f"held-out gap, {report.metric or 'nrmse'} [-] (lower is better)")
     ax.grid(True, axis="x", alpha=0.35, zorder=0)
-    fig.suptitle(f"Candidate effects on held-out data — verdict {report.verdict}, "
+    fig.suptitle(f"Candidate effects on held-out data — verdict {_verdict_words(report)}, "
                  f"gap {_fmt(report.gap_before, '.4f')} → {_fmt(report.gap_after, '.4f')} "
                  f"(shrink {_fmt(100 * report.shrink, '.1f')} %)", fontsize=10)
     return fig
