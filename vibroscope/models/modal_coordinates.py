@@ -53,6 +53,9 @@ class ModalCoordinatesModel(LumpedModel):
     ----------
     dofs, elements, inputs, outputs, name
         As :class:`LumpedModel`; elements, inputs and outputs may also name a point.
+    controllers : tuple of Controller, optional
+        As :class:`LumpedModel`: discrete controllers closing loops around the model; default
+        none.
     points : tuple of str
         The names of the measured points (not DOF names, not ``"ground"``).
     shapes : tuple of tuple of float, shape (n_points, n_shape)
