@@ -562,10 +562,9 @@ def _hysteresis(model, scales):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
 
         # Bouc-Wen: z' = alpha v - beta (gamma |v| z + delta v |z|), nu = 1;
-        # p = [log(alpha d_rms / u_rms), log(beta d_rms), phi] with gamma = cos(phi), delta = sin(phi):
-        # the hysteretic force scaled by the input's RMS force, whatever the connection's stiffness
-        def bw_coeffs(p, d_rms=d_rms):
-            alpha = u_ref * math.exp(p[0]) / d_rms
+        # p = [log(alpha / k), log(beta d_rms), phi] with gamma = cos(phi), delta = sin(phi)
+        def bw_coeffs(p, k_loc=k_loc, d_rms=d_rms):
+            alpha = k_loc * math.exp(p[0])
             beta = math.exp(p[1]) / d_rms
             phi = float(np.clip(p[2], -1.45, 1.45))
             return alpha, beta, math.cos(phi), math.sin(phi)
@@ -578,13 +577,18 @@ def _hysteresis(model, scales):
             alpha, beta, gamma, delta = bw_coeffs(p)
             return {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": 1.0}
 
+        lo_h = np.array([math.log(1e-4), math.log(1e-3), -1.45])
+        hi_h = np.array([math.log(10.0), math.log(1e3), 1.45])
+        # starts: alpha a share of the connection's stiffness, then (last) the hysteretic force a
+        # share of the input's RMS force (on a stiff link the first scale is 10x too strong)
+        grid = [(0.3, 1.0, 0.0), (1.0, 1.0, 0.0), (0.3, 1.0, -0.9), (0.3, 1.0, 0.6)]
+        f_share = u_ref / max(k_loc * d_rms, 1e-300)
+        grid += [(a * f_share, 1.0, 0.0) for a in (0.1, 0.3)]
         specs.append(EffectSpec(
             "hysteresis", {"between": [pair[0], pair[1]]}, 3,
-            [np.array([math.log(a), math.log(b), s])
-             for a, b, s in ((0.1, 1.0, 0.0), (0.03, 1.0, 0.0), (0.3, 1.0, 0.0), (0.1, 3.0, 0.0), (0.1, 1.0, -0.9),
-                             (0.1, 1.0, 0.6))],
-            np.array([math.log(1e-4), math.log(1e-3), -1.45]), np.array([math.log(100.0), math.log(1e3), 1.45]),
-            build, desc,
+            [np.clip(np.array([math.log(max(a, 1e-300)), math.log(b), s]), lo_h + 1e-6, hi_h - 1e-6)
+             for a, b, s in grid],
+            lo_h, hi_h, build, desc,
         ))
     return specs
 
