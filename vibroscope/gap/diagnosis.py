@@ -125,6 +125,9 @@ ADD_FACTOR = 0.5
 #: without level dependence of the BLA, a nonlinear verdict needs a penalised held-out excess gap
 #: below this factor times the best linear explanation's
 NL_MARGIN = 0.8
+#: effects of which forward selection names one member only (asymmetric friction contains Coulomb
+#: friction; a Jenkins joint is a Bouc-Wen element)
+NESTED_FAMILIES = ({"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"})
 #: locations of each nonlinear class refined after probing the start values
 N_LOCATIONS = 2
 
@@ -762,7 +765,6 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         results.append((s, build(x), x[nl:], gfit, lin.apply(refit, x[:nl])))
 
     # nonlinear effects: screening at every location with the linear parameters at the refit
-    sp = split.screen_prefix
 
     def probe(s):
         """The best start of `s` on the screening prefix, from the refitted and from the nominal
@@ -1053,10 +1055,8 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
     while len(chosen) < 3:
         if _excess(cur_c.gap_after, floor) <= 0.5 * floor:
             break
-        # one member of a nested family only (asymmetric friction contains Coulomb friction)
-        families = [{"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"}]
         cands = [s_ for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
-                 if eff not in used and not any(eff in fam and used & fam for fam in families)][:4]
+                 if eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)][:4]
         if not cands:
             break
 

@@ -390,10 +390,6 @@ def _time_delay(model, scales):
 
 
 def _offset(model, scales):
-    from vibroscope.models.lumped import Input
-
-    if "offset" not in Input.__dataclass_fields__:  # pragma: no cover - a model room without input offsets
-        return []
     u_rms = max(scales.get("u_rms", 1.0), 1e-12)
 
     def build(m, p):
@@ -465,8 +461,6 @@ def _coulomb_friction(model, scales):
 
 
 def _asymmetric_friction(model, scales):
-    if "force_neg" not in Friction.__dataclass_fields__:  # pragma: no cover - no asymmetric friction element
-        return []
     specs = []
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
