@@ -866,6 +866,18 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                         [split.validation[i] for i in val_logs]) if np.isfinite(g) else float("nan")
         return s, m_aug, p, gfit, g, yh, contrib, base
 
+    # a fit that vanishes into a simpler member of its family (asymmetric friction with equal
+    # forces) is evaluated as that simpler effect at the same location
+    for r in list(results):
+        s_, m_, p_, g_, b_ = r
+        red = s_.reduces_to(p_) if s_.reduces_to is not None else None
+        if red is None:
+            continue
+        s2 = next((x for x in specs if x.effect == red[0] and x.where == s_.where), None)
+        if s2 is not None:
+            r2 = (s2, s2.apply(b_, red[1]), np.asarray(red[1], float), g_, b_)
+            results.append(r2)
+            keep_ids.add(id(r2))
     # every linear and jointly fitted result is checked on held-out data, and of the screened ones
     # those within 1.5 times their class's best fitting gap (the rest cannot win)
     cls_best: dict[str, float] = {}
