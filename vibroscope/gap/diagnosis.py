@@ -578,6 +578,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     out_ch = log_channels(model)[1]
     closed = is_closed_loop(model)
     units = [sigs[0].units[list(sigs[0].channels).index(c)] if sigs[0].units else "" for c in out_ch]
+    in_ch0 = log_channels(model)[0][0]
+    in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
     skips = [_skip_samples(model, fs, u.shape[1], transient_s) for u in us]
     split = make_split(us, fs, skip=skips)
     sims = [LogSimulator(u, fs) for u in us]
@@ -752,7 +754,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         if s.effect not in best_lin or cost < best_lin[s.effect][3]:
             best_lin[s.effect] = (s, th_s, p_s, cost)
         bar.update(1)
-    for eff, (s, th_s, p_s, _) in best_lin.items():
+
+    def lin_polish(item):
+        """A linear effect's FRF fit polished in time with the linear parameters, on the same
+        (at most 20 s per log) samples as the linear refit."""
+        s, th_s, p_s, _ = item
         nl = len(lin)
 
         def build(x, s=s):
@@ -761,8 +767,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         x0 = np.concatenate([th_s, p_s])
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
-        x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns_fit, fast=False, max_nfev=6)
-        results.append((s, build(x), x[nl:], gfit, lin.apply(refit, x[:nl])))
+        x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns_pol, fast=False, max_nfev=6)
+        return s, build(x), x[nl:], gfit, lin.apply(refit, x[:nl])
+
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        results += list(ex.map(lin_polish, best_lin.values()))
 
     # nonlinear effects: screening at every location with the linear parameters at the refit
 
@@ -861,7 +870,10 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         s, m_aug, p, gfit, base = item
         g, yh = held_out(m_aug, fast=True)  # the winner is re-run at full accuracy (_polish)
         # how much the effect itself changes the held-out outputs (against its own linear base)
-        yb = {i: sims[i].run(base) for i in val_logs}
+        if base is refit or base is model:  # already simulated
+            yb = {i: (y_ref if base is refit else y_nom)[i] for i in val_logs}
+        else:
+            yb = {i: sims[i].run(base) for i in val_logs}
         contrib = nrmse([yh[i] for i in val_logs], [yb[i] for i in val_logs],
                         [split.validation[i] for i in val_logs]) if np.isfinite(g) else float("nan")
         return s, m_aug, p, gfit, g, yh, contrib, base
@@ -1035,7 +1047,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         spectrum=spectrum,
         timings=timings,
         level_evidence=level_ev,
-        meta={"fs_hz": fs, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
+        meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
