@@ -57,6 +57,9 @@ def add_parser(sub) -> None:
     p.add_argument("--nperseg", type=int, help="Welch segment length (default: ~16 averages, fine enough for --fmin)")
     p.add_argument("--fmin", type=float, help="lowest frequency searched for modes (Hz)")
     p.add_argument("--fmax", type=float, help="highest frequency analysed (Hz); decimates when well below fs/2")
+    p.add_argument("--no-decimate", action="store_true",
+                   help="analyse at the log's rate (default: decimate to >= 2.5x the band's top; a periodic input "
+                        "only by a factor that divides its period)")
     p.add_argument("--n-modes", type=int, help="number of modes to report")
     p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
     p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
@@ -210,7 +213,8 @@ def run(args) -> int:
     try:
         an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
                          nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
-                         estimator=args.estimator, method=args.method, select=select)
+                         estimator=args.estimator, method=args.method, select=select,
+                         decimation=not getattr(args, "no_decimate", False))
     except ValueError as exc:
         raise VibroscopeError(f"{args.log}: {exc}") from None
     nyq = an.psd.frequencies[-1]
@@ -559,7 +563,7 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
     n_seg = an.settings.get("n_segments")
     avg = f"{an.settings['n_averages']} of {n_seg} averages" if n_seg else f"{an.settings['n_averages']} averages"
     lines = [f"{source}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
-             f"({sig.duration:.2f} s); nperseg={an.settings['nperseg']} "
+             f"({sig.duration:.2f} s){decimation_text(an.settings.get('decimation'))}; nperseg={an.settings['nperseg']} "
              f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {avg})"]
     how = METHOD_NAMES.get(an.modal.method, an.modal.method)
     if an.settings.get("input"):
@@ -613,6 +617,16 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
                      f"max {v[k]:.3g} mm/s at {sev.channels[k]}; median {np.median(v):.3g} mm/s over "
                      f"{len(v)} channels" + (f" ({sev.note})" if sev.note else ""))
     return "\n".join(lines)
+
+
+def decimation_text(dec: dict | None) -> str:
+    """``"; decimated 400 → 50 Hz (why)"``, ``"; not decimated (why)"`` or ``""`` (no decimation
+    needed), from ``Analysis.settings["decimation"]`` (:func:`vibroscope.pipeline.analyse_signals`)."""
+    if not dec or not dec.get("reason"):
+        return ""
+    if dec.get("factors"):
+        return f"; decimated {dec['fs_in']:g} → {dec['fs_out']:g} Hz ({dec['reason']})"
+    return f"; not decimated ({dec['reason']})"
 
 
 def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,
