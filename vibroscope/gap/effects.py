@@ -380,7 +380,11 @@ def _time_delay(model, scales):
     fs = scales.get("fs", 1000.0)
 
     def build(m, p):
-        return replace(m, inputs=tuple(replace(i, delay=float(max(p[0], 0.0))) for i in m.inputs))
+        # a closed loop: the delay sits at the actuator (the driven inputs), not on the logged
+        # open-loop inputs
+        driven = {m.driven_input(c) for c in getattr(m, "controllers", ())}
+        return replace(m, inputs=tuple(replace(i, delay=float(max(p[0], 0.0))) if not driven or j in driven else i
+                                       for j, i in enumerate(m.inputs)))
 
     def vanish(p):
         d = float(max(p[0], 0.0))
