@@ -29,7 +29,8 @@ def add_parser(sub) -> None:
         help="spectra, FRFs, coherence and modal vectors of an MCAP log",
         description=(
             "Read an MCAP log (ROS 2 CDR, JSON, protobuf), put the channels on one time grid, and "
-            "compute PSDs, the cross-spectral matrix, FRFs with coherence (with --input) and modal "
+            "compute PSDs, the cross-spectral matrix, FRFs with coherence (with --input, or the log's one "
+            "force-like channel unless --output-only) and modal "
             "vectors (LSCF + LSFD with a force input, SSI-COV without; the band, orders and physical "
             "modes chosen automatically unless --fmin/--fmax are given). Writes a rerun recording, "
             "PNG figures and, with --json, a machine-readable summary."
