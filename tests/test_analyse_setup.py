@@ -125,7 +125,7 @@ def test_find_force_input_by_name_and_two_forces_take_none(tmp_path):
     two = _json_log(tmp_path / "two.mcap", {"/left/force.x": sig, "/right/force.x": sig, "/acc.a": sig})
     got = find_force_input(two, exclude_topics=("/acc",))
     assert got.channel is None and set(got.candidates) == {"/left/force.x", "/right/force.x"}
-    assert "2 force-like channels" in got.line() and "--input" in got.line()
+    assert got.line() == "no input taken: 2 force-like channels move (/left/force.x, /right/force.x); name one with --input"
     cell = _json_log(tmp_path / "cell.mcap", {"/cell.force.x": sig, "/cell.force.y": lambda t: 0.01 * sig(t),
                                               "/acc.a": sig})
     got = find_force_input(cell, exclude_topics=("/acc",))

@@ -126,6 +126,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     -------
     Analysis
     """
+    from vibroscope.errors import VibroscopeError
     from vibroscope.io import LogIndex, read_mcap
     from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels, find_force_input
     from vibroscope.pipeline import analyse_signals
@@ -136,8 +137,11 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         source = LogIndex.open(log, progress=progress)
     if find_input:
         resp = {source.topic_of(c).topic for c in outputs or ()}
-        found = find_force_input(source, exclude_topics=resp)
-        input, choice = found.channel, found.line() or None
+        try:
+            found = find_force_input(source, exclude_topics=resp)
+            input, choice = found.channel, found.line() or None
+        except VibroscopeError as exc:  # the search never stops an output-only analysis
+            choice = f"no force input looked for: {exc}"
     if outputs is None:
         # the input's topic holds the force, not a response
         sel = auto_channels(source, exclude_topics=(input.split(".", 1)[0],) if input else ())

@@ -413,8 +413,8 @@ class ForceInput:
             return f"input: {self.channel} (force-like: {self.why}); --output-only to ignore it"
         if self.candidates:
             c = self.candidates
-            return (f"output-only: {len(c)} force-like channels move ({', '.join(c[:4])}{' ...' if len(c) > 4 else ''}); "
-                    "name the input with --input")
+            return (f"no input taken: {len(c)} force-like channels move ({', '.join(c[:4])}"
+                    f"{' ...' if len(c) > 4 else ''}); name one with --input")
         return ""
 
 
