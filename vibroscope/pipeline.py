@@ -394,7 +394,8 @@ def analyse_signals(
         If `input` or an output is not a channel of `signals`.
     ValueError
         If the record is too short for the segment length, the method does not fit the
-        presence or absence of an input, ``fmin > fmax``, or a signal fault stops the analysis
+        presence or absence of an input, ``fmin > fmax``, `fmax` is above the Nyquist
+        frequency ``fs / 2``, or a signal fault stops the analysis
         (an all-missing channel, a zero or constant input, a record shorter than `nperseg`); the
         message names the channel or option and the remedy.
 
@@ -417,6 +418,8 @@ def analyse_signals(
     or not at all. ``settings["decimation"]`` says what was done and why: ``fs_in``, ``fs_out``
     (Hz), ``factors`` (the stages, [] when not decimated) and ``reason`` (None when decimating
     would not gain).
+
+    An input in an acceleration unit (m/s², g) gets a note: its FRFs are transmissibilities.
     """
     from vibroscope import modal
     from vibroscope.modal.selection import excited_band, response_band
@@ -428,9 +431,16 @@ def analyse_signals(
     notes = list(signals.meta.get("warnings", []))
     if fmin is not None and fmax is not None and fmin > fmax:
         raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
+    if fmax is not None and fmax > signals.fs / 2:
+        raise ValueError(f"fmax={fmax:g} Hz is above the Nyquist frequency {signals.fs / 2:g} Hz (fs={signals.fs:g} "
+                         f"Hz): nothing above fs/2 is measured")
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     if input is not None:
-        signals.index(input)
+        unit = signals.units[signals.index(input)]
+        if unit in _ACCELERATION_UNITS:  # base excitation: response over input acceleration
+            notes.append(f"input {input} is an acceleration ({unit}), not a force: the FRFs are transmissibilities "
+                         f"(response / input acceleration), not FRFs, and their modes are those of the structure "
+                         f"held at the input point")
     for c in outputs:
         signals.index(c)
     # signal faults: detected on the data, their documented actions applied (masking as NaN,
@@ -573,6 +583,10 @@ def analyse_signals(
     return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity, tuple(faults))
 
 
+#: units of an acceleration channel (an input in one of them makes a transmissibility)
+_ACCELERATION_UNITS = ("m/s^2", "m/s²", "m s^-2", "g")
+
+
 def _nperseg_for(sig: Signals, nperseg: int) -> int:
     """`nperseg`, halved (a power of two, at least 16) until at least 8 Welch segments (50 %
     overlap, on the record's grid) of every channel hold no missing sample; unchanged for a
@@ -609,7 +623,7 @@ def _severity(sig: Signals, notes: list):
     """ISO 20816 velocity RMS (10–1000 Hz, mm/s) of the acceleration channels, or None."""
     from vibroscope.spectral.integration import vibration_severity
 
-    acc = [c for c, u in zip(sig.channels, sig.units) if u in ("m/s^2", "m/s²", "m s^-2", "g")]
+    acc = [c for c, u in zip(sig.channels, sig.units) if u in _ACCELERATION_UNITS]
     if not acc or sig.fs / 2 <= 10.0:
         return None
     try:
@@ -656,7 +670,8 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
     index ranges), ``times_s`` (s from the first sample); see :meth:`vibroscope.faults.Fault.to_dict`), ``modes`` (each ``frequency_hz``,
     ``damping_ratio``, ``frequency_std_hz``, ``damping_std``, ``shape`` {path: [re, im]}, ``mpc``,
     ``mpd``, ``stable``), ``rejected_modes`` (``frequency_hz``, ``damping_ratio``, ``reason``), plus ``input``, ``outputs``,
-    ``settings``, ``timebase`` and, with `true_modes`, ``true_modes``.
+    ``settings``, ``timebase``, ``input_choice`` (the line naming the force-like channel taken as the
+    input, or why none was, when the log was searched for one) and, with `true_modes`, ``true_modes``.
 
     Parameters
     ----------
@@ -698,7 +713,7 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
     ident = analysis.identification
     if ident is not None:
         out["identification"] = {k: v for k, v in ident.settings.items() if k not in ("orders",)}
-    for key in ("timebase", "skipped", "decimated", "resampled"):
+    for key in ("timebase", "skipped", "decimated", "resampled", "input_choice"):
         if key in sig.meta:
             out[key] = sig.meta[key]
     if true_modes is not None:
