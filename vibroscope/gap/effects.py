@@ -518,6 +518,8 @@ def _backlash(model, scales):
 
         def build(m, p, pair=pair):
             jj, sp = _spring_at(m, pair)
+            if sp is None:  # another effect took the spring: no clearance to open
+                raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
             els = list(m.elements)
             els[jj] = Backlash(sp.between, k=sp.k, gap=float(math.exp(p[0])))
             return replace(m, elements=tuple(els))
@@ -623,6 +625,8 @@ def _joint_friction(model, scales):
 
         def build(m, p, pair=pair, coeffs=coeffs):
             jj, sp = _spring_at(m, pair)
+            if sp is None:  # another effect took the spring (a clearance): no joint to soften
+                raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
             r, fs_ = coeffs(p)
             alpha = r * sp.k
             els = list(m.elements)
