@@ -125,6 +125,12 @@ ADD_FACTOR = 0.5
 #: without level dependence of the BLA, a nonlinear verdict needs a penalised held-out excess gap
 #: below this factor times the best linear explanation's
 NL_MARGIN = 0.8
+#: with a measured resonance shift between the lowest and the highest level (hardening or
+#: softening), a nonlinear verdict whose own simulation does not shift the resonance the same way
+#: (by at least TREND_SHARE of the measured shift) yields to the best candidate that does, when
+#: that one's penalised held-out excess gap is within TREND_MARGIN times it
+TREND_MARGIN = 1.5
+TREND_SHARE = 0.3
 #: effects of which forward selection names one member only (asymmetric friction contains Coulomb
 #: friction; a Jenkins joint is a Bouc-Wen element)
 NESTED_FAMILIES = ({"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"})
@@ -942,6 +948,32 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         if j is not None and (key(cands[best_i][0].gap_after, cands[best_i][0].n_parameters)
                               > NL_MARGIN * key(cands[j][0].gap_after, cands[j][0].n_parameters)):
             best_i = j
+    # the level evidence enters the ranking: a measured hardening / softening must be reproduced
+    # by the nonlinear verdict's own simulation (its BLA per level, on the same level groups)
+    trend_shifts: dict[str, float] = {}
+    group_logs = {g[0] for g in groups}
+
+    def sim_shift(c):
+        name = f"{c[0].effect}@{where_label_plain(c[0].where)}"
+        if name not in trend_shifts:
+            yh = c[2]
+            b_c = _bla_levels(us, [yh.get(i) for i in range(len(ys))], groups, fs, nps, f_s)
+            trend_shifts[name] = float(_level_test(f_s, b_c)["shift"])
+        return trend_shifts[name]
+
+    def reproduces_trend(c):
+        if not group_logs <= set(c[2]):  # its outputs do not cover every level (multi-log)
+            return True
+        sc, sm = sim_shift(c), float(level["shift"])
+        return sc * sm > 0 and abs(sc) >= TREND_SHARE * abs(sm)
+
+    if (best_i is not None and level["trend"] in ("hardening", "softening")
+            and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear" and not reproduces_trend(cands[best_i])):
+        kb = key(cands[best_i][0].gap_after, cands[best_i][0].n_parameters)
+        j = next((i for i, c in enumerate(cands) if admissible(c) and EFFECT_TABLE[c[0].effect].kind == "nonlinear"
+                  and key(c[0].gap_after, c[0].n_parameters) <= TREND_MARGIN * kb and reproduces_trend(c)), None)
+        if j is not None:
+            best_i = j
     polish = dict(model=model, lin=lin, lo_l=lo_l, hi_l=hi_l, sims=sims, ys=ys, split=split, fs=fs,
                   held_out=held_out, key=key, k_before=k_before)
     if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:
@@ -1051,7 +1083,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
-                                   for k, v in level.items()},
+                                   for k, v in level.items()} | {"simulated_shifts": trend_shifts},
               "start_values": {f"{k[0]}@{k[1]}" if k[1] else k[0]: (list(v) if isinstance(v, tuple) else v)
                                for k, v in scales.get("regress", {}).items()},
               "closed_loop": ({"inputs": log_channels(model)[0], "outputs": out_ch,
@@ -1059,6 +1091,13 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
               "localisation": "bands, channels and regimes of the nominal model on the held-out log "
                               "(the nominal model is fitted on nothing)"},
     )
+
+
+def where_label_plain(where: dict) -> str:
+    """A candidate's location as a short key (``m1-ground``, ``input``, ``m2``)."""
+    if "between" in where:
+        return "-".join(str(x) for x in where["between"])
+    return str(where.get("dof") or where.get("side") or "model")
 
 
 def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers):
