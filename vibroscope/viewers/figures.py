@@ -18,7 +18,7 @@ from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, nearest_frequencies, real_shape, sensor_geometry
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
-           "plot_stabilization", "plot_frf_synthesis", "summary_figures"]
+           "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "summary_figures"]
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
@@ -662,6 +662,79 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
     axes[n, 1].text(0.05, 0.5, f"overall relative error\n‖H − Ĥ‖ / ‖H‖ = {100 * rel:.2f} %\n"
                               f"over {fs_.min():.4g}–{fs_.max():.4g} Hz", fontsize=10, va="center")
     fig.suptitle("Measured vs synthesized FRFs (LSFD modal model)", fontsize=11)
+    return fig
+
+
+def plot_mode_set_comparison(comparison, *, fig=None):
+    """Two mode sets compared: the MAC matrix (pairs framed) and each pair's frequency difference.
+
+    Parameters
+    ----------
+    comparison : ModeSetComparison
+        From :func:`vibroscope.modal.compare.compare_mode_sets`.
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Left: ``MAC[i, j]`` of mode i of A (rows) and mode j of B (columns), 0 white to 1 dark,
+        the values written in the cells (up to 16 × 16 modes), pairs framed in red. Right: the
+        relative frequency difference ``(f_B − f_A) / f_A`` of each pair in %, its MAC beside.
+
+    References
+    ----------
+    .. [1] R. J. Allemang, "The Modal Assurance Criterion -- twenty years of use and abuse",
+       Sound and Vibration 37(8), 14–23, 2003.
+    """
+    from matplotlib.patches import Rectangle
+
+    plt = _pyplot()
+    c = comparison
+    M = np.nan_to_num(np.asarray(c.mac, float))
+    na, nb = M.shape
+    if fig is None:
+        fig = plt.figure(figsize=(min(15.0, 7.5 + 0.35 * max(na, nb)), min(11.0, 4.0 + 0.33 * max(na, nb))),
+                         layout="constrained")
+    else:
+        fig.clear()
+    ax, ax2 = fig.subplots(1, 2, width_ratios=[1.25, 1])
+    im = ax.imshow(M, cmap="Greys", vmin=0, vmax=1, aspect="auto", interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="MAC", shrink=0.8)
+    ax.set_yticks(range(na), [f"{i + 1}: {f:.4g} Hz" for i, f in enumerate(c.frequencies_a)], fontsize=7)
+    ax.set_xticks(range(nb), [f"{j + 1}: {f:.4g} Hz" for j, f in enumerate(c.frequencies_b)], fontsize=7,
+                  rotation=60, ha="right")
+    ax.set_ylabel(f"A: {_short(c.labels[0], 40)}")
+    ax.set_xlabel(f"B: {_short(c.labels[1], 40)}")
+    if max(na, nb) <= 16:
+        for i in range(na):
+            for j in range(nb):
+                ax.text(j, i, f"{M[i, j]:.2f}", ha="center", va="center", fontsize=7,
+                        color="white" if M[i, j] > 0.6 else "black")
+    for i, j in c.pairs:
+        ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="tab:red", lw=1.8))
+    ax.set_title(f"MAC on {len(c.points)} common points (matched by {c.matched_by}); pairs framed", fontsize=9)
+    if len(c.pairs):
+        y = np.arange(len(c.pairs))
+        d = 100 * np.asarray(c.frequency_difference)
+        ax2.barh(y, d, color=np.where(np.asarray(c.mac_pairs) >= 0.9, "tab:green", "tab:orange"))
+        ax2.set_yticks(y, [f"A{i + 1} {c.frequencies_a[i]:.4g} / B{j + 1} {c.frequencies_b[j]:.4g} Hz"
+                           for i, j in c.pairs], fontsize=7)
+        ax2.invert_yaxis()
+        span = max(float(np.max(np.abs(d))), 1e-3)
+        for k, (dv, m) in enumerate(zip(d, c.mac_pairs)):
+            ax2.text(max(dv, 0.0) + 0.04 * span, k, f"{dv:+.2f} %  MAC {m:.2f}", va="center", ha="left", fontsize=7)
+        ax2.set_xlim(-1.15 * span, 2.3 * span)
+    else:
+        ax2.text(0.5, 0.5, "no pair (MAC and frequency limits)", ha="center", va="center", transform=ax2.transAxes)
+    ax2.axvline(0, color="0.3", lw=0.8)
+    ax2.set_xlabel("(f_B − f_A) / f_A [%]")
+    ax2.grid(axis="x", alpha=0.3)
+    un = [f"A{i + 1} {c.frequencies_a[i]:.4g}" for i in c.unpaired_a] + \
+         [f"B{j + 1} {c.frequencies_b[j]:.4g}" for j in c.unpaired_b]
+    ax2.set_title(f"{len(c.pairs)} pairs (green: MAC ≥ 0.9, orange: below)\nunpaired (Hz): "
+                  f"{', '.join(un[:6]) + (' …' if len(un) > 6 else '') or 'none'}", fontsize=8)
+    fig.suptitle("Mode sets compared: A (rows) vs B (columns)", fontsize=11)
     return fig
 
 
