@@ -184,3 +184,31 @@ def test_time_data_uff_points_to_convert(shared_data, name, capsys):
     assert main(["modal", str(shared_data / "uff" / name), "--no-rrd", "--no-figures"]) != 0
     err = capsys.readouterr().err
     assert "time data" in err and "vibroscope convert" in err
+
+
+def test_shapes_on_a_plane_geometry_are_drawn_in_3d(tmp_path, check_png):
+    """A simply supported plate's modes sin(mπx/a) sin(nπy/b) at a 5 x 4 grid: `modal` also writes
+    modes_3d.png (the tower above, points on a line, gets modes.png only)."""
+    import pyuff
+
+    a, b = 0.6, 0.4
+    X, Y = (g.ravel() for g in np.meshgrid(np.linspace(0, a, 5), np.linspace(0, b, 4), indexing="ij"))
+    nodes = np.arange(1, X.size + 1)
+    mn = [(1, 1), (2, 1), (1, 2), (2, 2)]
+    shapes = np.array([np.sin(m * np.pi * X / a) * np.sin(n * np.pi * Y / b) for m, n in mn])
+    f = np.array([20 * ((m / a) ** 2 + (n / b) ** 2) for m, n in mn])
+    mm = ModalModel(f, np.full(4, 0.01), shapes, [f"{k}+Z" for k in nodes], "plate")
+    geo = tmp_path / "g.unv"
+    pyuff.UFF(str(geo)).write_sets([pyuff.prepare_2411(
+        node_nums=nodes, def_cs=np.zeros(nodes.size, int), disp_cs=np.zeros(nodes.size, int),
+        color=np.ones(nodes.size, int), x=X, y=Y, z=np.zeros(X.size))], mode="add")
+    path = tmp_path / "plate.unv"
+    path.write_text(geo.read_text() + write_modes_uff55(mm, tmp_path / "m.unv").read_text())
+    ms = read_mode_set(path)
+    assert ms.coords is not None and len(ms.modes) == 4
+    np.testing.assert_allclose(np.diag(compare_mode_sets(ms.modes, mm).mac), 1.0, atol=1e-9)
+    assert main(["modal", str(path), "--out", str(tmp_path / "o"), "--no-rrd"]) == 0
+    check_png(tmp_path / "o" / "plate_modal_figures" / "modes_3d.png")
+    tower = write_lms_export(tmp_path / "lms.unv", tower_modes())
+    assert main(["modal", str(tower), "--out", str(tmp_path / "t"), "--no-rrd"]) == 0
+    assert not (tmp_path / "t" / "lms_modal_figures" / "modes_3d.png").exists()

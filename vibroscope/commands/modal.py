@@ -254,6 +254,15 @@ def _show_mode_set(args, sources: list, select) -> int:
     return 0
 
 
+def _shapes_3d(mm, coords, folder: Path) -> list[Path]:
+    """``modes_3d.png`` (shapes on the geometry) when the points spread in a plane or a volume."""
+    from vibroscope.viewers.figures import _save, plot_mode_shapes_3d
+
+    if coords is None or not len(mm) or np.count_nonzero(np.ptp(coords.xyz, axis=0) > 0) < 2:
+        return []  # points on a line: modes.png says it all
+    return [_save(plot_mode_shapes_3d(mm, coords.as_mapping()), folder / "modes_3d.png")]
+
+
 def _cross_check(an) -> None:
     """polyMAX on the output spectra beside SSI-COV: each SSI mode with the nearest polyMAX mode."""
     from vibroscope.modal.automatic import polymax_oma
@@ -361,6 +370,8 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
             tmp = tx.directory(planned["--figures"])
             paths = summary_figures(tmp, frf=h, modal=mm if len(mm) else None, sv=sv, coords=sc.as_mapping(),
                                     stabilization=ident.stabilization, synthesized=synth)
+            if coords is not None:  # a mode set with its geometry: also the shapes on it in 3-D
+                paths += _shapes_3d(mm, coords, tmp)
             for o in ods:
                 from vibroscope.viewers.acquisition import plot_ods
 

@@ -18,7 +18,7 @@ from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, nearest_frequencies, real_shape, sensor_geometry
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
-           "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "summary_figures"]
+           "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d", "summary_figures"]
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
@@ -662,6 +662,81 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
     axes[n, 1].text(0.05, 0.5, f"overall relative error\n‖H − Ĥ‖ / ‖H‖ = {100 * rel:.2f} %\n"
                               f"over {fs_.min():.4g}–{fs_.max():.4g} Hz", fontsize=10, va="center")
     fig.suptitle("Measured vs synthesized FRFs (LSFD modal model)", fontsize=11)
+    return fig
+
+
+def plot_mode_shapes_3d(modal, coords: Mapping[str, Any], *, fig=None, max_modes: int = 12, amplitude: float = 0.15):
+    """One 3-D panel per mode: the geometry's measured nodes, undeformed and displaced by the shape.
+
+    Points at one position (a triaxial node: ``12+X``, ``12+Y``, ``12+Z``) form one node whose
+    displacement is the sum of each point's real shape value along its measuring direction.
+
+    Parameters
+    ----------
+    modal : ModalModel
+        Natural frequencies (Hz), damping ratios, complex shapes ``(n_modes, n_points)``, points.
+    coords : mapping
+        ``point -> {"xyz": (x, y, z), "direction": (dx, dy, dz)}`` in m
+        (:meth:`vibroscope.io.coords.SensorCoords.as_mapping`).
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+    max_modes : int, optional
+        Panels drawn at most (the first modes); default 12.
+    amplitude : float, optional
+        Largest node displacement drawn, as a share of the geometry's largest extent (default 0.15).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Grey: undeformed nodes; coloured: displaced nodes, joined to their rest position, the
+        colour the signed displacement along the mode's main direction of motion (red +, blue −).
+    """
+    from matplotlib.ticker import MaxNLocator
+
+    plt = _pyplot()
+    fn = np.asarray(modal.natural_frequencies, dtype=float)
+    zeta = np.asarray(modal.damping_ratios, dtype=float)
+    shapes = np.atleast_2d(np.asarray(modal.shapes, dtype=complex))
+    pos, dirs, _ = sensor_geometry(list(modal.points), coords)
+    node_pos, member = np.unique(np.round(pos, 9), axis=0, return_inverse=True)
+    member = np.asarray(member).reshape(-1)
+    extent = float(np.max(np.ptp(node_pos, axis=0))) if len(node_pos) > 1 else 1.0
+    extent = extent if extent > 0 else 1.0
+    n = min(fn.size, max_modes)
+    cols = min(n, 4) or 1
+    rows = max(1, -(-n // cols))
+    if fig is None:
+        fig = plt.figure(figsize=(3.6 * cols, 3.4 * rows), layout="constrained")
+    else:
+        fig.clear()
+    lo, hi = node_pos.min(axis=0) - amplitude * extent, node_pos.max(axis=0) + amplitude * extent
+    for r in range(n):
+        ax = fig.add_subplot(rows, cols, r + 1, projection="3d")
+        phi = real_shape(shapes[r])
+        disp = np.zeros_like(node_pos)
+        np.add.at(disp, member, phi[:, None] * dirs)
+        mag = np.linalg.norm(disp, axis=1)
+        top = float(mag.max()) if mag.size and mag.max() > 0 else 1.0
+        moved = node_pos + amplitude * extent * disp / top
+        ax.scatter(*node_pos.T, color="0.7", s=8, depthshade=False)
+        for a, b in zip(node_pos, moved):
+            ax.plot(*np.c_[a, b], color="0.6", lw=0.6)
+        axis = int(np.argmax(np.sum(disp ** 2, axis=0)))  # the mode's main direction of motion
+        ax.scatter(*moved.T, c=disp[:, axis] / top, cmap="coolwarm", vmin=-1, vmax=1, s=22, depthshade=False,
+                   edgecolors="0.3", linewidths=0.3)
+        ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
+        ax.set_box_aspect(np.maximum(hi - lo, 0.05 * extent))
+        ax.set_xlabel("x [m]", fontsize=7, labelpad=-8)
+        ax.set_ylabel("y [m]", fontsize=7, labelpad=-8)
+        ax.set_zlabel("z [m]", fontsize=7, labelpad=-8)
+        ax.tick_params(labelsize=6, pad=-2)
+        for a in (ax.xaxis, ax.yaxis, ax.zaxis):
+            a.set_major_locator(MaxNLocator(3))
+        ax.view_init(elev=28, azim=-60)
+        ax.set_title(f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}\nmoves mostly along {'xyz'[axis]}", fontsize=8)
+    more = f"; first {n} of {fn.size} modes" if fn.size > n else ""
+    fig.suptitle(f"Mode shapes on the geometry ({getattr(modal, 'method', '')}, {len(node_pos)} nodes, "
+                 f"{len(modal.points)} points{more}); grey: at rest; red +, blue −", fontsize=10)
     return fig
 
 
