@@ -212,3 +212,12 @@ def test_shapes_on_a_plane_geometry_are_drawn_in_3d(tmp_path, check_png):
     tower = write_lms_export(tmp_path / "lms.unv", tower_modes())
     assert main(["modal", str(tower), "--out", str(tmp_path / "t"), "--no-rrd"]) == 0
     assert not (tmp_path / "t" / "lms_modal_figures" / "modes_3d.png").exists()
+
+
+def test_modes_beside_time_data_are_shown(lms, shared_data, tmp_path, capsys):
+    """An export holding mode shapes and time data (no FRF): `modal` shows the modes."""
+    both = tmp_path / "both.unv"
+    both.write_text(lms.read_text() + (shared_data / "uff" / "Sample_UFF58_ascii.uff").read_text())
+    assert not is_mode_set(both)  # it holds a dataset 58: identification is tried first
+    assert main(["modal", str(both), "--no-rrd", "--no-figures"]) == 0
+    assert "6 modes at 6 points (uff55" in capsys.readouterr().out

@@ -188,7 +188,16 @@ def run(args) -> int:
     if is_frf:
         from vibroscope.io.frf_files import read_frf
 
-        h = read_frf([str(s) for s in sources] if len(sources) > 1 else str(first), kind=args.kind, df=args.df)
+        from vibroscope.errors import LogFormatError
+        from vibroscope.io.frf_files import uff_datasets
+
+        try:
+            h = read_frf([str(s) for s in sources] if len(sources) > 1 else str(first), kind=args.kind, df=args.df)
+        except LogFormatError:
+            # no FRF record, but mode shapes (an export that also holds time data or spectra): show those
+            if first.suffix.lower() in (".uff", ".unv", ".uf") and len(sources) == 1 and 55 in uff_datasets(first):
+                return _show_mode_set(args, sources, select)
+            raise
         try:
             ident = identify_frf(h, method=args.method, fmin=args.fmin, fmax=args.fmax, select=select)
         except ValueError as exc:
