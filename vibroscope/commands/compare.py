@@ -252,6 +252,10 @@ def compare_modes(args, names: list[str]) -> int:
         raise VibroscopeError(f"{a_p} vs {b_p}: {exc}") from None
     print(f"A {a_p}: {len(a.modes)} modes ({a.format}); B {b_p}: {len(b.modes)} modes ({b.format}); MAC on "
           f"{len(c.points)} common points (matched by {c.matched_by})")
+    if c.matched_by == "order":
+        pairs = [f"{pa}={pb}" for pa, pb in zip(a.modes.points, b.modes.points)]
+        print(f"no point name in common: the k-th point of A is taken as the k-th of B ({', '.join(pairs[:6])}"
+              f"{', ...' if len(pairs) > 6 else ''}); check that this is the same place and direction")
     print("| A | f_A [Hz] | B | f_B [Hz] | f_B - f_A [Hz] | [%] | MAC | zeta_A [%] | zeta_B [%] |")
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for (i, j), d, e, m in zip(c.pairs, c.frequency_difference_hz, c.frequency_difference, c.mac_pairs):

@@ -107,8 +107,9 @@ def read_mode_set(path: str | Path, *, coords: str | Path | None = None) -> Mode
           channels) from the modal constants ``A_r,oi = φ_o φ_i`` of the input whose column is
           largest (proportional to ``φ_o``, what the MAC needs). ``kind = "lumped"``: the
           oscillatory modes of its linear part (:meth:`~vibroscope.models.LumpedModel.modes`),
-          points = the DOF names (or the model's named points). Shapes are scaled to unit
-          maximum modulus.
+          points = the DOFs (or the model's named points), each named by the channel of the
+          first ``[[output]]`` on it (so they meet a test's channels by name), else by its own
+          name. Shapes are scaled to unit maximum modulus.
         * ``.json``: the ``MODES.json`` of ``vibroscope modal --json``.
     coords : str or Path, optional
         Sensor coordinates (CSV or UFF geometry, :func:`~vibroscope.io.coords.read_coords`)
@@ -180,6 +181,11 @@ def _model_file_modes(p: Path) -> tuple[ModalModel, str]:
             pts, shapes = list(md.dofs), np.asarray(md.shapes)
         if not len(md):
             raise ModelFileError(f"{p}: the lumped model {name!r} has no oscillatory mode")
+        logged = {}
+        for o in model.outputs:  # a DOF that an output logs is named by that output's channel
+            if o.channel and o.dof not in logged:
+                logged[o.dof] = o.channel
+        pts = [logged.get(q, q) for q in pts]
         return ModalModel(md.natural_frequencies, md.damping_ratios, normalize_shapes(shapes), pts,
                           f"model file {name}", {"source": str(p)}), "model file (lumped)"
     raise ModelFileError(f"{p}: a {type(model).__name__} has no mode shapes; a mode set needs kind = \"modal\" "
