@@ -94,7 +94,7 @@ def test_convert_csv_without_rate_asks_for_fs(tmp_path, capsys):
     p = tmp_path / "data.csv"
     np.savetxt(p, np.arange(20.0).reshape(10, 2), delimiter=",")
     out = tmp_path / "out.mcap"
-    assert main(["convert", str(p), str(out), "--columns", "0-1"]) == 2
+    assert main(["convert", str(p), str(out), "--columns", "0-1"]) == 1
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err
     assert "data.csv" in err and "--fs" in err and "no time column was found" in err
@@ -161,7 +161,7 @@ def test_mat_positional_units_without_channels_is_an_error(tmp_path, capsys):
     _mat_pair(tmp_path)
     with pytest.raises(ValueError, match=r"not meaningful.*--channels"):
         read_mat(tmp_path / "a.mat", units="N,m/s^2,V")
-    assert main(["convert", str(tmp_path / "a.mat"), str(tmp_path / "x.mcap"), "--units", "N,m/s^2,V"]) == 2
+    assert main(["convert", str(tmp_path / "a.mat"), str(tmp_path / "x.mcap"), "--units", "N,m/s^2,V"]) == 1
     assert "name=unit" in capsys.readouterr().err and not (tmp_path / "x.mcap").exists()
     # one unit for all is unambiguous
     assert read_mat(tmp_path / "a.mat", units="V").units == ("V", "V", "V")
@@ -219,7 +219,7 @@ def test_convert_refuses_to_overwrite_its_input(tmp_path, capsys):
     p = tmp_path / "in.csv"
     np.savetxt(p, np.ones((10, 2)), delimiter=",")
     before = p.read_bytes()
-    assert main(["convert", str(p), str(p), "--fs", "10"]) == 2
+    assert main(["convert", str(p), str(p), "--fs", "10"]) == 1
     assert "is the input file" in capsys.readouterr().err
     with pytest.raises(ValueError, match="is the input file"):
         convert_to_mcap(p, tmp_path / "." / ".." / tmp_path.name / "in.csv", fs=10.0)

@@ -41,7 +41,8 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    """Convert; returns the exit status (2 for an option the input does not allow, printed in one line)."""
+    """Convert; returns the exit status (1 for an input or option the converter cannot use, said in
+    one line, as every command's errors; 2 stays argparse's usage errors)."""
     from vibroscope.io.convert import convert_to_mcap
 
     tc = args.time_column
@@ -57,7 +58,7 @@ def run(args) -> int:
         if getattr(args, "debug", False):
             raise
         print(f"vibroscope convert: error: {exc}", file=sys.stderr)
-        return 2
+        return 1
     print(f"wrote {path}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz")
     for c, u in zip(sig.channels, sig.units):
         print(f"  {c} [{u}]")
