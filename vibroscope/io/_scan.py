@@ -331,6 +331,7 @@ class _Summary:
     message_count: int | None
     lost: list[ChunkIndex] = field(default_factory=list)  # chunk indexes of chunks not in the file
     note: str | None = None  # how the summary was found, when not where the footer says
+    shift: int = 0  # bytes the footer's summary start (and chunk offsets after a deletion) point too far
 
 
 def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
@@ -397,7 +398,7 @@ def _relocated_summary(data: Any, fpos: int, stated: int, crc: int) -> _Summary 
         chunks, lost, moved = _place_chunks(data, summary.chunks, shift, start)
         if crc == 0 and len(chunks) <= len(lost):  # no CRC to prove it: most chunk indexes must match
             continue
-        summary.chunks, summary.lost = chunks, lost
+        summary.chunks, summary.lost, summary.shift = chunks, lost, shift
         summary.note = (f"the footer's summary start {stated} is wrong by {shift:+d} bytes (bytes deleted before "
                         f"it?); the summary section found at byte offset {start} ({'its CRC-32 checked' if crc else 'no CRC-32'}) is used: "
                         f"{len(chunks)} of its {len(chunks) + len(lost)} chunk indexes match chunk records "
@@ -1672,7 +1673,10 @@ def scan(
     if loose is not None:
         res.blocks.append(loose)
     res.complete = n >= 8 + _FOOTER_LEN + 8 and bytes(data[n - 8 :]) == MAGIC and data[n - 8 - _FOOTER_LEN] == Opcode.FOOTER
+    reported = {d.offset for d in res.damage}
     for ci in summary.lost if summary is not None else ():
+        if ci.chunk_start_offset in reported or ci.chunk_start_offset - summary.shift in reported:
+            continue  # its place was reported damaged by the walk (with the loss its message indexes list)
         counts = index_counts(ci)
         res.damage.append(Damage(
             ci.chunk_start_offset, f"chunk of {ci.chunk_length} bytes listed by the summary's chunk index (at this "
