@@ -208,6 +208,32 @@ def test_lying_uncompressed_size_allocates_nothing(tmp_path, zlog):
     _check_others_read(s, x, n1, o, f"exceeds {MAX_RATIO} times", q)
 
 
+def test_lying_size_in_block_reading(tmp_path, zlog):
+    """The block reader (:func:`vibroscope.io.blocks.open_grid`) refuses the lying chunk the same
+    way: its samples NaN, named by its offset, the others equal to the undamaged log's."""
+    from vibroscope.io.blocks import open_grid
+
+    p, data, x, chunks = zlog
+    o = chunks[1][0]
+    d = bytearray(data)
+    struct.pack_into("<Q", d, o + 9 + 16, 2**32 - 1)
+    q = tmp_path / "lie.mcap"
+    q.write_bytes(bytes(d))
+    n1 = [b.n for b in scan(p).blocks if b.file_offset == o][0]
+    g = open_grid(q, [CH], fs=FS)
+    tracemalloc.start()
+    try:
+        s = g.read(0, g.n_samples)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 64 << 20
+    ok = ~np.isnan(s.data[0])
+    idx = np.rint((s.t0 + np.arange(s.n_samples) / FS - T0) * FS).astype(np.int64)
+    assert np.array_equal(s.data[0][ok], x[idx[ok]]) and ok.sum() == N - n1
+    assert any(f"byte offset {o}" in w and f"exceeds {MAX_RATIO} times" in w for w in s.meta["warnings"])
+
+
 def test_size_over_the_memory_budget_is_refused(zlog):
     """Honest chunks larger than one thread's share of max_memory (one thread: half) are skipped and
     named; the others are read whole."""
