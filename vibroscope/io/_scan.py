@@ -641,6 +641,15 @@ def _decompress(chunk: Chunk) -> Any:
         dec = getattr(_LOCAL, "zstd", None)
         if dec is None:  # one decompression context per thread, reused (zstandard objects are not thread-safe)
             dec = _LOCAL.zstd = _zstd.ZstdDecompressor()
+        try:
+            stated = _zstd.frame_content_size(chunk.data)  # the frame header's size, when it has one
+        except Exception:  # noqa: BLE001 - not a zstd frame: the stream below names the fault
+            stated = -1
+        if stated == size:  # one call, into exactly the size already checked (zstd stops at the frame's size)
+            return dec.decompress(chunk.data, max_output_size=size)
+        if stated > size:
+            raise ValueError(f"zstd frame states {stated} bytes, more than the {size} the chunk states: not "
+                             f"decompressed")
         out = bytearray(size)
         got = _zstd_stream_into(dec, chunk.data, memoryview(out))
         if got != size:
