@@ -248,32 +248,35 @@ def test_size_over_the_memory_budget_is_refused(zlog):
     assert sum(b.n for b in r.blocks) == N - sum(d.messages for d in r.damage)
 
 
-def _zero_bomb_zstd(size: int) -> bytes:
+def _zero_bomb_zstd(size: int, content_size: bool = True) -> bytes:
     import zstandard
 
-    c = zstandard.ZstdCompressor(level=1).compressobj(size=size)
+    c = zstandard.ZstdCompressor(level=1, write_content_size=content_size).compressobj(size=size)
     piece = bytes(1 << 22)
     out = [c.compress(piece) for _ in range(size // len(piece))]
     return b"".join(out) + c.flush()
 
 
-@pytest.mark.parametrize("stated", ["honest", "small"])
+@pytest.mark.parametrize("stated", ["honest", "small", "small, frame without a size"])
 def test_zstd_bomb_refused_fast(tmp_path, zlog, stated):
-    """256 MiB of zeros in a few kB: refused in < 1 s by the ratio limit (stated honestly) or by
-    the bounded stream (stated as the original size: the frame runs on), memory small; the other
-    chunks are read and the refusal names file and offset."""
+    """256 MiB of zeros in a few kB: refused in < 1 s by the ratio limit (stated honestly), by the
+    frame's own size (stated as the original chunk's), or by the bounded stream (a frame that
+    states no size runs on beyond the chunk's), memory small; the other chunks are read and the
+    refusal names file and offset."""
     p, data, x, chunks = zlog
     o, end, _ = chunks[2]
     start, stop, usize = struct.unpack_from("<QQQ", data, o + 9)
     size = 256 << 20
-    bomb = _zero_bomb_zstd(size)
+    bomb = _zero_bomb_zstd(size, content_size="without" not in stated)
     rec = _chunk_record(start, stop, size if stated == "honest" else usize, b"zstd", bomb, crc=1)
     q = tmp_path / "bomb.mcap"
     q.write_bytes(_replace_chunk(data, chunks[2], rec))
     n2 = [b.n for b in scan(p).blocks if b.file_offset == o][0]
     s, dt, peak = _peak_read(q)
     assert dt < 1.0 and peak < 64 << 20
-    _check_others_read(s, x, n2, o, "decompression bomb" if stated == "honest" else "decompresses to more", q)
+    what = {"honest": "decompression bomb", "small": f"zstd frame states {size} bytes, more than the {usize}",
+            "small, frame without a size": f"decompresses to more than the {usize} bytes stated"}[stated]
+    _check_others_read(s, x, n2, o, what, q)
 
 
 def test_lz4_bomb_bounded(tmp_path, zlog):

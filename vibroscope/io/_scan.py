@@ -653,7 +653,8 @@ def _decompress(chunk: Chunk) -> Any:
         out = bytearray(size)
         got = _zstd_stream_into(dec, chunk.data, memoryview(out))
         if got != size:
-            raise ValueError(f"decompresses to {'more than' if got > size else got} bytes, not the {size} stated")
+            raise ValueError(f"decompresses to more than the {size} bytes stated" if got > size else
+                             f"decompresses to {got} bytes, not the {size} stated")
         return out
     if chunk.compression == "lz4":
         if _cramjam_lz4 is not None:
