@@ -311,8 +311,13 @@ def test_bad_rates_are_refused_before_reading(kw, match):
 
 
 def test_one_string_as_channels_is_refused():
-    with pytest.raises(ValueError, match=r"not one string .*\['/imu.linear_acceleration.x'\]"):
-        read_mcap("/nonexistent/never-opened.mcap", CH)
+    from vibroscope.io.blocks import open_grid
+
+    for f in (read_mcap, open_grid):
+        with pytest.raises(ValueError, match=r"not one string .*\['/imu.linear_acceleration.x'\]"):
+            f("/nonexistent/never-opened.mcap", CH)
+    with pytest.raises(ValueError, match=r"fs=nan must be finite and > 0"):
+        open_grid("/nonexistent/never-opened.mcap", [CH], fs=float("nan"))
 
 
 @pytest.mark.parametrize("fs", [1e9, 1e12, 2e6])

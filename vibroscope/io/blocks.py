@@ -626,13 +626,15 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         selection) the log has no Imu topic and no decodable topic with moving measurement
         fields.
     ValueError
-        If `fs` or `margin_s` is not a positive (non-negative) finite number.
+        If `fs` or `margin_s` is not a positive (non-negative) finite number, or `channels` is
+        one string (:func:`~vibroscope.io.mcap_read.check_read_args`).
     """
     from vibroscope.io.log_index import LogIndex
 
+    from vibroscope.io.mcap_read import check_read_args
+
     path = Path(path)
-    if fs is not None and not (np.isfinite(fs) and fs > 0):
-        raise ValueError(f"{fs=} must be a positive sampling frequency in Hz")
+    check_read_args(channels, fs)
     if not (np.isfinite(margin_s) and margin_s >= 0):
         raise ValueError(f"{margin_s=} must be a non-negative time in s")
     warnings: list[str] = []

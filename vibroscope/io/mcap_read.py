@@ -78,6 +78,7 @@ __all__ = [
     "unit_for",
     "ACCELERATION_TYPES",
     "memory_budget",
+    "check_read_args",
 ]
 
 
@@ -251,9 +252,24 @@ def _channels_read(log: LogIndex, parsed: list[MessagePath], rows: dict[int, np.
 MAX_UPSAMPLE = 100
 
 
-def _check_request(channels: Sequence[str] | None, fs: float | None, max_memory: int | None) -> None:
-    """Refuse a channel list given as one string, and a rate or budget that is not a positive,
-    finite number (one line naming the limit), before the log is read."""
+def check_read_args(channels: Sequence[str] | None, fs: float | None = None, max_memory: int | None = None) -> None:
+    """Refuse, before the log is read, a channel list given as one string and a rate or memory
+    budget that is not a finite number > 0.
+
+    Parameters
+    ----------
+    channels : sequence of str or None
+        Message paths.
+    fs : float, optional
+        Rate in Hz.
+    max_memory : int, optional
+        Memory budget in bytes.
+
+    Raises
+    ------
+    ValueError
+        One line naming the argument and the limit.
+    """
     if isinstance(channels, (str, bytes)):
         raise ValueError(f"channels={channels!r} must be a sequence of message paths, not one string "
                          f"(give [{channels!r}])")
@@ -388,7 +404,7 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
         times the highest topic rate, or the grid would need more than `max_memory` (checked
         before it is allocated).
     """
-    _check_request(channels, fs, max_memory)
+    check_read_args(channels, fs, max_memory)
     log = path if isinstance(path, LogIndex) else _index_for(path, channels, progress, max_memory)
     notes = _Notes.of_scan(log)
     auto = channels is None
