@@ -136,6 +136,22 @@ def test_deleted_chunk_in_real_logs(tmp_path, shared_data, name, which, with_ind
         assert info.topic(t).lost_messages == k and info.topic(t).lost_s > 0
 
 
+def test_two_deleted_chunks_in_a_real_log(tmp_path, shared_data):
+    """Two chunks deleted (two different shifts: the chunks between them are found by their
+    record headers): the others all read, both losses counted."""
+    p = shared_data / "mcap" / "capstan" / "bagfile_0.mcap"
+    data = p.read_bytes()
+    chunks = _chunks(p, data)
+    (a, _, b), (c, _, e) = chunks[2], chunks[6]
+    q = tmp_path / "two.mcap"
+    q.write_bytes(data[:a] + data[b:c] + data[e:])
+    ns = {blk.file_offset: blk.n for blk in scan(p).blocks}
+    r = scan(q)
+    assert sum(blk.n for blk in r.blocks) == sum(ns.values()) - ns[a] - ns[c]
+    assert sum(v[0] for v in r.lost_by_topic().values()) == ns[a] + ns[c]
+    assert any("2 list chunks no longer in the file" in w for w in r.warnings)
+
+
 def test_read_mcap_of_a_real_log_without_its_first_chunk(tmp_path, shared_data):
     """bagfile_0 without its first chunk: the joint states of the other chunks, as in the whole log."""
     p = shared_data / "mcap" / "capstan" / "bagfile_0.mcap"
