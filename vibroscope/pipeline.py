@@ -19,7 +19,8 @@ from vibroscope.signals import Signals, true_runs
 from vibroscope.spectral import FRF, CrossSpectralMatrix, Spectrum, csd_matrix, frf
 from vibroscope.spectral.estimators import MIN_AVERAGES, FewAveragesWarning
 
-__all__ = ["Analysis", "IdentifySettings", "METHODS", "analyse_signals", "decimate", "default_nperseg", "summary_dict"]
+__all__ = ["Analysis", "IdentifySettings", "METHODS", "analyse_signals", "decimate", "decimation_stages", "default_nperseg",
+           "summary_dict"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -42,7 +43,8 @@ class Analysis:
         Singular values of the response CSD (FDD); unpacks as ``(frequencies Hz, S (n_freqs,
         n_channels))``.
     settings : dict
-        Welch settings and the band analysed.
+        Welch settings, the band analysed and the decimation (``decimation``: ``fs_in``,
+        ``fs_out``, ``factors``, ``reason``; see :func:`analyse_signals`).
     warnings : list of str
         What the reader and the analysis noticed (gaps, jitter, skipped channels, ...).
     identification : Identification or None
@@ -100,7 +102,7 @@ def default_nperseg(n: int, fs: float, *, fmin: float | None = None, averages: i
     return int(min(nper, n))
 
 
-def decimate(signals: Signals, fmax: float) -> Signals:
+def decimate(signals: Signals, fmax: float, *, period: int | None = None) -> Signals:
     """Low-pass and decimate so that `fmax` (Hz) stays below 0.4·fs; unchanged if no gain.
 
     Uses :func:`scipy.signal.decimate` (order-8 Chebyshev I, zero phase) in stages of at most 10.
@@ -114,22 +116,32 @@ def decimate(signals: Signals, fmax: float) -> Signals:
     signals : Signals
         The record.
     fmax : float
-        Highest frequency of interest in Hz; the total factor is ``floor(fs / (2.5 fmax))``.
+        Highest frequency of interest in Hz; the total factor is at most ``floor(fs / (2.5 fmax))``,
+        so the reduced rate is at least ``2.5 fmax``.
+    period : int, optional
+        Period in samples of a periodic excitation in the record. The total factor is then the
+        largest one within that bound that divides `period` and is a product of stages of at most
+        10, so that the decimated record is periodic in ``period / factor`` whole samples (a
+        period-synchronous FRF needs whole periods; Pintelon & Schoukens 2012, §2.2); unchanged when
+        there is none. Default None (the factor ``floor(fs / (2.5 fmax))`` in stages of at most 10).
 
     Returns
     -------
     Signals
-        At the reduced rate, with ``meta["decimated"] = {"factors", "fs_in", "fs_out"}``; the
-        input itself when the factor is below 2.
+        At the reduced rate, with ``meta["decimated"] = {"factors", "fs_in", "fs_out", "reason"}``
+        (``reason``: one line saying why this factor); the input itself when no factor of at least
+        2 fits.
+
+    Raises
+    ------
+    ValueError
+        If `fmax` is not positive or `period` is below 2.
     """
-    q = int(np.floor(signals.fs / (2.5 * fmax)))
-    if q < 2:
+    if not (np.isfinite(fmax) and fmax > 0):
+        raise ValueError(f"{fmax=} must be a positive frequency in Hz")
+    stages = decimation_stages(signals.fs, fmax, period=period)
+    if not stages:
         return signals
-    stages, left = [], q
-    while left >= 2:  # stages of at most 10 (scipy's advice); total factor <= q keeps fs >= 2.5 fmax
-        f = min(left, 10)
-        stages.append(f)
-        left //= f
     total = int(np.prod(stages))
     fs = signals.fs / total
     present = np.isfinite(signals.data).all(axis=0)
@@ -145,8 +157,61 @@ def decimate(signals: Signals, fmax: float) -> Signals:
                 continue
             part = _decimate_stages(signals.data[:, a:b], stages)
             data[:, a // total: a // total + part.shape[1]] = part
-    meta = {**signals.meta, "decimated": {"factors": stages, "fs_in": signals.fs, "fs_out": fs}}
+    why = f"factor {total}: fs ≥ 2.5 × the {fmax:.4g} Hz band"
+    if period:
+        why += f", and it divides the input's period: {period} → {period // total} samples"
+    meta = {**signals.meta, "decimated": {"factors": stages, "fs_in": signals.fs, "fs_out": fs, "reason": why}}
     return Signals(data, fs, signals.channels, signals.units, signals.t0, meta)
+
+
+def decimation_stages(fs: float, fmax: float, *, period: int | None = None) -> list:
+    """The stages (factors of at most 10, largest first) :func:`decimate` uses; [] for none.
+
+    Parameters
+    ----------
+    fs : float
+        Sampling frequency in Hz.
+    fmax : float
+        Highest frequency of interest in Hz; the total factor is at most ``q = floor(fs / (2.5 fmax))``.
+    period : int, optional
+        Period in samples of a periodic excitation: the total factor is the largest ``d <= q`` that
+        divides `period` and factors into stages of at most 10 (none: []). Default None: the stages
+        ``min(q, 10)``, then ``q // 10`` and so on (their product at most `q`).
+
+    Returns
+    -------
+    list of int
+        Empty when no total factor of at least 2 fits.
+
+    Raises
+    ------
+    ValueError
+        If `period` is below 2.
+    """
+    q = int(np.floor(fs / (2.5 * fmax)))
+    if period is None:
+        stages, left = [], q
+        while left >= 2:  # stages of at most 10 (scipy's advice); total factor <= q keeps fs >= 2.5 fmax
+            f = min(left, 10)
+            stages.append(f)
+            left //= f
+        return stages
+    period = int(period)
+    if period < 2:
+        raise ValueError(f"{period=} must be at least 2 samples")
+    for d in range(min(q, period), 1, -1):
+        if period % d:
+            continue
+        stages, left = [], d
+        while left > 1:  # the largest stage <= 10 that divides what is left
+            f = next((f for f in range(10, 1, -1) if left % f == 0), None)
+            if f is None:  # a prime factor above 10
+                break
+            stages.append(f)
+            left //= f
+        if left == 1:
+            return stages
+    return []
 
 
 def _decimate_stages(data: np.ndarray, stages: list) -> np.ndarray:
@@ -269,6 +334,7 @@ def analyse_signals(
     prominence: float = 10.0,
     method: str = "auto",
     select: Sequence[float] | None = None,
+    decimation: bool = True,
 ) -> Analysis:
     """Spectra, FRFs, coherence and modal vectors of a record.
 
@@ -314,6 +380,9 @@ def analyse_signals(
     select : sequence of float, optional
         LSCF and SSI-COV: take the modes at these frequencies (Hz) from the stabilization diagram
         instead of the automatic physical-mode selection.
+    decimation : bool, optional
+        Decimate to the band (:func:`decimate`) when ``fmax < 0.4 fs`` (default True); False
+        analyses the record at its own rate.
 
     Returns
     -------
@@ -325,7 +394,8 @@ def analyse_signals(
         If `input` or an output is not a channel of `signals`.
     ValueError
         If the record is too short for the segment length, the method does not fit the
-        presence or absence of an input, ``fmin > fmax``, or a signal fault stops the analysis
+        presence or absence of an input, ``fmin > fmax``, `fmax` is above the Nyquist
+        frequency ``fs / 2``, or a signal fault stops the analysis
         (an all-missing channel, a zero or constant input, a record shorter than `nperseg`); the
         message names the channel or option and the remedy.
 
@@ -341,6 +411,15 @@ def analyse_signals(
     than half of the record, when each pair keeps its own segments (a note says so); the
     automatic `nperseg` is halved until at least 8 segments of every channel fit between the
     gaps, and a note says how many segments were averaged. Decimation never filters across a gap (:func:`decimate`).
+
+    Decimation keeps the rate at least 2.5 `fmax` (the band's top when `fmax` is not given). With
+    an input, its period is looked for first at the full rate (:func:`vibroscope.spectral.periodic.detect_period`,
+    low-passed to `fmax`); a periodic input is decimated only by a factor that divides its period,
+    or not at all. ``settings["decimation"]`` says what was done and why: ``fs_in``, ``fs_out``
+    (Hz), ``factors`` (the stages, [] when not decimated) and ``reason`` (None when decimating
+    would not gain).
+
+    An input in an acceleration unit (m/s², g) gets a note: its FRFs are transmissibilities.
     """
     from vibroscope import modal
     from vibroscope.modal.selection import excited_band, response_band
@@ -352,9 +431,16 @@ def analyse_signals(
     notes = list(signals.meta.get("warnings", []))
     if fmin is not None and fmax is not None and fmin > fmax:
         raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
+    if fmax is not None and fmax > signals.fs / 2:
+        raise ValueError(f"fmax={fmax:g} Hz is above the Nyquist frequency {signals.fs / 2:g} Hz (fs={signals.fs:g} "
+                         f"Hz): nothing above fs/2 is measured")
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     if input is not None:
-        signals.index(input)
+        unit = signals.units[signals.index(input)]
+        if unit in _ACCELERATION_UNITS:  # base excitation: response over input acceleration
+            notes.append(f"input {input} is an acceleration ({unit}), not a force: the FRFs are transmissibilities "
+                         f"(response / input acceleration), not FRFs, and their modes are those of the structure "
+                         f"held at the input point")
     for c in outputs:
         signals.index(c)
     # signal faults: detected on the data, their documented actions applied (masking as NaN,
@@ -414,13 +500,32 @@ def analyse_signals(
         if band_note:
             notes.append(band_note + " (set --fmin/--fmax to choose)")
     undecimated = sig
-    if fmax is not None and fmax < 0.4 * sig.fs:
-        dec = decimate(sig, fmax)
-        if not gappy or _clean_segments(dec, 16) >= 8:
+    # a periodic input is looked for at the full rate (low-passed to the band when a decimation
+    # would gain): the decimation factor must divide its period (whole periods for the FRFs)
+    wanted = bool(fmax is not None and fmax < 0.4 * sig.fs and decimation_stages(sig.fs, fmax))
+    per = None
+    if input and gappy:
+        notes.append("periodic input not looked for: the record has gaps")
+    elif input:
+        from vibroscope.spectral.periodic import detect_period
+
+        per = detect_period(sig[input], sig.fs, fmax=fmax if wanted else None)
+        per = per if per.is_periodic and per.n_periods >= 3 else None
+    dec_info = {"fs_in": sig.fs, "fs_out": sig.fs, "factors": [], "reason": None}
+    if wanted and not decimation:
+        dec_info["reason"] = "decimation turned off"
+    elif wanted:
+        dec = decimate(sig, fmax, period=per.period_samples if per else None)
+        if dec is sig:  # a periodic input whose period no allowed factor divides
+            dec_info["reason"] = (f"no factor up to {int(sig.fs // (2.5 * fmax))} divides the input's period of "
+                                  f"{per.period_samples} samples: a periodic excitation needs whole periods")
+        elif not gappy or _clean_segments(dec, 16) >= 8:
             sig = dec
+            dec_info = dict(dec.meta["decimated"])
         else:  # the decimation filter's settling eats short stretches between gaps
             notes.append(f"not decimated to the {fmax:.4g} Hz band: the stretches between gaps are too short "
                          f"for the decimation filter to settle")
+            dec_info["reason"] = "the stretches between gaps are too short for the decimation filter"
     fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
     if input:
         fw, P = _quick_welch(sig[input][None], sig.fs, _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs)))
@@ -429,17 +534,13 @@ def analyse_signals(
     else:
         band = (fmin, fmax_eff)
     period = None
-    if input and gappy:
-        notes.append("periodic input not looked for: the record has gaps")
-    elif input:
-        from vibroscope.spectral.periodic import detect_period
-
-        per = detect_period(sig[input], sig.fs)
-        if per.is_periodic and per.n_periods >= 3:
-            period = per.period_samples
-            notes.append(f"periodic input: period {per.period_s:.6g} s ({per.period_samples} samples, "
-                         f"{per.n_periods} periods, score {per.score:.4f}); FRFs period-synchronous "
-                         f"(rectangular window over whole periods, the first period dropped)")
+    if per is not None:
+        q = int(round(undecimated.fs / sig.fs))
+        period = per.period_samples // q
+        rate = f" at {sig.fs:g} Hz; {per.period_samples} at {undecimated.fs:g} Hz" if q > 1 else ""
+        notes.append(f"periodic input: period {per.period_s:.6g} s ({period} samples{rate}, "
+                     f"{per.n_periods} periods, score {per.score:.4f}); FRFs period-synchronous "
+                     f"(rectangular window over whole periods, the first period dropped)")
     auto = nperseg is None
     if auto:
         nperseg = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs,
@@ -478,8 +579,12 @@ def analyse_signals(
                      f"those touching a missing sample were skipped{few}")
     severity = _severity(undecimated.select(outputs), notes)
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
-                    input=input, outputs=list(outputs), method=mm.method, band_hz=list(band))
+                    input=input, outputs=list(outputs), method=mm.method, band_hz=list(band), decimation=dec_info)
     return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity, tuple(faults))
+
+
+#: units of an acceleration channel (an input in one of them makes a transmissibility)
+_ACCELERATION_UNITS = ("m/s^2", "m/s²", "m s^-2", "g")
 
 
 def _nperseg_for(sig: Signals, nperseg: int) -> int:
@@ -518,7 +623,7 @@ def _severity(sig: Signals, notes: list):
     """ISO 20816 velocity RMS (10–1000 Hz, mm/s) of the acceleration channels, or None."""
     from vibroscope.spectral.integration import vibration_severity
 
-    acc = [c for c, u in zip(sig.channels, sig.units) if u in ("m/s^2", "m/s²", "m s^-2", "g")]
+    acc = [c for c, u in zip(sig.channels, sig.units) if u in _ACCELERATION_UNITS]
     if not acc or sig.fs / 2 <= 10.0:
         return None
     try:
@@ -565,7 +670,8 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
     index ranges), ``times_s`` (s from the first sample); see :meth:`vibroscope.faults.Fault.to_dict`), ``modes`` (each ``frequency_hz``,
     ``damping_ratio``, ``frequency_std_hz``, ``damping_std``, ``shape`` {path: [re, im]}, ``mpc``,
     ``mpd``, ``stable``), ``rejected_modes`` (``frequency_hz``, ``damping_ratio``, ``reason``), plus ``input``, ``outputs``,
-    ``settings``, ``timebase`` and, with `true_modes`, ``true_modes``.
+    ``settings``, ``timebase``, ``input_choice`` (the line naming the force-like channel taken as the
+    input, or why none was, when the log was searched for one) and, with `true_modes`, ``true_modes``.
 
     Parameters
     ----------
@@ -607,7 +713,7 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
     ident = analysis.identification
     if ident is not None:
         out["identification"] = {k: v for k, v in ident.settings.items() if k not in ("orders",)}
-    for key in ("timebase", "skipped", "decimated", "resampled"):
+    for key in ("timebase", "skipped", "decimated", "resampled", "input_choice"):
         if key in sig.meta:
             out[key] = sig.meta[key]
     if true_modes is not None:

@@ -93,6 +93,10 @@ def test_vanishing_parameters_are_named():
     assert by["saturation"].vanishes([math.log(5.0)]) is None
     assert "symmetric" in by["asymmetric_friction"].vanishes([0.0, 0.02])
     assert by["asymmetric_friction"].vanishes([0.0, math.log(3.0)]) is None
+    # equal sliding forces reduce to Coulomb friction at their mean; unequal ones do not
+    name, p = by["asymmetric_friction"].reduces_to([0.0, math.log(1.06)])
+    assert name == "coulomb_friction" and math.exp(p[0]) == pytest.approx(1.03)
+    assert by["asymmetric_friction"].reduces_to([0.0, math.log(3.0)]) is None
     assert by["cubic_stiffness"].qualifiers([-0.1]) == {"character": "softening"}
     assert by["cubic_stiffness"].qualifiers([0.1]) == {"character": "hardening"}
 

@@ -5,8 +5,6 @@ data set (Janot, Gautier & Brunot 2019)."""
 
 from __future__ import annotations
 
-import time
-
 import control
 import numpy as np
 import pytest
@@ -100,6 +98,36 @@ def test_p_loop_on_a_mass_spring_matches_the_exact_discrete_loop():
     np.testing.assert_allclose(s.data[2], u, rtol=0, atol=1e-9)
     # static error of the P loop: k / (k + kp)
     assert s.data[1, -1] == pytest.approx(1e-3 * kp / (1e4 + kp), rel=1e-6)
+
+
+@pytest.mark.parametrize("delay_ticks", [3.0, 2.5])
+def test_a_delayed_actuator_applies_the_command_delay_s_late(delay_ticks):
+    """A driven input with ``delay``: the force applied over tick k is the command of tick
+    k - delay (linearly interpolated between ticks for a fractional delay, zero before the
+    start); the kernel equals that discrete loop built from the ZOH-sampled plant."""
+    kp, T = 3e3, 1e-3
+    m = LumpedModel.chain([1.0], [1e4], [20.0], output_quantity="displacement")
+    m = m.replace(inputs=(Input("m1", delay=delay_ticks * T),))
+    c = Controller("c", "P", {"kp": kp}, 1 / T, "m1", drives=0, reference="/r.x")
+    mc = m.replace(controllers=(c,))
+    n = 2000
+    r = np.r_[np.zeros(5), np.ones(n - 5)] * 1e-3
+    s = simulate(mc, r, 1 / T)
+    A, B, C, _ = m.state_matrices()
+    Phi, Gam = zoh_matrices(A, B, T)
+    q = np.zeros(2)
+    y, u = np.zeros(n), np.zeros(n)
+    d0, a = int(delay_ticks), delay_ticks - int(delay_ticks)
+    for k in range(n):
+        y[k] = (C @ q)[0]
+        u[k] = kp * (r[k] - y[k])
+        ua = (1 - a) * (u[k - d0] if k >= d0 else 0.0) + a * (u[k - d0 - 1] if k >= d0 + 1 else 0.0)
+        q = Phi @ q + Gam[:, 0] * ua
+    np.testing.assert_allclose(s.data[1], y, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(s.data[2], u, rtol=0, atol=1e-9)
+    # the delay changes the loop: the undelayed loop's response differs
+    s0 = simulate(m.replace(inputs=(Input("m1"),), controllers=(c,)), r, 1 / T)
+    assert np.max(np.abs(s0.data[1] - s.data[1])) > 1e-2 * np.max(np.abs(s.data[1]))
 
 
 def test_trapezoidal_path_agrees_with_exact_zoh_path():
@@ -249,14 +277,14 @@ def test_emps_reproduction(shared_data, fname, friction, max_q, max_vir):
     assert eq < max_q and ev < max_vir, (eq, ev)
 
 
-def test_closed_loop_speed_1dof_friction():
-    """>= 100x real time: 60 s of a 1-DOF drive with friction in its cascade loop at 1 kHz."""
+def test_closed_loop_1dof_friction_converges_and_tracks():
+    """60 s of a 1-DOF drive with friction in its cascade loop at 1 kHz: every Newton step
+    converges and the position follows the slow reference (its speed, >= 100x real time, is
+    measured by ``benchmarks/run.py``'s closed_loop case, not here)."""
     m = emps_model(35.15, friction=True)
     t = np.arange(60000) / 1000.0
     r = 0.1 * (1 - np.cos(2 * np.pi * 0.2 * t))
-    simulate(m, r[:100], 1000.0)  # compile
-    t1 = time.perf_counter()
     s = simulate(m, r, 1000.0)
-    dt = time.perf_counter() - t1
     assert s.meta["newton_failures"] == 0
-    assert dt < 0.6 * 2, dt  # target 0.6 s; x2 for a loaded test machine
+    q = s.data[list(s.channels).index("/emps/qm.x")]
+    assert np.max(np.abs(q - r)) < 0.05 * np.max(np.abs(r))

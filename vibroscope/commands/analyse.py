@@ -29,7 +29,8 @@ def add_parser(sub) -> None:
         help="spectra, FRFs, coherence and modal vectors of an MCAP log",
         description=(
             "Read an MCAP log (ROS 2 CDR, JSON, protobuf), put the channels on one time grid, and "
-            "compute PSDs, the cross-spectral matrix, FRFs with coherence (with --input) and modal "
+            "compute PSDs, the cross-spectral matrix, FRFs with coherence (with --input, or the log's one "
+            "force-like channel unless --output-only) and modal "
             "vectors (LSCF + LSFD with a force input, SSI-COV without; the band, orders and physical "
             "modes chosen automatically unless --fmin/--fmax are given). Writes a rerun recording, "
             "PNG figures and, with --json, a machine-readable summary."
@@ -37,7 +38,11 @@ def add_parser(sub) -> None:
     )
     p.add_argument("log", type=Path, nargs="*",
                    help="the MCAP log (several logs: a fleet analysis, with --dask or on this machine)")
-    p.add_argument("--input", help="force channel (message path), e.g. /actuator/force.wrench.force.x")
+    p.add_argument("--input", help="force channel (message path), e.g. /actuator/force.wrench.force.x; default the "
+                                   "log's one force-like channel (a Wrench force, a field in N, or named force/"
+                                   "command/input), if it holds exactly one that moves")
+    p.add_argument("--output-only", action="store_true",
+                   help="ignore any force channel in the log: output-only modal analysis of the responses")
     p.add_argument("--outputs", nargs="+", metavar="PATH",
                    help="response channels (default: every Imu linear_acceleration field)")
     p.add_argument("--coords", type=Path, help="sensor coordinates CSV (channel or sensor number, x, y, z, direction)")
@@ -57,6 +62,9 @@ def add_parser(sub) -> None:
     p.add_argument("--nperseg", type=int, help="Welch segment length (default: ~16 averages, fine enough for --fmin)")
     p.add_argument("--fmin", type=float, help="lowest frequency searched for modes (Hz)")
     p.add_argument("--fmax", type=float, help="highest frequency analysed (Hz); decimates when well below fs/2")
+    p.add_argument("--no-decimate", action="store_true",
+                   help="analyse at the log's rate (default: decimate to >= 2.5x the band's top; a periodic input "
+                        "only by a factor that divides its period)")
     p.add_argument("--n-modes", type=int, help="number of modes to report")
     p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
     p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
@@ -82,13 +90,20 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False, max_memory=None, **kw):
+def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False, find_input=False, max_memory=None,
+                **kw):
     """Read `log` and run :func:`vibroscope.pipeline.analyse_signals`; returns the Analysis.
 
     Without `outputs`, the responses are chosen by :func:`vibroscope.io.select.auto_channels`
     (Imu accelerations; else the measurement fields of the busiest topic), and the choice and
     what was skipped (undecodable channels by name) go into the warnings; the log is then
     scanned once (:class:`vibroscope.io.LogIndex`) for both the choice and the read.
+
+    With `find_input` and no `input`, the log's one force-like channel that moves
+    (:func:`vibroscope.io.select.find_force_input`: a Wrench force, a field in N, or one named
+    force/command/input, outside the responses' topics) is the input; the line saying so (or why
+    none was taken) is ``signals.meta["input_choice"]``, printed by :func:`report_text` and
+    written to the summary JSON.
 
     Parameters
     ----------
@@ -104,6 +119,10 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         topic rate.
     progress : bool, optional
         Show a progress bar while reading; default False.
+    find_input : bool, optional
+        Without `input`, take the log's one force-like channel as the input (see above);
+        default False (output-only without `input`). Only for the methods that use an input
+        (``method`` "auto", "lscf", "peak").
     max_memory : int, optional
         Memory budget in bytes for reading the log (:func:`vibroscope.io.read_mcap`); default
         half the available memory.
@@ -114,13 +133,23 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     -------
     Analysis
     """
+    from vibroscope.errors import VibroscopeError
     from vibroscope.io import LogIndex, read_mcap
-    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels
+    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels, find_force_input
     from vibroscope.pipeline import analyse_signals
 
-    notes, fallback, source = [], False, log
-    if outputs is None:  # scan the log once: the index serves the choice and the read
+    notes, fallback, source, choice = [], False, log, None
+    find_input = find_input and input is None and kw.get("method", "auto") in ("auto", "lscf", "peak")
+    if outputs is None or find_input:  # scan the log once: the index serves the choices and the read
         source = LogIndex.open(log, progress=progress, max_memory=max_memory)
+    if find_input:
+        resp = {source.topic_of(c).topic for c in outputs or ()}
+        try:
+            found = find_force_input(source, exclude_topics=resp)
+            input, choice = found.channel, found.line() or None
+        except VibroscopeError as exc:  # the search never stops an output-only analysis
+            choice = f"no force input looked for: {exc}"
+    if outputs is None:
         # the input's topic holds the force, not a response
         sel = auto_channels(source, exclude_topics=(input.split(".", 1)[0],) if input else ())
         notes.append(f"channels chosen automatically: {sel.reason}")
@@ -142,6 +171,8 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         sig = sig.select(([input] if input else []) + moving[:MAX_AUTO_CHANNELS])
     if notes:
         sig = sig.with_meta(warnings=notes + list(sig.meta.get("warnings", [])))
+    if choice:
+        sig = sig.with_meta(input_choice=choice)
     return analyse_signals(sig, input=input, **kw)
 
 
@@ -217,8 +248,10 @@ def run(args) -> int:
     select = _select_freqs(args.select)
     try:
         an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
-                         nperseg=args.nperseg, fmin=args.fmin, fmax=args.fmax, n_modes=args.n_modes,
-                         estimator=args.estimator, method=args.method, select=select, max_memory=budget)
+                         find_input=not getattr(args, "output_only", False), nperseg=args.nperseg, fmin=args.fmin,
+                         fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator, method=args.method,
+                         select=select, decimation=not getattr(args, "no_decimate", False),
+                         max_memory=budget)
     except ValueError as exc:
         raise VibroscopeError(f"{args.log}: {exc}") from None
     nyq = an.psd.frequencies[-1]
@@ -226,6 +259,10 @@ def run(args) -> int:
         if f > nyq:
             raise VibroscopeError(f"--ods {f:g}: above the analysed band's top, {nyq:g} Hz (the Nyquist frequency of "
                                   f"{an.signals.fs:g} Hz)")
+    if args.coords:  # the rows against the channels analysed, before the report (one line if they differ)
+        from vibroscope.io.coords import read_coords
+
+        read_coords(args.coords, an.settings["outputs"])
     print(report_text(an, source=str(args.log)))
     write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
                   spawn=args.spawn, ods=args.ods)
@@ -527,10 +564,14 @@ def _check_options(args) -> None:
 
     from vibroscope.errors import VibroscopeError
 
+    if getattr(args, "output_only", False) and getattr(args, "input", None):
+        raise VibroscopeError(f"--output-only and --input {args.input}: give one of them")
     for opt in ("fs", "fmin", "fmax", "nperseg", "n_modes", "df"):
         v = getattr(args, opt, None)
         if v is not None and not (math.isfinite(v) and v > 0):
             raise VibroscopeError(f"--{opt.replace('_', '-')} {v:g}: must be a positive, finite number")
+    if getattr(args, "fs", None) is not None and getattr(args, "fmax", None) is not None and args.fmax > args.fs / 2:
+        raise VibroscopeError(f"--fmax {args.fmax:g}: above the Nyquist frequency {args.fs / 2:g} Hz of --fs {args.fs:g}")
     for f in getattr(args, "ods", None) or ():
         if not (math.isfinite(f) and f > 0):
             raise VibroscopeError(f"--ods {f:g}: frequencies must be positive and finite (Hz)")
@@ -545,7 +586,7 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
     n_seg = an.settings.get("n_segments")
     avg = f"{an.settings['n_averages']} of {n_seg} averages" if n_seg else f"{an.settings['n_averages']} averages"
     lines = [f"{source}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
-             f"({sig.duration:.2f} s); nperseg={an.settings['nperseg']} "
+             f"({sig.duration:.2f} s){decimation_text(an.settings.get('decimation'))}; nperseg={an.settings['nperseg']} "
              f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {avg})"]
     how = METHOD_NAMES.get(an.modal.method, an.modal.method)
     if an.settings.get("input"):
@@ -553,6 +594,8 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
                      f"{an.settings['estimator']} FRF, modes by {how}")
     else:
         lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by {how}")
+    if sig.meta.get("input_choice"):  # the force-like channel taken as the input, or why none was
+        lines.append(sig.meta["input_choice"])
     from vibroscope.faults import fault_lines
 
     faults = tuple(getattr(an, "faults", ()) or ())
@@ -599,6 +642,16 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
                      f"max {v[k]:.3g} mm/s at {sev.channels[k]}; median {np.median(v):.3g} mm/s over "
                      f"{len(v)} channels" + (f" ({sev.note})" if sev.note else ""))
     return "\n".join(lines)
+
+
+def decimation_text(dec: dict | None) -> str:
+    """``"; decimated 400 → 50 Hz (why)"``, ``"; not decimated (why)"`` or ``""`` (no decimation
+    needed), from ``Analysis.settings["decimation"]`` (:func:`vibroscope.pipeline.analyse_signals`)."""
+    if not dec or not dec.get("reason"):
+        return ""
+    if dec.get("factors"):
+        return f"; decimated {dec['fs_in']:g} → {dec['fs_out']:g} Hz ({dec['reason']})"
+    return f"; not decimated ({dec['reason']})"
 
 
 def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,

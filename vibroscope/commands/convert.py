@@ -30,6 +30,12 @@ def add_parser(sub) -> None:
                    help="'acceleration': write every channel as sensor_msgs/msg/Imu linear_acceleration.x; "
                         "'auto': those with unit m/s^2")
     p.add_argument("--topic-prefix", default="/vibroscope", help="topic prefix (default /vibroscope)")
+    p.add_argument("--topic", action="append", metavar="NAME=CHANNEL[:TYPE[:FIELD]]", dest="topics",
+                   help="write CHANNEL on topic NAME as TYPE: json, wrench (geometry_msgs/WrenchStamped, field "
+                        "wrench.force.x) or imu (sensor_msgs/Imu, field linear_acceleration.x); FIELD another "
+                        "number field of the type (linear_acceleration.z, wrench.torque.y) or the JSON field name. "
+                        "Without TYPE: wrench for a channel in N, imu in m/s^2, else json. Repeat for each channel; "
+                        "channels may share a topic. E.g. --topic /shaker/force=Force:wrench --topic /imu/s02=s02:imu")
     p.add_argument("--progress", action="store_true", help="show a progress bar")
     p.set_defaults(func=run)
 
@@ -44,7 +50,8 @@ def run(args) -> int:
     try:
         path, sig = convert_to_mcap(
             args.input, args.output, fs=args.fs, columns=args.columns, channels=args.channels, units=args.units,
-            time_column=tc, kind=args.kind, topic_prefix=args.topic_prefix, progress=args.progress,
+            time_column=tc, kind=args.kind, topic_prefix=args.topic_prefix, topics=args.topics,
+            progress=args.progress,
         )
     except ValueError as exc:
         if getattr(args, "debug", False):

@@ -1,6 +1,7 @@
 """``vibroscope info LOG.mcap [--json]``: topics, types, counts, rates, time span and gaps
 (log-time increments over 1.5 median periods, and the time missing in them) and outlier log
-times of a log."""
+times of a log. ``--fields`` (or ``--topic T``) lists the numeric message paths instead, with
+their unit and a sample value: the paths ``--input``/``--outputs`` take."""
 
 from __future__ import annotations
 
@@ -13,6 +14,10 @@ def add_parser(sub) -> None:
     p = sub.add_parser("info", help="list the topics of an MCAP log (type, count, rate, span, decodable)")
     p.add_argument("log", metavar="LOG.mcap", help="the MCAP file")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--fields", action="store_true",
+                   help="list every numeric message path (what --input/--outputs take) with unit and a sample value")
+    p.add_argument("--topic", action="append", metavar="TOPIC",
+                   help="list the numeric message paths of this topic (repeatable; implies --fields)")
     p.set_defaults(func=run)
 
 
@@ -20,10 +25,34 @@ def _fmt_rate(r: float) -> str:
     return "-" if not math.isfinite(r) else f"{r:.4g}"
 
 
+def run_fields(args) -> int:
+    """Print the numeric message paths of the log (of ``--topic`` only when given), each with its
+    unit and its value in the topic's first message (:func:`vibroscope.io.select.numeric_fields`);
+    returns the exit status."""
+    from vibroscope.io.select import numeric_fields
+
+    fields = numeric_fields(args.log, args.topic)
+    if args.json:
+        print(json.dumps({"path": str(args.log), "fields": [
+            {"path": f.path, "unit": f.unit, "sample": f.sample if math.isfinite(f.sample) else None,
+             "type": f.schema} for f in fields]}, indent=2))
+        return 0
+    rows = [("path", "unit", "sample", "type")]
+    rows += [(f.path, f.unit or "-", f"{f.sample:.6g}", f.schema or "-") for f in fields]
+    w = [max(len(r[i]) for r in rows) for i in range(3)]
+    for r in rows:
+        print(f"{r[0].ljust(w[0])}  {r[1].ljust(w[1])}  {r[2].rjust(w[2])}  {r[3]}")
+    print(f"{len(fields)} numeric paths in {len({f.topic for f in fields})} topics"
+          " (the sample is the first message's value)")
+    return 0
+
+
 def run(args) -> int:
-    """Print the log's summary; returns the exit status."""
+    """Print the log's summary (or its numeric paths, :func:`run_fields`); returns the exit status."""
     from vibroscope.io import mcap_info
 
+    if getattr(args, "fields", False) or getattr(args, "topic", None):
+        return run_fields(args)
     info = mcap_info(args.log)
     if args.json:
         d = info.as_dict()

@@ -1,8 +1,10 @@
-"""``vibroscope modal LOG.mcap | FRF.uff | FRF.csv``: modal identification an engineer can check.
+"""``vibroscope modal LOG.mcap | FRF.uff | FRF.csv | MODES.unv``: modal identification an engineer can check.
 
 From a log the record is read and analysed as by ``vibroscope analyse`` (LSCF + LSFD with an
 input, SSI-COV without); from an FRF file (UFF 58, complex CSV, pyuff text FRFs) LSCF + LSFD
-runs on the measured FRFs. The physical modes are chosen automatically (or at ``--select``
+runs on the measured FRFs. A file that already holds modes -- UFF 55 (with its UFF 15 / 2411
+geometry), a model file, a ``MODES.json`` (:func:`vibroscope.io.mode_sets.read_mode_set`) -- is
+shown as it is: the table, the shapes on the geometry as a PNG and in rerun. The physical modes are chosen automatically (or at ``--select``
 frequencies); the stabilization diagram, the synthesized-vs-measured FRFs and the mode shapes
 are written as PNGs and to a rerun recording, the modes as ``MODES.json``, UFF 55 and a model
 file that ``vibroscope simulate`` runs.
@@ -42,7 +44,9 @@ def add_parser(sub) -> None:
             "MPC, inside the excited band); the rejected candidates are listed with the reason."
         ),
     )
-    p.add_argument("source", nargs="+", type=Path, help="an MCAP log, or one or more FRF files")
+    p.add_argument("source", nargs="+", type=Path,
+                   help="an MCAP log, one or more FRF files, or a mode set to show (UFF 55 with its geometry, "
+                        "a model file, a MODES.json)")
     p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
                    help="auto (default): LSCF with an input or an FRF file, SSI-COV without an input")
     p.add_argument("--select", default="auto", metavar="auto|F1,F2,..",
@@ -174,13 +178,26 @@ def run(args) -> int:
     sources = list(args.source)
     first = sources[0]
     select = _select_freqs(args.select)
+    from vibroscope.io.mode_sets import MODE_SET_SUFFIXES, is_mode_set
+
+    if first.suffix.lower() in MODE_SET_SUFFIXES and is_mode_set(first):
+        return _show_mode_set(args, sources, select)
     is_frf = first.suffix.lower() in FRF_SUFFIXES
     if not is_frf and len(sources) > 1:
         raise VibroscopeError(f"one MCAP log at a time ({len(sources)} sources given)")
     if is_frf:
         from vibroscope.io.frf_files import read_frf
 
-        h = read_frf([str(s) for s in sources] if len(sources) > 1 else str(first), kind=args.kind, df=args.df)
+        from vibroscope.errors import LogFormatError
+        from vibroscope.io.frf_files import uff_datasets
+
+        try:
+            h = read_frf([str(s) for s in sources] if len(sources) > 1 else str(first), kind=args.kind, df=args.df)
+        except LogFormatError:
+            # no FRF record, but mode shapes (an export that also holds time data or spectra): show those
+            if first.suffix.lower() in (".uff", ".unv", ".uf") and len(sources) == 1 and 55 in uff_datasets(first):
+                return _show_mode_set(args, sources, select)
+            raise
         try:
             ident = identify_frf(h, method=args.method, fmin=args.fmin, fmax=args.fmax, select=select)
         except ValueError as exc:
@@ -212,6 +229,47 @@ def run(args) -> int:
               + ", ".join(f"{100 * e:.2f} %" for e in np.atleast_1d(err)))
     _write(args, first, ident, h, synth, signals, psd, csd, sv)
     return 0
+
+
+def _show_mode_set(args, sources: list, select) -> int:
+    """``modal`` on a file of modes: the table, and the figures, recording and files asked for."""
+    from vibroscope.errors import VibroscopeError
+    from vibroscope.io.mode_sets import read_mode_set
+    from vibroscope.modal import mpc
+    from vibroscope.modal.automatic import Identification
+
+    first = sources[0]
+    if len(sources) > 1:
+        raise VibroscopeError(f"{first}: holds modes; show one mode set at a time, or compare two with "
+                              f"`vibroscope compare {first} {sources[1]}`")
+    given = {"--method": args.method != "auto", "--select": select is not None, "--input": args.input,
+             "--outputs": args.outputs, "--fs": args.fs, "--fmin": args.fmin, "--fmax": args.fmax,
+             "--kind": args.kind, "--ods": args.ods, "--uff58": args.uff58, "--export-model": args.export_model}
+    bad = [k for k, v in given.items() if v]
+    if bad:
+        raise VibroscopeError(f"{first}: holds identified modes, not FRFs or time data: {', '.join(bad)} do not apply")
+    ms = read_mode_set(first, coords=args.coords)
+    mm = ms.modes
+    geo = (f"geometry of {len(mm.points)} points from {ms.coords.source}" if ms.coords is not None
+           else "no geometry (points laid out on a line; give --coords)")
+    print(f"{first}: {len(mm)} modes at {len(mm.points)} points ({ms.format}, {mm.method}); {geo}")
+    m = mpc(mm.shapes) if len(mm) else np.zeros(0)
+    print(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9} {'MPC':>5}")
+    for k in range(len(mm)):
+        print(f"{k + 1:>4} {mm.natural_frequencies[k]:>10.4f} {100 * mm.damping_ratios[k]:>9.3f} {m[k]:>5.2f}")
+    print(f"compare with another mode set (test vs model, or another test): vibroscope compare {first} OTHER")
+    ident = Identification(mm, (), None, {"source": str(first), "format": ms.format})
+    _write(args, first, ident, None, None, None, None, None, None, coords=ms.coords)
+    return 0
+
+
+def _shapes_3d(mm, coords, folder: Path) -> list[Path]:
+    """``modes_3d.png`` (shapes on the geometry) when the points spread in a plane or a volume."""
+    from vibroscope.viewers.figures import _save, plot_mode_shapes_3d
+
+    if coords is None or not len(mm) or np.count_nonzero(np.ptp(coords.xyz, axis=0) > 0) < 2:
+        return []  # points on a line: modes.png says it all
+    return [_save(plot_mode_shapes_3d(mm, coords.as_mapping()), folder / "modes_3d.png")]
 
 
 def _cross_check(an) -> None:
@@ -256,7 +314,7 @@ def _print_modes(ident) -> None:
             print(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
 
 
-def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
+def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=None) -> None:
     from vibroscope.commands._outputs import AtomicOutputs
     from vibroscope.errors import VibroscopeError
     from vibroscope.pipeline import _jsonable
@@ -265,7 +323,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
     planned = _planned_outputs(args)
     mm = ident.modes
     pts = list(mm.points)
-    sc = read_coords(args.coords, pts) if args.coords else line_coords(pts)
+    sc = coords if coords is not None else read_coords(args.coords, pts) if args.coords else line_coords(pts)
     if args.uff58 and h is None:
         raise VibroscopeError("--uff58 needs FRFs: give --input for a log")
     if args.uff55 and not len(mm):
@@ -286,7 +344,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
             from vibroscope.io.frf_files import write_modes_uff55
 
             dirs = None
-            if args.coords:
+            if args.coords or coords is not None:
                 dirs = [int(np.argmax(np.abs(d))) + 1 if d[int(np.argmax(np.abs(d)))] >= 0
                         else -(int(np.argmax(np.abs(d))) + 1) for d in sc.directions]
             write_modes_uff55(mm, tx.file(args.uff55), directions=dirs)
@@ -321,6 +379,8 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
             tmp = tx.directory(planned["--figures"])
             paths = summary_figures(tmp, frf=h, modal=mm if len(mm) else None, sv=sv, coords=sc.as_mapping(),
                                     stabilization=ident.stabilization, synthesized=synth)
+            if coords is not None:  # a mode set with its geometry: also the shapes on it in 3-D
+                paths += _shapes_3d(mm, coords, tmp)
             for o in ods:
                 from vibroscope.viewers.acquisition import plot_ods
 

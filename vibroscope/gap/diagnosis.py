@@ -125,6 +125,12 @@ ADD_FACTOR = 0.5
 #: without level dependence of the BLA, a nonlinear verdict needs a penalised held-out excess gap
 #: below this factor times the best linear explanation's
 NL_MARGIN = 0.8
+#: with a measured resonance shift between the lowest and the highest level (hardening or
+#: softening), a nonlinear verdict whose own simulation does not shift the resonance the same way
+#: (by at least TREND_SHARE of the measured shift) yields to the best candidate that does, when
+#: that one's penalised held-out excess gap is within TREND_MARGIN times it
+TREND_MARGIN = 1.5
+TREND_SHARE = 0.3
 #: effects of which forward selection names one member only (asymmetric friction contains Coulomb
 #: friction; a Jenkins joint is a Bouc-Wen element)
 NESTED_FAMILIES = ({"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"})
@@ -578,6 +584,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     out_ch = log_channels(model)[1]
     closed = is_closed_loop(model)
     units = [sigs[0].units[list(sigs[0].channels).index(c)] if sigs[0].units else "" for c in out_ch]
+    in_ch0 = log_channels(model)[0][0]
+    in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
     skips = [_skip_samples(model, fs, u.shape[1], transient_s) for u in us]
     split = make_split(us, fs, skip=skips)
     sims = [LogSimulator(u, fs) for u in us]
@@ -752,7 +760,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         if s.effect not in best_lin or cost < best_lin[s.effect][3]:
             best_lin[s.effect] = (s, th_s, p_s, cost)
         bar.update(1)
-    for eff, (s, th_s, p_s, _) in best_lin.items():
+
+    def lin_polish(item):
+        """A linear effect's FRF fit polished in time with the linear parameters, on the same
+        (at most 20 s per log) samples as the linear refit."""
+        s, th_s, p_s, _ = item
         nl = len(lin)
 
         def build(x, s=s):
@@ -761,8 +773,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         x0 = np.concatenate([th_s, p_s])
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
-        x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns_fit, fast=False, max_nfev=6)
-        results.append((s, build(x), x[nl:], gfit, lin.apply(refit, x[:nl])))
+        x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns_pol, fast=False, max_nfev=6)
+        return s, build(x), x[nl:], gfit, lin.apply(refit, x[:nl])
+
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        results += list(ex.map(lin_polish, best_lin.values()))
 
     # nonlinear effects: screening at every location with the linear parameters at the refit
 
@@ -861,11 +876,26 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         s, m_aug, p, gfit, base = item
         g, yh = held_out(m_aug, fast=True)  # the winner is re-run at full accuracy (_polish)
         # how much the effect itself changes the held-out outputs (against its own linear base)
-        yb = {i: sims[i].run(base) for i in val_logs}
+        if base is refit or base is model:  # already simulated
+            yb = {i: (y_ref if base is refit else y_nom)[i] for i in val_logs}
+        else:
+            yb = {i: sims[i].run(base) for i in val_logs}
         contrib = nrmse([yh[i] for i in val_logs], [yb[i] for i in val_logs],
                         [split.validation[i] for i in val_logs]) if np.isfinite(g) else float("nan")
         return s, m_aug, p, gfit, g, yh, contrib, base
 
+    # a fit that vanishes into a simpler member of its family (asymmetric friction with equal
+    # forces) is evaluated as that simpler effect at the same location
+    for r in list(results):
+        s_, m_, p_, g_, b_ = r
+        red = s_.reduces_to(p_) if s_.reduces_to is not None else None
+        if red is None:
+            continue
+        s2 = next((x for x in specs if x.effect == red[0] and x.where == s_.where), None)
+        if s2 is not None:
+            r2 = (s2, s2.apply(b_, red[1]), np.asarray(red[1], float), g_, b_)
+            results.append(r2)
+            keep_ids.add(id(r2))
     # every linear and jointly fitted result is checked on held-out data, and of the screened ones
     # those within 1.5 times their class's best fitting gap (the rest cannot win)
     cls_best: dict[str, float] = {}
@@ -917,6 +947,32 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                   and EFFECT_TABLE[c[0].effect].kind in ("linear", "reference")), None)
         if j is not None and (key(cands[best_i][0].gap_after, cands[best_i][0].n_parameters)
                               > NL_MARGIN * key(cands[j][0].gap_after, cands[j][0].n_parameters)):
+            best_i = j
+    # the level evidence enters the ranking: a measured hardening / softening must be reproduced
+    # by the nonlinear verdict's own simulation (its BLA per level, on the same level groups)
+    trend_shifts: dict[str, float] = {}
+    group_logs = {g[0] for g in groups}
+
+    def sim_shift(c):
+        name = f"{c[0].effect}@{where_label_plain(c[0].where)}"
+        if name not in trend_shifts:
+            yh = c[2]
+            b_c = _bla_levels(us, [yh.get(i) for i in range(len(ys))], groups, fs, nps, f_s)
+            trend_shifts[name] = float(_level_test(f_s, b_c)["shift"])
+        return trend_shifts[name]
+
+    def reproduces_trend(c):
+        if not group_logs <= set(c[2]):  # its outputs do not cover every level (multi-log)
+            return True
+        sc, sm = sim_shift(c), float(level["shift"])
+        return sc * sm > 0 and abs(sc) >= TREND_SHARE * abs(sm)
+
+    if (best_i is not None and level["trend"] in ("hardening", "softening")
+            and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear" and not reproduces_trend(cands[best_i])):
+        kb = key(cands[best_i][0].gap_after, cands[best_i][0].n_parameters)
+        j = next((i for i, c in enumerate(cands) if admissible(c) and EFFECT_TABLE[c[0].effect].kind == "nonlinear"
+                  and key(c[0].gap_after, c[0].n_parameters) <= TREND_MARGIN * kb and reproduces_trend(c)), None)
+        if j is not None:
             best_i = j
     polish = dict(model=model, lin=lin, lo_l=lo_l, hi_l=hi_l, sims=sims, ys=ys, split=split, fs=fs,
                   held_out=held_out, key=key, k_before=k_before)
@@ -1023,11 +1079,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         spectrum=spectrum,
         timings=timings,
         level_evidence=level_ev,
-        meta={"fs_hz": fs, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
+        meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
-                                   for k, v in level.items()},
+                                   for k, v in level.items()} | {"simulated_shifts": trend_shifts},
               "start_values": {f"{k[0]}@{k[1]}" if k[1] else k[0]: (list(v) if isinstance(v, tuple) else v)
                                for k, v in scales.get("regress", {}).items()},
               "closed_loop": ({"inputs": log_channels(model)[0], "outputs": out_ch,
@@ -1035,6 +1091,13 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
               "localisation": "bands, channels and regimes of the nominal model on the held-out log "
                               "(the nominal model is fitted on nothing)"},
     )
+
+
+def where_label_plain(where: dict) -> str:
+    """A candidate's location as a short key (``m1-ground``, ``input``, ``m2``)."""
+    if "between" in where:
+        return "-".join(str(x) for x in where["between"])
+    return str(where.get("dof") or where.get("side") or "model")
 
 
 def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers):

@@ -250,6 +250,11 @@ class EffectSpec:
     character : callable p -> dict, optional
         Words that qualify the fitted effect (``{"character": "softening"}``), added to the
         candidate's ``where``.
+    reduces_to : callable p -> (str, ndarray) or None, optional
+        For an effect that contains a simpler one (asymmetric friction contains Coulomb
+        friction): the simpler effect's name and parameters when the fitted `p` vanish into
+        it (two equal sliding forces), else None. The diagnosis then evaluates the simpler
+        effect at the same location instead of discarding the fit.
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -266,6 +271,7 @@ class EffectSpec:
     linear: bool = False
     vanish: Callable | None = None
     character: Callable | None = None
+    reduces_to: Callable | None = None
     meta: dict = field(default_factory=dict)
 
     def apply(self, model: LumpedModel, p) -> LumpedModel:
@@ -374,7 +380,11 @@ def _time_delay(model, scales):
     fs = scales.get("fs", 1000.0)
 
     def build(m, p):
-        return replace(m, inputs=tuple(replace(i, delay=float(max(p[0], 0.0))) for i in m.inputs))
+        # a closed loop: the delay sits at the actuator (the driven inputs), not on the logged
+        # open-loop inputs
+        driven = {m.driven_input(c) for c in getattr(m, "controllers", ())}
+        return replace(m, inputs=tuple(replace(i, delay=float(max(p[0], 0.0))) if not driven or j in driven else i
+                                       for j, i in enumerate(m.inputs)))
 
     def vanish(p):
         d = float(max(p[0], 0.0))
@@ -484,11 +494,16 @@ def _asymmetric_friction(model, scales):
             return (f"the two sliding forces {fp:.4g} N and {fn:.4g} N are within 10 % of each other (symmetric "
                     f"friction)") if abs(fp - fn) < 0.1 * max(fp, fn) else None
 
+        def reduce(p):
+            # equal sliding forces: Coulomb friction at their mean
+            fp, fn = math.exp(p[0]), math.exp(p[1])
+            return ("coulomb_friction", np.array([math.log(0.5 * (fp + fn))])) if vanish(p) else None
+
         specs.append(EffectSpec(
             "asymmetric_friction", {"between": [pair[0], pair[1]]}, 2, starts,
             np.array([lo, lo]), np.array([hi, hi]),
             build, lambda p: {"Fc_pos_N": float(math.exp(p[0])), "Fc_neg_N": float(math.exp(p[1])),
-                              "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish,
+                              "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish, reduces_to=reduce,
         ))
     return specs
 
@@ -503,6 +518,8 @@ def _backlash(model, scales):
 
         def build(m, p, pair=pair):
             jj, sp = _spring_at(m, pair)
+            if sp is None:  # another effect took the spring: no clearance to open
+                raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
             els = list(m.elements)
             els[jj] = Backlash(sp.between, k=sp.k, gap=float(math.exp(p[0])))
             return replace(m, elements=tuple(els))
@@ -608,6 +625,8 @@ def _joint_friction(model, scales):
 
         def build(m, p, pair=pair, coeffs=coeffs):
             jj, sp = _spring_at(m, pair)
+            if sp is None:  # another effect took the spring (a clearance): no joint to soften
+                raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
             r, fs_ = coeffs(p)
             alpha = r * sp.k
             els = list(m.elements)

@@ -1,6 +1,7 @@
 """MCAP in and out: fast chunk decoding with a robust fallback, message paths, time bases
 and resampling onto a uniform grid, converters (CSV, MAT, UFF 58), FRF files
-(UFF 58, complex CSV, pyuff text), mode shapes (UFF 55) and geometry (UFF 15 / 2411).
+(UFF 58, complex CSV, pyuff text), mode shapes (UFF 55) and geometry (UFF 15 / 2411), mode sets
+(UFF 55, model files, MODES.json).
 
 Importing this package imports ``mcap``; the numerical core never imports it. The file
 converters and the FRF/UFF files (which use scipy and the modal room) load on first use, so
@@ -30,6 +31,8 @@ __all__ = [
     "write_frf_uff58",
     "read_modes_uff55",
     "write_modes_uff55",
+    "read_mode_set",
+    "ModeSet",
     "read_geometry",
     "write_geometry_uff15",
     "read_mcap",
@@ -59,6 +62,7 @@ _LAZY = {
     "convert_to_mcap": "convert", "read_csv": "convert", "read_mat": "convert", "read_uff58": "convert",
     "read_frf": "frf_files", "read_geometry": "frf_files", "read_modes_uff55": "frf_files",
     "write_frf_uff58": "frf_files", "write_geometry_uff15": "frf_files", "write_modes_uff55": "frf_files",
+    "read_mode_set": "mode_sets", "ModeSet": "mode_sets",
 }
 
 

@@ -120,6 +120,13 @@ class _Faults:
         return out
 
 
+def _hint(log: Any, channel: str) -> str:
+    """The numeric paths near `channel` (:func:`vibroscope.io.select.field_hint`), for an error."""
+    from vibroscope.io.select import field_hint
+
+    return field_hint(log, channel)
+
+
 def generic_extract(
     log: Any, cid: int, fields: list[tuple[str | int, ...]], skipped: list[dict], warnings: list[str],
     progress: bool = False,
@@ -171,14 +178,15 @@ def generic_extract(
         for k, f in enumerate(fields):
             try:
                 v = get_field(msg, f, topic=ch.topic)
-            except ChannelError:
-                if first:
-                    raise
+            except ChannelError as exc:
+                if first:  # the numeric paths near the one given, to copy
+                    raise ChannelError(f"{log.path}: {exc}{_hint(log, names[k])}") from None
                 v = None
             if v is None or isinstance(v, bool) or not isinstance(v, numbers.Real):
                 if first:
                     raise ChannelError(
                         f"{log.path}: topic {ch.topic!r}: field {names[k]!r} is not a number ({type(v).__name__})"
+                        + _hint(log, names[k])
                     )
                 faults.add(f"lack field {names[k]!r} or hold no number there (NaN at their stamps)", off,
                            f"message {i}", skipped,

@@ -13,7 +13,7 @@ from vibroscope.signals import Signals
 
 __all__ = [
     "read_csv", "read_mat", "read_uff58", "read_any", "convert_to_mcap", "parse_columns", "parse_units",
-    "normalize_unit", "select_channels",
+    "normalize_unit", "select_channels", "parse_topic", "TOPIC_TYPES",
 ]
 
 _ACC_UNITS = {"m/s^2", "m/s2", "m/s**2", "m s^-2", "m s-2", "m/s/s"}
@@ -652,6 +652,113 @@ def read_any(
     return sig
 
 
+#: message types of ``--topic NAME=CHANNEL:TYPE``: alias -> (ROS 2 type or "json", default field)
+TOPIC_TYPES = {
+    "json": ("json", ""),
+    "wrench": ("geometry_msgs/msg/WrenchStamped", "wrench.force.x"),
+    "geometry_msgs/wrenchstamped": ("geometry_msgs/msg/WrenchStamped", "wrench.force.x"),
+    "geometry_msgs/msg/wrenchstamped": ("geometry_msgs/msg/WrenchStamped", "wrench.force.x"),
+    "imu": ("sensor_msgs/msg/Imu", "linear_acceleration.x"),
+    "sensor_msgs/imu": ("sensor_msgs/msg/Imu", "linear_acceleration.x"),
+    "sensor_msgs/msg/imu": ("sensor_msgs/msg/Imu", "linear_acceleration.x"),
+}
+
+#: units a ROS 2 message fixes for its fields (REP 103), by field prefix
+_FIXED_UNITS = (("linear_acceleration.", "m/s^2"), ("angular_velocity.", "rad/s"), ("wrench.force.", "N"),
+                ("wrench.torque.", "N m"))
+
+
+def parse_topic(spec: str) -> tuple[str, str, str, str]:
+    """Parse a ``--topic`` specification ``NAME=CHANNEL[:TYPE[:FIELD]]``.
+
+    Parameters
+    ----------
+    spec : str
+        ``NAME`` the topic (a leading ``/`` is added when missing), ``CHANNEL`` the input
+        channel's name (as ``--channels`` names it), ``TYPE`` one of ``json``, ``wrench``
+        (``geometry_msgs/WrenchStamped``), ``imu`` (``sensor_msgs/Imu``), case-insensitive, the
+        ``msg/`` part optional; ``FIELD`` the field of a ROS message (default
+        ``wrench.force.x`` / ``linear_acceleration.x``) or the JSON field name (default: the
+        channel's name). E.g. ``/shaker/force=Force:wrench``, ``/imu/s02=s02:imu``,
+        ``/imu/s02=s02z:imu:linear_acceleration.z``.
+
+    Returns
+    -------
+    topic, channel, type, field : str
+        `type` is the ROS 2 type name, ``"json"``, or ``""`` when not given (chosen from the
+        channel's unit by :func:`convert_to_mcap`); `field` is ``""`` when not given.
+
+    Raises
+    ------
+    ValueError
+        If the form is wrong, the type unknown, or the field not a number field of the type.
+    """
+    from vibroscope.io import _ros2
+
+    name, eq, rest = str(spec).partition("=")
+    name = name.strip()
+    if not eq or not name or not rest.strip():
+        raise ValueError(f"--topic {spec!r}: expected NAME=CHANNEL[:TYPE[:FIELD]], e.g. /shaker/force=Force:wrench")
+    parts = rest.split(":")
+    if len(parts) > 3:
+        raise ValueError(f"--topic {spec!r}: expected NAME=CHANNEL[:TYPE[:FIELD]] (more than three ':' parts)")
+    channel = parts[0].strip()
+    tname = parts[1].strip() if len(parts) > 1 else ""
+    field = parts[2].strip() if len(parts) > 2 else ""
+    if not channel:
+        raise ValueError(f"--topic {spec!r}: no channel after '='")
+    topic = "/" + name.strip("/")
+    if topic == "/" or any(c.isspace() for c in topic) or "." in topic:
+        raise ValueError(f"--topic {spec!r}: topic {name!r} must be a name such as /shaker/force (no '.', no spaces)")
+    kind = ""
+    if tname:
+        key = tname.lower()
+        if key not in TOPIC_TYPES:
+            raise ValueError(f"--topic {spec!r}: unknown message type {tname!r}; known: json, wrench "
+                             f"(geometry_msgs/WrenchStamped), imu (sensor_msgs/Imu)")
+        kind = TOPIC_TYPES[key][0]
+    if field and kind not in ("", "json"):
+        ok = _ros2.FLOAT_FIELDS[kind]
+        if field not in ok:
+            near = [f for f in ok if f.split(".")[0] == field.split(".")[0]] or list(ok[:8])
+            raise ValueError(f"--topic {spec!r}: {field!r} is not a number field of {kind}; e.g. {', '.join(near)}")
+    return topic, channel, kind, field
+
+
+def _topic_layout(specs: Sequence[str], channels: Sequence[str], units: Sequence[str],
+                  src: Path) -> dict[int, tuple[str, str]]:
+    """Row -> (message path, unit) written for the channels that ``--topic`` names."""
+    from vibroscope.io.mcap_write import _sanitize
+
+    rows: dict[int, tuple[str, str]] = {}
+    kinds: dict[str, str] = {}
+    for spec in specs:
+        topic, ch, kind, field = parse_topic(spec)
+        if ch not in channels:
+            raise ValueError(f"--topic {spec!r}: {src} has no channel {ch!r}; channels are {list(channels)}")
+        i = list(channels).index(ch)
+        if i in rows:
+            raise ValueError(f"--topic {spec!r}: channel {ch!r} is already written as {rows[i][0]!r}")
+        unit = normalize_unit(units[i])
+        if not kind:
+            kind = {"N": TOPIC_TYPES["wrench"][0], "m/s^2": TOPIC_TYPES["imu"][0]}.get(unit, "json")
+        if kinds.setdefault(topic, kind) != kind:
+            raise ValueError(f"--topic {spec!r}: topic {topic!r} is already a {kinds[topic]} topic, not {kind}")
+        fixed = None
+        if kind == "json":
+            field = field or _sanitize(ch)
+            if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", field):
+                raise ValueError(f"--topic {spec!r}: JSON field {field!r} must be a name such as force or a.b")
+        else:
+            field = field or next(v[1] for v in TOPIC_TYPES.values() if v[0] == kind)
+            fixed = next((u for prefix, u in _FIXED_UNITS if field.startswith(prefix)), None)
+            if fixed is not None and unit not in ("", fixed):
+                raise ValueError(f"--topic {spec!r}: channel {ch!r} is in {unit!r}, but {kind} {field} is in {fixed} "
+                                 f"(give --units {ch}={fixed} if the values are in {fixed}, or use :json)")
+        rows[i] = (f"{topic}.{field}", fixed or unit)
+    return rows
+
+
 def _same_file(a: Path, b: Path) -> bool:
     try:
         if a.exists() and b.exists():
@@ -672,6 +779,7 @@ def convert_to_mcap(
     time_column: int | str | None = None,
     kind: Literal["auto", "acceleration", "other"] = "auto",
     topic_prefix: str = "/vibroscope",
+    topics: Sequence[str] | None = None,
     progress: bool = False,
 ) -> tuple[Path, Signals]:
     """Convert a CSV, .mat or UFF 58 file to an MCAP log.
@@ -700,6 +808,14 @@ def convert_to_mcap(
         the others as JSON fields of topic `topic_prefix`.
     topic_prefix : str, optional
         Topic prefix (default ``/vibroscope``).
+    topics : sequence of str, optional
+        ``NAME=CHANNEL[:TYPE[:FIELD]]`` specifications (:func:`parse_topic`) that name the topic
+        and message type of channels: ``/shaker/force=Force:wrench`` writes channel ``Force``
+        as ``wrench.force.x`` of ``geometry_msgs/msg/WrenchStamped`` messages on
+        ``/shaker/force``; ``/imu/s02=s02:imu`` channel ``s02`` as ``linear_acceleration.x`` of
+        ``sensor_msgs/msg/Imu`` on ``/imu/s02``; ``:json`` a JSON field. Without a type, a
+        channel in N is a wrench, one in m/s^2 an Imu, others JSON. Several channels may share
+        a topic (distinct fields). Channels not named keep the layout of `kind`/`topic_prefix`.
     progress : bool, optional
         Show a progress bar.
 
@@ -713,7 +829,9 @@ def convert_to_mcap(
     Raises
     ------
     ValueError
-        If `out` is `src` or a directory, `kind` is unknown, or as :func:`read_any`.
+        If `out` is `src` or a directory, `kind` is unknown, a `topics` entry is malformed, names
+        no channel, or gives a ROS type whose field unit contradicts the channel's, or as
+        :func:`read_any`.
     LogFormatError
         If `src` does not exist or cannot be read.
     """
@@ -730,8 +848,15 @@ def convert_to_mcap(
         raise LogFormatError(f"{src_p}: no such input file" + (" (a directory)" if src_p.is_dir() else ""))
     sig = read_any(src_p, fs=fs, columns=columns, channels=channels, units=units, time_column=time_column)
     prefix = "/" + topic_prefix.strip("/") if topic_prefix.strip("/") else ""
+    for spec in topics or ():
+        parse_topic(spec)  # the form first, before any channel is looked at
+    named = _topic_layout(list(topics or ()), sig.channels, sig.units, src_p)
     new_names, new_units = [], []
     for k, (nm, u) in enumerate(zip(sig.channels, sig.units)):
+        if k in named:
+            new_names.append(named[k][0])
+            new_units.append(named[k][1])
+            continue
         if kind == "acceleration" and u not in ("", "m/s^2"):
             raise ValueError(f"{src_p}: channel {nm!r} has unit {u!r}, but {kind=} writes every channel as an "
                              "acceleration in m/s^2 (use kind 'auto' or 'other', or fix --units)")

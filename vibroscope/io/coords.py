@@ -81,8 +81,12 @@ def _direction(v: str, path: Path, line: int) -> np.ndarray:
     raise LogFormatError(f"{path}: line {line}: direction {v!r} is not 1/2/3 or x/y/z")
 
 
+#: a channel that names its sensor's number: ``/lumo/s07.linear_acceleration.x``
+_SENSOR = re.compile(r"/s(\d+)(?:[./\[]|$)")
+
+
 def _sensor_number(channel: str) -> int | None:
-    m = re.search(r"/s(\d+)(?:[./\[]|$)", channel) or re.search(r"(\d+)(?!.*\d)", channel)
+    m = _SENSOR.search(channel) or re.search(r"(\d+)(?!.*\d)", channel)
     return int(m.group(1)) if m else None
 
 
@@ -100,8 +104,9 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
     channels : sequence of str
         The channels to place. With a ``channel`` column they are matched by name; with
         sensor numbers by the number in the channel name (``/lumo/s07.linear_acceleration.x``
-        -> 7) when every channel has a distinct one in the table, else in order (the k-th
-        channel is the k-th row).
+        -> 7) when every channel has a distinct one in the table (and, when the table has more
+        rows than there are channels, every channel names its sensor as ``/sNN``), else in order
+        (the k-th channel is the k-th row: as many rows as channels).
 
     Returns
     -------
@@ -112,7 +117,8 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
     LogFormatError
         If the file lacks x/y/z columns or a value does not parse (names file and line).
     ChannelError
-        If a channel has no row.
+        If a channel has no row, or the rows taken in order are more or fewer than the
+        channels (names both counts).
     """
     path = Path(path)
     if path.suffix.lower() in (".uff", ".unv", ".uf"):
@@ -164,12 +170,16 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
     else:
         nums = [_sensor_number(c) for c in channels]
         by_sn = {t[1]: t for t in table if t[1] is not None}
-        if all(n in by_sn for n in nums) and len(set(nums)) == len(nums):
+        # a subset of the rows by number only where every channel names its sensor (/lumo/s07...):
+        # another digit in a name (/imu/m1) picks a row by chance
+        named = all(_SENSOR.search(c) for c in channels) or len(table) == len(channels)
+        if all(n in by_sn for n in nums) and len(set(nums)) == len(nums) and named:
             chosen = [by_sn[n] for n in nums]
-        elif len(table) >= len(channels):
-            chosen = table[: len(channels)]
+        elif len(table) == len(channels):
+            chosen = table
         else:
-            raise ChannelError(f"{path}: {len(table)} coordinate rows for {len(channels)} channels")
+            raise ChannelError(f"{path}: {len(table)} coordinate rows for {len(channels)} channels: give one row per "
+                               "channel, or a 'channel' column naming them")
     return SensorCoords(tuple(channels), np.array([t[2] for t in chosen]).reshape(-1, 3),
                         np.array([t[3] for t in chosen]).reshape(-1, 3), True, str(path))
 

@@ -36,6 +36,7 @@ __all__ = [
     "write_modes_uff55",
     "read_geometry",
     "write_geometry_uff15",
+    "uff_datasets",
 ]
 
 _KIND_UNITS = {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}
@@ -106,6 +107,27 @@ def _open_uff(path: Path):
     if not types:
         raise LogFormatError(f"{path}: no UFF data set found (no '    -1' delimited blocks)")
     return u, types
+
+
+def uff_datasets(path: str | Path) -> list[int]:
+    """The dataset numbers of a Universal File's records, in file order.
+
+    Parameters
+    ----------
+    path : str or Path
+        A Universal File (ASCII or binary).
+
+    Returns
+    -------
+    list of int
+        E.g. ``[164, 15, 55, 55]`` for units, nodes and two mode records.
+
+    Raises
+    ------
+    LogFormatError
+        If the file is missing, unreadable or holds no dataset.
+    """
+    return _open_uff(Path(path))[1]
 
 
 def _read_set(u, path: Path, i: int, header_only: bool = False) -> dict:
@@ -323,9 +345,15 @@ def _read_uff58_frf(path: Path, input_name: str | None) -> _Table:
     if not frf_idx:
         found = ", ".join(f"function type {ft} ({_FUNC_TYPES.get(ft, '?')})"
                           for ft in sorted(set(ftypes.values()))) or "none"
+        hint = ""
+        if 1 in ftypes.values():
+            hint = (f"; it holds time data: make it an MCAP log with `vibroscope convert {path} LOG.mcap`, "
+                    "then run `vibroscope modal LOG.mcap --input ...` or `vibroscope analyse LOG.mcap`")
+        elif 55 in types:
+            hint = "; it holds UFF 55 mode shapes: read them with `vibroscope modal` on this file alone"
         raise LogFormatError(
             f"{path}: no UFF 58 FRF record (function type 4) among {len(types)} data sets "
-            f"({_summary(types)}); dataset-58 function types found: {found}")
+            f"({_summary(types)}); dataset-58 function types found: {found}{hint}")
     recs = {i: _read_set(u, path, i) for i in frf_idx}
 
     def out_key(i: int, s: dict) -> str:

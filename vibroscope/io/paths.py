@@ -13,7 +13,7 @@ from typing import Any, Iterable, Sequence
 
 from vibroscope.errors import ChannelError
 
-__all__ = ["MessagePath", "parse_path", "get_field", "format_path"]
+__all__ = ["MessagePath", "parse_path", "get_field", "format_path", "nearest_paths"]
 
 # ASCII only: "\d" would take other scripts' digits ("[٣]") that format_path writes back differently
 _FIELD = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)((?:\[-?[0-9]+\])*)")
@@ -178,3 +178,47 @@ def get_field(msg: Any, fields: Sequence[str | int], *, topic: str = "") -> Any:
                 f"topic {topic!r}: field {where!r} not found in the message ({type(exc).__name__}: {exc})"
             ) from None
     return cur
+
+
+def nearest_paths(path: str, candidates: Sequence[str], n: int = 8) -> list[str]:
+    """The message paths of `candidates` nearest to `path`, nearest first.
+
+    The paths that extend `path` (``/shaker/force`` -> ``/shaker/force.wrench.force.x``, in the
+    order given) come first, then those whose every step but the last matches (the siblings of a
+    misspelt field), then the closest by :class:`difflib.SequenceMatcher` ratio (at least 0.5).
+
+    Parameters
+    ----------
+    path : str
+        A message path that names no numeric field.
+    candidates : sequence of str
+        The valid paths, in a meaningful order (message order).
+    n : int, optional
+        Most paths returned; default 8.
+
+    Returns
+    -------
+    list of str
+        At most `n` paths of `candidates`, none repeated.
+
+    Examples
+    --------
+    >>> nearest_paths("/ft", ["/ft.wrench.force.x", "/ft.wrench.force.y", "/imu.x"], n=2)
+    ['/ft.wrench.force.x', '/ft.wrench.force.y']
+    >>> nearest_paths("/imu.linear_acceleration.q", ["/imu.angular_velocity.x", "/imu.linear_acceleration.x"])
+    ['/imu.linear_acceleration.x', '/imu.angular_velocity.x']
+    """
+    import difflib
+
+    path = str(path).strip()
+    out: list[str] = []
+    ext = [c for c in candidates if c.startswith(path) and c[len(path):len(path) + 1] in (".", "[")]
+    out += ext
+    parent = path.rsplit(".", 1)[0] if "." in path else None
+    if parent:
+        out += [c for c in candidates if c.startswith(parent + ".") and c not in out]
+    if len(out) < n:
+        scored = sorted(((difflib.SequenceMatcher(None, path, c).ratio(), -k, c) for k, c in enumerate(candidates)
+                         if c not in out), reverse=True)
+        out += [c for r, _, c in scored if r >= 0.5]
+    return out[:n]

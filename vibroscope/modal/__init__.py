@@ -12,6 +12,7 @@ Imports nothing of vibroscope's but :mod:`vibroscope.spectral` and :mod:`vibrosc
 
 from vibroscope.modal._results import ModalModel, Mode, mpc, normalize_shapes
 from vibroscope.modal.automatic import Identification, auto_lscf, auto_ssi, modes_document
+from vibroscope.modal.compare import ModeSetComparison, compare_mode_sets
 from vibroscope.modal.fdd import SingularValues, efdd_damping, fdd, singular_values
 from vibroscope.modal.lscf import lscf
 from vibroscope.modal.lsfd import LSFDResult, lsfd
@@ -27,7 +28,7 @@ __all__ = [
     "lscf", "lsfd", "LSFDResult",
     "peak_picking", "half_power_bandwidth", "fit_sdof",
     "fdd", "singular_values", "SingularValues", "efdd_damping",
-    "mac", "mac_matrix", "match_modes", "ModeMatch",
+    "mac", "mac_matrix", "match_modes", "ModeMatch", "compare_mode_sets", "ModeSetComparison",
     "automac", "comac", "complexity", "mpd", "modal_quality", "QualityTable",
     "ssi_cov", "Stabilization", "output_covariances",
     "select_modes", "cluster_poles", "pick_poles", "Selection", "RejectedMode",

@@ -1,6 +1,9 @@
 """Cross-validation of a model against a measurement: per-mode frequency shifts between two sets
 of FRF magnitudes (measured vs model), as in a model-updating report (Friswell & Mottershead,
-Finite Element Model Updating in Structural Dynamics, 1995, ch. 1: the frequency residuals).
+Finite Element Model Updating in Structural Dynamics, 1995, ch. 1: the frequency residuals), and
+the test-vs-model (or test-vs-test) comparison of two mode sets: frequency differences, the MAC
+matrix and the paired modes (Allemang, "The Modal Assurance Criterion -- twenty years of use and
+abuse", Sound and Vibration 37(8), 2003).
 """
 
 from __future__ import annotations
@@ -10,8 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from vibroscope.modal._peaks import parabolic_peak
+from vibroscope.modal.mac import mac, match_modes
 
-__all__ = ["FrequencyShift", "resonance_peaks", "frequency_shift"]
+__all__ = ["FrequencyShift", "resonance_peaks", "frequency_shift", "ModeSetComparison", "compare_mode_sets"]
 
 
 @dataclass(frozen=True)
@@ -119,3 +123,173 @@ def frequency_shift(measured: tuple[np.ndarray, np.ndarray], model: tuple[np.nda
     return FrequencyShift(A, B, B - A, (B - A) / A if A.size else np.zeros(0),
                           np.array([a for a in fa if a not in A]),
                           np.array([b for j, b in enumerate(fb) if j not in used]))
+
+
+@dataclass(frozen=True)
+class ModeSetComparison:
+    """Two mode sets compared: MAC matrix, paired modes and their frequency differences.
+
+    Attributes
+    ----------
+    frequencies_a, frequencies_b : ndarray, shape (n_a,), (n_b,)
+        Natural frequencies of each set in Hz, in the sets' own order.
+    damping_a, damping_b : ndarray, shape (n_a,), (n_b,)
+        Damping ratios (dimensionless; NaN where unknown).
+    mac : ndarray, shape (n_a, n_b)
+        MAC of every mode of A with every mode of B on the common `points`.
+    pairs : ndarray of int, shape (n_pairs, 2)
+        ``(index in A, index in B)``, sorted by the index in A.
+    frequency_difference_hz : ndarray, shape (n_pairs,)
+        ``f_B − f_A`` of each pair in Hz.
+    frequency_difference : ndarray, shape (n_pairs,)
+        ``(f_B − f_A) / f_A`` (dimensionless).
+    mac_pairs : ndarray, shape (n_pairs,)
+        MAC of each pair.
+    unpaired_a, unpaired_b : ndarray of int
+        Indices of the modes without a partner.
+    points : tuple of str
+        The points of A the MAC is computed on (matched to B by name, or by order, see
+        `matched_by`).
+    matched_by : str
+        ``"name"`` or ``"order"``.
+    labels : tuple of str
+        Names of the two sets (e.g. the files).
+    settings : dict
+        ``mac_min``, ``max_frequency_error``, ``frequency_weight``.
+    """
+
+    frequencies_a: np.ndarray
+    frequencies_b: np.ndarray
+    damping_a: np.ndarray
+    damping_b: np.ndarray
+    mac: np.ndarray
+    pairs: np.ndarray
+    frequency_difference_hz: np.ndarray
+    frequency_difference: np.ndarray
+    mac_pairs: np.ndarray
+    unpaired_a: np.ndarray
+    unpaired_b: np.ndarray
+    points: tuple
+    matched_by: str
+    labels: tuple = ("A", "B")
+    settings: dict | None = None
+
+    def __repr__(self) -> str:
+        return (f"ModeSetComparison({len(self.pairs)} pairs of {self.frequencies_a.size} x "
+                f"{self.frequencies_b.size} modes on {len(self.points)} points)")
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``{"labels", "points", "matched_by", "pairs": [{"a", "b", "frequency_a_hz",
+        "frequency_b_hz", "difference_hz", "difference_percent", "mac", "damping_a", "damping_b"}],
+        "unpaired_a", "unpaired_b", "mac", "settings"}`` (mode numbers 1-based, NaN as None)."""
+        def num(v):
+            v = float(v)
+            return v if np.isfinite(v) else None
+
+        pairs = [{"a": int(i) + 1, "b": int(j) + 1, "frequency_a_hz": float(self.frequencies_a[i]),
+                  "frequency_b_hz": float(self.frequencies_b[j]), "difference_hz": float(d),
+                  "difference_percent": float(100 * e), "mac": num(m),
+                  "damping_a": num(self.damping_a[i]), "damping_b": num(self.damping_b[j])}
+                 for (i, j), d, e, m in zip(self.pairs, self.frequency_difference_hz, self.frequency_difference,
+                                            self.mac_pairs)]
+        return {"labels": list(self.labels), "points": list(self.points), "matched_by": self.matched_by,
+                "pairs": pairs,
+                "unpaired_a": [{"mode": int(i) + 1, "frequency_hz": float(self.frequencies_a[i])} for i in self.unpaired_a],
+                "unpaired_b": [{"mode": int(j) + 1, "frequency_hz": float(self.frequencies_b[j])} for j in self.unpaired_b],
+                "mac": [[num(v) for v in row] for row in self.mac], "settings": dict(self.settings or {})}
+
+    def plot(self, fig=None):
+        """The MAC matrix and the frequency differences of the pairs
+        (:func:`vibroscope.viewers.figures.plot_mode_set_comparison`).
+
+        Parameters
+        ----------
+        fig : matplotlib.figure.Figure, optional
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from vibroscope.viewers.figures import plot_mode_set_comparison
+
+        return plot_mode_set_comparison(self, fig=fig)
+
+
+def _common_points(a, b) -> tuple[list[int], list[int], str]:
+    pa, pb = list(a.points), list(b.points)
+    where = {p: k for k, p in enumerate(pb)}
+    ia = [k for k, p in enumerate(pa) if p in where]
+    if ia:
+        return ia, [where[pa[k]] for k in ia], "name"
+    if len(pa) == len(pb):
+        return list(range(len(pa))), list(range(len(pb))), "order"
+    raise ValueError(f"the mode sets share no point name and have {len(pa)} and {len(pb)} points: the MAC needs "
+                     f"the same points (A: {pa[:4]}..., B: {pb[:4]}...)")
+
+
+def compare_mode_sets(a, b, *, mac_min: float = 0.5, max_frequency_error: float = 0.5,
+                      frequency_weight: float = 1.0, labels: tuple[str, str] = ("A", "B")) -> ModeSetComparison:
+    """Compare two mode sets (test vs model, or two tests): MAC matrix, pairs, frequency differences.
+
+    The modes are paired one-to-one by :func:`~vibroscope.modal.mac.match_modes` (minimum of
+    ``Σ (1 − MAC) + w |f_A − f_B| / f_B``, Hungarian algorithm), whatever the order of either set;
+    pairs with a MAC below `mac_min` or a relative frequency difference beyond
+    `max_frequency_error` are left unpaired.
+
+    Parameters
+    ----------
+    a, b : ModalModel
+        Frequencies in Hz, complex shapes ``(n_modes, n_points)`` at ``points``. The MAC uses the
+        points the two share by name (in A's order); when they share none but have as many
+        points, the points are taken in order.
+    mac_min : float, optional
+        Smallest MAC of a pair (default 0.5).
+    max_frequency_error : float, optional
+        Largest ``|f_B − f_A| / f_A`` of a pair (default 0.5).
+    frequency_weight : float, optional
+        Weight ``w`` of the frequency distance in the pairing cost (default 1).
+    labels : (str, str), optional
+        Names of the two sets, for the report.
+
+    Returns
+    -------
+    ModeSetComparison
+
+    Raises
+    ------
+    ValueError
+        If the sets share no point name and have different numbers of points, or one is empty.
+
+    References
+    ----------
+    .. [1] R. J. Allemang, "The Modal Assurance Criterion -- twenty years of use and abuse",
+       Sound and Vibration 37(8), 14–23, 2003.
+
+    Examples
+    --------
+    >>> from vibroscope.modal import ModalModel
+    >>> a = ModalModel([10.0, 20.0], [0.01, 0.01], [[1, 1], [1, -1]], ["p", "q"], "test")
+    >>> b = ModalModel([20.4, 10.1], [0.01, 0.01], [[1, -1], [1, 1]], ["p", "q"], "model")
+    >>> c = compare_mode_sets(a, b)
+    >>> c.pairs.tolist(), c.frequency_difference_hz.round(3).tolist()
+    ([[0, 1], [1, 0]], [0.1, 0.4])
+    """
+    if not len(a) or not len(b):
+        raise ValueError(f"a mode set is empty ({len(a)} and {len(b)} modes): nothing to compare")
+    ia, ib, how = _common_points(a, b)
+    sa = np.asarray(a.shapes)[:, ia]
+    sb = np.asarray(b.shapes)[:, ib]
+    fa, fb = np.asarray(a.natural_frequencies, float), np.asarray(b.natural_frequencies, float)
+    M = mac(sa, sb)
+    mm = match_modes((fa, sa), (fb, sb), mac_min=mac_min, frequency_weight=frequency_weight)
+    pairs = np.asarray(mm.pairs, int).reshape(-1, 2)  # (index in A, index in B)
+    keep = np.abs(fa[pairs[:, 0]] - fb[pairs[:, 1]]) <= max_frequency_error * fa[pairs[:, 0]]
+    pairs = pairs[keep]
+    pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    d = fb[pairs[:, 1]] - fa[pairs[:, 0]]
+    return ModeSetComparison(
+        fa, fb, np.asarray(a.damping_ratios, float), np.asarray(b.damping_ratios, float), M, pairs, d,
+        d / fa[pairs[:, 0]], M[pairs[:, 0], pairs[:, 1]] if len(pairs) else np.zeros(0),
+        np.setdiff1d(np.arange(fa.size), pairs[:, 0]), np.setdiff1d(np.arange(fb.size), pairs[:, 1]),
+        tuple(a.points[k] for k in ia), how, tuple(labels),
+        {"mac_min": mac_min, "max_frequency_error": max_frequency_error, "frequency_weight": frequency_weight})

@@ -273,6 +273,13 @@ def simulate_closed_loop(
         taps[c, : len(ctl.taps)] = ctl.taps
     in_sat = np.array([i.saturation if i.saturation is not None else np.inf for i in model.inputs])
     in_off = np.array([i.offset for i in model.inputs], dtype=float)
+    # a driven input's delay acts on the command (in controller ticks, fractional: linear
+    # interpolation between the two held commands around t - delay); open-loop inputs are
+    # shifted on the tick grid by _hold_rows
+    in_delay = np.zeros(len(model.inputs))
+    for c in ctls:
+        j = model.driven_input(c)
+        in_delay[j] = float(model.inputs[j].delay) * rate
     Nt = Ref.shape[1]
     Y = np.empty((len(model.outputs), Nt))
     Cout = np.empty((n_c, Nt))
@@ -286,7 +293,7 @@ def simulate_closed_loop(
         np.array([model.driven_input(c) for c in ctls], dtype=np.int64),
         np.array([c.saturation if c.saturation is not None else np.inf for c in ctls]),
         np.array([c.gain for c in ctls], dtype=float),
-        in_off, in_sat, Ref, FF, np.ascontiguousarray(Uol), T, R, float(tol), int(max_iter), Y, Cout,
+        in_off, in_sat, in_delay, Ref, FF, np.ascontiguousarray(Uol), T, R, float(tol), int(max_iter), Y, Cout,
     )  # fmt: skip
     fails, iters = int(fails), int(iters)
     if fails:

@@ -573,7 +573,7 @@ def _row(Cm, Dm, Hm, r, q, u, g):
 @numba.njit(**_JIT)
 def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, Dy, Hy,
                         Cm, Dm, Hm, claw, cgain, cflags, taps, ntaps, cdrive, csat, act_gain,
-                        in_off, in_sat, Ref, FF, Uol, T, R, tol, max_iter, Y, Cout):  # fmt: skip
+                        in_off, in_sat, in_delay, Ref, FF, Uol, T, R, tol, max_iter, Y, Cout):  # fmt: skip
     """Closed loop: plant states, controller states and nonlinear elements, from rest.
 
     Per controller tick ``k`` (period ``T``, ``Nt`` ticks): the outputs ``Y[:, k]`` and the
@@ -583,7 +583,9 @@ def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, 
     ``cgain[c] = (kp, ki, kd, ka, td, t1, kv)``, ``cflags[c] = (sampled velocity, sampled
     acceleration)``, FIR ``taps[c, :ntaps[c]]``, plus feed-forward ``FF[c, k]``, clipped at
     ``csat[c]``); then the held inputs (open-loop ``Uol[:, k]``; driven column
-    ``cdrive[c]``: ``clip(act_gain[c] Cout + in_off, -in_sat, in_sat)``) and ``R``
+    ``cdrive[c]``: ``clip(act_gain[c] Cout(k - in_delay) + in_off, -in_sat, in_sat)``, the
+    command ``in_delay[j]`` ticks earlier, linearly interpolated between ticks and 0 before
+    the start) and ``R``
     trapezoidal steps of ``T / R`` over them (with ``R = 1`` and the exact ZOH ``P``, ``Gu``
     of a linear plant, the exact discretisation). Returns ``(newton_failures,
     newton_iterations)``.
@@ -682,7 +684,15 @@ def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, 
             unew[j] = Uol[j, k]
         for c in range(n_c):
             j = cdrive[c]
-            f = act_gain[c] * Cout[c, k] + in_off[j]
+            cm = Cout[c, k]
+            dl = in_delay[j]
+            if dl > 0.0:
+                d0 = int(dl)
+                a = dl - d0
+                c0 = Cout[c, k - d0] if k - d0 >= 0 else 0.0
+                c1 = Cout[c, k - d0 - 1] if k - d0 - 1 >= 0 else 0.0
+                cm = (1.0 - a) * c0 + a * c1
+            f = act_gain[c] * cm + in_off[j]
             if f > in_sat[j]:
                 f = in_sat[j]
             elif f < -in_sat[j]:

@@ -261,9 +261,6 @@ class LumpedModel:
                                  f"among {len(inputs)} inputs")
             if j in driven:
                 raise ValueError(f"controller {c.name!r} drives input {j}, which another controller drives")
-            if inputs[j].delay:
-                raise ValueError(f"controller {c.name!r} drives input {j} with delay={inputs[j].delay}; "
-                                 "a driven input cannot be delayed")
             driven.append(j)
             chans += [ch for ch in (c.reference, c.feedforward, c.command_channel) if ch is not None]
         if len({c.name for c in controllers}) != len(controllers):

@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 import scipy.fft
 import scipy.ndimage
+import scipy.signal
 import scipy.stats
 
 from vibroscope._checks import check_option
@@ -76,6 +77,7 @@ def detect_period(
     *,
     min_periods: int = 3,
     min_score: float = 0.9,
+    fmax: float | None = None,
 ) -> Periodicity:
     """Period of a periodic signal (a repeated multisine, a periodic chirp), in whole samples.
 
@@ -91,6 +93,11 @@ def detect_period(
     min_score : float, optional
         Smallest `score` of a periodic signal (default 0.9: the record repeats with less than
         about 10 % of its power non-periodic, i.e. noise up to about 30 % RMS of the signal).
+    fmax : float, optional
+        Highest frequency of interest in Hz: the record is first low-passed there (zero-phase
+        Butterworth, order 8, :func:`scipy.signal.sosfiltfilt`), so that noise above the analysed
+        band does not lower the score (the period of a decimated record, found at the full
+        rate). Default None (the record as given).
 
     Returns
     -------
@@ -100,7 +107,7 @@ def detect_period(
     Raises
     ------
     ValueError
-        If `x` is not 1-D, `fs` is not positive, or ``min_periods < 1``.
+        If `x` is not 1-D, `fs` is not positive, ``min_periods < 1``, or `fmax` is not positive.
 
     Notes
     -----
@@ -139,11 +146,15 @@ def detect_period(
     min_periods = int(min_periods)
     if min_periods < 1:
         raise ValueError(f"{min_periods=} must be at least 1")
+    if fmax is not None and not (np.isfinite(fmax) and fmax > 0):
+        raise ValueError(f"{fmax=} must be a positive frequency in Hz")
     none = Periodicity(None, float("nan"), 0, float("nan"), False)
     n = x.size
     t_hi = n // min_periods
     if t_hi < 2 or not np.all(np.isfinite(x)):
         return none
+    if fmax is not None and fmax < 0.5 * fs and n > 64:  # sosfiltfilt's padding needs a few dozen samples
+        x = scipy.signal.sosfiltfilt(scipy.signal.butter(8, fmax, fs=fs, output="sos"), x)
     s = _lag_scores(x - x.mean())
     below = np.flatnonzero(s[1 : t_hi + 1] <= 0.0)
     if below.size == 0:

@@ -18,7 +18,7 @@ from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, nearest_frequencies, real_shape, sensor_geometry
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
-           "plot_stabilization", "plot_frf_synthesis", "summary_figures"]
+           "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d", "summary_figures"]
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
@@ -662,6 +662,154 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
     axes[n, 1].text(0.05, 0.5, f"overall relative error\n‖H − Ĥ‖ / ‖H‖ = {100 * rel:.2f} %\n"
                               f"over {fs_.min():.4g}–{fs_.max():.4g} Hz", fontsize=10, va="center")
     fig.suptitle("Measured vs synthesized FRFs (LSFD modal model)", fontsize=11)
+    return fig
+
+
+def plot_mode_shapes_3d(modal, coords: Mapping[str, Any], *, fig=None, max_modes: int = 12, amplitude: float = 0.15):
+    """One 3-D panel per mode: the geometry's measured nodes, undeformed and displaced by the shape.
+
+    Points at one position (a triaxial node: ``12+X``, ``12+Y``, ``12+Z``) form one node whose
+    displacement is the sum of each point's real shape value along its measuring direction.
+
+    Parameters
+    ----------
+    modal : ModalModel
+        Natural frequencies (Hz), damping ratios, complex shapes ``(n_modes, n_points)``, points.
+    coords : mapping
+        ``point -> {"xyz": (x, y, z), "direction": (dx, dy, dz)}`` in m
+        (:meth:`vibroscope.io.coords.SensorCoords.as_mapping`).
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+    max_modes : int, optional
+        Panels drawn at most (the first modes); default 12.
+    amplitude : float, optional
+        Largest node displacement drawn, as a share of the geometry's largest extent (default 0.15).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Grey: undeformed nodes; coloured: displaced nodes, joined to their rest position, the
+        colour the signed displacement along the mode's main direction of motion (red +, blue −).
+    """
+    from matplotlib.ticker import MaxNLocator
+
+    plt = _pyplot()
+    fn = np.asarray(modal.natural_frequencies, dtype=float)
+    zeta = np.asarray(modal.damping_ratios, dtype=float)
+    shapes = np.atleast_2d(np.asarray(modal.shapes, dtype=complex))
+    pos, dirs, _ = sensor_geometry(list(modal.points), coords)
+    node_pos, member = np.unique(np.round(pos, 9), axis=0, return_inverse=True)
+    member = np.asarray(member).reshape(-1)
+    extent = float(np.max(np.ptp(node_pos, axis=0))) if len(node_pos) > 1 else 1.0
+    extent = extent if extent > 0 else 1.0
+    n = min(fn.size, max_modes)
+    cols = min(n, 4) or 1
+    rows = max(1, -(-n // cols))
+    if fig is None:
+        fig = plt.figure(figsize=(3.6 * cols, 3.4 * rows), layout="constrained")
+    else:
+        fig.clear()
+    lo, hi = node_pos.min(axis=0) - amplitude * extent, node_pos.max(axis=0) + amplitude * extent
+    for r in range(n):
+        ax = fig.add_subplot(rows, cols, r + 1, projection="3d")
+        phi = real_shape(shapes[r])
+        disp = np.zeros_like(node_pos)
+        np.add.at(disp, member, phi[:, None] * dirs)
+        mag = np.linalg.norm(disp, axis=1)
+        top = float(mag.max()) if mag.size and mag.max() > 0 else 1.0
+        moved = node_pos + amplitude * extent * disp / top
+        ax.scatter(*node_pos.T, color="0.7", s=8, depthshade=False)
+        for a, b in zip(node_pos, moved):
+            ax.plot(*np.c_[a, b], color="0.6", lw=0.6)
+        axis = int(np.argmax(np.sum(disp ** 2, axis=0)))  # the mode's main direction of motion
+        ax.scatter(*moved.T, c=disp[:, axis] / top, cmap="coolwarm", vmin=-1, vmax=1, s=22, depthshade=False,
+                   edgecolors="0.3", linewidths=0.3)
+        ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
+        ax.set_box_aspect(np.maximum(hi - lo, 0.05 * extent))
+        ax.set_xlabel("x [m]", fontsize=7, labelpad=-8)
+        ax.set_ylabel("y [m]", fontsize=7, labelpad=-8)
+        ax.set_zlabel("z [m]", fontsize=7, labelpad=-8)
+        ax.tick_params(labelsize=6, pad=-2)
+        for a in (ax.xaxis, ax.yaxis, ax.zaxis):
+            a.set_major_locator(MaxNLocator(3))
+        ax.view_init(elev=28, azim=-60)
+        ax.set_title(f"Mode {r + 1}: {mode_label(fn[r], zeta[r])}\nmoves mostly along {'xyz'[axis]}", fontsize=8)
+    more = f"; first {n} of {fn.size} modes" if fn.size > n else ""
+    fig.suptitle(f"Mode shapes on the geometry ({getattr(modal, 'method', '')}, {len(node_pos)} nodes, "
+                 f"{len(modal.points)} points{more}); grey: at rest; red +, blue −", fontsize=10)
+    return fig
+
+
+def plot_mode_set_comparison(comparison, *, fig=None):
+    """Two mode sets compared: the MAC matrix (pairs framed) and each pair's frequency difference.
+
+    Parameters
+    ----------
+    comparison : ModeSetComparison
+        From :func:`vibroscope.modal.compare.compare_mode_sets`.
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Left: ``MAC[i, j]`` of mode i of A (rows) and mode j of B (columns), 0 white to 1 dark,
+        the values written in the cells (up to 16 × 16 modes), pairs framed in red. Right: the
+        relative frequency difference ``(f_B − f_A) / f_A`` of each pair in %, its MAC beside.
+
+    References
+    ----------
+    .. [1] R. J. Allemang, "The Modal Assurance Criterion -- twenty years of use and abuse",
+       Sound and Vibration 37(8), 14–23, 2003.
+    """
+    from matplotlib.patches import Rectangle
+
+    plt = _pyplot()
+    c = comparison
+    M = np.nan_to_num(np.asarray(c.mac, float))
+    na, nb = M.shape
+    if fig is None:
+        fig = plt.figure(figsize=(min(15.0, 7.5 + 0.35 * max(na, nb)), min(11.0, 4.0 + 0.33 * max(na, nb))),
+                         layout="constrained")
+    else:
+        fig.clear()
+    ax, ax2 = fig.subplots(1, 2, width_ratios=[1.25, 1])
+    im = ax.imshow(M, cmap="Greys", vmin=0, vmax=1, aspect="auto", interpolation="nearest")
+    fig.colorbar(im, ax=ax, label="MAC", shrink=0.8)
+    ax.set_yticks(range(na), [f"{i + 1}: {f:.4g} Hz" for i, f in enumerate(c.frequencies_a)], fontsize=7)
+    ax.set_xticks(range(nb), [f"{j + 1}: {f:.4g} Hz" for j, f in enumerate(c.frequencies_b)], fontsize=7,
+                  rotation=60, ha="right")
+    ax.set_ylabel(f"A: {_short(c.labels[0], 40)}")
+    ax.set_xlabel(f"B: {_short(c.labels[1], 40)}")
+    if max(na, nb) <= 16:
+        for i in range(na):
+            for j in range(nb):
+                ax.text(j, i, f"{M[i, j]:.2f}", ha="center", va="center", fontsize=7,
+                        color="white" if M[i, j] > 0.6 else "black")
+    for i, j in c.pairs:
+        ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="tab:red", lw=1.8))
+    ax.set_title(f"MAC on {len(c.points)} common points (matched by {c.matched_by}); pairs framed", fontsize=9)
+    if len(c.pairs):
+        y = np.arange(len(c.pairs))
+        d = 100 * np.asarray(c.frequency_difference)
+        ax2.barh(y, d, color=np.where(np.asarray(c.mac_pairs) >= 0.9, "tab:green", "tab:orange"))
+        ax2.set_yticks(y, [f"A{i + 1} {c.frequencies_a[i]:.4g} / B{j + 1} {c.frequencies_b[j]:.4g} Hz"
+                           for i, j in c.pairs], fontsize=7)
+        ax2.invert_yaxis()
+        span = max(float(np.max(np.abs(d))), 1e-3)
+        for k, (dv, m) in enumerate(zip(d, c.mac_pairs)):
+            ax2.text(max(dv, 0.0) + 0.04 * span, k, f"{dv:+.2f} %  MAC {m:.2f}", va="center", ha="left", fontsize=7)
+        ax2.set_xlim(-1.15 * span, 2.3 * span)
+    else:
+        ax2.text(0.5, 0.5, "no pair (MAC and frequency limits)", ha="center", va="center", transform=ax2.transAxes)
+    ax2.axvline(0, color="0.3", lw=0.8)
+    ax2.set_xlabel("(f_B − f_A) / f_A [%]")
+    ax2.grid(axis="x", alpha=0.3)
+    un = [f"A{i + 1} {c.frequencies_a[i]:.4g}" for i in c.unpaired_a] + \
+         [f"B{j + 1} {c.frequencies_b[j]:.4g}" for j in c.unpaired_b]
+    ax2.set_title(f"{len(c.pairs)} pairs (green: MAC ≥ 0.9, orange: below)\nunpaired (Hz): "
+                  f"{', '.join(un[:6]) + (' …' if len(un) > 6 else '') or 'none'}", fontsize=8)
+    fig.suptitle("Mode sets compared: A (rows) vs B (columns)", fontsize=11)
     return fig
 
 

@@ -210,8 +210,17 @@ def _channel_gap(report, name: str):
     return None
 
 
+def _input_unit(report) -> str:
+    """Unit of the report's first input (N unless the report says otherwise)."""
+    return str((getattr(report, "meta", None) or {}).get("input_unit") or "N")
+
+
 def _fmt(x: float, spec: str = ".3f") -> str:
-    return format(float(x), spec) if x is not None and np.isfinite(float(x)) else "n/a"
+    if x is None or not np.isfinite(float(x)):
+        return "n/a"
+    if spec == ".3f" and 0 < abs(float(x)) < 5e-3:  # small gaps keep their digits (1.2e-05, not 0.000)
+        return format(float(x), ".2g")
+    return format(float(x), spec)
 
 
 def _positive(v: np.ndarray) -> np.ndarray:
@@ -366,7 +375,7 @@ def _verdict_words(report) -> str:
 def plot_gap_frf(report, *, fig=None):
     """Bode plots of the measured H1, the nominal and the augmented model, per output.
 
-    Columns are the outputs; rows |H| in dB (re 1 output unit per N of the first input),
+    Columns are the outputs; rows |H| in dB (re 1 output unit per unit of the first input: N, or a closed loop's reference unit),
     phase in degrees, and the coherence γ² of the measured H1.
 
     Parameters
@@ -388,6 +397,7 @@ def plot_gap_frf(report, *, fig=None):
     Hn = np.asarray(sp.frf_nominal).reshape(f.size, -1)
     Ha = np.asarray(sp.frf_augmented).reshape(f.size, -1)
     coh = np.asarray(sp.coherence, dtype=float).reshape(f.size, -1)
+    iu = _input_unit(report)
     n_out = Hm.shape[1]
     names = _channel_names(report, n_out)
     units = _units(report, n_out)
@@ -407,14 +417,14 @@ def plot_gap_frf(report, *, fig=None):
             axm.plot(f, _db(H[:, o]), color=COLORS[what], lw=1.2 if what == "measured" else 1.0, ls=ls, label=label)
             axp.plot(f, np.degrees(np.angle(H[:, o])), color=COLORS[what], lw=1.0, ls=ls, label=label)
         axc.plot(f, coh[:, o], color="C0", lw=1.0, label="coherence of the measured H1")
-        axm.set_ylabel(f"|H| [dB re 1 {units[o] or 'unit'}/N]", fontsize=8)
+        axm.set_ylabel(f"|H| [dB re 1 {units[o] or 'unit'}/{iu}]", fontsize=8)
         axp.set_ylabel("phase [deg]", fontsize=8)
         axp.set_ylim(-185, 185)
         axp.set_yticks([-180, -90, 0, 90, 180])
         axc.set_ylabel("coherence γ² [-]", fontsize=8)
         axc.set_ylim(-0.02, 1.05)
         axc.set_xlabel("frequency [Hz]")
-        axm.set_title(f"{_short(names[o], 40)} / first input [N]", fontsize=9)
+        axm.set_title(f"{_short(names[o], 40)} / first input [{iu}]", fontsize=9)
         for a in (axm, axp, axc):
             a.grid(True, alpha=0.35)
         axc.set_xlim(lo, hi)
@@ -532,7 +542,9 @@ def plot_gap_evidence(report, *, fig=None):
         verdict = f"flagged: {_fmt(s.value, '.3g')} > {_fmt(s.threshold, '.3g')}" if s.flagged else \
             f"not flagged: {_fmt(s.value, '.3g')} ≤ {_fmt(s.threshold, '.3g')}"
         if s.flagged and s.points_to:
-            verdict += "\n→ " + ", ".join(s.points_to)
+            # at most three names a line: the legend stays inside its panel
+            names = list(s.points_to)
+            verdict += "\n→ " + ",\n   ".join(", ".join(names[i:i + 3]) for i in range(0, len(names), 3))
         ax.plot(x[:m], y[:m], "o-" if m <= 60 else "-", color=col, ms=3, lw=1.6 if s.flagged else 1.0,
                 label=verdict)
         if np.nanmin(y[:m], initial=np.inf) < 0 < np.nanmax(y[:m], initial=-np.inf):
@@ -644,7 +656,7 @@ def plot_gap_levels(report, *, fig=None):
     ev = getattr(report, "level_evidence", None)
     if ev is None or len(ev.levels) < 2:
         return None
-    return plot_level_evidence(ev)
+    return plot_level_evidence(ev, input_unit=_input_unit(report))
 
 
 _PLOTTERS = {"gap_levels": plot_gap_levels, "gap_time": plot_gap_time, "gap_frf": plot_gap_frf, "gap_spectrum": plot_gap_spectrum,
@@ -696,7 +708,7 @@ def plot_gap_report(report, out_dir: str | Path | None = None, *,
 # level dependence of the BLA (:func:`vibroscope.gap.levels.level_blas`)
 # --------------------------------------------------------------------------------------------
 
-def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None):
+def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None, input_unit: str = "N"):
     """|H| per excitation level, and each mode's natural frequency and damping ratio vs level.
 
     Parameters
@@ -707,6 +719,8 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
         a new figure (|H| on top, the two parameter panels below).
     out_path : str or Path, optional
         Write the figure as a PNG there (and close it).
+    input_unit : str, optional
+        Unit of the first input (default ``"N"``; a closed loop's reference: ``"m"``, ...).
 
     Returns
     -------
@@ -743,7 +757,7 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
         if f_all:
             sel = (f >= 0.8 * min(f_all)) & (f <= 1.2 * max(f_all))
         a0.plot(f[sel], _db(np.abs(lv.H[sel, o])), color=c, lw=1.2,
-                label=f"log {lv.log + 1}" + (f", level {lv.level + 1}" if lv.level else "") + f": {lv.rms:.3g} N RMS")
+                label=f"log {lv.log + 1}" + (f", level {lv.level + 1}" if lv.level else "") + f": {lv.rms:.3g} {input_unit} RMS")
     for fm in f_all:
         a0.axvline(fm, color="0.6", lw=0.8, ls=":")
     a0.set_xlabel("frequency [Hz]")
@@ -777,7 +791,7 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
             a.xaxis.set_major_locator(FixedLocator(ticks))
             a.xaxis.set_minor_locator(NullLocator())
             a.xaxis.set_major_formatter(FormatStrFormatter("%.3g"))
-        a.set_xlabel("input RMS [N]")
+        a.set_xlabel(f"input RMS [{input_unit}]")
         a.set_ylabel(yl)
         a.grid(True, which="both", alpha=0.3)
         if modes:
