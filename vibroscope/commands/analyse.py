@@ -203,10 +203,6 @@ def run(args) -> int:
     from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
 
-    import math
-
-    if args.fs is not None and not (math.isfinite(args.fs) and args.fs > 0):
-        raise VibroscopeError(f"--fs {args.fs:g}: must be a positive, finite rate in Hz")
     check_out_dir(args.out)
     _check_options(args)
     logs = list(args.log) if isinstance(args.log, (list, tuple)) else [args.log]
