@@ -90,7 +90,8 @@ def add_parser(sub) -> None:
     p.set_defaults(func=run)
 
 
-def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False, find_input=False, **kw):
+def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False, find_input=False, max_memory=None,
+                **kw):
     """Read `log` and run :func:`vibroscope.pipeline.analyse_signals`; returns the Analysis.
 
     Without `outputs`, the responses are chosen by :func:`vibroscope.io.select.auto_channels`
@@ -122,6 +123,9 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         Without `input`, take the log's one force-like channel as the input (see above);
         default False (output-only without `input`). Only for the methods that use an input
         (``method`` "auto", "lscf", "peak").
+    max_memory : int, optional
+        Memory budget in bytes for reading the log (:func:`vibroscope.io.read_mcap`); default
+        half the available memory.
     **kw
         Passed to :func:`vibroscope.pipeline.analyse_signals` (``nperseg``, ``fmin``, ...).
 
@@ -137,7 +141,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     notes, fallback, source, choice = [], False, log, None
     find_input = find_input and input is None and kw.get("method", "auto") in ("auto", "lscf", "peak")
     if outputs is None or find_input:  # scan the log once: the index serves the choices and the read
-        source = LogIndex.open(log, progress=progress)
+        source = LogIndex.open(log, progress=progress, max_memory=max_memory)
     if find_input:
         resp = {source.topic_of(c).topic for c in outputs or ()}
         try:
@@ -151,7 +155,8 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         notes.append(f"channels chosen automatically: {sel.reason}")
         notes += [f"{what}: skipped: {why}" for what, why in sel.skipped]
         outputs, fallback = [c for c in sel.channels if c != input], sel.fallback
-    sig = read_mcap(source, [input, *outputs] if input else list(outputs), fs=fs, progress=progress)
+    sig = read_mcap(source, [input, *outputs] if input else list(outputs), fs=fs, progress=progress,
+                    max_memory=max_memory)
     if sig.n_samples < 16:  # not one Welch segment of the shortest length
         raise ValueError(f"the log is too short to analyse: {sig.n_samples} samples on the common grid "
                          f"({sig.duration:.3g} s at {sig.fs:g} Hz); at least 16 are needed")
@@ -241,7 +246,8 @@ def run(args) -> int:
         an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
                          find_input=not getattr(args, "output_only", False), nperseg=args.nperseg, fmin=args.fmin,
                          fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator, method=args.method,
-                         select=select, decimation=not getattr(args, "no_decimate", False))
+                         select=select, decimation=not getattr(args, "no_decimate", False),
+                         max_memory=budget)
     except ValueError as exc:
         raise VibroscopeError(f"{args.log}: {exc}") from None
     nyq = an.psd.frequencies[-1]
@@ -309,31 +315,9 @@ def memory_budget(max_memory: str | None = None) -> int:
             return parse_size(max_memory)
         except ValueError as exc:
             raise VibroscopeError(f"--max-memory {max_memory}: {exc}") from None
-    avail = None
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    avail = int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    if avail is None:
-        import os
+    from vibroscope.io import memory_budget as default_budget
 
-        try:
-            avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-        except (ValueError, OSError, AttributeError):
-            avail = 8 << 30
-    budget = avail // 2
-    try:
-        import resource
-
-        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
-        if soft != resource.RLIM_INFINITY:
-            budget = min(budget, soft // 2)
-    except (ImportError, OSError, ValueError):
-        pass
-    return int(budget)
+    return default_budget()
 
 
 def whole_read_bytes(log: Path) -> int:

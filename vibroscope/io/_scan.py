@@ -71,7 +71,7 @@ import struct
 import threading
 import zlib
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from io import BytesIO
 from pathlib import Path
@@ -90,6 +90,11 @@ _MSG_HDR = struct.Struct("<HIQQ")  # channel_id, sequence, log_time, publish_tim
 _REC_HDR = struct.Struct("<BQ")
 _FOOTER_LEN = 1 + 8 + 20
 _MAX_CHUNK_USIZE = 1 << 32  # a stated uncompressed size beyond this is damage, not data
+#: the largest ratio of a compressed chunk's stated uncompressed size to its compressed size (plus
+#: :data:`RATIO_SLACK` bytes) that is decompressed; beyond it the chunk is refused as a lying size
+#: or a decompression bomb. Real logs reach ~10 (zstd) and LZ4 frames cannot exceed ~255.
+MAX_RATIO = 1000
+RATIO_SLACK = 1 << 20
 _COMPRESSIONS = (b"", b"zstd", b"lz4")
 MODES = ("auto", "stream", "indexed")
 _MAX_WORKERS = 8
@@ -208,12 +213,19 @@ class Damage:
         say so; None when unknown.
     channel_ids : tuple of int, optional
         Channels of the messages lost, when known.
+    per_channel : tuple of (int, int), optional
+        (channel id, messages lost) for each channel, when the message indexes say so.
+    span_ns : (int, int) or None, optional
+        First and last log time in ns of the messages lost (the lost chunk's time range, as its
+        chunk index or its intact record header states it), when known.
     """
 
     offset: int
     reason: str
     messages: int | None = None
     channel_ids: tuple[int, ...] = ()
+    per_channel: tuple[tuple[int, int], ...] = ()
+    span_ns: tuple[int, int] | None = None
 
     def describe(self, channels: dict[int, Channel]) -> str:
         """The reason with the topics and message count lost (``"...; topics /a, /b (12 messages lost)"``)."""
@@ -257,6 +269,43 @@ class ScanResult:
     damage: list[Damage] = field(default_factory=list)  # every damaged place, in file order
     recovered: int = 0  # chunks with a damaged record header read through the summary's index
 
+    def lost_by_topic(self) -> dict[str, tuple[int | None, float]]:
+        """Messages and seconds lost per topic, over every :attr:`damage` entry that says so.
+
+        Returns
+        -------
+        dict of str to (int or None, float)
+            Topic (``"channel id N"`` for a channel no record names) -> (messages lost, None
+            when a damaged place lists the topic without a count for it; seconds covered by the
+            log time ranges of the chunks lost that held it, overlaps counted once, 0.0 when no
+            range is known).
+        """
+        count: dict[str, int | None] = {}
+        spans: dict[str, list[tuple[int, int]]] = {}
+        for d in self.damage:
+            per = dict(d.per_channel)
+            for c in d.channel_ids:
+                name = self.channels[c].topic if c in self.channels else f"channel id {c}"
+                k = per.get(c)
+                if k is None and d.messages is not None and len(d.channel_ids) == 1:
+                    k = d.messages
+                prev = count.get(name, 0)
+                count[name] = None if k is None or prev is None else prev + k
+                if d.span_ns is not None:
+                    spans.setdefault(name, []).append(d.span_ns)
+        out = {}
+        for name, k in count.items():
+            sec, hi = 0, None
+            for a, b in sorted(spans.get(name, [])):
+                if hi is None or a > hi:
+                    sec += b - a
+                    hi = b
+                elif b > hi:
+                    sec += b - hi
+                    hi = b
+            out[name] = (k, sec * 1e-9)
+        return out
+
     def messages(self) -> list[tuple[int, int, bytes]]:
         """Every message found, undecoded, blocks in order (chunks in file order, then the loose ones).
 
@@ -280,6 +329,9 @@ class _Summary:
     channels: dict[int, Channel]
     chunks: dict[int, ChunkIndex]
     message_count: int | None
+    lost: list[ChunkIndex] = field(default_factory=list)  # chunk indexes of chunks not in the file
+    note: str | None = None  # how the summary was found, when not where the footer says
+    shift: int = 0  # bytes the footer's summary start (and chunk offsets after a deletion) point too far
 
 
 def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
@@ -287,7 +339,8 @@ def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
 
     Every record is parsed defensively: a summary that does not parse, lies outside the file,
     fails its CRC-32, or (without a CRC) has a chunk index not pointing at a chunk opcode is
-    not used.
+    not used. A summary whose stated start is wrong because bytes before it were deleted
+    (a lost chunk) is found again (:func:`_relocated_summary`).
     """
     if n < 8 + _FOOTER_LEN + 8 or bytes(data[n - 8 : n]) != MAGIC:
         return None, None
@@ -298,13 +351,132 @@ def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
     summary_start, _sos, summary_crc = struct.unpack_from("<QQI", data, fpos + 9)
     if summary_start == 0:
         return None, None
+    why = None
     if not 8 <= summary_start <= fpos:
-        return None, f"the footer's summary start {summary_start} lies outside the file"
-    if summary_crc != 0:
+        why = f"the footer's summary start {summary_start} lies outside the file"
+    elif summary_crc != 0:
         crc = zlib.crc32(memoryview(data)[summary_start : fpos + 9 + 16])
         if crc != summary_crc:
-            return None, (f"summary section at byte offset {summary_start} fails its CRC-32 "
-                          f"(stored {summary_crc:#010x}, computed {crc:#010x})")
+            why = (f"summary section at byte offset {summary_start} fails its CRC-32 "
+                   f"(stored {summary_crc:#010x}, computed {crc:#010x})")
+    if why is not None:
+        moved = _relocated_summary(data, fpos, summary_start, summary_crc)
+        return (moved, None) if moved is not None else (None, why)
+    return _parse_summary(data, summary_start, fpos, summary_crc)
+
+
+_DATA_END_HEAD = bytes([Opcode.DATA_END]) + struct.pack("<Q", 4)
+_MAX_CHUNK_SEARCHES = 256  # chunk indexes looked for byte by byte when neither offset holds their chunk
+
+
+def _relocated_summary(data: Any, fpos: int, stated: int, crc: int) -> _Summary | None:
+    """The summary section found where it lies when bytes before it were deleted, or None.
+
+    The footer's summary start then points `shift` bytes too far. The section is looked for
+    right after a Data End record (where writers put it) and proven by the footer's CRC-32,
+    or without one by parsing to the footer with more than half of its chunk indexes matching
+    chunk records. Its chunk indexes are then matched to the chunk
+    records of the file (:func:`_place_chunks`): at their stated offset (before the deleted
+    bytes), `shift` bytes earlier (after them), or where a chunk record with the same length,
+    log time range and uncompressed size lies; a chunk index matching no chunk record lists
+    a chunk that is not in the file (``_Summary.lost``).
+    """
+    mv = memoryview(data)
+    hi, tries = fpos, 0
+    while tries < 8:
+        p = data.rfind(_DATA_END_HEAD, 8, hi)
+        if p < 0:
+            return None
+        hi, tries = p + len(_DATA_END_HEAD) - 1, tries + 1
+        start = p + 13
+        if start == stated or start > fpos or (crc != 0 and zlib.crc32(mv[start : fpos + 9 + 16]) != crc):
+            continue
+        summary, _why = _parse_summary(data, start, fpos, crc, placed=False)
+        if summary is None:
+            continue
+        shift = stated - start
+        chunks, lost, moved = _place_chunks(data, summary.chunks, shift, start)
+        if crc == 0 and len(chunks) <= len(lost):  # no CRC to prove it: most chunk indexes must match
+            continue
+        summary.chunks, summary.lost, summary.shift = chunks, lost, shift
+        summary.note = (f"the footer's summary start {stated} is wrong by {shift:+d} bytes (bytes deleted before "
+                        f"it?); the summary section found at byte offset {start} ({'its CRC-32 checked' if crc else 'no CRC-32'}) is used: "
+                        f"{len(chunks)} of its {len(chunks) + len(lost)} chunk indexes match chunk records "
+                        f"({moved} shifted); {len(lost)} list{'s a chunk' if len(lost) == 1 else ' chunks'} no longer in the file")
+        return summary
+    return None
+
+
+def _chunk_signature(ci: ChunkIndex) -> bytes:
+    """The first 33 bytes of the chunk record a chunk index lists: opcode, record length, log
+    time range and uncompressed size."""
+    return bytes([Opcode.CHUNK]) + struct.pack("<QQQQ", ci.chunk_length - 9, ci.message_start_time,
+                                               ci.message_end_time, ci.uncompressed_size)
+
+
+def _place_chunks(data: Any, stated: dict[int, ChunkIndex], shift: int,
+                  stop: int) -> tuple[dict[int, ChunkIndex], list[ChunkIndex], int]:
+    """(chunk indexes by the offset where their chunk record lies, chunk indexes whose chunk is
+    not in ``data[8:stop]``, how many were moved); see :func:`_relocated_summary`."""
+    placed: dict[int, ChunkIndex] = {}
+    lost: list[ChunkIndex] = []
+    moved = searches = 0
+    for o, ci in sorted(stated.items()):
+        sig = _chunk_signature(ci)
+        where = None
+        for q in (o, o - shift):
+            if 8 <= q and q + ci.chunk_length <= stop and q not in placed and bytes(data[q : q + 33]) == sig:
+                where = q
+                break
+        if where is None and searches < _MAX_CHUNK_SEARCHES:
+            searches += 1
+            q = data.find(sig, 8, stop)
+            if q >= 0 and q + ci.chunk_length <= stop and q not in placed:
+                where = q
+        if where is None:
+            lost.append(ci)
+            continue
+        d = o - where
+        moved += d != 0
+        placed[where] = ci if d == 0 else ChunkIndex(
+            message_start_time=ci.message_start_time, message_end_time=ci.message_end_time,
+            chunk_start_offset=where, chunk_length=ci.chunk_length,
+            message_index_offsets={c: off - d for c, off in ci.message_index_offsets.items()},
+            message_index_length=ci.message_index_length, compression=ci.compression,
+            compressed_size=ci.compressed_size, uncompressed_size=ci.uncompressed_size)
+    return placed, lost, moved
+
+
+def index_counts(ci: ChunkIndex) -> dict[int, int] | None:
+    """Messages per channel id of the chunk a chunk index lists, from the lengths of its message
+    index records (their offsets and total length in the index), or None when they do not add up.
+
+    Parameters
+    ----------
+    ci : mcap.records.ChunkIndex
+        The chunk index.
+
+    Returns
+    -------
+    dict of int to int or None
+    """
+    items = sorted(ci.message_index_offsets.items(), key=lambda kv: kv[1])
+    if not items:
+        return None
+    ends = [off for _, off in items[1:]] + [ci.chunk_start_offset + ci.chunk_length + ci.message_index_length]
+    out = {}
+    for (cid, off), end in zip(items, ends):
+        k, r = divmod(end - off - 15, 16)
+        if k < 0 or r:
+            return None
+        out[cid] = k
+    return out
+
+
+def _parse_summary(data: Any, summary_start: int, fpos: int, summary_crc: int,
+                   placed: bool = True) -> tuple[_Summary | None, str | None]:
+    """The summary records in ``data[summary_start:fpos]``; `placed`: its chunk indexes must
+    point into the data section (else they are matched to chunk records by the caller)."""
     schemas, channels, chunks, count = {}, {}, {}, None
     pos = summary_start
     while pos < fpos:
@@ -324,10 +496,12 @@ def _read_summary(data: Any, n: int) -> tuple[_Summary | None, str | None]:
             elif op == Opcode.CHUNK_INDEX:
                 ci = _chunk_index(data, body, end)
                 o = ci.chunk_start_offset
-                if not (8 <= o and ci.chunk_length >= 9 and o + ci.chunk_length <= summary_start):
+                if placed and not (8 <= o and ci.chunk_length >= 9 and o + ci.chunk_length <= summary_start):
                     return None, f"chunk index at byte offset {pos} points outside the data section ({o})"
-                if summary_crc == 0 and data[o] != Opcode.CHUNK:
+                if placed and summary_crc == 0 and data[o] != Opcode.CHUNK:
                     return None, f"chunk index at byte offset {pos} points at {_opname(data[o])}, not a chunk ({o})"
+                if not placed and ci.chunk_length < 9 + 40:
+                    return None, f"chunk index at byte offset {pos} states a chunk length of {ci.chunk_length}"
                 chunks[o] = ci
             elif op == Opcode.STATISTICS:
                 count = _parse(Statistics, data[body:end]).message_count
@@ -368,6 +542,69 @@ def _chunk_index(data: Any, body: int, end: int) -> ChunkIndex:
                       compressed_size=csize, uncompressed_size=usize)
 
 
+def memory_budget() -> int:
+    """The default memory budget in bytes: half the available memory, or half the address-space
+    limit (``ulimit -v``, ``RLIMIT_AS``), whichever is smaller.
+
+    Returns
+    -------
+    int
+    """
+    avail = None
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    avail = int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    if avail is None:
+        try:
+            avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            avail = 8 << 30
+    budget = avail // 2
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if soft != resource.RLIM_INFINITY:
+            budget = min(budget, soft // 2)
+    except (ImportError, OSError, ValueError):
+        pass
+    return int(budget)
+
+
+def check_chunk_size(chunk: Chunk, limit: int) -> None:
+    """Refuse, before anything is allocated, a chunk whose stated uncompressed size exceeds
+    `limit` bytes (a share of the memory budget), or :data:`MAX_RATIO` times its compressed size
+    plus :data:`RATIO_SLACK`, or (uncompressed) differs from its data length.
+
+    Parameters
+    ----------
+    chunk : mcap.records.Chunk
+        The chunk record (its data not yet decompressed).
+    limit : int
+        Bytes one chunk may take decompressed.
+
+    Raises
+    ------
+    ValueError
+        Naming the stated size and the limit it exceeds.
+    """
+    usize, csize = chunk.uncompressed_size, len(chunk.data)
+    if chunk.compression == "":
+        if usize != csize:
+            raise ValueError(f"uncompressed chunk states {usize} bytes but holds {csize}")
+        return
+    if usize > MAX_RATIO * csize + RATIO_SLACK:
+        raise ValueError(f"stated uncompressed size {usize} exceeds {MAX_RATIO} times its {csize} compressed bytes "
+                         f"(+{RATIO_SLACK}): a lying size or a decompression bomb, not decompressed")
+    if usize > limit:
+        raise ValueError(f"stated uncompressed size {usize} exceeds this chunk's share of the memory budget "
+                         f"({limit} bytes; max_memory): not decompressed")
+
+
 def _read_chunk(mv: memoryview, body: int, end: int) -> Chunk:
     """Parse a Chunk record without copying its (possibly large) data."""
     if end - body < 40:
@@ -391,21 +628,68 @@ def _read_chunk(mv: memoryview, body: int, end: int) -> Chunk:
 _LOCAL = threading.local()
 
 
-def _decompress(chunk: Chunk) -> bytes:
+def _decompress(chunk: Chunk) -> Any:
+    """The chunk's data decompressed, never to more than its stated uncompressed size (a frame
+    header claiming more is not believed: the output buffer is the stated size, filled by a
+    stream; a frame that goes on beyond it raises)."""
     if chunk.compression == "":
         return chunk.data
+    size = chunk.uncompressed_size
     if chunk.compression == "zstd":
         if _zstd is None:
             raise ValueError("zstd compression but the zstandard module is not installed")
         dec = getattr(_LOCAL, "zstd", None)
         if dec is None:  # one decompression context per thread, reused (zstandard objects are not thread-safe)
             dec = _LOCAL.zstd = _zstd.ZstdDecompressor()
-        return dec.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+        try:
+            stated = _zstd.frame_content_size(chunk.data)  # the frame header's size, when it has one
+        except Exception:  # noqa: BLE001 - not a zstd frame: the stream below names the fault
+            stated = -1
+        if stated == size:  # one call, into exactly the size already checked (zstd stops at the frame's size)
+            return dec.decompress(chunk.data, max_output_size=size)
+        if stated > size:
+            raise ValueError(f"zstd frame states {stated} bytes, more than the {size} the chunk states: not "
+                             f"decompressed")
+        out = bytearray(size)
+        got = _zstd_stream_into(dec, chunk.data, memoryview(out))
+        if got != size:
+            raise ValueError(f"decompresses to more than the {size} bytes stated" if got > size else
+                             f"decompresses to {got} bytes, not the {size} stated")
+        return out
     if chunk.compression == "lz4":
+        if _cramjam_lz4 is not None:
+            out = bytearray(size)
+            try:
+                got = _cramjam_lz4.decompress_into(chunk.data, out)
+            except Exception as exc:  # noqa: BLE001 - cramjam's errors: too long for the buffer, or damaged
+                raise ValueError(f"LZ4 frame does not decompress into the {size} bytes stated ({exc})") from None
+            if got != size:
+                raise ValueError(f"decompresses to {got} bytes, not the {size} stated")
+            return out
         if _lz4 is None:
             raise ValueError("lz4 compression but the lz4 module is not installed")
-        return _lz4.decompress(chunk.data)
+        d = _lz4.LZ4FrameDecompressor()
+        out = d.decompress(bytes(chunk.data), max_length=size + 1)
+        if len(out) != size or not d.eof:
+            raise ValueError(f"decompresses to {'more than ' if len(out) > size else ''}{len(out)} bytes, not the "
+                             f"{size} stated")
+        return out
     raise ValueError(f"unsupported chunk compression {chunk.compression!r}")
+
+
+def _zstd_stream_into(dec: Any, data: Any, out: memoryview) -> int:
+    """Decompress the zstd frame `data` into `out` by a stream (never more than ``len(out)`` + 1
+    bytes produced); returns the bytes written, ``len(out) + 1`` when the frame goes on."""
+    reader = dec.stream_reader(data, read_size=max(min(len(data), 1 << 20), 1), read_across_frames=False)
+    size, got = len(out), 0
+    while got < size:
+        k = reader.readinto(out[got:])
+        if not k:
+            break
+        got += k
+    if got == size and reader.read(1):
+        return size + 1
+    return got
 
 
 def _scratch(size: int) -> memoryview:
@@ -439,16 +723,7 @@ def _decompress_into(chunk: Chunk) -> memoryview | None:
             dec = getattr(_LOCAL, "zstd", None)
             if dec is None:
                 dec = _LOCAL.zstd = _zstd.ZstdDecompressor()
-            reader = dec.stream_reader(chunk.data, read_size=max(len(chunk.data), 1), read_across_frames=False)
-            got = 0
-            while got < size:
-                k = reader.readinto(out[got:])
-                if not k:
-                    break
-                got += k
-            if got != size or reader.read(1):
-                return None
-            return out
+            return out if _zstd_stream_into(dec, chunk.data, out) == size else None
         if chunk.compression == "lz4" and _cramjam_lz4 is not None:
             out = _scratch(size)
             return out if _cramjam_lz4.decompress_into(chunk.data, out) == size else None
@@ -712,10 +987,15 @@ class _Scanner:
         self.frontier = 0  # where the look-ahead for chunk records stopped
         self.window = 1
         self.data_crc: dict[int, Future] = {}  # data end offset -> CRC-32 of the bytes before it, under way
+        self.max_chunk = _MAX_CHUNK_USIZE  # bytes one chunk may take decompressed (start_pool sets the budget's share)
 
     # -- chunks opened ahead of the walk -----------------------------------------------------
-    def start_pool(self, workers: int) -> None:
-        """Open chunks ahead of the walk on `workers` threads (decompression and CRC-32 release the GIL)."""
+    def start_pool(self, workers: int, max_memory: int | None = None) -> None:
+        """Open chunks ahead of the walk on `workers` threads (decompression and CRC-32 release the GIL);
+        each chunk may take decompressed at most the share of `max_memory` (bytes, default
+        :func:`memory_budget`) of one of the ``workers + 1`` threads."""
+        budget = memory_budget() if max_memory is None else int(max_memory)
+        self.max_chunk = min(_MAX_CHUNK_USIZE, budget // (max(workers, 1) + 1))
         if workers > 1:
             self.pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="vibroscope-mcap")
             self.window = 2 * workers + 2
@@ -977,6 +1257,7 @@ class _Scanner:
         may be wanted later was decoded (:class:`Block` gets them back on use), else a copy.
         """
         chunk = _read_chunk(self.mview, body, end)
+        check_chunk_size(chunk, self.max_chunk)
         raw = _decompress_into(chunk) if self.plan else None
         scratch = raw is not None
         if scratch and self.validate_crcs and chunk.uncompressed_crc != 0 and _crc32(raw) != chunk.uncompressed_crc:
@@ -1240,6 +1521,31 @@ class _Scanner:
                      np.array(ln, np.int64))
 
 
+def _with_loss(d: Damage, sc: "_Scanner") -> Damage:
+    """`d` with its messages per channel and its log time range, where the chunk index of the
+    summary (``sc.index`` or the lost chunks) or the intact chunk record header at its offset
+    says them."""
+    if d.messages is None or d.per_channel or not d.channel_ids:
+        return d
+    ci = sc.index.get(d.offset)
+    per: tuple[tuple[int, int], ...] = ()
+    span = None
+    if ci is not None:
+        counts = index_counts(ci)
+        if counts is not None and sum(counts.values()) == d.messages:
+            per = tuple(sorted(counts.items()))
+        span = (int(ci.message_start_time), int(ci.message_end_time))
+    elif d.offset + 9 + 24 <= sc.n and sc.data[d.offset] == Opcode.CHUNK:
+        a, b = struct.unpack_from("<QQ", sc.data, d.offset + 9)
+        lo = min((int(b_.log_time.min()) for b_ in sc.res.blocks if b_.n), default=None)
+        hi = max((int(b_.log_time.max()) for b_ in sc.res.blocks if b_.n), default=None)
+        if lo is not None and a <= b and lo - (hi - lo) <= a and b <= hi + (hi - lo):
+            span = (int(a), int(b))  # a record header in the time range of the log: believed
+    if not per and len(d.channel_ids) == 1:
+        per = ((d.channel_ids[0], d.messages),)
+    return replace(d, per_channel=per, span_ns=span)
+
+
 def scan(
     path: str | Path,
     *,
@@ -1250,6 +1556,7 @@ def scan(
     fast: bool = True,
     workers: int | None = None,
     fields: Any = None,
+    max_memory: int | None = None,
 ) -> ScanResult:
     """Scan an MCAP file record by record, recovering after damage.
 
@@ -1293,6 +1600,12 @@ def scan(
         may be wanted later (of a `topics` topic) was decoded, the chunk is decompressed into
         a buffer reused from chunk to chunk and its bytes are not kept (``Block.buf``
         decompresses it again on use); the result is otherwise the same.
+    max_memory : int, optional
+        Memory budget in bytes (default :func:`memory_budget`): a chunk whose stated
+        uncompressed size exceeds the share of one thread (``max_memory / (workers + 1)``),
+        or :data:`MAX_RATIO` times its compressed size, is skipped and reported before anything
+        is allocated for it (:func:`check_chunk_size`); decompression never produces more than
+        the stated size.
 
     Returns
     -------
@@ -1324,6 +1637,8 @@ def scan(
     summary, why = (None, None) if mode == "stream" else _read_summary(data, n)
     if why is not None:
         res.warnings.append(f"{path}: {why}; the summary is not used")
+    if summary is not None and summary.note is not None:
+        res.warnings.append(f"{path}: {summary.note}")
     if mode == "indexed" and summary is None:
         res.warnings.append(f"{path}: no valid summary section to read by its chunk indexes; read by a linear pass")
     skip: set[int] = set()
@@ -1348,7 +1663,7 @@ def scan(
     sc = _Scanner(res, data, validate_crcs=validate_crcs, fast=fast, summary=summary, skip_chunks=skip,
                   search=mode != "indexed" or summary is None or not summary.chunks, seek=mode == "indexed", bar=bar,
                   plan=_decode_plan(summary, topics, fields), unwanted=unwanted)
-    sc.start_pool(min(os.cpu_count() or 1, _MAX_WORKERS) if workers is None else workers)
+    sc.start_pool(min(os.cpu_count() or 1, _MAX_WORKERS) if workers is None else workers, max_memory)
     try:
         sc.crc_ahead()
         if n >= 8 + 9:
@@ -1368,12 +1683,23 @@ def scan(
     if loose is not None:
         res.blocks.append(loose)
     res.complete = n >= 8 + _FOOTER_LEN + 8 and bytes(data[n - 8 :]) == MAGIC and data[n - 8 - _FOOTER_LEN] == Opcode.FOOTER
+    reported = {d.offset for d in res.damage}
+    for ci in summary.lost if summary is not None else ():
+        if ci.chunk_start_offset in reported or ci.chunk_start_offset - summary.shift in reported:
+            continue  # its place was reported damaged by the walk (with the loss its message indexes list)
+        counts = index_counts(ci)
+        res.damage.append(Damage(
+            ci.chunk_start_offset, f"chunk of {ci.chunk_length} bytes listed by the summary's chunk index (at this "
+            f"stated byte offset) is not in the file (deleted?)", sum(counts.values()) if counts is not None else None,
+            tuple(sorted(ci.message_index_offsets)), tuple(sorted(counts.items())) if counts is not None else (),
+            (int(ci.message_start_time), int(ci.message_end_time))))
     if summary is not None and summary.message_count is not None and topics is None and not res.damage:
         got = sum(b.n for b in res.blocks)
         if got < summary.message_count:  # a loss no damaged place explains: reported all the same
             res.damage.append(Damage(summary.start, f"the summary's statistics (section at this byte offset) count "
                                                     f"{summary.message_count} messages, {got} were found",
                                      summary.message_count - got))
+    res.damage = [_with_loss(d, sc) for d in res.damage]
     res.damage.sort(key=lambda d: d.offset)
     res.skipped.extend((d.offset, d.describe(res.channels)) for d in res.damage)
     if res.header is None and not any("header record damaged" in w for w in res.warnings):

@@ -83,13 +83,22 @@ def _pread(fd: int, n: int, offset: int) -> bytes:
 
 
 def _open_chunk(fd: int, span: ChunkSpan):
-    """(raw bytes, records, (cid, log time, start, length)) of one chunk, CRC checked; raises ValueError."""
+    """(raw bytes, records, (cid, log time, start, length)) of one chunk, CRC checked; raises ValueError.
+
+    The sizes the file states are checked before anything is allocated: the chunk must lie in the
+    file, and its uncompressed size within the ratio limit and half the memory budget
+    (:func:`vibroscope.io._scan.check_chunk_size`); decompression never goes beyond it."""
     from vibroscope.io import _scan
 
+    size = os.fstat(fd).st_size
+    if not (0 <= span.offset and 9 + 40 <= span.length and span.offset + span.length <= size):
+        raise ValueError(f"chunk of {span.length} bytes at byte offset {span.offset} does not lie in the file "
+                         f"({size} bytes)")
     rec = _pread(fd, span.length, span.offset)
     if rec[0] != _CHUNK_OP:
         raise ValueError(f"opcode 0x{rec[0]:02x} where a chunk record was expected")
     chunk = _scan._read_chunk(memoryview(rec), 9, len(rec))
+    _scan.check_chunk_size(chunk, _scan.memory_budget() // 2)
     raw = _scan._checked(chunk)  # uncompressed: a view of `rec`, not a copy
     recs: list = []
     return raw, recs, _scan._index_messages(raw, 0, len(raw), recs, True)
@@ -617,13 +626,15 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         selection) the log has no Imu topic and no decodable topic with moving measurement
         fields.
     ValueError
-        If `fs` or `margin_s` is not a positive (non-negative) finite number.
+        If `fs` or `margin_s` is not a positive (non-negative) finite number, or `channels` is
+        one string (:func:`~vibroscope.io.mcap_read.check_read_args`).
     """
     from vibroscope.io.log_index import LogIndex
 
+    from vibroscope.io.mcap_read import check_read_args
+
     path = Path(path)
-    if fs is not None and not (np.isfinite(fs) and fs > 0):
-        raise ValueError(f"{fs=} must be a positive sampling frequency in Hz")
+    check_read_args(channels, fs)
     if not (np.isfinite(margin_s) and margin_s >= 0):
         raise ValueError(f"{margin_s=} must be a non-negative time in s")
     warnings: list[str] = []

@@ -137,6 +137,13 @@ class TopicInfo:
         Log times far off their neighbours (:func:`~vibroscope.io.timebase.outlier_stamps`),
         left out of the span, rate and gap count; default 0. Header stamps are checked on reading
         (``read_mcap(...).meta["outliers"]``).
+    lost_messages : int or None
+        Messages of the topic in damaged or missing chunks (from their message indexes or the
+        summary's chunk indexes); None when a damaged place lists the topic without a count;
+        default 0.
+    lost_s : float
+        Seconds covered by the log time ranges of the lost chunks that held the topic (an
+        upper bound of its time lost), when known; default 0.
     """
 
     topic: str
@@ -152,6 +159,8 @@ class TopicInfo:
     gaps: int = 0
     gap_time_s: float = 0.0
     outliers: int = 0
+    lost_messages: int | None = 0
+    lost_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -266,7 +275,8 @@ class LogIndex:
         self._fields: dict[str, list[str]] | None = None
 
     @classmethod
-    def open(cls, path: str | Path, *, progress: bool = False, topics: Any = None) -> "LogIndex":
+    def open(cls, path: str | Path, *, progress: bool = False, topics: Any = None,
+             max_memory: int | None = None) -> "LogIndex":
         """Scan `path` once and index it.
 
         Parameters
@@ -278,6 +288,9 @@ class LogIndex:
         topics : set of str, optional
             Only these topics are wanted: with an intact summary, chunks holding none of
             them are not decompressed (:func:`vibroscope.io._scan.scan`). Default: all.
+        max_memory : int, optional
+            Memory budget in bytes for decompressing chunks (:func:`vibroscope.io._scan.scan`);
+            default half the available memory.
 
         Returns
         -------
@@ -288,7 +301,7 @@ class LogIndex:
         LogFormatError
             If nothing of the file can be read (names file and byte offset).
         """
-        return cls(_scan.scan(Path(path), progress=progress, topics=topics), topics)
+        return cls(_scan.scan(Path(path), progress=progress, topics=topics, max_memory=max_memory), topics)
 
     # -- channels and messages ------------------------------------------------------------
     def schema(self, cid: int) -> Any:
@@ -544,6 +557,7 @@ def _gap_counts(lt: np.ndarray) -> tuple[int, float]:
 
 def _info(log: LogIndex) -> LogInfo:
     topics = []
+    lost = log.scan.lost_by_topic()
     for topic, cids in sorted(log.by_topic.items()):
         cid = cids[0]
         ch = log.scan.channels[cid]
@@ -579,6 +593,7 @@ def _info(log: LogIndex) -> LogInfo:
                 gaps,
                 missing,
                 outliers,
+                *lost.get(topic, (0, 0.0)),
             )
         )
     withmsg = [t for t in topics if t.message_count]

@@ -29,7 +29,8 @@ two stamps lengthens it), and is NaN in the gaps between runs and in lost chunks
 objects); ``gaps`` (list of ``{"topic", "start_s", "length_s", "n_samples"}``: ``start_s``
 absolute like ``t0``, ``n_samples`` the NaN grid samples); ``nan_samples`` (per channel);
 ``outliers`` (list of ``{"topic", "count", "stamps_ns", "log_times_ns"}``, at most 10 values
-each); ``warnings`` (list of str, one line per problem); ``skipped`` (list of dicts: damage
+each); ``lost`` (per topic of the log ``{"messages", "seconds"}`` lost in damaged or missing
+chunks, :meth:`~vibroscope.io._scan.ScanResult.lost_by_topic`; ``messages`` None when unknown); ``warnings`` (list of str, one line per problem); ``skipped`` (list of dicts: damage
 with ``offset`` and ``reason``; undecodable topics with ``topic``, ``schema``, ``reason``;
 bad messages with ``topic``, ``offset`` (of their chunk), ``field``, ``reason``);
 ``fast_path`` (per topic); ``indexed`` and ``chunks_skipped_by_index`` (the scan).
@@ -37,6 +38,8 @@ bad messages with ``topic``, ``offset`` (of their chunk), ``field``, ``reason``)
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections import defaultdict
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -59,7 +62,8 @@ from vibroscope.io.log_index import (
     unit_for,
 )
 from vibroscope.io.paths import MessagePath
-from vibroscope.io.timebase import TimebaseReport, analyse_stamps, outlier_stamps
+from vibroscope.io._scan import memory_budget
+from vibroscope.io.timebase import TimebaseReport, analyse_stamps, grid_for, outlier_stamps
 from vibroscope.signals import Signals
 
 __all__ = [
@@ -73,6 +77,8 @@ __all__ = [
     "TopicInfo",
     "unit_for",
     "ACCELERATION_TYPES",
+    "memory_budget",
+    "check_read_args",
 ]
 
 
@@ -84,6 +90,7 @@ class _Notes:
     skipped: list[dict]
     warnings: list[str]
     outliers: list[dict]
+    lost: dict[str, dict]  # topic -> {"messages", "seconds"} lost in damaged or missing chunks
 
     @classmethod
     def of_scan(cls, log: LogIndex) -> "_Notes":
@@ -91,7 +98,8 @@ class _Notes:
         skipped = [{"offset": o, "reason": r} for o, r in log.scan.skipped]
         warnings = list(log.scan.warnings)
         warnings += [f"{log.path}: skipped at byte offset {o}: {r}" for o, r in log.scan.skipped]
-        return cls(skipped, warnings, [])
+        lost = {t: {"messages": k, "seconds": sec} for t, (k, sec) in sorted(log.scan.lost_by_topic().items())}
+        return cls(skipped, warnings, [], lost)
 
 
 def _wanted_topics(channels: Sequence[str] | None) -> set[str] | None:
@@ -101,16 +109,17 @@ def _wanted_topics(channels: Sequence[str] | None) -> set[str] | None:
     return {c[:i] for c in channels for i in range(1, len(c) + 1) if i == len(c) or c[i] in ".["}
 
 
-def _index_for(path: str | Path, channels: Sequence[str] | None, progress: bool) -> LogIndex:
+def _index_for(path: str | Path, channels: Sequence[str] | None, progress: bool,
+               max_memory: int | None = None) -> LogIndex:
     """The log scanned for the topics of `channels` only (chunks of others passed over); scanned
     whole when that scan does not know a requested topic (channels only inside chunks)."""
-    log = LogIndex.open(path, progress=progress, topics=_wanted_topics(channels))
+    log = LogIndex.open(path, progress=progress, topics=_wanted_topics(channels), max_memory=max_memory)
     if channels is not None and log.scan.chunks_skipped_by_index:
         try:
             for c in channels:
                 log.topic_of(c)
         except ChannelError:
-            log = LogIndex.open(path, progress=progress)
+            log = LogIndex.open(path, progress=progress, max_memory=max_memory)
     return log
 
 
@@ -239,6 +248,58 @@ def _channels_read(log: LogIndex, parsed: list[MessagePath], rows: dict[int, np.
     return keep
 
 
+#: the highest output rate :func:`read_mcap` accepts, as a multiple of the highest estimated topic rate
+MAX_UPSAMPLE = 100
+
+
+def check_read_args(channels: Sequence[str] | None, fs: float | None = None, max_memory: int | None = None) -> None:
+    """Refuse, before the log is read, a channel list given as one string and a rate or memory
+    budget that is not a finite number > 0.
+
+    Parameters
+    ----------
+    channels : sequence of str or None
+        Message paths.
+    fs : float, optional
+        Rate in Hz.
+    max_memory : int, optional
+        Memory budget in bytes.
+
+    Raises
+    ------
+    ValueError
+        One line naming the argument and the limit.
+    """
+    if isinstance(channels, (str, bytes)):
+        raise ValueError(f"channels={channels!r} must be a sequence of message paths, not one string "
+                         f"(give [{channels!r}])")
+    for name, v in (("fs", fs), ("max_memory", max_memory)):
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise ValueError(f"{name}={v!r} must be a number (Hz for fs, bytes for max_memory)")
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name}={v!r} must be finite and > 0")
+
+
+def _check_grid(log: LogIndex, topics: list[str], samples: dict[str, TopicSamples], fs: float, n_rows: int,
+                max_memory: int | None) -> None:
+    """Refuse an output rate above :data:`MAX_UPSAMPLE` times the highest topic rate, and a
+    grid whose rows need more than the memory budget, before the grid is allocated."""
+    rates = [samples[t].report.fs_est for t in topics if np.isfinite(samples[t].report.fs_est)]
+    top = max(rates, default=float("nan"))
+    if np.isfinite(top) and fs > MAX_UPSAMPLE * top:
+        raise ValueError(f"{fs=:g} Hz exceeds the limit of {MAX_UPSAMPLE} times the highest topic rate "
+                         f"({top:.6g} Hz est.): {MAX_UPSAMPLE * top:.6g} Hz")
+    _start, n = grid_for([(int(samples[t].t_ns[0]), int(samples[t].t_ns[-1])) for t in topics], fs)
+    need = 2 * 8 * n * max(n_rows, 1)  # the rows on the grid and the stacked record, float64
+    budget = memory_budget() if max_memory is None else int(max_memory)
+    if need > budget:
+        raise ValueError(f"{log.path}: the grid at {fs:g} Hz holds {n} samples x {n_rows} channels, about "
+                         f"{need / 2**20:.0f} MiB, more than the memory budget of {budget / 2**20:.0f} MiB "
+                         f"(max_memory; a lower fs, fewer channels or a larger budget)")
+
+
 def _output_rate(log: LogIndex, fs: float | None, topics: list[str], reports: dict[str, TimebaseReport],
                  resample: bool) -> float:
     """`fs`, by default the highest estimated topic rate (the first topic's without resampling)."""
@@ -290,13 +351,13 @@ def _meta(log: LogIndex, notes: _Notes, reports: dict[str, TimebaseReport], resa
         "timebase_reports": {t: replace(r, resampled=resampled[t]) for t, r in reports.items()},
         "warnings": notes.warnings, "skipped": notes.skipped, "fast_path": fast_path, "t0_ns": int(start),
         "gaps": gaps, "nan_samples": {c: int(np.count_nonzero(np.isnan(r))) for c, r in zip(names, data)},
-        "outliers": notes.outliers, "indexed": log.scan.indexed,
+        "outliers": notes.outliers, "lost": notes.lost, "indexed": log.scan.indexed,
         "chunks_skipped_by_index": log.scan.chunks_skipped_by_index,
     }
 
 
 def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None, *, fs: float | None = None,
-              progress: bool = False, resample: bool = True) -> Signals:
+              progress: bool = False, resample: bool = True, max_memory: int | None = None) -> Signals:
     """Read channels of an MCAP log onto one uniform time grid.
 
     Parameters
@@ -316,6 +377,10 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
         If False, no grid: every topic must have the same number of samples (after
         dropping duplicate and outlier stamps), which are returned as they are at `fs`
         (default the first topic's estimated rate); gaps are reported, not filled.
+    max_memory : int, optional
+        Memory budget in bytes: no chunk whose stated uncompressed size exceeds its share is
+        decompressed (:func:`vibroscope.io._scan.scan`), and a grid whose rows would need more
+        is refused. Default :func:`vibroscope.io._scan.memory_budget` (half the available memory).
 
     Returns
     -------
@@ -334,9 +399,13 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
         or (automatic selection) the log has no acceleration field, or the grid would be
         more than 10 times larger than the messages read (damaged stamps).
     ValueError
-        With ``resample=False``, if the topics' sample counts differ.
+        With ``resample=False``, if the topics' sample counts differ; if `channels` is one string;
+        if `fs` or `max_memory` is not a finite number > 0; if `fs` exceeds :data:`MAX_UPSAMPLE`
+        times the highest topic rate, or the grid would need more than `max_memory` (checked
+        before it is allocated).
     """
-    log = path if isinstance(path, LogIndex) else _index_for(path, channels, progress)
+    check_read_args(channels, fs, max_memory)
+    log = path if isinstance(path, LogIndex) else _index_for(path, channels, progress, max_memory)
     notes = _Notes.of_scan(log)
     auto = channels is None
     parsed = [log.topic_of(c) for c in (_automatic_channels(log, notes) if auto else channels)]
@@ -347,7 +416,14 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
     keep = _channels_read(log, parsed, rows, notes)
     topics = list(dict.fromkeys(parsed[i].topic for i in keep))
     reports = {t: samples[t].report for t in topics}
+    for t in topics:
+        if t in notes.lost:
+            k, sec = notes.lost[t]["messages"], notes.lost[t]["seconds"]
+            notes.warnings.append(f"topic {t!r}: {'an unknown number of' if k is None else k} messages lost in "
+                                  f"damaged or missing chunks (log time ranges of {sec:.6g} s)")
     fs = _output_rate(log, fs, topics, reports, resample)
+    if resample:
+        _check_grid(log, topics, samples, fs, len(keep), max_memory)
     start, trows, resampled, gaps = (onto_grid(log.path, topics, samples, fs, notes.warnings) if resample
                                      else (*_as_logged(topics, samples, notes), []))
     picks = [(parsed[i].topic, by_topic[parsed[i].topic].index(i)) for i in keep]

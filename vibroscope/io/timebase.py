@@ -291,8 +291,10 @@ def fit_stamps(ts_ns: np.ndarray, dt_s: np.ndarray | None = None) -> StampFit:
     ``round(dt / T) - 1`` (at least 1; the same for stamps without jitter).
     Where the gaps so found come more often than every :data:`GAP_WINDOW` messages on average,
     the stamps are not a clock with jitter and lost messages (bursts of log times, messages
-    kept at irregular multiples of a base period): the rule and rate of regular stamps apply
-    (gaps over 1.5 median increments, 1 / the mean increment outside them).
+    kept at irregular multiples of a base period): the gap rule of regular stamps applies
+    (gaps over 1.5 median increments), and the rate is 1 / ``Tw`` (below), which does not
+    depend on where the log ends (1 / the mean increment outside the gaps did: it keeps the
+    short increments of a burst and drops the long one before it).
     The period ``T`` is the least-squares slope of the stamps against the message count with
     one intercept per gap-free run, refitted once without stamps more than 6 robust standard
     deviations off the line. It starts from the runs between increments over 1.5 ``Tw``
@@ -345,7 +347,11 @@ def fit_stamps(ts_ns: np.ndarray, dt_s: np.ndarray | None = None) -> StampFit:
     if (isgap.sum() + 1) * GAP_WINDOW > n:  # runs shorter than the window on average: not a clock with
         isgap = dt > GAP_PERIODS * med  # jitter and lost messages (bursts): the rule of regular stamps
         miss = np.where(isgap, np.maximum(1, np.rint(dt / med) - 1), 0).astype(np.int64)
-        return StampFit(_rate(dt[~isgap], med), med, med, jit, False, isgap, miss)
+        # rate: 1 / the median increment over GAP_WINDOW messages per message (``tw``), not 1 / the mean
+        # increment outside the gaps: that mean keeps the short increments of a burst and drops the long
+        # ones before it, so it grew with the share of bursty stretches (a log's first seconds read at
+        # 160 Hz, the whole log at 100 Hz); the windowed median is the same wherever the log ends
+        return StampFit(_snap(1.0 / tw, 1.5e-9 / max(rel[-1], 1e-300)), med, med, jit, False, isgap, miss)
     snap = 3.0 * _slope_se(rel, isgap, jit) / T if np.isfinite(jit) else 0.0
     fs = _snap(1.0 / T, max(1.5e-9 / max(rel[-1], 1e-300), snap))
     return StampFit(fs, T, med, jit, False, isgap, miss)
