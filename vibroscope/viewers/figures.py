@@ -23,6 +23,8 @@ __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_value
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
+#: zlib level of the written PNGs (lossless at any level)
+PNG_LEVEL = 6
 _MAX_LEGEND = 12
 
 
@@ -667,22 +669,35 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
 
 
 def _save(fig, path: Path) -> Path:
-    """Write `fig` as a PNG at :data:`DPI`, palette-quantised (256 colours) to stay small."""
+    """Write `fig` as a PNG at :data:`DPI`, palette-quantised (256 colours) to stay small.
+
+    The figure is rendered to raw RGBA pixels and encoded once, as the quantised PNG (not encoded
+    by matplotlib, decoded and encoded again), at zlib level :data:`PNG_LEVEL` (the pixels of
+    level 9 with ``optimize``, in a seventh of the time, the file ~10 % larger)."""
     import io
 
     buf = io.BytesIO()
-    fig.savefig(buf, dpi=DPI, format="png")
-    plt = _pyplot()
-    plt.close(fig)
     try:
         from PIL import Image
-
-        buf.seek(0)
-        with Image.open(buf) as im:
-            im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) \
-                .save(path, format="PNG", optimize=True)
     except ImportError:  # pragma: no cover - pillow comes with matplotlib
-        Path(path).write_bytes(buf.getvalue())
+        fig.savefig(path, dpi=DPI, format="png")
+        _pyplot().close(fig)
+        return path
+    w, h = (int(v) for v in (fig.get_figwidth() * DPI, fig.get_figheight() * DPI))
+    fig.savefig(buf, dpi=DPI, format="rgba")
+    _pyplot().close(fig)
+    raw = buf.getbuffer()
+    if raw.nbytes == 4 * w * h:
+        im = Image.frombuffer("RGBA", (w, h), raw, "raw", "RGBA", 0, 1)
+    else:  # pragma: no cover - a size rounded otherwise than Agg's: let PIL read matplotlib's PNG
+        del raw
+        buf = io.BytesIO()
+        fig.savefig(buf, dpi=DPI, format="png")
+        buf.seek(0)
+        im = Image.open(buf)
+    with im:
+        im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) \
+            .save(path, format="PNG", compress_level=PNG_LEVEL)
     return path
 
 
@@ -733,6 +748,9 @@ class PendingFigures:
         if n > 1 and sys.platform.startswith("linux") and not _JOBS:
             import multiprocessing
 
+            import PIL.Image  # noqa: F401 - imported once, here, not in each worker
+
+            _pyplot()
             _JOBS = self._jobs
             try:
                 self._pool = multiprocessing.get_context("fork").Pool(n)
