@@ -713,6 +713,13 @@ def _render(k: int) -> str:
     return str(_save(getattr(fig, "figure", fig), path))
 
 
+def _quiet_worker() -> None:
+    """Worker start: Ctrl-C is the parent's to handle (it terminates the workers), not a traceback each."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _workers() -> int:
     """CPU cores this process may run on."""
     try:
@@ -753,7 +760,7 @@ class PendingFigures:
             _pyplot()
             _JOBS = self._jobs
             try:
-                self._pool = multiprocessing.get_context("fork").Pool(n)
+                self._pool = multiprocessing.get_context("fork").Pool(n, initializer=_quiet_worker)
                 # the slowest first (listed first by the caller), one job at a time to whichever is free
                 self._result = self._pool.map_async(_render, range(len(self._jobs)), chunksize=1)
             finally:
