@@ -13,6 +13,8 @@ threads, caches and memory do not leak into the next:
 ``rerun_log.py``          rerun: 1e7 samples + 1000 spectra, envelope, live view
 ``modal_threads.py``      SSI-COV on LUMO, one BLAS thread vs default, idle and loaded
 ``startup.py``            CLI start-up against ``python -c pass``
+``analyse_outputs.py``    ``analyse`` of a 1e6-message Imu log with every output (rerun recording,
+                          figures) against ``--no-rrd --no-figures``, whole processes, alternated
 ``scaling.py``            time and memory vs length and channels (``docs/bench/scaling.png``)
 ========================  =====================================================================
 
@@ -44,6 +46,7 @@ def _cases(quick: bool) -> list[list[str]]:
         ["rerun_log.py"],
         ["modal_threads.py"],
         ["startup.py"],
+        ["analyse_outputs.py"],
         ["scaling.py"],
     ]
 

@@ -61,6 +61,9 @@ def test_frf_analysis_with_nan_in_response_and_force_gives_the_modes(demo):
     assert doc["faults"][1]["spans"] == [[10_000, 10_010], [90_500, 90_700]]
     text = report_text(an, source="demo")
     assert f"{n_avg} of {n_seg} averages" in text
+    assert [ln for ln in text.splitlines() if "fault" in ln] == [
+        "  faults: 2 nan (details: --verbose or --json)"]
+    text = report_text(an, source="demo", verbose=True)
     nan_lines = [ln for ln in text.splitlines() if ln.startswith("  fault: nan in ")]
     assert len(nan_lines) == 1 and nan_lines[0].startswith(f"  fault: nan in 2 channels ({force}, {acc}); e.g. ")
 

@@ -186,7 +186,7 @@ def test_interrupt_while_writing_figures_keeps_the_earlier_recording(tiny_log, t
         (Path(out_dir) / "signals.png").write_bytes(b"half a PNG")  # Ctrl-C while the figures are drawn
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(figures, "summary_figures", interrupted)
+    monkeypatch.setattr(figures, "figure_jobs", interrupted)
     assert main(["analyse", str(tiny_log), "--json", "s.json"]) == 130
     assert _err_lines(capsys) == ["vibroscope analyse: interrupted"]
     assert (rrd.read_bytes(), js.read_bytes()) == earlier

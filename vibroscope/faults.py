@@ -27,15 +27,26 @@ kind               rule                                                        a
                    over the record (``n p₀^(L-1)``); not when such runs hold
                    more than :data:`DROPOUT_MAX_FRACTION` of the samples
 ``dc_offset``      ``|mean| > DC_RATIO · std`` of the finite samples           ``detrend``
+                   (not when it is gravity: see ``gravity``)
+``gravity``        a note, not a fault: the ``dc_offset`` of an acceleration   ``detrend``
+                   channel (m/s² or g) whose sensor's mean vector has the
+                   length of standard gravity within :data:`GRAVITY_TOL`
+                   (the x, y, z axes of one sensor together; one axis alone:
+                   a mean near ±9.81 m/s²)
 ``drift``          the means of consecutive `nperseg`-blocks scatter by more   ``report``
                    than :data:`DRIFT_RATIO` times the median within-block std
                    (a trend slower than one segment, at least 4 blocks)
 ``missing_unit``   the channel's unit is empty                                 ``report``
-``constant``       every finite sample equal (output channel)                  ``drop``
+``constant``       every finite sample equal (output channel; a note, not a    ``drop``
+                   fault: a joint at rest, an unused axis)
 ``zero_input``     the input (force) channel is zero throughout                ``stop``
 ``constant`` input the input channel is constant but not zero                  ``stop``
 ``short_record``   fewer samples than `nperseg`                                ``stop``
 =================  ==========================================================  ==================
+
+A *note* (:attr:`Fault.note`) is an expected property of a signal, not a problem: it is handled
+by its action like a fault, listed under ``notes`` in the analysis's JSON and printed only with
+``--verbose``; :func:`fault_summary` counts the faults alone.
 
 Actions: ``skip_segments`` — the spectral estimators skip every Welch segment that touches a
 missing sample (:mod:`vibroscope.spectral`); ``mask`` — the samples of the spans become NaN
@@ -56,11 +67,12 @@ from typing import Literal
 import numpy as np
 
 from vibroscope.signals import Signals, true_runs
+from vibroscope.spectral.integration import ACC_UNITS, G_N
 
-__all__ = ["fault_lines", "Fault", "FAULT_KINDS", "detect_faults", "apply_faults", "nan_spans"]
+__all__ = ["fault_lines", "fault_summary", "Fault", "FAULT_KINDS", "detect_faults", "apply_faults", "nan_spans"]
 
-FAULT_KINDS = ("nan", "inf", "overflow", "clipping", "dropout", "dc_offset", "drift", "missing_unit", "constant",
-               "zero_input", "short_record")
+FAULT_KINDS = ("nan", "inf", "overflow", "clipping", "dropout", "dc_offset", "gravity", "drift", "missing_unit",
+               "constant", "zero_input", "short_record")
 Action = Literal["skip_segments", "mask", "detrend", "report", "drop", "stop"]
 
 #: clipping: a rail value held for at least this many consecutive samples ...
@@ -82,6 +94,11 @@ DROPOUT_ODDS = 1e-3
 OVERFLOW_LIMIT = 1e100
 #: dc_offset: |mean| larger than this many standard deviations
 DC_RATIO = 1.0
+#: gravity: a sensor's mean acceleration vector within this fraction of G_N is gravity (local g
+#: varies by 0.5 %, MEMS accelerometers' bias and scale errors by a few %)
+GRAVITY_TOL = 0.05
+#: gravity: the units of acceleration channels (m/s² spellings, and g) and their scale to m/s²
+_ACC_SCALE = {**dict.fromkeys(ACC_UNITS, 1.0), "g": G_N}
 #: drift: std of the block means larger than this times the median within-block std
 DRIFT_RATIO = 0.5
 #: spans listed per fault in messages
@@ -108,6 +125,9 @@ class Fault:
         The same spans in s from the first sample (``start / fs``, ``stop / fs``).
     n_samples : int
         Samples affected (0 for whole-channel faults that mark none).
+    note : bool
+        An expected property of the signal (gravity on an accelerometer axis, a constant output
+        channel), not a problem: reported as a note, handled by its `action` all the same.
     """
 
     channel: str
@@ -117,14 +137,16 @@ class Fault:
     spans: tuple = ()
     times: tuple = ()
     n_samples: int = 0
+    note: bool = False
 
     def __str__(self) -> str:
         return f"{self.kind} in {self.channel}: {self.message}"
 
     def to_dict(self) -> dict:
         """JSON-ready dict: ``channel``, ``kind``, ``message``, ``action``, ``n_samples``,
-        ``n_spans``, ``spans`` and ``times_s`` (the first 100 spans)."""
+        ``n_spans``, ``spans`` and ``times_s`` (the first 100 spans), ``note``."""
         return {"channel": self.channel, "kind": self.kind, "message": self.message, "action": self.action,
+                "note": self.note,
                 "n_samples": int(self.n_samples), "n_spans": len(self.spans),
                 "spans": [[int(a), int(b)] for a, b in self.spans[:100]],
                 "times_s": [[float(a), float(b)] for a, b in self.times[:100]]}
@@ -162,6 +184,34 @@ def fault_lines(faults, *, max_names: int = 3) -> list[str]:
     return out
 
 
+def fault_summary(faults) -> str:
+    """One line counting the faults (not the notes) per kind, the most frequent first.
+
+    Parameters
+    ----------
+    faults : sequence of Fault
+        From :func:`detect_faults`; notes (:attr:`Fault.note`) are not counted.
+
+    Returns
+    -------
+    str
+        ``"2 dropout, 1 clipping"`` (channels per kind; kinds with equal counts in the order they
+        first occur), or ``""`` when there is no fault.
+
+    Examples
+    --------
+    >>> fault_summary([Fault("a", "dropout", "", "mask"), Fault("b", "clipping", "", "mask"),
+    ...                Fault("b", "dropout", "", "mask"), Fault("c", "gravity", "", "detrend", note=True)])
+    '2 dropout, 1 clipping'
+    """
+    counts: dict[str, int] = {}
+    for f in faults:
+        if not f.note:
+            counts[f.kind] = counts.get(f.kind, 0) + 1
+    order = sorted(counts, key=lambda k: -counts[k])  # stable: ties keep their first occurrence
+    return ", ".join(f"{counts[k]} {k}" for k in order)
+
+
 def nan_spans(x: np.ndarray) -> list[tuple[int, int]]:
     """Runs of non-finite samples (NaN or ±Inf) of a 1-D record, as ``[start, stop)`` index pairs.
 
@@ -185,9 +235,31 @@ def _where(spans, fs: float) -> str:
     return f"{len(spans)} span{'s' if len(spans) != 1 else ''} ({shown}{more})"
 
 
-def _fault(ch, kind, msg, action, spans, fs, n):
+def _fault(ch, kind, msg, action, spans, fs, n, note=False):
     spans = tuple((int(a), int(b)) for a, b in spans)
-    return Fault(ch, kind, msg, action, spans, tuple((a / fs, b / fs) for a, b in spans), int(n))
+    return Fault(ch, kind, msg, action, spans, tuple((a / fs, b / fs) for a, b in spans), int(n), note)
+
+
+def _sensor(channel: str) -> str:
+    """The sensor an axis belongs to: the channel without a last ``.x``/``.y``/``.z``."""
+    head, dot, axis = channel.rpartition(".")
+    return head if dot and axis in ("x", "y", "z") else channel
+
+
+def _gravity(signals: Signals, means: dict) -> dict:
+    """The acceleration channels whose offset is gravity, with the length of their sensor's mean
+    vector (m/s²): the axes of one sensor (:func:`_sensor`) together."""
+    by_sensor: dict[str, list] = {}
+    for ch, unit in zip(signals.channels, signals.units):
+        scale = _ACC_SCALE.get(unit.strip())
+        if scale is not None and ch in means:
+            by_sensor.setdefault((_sensor(ch), unit.strip()), []).append((ch, means[ch] * scale))
+    out = {}
+    for axes in by_sensor.values():
+        norm = float(np.sqrt(sum(m * m for _, m in axes)))
+        if abs(norm - G_N) <= GRAVITY_TOL * G_N:
+            out.update({ch: norm for ch, _ in axes})
+    return out
 
 
 def _clipping(x: np.ndarray, finite: np.ndarray) -> list[tuple[int, int, float]]:
@@ -258,7 +330,8 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
     -------
     tuple of Fault
         In channel order, then by kind; empty for a clean record. The rules and actions are in
-        the module docstring.
+        the module docstring; the notes among them (gravity, a constant output) have
+        :attr:`Fault.note` set.
 
     Raises
     ------
@@ -278,6 +351,11 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
         signals.index(input)
     nper = int(nperseg) if nperseg is not None else max(16, n // 16)
     faults: list[Fault] = []
+    with np.errstate(all="ignore"):  # an all-missing or overflowing channel has no mean: no gravity
+        means = {ch: float(np.nanmean(np.where(np.abs(x) <= OVERFLOW_LIMIT, x, np.nan)))
+                 for ch, unit, x in zip(signals.channels, signals.units, signals.data)
+                 if unit.strip() in _ACC_SCALE and np.isfinite(x).any()}
+    gravity = _gravity(signals, means)
     if n < nper:
         for ch in signals.channels:
             faults.append(_fault(ch, "short_record",
@@ -338,7 +416,7 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
                                      f"(without --input)", "stop", (), fs, 0))
             else:
                 faults.append(_fault(ch, "constant", f"constant ({hi:.6g}) throughout: no vibration, left out "
-                                     f"of the analysis", "drop", (), fs, 0))
+                                     f"of the analysis", "drop", (), fs, 0, note=True))
             continue
         if not unit:
             faults.append(_fault(ch, "missing_unit", "no unit: spectra are in unit²/Hz of an unknown unit and "
@@ -361,7 +439,11 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
             faults.append(_fault(ch, "dropout", f"{k} samples of {what} in {_where(spans, fs)} inside a live "
                                  f"signal; masked as missing, their segments skipped", "mask", spans, fs, k))
         mean, std = float(xf.mean()), float(xf.std())
-        if abs(mean) > DC_RATIO * std:
+        if abs(mean) > DC_RATIO * std and ch in gravity:
+            faults.append(_fault(ch, "gravity", f"mean {mean:.4g} {unit}: gravity (the sensor's mean acceleration "
+                                 f"is {gravity[ch]:.4g} m/s², g = {G_N} m/s²); removed by the per-segment "
+                                 f"detrend", "detrend", (), fs, 0, note=True))
+        elif abs(mean) > DC_RATIO * std:
             faults.append(_fault(ch, "dc_offset", f"mean {mean:.4g} is {abs(mean) / std:.3g} standard deviations "
                                  f"({std:.4g}); removed by the per-segment detrend", "detrend", (), fs, 0))
         drift = _drift(x, nper)

@@ -56,6 +56,9 @@ class Analysis:
     faults : tuple of Fault
         The signal faults found (:func:`vibroscope.faults.detect_faults`) and handled; each is
         also one line of `warnings`.
+    notes : tuple of Fault
+        Expected properties of the signals, handled like faults but no warning (gravity on an
+        accelerometer axis, a constant output channel left out; :attr:`vibroscope.faults.Fault.note`).
     """
 
     signals: Signals
@@ -69,6 +72,7 @@ class Analysis:
     identification: Any = None
     severity: Any = None
     faults: tuple = ()
+    notes: tuple = ()
 
 
 def default_nperseg(n: int, fs: float, *, fmin: float | None = None, averages: int = 16) -> int:
@@ -405,7 +409,8 @@ def analyse_signals(
     missing samples (NaN) skip the Welch segments they touch; Inf, clipped and dropped-out samples
     are set to NaN (masked, never replaced by other numbers) and skipped the same way; constant
     outputs are left out; each fault is a line of ``Analysis.warnings`` and is listed in
-    ``Analysis.faults``. A sample missing in one analysed channel is treated as missing in all
+    ``Analysis.faults``; expected properties (gravity on an accelerometer axis, a constant output)
+    are listed in ``Analysis.notes`` instead, with no warning. A sample missing in one analysed channel is treated as missing in all
     of them, so that every entry of the spectral matrix, the FRFs, the coherence and the SSI
     covariances comes from the same segments (or lag windows) -- unless that would leave less
     than half of the record, when each pair keeps its own segments (a note says so); the
@@ -452,16 +457,16 @@ def analyse_signals(
     # the automatic nperseg is halved to fit between gaps (_nperseg_for): only a stretch shorter than
     # what it can reach stops the analysis
     nper_check = nperseg or _nperseg_for(sig, default_nperseg(max(n_valid, 1), sig.fs))
-    faults = detect_faults(sig, input=input, nperseg=nper_check)
-    flat = [f.channel for f in faults if f.action == "drop"]
+    found = detect_faults(sig, input=input, nperseg=nper_check)
+    faults = tuple(f for f in found if not f.note)
+    expected = tuple(f for f in found if f.note)  # gravity, constant outputs: notes, not warnings
+    flat = [f.channel for f in found if f.action == "drop"]
     if flat:  # e.g. the unused axes of a one-axis IMU: no information, singular spectra
-        more = f" and {len(flat) - 3} more" if len(flat) > 3 else ""
-        notes.append(f"{len(flat)} constant channels skipped (no vibration): {flat[:3]}{more}")
         outputs = [c for c in outputs if c not in flat]
     if not outputs:
         raise ValueError("no non-constant response channel to analyse")
-    notes += [str(f) for f in faults if f.action != "drop"]
-    sig = apply_faults(sig, faults)
+    notes += [str(f) for f in faults]
+    sig = apply_faults(sig, found)
     # a sample missing in one channel is missing in all: every spectral entry and covariance then
     # comes from the same segments (consistent H1/H2/Hv, coherence and SSI covariances) -- unless
     # that leaves less than half the record: then each pair keeps its own segments
@@ -580,7 +585,7 @@ def analyse_signals(
     severity = _severity(undecimated.select(outputs), notes)
     settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
                     input=input, outputs=list(outputs), method=mm.method, band_hz=list(band), decimation=dec_info)
-    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity, tuple(faults))
+    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity, faults, expected)
 
 
 #: units of an acceleration channel (an input in one of them makes a transmissibility)
@@ -667,7 +672,8 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
 
     Keys: ``fs`` (Hz), ``channels``, ``warnings``, ``faults`` (one dict per signal fault:
     ``channel``, ``kind``, ``message``, ``action``, ``n_samples``, ``n_spans``, ``spans`` (sample
-    index ranges), ``times_s`` (s from the first sample); see :meth:`vibroscope.faults.Fault.to_dict`), ``modes`` (each ``frequency_hz``,
+    index ranges), ``times_s`` (s from the first sample); see :meth:`vibroscope.faults.Fault.to_dict`), ``notes``
+    (expected properties, e.g. gravity on an accelerometer axis, in the same form), ``modes`` (each ``frequency_hz``,
     ``damping_ratio``, ``frequency_std_hz``, ``damping_std``, ``shape`` {path: [re, im]}, ``mpc``,
     ``mpd``, ``stable``), ``rejected_modes`` (``frequency_hz``, ``damping_ratio``, ``reason``), plus ``input``, ``outputs``,
     ``settings``, ``timebase``, ``input_choice`` (the line naming the force-like channel taken as the
@@ -700,6 +706,7 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
         "outputs": analysis.settings.get("outputs"),
         "warnings": list(analysis.warnings),
         "faults": [f.to_dict() for f in getattr(analysis, "faults", ())],
+        "notes": [f.to_dict() for f in getattr(analysis, "notes", ())],
         "modal_method": analysis.modal.method,
         "modes": _modes(analysis)["modes"],
         "rejected_modes": _modes(analysis)["rejected"],

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -75,6 +76,9 @@ def add_parser(sub) -> None:
     p.add_argument("--ods", type=float, nargs="+", metavar="F",
                    help="operating deflection shapes at these frequencies (Hz), drawn and animated like modes")
     p.add_argument("--progress", action="store_true", help="progress bar while reading")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="print every signal fault (one line per kind) and note (gravity, constant channels); "
+                        "default: one line counting the faults per kind (all of them are in --json)")
     p.add_argument("--stream", action="store_true",
                    help="read the log block by block into the spectral accumulators (memory bounded by the block; "
                         "spectra, FRFs and modes from the spectra, drawn and recorded without the time series). "
@@ -259,7 +263,7 @@ def run(args) -> int:
         from vibroscope.io.coords import read_coords
 
         read_coords(args.coords, an.settings["outputs"])
-    print(report_text(an, source=str(args.log)))
+    print(report_text(an, source=str(args.log), verbose=getattr(args, "verbose", False)))
     write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
                   spawn=args.spawn, ods=args.ods)
     return 0
@@ -575,9 +579,26 @@ def _check_options(args) -> None:
             raise VibroscopeError(f"--ods {f:g}: above the Nyquist frequency {args.fs / 2:g} Hz of --fs {args.fs:g}")
 
 
-def report_text(an, *, source: str = "", true_modes=None) -> str:
-    """Human-readable report: record, signal faults (one line per kind, :func:`vibroscope.faults.fault_lines`),
-    warnings, and the modes (beside true ones when given)."""
+def report_text(an, *, source: str = "", true_modes=None, verbose: bool = False) -> str:
+    """Human-readable report: record, signal faults, warnings, and the modes (beside true ones when given).
+
+    Parameters
+    ----------
+    an : Analysis
+        From :func:`vibroscope.pipeline.analyse_signals`.
+    source : str, optional
+        What was analysed (the log's path), at the head of the first line.
+    true_modes : ModalModel, optional
+        Known modes, listed beside the identified ones with the errors.
+    verbose : bool, optional
+        Every fault kind on its own line (:func:`vibroscope.faults.fault_lines`) and the notes
+        (``Analysis.notes``: gravity, constant channels); default False: one line counting the
+        faults per kind (:func:`vibroscope.faults.fault_summary`) and no note.
+
+    Returns
+    -------
+    str
+    """
     sig = an.signals
     n_seg = an.settings.get("n_segments")
     avg = f"{an.settings['n_averages']} of {n_seg} averages" if n_seg else f"{an.settings['n_averages']} averages"
@@ -592,12 +613,16 @@ def report_text(an, *, source: str = "", true_modes=None) -> str:
         lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by {how}")
     if sig.meta.get("input_choice"):  # the force-like channel taken as the input, or why none was
         lines.append(sig.meta["input_choice"])
-    from vibroscope.faults import fault_lines
+    from vibroscope.faults import fault_lines, fault_summary
 
-    faults = tuple(getattr(an, "faults", ()) or ())
-    for line in fault_lines([f for f in faults if f.action != "drop"]):  # dropped channels: one note below
-        lines.append(f"  fault: {line}")
-    shown = {str(f) for f in faults}
+    faults = tuple(f for f in getattr(an, "faults", ()) or () if not f.note)
+    notes = tuple(getattr(an, "notes", ()) or ())
+    if verbose:
+        lines += [f"  fault: {line}" for line in fault_lines(faults)]
+        lines += [f"  note: {line}" for line in fault_lines(notes)]
+    elif faults:
+        lines.append(f"  faults: {fault_summary(faults)} (details: --verbose or --json)")
+    shown = {str(f) for f in faults + notes}
     for w in an.warnings:
         if w not in shown:
             lines.append(f"  warning: {w}")
@@ -729,38 +754,42 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             tx.file(json_path).write_text(json.dumps(d, indent=2))
             written["json"] = json_path
             done.append(f"summary: {json_path}")
-        if figures:
-            from vibroscope.viewers.acquisition import plot_kinematics, plot_ods
-            from vibroscope.viewers.figures import _save, summary_figures
+        kin = None
+        if acc and (figures or rrd or spawn):  # integrated once, for the figure and the recording
+            from vibroscope.spectral.integration import integrate
+
+            a = an.signals.select(acc)
+            kin = (integrate(a, order=1), integrate(a, order=2))
+        pending = None
+        if figures:  # drawn in worker processes while the recording is written (PendingFigures)
+            from vibroscope.viewers.acquisition import plot_ods
+            from vibroscope.viewers.figures import PendingFigures, figure_jobs
 
             tmp = tx.directory(figures)
-            paths = summary_figures(tmp, signals=sig, psd=an.psd, frf=an.frf, modal=an.modal,
-                                    sv=an.singular_values, coords=sc.as_mapping(), true_modes=true_modes,
-                                    stabilization=stab, synthesized=synth)
-            if acc:
-                paths.append(_save(plot_kinematics(an.signals.select(acc)), tmp / "kinematics.png"))
-            for o in ods_shapes:
-                paths.append(_save(plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png"))
-            written["figures"] = [tx.final(p) for p in paths]
-            done.append(f"figures: {', '.join(str(p) for p in written['figures'])}")
-        if rrd or spawn:
-            from vibroscope.commands.modal import _with_ods
-            from vibroscope.viewers.acquisition import ods_as_modal_model
-            from vibroscope.viewers.rerun_view import log_analysis
+            jobs = figure_jobs(tmp, signals=sig, psd=an.psd, frf=an.frf, modal=an.modal, sv=an.singular_values,
+                               coords=sc.as_mapping(), true_modes=true_modes, stabilization=stab, synthesized=synth,
+                               kinematics=(an.signals.select(acc), *kin) if kin else None)
+            jobs += [(lambda o=o: plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png")
+                     for o in ods_shapes]
+            pending = PendingFigures(jobs)
+        with pending or contextlib.nullcontext():  # an error or Ctrl-C here stops the figure workers
+            if rrd or spawn:
+                from vibroscope.commands.modal import _with_ods
+                from vibroscope.viewers.acquisition import ods_as_modal_model
+                from vibroscope.viewers.rerun_view import log_analysis
 
-            kin = None
-            if acc:
-                from vibroscope.spectral.integration import integrate
+                modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
+                path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
+                                    coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None, spawn=spawn,
+                                    recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
+                written["rrd"] = tx.final(path) if path is not None else None
+                if rrd:
+                    done.append(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+            if pending is not None:
+                from vibroscope.viewers.figures import in_figure_order
 
-                a = an.signals.select(acc)
-                kin = (integrate(a, order=1), integrate(a, order=2))
-            modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
-            path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
-                                coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None, spawn=spawn,
-                                recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
-            written["rrd"] = tx.final(path) if path is not None else None
-            if rrd:
-                done.append(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+                written["figures"] = [tx.final(p) for p in in_figure_order(pending.wait())]
+                done.insert(len(done) - bool(rrd), f"figures: {', '.join(str(p) for p in written['figures'])}")
     for line in done:
         print(line)
     return written

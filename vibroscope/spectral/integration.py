@@ -28,9 +28,10 @@ BUTTER_ORDER = 4
 #: standard gravity in m/s² (for channels in g)
 G_N = 9.80665
 
-_ACC_UNITS = {"m/s^2", "m/s²", "m/s2", "m s^-2", "m·s^-2", "m*s^-2", "m.s^-2"}
+#: the spellings of m/s² taken as acceleration units
+ACC_UNITS = {"m/s^2", "m/s²", "m/s2", "m s^-2", "m·s^-2", "m*s^-2", "m.s^-2"}
 _VEL_UNITS = {"m/s", "m s^-1", "m·s^-1", "m*s^-1"}
-_INTEGRAL_UNIT = {**{u: "m/s" for u in _ACC_UNITS}, **{u: "m" for u in _VEL_UNITS}}
+_INTEGRAL_UNIT = {**{u: "m/s" for u in ACC_UNITS}, **{u: "m" for u in _VEL_UNITS}}
 
 
 def _integral_unit(unit: str, order: int) -> str:
@@ -387,7 +388,7 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     assumed = []
     for k, u in enumerate(signals.units):
         u = u.strip()
-        if u in _ACC_UNITS:
+        if u in ACC_UNITS:
             continue
         if u == "g":
             scale[k] = G_N

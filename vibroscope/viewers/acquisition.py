@@ -50,7 +50,7 @@ def _trace(ax, t: np.ndarray, x: np.ndarray, color: str, max_points: int) -> Non
 
 def plot_kinematics(acc_signals, *, f_cut: float | None = None,
                     method: Literal["frequency", "highpass"] = "frequency", max_channels: int = 3,
-                    fig=None, max_points: int = 3000):
+                    fig=None, max_points: int = 3000, integrals=None):
     """Acceleration, velocity and displacement against time, one column per channel.
 
     Velocity and displacement come from :func:`vibroscope.spectral.integration.integrate`
@@ -75,6 +75,10 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
         Figure to draw in (cleared); a new one when None.
     max_points : int, optional
         Longer records are drawn as their per-bin minimum/maximum envelope.
+    integrals : tuple of Signals, optional
+        ``(velocity, displacement)`` of `acc_signals`, already integrated
+        (``integrate(acc_signals, order=1)``, ``order=2``; `f_cut` and `method` are then theirs):
+        not computed again.
 
     Returns
     -------
@@ -90,8 +94,12 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
         raise ValueError(f"{max_channels=} must be at least 1")
     nc = min(acc_signals.n_channels, int(max_channels))
     acc = acc_signals.select(range(nc))
-    vel = integrate(acc, order=1, f_cut=f_cut, method=method)
-    disp = integrate(acc, order=2, f_cut=f_cut, method=method)
+    if integrals is not None:
+        vel, disp = (s.select(range(nc)) for s in integrals)
+        method = vel.meta["integration"].get("method", method)
+    else:
+        vel = integrate(acc, order=1, f_cut=f_cut, method=method)
+        disp = integrate(acc, order=2, f_cut=f_cut, method=method)
     fc = vel.meta["integration"]["f_cut_hz"]
     if fig is None:
         plt = _pyplot()

@@ -1,0 +1,86 @@
+"""What the outputs cost (issue 20, item 11): ``vibroscope analyse LOG`` with every output (rerun
+recording, PNG figures) against ``--no-rrd --no-figures``, each a whole fresh process, alternated in
+the same run::
+
+    python benchmarks/analyse_outputs.py [--messages 1e6] [--repeat 3] [--log LOG]
+
+The log is a ROS 2 Imu recording of `--messages` messages at 1 kHz (three axes: three resonances
+at 12, 37 and 83 Hz under white noise, gravity on z), written with the project's writer, unless
+`--log` names one. The runs alternate (analysis only, then all outputs) so that a change of the
+machine's load hits both; the figure is the ratio of the medians (all outputs / analysis only),
+with the medians of wall and CPU time (user + system, the worker processes included) and the load
+average before and after. On a shared machine compare the ratios, not the seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def write_log(path: Path, n: int, fs: float = 1000.0) -> Path:
+    """A ROS 2 Imu MCAP of `n` messages at `fs` Hz: three modes (12, 37, 83 Hz, Q 40) mixed onto x, y,
+    z, plus 0.02 m/s² noise and gravity (9.80665 m/s²) on z."""
+    import numpy as np
+    import scipy.signal as ss
+
+    from vibroscope.io import write_ros2_mcap
+    from vibroscope.signals import Signals
+
+    rng = np.random.default_rng(0)
+    modes = []
+    for f in (12.0, 37.0, 83.0):
+        b, a = ss.iirpeak(f, 40, fs)
+        modes.append(ss.lfilter(b, a, rng.standard_normal(n)))
+    mix = np.array([[1.0, 0.5, 0.3], [0.6, -1.0, 0.4], [-0.8, 0.3, 1.0]])
+    x = mix @ np.array(modes) + 0.02 * rng.standard_normal((3, n))
+    x[2] += 9.80665
+    return write_ros2_mcap(path, Signals(x, fs, [f"/imu.linear_acceleration.{c}" for c in "xyz"], ["m/s^2"] * 3,
+                                         t0=1.7e9), frame_id="imu_link")
+
+
+def _run(argv: list[str], cwd: str) -> tuple[float, float]:
+    """(wall s, CPU s of the process and its children) of one run of `argv`."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t = time.perf_counter()
+    subprocess.run(argv, check=True, capture_output=True, cwd=cwd)
+    wall = time.perf_counter() - t
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--messages", type=float, default=1e6, help="messages of the generated Imu log (default 1e6)")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each case, alternated (default 3)")
+    ap.add_argument("--log", type=Path, help="analyse this log instead of a generated one")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as d:
+        log = args.log.resolve() if args.log else write_log(Path(d) / "imu.mcap", int(args.messages))
+        cli = [sys.executable, "-m", "vibroscope.cli", "analyse", str(log), "--out", d]
+        cases = {"analysis only (--no-rrd --no-figures)": [*cli, "--no-rrd", "--no-figures"],
+                 "all outputs (rrd + figures)": cli}
+        res: dict[str, list] = {k: [] for k in cases}
+        load0 = os.getloadavg()[0]
+        for _ in range(args.repeat):
+            for name, argv in cases.items():
+                res[name].append(_run(argv, d))
+        load1 = os.getloadavg()[0]
+    med = {k: (statistics.median(w for w, _ in v), statistics.median(c for _, c in v)) for k, v in res.items()}
+    (w0, c0), (w1, c1) = med.values()
+    size = f"{log.name}, {log.stat().st_size / 2**20:.0f} MiB" if args.log else f"Imu log of {args.messages:.0e} messages"
+    for name, (w, c) in med.items():
+        print(f"case=analyse_outputs  {name}  {size}  median_wall_s={w:.2f}  median_cpu_s={c:.2f}  runs={args.repeat}")
+    print(f"case=analyse_outputs  ratio all/none  wall={w1 / w0:.2f}x  cpu={c1 / c0:.2f}x  "
+          f"load_avg={load0:.1f}->{load1:.1f}  cores={len(os.sched_getaffinity(0))}")
+
+
+if __name__ == "__main__":
+    main()
