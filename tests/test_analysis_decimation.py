@@ -103,14 +103,15 @@ def test_period_no_factor_divides_is_not_decimated():
 
 def test_broadband_record_decimates_as_before_and_the_option_turns_it_off():
     """Random force (not periodic): the factor floor(fs / (2.5 fmax)) in stages of at most 10, the
-    data those of scipy.signal.decimate; ``decimation=False`` keeps the rate and says so."""
+    data those of an order-9 Chebyshev I forward-backward low-pass; ``decimation=False`` keeps the rate and says so."""
     u = band_limited_random(FS, 80_000, f_lo=2.0, f_hi=15.0, rms=1.0, seed=3)
     sig = simulate(MODEL, u, FS, noise=0.02, seed=4)
     assert not detect_period(sig[INPUT], FS, fmax=15.0).is_periodic
     an = analyse_signals(sig, input=INPUT, fmax=15.0)
     assert an.settings["decimation"]["factors"] == [10] and an.signals.fs == 40.0
     assert an.frf.estimator == "H1"
-    ref = scipy.signal.decimate(sig.select(an.signals.channels).data, 10, axis=-1, zero_phase=True)
+    sos = scipy.signal.cheby1(9, 0.05, 0.8 / 10, output="sos")  # odd order: unit gain at 0 Hz
+    ref = scipy.signal.sosfiltfilt(sos, sig.select(an.signals.channels).data, axis=-1)[:, ::10]
     np.testing.assert_array_equal(an.signals.data, ref)
     assert "decimated 400 → 40 Hz (factor 10: fs ≥ 2.5 × the 15 Hz band)" in report_text(an).splitlines()[0]
     _assert_three_modes(an.modal.natural_frequencies, rtol=1e-2)
@@ -171,3 +172,18 @@ def test_cli_on_a_shaker_mcap(tmp_path, capsys, shaker):
     doc = json.loads(js.read_text())
     assert doc["fs"] == FS and doc["settings"]["decimation"]["factors"] == []
     _assert_three_modes([m["frequency_hz"] for m in doc["modes"]])
+
+
+def test_decimation_keeps_a_mean_such_as_gravity():
+    """A constant 9.80665 m/s^2 plus a band-limited vibration: the decimated mean is the mean
+    (scipy.signal.decimate's even-order filter passes it 1.1 % low)."""
+    from vibroscope.pipeline import decimate
+    from vibroscope.signals import Signals
+
+    x = 9.80665 + 0.1 * band_limited_random(FS, 40_000, f_lo=2.0, f_hi=10.0, rms=1.0, seed=5)
+    out = decimate(Signals(x[None, :], FS, channels=("/imu.linear_acceleration.z",), units=("m/s^2",)), 10.0)
+    assert out.fs == 40.0
+    y = out.data[0, 200:-200]
+    assert np.mean(y) == pytest.approx(np.mean(x[2000:-2000]), rel=2e-4)
+    old = scipy.signal.decimate(x, 10, zero_phase=True)[200:-200]
+    assert np.mean(old) < 0.995 * np.mean(y)  # the defect this replaces
