@@ -31,6 +31,7 @@ need; the time panel starts on ``animation`` (playing, looped) when there are mo
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -39,11 +40,14 @@ import numpy as np
 from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, sensor_geometry
 
-__all__ = ["log_analysis", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
+__all__ = ["log_analysis", "spawn_viewer", "flush_recording", "viewer_executable", "VIEWER_PORT", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
            "mode_frames", "node_frames", "envelope_indices", "MAX_POINTS"]
 
 #: animation frames per cycle of a mode
 FRAMES = 40
+
+#: the port a spawned rerun viewer listens on (rerun's default)
+VIEWER_PORT = 9876
 
 #: most points logged per time-series channel: longer channels are logged as their min/max
 #: envelope (:func:`envelope_indices`), 50 000 bins of two true samples each
@@ -312,7 +316,10 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     rrd_path : str or Path, optional
         Write the recording (and its blueprint) to this ``.rrd`` file.
     spawn : bool, optional
-        Open a rerun viewer and stream the recording to it.
+        Open a rerun viewer (:func:`spawn_viewer`: the one rerun-sdk installs, or one already
+        running) and stream the recording to it; when none can open (no display, no program),
+        a one-line warning says why and the recording goes to `rrd_path` only (nothing is
+        logged without `rrd_path`).
     application_id : str, optional
     recording_name : str, optional
         Shown in the viewer as the recording's name.
@@ -336,7 +343,7 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     Returns
     -------
     Path or None
-        `rrd_path` once written and closed, None when only spawned.
+        `rrd_path` once written and closed, None when only spawned (or no viewer opened).
 
     Raises
     ------
@@ -353,8 +360,9 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     (seconds, minutes), not as plain numbers. The viewer shows one timeline at a time; the tabs say which.
 
     The recording is an explicit :class:`rerun.RecordingStream` (never the global one); the
-    blueprint is sent as its default blueprint; the stream is flushed and disconnected before
-    returning, so the ``.rrd`` file is complete (it carries rerun's footer/manifest).
+    blueprint is sent as its default blueprint; the stream is flushed (:func:`flush_recording`,
+    in short interruptible steps) and disconnected before returning, so the ``.rrd`` file is
+    complete (it carries rerun's footer/manifest).
 
     Examples
     --------
@@ -374,7 +382,14 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                           f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions,
                           stabilization_present=stabilization is not None and len(stabilization.frequency) > 0,
                           kinematics=kinematics)
-    rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, spawn, bp)
+    url = None
+    if spawn:
+        url, why = spawn_viewer()
+        if url is None:
+            warnings.warn(f"--spawn: no rerun viewer opened: {why}", stacklevel=2)
+            if rrd_path is None:
+                return None
+    rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, url, bp)
     try:
         _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl, max_points=max_points)
         if signals is not None:
@@ -393,10 +408,178 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
             _log_stabilization(rec, stabilization, ftl)
         if modal is not None:
             _log_modes(rec, modal, coords, frames)
-        rec.flush()
+        flush_recording(rec, viewer=url)
     finally:
         rec.disconnect()
     return path
+
+
+def viewer_executable() -> str | None:
+    """The rerun viewer program: the ``rerun`` that the rerun-sdk package installed beside this
+    Python (``bin/`` of its virtual environment), else ``rerun`` on ``PATH``, else the binary inside
+    the ``rerun_cli`` package; None when there is none.
+
+    Returns
+    -------
+    str or None
+    """
+    import importlib.util
+    import os
+    import shutil
+    import sys
+
+    exe = "rerun.exe" if sys.platform.startswith("win") else "rerun"
+    beside = Path(sys.executable).parent / exe
+    if beside.is_file() and os.access(beside, os.X_OK):
+        return str(beside)
+    found = shutil.which("rerun")
+    if found:
+        return found
+    try:
+        spec = importlib.util.find_spec("rerun_cli")
+    except (ImportError, ValueError):
+        spec = None
+    if spec is not None and spec.origin:
+        inner = Path(spec.origin).parent / exe
+        if inner.is_file() and os.access(inner, os.X_OK):
+            return str(inner)
+    return None
+
+
+def _listening(port: int, timeout: float = 0.2) -> bool:
+    import socket
+
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+def spawn_viewer(port: int | None = None, *, start_s: float = 30.0, settle_s: float = 1.0,
+                 executable: str | None = None) -> tuple[str | None, str | None]:
+    """Start the rerun viewer that rerun-sdk ships (or find one running) and return its URL, or say why not.
+
+    Unlike :func:`rerun.spawn` (which looks for ``rerun`` on ``PATH`` only, is silently ignored
+    without a global recording, and blocks without a timeout), every wait here is a short Python
+    loop, so Ctrl-C and SIGTERM are handled at once:
+
+    1. a program already listening on ``127.0.0.1:port`` is taken as a running viewer;
+    2. on Linux without ``DISPLAY``, ``WAYLAND_DISPLAY`` or ``WAYLAND_SOCKET`` no window can
+       open: nothing is started;
+    3. otherwise :func:`viewer_executable` is started detached (its own session, so Ctrl-C on
+       the command does not close it) as ``rerun --port PORT --expect-data-soon``, and is
+       accepted once it listens and is still alive `settle_s` later (a viewer that cannot open
+       its window listens briefly, then exits: its last error line is the reason).
+
+    Parameters
+    ----------
+    port : int, optional
+        The viewer's gRPC port; default :data:`VIEWER_PORT` (9876, rerun's), read at call time.
+    start_s : float, optional
+        Longest wait (s) for a started viewer to listen; default 30.
+    settle_s : float, optional
+        How long (s) a started viewer must stay alive once listening; default 1.
+    executable : str, optional
+        The viewer program; default :func:`viewer_executable`.
+
+    Returns
+    -------
+    (str or None, str or None)
+        ``("rerun+http://127.0.0.1:PORT/proxy", None)`` when a viewer takes the recording, else
+        ``(None, reason)``, the reason one line.
+    """
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    import time
+
+    port = VIEWER_PORT if port is None else int(port)
+    url = f"rerun+http://127.0.0.1:{port}/proxy"
+    if _listening(port):
+        return url, None
+    if sys.platform.startswith("linux") and not any(
+            os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")):
+        return None, "no display (DISPLAY and WAYLAND_DISPLAY are not set), so no viewer window can open"
+    exe = executable or viewer_executable()
+    if exe is None:
+        return None, "no rerun viewer program found (pip install rerun-sdk installs one beside Python)"
+    log = tempfile.TemporaryFile()  # unlinked at once: the viewer's start-up errors, no file left behind
+    try:
+        proc = subprocess.Popen([exe, "--port", str(port), "--expect-data-soon"], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+                                env={**os.environ, "RERUN_APP_ONLY": "true"})
+    except OSError as exc:
+        log.close()
+        return None, f"cannot start {exe}: {exc.strerror or exc}"
+
+    def failed(what: str) -> tuple[None, str]:
+        log.seek(0)
+        lines = [_strip_ansi(ln) for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+        errs = [ln for ln in lines if "error" in ln.lower()] or lines
+        log.close()
+        return None, f"{exe} {what}" + (f": {' '.join(errs[-1].split())[:300]}" if errs else "")
+
+    try:
+        deadline = time.monotonic() + start_s
+        while not _listening(port, 0.1):
+            if proc.poll() is not None:
+                return failed(f"exited at start (status {proc.returncode})")
+            if time.monotonic() > deadline:
+                proc.terminate()
+                return failed(f"did not listen on port {port} within {start_s:g} s (stopped)")
+            time.sleep(0.05)
+        settle = time.monotonic() + settle_s
+        while time.monotonic() < settle:
+            if proc.poll() is not None:
+                return failed(f"exited at start (status {proc.returncode})")
+            time.sleep(0.05)
+    except BaseException:  # Ctrl-C while waiting: no viewer half started
+        proc.terminate()
+        log.close()
+        raise
+    log.close()
+    return url, None
+
+
+def _strip_ansi(text: str) -> str:
+    import re
+
+    return re.sub(r"\x1b\[[0-9;]*m", "", text)
+
+
+def flush_recording(rec, *, viewer: str | None = None, step_s: float = 0.25, viewer_s: float = 30.0) -> None:
+    """Flush a recording in short steps, so that Ctrl-C and SIGTERM are never held by the flush.
+
+    :meth:`rerun.RecordingStream.flush` waits without a timeout by default, inside rerun's
+    native code, where Python's signal handlers cannot run; here each wait is at most `step_s`.
+    A file alone is waited for as long as it takes; with a viewer, at most `viewer_s` (then a
+    warning: the file, if any, still gets everything).
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording.
+    viewer : str, optional
+        The viewer's URL when the recording streams to one.
+    step_s : float, optional
+        Longest single wait (s); default 0.25.
+    viewer_s : float, optional
+        Longest total wait (s) with a viewer; default 30.
+    """
+    import time
+
+    start = time.monotonic()
+    while True:
+        try:
+            rec.flush(timeout_sec=step_s)
+            return
+        except RuntimeError:  # "Flush timed out - not all log messages were sent"
+            if viewer is not None and time.monotonic() - start > viewer_s:
+                warnings.warn(f"--spawn: the viewer at {viewer} did not take the whole recording within "
+                              f"{viewer_s:g} s", stacklevel=2)
+                return
 
 
 def _frequency_timeline(*results) -> tuple[str | None, np.ndarray | None]:
@@ -408,9 +591,9 @@ def _frequency_timeline(*results) -> tuple[str | None, np.ndarray | None]:
 
 
 def _open_recording(application_id: str, recording_id: str | None, recording_name: str | None,
-                    rrd_path: str | Path | None, spawn: bool, blueprint):
-    """(an explicit :class:`rerun.RecordingStream` with its sinks and default blueprint, the
-    ``.rrd`` path or None)."""
+                    rrd_path: str | Path | None, viewer: str | None, blueprint):
+    """(an explicit :class:`rerun.RecordingStream` with its sinks (the ``.rrd`` file and/or the
+    viewer at URL `viewer`) and default blueprint, the ``.rrd`` path or None)."""
     import rerun as rr
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
@@ -419,13 +602,8 @@ def _open_recording(application_id: str, recording_id: str | None, recording_nam
     path = Path(rrd_path) if rrd_path is not None else None
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
-    if spawn and path is not None:
-        rr.spawn(connect=False)
-        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(), default_blueprint=blueprint)
-    elif spawn:
-        rec.spawn(default_blueprint=blueprint)
-    else:
-        rec.save(str(path), default_blueprint=blueprint)
+    sinks = ([rr.FileSink(str(path))] if path is not None else []) + ([rr.GrpcSink(viewer)] if viewer else [])
+    rec.set_sinks(*sinks, default_blueprint=blueprint)
     return rec, path
 
 
