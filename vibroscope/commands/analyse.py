@@ -721,11 +721,16 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 kin = (integrate(a, order=1), integrate(a, order=2))
             modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
             path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
-                                coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None, spawn=spawn,
+                                coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
+                                spawn=spawn and not rrd,  # a recording under its final name is opened below
                                 recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
             written["rrd"] = tx.final(path) if path is not None else None
             if rrd:
                 done.append(f"rerun recording: {rrd}  (open with: rerun {shlex.quote(str(rrd))})")
     for line in done:
         print(line)
+    if spawn and rrd:
+        from vibroscope.viewers.rerun_view import show_recording
+
+        show_recording(rrd)
     return written

@@ -339,13 +339,17 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv) -> None:
             if ods:
                 show = _with_ods(mm, [ods_as_modal_model(o) for o in ods])
             log_analysis(signals=signals, psd=psd, csd=csd, frf=h, modal=show, coords=sc.as_mapping(),
-                         rrd_path=tx.file(rrd) if rrd else None, spawn=args.spawn,
+                         rrd_path=tx.file(rrd) if rrd else None, spawn=args.spawn and not rrd,
                          recording_name=f"{source.stem} modal", stabilization=ident.stabilization,
                          synthesized=synth)
             if rrd:
                 done.append(f"rerun recording: {rrd}  (open with: rerun {shlex.quote(str(rrd))})")
     for line in done:
         print(line)
+    if args.spawn and planned["--rrd"]:  # once under its final name
+        from vibroscope.viewers.rerun_view import show_recording
+
+        show_recording(planned["--rrd"])
 
 
 def _with_ods(mm, ods):

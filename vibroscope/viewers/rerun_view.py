@@ -40,7 +40,7 @@ import numpy as np
 from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, sensor_geometry
 
-__all__ = ["log_analysis", "spawn_viewer", "flush_recording", "viewer_executable", "VIEWER_PORT", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
+__all__ = ["log_analysis", "open_in_viewer", "show_recording", "flush_recording", "viewer_executable", "VIEWER_PORT", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
            "mode_frames", "node_frames", "envelope_indices", "MAX_POINTS"]
 
 #: animation frames per cycle of a mode
@@ -316,10 +316,12 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     rrd_path : str or Path, optional
         Write the recording (and its blueprint) to this ``.rrd`` file.
     spawn : bool, optional
-        Open a rerun viewer (:func:`spawn_viewer`: the one rerun-sdk installs, or one already
-        running) and stream the recording to it; when none can open (no display, no program),
-        a one-line warning says why and the recording goes to `rrd_path` only (nothing is
-        logged without `rrd_path`).
+        Once the recording is complete, open it in the rerun viewer (:func:`open_in_viewer`: the
+        program rerun-sdk installs; a viewer already running takes it); without `rrd_path` the
+        file is written to a folder of its own in the system's temporary folder for the viewer.
+        When no viewer can open (no display, no program), a one-line warning says why. A
+        command writing `rrd_path` under a temporary name calls :func:`open_in_viewer` itself
+        once the file has its final name.
     application_id : str, optional
     recording_name : str, optional
         Shown in the viewer as the recording's name.
@@ -343,7 +345,7 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     Returns
     -------
     Path or None
-        `rrd_path` once written and closed, None when only spawned (or no viewer opened).
+        `rrd_path` once written and closed, None when only shown in a viewer.
 
     Raises
     ------
@@ -382,14 +384,14 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                           f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions,
                           stabilization_present=stabilization is not None and len(stabilization.frequency) > 0,
                           kinematics=kinematics)
-    url = None
-    if spawn:
-        url, why = spawn_viewer()
-        if url is None:
-            warnings.warn(f"--spawn: no rerun viewer opened: {why}", stacklevel=2)
-            if rrd_path is None:
-                return None
-    rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, url, bp)
+    if spawn and rrd_path is None:  # the viewer opens a file: one of its own in the system's temporary folder
+        import tempfile
+
+        rrd_path = Path(tempfile.mkdtemp(prefix="vibroscope-view-")) / f"{recording_name or application_id}.rrd"
+        shown_only = True
+    else:
+        shown_only = False
+    rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, bp)
     try:
         _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl, max_points=max_points)
         if signals is not None:
@@ -408,10 +410,31 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
             _log_stabilization(rec, stabilization, ftl)
         if modal is not None:
             _log_modes(rec, modal, coords, frames)
-        flush_recording(rec, viewer=url)
+        flush_recording(rec)
     finally:
         rec.disconnect()
-    return path
+    if spawn:
+        show_recording(path)
+    return None if shown_only else path
+
+
+def show_recording(path: str | Path) -> bool:
+    """:func:`open_in_viewer`, with a one-line warning ``--spawn: no rerun viewer opened: WHY`` when none opens.
+
+    Parameters
+    ----------
+    path : str or Path
+        The complete recording.
+
+    Returns
+    -------
+    bool
+        Whether a viewer took it.
+    """
+    why = open_in_viewer(path)
+    if why is not None:
+        warnings.warn(f"--spawn: no rerun viewer opened: {why}", stacklevel=2)
+    return why is None
 
 
 def viewer_executable() -> str | None:
@@ -456,38 +479,36 @@ def _listening(port: int, timeout: float = 0.2) -> bool:
         return False
 
 
-def spawn_viewer(port: int | None = None, *, start_s: float = 30.0, settle_s: float = 1.0,
-                 executable: str | None = None) -> tuple[str | None, str | None]:
-    """Start the rerun viewer that rerun-sdk ships (or find one running) and return its URL, or say why not.
+def open_in_viewer(path: str | Path, *, port: int | None = None, settle_s: float = 1.5,
+                   executable: str | None = None) -> str | None:
+    """Open a finished ``.rrd`` file in the rerun viewer that rerun-sdk ships; None, or one line saying why not.
 
-    Unlike :func:`rerun.spawn` (which looks for ``rerun`` on ``PATH`` only, is silently ignored
-    without a global recording, and blocks without a timeout), every wait here is a short Python
-    loop, so Ctrl-C and SIGTERM are handled at once:
-
-    1. a program already listening on ``127.0.0.1:port`` is taken as a running viewer;
-    2. on Linux without ``DISPLAY``, ``WAYLAND_DISPLAY`` or ``WAYLAND_SOCKET`` no window can
-       open: nothing is started;
-    3. otherwise :func:`viewer_executable` is started detached (its own session, so Ctrl-C on
-       the command does not close it) as ``rerun --port PORT --expect-data-soon``, and is
-       accepted once it listens and is still alive `settle_s` later (a viewer that cannot open
-       its window listens briefly, then exits: its last error line is the reason).
+    The viewer program (:func:`viewer_executable`) is started detached (its own session: Ctrl-C
+    on the command does not close it) as ``rerun PATH``; rerun itself hands the file to a viewer
+    already listening on its port, else opens a window. This process never streams to the viewer,
+    so nothing here can wait on it (:func:`rerun.spawn` looks on ``PATH`` only, is ignored without
+    a global recording, and a gRPC flush to a viewer that never answers waits for ever, deaf to
+    Ctrl-C). The viewer is judged after `settle_s`: still running, or ended with status 0 (handed
+    over), is success; a viewer that cannot open its window ends at once with an error, whose
+    last line is the reason. On Linux with no ``DISPLAY``/``WAYLAND_DISPLAY``/``WAYLAND_SOCKET``
+    and no viewer listening, nothing is started.
 
     Parameters
     ----------
+    path : str or Path
+        The recording (complete: written and closed).
     port : int, optional
-        The viewer's gRPC port; default :data:`VIEWER_PORT` (9876, rerun's), read at call time.
-    start_s : float, optional
-        Longest wait (s) for a started viewer to listen; default 30.
+        The port a running viewer listens on; default :data:`VIEWER_PORT` (9876, rerun's), read
+        at call time.
     settle_s : float, optional
-        How long (s) a started viewer must stay alive once listening; default 1.
+        How long (s) to watch the started viewer; default 1.5.
     executable : str, optional
         The viewer program; default :func:`viewer_executable`.
 
     Returns
     -------
-    (str or None, str or None)
-        ``("rerun+http://127.0.0.1:PORT/proxy", None)`` when a viewer takes the recording, else
-        ``(None, reason)``, the reason one line.
+    str or None
+        None when the viewer took the file, else the reason, one line.
     """
     import os
     import subprocess
@@ -496,51 +517,34 @@ def spawn_viewer(port: int | None = None, *, start_s: float = 30.0, settle_s: fl
     import time
 
     port = VIEWER_PORT if port is None else int(port)
-    url = f"rerun+http://127.0.0.1:{port}/proxy"
-    if _listening(port):
-        return url, None
-    if sys.platform.startswith("linux") and not any(
+    running = _listening(port)
+    if not running and sys.platform.startswith("linux") and not any(
             os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")):
-        return None, "no display (DISPLAY and WAYLAND_DISPLAY are not set), so no viewer window can open"
+        return "no display (DISPLAY and WAYLAND_DISPLAY are not set), so no viewer window can open"
     exe = executable or viewer_executable()
     if exe is None:
-        return None, "no rerun viewer program found (pip install rerun-sdk installs one beside Python)"
+        return "no rerun viewer program found (pip install rerun-sdk installs one beside Python)"
     log = tempfile.TemporaryFile()  # unlinked at once: the viewer's start-up errors, no file left behind
     try:
-        proc = subprocess.Popen([exe, "--port", str(port), "--expect-data-soon"], stdin=subprocess.DEVNULL,
+        proc = subprocess.Popen([exe, "--port", str(port), str(path)], stdin=subprocess.DEVNULL,
                                 stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
                                 env={**os.environ, "RERUN_APP_ONLY": "true"})
     except OSError as exc:
         log.close()
-        return None, f"cannot start {exe}: {exc.strerror or exc}"
-
-    def failed(what: str) -> tuple[None, str]:
-        log.seek(0)
-        lines = [_strip_ansi(ln) for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
-        errs = [ln for ln in lines if "error" in ln.lower()] or lines
-        log.close()
-        return None, f"{exe} {what}" + (f": {' '.join(errs[-1].split())[:300]}" if errs else "")
-
+        return f"cannot start {exe}: {exc.strerror or exc}"
     try:
-        deadline = time.monotonic() + start_s
-        while not _listening(port, 0.1):
-            if proc.poll() is not None:
-                return failed(f"exited at start (status {proc.returncode})")
-            if time.monotonic() > deadline:
-                proc.terminate()
-                return failed(f"did not listen on port {port} within {start_s:g} s (stopped)")
+        end = time.monotonic() + settle_s
+        while proc.poll() is None and time.monotonic() < end:
             time.sleep(0.05)
-        settle = time.monotonic() + settle_s
-        while time.monotonic() < settle:
-            if proc.poll() is not None:
-                return failed(f"exited at start (status {proc.returncode})")
-            time.sleep(0.05)
-    except BaseException:  # Ctrl-C while waiting: no viewer half started
-        proc.terminate()
+        if proc.returncode is None or proc.returncode == 0:
+            return None
+        log.seek(0)
+        text = [_strip_ansi(ln) for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+        errs = [ln for ln in text if "error" in ln.lower()] or text
+        return f"{exe} ended at start (status {proc.returncode})" + (
+            f": {' '.join(errs[-1].split())[:300]}" if errs else "")
+    finally:
         log.close()
-        raise
-    log.close()
-    return url, None
 
 
 def _strip_ansi(text: str) -> str:
@@ -549,37 +553,26 @@ def _strip_ansi(text: str) -> str:
     return re.sub(r"\x1b\[[0-9;]*m", "", text)
 
 
-def flush_recording(rec, *, viewer: str | None = None, step_s: float = 0.25, viewer_s: float = 30.0) -> None:
-    """Flush a recording in short steps, so that Ctrl-C and SIGTERM are never held by the flush.
+def flush_recording(rec, *, step_s: float = 0.25) -> None:
+    """Flush a recording in short waits, so that Ctrl-C and SIGTERM are never held by the flush.
 
-    :meth:`rerun.RecordingStream.flush` waits without a timeout by default, inside rerun's
-    native code, where Python's signal handlers cannot run; here each wait is at most `step_s`.
-    A file alone is waited for as long as it takes; with a viewer, at most `viewer_s` (then a
-    warning: the file, if any, still gets everything).
+    :meth:`rerun.RecordingStream.flush` waits without a timeout by default, inside rerun's native
+    code where Python's signal handlers cannot run; here each wait is at most `step_s`, repeated
+    until the flush is complete.
 
     Parameters
     ----------
     rec : rerun.RecordingStream
         The recording.
-    viewer : str, optional
-        The viewer's URL when the recording streams to one.
     step_s : float, optional
         Longest single wait (s); default 0.25.
-    viewer_s : float, optional
-        Longest total wait (s) with a viewer; default 30.
     """
-    import time
-
-    start = time.monotonic()
     while True:
         try:
             rec.flush(timeout_sec=step_s)
             return
-        except RuntimeError:  # "Flush timed out - not all log messages were sent"
-            if viewer is not None and time.monotonic() - start > viewer_s:
-                warnings.warn(f"--spawn: the viewer at {viewer} did not take the whole recording within "
-                              f"{viewer_s:g} s", stacklevel=2)
-                return
+        except RuntimeError:  # "Flush timed out - not all log messages were sent": wait on
+            continue
 
 
 def _frequency_timeline(*results) -> tuple[str | None, np.ndarray | None]:
@@ -591,19 +584,17 @@ def _frequency_timeline(*results) -> tuple[str | None, np.ndarray | None]:
 
 
 def _open_recording(application_id: str, recording_id: str | None, recording_name: str | None,
-                    rrd_path: str | Path | None, viewer: str | None, blueprint):
-    """(an explicit :class:`rerun.RecordingStream` with its sinks (the ``.rrd`` file and/or the
-    viewer at URL `viewer`) and default blueprint, the ``.rrd`` path or None)."""
+                    rrd_path: str | Path, blueprint):
+    """(an explicit :class:`rerun.RecordingStream` saving to `rrd_path` with its default blueprint,
+    the ``.rrd`` path)."""
     import rerun as rr
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
     if recording_name:
         rec.send_recording_name(recording_name)
-    path = Path(rrd_path) if rrd_path is not None else None
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    sinks = ([rr.FileSink(str(path))] if path is not None else []) + ([rr.GrpcSink(viewer)] if viewer else [])
-    rec.set_sinks(*sinks, default_blueprint=blueprint)
+    path = Path(rrd_path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec.save(str(path), default_blueprint=blueprint)
     return rec, path
 
 
