@@ -144,7 +144,8 @@ def check_out_dir(out_dir: str | os.PathLike | None, option: str = "--out") -> N
     Parameters
     ----------
     out_dir : str or path-like, optional
-        The folder (None: the current directory, which is still probed for writing).
+        The folder (None: the current directory, probed by :func:`check_outputs` with each output
+        that goes there).
     option : str, optional
         The option named in the message; default ``"--out"``.
 
@@ -157,8 +158,8 @@ def check_out_dir(out_dir: str | os.PathLike | None, option: str = "--out") -> N
     if out_dir is not None and os.path.exists(out_dir) and not os.path.isdir(out_dir):
         kind = special_kind(out_dir) or "a file"
         raise VibroscopeError(f"{option} {out_dir} is {kind}, not a folder")
-    where = Path(out_dir) if out_dir is not None else Path.cwd()
-    check_writable(where, f"{option} {where}" if out_dir is not None else "the current directory")
+    if out_dir is not None:  # (the current directory is probed with each output that goes there)
+        check_writable(out_dir, f"{option} {out_dir}")
 
 
 def resolve_outputs(args, options: Iterable[str], out_dir: str | os.PathLike | None) -> None:
