@@ -130,12 +130,13 @@ def check_writable(folder: str | os.PathLike, option: str) -> None:
     where = _existing_ancestor(Path(folder))
     if not where.is_dir():
         raise VibroscopeError(f"{option}: cannot create a folder under {where}: it is not a folder")
-    try:
-        fd, probe = tempfile.mkstemp(prefix=f".vibroscope{TEMP_MARK}{os.getpid()}-probe", dir=where)
-    except OSError as exc:
-        raise VibroscopeError(f"{option}: cannot write in {where} ({exc.strerror or exc})") from None
-    os.close(fd)
-    os.unlink(probe)
+    with _held_signals():  # a Ctrl-C here never leaves the probe behind
+        try:
+            fd, probe = tempfile.mkstemp(prefix=f".vibroscope-probe-{os.getpid()}-", dir=where)
+        except OSError as exc:
+            raise VibroscopeError(f"{option}: cannot write in {where} ({exc.strerror or exc})") from None
+        os.close(fd)
+        os.unlink(probe)
 
 
 def check_out_dir(out_dir: str | os.PathLike | None, option: str = "--out") -> None:
