@@ -7,15 +7,21 @@ Every problem is reported on one line of stderr, ``vibroscope CMD: error: MESSAG
 status 1: a :class:`~vibroscope.errors.VibroscopeError` by its message, any other exception by
 its type name and message followed by ``(run with --debug for the traceback)``. Python warnings
 raised during a command print as ``vibroscope CMD: warning: MESSAGE`` (each message once);
-Ctrl-C prints ``vibroscope CMD: interrupted`` and exits with 130. ``--debug`` (before or after
-the sub-command) shows the traceback instead. argparse's own usage errors exit with 2.
+Ctrl-C prints ``vibroscope CMD: interrupted`` and exits with 130; SIGTERM prints ``vibroscope
+CMD: terminated`` and exits with 143, after the same clean-up (no temporary output is left). A
+closed output pipe (``vibroscope info LOG | head``) ends the command quietly with 141.
+``--debug`` (before or after the sub-command) shows the traceback instead. argparse's own usage
+errors exit with 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import signal
 import sys
+import threading
 import traceback
 import warnings
 
@@ -26,6 +32,30 @@ COMMANDS = ("demo", "info", "analyse", "modal", "convert", "simulate", "compare"
 
 #: exit status after Ctrl-C (128 + SIGINT)
 EXIT_INTERRUPTED = 130
+
+#: exit status after SIGTERM (128 + SIGTERM)
+EXIT_TERMINATED = 143
+
+#: exit status when the reader of the output went away (128 + SIGPIPE), e.g. ``| head``
+EXIT_BROKEN_PIPE = 141
+
+
+class Terminated(BaseException):
+    """Raised in the main thread by SIGTERM during a command, so that its clean-up runs (a
+    ``BaseException`` like ``KeyboardInterrupt``: no ``except Exception`` swallows it)."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null after its reader went away (no second error at exit)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -84,7 +114,8 @@ def run_command(func, args, command: str, *, debug: bool = False, stream=None) -
     Returns
     -------
     int
-        `func`'s status; 1 after an error, 130 after ``KeyboardInterrupt``.
+        `func`'s status; 1 after an error, 130 after ``KeyboardInterrupt``, 143 after SIGTERM, 141
+        when stdout's reader went away (``BrokenPipeError``).
     """
     err = stream or sys.stderr
     prefix = f"vibroscope {command}"
@@ -96,15 +127,26 @@ def run_command(func, args, command: str, *, debug: bool = False, stream=None) -
             seen.add(text)
             print(f"{prefix}: warning: {text}", file=err, flush=True)
 
+    old_term = None
+    if threading.current_thread() is threading.main_thread():
+        old_term = signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         with warnings.catch_warnings():
             warnings.showwarning = show
-            return int(func(args) or 0)
+            status = int(func(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not at exit
+        return status
     except KeyboardInterrupt:
         if debug:
             traceback.print_exc(file=err)
         print(f"{prefix}: interrupted", file=err, flush=True)
         return EXIT_INTERRUPTED
+    except Terminated:
+        print(f"{prefix}: terminated", file=err, flush=True)
+        return EXIT_TERMINATED
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
     except SystemExit:
         raise
     except VibroscopeError as exc:
@@ -117,6 +159,9 @@ def run_command(func, args, command: str, *, debug: bool = False, stream=None) -
             raise
         print(f"{prefix}: error: {_describe(exc)} (run with --debug for the traceback)", file=err, flush=True)
         return 1
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -134,6 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("vibroscope: interrupted", file=sys.stderr, flush=True)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # `vibroscope --help | head`
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

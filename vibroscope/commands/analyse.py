@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -47,17 +48,18 @@ def add_parser(sub) -> None:
     p.add_argument("--outputs", nargs="+", metavar="PATH",
                    help="response channels (default: every Imu linear_acceleration field)")
     p.add_argument("--coords", type=Path, help="sensor coordinates CSV (channel or sensor number, x, y, z, direction)")
-    p.add_argument("--json", type=Path, metavar="SUMMARY.json", help="write the machine-readable summary")
+    p.add_argument("--json", type=Path, metavar="SUMMARY.json",
+                   help="write the machine-readable summary (a relative path is taken inside --out when given)")
     p.add_argument("--out", type=Path, metavar="DIR",
                    help="folder of the default outputs (default: the current directory, never beside the log)")
-    p.add_argument("--rrd", type=Path, help="rerun recording to write (default: <out>/<LOG stem>_analyse.rrd)")
+    p.add_argument("--rrd", type=Path, help="rerun recording to write (default: <out>/<LOG stem>_analyse.rrd; relative: inside --out)")
     p.add_argument("--no-rrd", action="store_true", help="write no rerun recording")
     p.add_argument("--spawn", action="store_true", help="open a rerun viewer")
     p.add_argument("--connect", nargs="?", const="", metavar="URL",
                    help="stream to a running rerun viewer while the log is read: the time series as they arrive "
                         "and the PSD/FRF/coherence refreshed as averages accumulate (default URL: "
                         "rerun+http://127.0.0.1:9876/proxy); then the analysis runs as usual")
-    p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: <out>/<LOG stem>_analyse_figures/)")
+    p.add_argument("--figures", type=Path, metavar="DIR", help="PNG figures directory (default: <out>/<LOG stem>_analyse_figures/; relative: inside --out)")
     p.add_argument("--no-figures", action="store_true", help="write no PNG figures")
     p.add_argument("--fs", type=float, help="resample to this rate (Hz); default the highest topic rate")
     p.add_argument("--nperseg", type=int, help="Welch segment length (default: ~16 averages, fine enough for --fmin)")
@@ -203,11 +205,12 @@ def run(args) -> int:
     VibroscopeError
         When an output is an input file (``--json LOG``), or the analysis fails (the log named).
     """
-    from vibroscope.commands._outputs import check_out_dir, check_outputs, default_output
+    from vibroscope.commands._outputs import check_out_dir, check_outputs, default_output, resolve_outputs
     from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
 
     check_out_dir(args.out)
+    resolve_outputs(args, ("json", "rrd", "figures"), args.out)  # `--out res --json s.json`: res/s.json
     _check_options(args)
     logs = list(args.log) if isinstance(args.log, (list, tuple)) else [args.log]
     if _takes_log(args.dask):
@@ -225,6 +228,10 @@ def run(args) -> int:
                                   "live view: give one log, or drop --connect")
         return run_fleet(args, logs)
     args.log = logs[0]
+    rrd = None if args.no_rrd else (args.rrd or default_output(args.log, "analyse", ".rrd", args.out))
+    figures = None if args.no_figures else (args.figures or default_output(args.log, "analyse", "_figures", args.out))
+    check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},  # before any work
+                  {"log": args.log, "coordinates": args.coords})
     if live:  # the live view first, read block by block (vibroscope.viewers.rerun_live), then the analysis
         from vibroscope.viewers.rerun_live import stream_log
 
@@ -241,10 +248,6 @@ def run(args) -> int:
                f"{budget / 2**20:.0f} MiB (--max-memory)")
         print(f"streaming {args.log} block by block: {why}")
         return run_stream(args)
-    rrd = None if args.no_rrd else (args.rrd or default_output(args.log, "analyse", ".rrd", args.out))
-    figures = None if args.no_figures else (args.figures or default_output(args.log, "analyse", "_figures", args.out))
-    check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},
-                  {"log": args.log, "coordinates": args.coords})
     select = _select_freqs(args.select)
     try:
         an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
@@ -399,15 +402,11 @@ def run_stream(args) -> int:
     except ValueError as exc:
         raise VibroscopeError(f"{args.log}: {exc}") from None
     print(stream_report_text(an, source=str(args.log)))
-    if args.json:
-        from vibroscope.commands._outputs import AtomicOutputs
-
-        with AtomicOutputs(inputs=[args.log]) as tx:
-            tx.file(args.json).write_text(json.dumps(stream_summary(an, source=str(args.log)), indent=2))
-        print(f"summary: {args.json}")
     # the spectra, FRFs, modes and stabilization diagram need no time series: drawn and recorded as
-    # for a whole read (no signals.png, kinematics.png or /signals entities)
-    write_outputs(an, args.log, coords=args.coords, rrd=rrd, figures=figures, spawn=args.spawn, ods=args.ods)
+    # for a whole read (no signals.png, kinematics.png or /signals entities); the summary goes with
+    # them, so that all outputs appear together or none
+    write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
+                  spawn=args.spawn, ods=args.ods)
     return 0
 
 
@@ -691,7 +690,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     an : Analysis or StreamAnalysis
         The analysis (:func:`vibroscope.pipeline.analyse_signals`), or a streamed one
         (:func:`vibroscope.stream.analyse_stream`: no time series, so no ``signals.png``,
-        ``kinematics.png`` or ``/signals`` entities, and no `json_path`: see
+        ``kinematics.png`` or ``/signals`` entities; its `json_path` summary is
         :func:`stream_summary`).
     log : Path
         The analysed log (named in the summary and the recording; never written).
@@ -750,7 +749,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     done = []
     with AtomicOutputs(inputs=[log, coords]) as tx:
         if json_path:
-            d = summary_dict(an, source=str(log), true_modes=true_modes)
+            d = (summary_dict(an, source=str(log), true_modes=true_modes) if sig is not None
+                 else stream_summary(an, source=str(log)))
             tx.file(json_path).write_text(json.dumps(d, indent=2))
             written["json"] = json_path
             done.append(f"summary: {json_path}")
@@ -780,11 +780,12 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
 
                 modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
                 path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
-                                    coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None, spawn=spawn,
+                                    coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
+                                    spawn=spawn and not rrd,  # a recording under its final name is opened below
                                     recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
                 written["rrd"] = tx.final(path) if path is not None else None
                 if rrd:
-                    done.append(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+                    done.append(f"rerun recording: {rrd}  (open with: rerun {shlex.quote(str(rrd))})")
             if pending is not None:
                 from vibroscope.viewers.figures import in_figure_order
 
@@ -792,4 +793,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 done.insert(len(done) - bool(rrd), f"figures: {', '.join(str(p) for p in written['figures'])}")
     for line in done:
         print(line)
+    if spawn and rrd:
+        from vibroscope.viewers.rerun_view import show_recording
+
+        show_recording(rrd)
     return written

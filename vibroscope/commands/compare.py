@@ -162,7 +162,7 @@ def run(args) -> int:
     inputs = {"sweep file": args.sweep, "model file": None if args.model in BUILTINS else args.model}
     out = Path(args.out)
     check_out_dir(out)
-    check_outputs({"--rrd": args.rrd, "--out": out}, inputs)
+    check_outputs({"--rrd": args.rrd}, inputs)
     model = _model(args.model)
     png_path = out / f"compare_{model.name}.png"
     check_outputs({"--out": png_path}, inputs)

@@ -13,7 +13,8 @@ def add_parser(sub) -> None:
     """Register the ``info`` sub-command."""
     p = sub.add_parser("info", help="list the topics of an MCAP log (type, count, rate, span, decodable)")
     p.add_argument("log", metavar="LOG.mcap", help="the MCAP file")
-    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--json", action="store_true",
+                   help="print JSON instead of a table (strict JSON: a value that is not a number is null)")
     p.add_argument("--fields", action="store_true",
                    help="list every numeric message path (what --input/--outputs take) with unit and a sample value")
     p.add_argument("--topic", action="append", metavar="TOPIC",
@@ -55,8 +56,9 @@ def run(args) -> int:
         return run_fields(args)
     info = mcap_info(args.log)
     if args.json:
-        d = info.as_dict()
-        print(json.dumps(d, indent=2, default=lambda o: None if isinstance(o, float) and not math.isfinite(o) else str(o)))
+        # strict JSON: a rate or span that is not a number (a topic of < 2 messages) is null, never NaN
+        text = json.dumps(info.as_dict(), default=str)
+        print(json.dumps(json.loads(text, parse_constant=lambda c: None), indent=2, allow_nan=False))
         return 0
     print(f"{info.path}: {info.message_count} messages, {len(info.topics)} topics, {info.duration_s:.3f} s"
           f"{' (profile ' + info.profile + ')' if info.profile else ''}")

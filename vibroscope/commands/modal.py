@@ -13,6 +13,7 @@ file that ``vibroscope simulate`` runs.
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
 import numpy as np
@@ -166,11 +167,13 @@ def run(args) -> int:
     VibroscopeError
         When an output is an input file, or the identification fails.
     """
-    from vibroscope.commands._outputs import check_out_dir, check_outputs
+    from vibroscope.commands._outputs import check_out_dir, check_outputs, resolve_outputs
     from vibroscope.commands.analyse import METHOD_NAMES, report_text
     from vibroscope.errors import VibroscopeError
 
     check_out_dir(args.out)
+    # `--out res --json m.json`: res/m.json
+    resolve_outputs(args, ("json", "export_model", "uff55", "uff15", "uff58", "figures", "rrd"), args.out)
     from vibroscope.commands.analyse import _check_options
 
     _check_options(args)
@@ -206,7 +209,7 @@ def run(args) -> int:
         print(f"{first}{' + %d more' % (len(sources) - 1) if len(sources) > 1 else ''}: FRF {len(h.outputs)} outputs x "
               f"{len(h.inputs)} inputs, {h.frequencies.size} lines {h.frequencies[0]:.4g}–{h.frequencies[-1]:.4g} Hz; "
               f"modes by {METHOD_NAMES.get(mm.method, mm.method)}")
-        _print_modes(ident)
+        _print_modes(ident, args.json)
         signals = psd = csd = None
         sv = _mif(h)
     else:
@@ -300,7 +303,7 @@ def _mif(h):
     return h.frequencies, s[:, None], "Σ |H|² over outputs and inputs [dB]"
 
 
-def _print_modes(ident) -> None:
+def _print_modes(ident, json_path=None) -> None:
     mm = ident.modes
     print(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9} {'MPC':>5}")
     mp = mm.extra.get("mpc", np.full(len(mm), np.nan))
@@ -309,7 +312,8 @@ def _print_modes(ident) -> None:
     if not len(mm):
         print("   (no mode passed the physical-mode selection)")
     if ident.rejected:
-        print(f"  {len(ident.rejected)} candidates rejected (in MODES.json), e.g.:")
+        where = f"in {json_path}" if json_path else "all listed with --json FILE"
+        print(f"  {len(ident.rejected)} candidates rejected ({where}), e.g.:")
         for r in ident.rejected[:4]:
             print(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
 
@@ -353,7 +357,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
             from vibroscope.io.frf_files import write_geometry_uff15
 
             write_geometry_uff15(tx.file(args.uff15), list(range(1, len(pts) + 1)), sc.xyz)
-            done.append(f"geometry (UFF 15, node k = point k of MODES.json): {args.uff15}")
+            done.append(f"geometry (UFF 15, node k = point k of the mode shapes): {args.uff15}")
         if args.uff58:
             from vibroscope.io.frf_files import write_frf_uff58
 
@@ -362,7 +366,8 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
         if args.export_model:
             export_modal_model(ident.lsfd, tx.file(args.export_model),
                                name=f"{source.stem}, identified by LSCF + LSFD", frf=h)
-            done.append(f"modal model: {args.export_model}  (run with: vibroscope simulate {args.export_model} ...)")
+            done.append(f"modal model: {args.export_model}  (run with: vibroscope simulate "
+                        f"{shlex.quote(str(args.export_model))} ...)")
         ods = []
         for f in args.ods or ():
             from vibroscope.spectral.integration import ods as ods_at
@@ -394,13 +399,17 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
             if ods:
                 show = _with_ods(mm, [ods_as_modal_model(o) for o in ods])
             log_analysis(signals=signals, psd=psd, csd=csd, frf=h, modal=show, coords=sc.as_mapping(),
-                         rrd_path=tx.file(rrd) if rrd else None, spawn=args.spawn,
+                         rrd_path=tx.file(rrd) if rrd else None, spawn=args.spawn and not rrd,
                          recording_name=f"{source.stem} modal", stabilization=ident.stabilization,
                          synthesized=synth)
             if rrd:
-                done.append(f"rerun recording: {rrd}  (open with: rerun {rrd})")
+                done.append(f"rerun recording: {rrd}  (open with: rerun {shlex.quote(str(rrd))})")
     for line in done:
         print(line)
+    if args.spawn and planned["--rrd"]:  # once under its final name
+        from vibroscope.viewers.rerun_view import show_recording
+
+        show_recording(planned["--rrd"])
 
 
 def _with_ods(mm, ods):

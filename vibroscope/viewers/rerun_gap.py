@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroscope.viewers.gap_figures import candidate_label, held_out_spans, verdict_index
-from vibroscope.viewers.rerun_view import _db, _whole, channel_entity, frequency_index
+from vibroscope.viewers.rerun_view import _db, _whole, channel_entity, flush_recording, frequency_index, show_recording
 
 __all__ = ["log_gap_report", "TRACES", "SPECTRA", "FRF_CURVES", "GAP_BARS"]
 
@@ -207,7 +207,9 @@ def log_gap_report(report, *, recording=None, path: str | Path | None = None, sp
     path : str or Path, optional
         Write the recording (and its blueprint) to this ``.rrd`` file.
     spawn : bool, optional
-        Open a rerun viewer and stream the recording to it.
+        Once the recording is complete, open it in the rerun viewer
+        (:func:`vibroscope.viewers.rerun_view.open_in_viewer`; without `path`, a file of its own
+        in the system's temporary folder); a one-line warning says why when none opens.
     application_id : str, optional
         Application id of a new stream.
     recording_name : str, optional
@@ -256,15 +258,15 @@ def log_gap_report(report, *, recording=None, path: str | Path | None = None, sp
     if recording_name or recording is None:
         rec.send_recording_name(recording_name or f"gap: {report.model_name or 'model'}")
     out = Path(path) if path is not None else None
+    shown_only = spawn and out is None
+    if shown_only:  # the viewer opens a complete file (rerun_view.open_in_viewer): one of its own
+        import tempfile
+
+        out = Path(tempfile.mkdtemp(prefix="vibroscope-view-")) / "gap.rrd"
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-    redirected = out is not None or spawn
-    if spawn and out is not None:
-        rr.spawn(connect=False)
-        rec.set_sinks(rr.FileSink(str(out)), rr.GrpcSink(), default_blueprint=bp)
-    elif spawn:
-        rec.spawn(default_blueprint=bp)
-    elif out is not None:
+    redirected = out is not None
+    if out is not None:
         rec.save(str(out), default_blueprint=bp)
     else:
         rec.send_blueprint(bp, make_active=True, make_default=True)
@@ -298,11 +300,13 @@ def log_gap_report(report, *, recording=None, path: str | Path | None = None, sp
                     static=True)
         rec.log("gaps", rr.BarChart(_f64([report.gap_before, report.gap_refit, report.gap_after,
                                           report.noise_floor]), color=_BAR), static=True)
-        rec.flush()
+        flush_recording(rec)
     finally:
         if redirected:
             rec.disconnect()
-    return out
+    if spawn:
+        show_recording(out)
+    return None if shown_only else out
 
 
 def _log_traces(rec, tr, chans, units) -> None:

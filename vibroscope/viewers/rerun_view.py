@@ -31,6 +31,7 @@ need; the time panel starts on ``animation`` (playing, looped) when there are mo
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -39,11 +40,14 @@ import numpy as np
 from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, sensor_geometry
 
-__all__ = ["log_analysis", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
+__all__ = ["log_analysis", "open_in_viewer", "show_recording", "flush_recording", "viewer_executable", "VIEWER_PORT", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
            "mode_frames", "node_frames", "envelope_indices", "MAX_POINTS"]
 
 #: animation frames per cycle of a mode
 FRAMES = 40
+
+#: the port a spawned rerun viewer listens on (rerun's default)
+VIEWER_PORT = 9876
 
 #: most points logged per time-series channel: longer channels are logged as their min/max
 #: envelope (:func:`envelope_indices`), 50 000 bins of two true samples each
@@ -312,7 +316,12 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     rrd_path : str or Path, optional
         Write the recording (and its blueprint) to this ``.rrd`` file.
     spawn : bool, optional
-        Open a rerun viewer and stream the recording to it.
+        Once the recording is complete, open it in the rerun viewer (:func:`open_in_viewer`: the
+        program rerun-sdk installs; a viewer already running takes it); without `rrd_path` the
+        file is written to a folder of its own in the system's temporary folder for the viewer.
+        When no viewer can open (no display, no program), a one-line warning says why. A
+        command writing `rrd_path` under a temporary name calls :func:`open_in_viewer` itself
+        once the file has its final name.
     application_id : str, optional
     recording_name : str, optional
         Shown in the viewer as the recording's name.
@@ -336,7 +345,7 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     Returns
     -------
     Path or None
-        `rrd_path` once written and closed, None when only spawned.
+        `rrd_path` once written and closed, None when only shown in a viewer.
 
     Raises
     ------
@@ -353,8 +362,9 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
     (seconds, minutes), not as plain numbers. The viewer shows one timeline at a time; the tabs say which.
 
     The recording is an explicit :class:`rerun.RecordingStream` (never the global one); the
-    blueprint is sent as its default blueprint; the stream is flushed and disconnected before
-    returning, so the ``.rrd`` file is complete (it carries rerun's footer/manifest).
+    blueprint is sent as its default blueprint; the stream is flushed (:func:`flush_recording`,
+    in short interruptible steps) and disconnected before returning, so the ``.rrd`` file is
+    complete (it carries rerun's footer/manifest).
 
     Examples
     --------
@@ -374,7 +384,14 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                           f_range=None if fidx is None else (fidx[0], fidx[-1]), positions=positions,
                           stabilization_present=stabilization is not None and len(stabilization.frequency) > 0,
                           kinematics=kinematics)
-    rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, spawn, bp)
+    if spawn and rrd_path is None:  # the viewer opens a file: one of its own in the system's temporary folder
+        import tempfile
+
+        rrd_path = Path(tempfile.mkdtemp(prefix="vibroscope-view-")) / f"{recording_name or application_id}.rrd"
+        shown_only = True
+    else:
+        shown_only = False
+    rec, path = _open_recording(application_id, recording_id, recording_name, rrd_path, bp)
     try:
         _log_about(rec, signals=signals, psd=psd, frf=frf, ftl=ftl, max_points=max_points)
         if signals is not None:
@@ -393,10 +410,169 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
             _log_stabilization(rec, stabilization, ftl)
         if modal is not None:
             _log_modes(rec, modal, coords, frames)
-        rec.flush()
+        flush_recording(rec)
     finally:
         rec.disconnect()
-    return path
+    if spawn:
+        show_recording(path)
+    return None if shown_only else path
+
+
+def show_recording(path: str | Path) -> bool:
+    """:func:`open_in_viewer`, with a one-line warning ``--spawn: no rerun viewer opened: WHY`` when none opens.
+
+    Parameters
+    ----------
+    path : str or Path
+        The complete recording.
+
+    Returns
+    -------
+    bool
+        Whether a viewer took it.
+    """
+    why = open_in_viewer(path)
+    if why is not None:
+        warnings.warn(f"--spawn: no rerun viewer opened: {why}", stacklevel=2)
+    return why is None
+
+
+def viewer_executable() -> str | None:
+    """The rerun viewer program: the ``rerun`` that the rerun-sdk package installed beside this
+    Python (``bin/`` of its virtual environment), else ``rerun`` on ``PATH``, else the binary inside
+    the ``rerun_cli`` package; None when there is none.
+
+    Returns
+    -------
+    str or None
+    """
+    import importlib.util
+    import os
+    import shutil
+    import sys
+
+    exe = "rerun.exe" if sys.platform.startswith("win") else "rerun"
+    beside = Path(sys.executable).parent / exe
+    if beside.is_file() and os.access(beside, os.X_OK):
+        return str(beside)
+    found = shutil.which("rerun")
+    if found:
+        return found
+    try:
+        spec = importlib.util.find_spec("rerun_cli")
+    except (ImportError, ValueError):
+        spec = None
+    if spec is not None and spec.origin:
+        inner = Path(spec.origin).parent / exe
+        if inner.is_file() and os.access(inner, os.X_OK):
+            return str(inner)
+    return None
+
+
+def _listening(port: int, timeout: float = 0.2) -> bool:
+    import socket
+
+    try:
+        with socket.create_connection(("127.0.0.1", port), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+def open_in_viewer(path: str | Path, *, port: int | None = None, settle_s: float = 1.5,
+                   executable: str | None = None) -> str | None:
+    """Open a finished ``.rrd`` file in the rerun viewer that rerun-sdk ships; None, or one line saying why not.
+
+    The viewer program (:func:`viewer_executable`) is started detached (its own session: Ctrl-C
+    on the command does not close it) as ``rerun PATH``; rerun itself hands the file to a viewer
+    already listening on its port, else opens a window. This process never streams to the viewer,
+    so nothing here can wait on it (:func:`rerun.spawn` looks on ``PATH`` only, is ignored without
+    a global recording, and a gRPC flush to a viewer that never answers waits for ever, deaf to
+    Ctrl-C). The viewer is judged after `settle_s`: still running, or ended with status 0 (handed
+    over), is success; a viewer that cannot open its window ends at once with an error, whose
+    last line is the reason. On Linux with no ``DISPLAY``/``WAYLAND_DISPLAY``/``WAYLAND_SOCKET``
+    and no viewer listening, nothing is started.
+
+    Parameters
+    ----------
+    path : str or Path
+        The recording (complete: written and closed).
+    port : int, optional
+        The port a running viewer listens on; default :data:`VIEWER_PORT` (9876, rerun's), read
+        at call time.
+    settle_s : float, optional
+        How long (s) to watch the started viewer; default 1.5.
+    executable : str, optional
+        The viewer program; default :func:`viewer_executable`.
+
+    Returns
+    -------
+    str or None
+        None when the viewer took the file, else the reason, one line.
+    """
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    import time
+
+    port = VIEWER_PORT if port is None else int(port)
+    running = _listening(port)
+    if not running and sys.platform.startswith("linux") and not any(
+            os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "WAYLAND_SOCKET")):
+        return "no display (DISPLAY and WAYLAND_DISPLAY are not set), so no viewer window can open"
+    exe = executable or viewer_executable()
+    if exe is None:
+        return "no rerun viewer program found (pip install rerun-sdk installs one beside Python)"
+    log = tempfile.TemporaryFile()  # unlinked at once: the viewer's start-up errors, no file left behind
+    try:
+        proc = subprocess.Popen([exe, "--port", str(port), str(path)], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=log, start_new_session=True,
+                                env={**os.environ, "RERUN_APP_ONLY": "true"})
+    except OSError as exc:
+        log.close()
+        return f"cannot start {exe}: {exc.strerror or exc}"
+    try:
+        end = time.monotonic() + settle_s
+        while proc.poll() is None and time.monotonic() < end:
+            time.sleep(0.05)
+        if proc.returncode is None or proc.returncode == 0:
+            return None
+        log.seek(0)
+        text = [_strip_ansi(ln) for ln in log.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+        errs = [ln for ln in text if "error" in ln.lower()] or text
+        return f"{exe} ended at start (status {proc.returncode})" + (
+            f": {' '.join(errs[-1].split())[:300]}" if errs else "")
+    finally:
+        log.close()
+
+
+def _strip_ansi(text: str) -> str:
+    import re
+
+    return re.sub(r"\x1b\[[0-9;]*m", "", text)
+
+
+def flush_recording(rec, *, step_s: float = 0.25) -> None:
+    """Flush a recording in short waits, so that Ctrl-C and SIGTERM are never held by the flush.
+
+    :meth:`rerun.RecordingStream.flush` waits without a timeout by default, inside rerun's native
+    code where Python's signal handlers cannot run; here each wait is at most `step_s`, repeated
+    until the flush is complete.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording.
+    step_s : float, optional
+        Longest single wait (s); default 0.25.
+    """
+    while True:
+        try:
+            rec.flush(timeout_sec=step_s)
+            return
+        except RuntimeError:  # "Flush timed out - not all log messages were sent": wait on
+            continue
 
 
 def _frequency_timeline(*results) -> tuple[str | None, np.ndarray | None]:
@@ -408,24 +584,17 @@ def _frequency_timeline(*results) -> tuple[str | None, np.ndarray | None]:
 
 
 def _open_recording(application_id: str, recording_id: str | None, recording_name: str | None,
-                    rrd_path: str | Path | None, spawn: bool, blueprint):
-    """(an explicit :class:`rerun.RecordingStream` with its sinks and default blueprint, the
-    ``.rrd`` path or None)."""
+                    rrd_path: str | Path, blueprint):
+    """(an explicit :class:`rerun.RecordingStream` saving to `rrd_path` with its default blueprint,
+    the ``.rrd`` path)."""
     import rerun as rr
 
     rec = rr.RecordingStream(application_id, recording_id=recording_id)
     if recording_name:
         rec.send_recording_name(recording_name)
-    path = Path(rrd_path) if rrd_path is not None else None
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    if spawn and path is not None:
-        rr.spawn(connect=False)
-        rec.set_sinks(rr.FileSink(str(path)), rr.GrpcSink(), default_blueprint=blueprint)
-    elif spawn:
-        rec.spawn(default_blueprint=blueprint)
-    else:
-        rec.save(str(path), default_blueprint=blueprint)
+    path = Path(rrd_path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec.save(str(path), default_blueprint=blueprint)
     return rec, path
 
 
