@@ -330,7 +330,7 @@ def test_stream_interrupted_while_drawing_leaves_no_summary(tiny_log, tmp_path, 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(vf, "summary_figures", interrupted)
+    monkeypatch.setattr(vf, "figure_jobs", interrupted)
     js = tmp_path / "s.json"
     assert main(["analyse", str(tiny_log), "--stream", "--json", str(js), "--out", str(tmp_path)]) == 130
     capsys.readouterr()
