@@ -26,7 +26,9 @@ classes damage the shared file itself. The reference is the undamaged file that 
 Checks of one variant, read with the reference's rate (``read_mcap(variant, channels, fs=ref.fs)``):
 
 - ``ok``: every value is NaN, or equals the reference's value at the same grid time, or (a topic the
-  reader interpolates) lies between the two undamaged samples around its time; and when samples
+  reader interpolates in the undamaged log too: stamps with jitter) lies between the two undamaged
+  samples around its time (an on-grid topic is never interpolated: one wrong stamp must not make it
+  so); and when samples
   the reference has are missing, the read reports something (``meta`` ``skipped``, ``gaps`` or
   ``outliers``), and the NaN samples are those of the reported gaps;
 - ``refused``: a :class:`~vibroscope.errors.VibroscopeError` naming damage (a byte offset,
@@ -337,8 +339,8 @@ def check(base: Base, variant: Path) -> tuple[str, str]:
     equal[same_t] = gv[same_t] == rv[k[same_t]]
     bad = fin & ~equal
     interp = 0
-    if bad.any() and got.meta["timebase"][topic]["resampled"]:
-        st, sv = base.raw_samples(got.meta["timebase"][topic]["time_source"])
+    if bad.any() and ref.meta["timebase"][topic]["resampled"]:  # the undamaged log needs interpolation too
+        st, sv = base.raw_samples(ref.meta["timebase"][topic]["time_source"])
         j = np.searchsorted(st, gt[bad], "right")
         ok = (j > 0) & (j < st.size)
         lo = np.full(j.size, np.inf)
