@@ -459,14 +459,6 @@ def _robust_std(x: np.ndarray) -> float:
     return 1.4826 * float(median(np.abs(x - median(x))))
 
 
-def _side_medians(x: np.ndarray, idx: np.ndarray, w: int) -> tuple[np.ndarray, np.ndarray]:
-    """Medians of ``x[i-w:i]`` and ``x[i+1:i+1+w]`` at each index `i` of `idx` (NaN where a side is empty;
-    a side cut by an end is shorter)."""
-    pad = np.r_[np.full(w, np.nan), x, np.full(w, np.nan)]
-    win = np.lib.stride_tricks.sliding_window_view(pad, w)  # win[j] = pad[j : j + w]
-    return _nanmedian_rows(win[idx]), _nanmedian_rows(win[idx + w + 1])  # x[i-w : i], x[i+1 : i+1+w]
-
-
 def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
     """Median of each row of `a` without its NaN (NaN for an all-NaN row), no warning."""
     import warnings
@@ -530,48 +522,51 @@ def nudged_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray, *, sigmas: fl
     out = np.zeros(n, bool)
     if n < 2 * window + 1:
         return out
-    d = np.diff(t)
+    off = t - np.asarray(log_times_ns, np.int64)
+    r2o = 2 * off[1:-1] - off[:-2] - off[2:]  # twice the second difference, exact in int64
+    if not r2o.any():  # the usual case: a constant offset (or stamps that are the log times)
+        return out
+    step = max(1, n >> 16)  # tolerances from a strided sample of 65536: statistics, not every stamp
+    d = np.diff(t[::step]) if step > 1 else np.diff(t)
     pos = d[d > 0]
     if pos.size == 0:
         return out
-    T = float(median(pos))
-    tf = (t - t[0]).astype(np.float64)
-    off = tf - (np.asarray(log_times_ns, np.int64) - t[0]).astype(np.float64)
-    r2o = off[1:-1] - 0.5 * (off[:-2] + off[2:])
-    tol_l = max(sigmas * _robust_std(r2o), ON_GRID_TOL * T)
-    cand = np.flatnonzero(np.abs(r2o) > 0.5 * tol_l) + 1  # a moved stamp moves its own second difference fully
+    T = float(median(pos)) / step
+    tol_l = max(sigmas * _robust_std(r2o[::step].astype(np.float64)) / 2, ON_GRID_TOL * T)
+    cand = np.flatnonzero(np.abs(r2o) > tol_l) + 1  # a moved stamp moves its own second difference fully
     cand = np.unique(np.r_[cand, [0, n - 1]])  # the ends have no second difference: always examined
     w = window
-    pad = np.r_[np.full(w, np.nan), off, np.full(w, np.nan)]
-    nb = np.delete(np.lib.stride_tricks.sliding_window_view(pad, 2 * w + 1)[cand], w, axis=1)
-    c1 = np.abs(off[cand] - _nanmedian_rows(nb)) > tol_l
-    cand = cand[c1]
+    rel = np.r_[np.arange(-w, 0), np.arange(1, w + 1)]
+    j = cand[:, None] + rel[None, :]
+    inr = (j >= 0) & (j < n)
+    jc = np.clip(j, 0, n - 1)
+    nb = np.where(inr, (off[jc] - off[cand][:, None]).astype(np.float64), np.nan)
+    c1 = np.abs(_nanmedian_rows(nb)) > tol_l  # the offset against the median of its neighbours'
+    cand, jc, inr = cand[c1], jc[c1], inr[c1]
     if cand.size == 0:
         return out
     # 2(a): off the grid of its neighbours in time
-    order = np.argsort(t, kind="stable")
-    rank = np.empty(n, np.int64)
-    rank[order] = np.arange(n)
-    ts = tf[order]
-    ph = np.diff(ts) / T
+    dt = (np.diff(np.sort(t[::step])) if step > 1 else np.diff(np.sort(t))).astype(np.float64)
+    ph = dt / (T * step) if step > 1 else dt / T
     tol_p = max(sigmas * _robust_std((ph - np.rint(ph)) * T), ON_GRID_TOL * T)
     c2a = np.zeros(cand.size, bool)
     if tol_p < 0.5 * T:
-        r = rank[cand]
-        j = r[:, None] + np.r_[np.arange(-w, 0), np.arange(1, w + 1)][None, :]
-        ok = (j >= 0) & (j < n)
-        x = (tf[cand][:, None] - ts[np.clip(j, 0, n - 1)]) / T
+        ts = np.sort(t)
+        r = np.searchsorted(ts, t[cand])  # rank of each candidate among the stamps (its first copy)
+        k = r[:, None] + rel[None, :]
+        ok = (k >= 0) & (k < n)
+        x = (t[cand][:, None] - ts[np.clip(k, 0, n - 1)]).astype(np.float64) / T
         x = np.where(ok, np.abs(x - np.rint(x)) * T, np.nan)  # |phase|: half a period is +-T/2 alike
         left, right = _nanmedian_rows(x[:, :w]), _nanmedian_rows(x[:, w:])
         left = np.where(np.isnan(left), right, left)  # an end: its one side decides
         right = np.where(np.isnan(right), left, right)
         c2a = (np.abs(left) > tol_p) & (np.abs(right) > tol_p)
-    # 2(b): off the sequence in logging order
-    r2t = tf[1:-1] - 0.5 * (tf[:-2] + tf[2:])
+    # 2(b): off the sequence in logging order (stamps less their count: level between gaps)
+    r2t = (2 * t[1:-1:step] - t[:-2:step] - t[2::step]).astype(np.float64) / 2
     tol_t = max(sigmas * _robust_std(r2t), 1.5 * T)
-    lin = tf - np.arange(n, dtype=np.float64) * T  # stamps less their count: level between gaps
-    pl, pr = _side_medians(lin, cand, w)
-    el, er = lin[cand] - pl, lin[cand] - pr
+    lin = np.where(inr, (t[jc] - t[cand][:, None]).astype(np.float64) - (jc - cand[:, None]) * T, np.nan)
+    pl, pr = _nanmedian_rows(lin[:, :w]), _nanmedian_rows(lin[:, w:])
+    el, er = -pl, -pr  # the stamp's own level is 0 relative to itself
     el = np.where(np.isnan(el), er, el)
     er = np.where(np.isnan(er), el, er)
     c2b = (np.sign(el) == np.sign(er)) & (np.minimum(np.abs(el), np.abs(er)) > tol_t)
