@@ -11,8 +11,8 @@ here. Damage classes (``CLASSES``):
 ``bitflip``         1 to 8 random bits flipped after the magic;
 ``zero4k``          one 4 KiB-aligned block of 4 KiB zeroed;
 ``delete_chunk``    one chunk record (with the message indexes after it) removed;
-``nudge``           one message of the channel read: its header stamp moved by 0.2 to 999 periods
-                    (below the outlier threshold of 1000 periods and 1 s);
+``nudge``           one message of the channel read: its header stamp moved by 0.2 periods to just
+                    below the outlier threshold (the larger of 1000 periods and 1 s: below both);
 ``nanosec``         one message's ``header.stamp.nanosec`` set to a value of 1e9 or more;
 ``shift_summary``   1 to 4096 bytes inserted after the header record: the summary's offsets all
                     point that far before the records they name;
@@ -20,8 +20,9 @@ here. Damage classes (``CLASSES``):
 
 The stamp classes (``nudge``, ``nanosec``) change bytes inside a message, which needs an uncompressed
 chunk: they damage an uncompressed copy of the log (same messages, rewritten once by the ``mcap``
-writer, without compression; the chunk CRC of the patched chunk set to 0, "not computed"); the other
-classes damage the shared file itself. The reference is the undamaged file that was damaged.
+writer, without compression; the chunk CRC of the patched chunk set to 0, "not computed"), and only
+logs whose channel is read on header stamps (not bagfile_0, whose joint-state stamps are all 0); the
+other classes damage the shared file itself. The reference is the undamaged file that was damaged.
 
 Checks of one variant, read with the reference's rate (``read_mcap(variant, channels, fs=ref.fs)``):
 
@@ -401,9 +402,14 @@ def run(n_per_class: int, seed: int, names: list[str], classes: list[str], work:
     bases = prepare(work, names, bool(STAMP_CLASSES & set(classes)), log)
     rows = []
     variant = work / "variant.mcap"
+    # the stamp classes damage logs whose channel is read on its header stamps (bagfile_0's joint states
+    # carry stamps of 0 and are read on their log times: a moved stamp there changes nothing)
+    stamped = [m for m in names if "copy" in bases[m]
+               and bases[m]["copy"].ref.meta["timebase"][LOGS[m][1].split(".")[0]]["time_source"] == "header.stamp"]
     for kind in classes:
+        pool = stamped if kind in STAMP_CLASSES and stamped else names
         for i in range(n_per_class):
-            name = names[i % len(names)]
+            name = pool[i % len(pool)]
             base = bases[name]["copy" if kind in STAMP_CLASSES else "file"]
             data, desc = damage(kind, rng, base)
             variant.write_bytes(data)
