@@ -148,3 +148,24 @@ def test_interpolation_never_leaves_the_range_of_its_two_neighbours(n, seed, jit
     lo = np.minimum(y[:, j - 1], y[:, j])
     hi = np.maximum(y[:, j - 1], y[:, j])
     assert np.all((v >= lo - 1e-12) & (v <= hi + 1e-12))
+
+
+def test_stray_stamp_the_log_times_cannot_show_is_left_out_of_an_on_grid_topic(tmp_path):
+    """Log times that jitter by several periods hide a stamp moved by 0.3 periods (no outlier), but the
+    stamp is off the grid all the others lie on: its sample is left out (NaN, said), the topic is still
+    placed by index, every other value exact."""
+    rng = np.random.default_rng(2)
+    k = np.arange(N)
+    st = T0 + k * PER
+    lt = st + rng.integers(0, 5 * PER, N)  # logged 0-5 ms late
+    y = _signal(k)
+    bad = st.copy()
+    bad[2000] += 300_000
+    order = np.argsort(lt, kind="stable")  # written in log-time order, as a recorder would
+    s = read_mcap(_log(tmp_path / "s.mcap", bad[order], y[order], lt[order]), [CH])
+    tb = s.meta["timebase"]["/imu"]
+    assert tb["resampled"] is False and tb["outliers"] == 0  # not told by the log times: by the grid
+    assert np.isnan(s.data[0, 2000]) and np.isnan(s.data).sum() == 1
+    assert np.array_equal(np.delete(s.data[0], 2000), np.delete(y, 2000))
+    assert any("1 stamps off the grid" in w for w in s.meta["warnings"])
+    assert sum(g["n_samples"] for g in s.meta["gaps"]) == 1
