@@ -11,6 +11,7 @@ here. Damage classes (``CLASSES``):
 ``bitflip``         1 to 8 random bits flipped after the magic;
 ``zero4k``          one 4 KiB-aligned block of 4 KiB zeroed;
 ``delete_chunk``    one chunk record (with the message indexes after it) removed;
+``delete_first_chunk`` the first chunk so removed (the issue's worst case: every later offset shifts);
 ``nudge``           one message of the channel read: its header stamp moved by 0.2 periods to just
                     below the outlier threshold (the larger of 1000 periods and 1 s: below both);
 ``nanosec``         one message's ``header.stamp.nanosec`` set to a value of 1e9 or more;
@@ -82,7 +83,8 @@ LOGS = {
     "torque_ripple": ("torque_ripple_data_0.mcap", "/robot/joint_state.effort[0]"),
     "synthetic_imu": (None, "/imu.linear_acceleration.x"),
 }
-CLASSES = ["truncate", "bitflip", "zero4k", "delete_chunk", "nudge", "nanosec", "shift_summary", "lying_size"]
+CLASSES = ["truncate", "bitflip", "zero4k", "delete_chunk", "delete_first_chunk", "nudge", "nanosec", "shift_summary",
+           "lying_size"]
 STAMP_CLASSES = {"nudge", "nanosec"}
 MAGIC = b"\x89MCAP0\r\n"
 OP_HEADER, OP_FOOTER, OP_CHUNK, OP_MESSAGE_INDEX, OP_DATA_END = 0x01, 0x02, 0x06, 0x07, 0x0F
@@ -261,8 +263,8 @@ def damage(kind: str, rng: random.Random, base: Base) -> tuple[bytes, str]:
         a = rng.randrange(1, max(2, n // 4096)) * 4096
         b[a : a + 4096] = bytes(len(b[a : a + 4096]))
         return bytes(b), f"zeroed {a}..{a + 4096}"
-    if kind == "delete_chunk":
-        i = rng.randrange(len(chunks))
+    if kind in ("delete_chunk", "delete_first_chunk"):
+        i = 0 if kind == "delete_first_chunk" else rng.randrange(len(chunks))
         _op, a, e = chunks[i]
         recs = base.recs
         j = recs.index(chunks[i]) + 1
