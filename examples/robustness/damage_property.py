@@ -459,7 +459,7 @@ def write_outputs(rows: list[dict], table: list[dict], out: Path, title: str) ->
 
     colours = {"ok": "#2e7d32", "refused": "#81c784", "bad_value": "#c62828", "silent_loss": "#ef6c00",
                "lost_unsaid": "#f9a825", "crash": "#6a1b9a"}
-    fig, ax = plt.subplots(figsize=(9, 4.6))
+    fig, ax = plt.subplots(figsize=(9, 5.0))
     x = np.arange(len(table))
     bottom = np.zeros(len(table))
     for o in OUTCOMES:
@@ -468,11 +468,11 @@ def write_outputs(rows: list[dict], table: list[dict], out: Path, title: str) ->
         bottom += v
     for xi, t in zip(x, table):
         ax.text(xi, 101.5, f"{100 * t['rate']:.0f} %\n(n={t['variants']})", ha="center", va="bottom", fontsize=8)
-    ax.set_xticks(x, [t["class"].replace("_", " ") for t in table], rotation=20)
+    ax.set_xticks(x, [t["class"].replace("_", " ") for t in table], rotation=25, ha="right")
     ax.set_ylabel("variants (%)")
     ax.set_ylim(0, 118)
     ax.set_title(title, fontsize=10)
-    ax.legend(ncol=3, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.22), frameon=False)
+    ax.legend(ncol=3, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.34), frameon=False)
     fig.tight_layout()
     fig.savefig(out / "damage_property.png", dpi=120)
     plt.close(fig)
