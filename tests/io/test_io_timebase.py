@@ -89,8 +89,13 @@ def test_multirate_resampling_band_limited_sine(tmp_path, fs):
     t = r.meta["t0_ns"] * 1e-9 - T0 * 1e-9 + np.arange(r.n_samples) / r.fs
     ref = np.sin(2 * np.pi * f * t)
     inner = slice(r.n_samples // 10, -r.n_samples // 10)
-    for k in range(2):
-        assert np.max(np.abs(r.data[k, inner] - ref[inner])) < 1e-3
+    # the shape-preserving interpolant (PCHIP) stays between the two samples around each grid time, so
+    # near an extremum it errs by up to A (1 - cos(w h / 2)) <= A (w h)^2 / 8 (h the longest increment:
+    # 1 ms for /a; 4 ms + 2 x 0.4 ms jitter for /b); a low-passed record (fs=100) to 1e-3 as before
+    for k, h in enumerate((1e-3, 4.8e-3)):
+        bound = (2 * np.pi * f * h) ** 2 / 8 if fs is None else 1e-3
+        assert np.max(np.abs(r.data[k, inner] - ref[inner])) < bound
+        assert np.sqrt(np.mean((r.data[k, inner] - ref[inner]) ** 2)) < bound / 2
     tb = r.meta["timebase"]
     assert tb["/b"]["resampled"] is True
     assert tb["/a"]["resampled"] is True  # the common span starts at /b's first stamp, off /a's grid

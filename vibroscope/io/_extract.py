@@ -19,6 +19,7 @@ import numpy as np
 from vibroscope.errors import ChannelError
 from vibroscope.io import _ros2
 from vibroscope.io.paths import format_path, get_field
+from vibroscope.io.timebase import INVALID_STAMP_NS
 
 #: reports per kind of fault kept in ``skipped`` per topic (the counts are always complete)
 MAX_REPORTS = 5
@@ -52,9 +53,10 @@ class Extracted:
 def _stamp_of(msg: Any) -> int | None:
     try:
         st = get_field(msg, ("header", "stamp"))
-        if isinstance(st, dict):
-            return int(st["sec"]) * 1_000_000_000 + int(st["nanosec"])
-        return int(st.sec) * 1_000_000_000 + int(st.nanosec)
+        sec, nsec = (st["sec"], st["nanosec"]) if isinstance(st, dict) else (st.sec, st.nanosec)
+        if not 0 <= int(nsec) < 1_000_000_000:  # an invalid time: dropped as an outlier stamp, counted
+            return INVALID_STAMP_NS
+        return int(sec) * 1_000_000_000 + int(nsec)
     except Exception:  # noqa: BLE001 - no header: log_time is used
         return None
 

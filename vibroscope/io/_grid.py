@@ -2,12 +2,15 @@
 
 A topic whose stamps lie on the grid (within :data:`~vibroscope.io.timebase.ON_GRID_TOL` of
 a period, at the grid's rate) is placed by index, ``k = round((t - start) fs)``: no
-interpolation at all, NaN where nothing was logged. Any other topic is interpolated
-(:func:`~vibroscope.io.timebase.resample_to_grid`) within each contiguous run of its stamps
-(no increment holding a missing message, :func:`~vibroscope.io.timebase.fit_stamps`: jitter
-of the stamps is not a gap), so the
-spline and the anti-alias filter never span a gap; the grid samples in a gap are NaN. Chunks
-lost to damage are gaps like any other. Every gap is reported.
+interpolation at all, NaN where nothing was logged. So is a topic all but a few of whose
+stamps do (at most :data:`MAX_OFF_GRID_SHARE`, 1 %, and at least one): the samples of the
+stray stamps are left out (NaN, counted in a warning), since one wrong stamp must not make the
+whole topic interpolated. Any other topic is interpolated (shape-preserving PCHIP,
+:func:`~vibroscope.io.timebase.resample_to_grid`: never a value outside its two neighbours)
+within each contiguous run of its stamps (no increment holding a missing message,
+:func:`~vibroscope.io.timebase.fit_stamps`: jitter of the stamps is not a gap), so the
+interpolant and the anti-alias filter never span a gap; the grid samples in a gap are NaN.
+Chunks lost to damage are gaps like any other. Every gap is reported.
 """
 
 from __future__ import annotations
@@ -44,20 +47,38 @@ class TopicSamples:
     report: TimebaseReport
 
 
-def _on_grid_index(t: np.ndarray, start: int, fs: float) -> np.ndarray | None:
-    """Grid indices of stamps `t` when they are samples of the grid at `fs` (one per period)."""
+#: at most this share of a topic's stamps (and at least one) may lie off the grid of the others for the
+#: topic to be placed by index: those samples are left out (NaN, counted), not interpolated
+MAX_OFF_GRID_SHARE = 0.01
+
+
+def _on_grid_index(t: np.ndarray, start: int, fs: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(grid indices of the stamps on the grid, which stamps those are (bool, `t`'s shape)) when stamps
+    `t` are samples of the grid at `fs` (one per period), all but at most :data:`MAX_OFF_GRID_SHARE`
+    of them (at least one); else None (interpolate)."""
     rel = (t - start).astype(np.float64) * 1e-9 * fs
     k = np.rint(rel)
-    if np.max(np.abs(rel - k), initial=0.0) > ON_GRID_TOL:
+    on = np.abs(rel - k) <= ON_GRID_TOL
+    n_off = t.size - int(np.count_nonzero(on))
+    if n_off > max(1, int(MAX_OFF_GRID_SHARE * t.size)) or n_off == t.size:
         return None
     k = k.astype(np.int64)
+    if n_off:
+        k = k[on]
     if k.size > 1:
         d = np.diff(k)
         # increasing, and median step 1 (steps ≥ 1: more than half of them are 1): else stamps at a
         # multiple of the grid period (upsampling): interpolate
         if np.any(d <= 0) or 2 * np.count_nonzero(d == 1) <= d.size:
             return None
-    return k
+    return k, on
+
+
+def off_grid_stamps(s: TopicSamples, start: int, fs: float) -> int:
+    """Stamps of a topic placed by index (:func:`place_topic`) that lie off the grid of the others and
+    were left out (their samples NaN, not interpolated); 0 for a topic that is interpolated."""
+    got = _on_grid_index(s.t_ns, start, fs)
+    return 0 if got is None else int(s.t_ns.size - np.count_nonzero(got[1]))
 
 
 def _runs(t: np.ndarray) -> list[tuple[int, int]]:
@@ -114,8 +135,11 @@ def place_topic(s: TopicSamples, start: int, n: int, fs: float, *,
     t, y = s.t_ns, s.values
     out = np.full((y.shape[0], n), np.nan)
     covered = np.zeros(n, bool)
-    k = _on_grid_index(t, start, fs)
-    if k is not None:
+    got = _on_grid_index(t, start, fs)
+    if got is not None:
+        k, on = got
+        if k.size < t.size:  # a few stamps off the grid of the others (a nudged stamp): left out, not interpolated
+            y = y[:, on]
         k = k - first
         i0, i1 = np.searchsorted(k, [0, n])  # k is increasing
         k, y = k[i0:i1], y[:, i0:i1]
@@ -236,6 +260,10 @@ def onto_grid(path: Any, topics: list[str], samples: dict[str, TopicSamples], fs
     for t in topics:
         out, covered, resampled[t] = place_topic(samples[t], start, n, fs)
         rows[t] = out
+        stray = 0 if resampled[t] else off_grid_stamps(samples[t], start, fs)
+        if stray:
+            warnings.append(f"topic {t!r}: {stray} stamps off the grid that its other stamps lie on (moved stamps?): "
+                            "their samples left out (NaN), not interpolated")
         if resampled[t]:
             fs_src = samples[t].report.fs_est
             warnings.append(

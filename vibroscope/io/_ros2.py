@@ -15,6 +15,8 @@ import threading
 
 import numpy as np
 
+from vibroscope.io.timebase import stamps_ns
+
 SEP = "=" * 80 + "\n"
 
 _TIME = "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
@@ -203,7 +205,7 @@ def decode_block(buf, st: np.ndarray, ln: np.ndarray, tname: str, names: list[st
         p = np.ndarray((m,), dtype=dt, buffer=buf, offset=int(st[0]), strides=(step,))
         if not (p["_cdr"] == 0x0100).all() or not flen_fits(p["_flen"], first):
             return None
-        stamps = p["header.stamp.sec"].astype(np.int64) * 1_000_000_000 + p["header.stamp.nanosec"]
+        stamps = stamps_ns(p["header.stamp.sec"], p["header.stamp.nanosec"])  # nanosec >= 1e9: invalid
         return stamps, [p[n] for n in names]
     floats = FLOAT_FIELDS[tname]
     kernel = _gather_kernel() if compiled else None
@@ -216,7 +218,7 @@ def decode_block(buf, st: np.ndarray, ln: np.ndarray, tname: str, names: list[st
             return None
         f64 = iter(out.view("<f8"))
         vals = [sec if n == STAMP_FIELDS[0] else nsec if n == STAMP_FIELDS[1] else next(f64) for n in names]
-        return sec.astype(np.int64) * 1_000_000_000 + nsec, vals
+        return stamps_ns(sec, nsec), vals
     nb = len(buf)
     st, ln = st.astype(np.int64), ln.astype(np.int64)
     if int(st.min()) < 0 or int(ln.min()) < 16 or int((st + ln).max()) > nb:
@@ -235,7 +237,7 @@ def decode_block(buf, st: np.ndarray, ln: np.ndarray, tname: str, names: list[st
     first += st
     cols = {"header.stamp.sec": sec, "header.stamp.nanosec": nsec}
     vals = [cols[n] if n in cols else at("<f8", first + 8 * floats.index(n)) for n in names]
-    return sec.astype(np.int64) * 1_000_000_000 + nsec, vals
+    return stamps_ns(sec, nsec), vals
 
 
 def encode_fixed(

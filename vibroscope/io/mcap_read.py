@@ -11,10 +11,12 @@ Time base
 ---------
 ``header.stamp`` (sec + nanosec, int64 ns) where the message has a header, else the log
 time (also when most header stamps are equal). Outlier stamps (more than 1000 periods and
-1 s off their neighbours or their log time, :func:`~vibroscope.io.timebase.outlier_stamps`)
-are dropped and reported; the rest are sorted, equal stamps dropped (first kept). A topic
+1 s off their neighbours or their log time; a ``nanosec`` not below 1e9; a header stamp moved by
+less, against both its log time and the stamps around it,
+:func:`~vibroscope.io.timebase.outlier_stamps`) are dropped and reported; the rest are sorted, equal stamps dropped (first kept). A topic
 whose stamps lie on the output grid within 1 % of a period is placed by index (no
-interpolation; NaN where a message is missing); any other is interpolated (cubic spline,
+interpolation; NaN where a message is missing; a few stamps off that grid, at most 1 %, are left
+out as NaN); any other is interpolated (shape-preserving PCHIP, never outside its two neighbours,
 after an anti-alias low-pass when its rate exceeds `fs` by 1 %,
 :func:`~vibroscope.io.timebase.resample_to_grid`) within each run of stamps without a
 missing message (:func:`~vibroscope.io.timebase.fit_stamps`: increments over 1.5 median

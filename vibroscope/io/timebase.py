@@ -22,9 +22,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["TimebaseReport", "StampFit", "analyse_stamps", "fit_stamps", "outlier_stamps", "resample_to_grid",
-           "GAP_PERIODS", "GAP_WINDOW", "GAP_SIGMAS", "ON_GRID_TOL", "OUTLIER_PERIODS", "OUTLIER_MIN_S",
-           "DOWNSAMPLE_RATIO"]
+__all__ = ["TimebaseReport", "StampFit", "analyse_stamps", "fit_stamps", "outlier_stamps", "nudged_stamps",
+           "resample_to_grid", "stamps_ns", "GAP_PERIODS", "GAP_WINDOW", "GAP_SIGMAS", "ON_GRID_TOL",
+           "OUTLIER_PERIODS", "OUTLIER_MIN_S", "NUDGE_SIGMAS", "DOWNSAMPLE_RATIO", "INVALID_STAMP_NS"]
 
 #: increments longer than this many median periods are gaps: no interpolation across them
 GAP_PERIODS = 1.5
@@ -34,6 +34,12 @@ ON_GRID_TOL = 0.01
 OUTLIER_PERIODS = 1000.0
 #: least deviation in s of an outlier stamp
 OUTLIER_MIN_S = 1.0
+#: a stamp whose offset from its log time departs from its neighbours' by this many robust standard
+#: deviations of that offset (and by more than ON_GRID_TOL of a period) is a nudged stamp (:func:`nudged_stamps`)
+NUDGE_SIGMAS = 8.0
+#: the stamp of a message whose ``header.stamp.nanosec`` is not below 1e9 (an invalid time, :func:`stamps_ns`):
+#: far below any real stamp, so every rule of :func:`outlier_stamps` drops it; no difference of stamps overflows
+INVALID_STAMP_NS = -(1 << 62)
 #: a source rate this much above the output rate is low-passed before resampling (below, the
 #: band that could alias, ``fs/2 .. fs_src/2``, is under 0.5 % of the output band)
 DOWNSAMPLE_RATIO = 1.01
@@ -426,6 +432,154 @@ def _snap(fs: float, rel_tol: float) -> float:
     return fs
 
 
+def stamps_ns(sec: np.ndarray, nanosec: np.ndarray) -> np.ndarray:
+    """ROS 2 ``builtin_interfaces/Time`` fields as int64 ns; an invalid time is :data:`INVALID_STAMP_NS`.
+
+    Parameters
+    ----------
+    sec : ndarray of int, shape (n,)
+        ``header.stamp.sec``.
+    nanosec : ndarray of int, shape (n,)
+        ``header.stamp.nanosec``; valid below 1e9 (ROS 2 ``builtin_interfaces/msg/Time``:
+        "nanosec: the nanoseconds component, valid in the range [0, 1e9)").
+
+    Returns
+    -------
+    ndarray of int64, shape (n,)
+        ``sec * 1e9 + nanosec``, and :data:`INVALID_STAMP_NS` where ``nanosec >= 1e9`` (a flipped
+        bit there would move the stamp by up to 3.3 s while looking like any other stamp); such
+        stamps are outliers of :func:`outlier_stamps`, dropped and counted.
+    """
+    ns = np.asarray(nanosec)
+    t = np.asarray(sec).astype(np.int64) * 1_000_000_000 + ns
+    bad = ns >= 1_000_000_000
+    if bad.any():
+        t = np.where(bad, INVALID_STAMP_NS, t)
+    return t
+
+
+def _robust_std(x: np.ndarray) -> float:
+    """1.4826 times the median absolute deviation of `x` (0 for an empty array)."""
+    if x.size == 0:
+        return 0.0
+    return 1.4826 * float(median(np.abs(x - median(x))))
+
+
+def _nanmedian_rows(a: np.ndarray) -> np.ndarray:
+    """Median of each row of `a` without its NaN (NaN for an all-NaN row), no warning."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(a, axis=1) if a.size else np.zeros(a.shape[0])
+
+
+def nudged_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray, *, sigmas: float = NUDGE_SIGMAS,
+                  window: int = 4) -> np.ndarray:
+    """Which header stamps were moved by less than the outlier threshold: they disagree with their
+    log time and with the stamps around them.
+
+    Parameters
+    ----------
+    stamps_ns : ndarray of int64, shape (n,)
+        Header stamps in ns, in the order the messages were logged.
+    log_times_ns : ndarray of int64, shape (n,)
+        The messages' log times in ns (the second clock).
+    sigmas : float, optional
+        Threshold in robust standard deviations (default :data:`NUDGE_SIGMAS`, 8).
+    window : int, optional
+        Neighbours on each side that a stamp is compared with (default 4).
+
+    Returns
+    -------
+    ndarray of bool, shape (n,)
+        True for a nudged stamp (False everywhere with fewer than ``2 window + 1`` stamps).
+
+    Notes
+    -----
+    With ``T`` the median positive stamp increment, a stamp ``t_i`` with log time ``l_i`` is nudged
+    when
+
+    1. its offset ``t_i - l_i`` departs from the median offset of its ``2 window`` neighbours (in
+       logging order) by more than ``tol_l = max(sigmas s_l, ON_GRID_TOL T)``, ``s_l`` the robust
+       standard deviation (1.4826 MAD) of the offsets' second differences
+       ``o_i - (o_{i-1} + o_{i+1}) / 2``: the stamp moved against the log time, and
+    2. either (a) it is off the grid of the stamps around it *in time*: the phase
+       ``|(t_i - t_j) mod T|`` (the mod taken in ``[-T/2, T/2]``) has a median beyond
+       ``tol_p = max(sigmas s_p, ON_GRID_TOL T)`` over the ``window`` stamps before it and over
+       the ``window`` after it (``s_p`` the robust standard deviation of the phases of
+       consecutive stamps; only where ``tol_p < T / 2``, i.e. the stamps keep a grid), or (b) it
+       is off the sequence *in logging order*: it departs, with the same sign, by more than
+       ``max(sigmas s_t, 1.5 T)`` from both predictions ``median(t_j - (j - i) T)`` of the
+       ``window`` stamps logged before it and after it (``s_t`` the robust standard deviation of
+       the stamps' second differences).
+
+    A stamp moved by ``delta`` meets 1 and 2(a) for ``ON_GRID_TOL T < |delta|`` (off the grid,
+    above the log times' jitter), and 1 and 2(b) for ``|delta| > 1.5 T`` (beyond the neighbour
+    it passes). Two messages logged in swapped order (stamps one period out of logging order,
+    each on the grid) meet neither 2(a) nor 2(b); a late log time alone, or a gap, fails 1 or 2.
+    Not told apart: a move by a whole number of periods of at most 1.5 (onto a neighbour's grid
+    point, or into a gap), and moves below ``tol_l`` where the log times jitter more than the
+    stamps (such a stamp, off the grid of the others, is still left out of an on-grid topic by
+    :mod:`vibroscope.io._grid`).
+    """
+    t = np.asarray(stamps_ns, np.int64)
+    n = t.size
+    out = np.zeros(n, bool)
+    if n < 2 * window + 1:
+        return out
+    off = t - np.asarray(log_times_ns, np.int64)
+    r2o = 2 * off[1:-1] - off[:-2] - off[2:]  # twice the second difference, exact in int64
+    if not r2o.any():  # the usual case: a constant offset (or stamps that are the log times)
+        return out
+    step = max(1, n >> 16)  # tolerances from a strided sample of 65536: statistics, not every stamp
+    d = np.diff(t[::step]) if step > 1 else np.diff(t)
+    pos = d[d > 0]
+    if pos.size == 0:
+        return out
+    T = float(median(pos)) / step
+    tol_l = max(sigmas * _robust_std(r2o[::step].astype(np.float64)) / 2, ON_GRID_TOL * T)
+    cand = np.flatnonzero(np.abs(r2o) > tol_l) + 1  # a moved stamp moves its own second difference fully
+    cand = np.unique(np.r_[cand, [0, n - 1]])  # the ends have no second difference: always examined
+    w = window
+    rel = np.r_[np.arange(-w, 0), np.arange(1, w + 1)]
+    j = cand[:, None] + rel[None, :]
+    inr = (j >= 0) & (j < n)
+    jc = np.clip(j, 0, n - 1)
+    nb = np.where(inr, (off[jc] - off[cand][:, None]).astype(np.float64), np.nan)
+    c1 = np.abs(_nanmedian_rows(nb)) > tol_l  # the offset against the median of its neighbours'
+    cand, jc, inr = cand[c1], jc[c1], inr[c1]
+    if cand.size == 0:
+        return out
+    # 2(a): off the grid of its neighbours in time
+    dt = (np.diff(np.sort(t[::step])) if step > 1 else np.diff(np.sort(t))).astype(np.float64)
+    ph = dt / (T * step) if step > 1 else dt / T
+    tol_p = max(sigmas * _robust_std((ph - np.rint(ph)) * T), ON_GRID_TOL * T)
+    c2a = np.zeros(cand.size, bool)
+    if tol_p < 0.5 * T:
+        ts = np.sort(t)
+        r = np.searchsorted(ts, t[cand])  # rank of each candidate among the stamps (its first copy)
+        k = r[:, None] + rel[None, :]
+        ok = (k >= 0) & (k < n)
+        x = (t[cand][:, None] - ts[np.clip(k, 0, n - 1)]).astype(np.float64) / T
+        x = np.where(ok, np.abs(x - np.rint(x)) * T, np.nan)  # |phase|: half a period is +-T/2 alike
+        left, right = _nanmedian_rows(x[:, :w]), _nanmedian_rows(x[:, w:])
+        left = np.where(np.isnan(left), right, left)  # an end: its one side decides
+        right = np.where(np.isnan(right), left, right)
+        c2a = (np.abs(left) > tol_p) & (np.abs(right) > tol_p)
+    # 2(b): off the sequence in logging order (stamps less their count: level between gaps)
+    r2t = (2 * t[1:-1:step] - t[:-2:step] - t[2::step]).astype(np.float64) / 2
+    tol_t = max(sigmas * _robust_std(r2t), 1.5 * T)
+    lin = np.where(inr, (t[jc] - t[cand][:, None]).astype(np.float64) - (jc - cand[:, None]) * T, np.nan)
+    pl, pr = _nanmedian_rows(lin[:, :w]), _nanmedian_rows(lin[:, w:])
+    el, er = -pl, -pr  # the stamp's own level is 0 relative to itself
+    el = np.where(np.isnan(el), er, el)
+    er = np.where(np.isnan(er), el, er)
+    c2b = (np.sign(el) == np.sign(er)) & (np.minimum(np.abs(el), np.abs(er)) > tol_t)
+    out[cand[c2a | c2b]] = True
+    return out
+
+
 def outlier_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray | None = None, *,
                    periods: float = OUTLIER_PERIODS, min_s: float = OUTLIER_MIN_S) -> np.ndarray:
     """Which stamps are outliers: far off their neighbours or their own log time.
@@ -459,10 +613,22 @@ def outlier_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray | None = None
     3. it lies in a small cluster (at most 1 % of the stamps, at least 1) separated from
        the rest by more than ``thr`` and by more than 10 times the span of the rest.
 
-    A stamp that was wrong by less than ``thr`` cannot be told from jitter or a gap here.
+    4. its ``nanosec`` field was not below 1e9 (:data:`INVALID_STAMP_NS`, :func:`stamps_ns`);
+    5. (header stamps only) it was moved by less than ``thr``, disagreeing with its log time and with
+       the stamps on both sides of it (:func:`nudged_stamps`).
+
+    Such a stamp is dropped with its sample (NaN on the grid, counted), never trusted: a message
+    placed at a wrong time would give a value that was never measured there.
     """
     t = np.asarray(stamps_ns, np.int64)
     n = t.size
+    invalid = t == INVALID_STAMP_NS
+    if invalid.any():  # the rest judged without them
+        out = invalid.copy()
+        keep = np.flatnonzero(~invalid)
+        out[keep] = outlier_stamps(t[keep], None if log_times_ns is None else np.asarray(log_times_ns)[keep],
+                                   periods=periods, min_s=min_s)
+        return out
     out = np.zeros(n, bool)
     if n < 3:
         return out
@@ -482,7 +648,7 @@ def outlier_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray | None = None
         out |= np.abs(off - median(off)) > thr
     jump = np.abs(dt.astype(np.float64)) > thr  # (n-1,)
     if increasing and not jump.any():
-        return out  # no increment beyond thr: no isolated jump, no far cluster
+        return _with_nudged(out, t, log_times_ns)  # no increment beyond thr: no isolated jump, no far cluster
     if order_all is None:
         order_all = np.arange(n)
     tf = t.astype(np.float64)
@@ -506,6 +672,15 @@ def outlier_stamps(stamps_ns: np.ndarray, log_times_ns: np.ndarray | None = None
         if dd[j] <= 10 * span_rest:
             break
         out[order[: j + 1] if left <= right else order[j + 1 :]] = True
+    return _with_nudged(out, t, log_times_ns)
+
+
+def _with_nudged(out: np.ndarray, t: np.ndarray, log_times_ns: np.ndarray | None) -> np.ndarray:
+    """`out` or the nudged stamps among the rest (:func:`nudged_stamps`; header stamps only)."""
+    if log_times_ns is None:
+        return out
+    keep = np.flatnonzero(~out)
+    out[keep] = nudged_stamps(t[keep], np.asarray(log_times_ns, np.int64)[keep])
     return out
 
 
@@ -563,14 +738,23 @@ def resample_to_grid(
     Notes
     -----
     The samples must form one contiguous run (no gap): the caller splits a topic at its gaps
-    (:mod:`vibroscope.io._grid`) and calls this per run, so a spline never spans a gap.
-    Downsampling (``fs_src > 1.01 fs``, :data:`DOWNSAMPLE_RATIO`): the samples are first put on a uniform grid at `fs_src`
-    (cubic spline), low-passed (8th-order Butterworth at 0.4 `fs`, forward-backward so with
-    no phase shift), then interpolated. Otherwise a cubic spline through the samples
-    (interpolation error O(h^4) for band-limited signals; linear interpolation would
-    attenuate a sine at 5 % of the rate by about 1 %).
+    (:mod:`vibroscope.io._grid`) and calls this per run, so an interpolant never spans a gap.
+    The interpolant is the shape-preserving piecewise cubic Hermite (PCHIP, Fritsch & Carlson,
+    "Monotone piecewise cubic interpolation", SIAM J. Numer. Anal. 17(2), 1980; scipy's
+    ``PchipInterpolator``): monotone on every interval, so **an interpolated value always lies
+    between the two samples around it** (a cubic spline overshoots: a single misplaced stamp made
+    it give 1.21 from samples within +-1). Its error is therefore bounded by the increment
+    between those two samples, ``|y(t) - y_k| <= |y_{k+1} - y_k|``; for a sine of amplitude A
+    and frequency f sampled every h it is below ``A (2 pi f h)^2 / 8`` near the extrema (where
+    PCHIP flattens) and O(h^3) elsewhere (a sine at 3 % of the rate: < 0.5 % of A).
+    Downsampling (``fs_src > 1.01 fs``, :data:`DOWNSAMPLE_RATIO`): the samples are first put on
+    a uniform grid at `fs_src` (PCHIP: points within the stamps' jitter of a sample), low-passed
+    (8th-order Butterworth at 0.4 `fs`, forward-backward so with no phase shift), then
+    interpolated by a cubic spline (the low-passed record is band-limited: error O(h^4)); the
+    output is then the low-passed signal, which may leave the range of the raw samples (a
+    filter's ringing), as the output of any anti-alias filter does.
     """
-    from scipy.interpolate import CubicSpline
+    from scipy.interpolate import CubicSpline, PchipInterpolator
 
     y = np.atleast_2d(np.asarray(y, float))
     if fs_src > fs * DOWNSAMPLE_RATIO:
@@ -581,10 +765,11 @@ def resample_to_grid(
         return np.vstack([np.interp(grid_s, t_s, row) for row in y])
     if fs_src > fs * DOWNSAMPLE_RATIO:
         tu = t_s[0] + np.arange(n_u) / fs_src
-        yu = CubicSpline(t_s, y, axis=1)(tu)
+        yu = PchipInterpolator(t_s, y, axis=1)(tu)
         yu = _lowpass_uniform(yu, fs_src, fs)
+        # the low-passed uniform record is band-limited (below 0.4 fs): a cubic spline, O(h^4)
         return CubicSpline(tu, yu, axis=1)(np.clip(grid_s, tu[0], tu[-1]))
-    return CubicSpline(t_s, y, axis=1)(grid_s)
+    return PchipInterpolator(t_s, y, axis=1)(grid_s)
 
 
 def on_grid(t_ns: np.ndarray, start_ns: int, fs: float, tol: float = 0.01) -> bool:
