@@ -67,8 +67,6 @@ def test_deleted_middle_chunk_is_a_counted_gap(dp, bases, tmp_path):
         assert outcome == "ok" and not detail.startswith("lost 0"), detail
 
 
-@pytest.mark.xfail(reason="issue 21 item 1 (another branch): a log whose first (or only) chunk is deleted reads "
-                          "as 'no such topic', the loss not named", strict=False)
 @pytest.mark.parametrize("log", ["controlled", "synthetic_imu"])
 def test_deleted_first_chunk_is_said(dp, bases, tmp_path, log):
     (base, p, desc), = _variants(dp, bases, "delete_first_chunk", tmp_path, logs=[log], n=1)

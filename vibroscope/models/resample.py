@@ -13,12 +13,13 @@ Resampling in vibroscope: three designs, each for its own job
   because :func:`~vibroscope.models.simulate.simulate` and its tests rely on output ``k``
   belonging to input ``k``;
 * :func:`vibroscope.io.timebase.resample_to_grid`, **irregular time stamps onto a uniform
-  grid** at any (non-integer) rate ratio: a cubic spline through the samples, with a
-  Butterworth anti-alias low-pass when the source is faster. Integer-factor filters do not
+  grid** at any (non-integer) rate ratio: a shape-preserving cubic (PCHIP) through the
+  samples, never outside two neighbours, with a Butterworth anti-alias low-pass when the source
+  is faster. Integer-factor filters do not
   apply to jittered, gapped stamps;
 * :func:`vibroscope.pipeline.decimate`, **reducing a uniform record to the analysis band**
-  before spectral estimation: :func:`scipy.signal.decimate` (order-8 Chebyshev I, zero
-  phase) in stages of at most 10 for any integer factor, including large primes for which a
+  before spectral estimation: an order-9 Chebyshev I low-pass (zero phase, unit gain at
+  0 Hz) in stages of at most 10 for any integer factor, including large primes for which a
   30th-order FIR per stage would alias; only the band below 0.4 fs is used afterwards.
 
 The three are kept apart on purpose: merging them would change simulated records (FIR vs
