@@ -942,12 +942,24 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
 
+    group_logs0 = {g[0] for g in groups}
+    explains_level: dict[int, bool] = {}
+
     def admissible(c):
-        """Not vanished, and not a linear explanation of a BLA that changes with the level."""
+        """Not vanished, and not a linear explanation of a BLA that changes with the level -
+        unless the candidate's own simulation changes with the level the same way (a linear
+        effect inside a nominal with nonlinear parts, such as a controller's saturation)."""
         if c[0].vanished:
             return False
         kind = EFFECT_TABLE[c[0].effect].kind
-        return not (level["flagged"] and kind in ("linear", "reference"))
+        if not (level["flagged"] and kind in ("linear", "reference")):
+            return True
+        if c[0].effect in ("parameter_mismatch", "none") or not group_logs0 <= set(c[2]):
+            return False
+        if id(c[0]) not in explains_level:
+            b_c = _bla_levels(us, [c[2].get(i) for i in range(len(ys))], groups, fs, nps, f_s)
+            explains_level[id(c[0])] = not _level_test(f_s, blas, b_c)["flagged"]
+        return explains_level[id(c[0])]
 
     best_i = next((i for i, c in enumerate(cands) if admissible(c)), None)
     if best_i is not None and not level["flagged"] and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear":
