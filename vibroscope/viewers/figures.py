@@ -862,10 +862,14 @@ def _render(k: int) -> str:
 
 
 def _quiet_worker() -> None:
-    """Worker start: Ctrl-C is the parent's to handle (it terminates the workers), not a traceback each."""
+    """Worker start: Ctrl-C is the parent's to handle (it terminates the workers), not a traceback
+    each; SIGTERM (``Pool.terminate``) ends a worker at once, whatever handler the parent had
+    installed when it forked (a Python handler that raises or holds the signal would leave the
+    worker waiting on the pool's queue, and the parent's join waiting for ever)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 def _workers() -> int:
