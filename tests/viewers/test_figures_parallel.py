@@ -51,3 +51,29 @@ def test_a_failing_figure_raises_and_leaves_no_worker(tmp_path, results):
     assert not multiprocessing.active_children()
     with pytest.raises(RuntimeError, match="no figure here"):  # in this process, the same error
         figures.PendingFigures(jobs, workers=1).wait()
+
+
+def test_workers_end_although_the_parent_holds_sigterm(tmp_path):
+    """A parent whose SIGTERM handler only records the signal (a library's graceful shutdown, the
+    held signals of the output commit) forks workers with that handler: Pool.terminate must still
+    end them (run in a subprocess, so a regression fails on the timeout instead of hanging)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import signal, sys\n"
+        "got = []\n"
+        "signal.signal(signal.SIGTERM, lambda s, f: got.append(s))\n"
+        "import matplotlib; matplotlib.use('Agg')\n"
+        "from vibroscope.viewers import figures\n"
+        "import matplotlib.pyplot as plt\n"
+        "def draw():\n"
+        "    fig, ax = plt.subplots(); ax.plot([0, 1]); return fig\n"
+        f"out = {str(tmp_path)!r}\n"
+        "for k in range(3):\n"
+        "    jobs = [(draw, f'{out}/a{k}.png'), (draw, f'{out}/b{k}.png')]\n"
+        "    print(len(figures.PendingFigures(jobs, workers=2).wait()))\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["2", "2", "2"]
