@@ -942,8 +942,16 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
 
-    group_logs0 = {g[0] for g in groups}
-    explains_level: dict[int, bool] = {}
+    group_logs = {g[0] for g in groups}
+    cand_bla: dict[int, list | None] = {}
+
+    def bla_of(c):
+        """The BLA per level of a candidate's own simulation on the measured level groups
+        (cached); None when its held-out outputs do not cover every level (multi-log)."""
+        if id(c[0]) not in cand_bla:
+            cand_bla[id(c[0])] = (_bla_levels(us, [c[2].get(i) for i in range(len(ys))], groups, fs, nps, f_s)
+                                  if group_logs <= set(c[2]) else None)
+        return cand_bla[id(c[0])]
 
     def admissible(c):
         """Not vanished, and not a linear explanation of a BLA that changes with the level -
@@ -954,12 +962,9 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         kind = EFFECT_TABLE[c[0].effect].kind
         if not (level["flagged"] and kind in ("linear", "reference")):
             return True
-        if c[0].effect in ("parameter_mismatch", "none") or not group_logs0 <= set(c[2]):
+        if c[0].effect in ("parameter_mismatch", "none") or bla_of(c) is None:
             return False
-        if id(c[0]) not in explains_level:
-            b_c = _bla_levels(us, [c[2].get(i) for i in range(len(ys))], groups, fs, nps, f_s)
-            explains_level[id(c[0])] = not _level_test(f_s, blas, b_c)["flagged"]
-        return explains_level[id(c[0])]
+        return not _level_test(f_s, blas, bla_of(c))["flagged"]
 
     best_i = next((i for i, c in enumerate(cands) if admissible(c)), None)
     if best_i is not None and not level["flagged"] and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear":
@@ -971,21 +976,13 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             best_i = j
     # the level evidence enters the ranking: a measured hardening / softening must be reproduced
     # by the nonlinear verdict's own simulation (its BLA per level, on the same level groups)
-    trend_shifts: dict[str, float] = {}
-    group_logs = {g[0] for g in groups}
-
-    def sim_shift(c):
-        name = f"{c[0].effect}@{where_label_plain(c[0].where)}"
-        if name not in trend_shifts:
-            yh = c[2]
-            b_c = _bla_levels(us, [yh.get(i) for i in range(len(ys))], groups, fs, nps, f_s)
-            trend_shifts[name] = float(_level_test(f_s, b_c)["shift"])
-        return trend_shifts[name]
+    trend_shifts: dict[str, float] = {}  # the report's record: effect@location -> simulated shift
 
     def reproduces_trend(c):
-        if not group_logs <= set(c[2]):  # its outputs do not cover every level (multi-log)
+        if bla_of(c) is None:  # its outputs do not cover every level (multi-log): no evidence
             return True
-        sc, sm = sim_shift(c), float(level["shift"])
+        sc, sm = float(_level_test(f_s, bla_of(c))["shift"]), float(level["shift"])
+        trend_shifts[f"{c[0].effect}@{_where_key(c[0].where)}"] = sc
         return sc * sm > 0 and abs(sc) >= TREND_SHARE * abs(sm)
 
     if (best_i is not None and level["trend"] in ("hardening", "softening")
@@ -1114,7 +1111,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     )
 
 
-def where_label_plain(where: dict) -> str:
+def _where_key(where: dict) -> str:
     """A candidate's location as a short key (``m1-ground``, ``input``, ``m2``)."""
     if "between" in where:
         return "-".join(str(x) for x in where["between"])
