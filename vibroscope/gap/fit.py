@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -196,7 +197,8 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
     return build(x), x[:nl], x[nl:], float(best.cost)
 
 
-def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, max_nfev=30, diff_step=1e-3):
+def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, max_nfev=30, diff_step=1e-3,
+                    jac_workers=2):
     """Least-squares fit of parameters `x` of ``build(x) -> LumpedModel`` to the outputs.
 
     Parameters
@@ -219,6 +221,10 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
     diff_step : float, optional
         Relative finite-difference step of the Jacobian (``least_squares``'s
         ``diff_step``); default 1e-3.
+    jac_workers : int, optional
+        Threads evaluating the finite-difference Jacobian's columns (``least_squares``'s
+        ``workers``, scipy >= 1.16); default 2. The simulation kernels release the GIL, so
+        the columns run on several cores; the result does not depend on it.
 
     Returns
     -------
@@ -227,7 +233,7 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
     # each channel normalised by its own energy (the metric of vibroscope.gap.measure.nrmse)
     den_c = sum(np.sum(y[:, :n][:, m[:n]] ** 2, axis=1) for y, m, n in zip(ys, masks, ns) if n)
     den = np.sqrt(np.maximum(np.asarray(den_c, float), 1e-300) * len(np.atleast_1d(den_c)))[:, None]
-    count = [0]
+    calls: list = []  # one entry per simulation (list.append is atomic across threads)
 
     def res(x):
         m = build(x)
@@ -236,7 +242,7 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
             if not n:
                 continue
             yh = sim.run(m, n, fast=fast)
-            count[0] += 1
+            calls.append(1)
             r = (y[:, :n] - yh)[:, mk[:n]] / den
             if not np.all(np.isfinite(r)):
                 r = np.full_like(r, 10.0 / math.sqrt(r.size))
@@ -244,9 +250,14 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
         return np.concatenate(out)
 
     x0 = np.clip(np.asarray(x0, float), lower + 1e-9, upper - 1e-9)
-    sol = least_squares(res, x0, bounds=(lower, upper), method="trf", x_scale=1.0, diff_step=diff_step,
-                        max_nfev=max_nfev)
-    return sol.x, float(math.sqrt(2 * sol.cost)), count[0]
+    kw = {"x_scale": 1.0, "diff_step": diff_step, "max_nfev": max_nfev}
+    if jac_workers > 1 and x0.size > 1:
+        # the Jacobian's columns in parallel threads (the simulation kernels release the GIL)
+        with ThreadPoolExecutor(min(jac_workers, x0.size)) as ex:
+            sol = least_squares(res, x0, bounds=(lower, upper), method="trf", workers=ex.map, **kw)
+    else:
+        sol = least_squares(res, x0, bounds=(lower, upper), method="trf", **kw)
+    return sol.x, float(math.sqrt(2 * sol.cost)), len(calls)
 
 
 def best_start(build, starts, sims, ys, masks, ns):
