@@ -102,6 +102,7 @@ from vibroscope.gap.measure import (
 )
 from vibroscope.gap.report import Candidate, ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.gap.signatures import run_signatures
+from vibroscope.modal.automatic import one_blas_thread
 from vibroscope.models.elements import GROUND
 from vibroscope.models.lumped import Input, LumpedModel, Output
 from vibroscope.models.elements import Spring
@@ -572,6 +573,7 @@ def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
     return out
 
 
+@one_blas_thread  # the fits run in a thread pool: a BLAS pool per thread only spins against it
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress) -> GapReport:
     from tqdm.auto import tqdm
 
@@ -740,7 +742,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     sigs_tests = run_signatures(
         f=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
         noise_coh=noise_coh, resid=resid[:, mfit0], u=u_fit[mfit0], states={"relative": rel_fit}, fs=fs,
-        out_channels=out_ch, level_stat=level)
+        out_channels=out_ch, level_stat=level, input_unit=in_unit)
     tau = next((s.value for s in sigs_tests if s.name == "phase_slope"), 0.0)
     scales["delay0"] = float(min(max(tau, 1e-4), 0.05))
     n_reg = min(n_sc, int(20 * fs))
@@ -749,11 +751,26 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
 
     # 4. candidates ------------------------------------------------------------------------------
     t = time.perf_counter()
+    val_logs = [i for i, m in enumerate(split.validation) if m.any()]
+
+    def held_out(m_, fast=False):
+        yh = {i: sims[i].run(m_, fast=fast) for i in val_logs}
+        g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
+        return (g if np.isfinite(g) else float("inf")), yh
+
     none_ok = gap_before <= NONE_FACTOR * floor
     specs = [] if none_ok else candidate_specs(refit, scales, effect_set)  # within the noise: nothing to explain
     lin_specs = [s for s in specs if s.linear]
     nl_specs = [s for s in specs if not s.linear]
-    bar = tqdm(total=len(specs) + min(n_full, len({s.effect for s in nl_specs})), desc="gap candidates",
+    not_tried: dict[str, str] = {}  # effect -> why its candidates were not fitted
+    linear_nominal = not closed and all(e.is_linear for e in refit.elements)
+    if lin_specs and level["flagged"] and linear_nominal:
+        # a linear effect in a linear model cannot change the BLA with the level: it would be
+        # inadmissible (see admissible() below), so it is not fitted
+        for s in lin_specs:
+            not_tried[s.effect] = "the BLA changes with the level, which no linear effect of a linear model does"
+        lin_specs = []
+    bar = tqdm(total=len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs})), desc="gap candidates",
                disable=not progress, leave=False)
     results = []  # (spec, augmented model, p, gap_fit, base model without the effect)
 
@@ -787,6 +804,24 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
 
     with ThreadPoolExecutor(max(1, workers)) as ex:
         results += list(ex.map(lin_polish, best_lin.values()))
+    pre_eval: dict[int, tuple] = {}  # id(result) -> (held-out gap, outputs), reused in evaluate()
+    if results and nl_specs and not level["flagged"]:
+        # a linear explanation already at the noise floor, and a BLA that does not change with the
+        # level: a level-dependent nonlinear effect could not be told from the noise (the search
+        # stops, as 'none' stops it for the nominal model)
+        with ThreadPoolExecutor(max(1, workers)) as ex:
+            for r, ev in zip(results, ex.map(lambda r: held_out(r[1], fast=True), results)):
+                pre_eval[id(r)] = ev
+        g_lin = min([gap_refit] + [pre_eval[id(r)][0] for r in results if r[0].vanishes(r[2]) is None])
+        if g_lin <= NONE_FACTOR * floor:
+            for s in nl_specs:
+                if EFFECT_TABLE[s.effect].level_dependent:
+                    not_tried[s.effect] = (f"a linear explanation leaves a held-out gap of {g_lin:.3g}, within "
+                                           f"{NONE_FACTOR} x the noise floor {floor:.3g}, and the BLA does not change "
+                                           f"with the level")
+            nl_specs = [s for s in nl_specs if not EFFECT_TABLE[s.effect].level_dependent]
+            bar.total = len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs}))
+            bar.refresh()
 
     # nonlinear effects: screening at every location with the linear parameters at the refit
 
@@ -874,16 +909,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
 
     # 5. held-out evaluation and ranking ----------------------------------------------------------
     t = time.perf_counter()
-    val_logs = [i for i, m in enumerate(split.validation) if m.any()]
-
-    def held_out(m_, fast=False):
-        yh = {i: sims[i].run(m_, fast=fast) for i in val_logs}
-        g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
-        return (g if np.isfinite(g) else float("inf")), yh
 
     def evaluate(item):
         s, m_aug, p, gfit, base = item
-        g, yh = held_out(m_aug, fast=True)  # the winner is re-run at full accuracy (_polish)
+        # the winner is re-run at full accuracy (_polish)
+        g, yh = pre_eval[id(item)] if id(item) in pre_eval else held_out(m_aug, fast=True)
         # how much the effect itself changes the held-out outputs (against its own linear base)
         if base is refit or base is model:  # already simulated
             yb = {i: (y_ref if base is refit else y_nom)[i] for i in val_logs}
@@ -1068,7 +1098,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             from vibroscope.gap.levels import level_blas
 
             np_ev = _pow2(min(nps, max(min(int(np.sum(g[1])) for g in groups) // 4, 256)))
-            level_ev = level_blas(us, ys, all_masks, fs, np_ev, f_band=tuple(nf.excited_band))
+            level_ev = level_blas(us, ys, all_masks, fs, np_ev, f_band=tuple(nf.excited_band), input_unit=in_unit)
         except (ValueError, np.linalg.LinAlgError):  # evidence only: the report goes on without it
             level_ev = None
     timings["report"] = time.perf_counter() - t
@@ -1104,6 +1134,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                                    for k, v in level.items()} | {"simulated_shifts": trend_shifts},
               "start_values": {f"{k[0]}@{k[1]}" if k[1] else k[0]: (list(v) if isinstance(v, tuple) else v)
                                for k, v in scales.get("regress", {}).items()},
+              "not_tried": not_tried,
               "closed_loop": ({"inputs": log_channels(model)[0], "outputs": out_ch,
                                "excluded_effects": excluded} if closed else None),
               "localisation": "bands, channels and regimes of the nominal model on the held-out log "
