@@ -139,6 +139,14 @@ def lscf(
        frequency-domain method: a new standard for modal parameter estimation?", Shock and
        Vibration 11, 395–409, 2004.
 
+    See Also
+    --------
+    lsfd : Residues and mode shapes for the selected poles.
+    auto_lscf : LSCF with automatic settings, pole selection and LSFD.
+    peak_picking : Single-mode fits at the FRF's peaks.
+    ssi_cov : Output-only poles from the time series (SSI-COV).
+    fdd : Output-only modes from the cross-spectral matrix (FDD/EFDD).
+
     Examples
     --------
     >>> import numpy as np

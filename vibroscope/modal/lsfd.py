@@ -447,6 +447,11 @@ def lsfd(
        frequency-domain method: a new standard for modal parameter estimation?", Shock and
        Vibration 11, 395–409, 2004.
 
+    See Also
+    --------
+    lscf : The poles this fit takes.
+    auto_lscf : LSCF, automatic pole selection and this fit in one call.
+
     Examples
     --------
     >>> import numpy as np

@@ -199,6 +199,11 @@ def peak_picking(
        Studies Press, 2000, ch. 4 (SDOF modal analysis methods: peak-amplitude, circle-fit,
        inverse/line-fit).
 
+    See Also
+    --------
+    lscf : All modes of a band at once, close modes included (LSCF/polyMAX).
+    fdd : The output-only counterpart on a cross-spectral matrix.
+
     Examples
     --------
     The accelerance of 1 kg on 1e4 N/m with 2 % damping: 15.92 Hz and ζ = 0.02 are recovered.

@@ -295,6 +295,13 @@ def csd_matrix(
     .. [1] P. D. Welch, IEEE Trans. Audio Electroacoust. AU-15, 70–73, 1967.
     .. [2] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
 
+    See Also
+    --------
+    welch : The diagonal only (power spectral densities), one channel at a time.
+    frf : H1, H2 or Hv from this matrix.
+    coherence : Ordinary coherence from this matrix.
+    vibroscope.modal.fdd : Output-only modes from this matrix.
+
     Examples
     --------
     >>> import numpy as np
@@ -366,6 +373,12 @@ def welch(
     ----------
     .. [1] P. D. Welch, IEEE Trans. Audio Electroacoust. AU-15, 70–73, 1967.
 
+    See Also
+    --------
+    csd_matrix : All channel pairs (cross-spectral densities) in the same pass.
+    amplitude_spectrum : Amplitude (not power) per line.
+    spectrogram : Short-time spectra over time.
+
     Examples
     --------
     >>> import numpy as np
@@ -423,6 +436,10 @@ def amplitude_spectrum(
     ----------
     .. [1] A. Brandt, *Noise and Vibration Analysis: Signal Analysis and Experimental Procedures*,
        Wiley, 2011.
+
+    See Also
+    --------
+    welch : Power (``'density'`` or ``'spectrum'``) per line.
     """
     data, fs, channels, units = _unpack(x, fs)
     n = data.shape[1]
@@ -546,6 +563,34 @@ def frf(
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
     .. [2] G. T. Rocklin, J. Crowley and H. Vold, "A comparison of H1, H2, and Hv frequency response
        functions", Proc. 3rd IMAC, 1985.
+
+    See Also
+    --------
+    csd_matrix : The spectral matrix the estimators read; pass it as `x` for several estimates.
+    coherence : Ordinary coherence of channel pairs.
+    multiple_coherence : Coherence of each output with all inputs together.
+    vibroscope.modal.lscf : Poles from the FRF (LSCF/polyMAX); :func:`vibroscope.modal.lsfd` the shapes.
+    vibroscope.modal.peak_picking : Modes from the FRF's peaks.
+
+    Examples
+    --------
+    A gain of 2.5 with output noise of unit variance: H1 recovers the gain; H2 is biased up by the
+    noise, by ``1 / γ² = (6.25 + 1) / 6.25``:
+
+    >>> import numpy as np
+    >>> from vibroscope import Signals
+    >>> rng = np.random.default_rng(0)
+    >>> x = rng.standard_normal(100_000)
+    >>> y = 2.5 * x + rng.standard_normal(100_000)
+    >>> sig = Signals(np.vstack([x, y]), fs=1000.0, channels=["/f.x", "/a.x"], units=["N", "m/s^2"])
+    >>> h1 = frf(sig, "/f.x", nperseg=1000)
+    >>> h1.kind, h1.H.shape  # H[f, output, input]; N in, m/s² out: accelerance
+    ('accelerance', (501, 1, 1))
+    >>> round(float(np.abs(h1.H[1:-1, 0, 0]).mean()), 2), round(float(h1.coherence[1:-1, 0].mean()), 2)
+    (2.5, 0.86)
+    >>> h2 = frf(sig, "/f.x", estimator="H2", nperseg=1000)
+    >>> round(float(np.abs(h2.H[1:-1, 0, 0]).mean()), 2)  # 2.5 · 7.25 / 6.25
+    2.9
     """
     check_option("estimator", estimator, ("H1", "H2", "Hv"))
     if isinstance(x, CrossSpectralMatrix):
@@ -655,6 +700,11 @@ def coherence(
     References
     ----------
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §5.2.5.
+
+    See Also
+    --------
+    multiple_coherence : An output against several inputs together.
+    frf : The FRF with its coherence.
     """
     G = x if isinstance(x, CrossSpectralMatrix) else csd_matrix(
         x, fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend, nfft=nfft)
@@ -693,6 +743,11 @@ def multiple_coherence(
     References
     ----------
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §7.3.
+
+    See Also
+    --------
+    coherence : Ordinary coherence of channel pairs.
+    frf : The FRF with this coherence.
     """
     h = frf(x, inputs, outputs, **welch_kw)
     return MultipleCoherence(h.frequencies, h.coherence, h.inputs, h.outputs, dict(h.settings))
@@ -731,6 +786,10 @@ def spectrogram(
     -------
     Spectrogram
         ``values`` shape (n_channels, n_freqs, n_times).
+
+    See Also
+    --------
+    welch : The spectra averaged over the whole record.
     """
     data, fs, channels, units = _unpack(x, fs)
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
