@@ -1,4 +1,5 @@
-"""Each curated name of :mod:`vibroscope` (its lazily loaded ``_LAZY`` table and :class:`Signals`)
+"""Each curated name of :mod:`vibroscope` (its ``__all__``: the lazily loaded ``_LAZY`` table,
+:class:`Signals` and the exceptions)
 has an ``Examples`` section whose doctest recovers a known number, and the doctest passes.
 
 The same doctests also run in the whole-suite run (``--doctest-modules`` over the package in
@@ -17,7 +18,7 @@ import pytest
 
 import vibroscope
 
-CURATED = sorted(["Signals", *vibroscope._LAZY])
+CURATED = sorted(n for n in vibroscope.__all__ if not n.startswith("__"))  # _LAZY, Signals, the errors
 
 # Names whose examples are all marked ``# doctest: +SKIP``, with the reason.
 SKIPPED = {
@@ -37,7 +38,8 @@ def _examples(name: str) -> list[doctest.DocTest]:
 
 
 def test_every_curated_name_is_collected():
-    assert {"read_mcap", "frf", "ssi_cov", "fdd", "diagnose", "Signals"} <= set(CURATED)
+    assert {"read_mcap", "frf", "ssi_cov", "fdd", "diagnose", "Signals", "VibroscopeError"} <= set(CURATED)
+    assert set(vibroscope._LAZY) <= set(CURATED)
     assert set(SKIPPED) | set(WITHOUT) <= set(CURATED)
 
 

@@ -569,6 +569,7 @@ def frf(
     csd_matrix : The spectral matrix the estimators read; pass it as `x` for several estimates.
     coherence : Ordinary coherence of channel pairs.
     multiple_coherence : Coherence of each output with all inputs together.
+    frf_periodic : H1 from whole periods of a periodic excitation.
     vibroscope.modal.lscf : Poles from the FRF (LSCF/polyMAX); :func:`vibroscope.modal.lsfd` the shapes.
     vibroscope.modal.peak_picking : Modes from the FRF's peaks.
 

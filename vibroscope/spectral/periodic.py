@@ -253,6 +253,11 @@ def frf_periodic(
        2nd ed., Wiley–IEEE Press, 2012, ch. 2.
     .. [2] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §9.2.
 
+    See Also
+    --------
+    detect_period : The period of the input, when it is not known.
+    vibroscope.spectral.frf : H1, H2 or Hv by Welch averaging, for random excitation.
+
     Examples
     --------
     A 3-tap FIR filter driven by a repeated random period is recovered exactly:
