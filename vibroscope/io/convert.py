@@ -359,7 +359,7 @@ def read_csv(
     Returns
     -------
     Signals
-        shape (n_channels, n_rows).
+        Shape (n_channels, n_rows).
 
     Raises
     ------

@@ -263,16 +263,16 @@ def auto_ssi(
     -------
     Identification
 
-    References
-    ----------
-    .. [1] B. Peeters and G. De Roeck, "Reference-based stochastic subspace identification for
-       output-only modal analysis", Mechanical Systems and Signal Processing 13(6), 855–878, 1999.
-
     See Also
     --------
     vibroscope.modal.ssi_cov : The stabilization diagram with settings of one's own.
     auto_lscf : The input-output counterpart (FRFs, LSCF and LSFD).
     vibroscope.modal.fdd : Output-only modes from the cross-spectral matrix.
+
+    References
+    ----------
+    .. [1] B. Peeters and G. De Roeck, "Reference-based stochastic subspace identification for
+       output-only modal analysis", Mechanical Systems and Signal Processing 13(6), 855–878, 1999.
 
     Examples
     --------
@@ -382,17 +382,17 @@ def auto_lscf(
     Identification
         With ``lsfd`` (residues, residuals; ``lsfd.synthesize()`` the model FRFs).
 
-    References
-    ----------
-    .. [1] B. Peeters, H. Van der Auweraer, P. Guillaume and J. Leuridan, "The PolyMAX
-       frequency-domain method: a new standard for modal parameter estimation?", Shock and
-       Vibration 11, 395–409, 2004.
-
     See Also
     --------
     vibroscope.modal.lscf : The stabilization diagram with settings of one's own.
     vibroscope.modal.lsfd : The residue fit for given poles.
     auto_ssi : The output-only counterpart (SSI-COV).
+
+    References
+    ----------
+    .. [1] B. Peeters, H. Van der Auweraer, P. Guillaume and J. Leuridan, "The PolyMAX
+       frequency-domain method: a new standard for modal parameter estimation?", Shock and
+       Vibration 11, 395–409, 2004.
 
     Examples
     --------

@@ -98,14 +98,14 @@ def frequency_shift(measured: tuple[np.ndarray, np.ndarray], model: tuple[np.nda
     tolerance : float, optional
         Largest relative distance of a pair; default 0.15.
 
+    Returns
+    -------
+    FrequencyShift
+
     Notes
     -----
     Peaks below 1 % of the measured axis' top frequency are ignored (near 0 Hz a measured FRF is
     noise).
-
-    Returns
-    -------
-    FrequencyShift
     """
     lo = 0.01 * float(np.max(measured[0]))  # the near-0 Hz lines of a measurement are noise
     fa = resonance_peaks(*measured, prominence=prominence, fmin=lo)

@@ -287,6 +287,14 @@ def fdd(
     ValueError
         If the band holds fewer than 5 bins or the matrix has fewer than 2 channels.
 
+    See Also
+    --------
+    vibroscope.spectral.csd_matrix : The cross-spectral matrix this decomposes.
+    singular_values : The singular-value spectra alone (the FDD plot).
+    ssi_cov : Output-only poles from the time series (SSI-COV).
+    lscf : Poles from measured FRFs (input and output).
+    peak_picking : The input-output counterpart (peaks of an FRF).
+
     Notes
     -----
     Where EFDD cannot fit (fewer than 3 usable extrema, e.g. a bell of a few bins, a decay longer
@@ -299,14 +307,6 @@ def fdd(
        frequency domain decomposition", Smart Materials and Structures 10, 441–445, 2001.
     .. [2] R. Brincker, C. E. Ventura and P. Andersen, "Damping estimation by frequency domain
        decomposition", Proc. 19th IMAC, 698–703, 2001.
-
-    See Also
-    --------
-    vibroscope.spectral.csd_matrix : The cross-spectral matrix this decomposes.
-    singular_values : The singular-value spectra alone (the FDD plot).
-    ssi_cov : Output-only poles from the time series (SSI-COV).
-    lscf : Poles from measured FRFs (input and output).
-    peak_picking : The input-output counterpart (peaks of an FRF).
 
     Examples
     --------

@@ -187,6 +187,11 @@ def peak_picking(
     ValueError
         If the band holds fewer than 5 bins, `refine` is not allowed, or `input` is unknown.
 
+    See Also
+    --------
+    lscf : All modes of a band at once, close modes included (LSCF/polyMAX).
+    fdd : The output-only counterpart on a cross-spectral matrix.
+
     Notes
     -----
     Peak picking assumes well separated, lightly damped modes; for close modes the quadrature
@@ -198,11 +203,6 @@ def peak_picking(
     .. [1] D. J. Ewins, *Modal Testing: Theory, Practice and Application*, 2nd ed., Research
        Studies Press, 2000, ch. 4 (SDOF modal analysis methods: peak-amplitude, circle-fit,
        inverse/line-fit).
-
-    See Also
-    --------
-    lscf : All modes of a band at once, close modes included (LSCF/polyMAX).
-    fdd : The output-only counterpart on a cross-spectral matrix.
 
     Examples
     --------

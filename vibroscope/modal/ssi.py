@@ -220,17 +220,17 @@ def ssi_cov(
         If an order exceeds ``n_lags · n_refs``, `n_lags` is too long for the record, or `fs` is
         missing for an array.
 
-    References
-    ----------
-    .. [1] B. Peeters and G. De Roeck, "Reference-based stochastic subspace identification for
-       output-only modal analysis", Mechanical Systems and Signal Processing 13(6), 855–878, 1999.
-
     See Also
     --------
     auto_ssi : SSI-COV with automatic settings and physical-mode selection.
     fdd : Output-only modes from the cross-spectral matrix (FDD/EFDD).
     lscf : Poles from measured FRFs (input and output).
     Stabilization.modal_model : The stable modes of the diagram.
+
+    References
+    ----------
+    .. [1] B. Peeters and G. De Roeck, "Reference-based stochastic subspace identification for
+       output-only modal analysis", Mechanical Systems and Signal Processing 13(6), 855–878, 1999.
 
     Examples
     --------

@@ -278,6 +278,13 @@ def csd_matrix(
         When segments were skipped for missing samples and fewer than :data:`MIN_AVERAGES` (8)
         remain for a pair.
 
+    See Also
+    --------
+    welch : The diagonal only (power spectral densities), one channel at a time.
+    frf : H1, H2 or Hv from this matrix.
+    coherence : Ordinary coherence from this matrix.
+    vibroscope.modal.fdd : Output-only modes from this matrix.
+
     Notes
     -----
     With segments ``x_s`` of length N, window w and ``X_i,s = FFT(w·x_i,s)``:
@@ -294,13 +301,6 @@ def csd_matrix(
     ----------
     .. [1] P. D. Welch, IEEE Trans. Audio Electroacoust. AU-15, 70–73, 1967.
     .. [2] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
-
-    See Also
-    --------
-    welch : The diagonal only (power spectral densities), one channel at a time.
-    frf : H1, H2 or Hv from this matrix.
-    coherence : Ordinary coherence from this matrix.
-    vibroscope.modal.fdd : Output-only modes from this matrix.
 
     Examples
     --------
@@ -362,6 +362,12 @@ def welch(
     FewAveragesWarning
         As :func:`csd_matrix`.
 
+    See Also
+    --------
+    csd_matrix : All channel pairs (cross-spectral densities) in the same pass.
+    amplitude_spectrum : Amplitude (not power) per line.
+    spectrogram : Short-time spectra over time.
+
     Notes
     -----
     ``P(f_k) = (2 / (K fs Σw²)) Σ_s |X_s(f_k)|²``. With ``scaling='spectrum'`` a sine of amplitude
@@ -372,12 +378,6 @@ def welch(
     References
     ----------
     .. [1] P. D. Welch, IEEE Trans. Audio Electroacoust. AU-15, 70–73, 1967.
-
-    See Also
-    --------
-    csd_matrix : All channel pairs (cross-spectral densities) in the same pass.
-    amplitude_spectrum : Amplitude (not power) per line.
-    spectrogram : Short-time spectra over time.
 
     Examples
     --------
@@ -425,6 +425,10 @@ def amplitude_spectrum(
     Spectrum
         ``scaling='amplitude'``; a sine of amplitude A on a bin reads A (signal units).
 
+    See Also
+    --------
+    welch : Power (``'density'`` or ``'spectrum'``) per line.
+
     Notes
     -----
     ``A(f_k) = 2 |X(f_k)| / Σw`` (DC and Nyquist not doubled), the amplitude ("coherent gain")
@@ -436,10 +440,6 @@ def amplitude_spectrum(
     ----------
     .. [1] A. Brandt, *Noise and Vibration Analysis: Signal Analysis and Experimental Procedures*,
        Wiley, 2011.
-
-    See Also
-    --------
-    welch : Power (``'density'`` or ``'spectrum'``) per line.
     """
     data, fs, channels, units = _unpack(x, fs)
     n = data.shape[1]
@@ -520,7 +520,7 @@ def frf(
         the smallest eigenvector of the ``[inputs, output]`` spectral matrix per output); with
         ``Gxy = E[conj(X) Y]`` as in Notes.
     {welch_params}
-        (The Welch settings are ignored when `x` is a CrossSpectralMatrix.)
+        The Welch settings are ignored when `x` is a CrossSpectralMatrix.
     kind : {'accelerance', 'mobility', 'receptance'}, optional
         Declare the FRF kind; default inferred from the channel units (N in; m/s², m/s or m out).
     workers : int, optional
@@ -545,6 +545,15 @@ def frf(
     KeyError
         If a channel name is not in the record.
 
+    See Also
+    --------
+    csd_matrix : The spectral matrix the estimators read; pass it as `x` for several estimates.
+    coherence : Ordinary coherence of channel pairs.
+    multiple_coherence : Coherence of each output with all inputs together.
+    frf_periodic : H1 from whole periods of a periodic excitation.
+    vibroscope.modal.lscf : Poles from the FRF (LSCF/polyMAX); :func:`vibroscope.modal.lsfd` the shapes.
+    vibroscope.modal.peak_picking : Modes from the FRF's peaks.
+
     Notes
     -----
     With ``Sxx[a, b] = E[conj(X_a) X_b]``, ``Sxy[a, o] = E[conj(X_a) Y_o]`` and ``Y = H X``:
@@ -563,15 +572,6 @@ def frf(
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
     .. [2] G. T. Rocklin, J. Crowley and H. Vold, "A comparison of H1, H2, and Hv frequency response
        functions", Proc. 3rd IMAC, 1985.
-
-    See Also
-    --------
-    csd_matrix : The spectral matrix the estimators read; pass it as `x` for several estimates.
-    coherence : Ordinary coherence of channel pairs.
-    multiple_coherence : Coherence of each output with all inputs together.
-    frf_periodic : H1 from whole periods of a periodic excitation.
-    vibroscope.modal.lscf : Poles from the FRF (LSCF/polyMAX); :func:`vibroscope.modal.lsfd` the shapes.
-    vibroscope.modal.peak_picking : Modes from the FRF's peaks.
 
     Examples
     --------
@@ -698,14 +698,14 @@ def coherence(
         ``γ²_ij = |G_ij|² / (G_ii G_jj)`` ∈ [0, 1]; ``gamma2[:, i, j]`` equals
         ``scipy.signal.coherence(x[i], x[j])``.
 
-    References
-    ----------
-    .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §5.2.5.
-
     See Also
     --------
     multiple_coherence : An output against several inputs together.
     frf : The FRF with its coherence.
+
+    References
+    ----------
+    .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §5.2.5.
     """
     G = x if isinstance(x, CrossSpectralMatrix) else csd_matrix(
         x, fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend, nfft=nfft)
@@ -741,14 +741,14 @@ def multiple_coherence(
         ``gamma2`` of shape (n_freqs, n_outputs),
         ``γ²_{y:x} = Gxyᴴ Gxx⁻¹ Gxy / Gyy`` ∈ [0, 1]; equals the ordinary coherence for one input.
 
-    References
-    ----------
-    .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §7.3.
-
     See Also
     --------
     coherence : Ordinary coherence of channel pairs.
     frf : The FRF with this coherence.
+
+    References
+    ----------
+    .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §7.3.
     """
     h = frf(x, inputs, outputs, **welch_kw)
     return MultipleCoherence(h.frequencies, h.coherence, h.inputs, h.outputs, dict(h.settings))
