@@ -260,6 +260,11 @@ def compare_mode_sets(a, b, *, mac_min: float = 0.5, max_frequency_error: float 
     ValueError
         If the sets share no point name and have different numbers of points, or one is empty.
 
+    See Also
+    --------
+    vibroscope.modal.mac.match_modes : Pairs of an estimate with reference modes.
+    frequency_shift : Shifts of resonance peaks between measured and model FRFs.
+
     References
     ----------
     .. [1] R. J. Allemang, "The Modal Assurance Criterion -- twenty years of use and abuse",
