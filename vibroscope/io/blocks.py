@@ -732,6 +732,11 @@ def iter_blocks(path: str | Path, channels: Sequence[str] | None = None, *, fs: 
     ValueError
         If `block_s` is not positive, or `time_range` is empty.
 
+    See Also
+    --------
+    vibroscope.io.read_mcap : The whole log on one grid, in memory.
+    open_grid : The grid these blocks are cut from.
+
     Examples
     --------
     >>> for block in iter_blocks("run.mcap", block_s=60.0):  # doctest: +SKIP
