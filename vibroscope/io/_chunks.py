@@ -42,7 +42,6 @@ except ImportError:  # pragma: no cover - zlib's is the fallback
     crc32 = zlib.crc32
 
 
-
 def memory_budget() -> int:
     """The default memory budget in bytes: half the available memory, or half the address-space
     limit (``ulimit -v``, ``RLIMIT_AS``), whichever is smaller.

@@ -17,6 +17,7 @@ FOOTER_LEN = 1 + 8 + 20
 
 
 def opname(op: int) -> str:
+    """The opcode's name (``"CHUNK"``), or ``"opcode 0x.."`` for one MCAP does not define."""
     try:
         return Opcode(op).name
     except ValueError:
@@ -28,7 +29,7 @@ def valid_opcode(op: int) -> bool:
     return 0x01 <= op <= 0x0F or op >= 0x80
 
 
-
 def parse_record(cls: Any, body: bytes) -> Any:
+    """The record of type `cls` (an ``mcap.records`` class) whose body is `body`, by mcap's parser."""
     return cls.read(ReadDataStream(BytesIO(body)))
 

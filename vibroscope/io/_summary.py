@@ -19,6 +19,11 @@ from vibroscope.io._records import FOOTER_LEN, MAGIC, REC_HDR, opname, parse_rec
 
 @dataclass
 class Summary:
+    """A summary section that validated: its start offset, schemas, channels, chunk indexes by
+    chunk offset, the statistics' message count (None without one), and, when it was found again
+    after deleted bytes (:func:`relocated_summary`), the chunk indexes of chunks not in the file,
+    a note and the shift."""
+
     start: int
     schemas: dict[int, Schema]
     channels: dict[int, Channel]

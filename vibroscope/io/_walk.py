@@ -39,7 +39,6 @@ SUMMARY_ONLY_OPS = {Opcode.CHUNK_INDEX, Opcode.ATTACHMENT_INDEX, Opcode.METADATA
 DATA_OPS = {Opcode.CHUNK, Opcode.MESSAGE, Opcode.MESSAGE_INDEX, Opcode.ATTACHMENT, Opcode.METADATA, Opcode.HEADER}
 
 
-
 def fields_end(data: Any, op: int, body: int, end: int) -> int | None:
     """Where the fields of a Header, Schema, Channel, Message Index or Data End record end
     (from their own length prefixes), or None for other records or when they run past `end`."""
