@@ -137,6 +137,8 @@ TREND_SHARE = 0.3
 NESTED_FAMILIES = ({"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"})
 #: locations of each nonlinear class refined after probing the start values
 N_LOCATIONS = 2
+#: seconds of fitting data per log on which the winner is polished at full accuracy
+POLISH_S = 30.0
 
 
 def as_lumped(model) -> LumpedModel:
@@ -1246,7 +1248,7 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
 
 def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before):
     """Refine the winning candidate's effects (`chain`: ``(spec, p)`` applied in order to the
-    linear model) jointly with the linear parameters on up to 60 s of the fitting data at the
+    linear model) jointly with the linear parameters on up to POLISH_S s of the fitting data at the
     full integration accuracy (Ljung 1999, output error); the held-out gap is recomputed at
     full accuracy. The polished model is kept only when its held-out gap is not worse."""
     c, m_aug, _, s_last, p_last, base = cand
@@ -1262,7 +1264,7 @@ def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_ou
             m = s_.apply(m, x[a_:b_])
         return m
 
-    ns = [min(n, int(60 * fs)) if n else 0 for n in split.fit_prefix]
+    ns = [min(n, int(POLISH_S * fs)) if n else 0 for n in split.fit_prefix]
     x0 = np.concatenate([th] + [np.asarray(p_, float) for _, p_ in chain])
     lo = np.concatenate([lo_l] + [s_.lower for s_, _ in chain])
     hi = np.concatenate([hi_l] + [s_.upper for s_, _ in chain])

@@ -28,21 +28,29 @@ from scipy.optimize import least_squares
 
 from vibroscope.gap.closed_loop import is_closed_loop, log_channels, measured_rows
 from vibroscope.models.lumped import LumpedModel
-from vibroscope.models.simulate import default_oversample, reconstruct_input
+from vibroscope.models.simulate import reconstruct_input
 from vibroscope.models.simulate import simulate as _sim
 
 __all__ = ["LogSimulator", "best_start", "fit_linear_frf", "fit_time_domain", "frf_residual"]
 
 
+#: the nonlinear simulations of the diagnosis discretise the linear part exactly
+#: (:func:`vibroscope.models.integrate.flatten_model`): no frequency warping, so fewer sub-steps
+#: than the trapezoidal rule reach the same accuracy (a 2-DOF cubic spring, modes to 80 Hz at
+#: 1 kHz: 8e-4 nrmse at 5 sub-steps against 5e-3 for the trapezoidal rule at 8)
+SCHEME = "exponential"
+
+
 def _oversample_for(model: LumpedModel, fs: float, fast: bool) -> int:
-    """The simulator's default sub-steps, or a coarser ``max(8, 16 f_max / fs)`` for screening."""
-    if not fast:
-        return default_oversample(model, fs)
+    """Sub-steps of the exponential scheme: ``max(10, 20 f_max / fs)``, or a coarser
+    ``max(5, 8 f_max / fs)`` for screening."""
     try:
         fmax = float(np.max(model.modes().natural_frequencies))
     except Exception:  # noqa: BLE001 - no modes (free body)
         fmax = 0.0
-    return max(8, int(math.ceil(16.0 * fmax / fs)))
+    if not fast:
+        return max(10, int(math.ceil(20.0 * fmax / fs)))
+    return max(5, int(math.ceil(8.0 * fmax / fs)))
 
 
 class LogSimulator:
@@ -74,9 +82,10 @@ class LogSimulator:
         n : int, optional
             Number of leading samples to simulate; default all.
         fast : bool, optional
-            For nonlinear models, integrate with the coarser screening oversampling
-            ``max(8, ceil(16 f_max / fs))`` instead of the simulator's default; default False.
-            Linear models always use 8 sub-steps.
+            For nonlinear models, integrate with the coarser screening sub-steps
+            ``max(5, ceil(8 f_max / fs))`` instead of ``max(10, ceil(20 f_max / fs))``
+            (both with the exponential scheme, :data:`SCHEME`); default False. Linear models
+            always take the exact linear path at 8 sub-steps.
 
         Returns
         -------
@@ -100,7 +109,7 @@ class LogSimulator:
             return y if np.all(np.isfinite(y)) else np.full_like(y, np.nan)
         linear = all(e.is_linear for e in model.elements)
         kw = {}
-        # linear models: the exact FOH path at 8 sub-steps; nonlinear: the trapezoidal kernel
+        # linear models: the exact FOH path at 8 sub-steps; nonlinear: the compiled kernel
         R = 8 if linear else _oversample_for(model, self.fs, fast)
         key = (R, n)
         if key not in self._fine:
@@ -109,7 +118,7 @@ class LogSimulator:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = _sim(model, u, self.fs, **kw)
+                s = _sim(model, u, self.fs, scheme=SCHEME, **kw)
             y = np.asarray(s.data[len(model.inputs):])
         except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
             y = np.full((len(model.outputs), n), np.nan)
