@@ -720,6 +720,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         When an output is the log or the coordinates file.
     """
     from vibroscope.commands._outputs import AtomicOutputs, check_outputs
+    from vibroscope.provenance import json_report
     from vibroscope.io.coords import line_coords, read_coords
     from vibroscope.pipeline import summary_dict
 
@@ -751,7 +752,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         if json_path:
             d = (summary_dict(an, source=str(log), true_modes=true_modes) if sig is not None
                  else stream_summary(an, source=str(log)))
-            tx.file(json_path).write_text(json.dumps(d, indent=2))
+            tx.file(json_path).write_text(json.dumps(json_report(d), indent=2))
             written["json"] = json_path
             done.append(f"summary: {json_path}")
         kin = None
