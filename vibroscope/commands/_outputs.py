@@ -497,7 +497,8 @@ class AtomicOutputs:
         return moves
 
     def _swap_whole(self, final: Path) -> bool:
-        """Whether an existing figures folder holds only PNG files vibroscope wrote (an earlier run's), none an input."""
+        """Whether an existing figures folder holds only PNG files vibroscope wrote (an earlier run's),
+        none an input."""
         return all(p.suffix.lower() == FIGURE_SUFFIX and written_by_vibroscope(p) for p in final.iterdir()) \
             and not any(same_file(p, i) for p in final.iterdir() for i in self._inputs)
 
