@@ -148,6 +148,13 @@ def test_uff_files_carry_a_dataset_151_and_read_back_the_same(tmp_path):
     ra, rb = read_frf(a), read_frf(b)
     np.testing.assert_array_equal(ra.H, rb.H)
     assert ra.outputs == rb.outputs and ra.inputs == rb.inputs
+    # UFF 55 mode shapes are known by their ID line 2 ("vibroscope mode shapes"), no header needed
+    from vibroscope.io.frf_files import write_modes_uff55
+    from vibroscope.modal import ModalModel
+
+    mm = ModalModel(np.array([10.0, 20.0]), np.array([0.01, 0.02]), np.array([[1, 0.5], [0.3, 1]], complex),
+                    ("a", "b"), "lscf")
+    assert written_by_vibroscope(write_modes_uff55(mm, tmp_path / "m55.uff"))
 
 
 def test_check_outputs_and_the_commit_refuse_a_foreign_file_and_keep_it(tmp_path):

@@ -16,6 +16,9 @@ JSON     the first key: ``"generator": "vibroscope <version>"`` (:func:`json_rep
 TOML     the first line ``# generator: vibroscope <version>`` (:func:`toml_header`)
 UFF      a dataset 151 (header) first, its creating program :data:`GENERATOR`
          (:func:`uff_header`); or the dataset-55 ID line 2 ``vibroscope mode shapes``
+CSV      the fleet table's header (:meth:`vibroscope.fleet.FleetResult.write_csv`):
+         ``log,n_samples,duration_s,modes_hz,damping,`` (a CSV has no place for a mark
+         that every CSV reader ignores)
 =======  ==========================================================================================
 
 This module imports nothing of vibroscope's but its version.
@@ -30,7 +33,8 @@ from typing import Any, Mapping
 
 from vibroscope import __version__
 
-__all__ = ["GENERATOR", "HEAD_BYTES", "written_by_vibroscope", "json_report", "toml_header", "uff_header"]
+__all__ = ["GENERATOR", "HEAD_BYTES", "FLEET_CSV_HEADER", "written_by_vibroscope", "json_report", "toml_header",
+           "uff_header"]
 
 #: who wrote an output, as every mark states it
 GENERATOR = f"vibroscope {__version__}"
@@ -41,6 +45,8 @@ _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _JSON_MARK = re.compile(rb'\A\s*\{\s*"generator"\s*:\s*"vibroscope\b')
 _TOML_MARK = re.compile(rb"\A# generator: vibroscope\b")
+#: the first columns of the fleet table (:meth:`vibroscope.fleet.FleetResult.write_csv`)
+FLEET_CSV_HEADER = b"log,n_samples,duration_s,modes_hz,damping,"
 
 
 def json_report(doc: Mapping[str, Any]) -> dict[str, Any]:
@@ -152,7 +158,7 @@ def written_by_vibroscope(path: str | os.PathLike) -> bool:
     if head.startswith(_PNG_MAGIC):
         sw = _png_software(head)
         return sw is not None and sw.startswith(b"vibroscope")
-    if _JSON_MARK.match(head) or _TOML_MARK.match(head):
+    if _JSON_MARK.match(head) or _TOML_MARK.match(head) or head.startswith(FLEET_CSV_HEADER):
         return True
     lines = head[:2048].splitlines()
     if len(lines) >= 5 and lines[0].strip() == b"-1":  # a Universal File: our 151 header, or UFF 55's ID line 2

@@ -517,7 +517,12 @@ def run_fleet(args, logs: list) -> int:
         import dask.distributed  # noqa: F401 - the [dask] extra
     except ImportError as exc:
         raise VibroscopeError(f"--dask needs dask.distributed (pip install 'vibroscope[dask]'): {exc}") from None
+    from vibroscope.commands._outputs import check_out_dir, check_outputs
+
     out = Path(args.out) if args.out else Path.cwd()
+    check_out_dir(args.out)  # before any work: only vibroscope's own earlier outputs are replaced
+    check_outputs({"--json": args.json or out / "fleet.json", "--out (table)": out / "fleet.csv",
+                   "--out (figure)": None if args.no_figures else out / "fleet_spectra.png"}, {"log": list(logs)})
     out.mkdir(parents=True, exist_ok=True)
     chans = None if args.outputs is None else ([args.input] if args.input else []) + list(args.outputs)
     where = args.dask or "a local cluster"

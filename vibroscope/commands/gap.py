@@ -100,7 +100,8 @@ def run(args) -> int:
     done = []
     with AtomicOutputs(inputs=[args.model, *args.logs]) as tx:
         if args.json:
-            tx.file(args.json).write_text(json.dumps(json_report(report.to_dict()), indent=2) + "\n", encoding="utf-8")
+            tx.file(args.json).write_text(json.dumps(json_report(report.to_dict()), indent=2) + "\n",
+                                          encoding="utf-8")
             done.append(f"wrote {args.json}")
         if args.export_model:
             tx.file(args.export_model).write_text(toml_header() + report.augmented_model_toml, encoding="utf-8")

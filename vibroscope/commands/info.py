@@ -1,7 +1,8 @@
 """``vibroscope info LOG.mcap [--json]``: topics, types, counts, rates, time span and gaps
 (log-time increments over 1.5 median periods, and the time missing in them), outlier log
-times and messages lost in damaged or missing chunks of a log. ``--fields`` (or ``--topic T``) lists the numeric message paths instead, with
-their unit and a sample value: the paths ``--input``/``--outputs`` take."""
+times and messages lost in damaged or missing chunks of a log. ``--fields`` (or ``--topic T``)
+lists the numeric message paths instead, with their unit and a sample value: the paths
+``--input``/``--outputs`` take."""
 
 from __future__ import annotations
 
@@ -73,7 +74,8 @@ def run(args) -> int:
                      "yes" if t.decodable else f"no: {t.reason}"))
     w = [max(len(r[i]) for r in rows) for i in range(10)]
     for r in rows:
-        print("  ".join(c.ljust(w[i]) if i in (0, 1, 2) else c.rjust(w[i]) for i, c in enumerate(r[:10])) + "  " + r[10])
+        cells = (c.ljust(w[i]) if i in (0, 1, 2) else c.rjust(w[i]) for i, c in enumerate(r[:10]))
+        print("  ".join(cells) + "  " + r[10])
     for off, reason in info.skipped:
         print(f"skipped at byte offset {off}: {reason}")
     for wmsg in info.warnings:

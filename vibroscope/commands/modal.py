@@ -455,8 +455,11 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     -------
     Path
     """
+    from vibroscope._checks import atomic_file
     from vibroscope.models import Input, Output
     from vibroscope.models.modal_model import PoleResidueModel
+    from vibroscope.models.modelfile import dumps_model
+    from vibroscope.provenance import toml_header
 
     q = _KIND_QUANTITY.get(res.kind, "displacement")
     R, LR, UR = res.residues, res.lower_residual, res.upper_residual
@@ -473,10 +476,6 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     inputs = tuple(Input(lb, channel=c) for lb, c in zip(labels, res.inputs))
     model = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
                                                  inputs=inputs, outputs=outputs, lower=LR, upper=UR, name=name)
-    from vibroscope._checks import atomic_file
-    from vibroscope.models.modelfile import dumps_model
-    from vibroscope.provenance import toml_header
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_file(path) as tmp:  # the model file, after the line that marks it as vibroscope's
