@@ -278,3 +278,31 @@ def test_convert_out_only_replaces_its_own_log(kind, tmp_path, capsys):
     err = [ln for ln in cap.err.splitlines() if ln.strip()]
     assert len(err) == 1 and str(out) in err[0] and cap.out == "", (err, cap.out)
     assert _snapshot(out) == before and not _temps(tmp_path)
+
+
+def test_modal_outputs_are_marked_read_back_and_replaced_by_the_next_run(tmp_path, capsys):
+    """UFF 58 / 15 (with their dataset 151), UFF 55, the model file (its first comment line) and the JSON:
+    each read back by its reader, known as vibroscope's, and replaced by the same command run again."""
+    from vibroscope.commands.demo import make_demo_log
+    from vibroscope.io.frf_files import read_frf, read_geometry
+    from vibroscope.models.modelfile import load_model
+
+    log = tmp_path / "demo.mcap"  # long enough for LSCF to find the demo's three modes
+    make_demo_log(log, duration=20.0, fs=500.0)
+
+    outs = {o: tmp_path / n for o, n in (("--json", "m.json"), ("--uff58", "h.uff"), ("--uff15", "g.uff"),
+                                         ("--uff55", "m55.uff"), ("--export-model", "m.toml"))}
+    argv = ["modal", str(log), "--input", "/actuator/force.wrench.force.x", "--no-figures", "--no-rrd"]
+    for o, p in outs.items():
+        argv += [o, str(p)]
+    assert main(argv) == 0
+    capsys.readouterr()
+    assert [p for p in outs.values() if not written_by_vibroscope(p)] == []
+    h = read_frf(outs["--uff58"])
+    assert h.H.shape[1] == 3 and h.inputs == ("/actuator/force.wrench.force.x",)
+    assert read_geometry(outs["--uff15"])[1].shape == (3, 3)
+    assert outs["--export-model"].read_text().startswith(toml_header())
+    assert len(load_model(outs["--export-model"]).inputs) == 1
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert all(f"replacing {p} (earlier output)" in out for p in outs.values()), out
