@@ -255,8 +255,10 @@ class FleetResult:
         -------
         Path
         """
+        from vibroscope.provenance import json_report
+
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
+        path.write_text(json.dumps(json_report(self.to_dict()), indent=2))
         return path
 
 

@@ -517,7 +517,12 @@ def run_fleet(args, logs: list) -> int:
         import dask.distributed  # noqa: F401 - the [dask] extra
     except ImportError as exc:
         raise VibroscopeError(f"--dask needs dask.distributed (pip install 'vibroscope[dask]'): {exc}") from None
+    from vibroscope.commands._outputs import check_out_dir, check_outputs
+
     out = Path(args.out) if args.out else Path.cwd()
+    check_out_dir(args.out)  # before any work: only vibroscope's own earlier outputs are replaced
+    check_outputs({"--json": args.json or out / "fleet.json", "--out (table)": out / "fleet.csv",
+                   "--out (figure)": None if args.no_figures else out / "fleet_spectra.png"}, {"log": list(logs)})
     out.mkdir(parents=True, exist_ok=True)
     chans = None if args.outputs is None else ([args.input] if args.input else []) + list(args.outputs)
     where = args.dask or "a local cluster"
@@ -720,6 +725,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         When an output is the log or the coordinates file.
     """
     from vibroscope.commands._outputs import AtomicOutputs, check_outputs
+    from vibroscope.provenance import json_report
     from vibroscope.io.coords import line_coords, read_coords
     from vibroscope.pipeline import summary_dict
 
@@ -751,7 +757,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         if json_path:
             d = (summary_dict(an, source=str(log), true_modes=true_modes) if sig is not None
                  else stream_summary(an, source=str(log)))
-            tx.file(json_path).write_text(json.dumps(d, indent=2))
+            tx.file(json_path).write_text(json.dumps(json_report(d), indent=2))
             written["json"] = json_path
             done.append(f"summary: {json_path}")
         kin = None

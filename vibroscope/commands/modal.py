@@ -318,8 +318,16 @@ def _print_modes(ident, json_path=None) -> None:
             print(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
 
 
+def _mark_uff(path: Path, header: str) -> None:
+    """Put `header` (a dataset 151 naming vibroscope, :func:`vibroscope.provenance.uff_header`) before the
+    datasets of the Universal File `path`: the mark by which a later run knows the file as its own output."""
+    path = Path(path)
+    path.write_bytes(header.encode("ascii") + path.read_bytes())
+
+
 def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=None) -> None:
     from vibroscope.commands._outputs import AtomicOutputs
+    from vibroscope.provenance import json_report, uff_header
     from vibroscope.errors import VibroscopeError
     from vibroscope.pipeline import _jsonable
     from vibroscope.io.coords import line_coords, read_coords
@@ -342,7 +350,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
         if args.json:
             doc = ident.to_dict()
             doc["source"] = [str(s) for s in args.source]
-            tx.file(args.json).write_text(json.dumps(_jsonable(doc), indent=2))  # NaN -> null
+            tx.file(args.json).write_text(json.dumps(json_report(_jsonable(doc)), indent=2))  # NaN -> null
             done.append(f"modes: {args.json}")
         if args.uff55:
             from vibroscope.io.frf_files import write_modes_uff55
@@ -356,12 +364,12 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
         if args.uff15:
             from vibroscope.io.frf_files import write_geometry_uff15
 
-            write_geometry_uff15(tx.file(args.uff15), list(range(1, len(pts) + 1)), sc.xyz)
+            _mark_uff(write_geometry_uff15(tx.file(args.uff15), list(range(1, len(pts) + 1)), sc.xyz), uff_header())
             done.append(f"geometry (UFF 15, node k = point k of the mode shapes): {args.uff15}")
         if args.uff58:
             from vibroscope.io.frf_files import write_frf_uff58
 
-            write_frf_uff58(h, tx.file(args.uff58))
+            _mark_uff(write_frf_uff58(h, tx.file(args.uff58)), uff_header())
             done.append(f"FRFs (UFF 58): {args.uff58}")
         if args.export_model:
             export_modal_model(ident.lsfd, tx.file(args.export_model),
@@ -447,9 +455,11 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     -------
     Path
     """
+    from vibroscope._checks import atomic_file
     from vibroscope.models import Input, Output
     from vibroscope.models.modal_model import PoleResidueModel
-    from vibroscope.models.modelfile import dump_model
+    from vibroscope.models.modelfile import dumps_model
+    from vibroscope.provenance import toml_header
 
     q = _KIND_QUANTITY.get(res.kind, "displacement")
     R, LR, UR = res.residues, res.lower_residual, res.upper_residual
@@ -468,7 +478,8 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
                                                  inputs=inputs, outputs=outputs, lower=LR, upper=UR, name=name)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    dump_model(model, path)
+    with atomic_file(path) as tmp:  # the model file, after the line that marks it as vibroscope's
+        Path(tmp).write_text(toml_header() + dumps_model(model), encoding="utf-8")
     return path
 
 
