@@ -27,7 +27,8 @@ import numpy as np
 
 from vibroscope.errors import LogFormatError
 from vibroscope.modal._results import ModalModel
-from vibroscope.spectral._results import FRF, FRF_KINDS
+from vibroscope.spectral._results import FRF
+from vibroscope.spectral.kinds import FRF_KIND_TABLE, FRF_KINDS
 
 __all__ = [
     "read_frf",
@@ -39,11 +40,8 @@ __all__ = [
     "uff_datasets",
 ]
 
-_KIND_UNITS = {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}
 #: UFF specific data types (dataset 58 records 8-10): response quantity -> FRF kind
-_SPEC_TO_KIND = {12: "accelerance", 11: "mobility", 8: "receptance"}
-_KIND_TO_SPEC = {v: k for k, v in _SPEC_TO_KIND.items()}
-_KIND_NUM_LABEL = {"accelerance": "m/s^2", "mobility": "m/s", "receptance": "m"}
+_SPEC_TO_KIND = {k.uff_data_type: k.name for k in FRF_KIND_TABLE.values()}
 _FORCE_SPEC = (13, 9)  # excitation force, reaction force
 _FUNC_TYPES = {
     0: "general", 1: "time response", 2: "auto spectrum", 3: "cross spectrum", 4: "FRF",
@@ -419,7 +417,7 @@ def _read_uff58_frf(path: Path, input_name: str | None) -> _Table:
         kinds.add(_SPEC_TO_KIND.get(num) if den in _FORCE_SPEC else None)
     kind = kinds.pop() if len(kinds) == 1 else None
     if kind:
-        units = _KIND_UNITS[kind]
+        units = FRF_KIND_TABLE[kind].unit
     else:
         labs = {(_label(recs[i].get("ordinate_axis_units_lab")), _label(recs[i].get("orddenom_axis_units_lab")))
                 for i in frf_idx}
@@ -621,7 +619,7 @@ def read_frf(
             raise ValueError(f"input_name={input_name!r} given for an FRF with {len(inputs)} inputs {inputs}")
         inputs = [str(input_name)]
     k = kind if kind is not None else t.kind
-    units = _KIND_UNITS[k] if k is not None else t.units
+    units = FRF_KIND_TABLE[k].unit if k is not None else t.units
     settings = {"source": [str(p) for p in paths] if len(paths) > 1 else str(paths[0]), "format": t.fmt,
                 **t.extra}
     notes = _non_finite_notes(t.f, t.H, outputs, inputs)
@@ -716,8 +714,9 @@ def write_frf_uff58(frf: FRF, path: str | Path, *, binary: bool = False) -> Path
     d = np.diff(f)
     even = bool(np.allclose(d, d[0], rtol=1e-6, atol=0.0))
     kind = frf.kind
-    num_spec, den_spec = (_KIND_TO_SPEC[kind], 13) if kind in _KIND_TO_SPEC else (0, 0)
-    num_lab, den_lab = (_KIND_NUM_LABEL[kind], "N") if kind in _KIND_NUM_LABEL else ("NONE", "NONE")
+    k = FRF_KIND_TABLE.get(kind)
+    num_spec, den_spec = (k.uff_data_type, 13) if k else (0, 0)
+    num_lab, den_lab = (k.response_unit, "N") if k else ("NONE", "NONE")
     common = dict(binary=int(bool(binary)), abscissa_spacing=int(even), abscissa_spec_data_type=18,
                   abscissa_axis_units_lab="Hz", x=f, id3=_date_line())
     dsets: list[dict] = []
