@@ -30,8 +30,8 @@ from vibroscope.modal.fdd import fdd
 from vibroscope.modal.peak_picking import peak_picking
 from vibroscope.modal.selection import select_modes
 
-__all__ = ["ModalMethod", "MethodCall", "MODAL_METHODS", "METHOD_CHOICES", "AUTO", "resolve_method", "identify",
-           "display_name", "uses_input", "method_help"]
+__all__ = ["ModalMethod", "MethodCall", "MODAL_METHODS", "METHOD_CHOICES", "AUTO", "lookup_method", "resolve_method", "identify",
+           "display_name", "uses_input"]
 
 #: the rule that picks a method from the data (see the module notes)
 AUTO = "auto"
@@ -194,7 +194,29 @@ _BY_NAME = {n: m for m in MODAL_METHODS.values() for n in dict.fromkeys((m.key, 
 METHOD_CHOICES = (AUTO, *_BY_NAME)
 
 
-def _spec(method: str) -> ModalMethod | None:
+def lookup_method(method: str) -> ModalMethod | None:
+    """The registry's entry that `method` names, whatever the data (None for ``'auto'``).
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`METHOD_CHOICES`: a method's `key` or `name`, or ``'auto'``.
+
+    Returns
+    -------
+    ModalMethod or None
+
+    Raises
+    ------
+    ValueError
+        ``"Invalid value for the 'method' parameter. Allowed values are ..., but got ... instead."``
+        (the one error of an unknown method).
+
+    Examples
+    --------
+    >>> lookup_method("ssi").name
+    'ssi_cov'
+    """
     check_option("method", method, METHOD_CHOICES)
     return _BY_NAME.get(method)
 
@@ -217,7 +239,7 @@ def uses_input(method: str) -> bool:
     ValueError
         If `method` is not one of :data:`METHOD_CHOICES`.
     """
-    m = _spec(method)
+    m = lookup_method(method)
     return m is None or m.needs_input or m.with_input is not None
 
 
@@ -251,7 +273,7 @@ def resolve_method(method: str, *, has_input: bool, time_series: bool = True) ->
         ``"method='ssi' (SSI-COV) needs the time series; spectra alone: use ..."`` when it does
         not fit the data.
     """
-    m = _spec(method)
+    m = lookup_method(method)
     if m is None:
         m = MODAL_METHODS["lscf" if has_input else "ssi_cov" if time_series else "efdd"]
     elif has_input and not m.needs_input:
@@ -322,21 +344,3 @@ def display_name(name: str) -> str:
     """
     m = _BY_NAME.get(name)
     return m.display if m is not None else name
-
-
-def method_help(*, default: str = "LSCF with an input, SSI-COV without") -> str:
-    """The ``--method`` help text, from the registry.
-
-    Parameters
-    ----------
-    default : str, optional
-        What ``'auto'`` does in this command.
-
-    Returns
-    -------
-    str
-    """
-    return (f"modal identification: auto (default: {default}); "
-            + "; ".join(f"{m.key}: {m.summary}" for m in MODAL_METHODS.values())
-            + " (each method's result name is accepted too: " + ", ".join(
-                m.name for m in MODAL_METHODS.values() if m.name != m.key) + ")")
