@@ -68,8 +68,9 @@ def add_parser(sub) -> None:
     p.add_argument("--n-modes", type=int, help="number of modes to report")
     p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
     p.add_argument("--method", default="auto", choices=LazyChoices("vibroscope.modal.methods", "METHOD_CHOICES"),
-                   help="modal identification by a method of vibroscope.modal.methods (its key or result name); "
-                        "default auto: LSCF with --input, SSI-COV without")
+                   metavar="METHOD", help="modal identification: %(choices)s (the methods of "
+                                          "vibroscope.modal.methods by key or result name); default auto: LSCF "
+                                          "with --input, SSI-COV without")
     p.add_argument("--select", metavar="F1,F2,..",
                    help="LSCF/SSI-COV: take the modes at these frequencies (Hz) from the stabilization diagram")
     p.add_argument("--ods", type=float, nargs="+", metavar="F",
@@ -125,7 +126,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     find_input : bool, optional
         Without `input`, take the log's one force-like channel as the input (see above);
         default False (output-only without `input`). Only for the methods that use an input
-        (``method`` "auto", "lscf", "peak").
+        (:func:`vibroscope.modal.methods.uses_input`).
     max_memory : int, optional
         Memory budget in bytes for reading the log (:func:`vibroscope.io.read_mcap`); default
         half the available memory.

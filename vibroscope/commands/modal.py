@@ -50,8 +50,9 @@ def add_parser(sub) -> None:
                    help="an MCAP log, one or more FRF files, or a mode set to show (UFF 55 with its geometry, "
                         "a model file, a MODES.json)")
     p.add_argument("--method", default="auto", choices=LazyChoices("vibroscope.modal.methods", "METHOD_CHOICES"),
-                   help="modal identification by a method of vibroscope.modal.methods (its key or result name); "
-                        "default auto: LSCF with an input or an FRF file, SSI-COV without an input")
+                   metavar="METHOD", help="modal identification: %(choices)s (the methods of "
+                                          "vibroscope.modal.methods by key or result name); default auto: LSCF "
+                                          "with an input or an FRF file, SSI-COV without an input")
     p.add_argument("--select", default="auto", metavar="auto|F1,F2,..",
                    help="modes: 'auto' (physical-mode selection) or the frequencies (Hz) to take from the "
                         "stabilization diagram")
@@ -61,8 +62,8 @@ def add_parser(sub) -> None:
     p.add_argument("--fs", type=float, help="resample a log to this rate (Hz)")
     p.add_argument("--fmin", type=float, help="lowest frequency of the band (Hz); default from the data")
     p.add_argument("--fmax", type=float, help="highest frequency of the band (Hz); default from the data")
-    p.add_argument("--kind", choices=LazyChoices("vibroscope.spectral.kinds", "FRF_KINDS"),
-                   help="what an FRF file holds when it does not say (default: unknown)")
+    p.add_argument("--kind", choices=LazyChoices("vibroscope.spectral.kinds", "FRF_KINDS"), metavar="KIND",
+                   help="what an FRF file holds when it does not say: %(choices)s (default: unknown)")
     p.add_argument("--df", type=float, default=1.0, help="line spacing (Hz) of text FRFs without an axis (default 1)")
     p.add_argument("--json", type=Path, metavar="MODES.json", help="write the modes (and rejected candidates)")
     p.add_argument("--export-model", type=Path, metavar="MODEL.toml",
