@@ -171,13 +171,16 @@ def _literals(tree):
             yield n, {e.value for e in elts if isinstance(e, ast.Constant) and isinstance(e.value, str)}
 
 
+REGISTRIES = ("modal/methods.py", "spectral/kinds.py")
+
+
 def test_no_module_keeps_its_own_list():
     """No literal tuple, list, set or dict outside the registries names two methods or two FRF
     kinds (the packages' ``__init__`` list function names, some of which are method names)."""
     methods = {n for m in MODAL_METHODS.values() for n in (m.key, m.name)}
     found = []
     for path in sorted(PACKAGE.rglob("*.py")):
-        if path.name == "__init__.py" or path.relative_to(PACKAGE).as_posix() in ("modal/methods.py", "spectral/kinds.py"):
+        if path.name == "__init__.py" or path.relative_to(PACKAGE).as_posix() in REGISTRIES:
             continue
         for node, strings in _literals(ast.parse(path.read_text())):
             for vocab in (methods, set(FRF_KINDS)):

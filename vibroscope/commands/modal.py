@@ -26,7 +26,6 @@ __all__ = ["add_parser", "run", "identify_frf", "FRF_SUFFIXES"]
 FRF_SUFFIXES = (".uff", ".unv", ".uf", ".csv", ".txt")
 
 
-
 def add_parser(sub) -> None:
     """Register ``modal`` on the CLI's sub-parsers.
 

@@ -30,8 +30,8 @@ from vibroscope.modal.fdd import fdd
 from vibroscope.modal.peak_picking import peak_picking
 from vibroscope.modal.selection import select_modes
 
-__all__ = ["ModalMethod", "MethodCall", "MODAL_METHODS", "METHOD_CHOICES", "AUTO", "lookup_method", "resolve_method", "identify",
-           "display_name", "uses_input"]
+__all__ = ["ModalMethod", "MethodCall", "MODAL_METHODS", "METHOD_CHOICES", "AUTO", "lookup_method", "resolve_method",
+           "identify", "display_name", "uses_input"]
 
 #: the rule that picks a method from the data (see the module notes)
 AUTO = "auto"
@@ -107,8 +107,6 @@ class ModalMethod:
         What the stabilization diagram's model order counts; None without a diagram.
     runner : callable
         ``runner(call: MethodCall) -> Identification``.
-    summary : str
-        One line for ``--help``.
     with_input : str or None
         The method (`name`) that this one's names mean when an input is given (polyMAX on FRFs is
         LSCF); None: an input is refused.
@@ -122,7 +120,6 @@ class ModalMethod:
     selects: bool
     order: str | None
     runner: Callable[[MethodCall], Identification]
-    summary: str
     with_input: str | None = None
 
 
@@ -172,20 +169,18 @@ def _run_efdd(call: MethodCall) -> Identification:
 #: the registry: every modal identification method, by the name results carry
 MODAL_METHODS: dict[str, ModalMethod] = {m.name: m for m in (
     ModalMethod(name="lscf", key="lscf", display="LSCF/polyMAX + LSFD", needs_input=True, needs_time_series=False,
-                selects=True, order="polynomial order", runner=_run_lscf,
-                summary="LSCF/polyMAX + LSFD on the FRFs"),
+                selects=True, order="polynomial order", runner=_run_lscf),
     ModalMethod(name="ssi_cov", key="ssi", display="SSI-COV", needs_input=False, needs_time_series=True,
-                selects=True, order="block rows", runner=_run_ssi,
-                summary="covariance-driven SSI (output-only)"),
+                selects=True, order="block rows", runner=_run_ssi),
     ModalMethod(name="polymax_oma", key="polymax", display="polyMAX on the output spectra", needs_input=False,
                 needs_time_series=True, selects=False, order="polynomial order", runner=_run_polymax,
-                summary="polyMAX on the output spectra (output-only; on FRFs: lscf)", with_input="lscf"),
+                with_input="lscf"),
     ModalMethod(name="fdd", key="fdd", display="FDD", needs_input=False, needs_time_series=False, selects=False,
-                order=None, runner=_run_fdd, summary="frequency domain decomposition (output-only, no damping)"),
+                order=None, runner=_run_fdd),
     ModalMethod(name="efdd", key="efdd", display="EFDD", needs_input=False, needs_time_series=False,
-                selects=False, order=None, runner=_run_efdd, summary="enhanced FDD (output-only)"),
+                selects=False, order=None, runner=_run_efdd),
     ModalMethod(name="peak_picking", key="peak", display="peak picking", needs_input=True, needs_time_series=False,
-                selects=False, order=None, runner=_run_peak, summary="peak picking on the FRFs"),
+                selects=False, order=None, runner=_run_peak),
 )}
 
 _BY_NAME = {n: m for m in MODAL_METHODS.values() for n in dict.fromkeys((m.key, m.name))}
