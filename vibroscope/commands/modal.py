@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroscope._checks import LazyChoices
+
 __all__ = ["add_parser", "run", "identify_frf", "FRF_SUFFIXES"]
 
 #: file suffixes read as FRF files (everything else is read as an MCAP log)
 FRF_SUFFIXES = (".uff", ".unv", ".uf", ".csv", ".txt")
-
-_KIND_QUANTITY = {"accelerance": "acceleration", "mobility": "velocity", "receptance": "displacement", None: "displacement"}
 
 
 def add_parser(sub) -> None:
@@ -48,8 +48,10 @@ def add_parser(sub) -> None:
     p.add_argument("source", nargs="+", type=Path,
                    help="an MCAP log, one or more FRF files, or a mode set to show (UFF 55 with its geometry, "
                         "a model file, a MODES.json)")
-    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
-                   help="auto (default): LSCF with an input or an FRF file, SSI-COV without an input")
+    p.add_argument("--method", default="auto", choices=LazyChoices("vibroscope.modal.methods", "METHOD_CHOICES"),
+                   metavar="METHOD", help="modal identification: %(choices)s (the methods of "
+                                          "vibroscope.modal.methods by key or result name); default auto: LSCF "
+                                          "with an input or an FRF file, SSI-COV without an input")
     p.add_argument("--select", default="auto", metavar="auto|F1,F2,..",
                    help="modes: 'auto' (physical-mode selection) or the frequencies (Hz) to take from the "
                         "stabilization diagram")
@@ -59,8 +61,8 @@ def add_parser(sub) -> None:
     p.add_argument("--fs", type=float, help="resample a log to this rate (Hz)")
     p.add_argument("--fmin", type=float, help="lowest frequency of the band (Hz); default from the data")
     p.add_argument("--fmax", type=float, help="highest frequency of the band (Hz); default from the data")
-    p.add_argument("--kind", choices=["accelerance", "mobility", "receptance"],
-                   help="what an FRF file holds when it does not say (default: unknown)")
+    p.add_argument("--kind", choices=LazyChoices("vibroscope.spectral.kinds", "FRF_KINDS"), metavar="KIND",
+                   help="what an FRF file holds when it does not say: %(choices)s (default: unknown)")
     p.add_argument("--df", type=float, default=1.0, help="line spacing (Hz) of text FRFs without an axis (default 1)")
     p.add_argument("--json", type=Path, metavar="MODES.json", help="write the modes (and rejected candidates)")
     p.add_argument("--export-model", type=Path, metavar="MODEL.toml",
@@ -102,7 +104,9 @@ def identify_frf(frf, *, method: str = "auto", fmin=None, fmax=None, select=None
     ----------
     frf : FRF
         Measured FRFs.
-    method : {'auto', 'lscf', 'peak'}, optional
+    method : str, optional
+        A method of :data:`vibroscope.modal.methods.METHOD_CHOICES` that runs on FRFs: 'auto'
+        or 'lscf' (LSCF + LSFD, also for 'polymax'), 'peak' (peak picking); default 'auto'.
     fmin, fmax : float, optional
         Band in Hz; default the FRF's axis (where the coherence, if any, is defined).
     select : sequence of float, optional
@@ -116,20 +120,12 @@ def identify_frf(frf, *, method: str = "auto", fmin=None, fmax=None, select=None
     Raises
     ------
     ValueError
-        For an output-only method.
+        For an unknown or an output-only method (:func:`vibroscope.modal.methods.resolve_method`).
     """
-    from vibroscope import modal
-    from vibroscope.modal.automatic import Identification, auto_lscf
-    from vibroscope.modal.selection import select_modes
+    from vibroscope.modal.methods import identify
 
-    if method in ("ssi", "fdd", "efdd"):
-        raise ValueError(f"--method {method} is output-only: an FRF file needs lscf or peak")
-    if method == "peak":
-        mm = modal.peak_picking(frf, fmin=fmin, fmax=fmax)
-        coh = (frf.frequencies, frf.coherence) if np.any(np.isfinite(frf.coherence)) else None
-        sel = select_modes(mm, fmin=fmin, fmax=fmax, coherence=coh)
-        return Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria})
-    return auto_lscf(frf, fmin=fmin, fmax=fmax, select=select)
+    # (merge_duplicates=False: peak picking on FRF files has never merged duplicate candidates)
+    return identify(method, frf=frf, fmin=fmin, fmax=fmax, select=select, merge_duplicates=False)
 
 
 def _default_out(source: Path, suffix: str, out_dir=None) -> Path:
@@ -168,7 +164,8 @@ def run(args) -> int:
         When an output is an input file, or the identification fails.
     """
     from vibroscope.commands._outputs import check_out_dir, check_outputs, resolve_outputs
-    from vibroscope.commands.analyse import METHOD_NAMES, report_text
+    from vibroscope.commands.analyse import report_text
+    from vibroscope.modal.methods import display_name
     from vibroscope.errors import VibroscopeError
 
     check_out_dir(args.out)
@@ -208,7 +205,7 @@ def run(args) -> int:
         mm = ident.modes
         print(f"{first}{' + %d more' % (len(sources) - 1) if len(sources) > 1 else ''}: FRF {len(h.outputs)} outputs x "
               f"{len(h.inputs)} inputs, {h.frequencies.size} lines {h.frequencies[0]:.4g}–{h.frequencies[-1]:.4g} Hz; "
-              f"modes by {METHOD_NAMES.get(mm.method, mm.method)}")
+              f"modes by {display_name(mm.method)}")
         _print_modes(ident, args.json)
         signals = psd = csd = None
         sv = _mif(h)
@@ -461,7 +458,9 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     from vibroscope.models.modelfile import dumps_model
     from vibroscope.provenance import toml_header
 
-    q = _KIND_QUANTITY.get(res.kind, "displacement")
+    from vibroscope.spectral.kinds import FRF_KIND_TABLE
+
+    q = FRF_KIND_TABLE[res.kind].quantity if res.kind in FRF_KIND_TABLE else "displacement"
     R, LR, UR = res.residues, res.lower_residual, res.upper_residual
     if frf is not None:
         from vibroscope.modal.lsfd import pole_residue_form

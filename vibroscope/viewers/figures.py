@@ -581,10 +581,11 @@ def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
             ax.axvline(fn, color="tab:red", lw=0.6, ls="--")
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("model order")
-    if st.settings.get("method") == "lscf":
-        ax.set_title("Stabilization diagram (LSCF / polyMAX, polynomial order)")
-    else:
-        ax.set_title(f"Stabilization diagram (SSI-COV, {st.settings.get('n_lags', '?')} block rows)")
+    from vibroscope.modal.methods import MODAL_METHODS
+
+    m = MODAL_METHODS.get(st.settings.get("method", "ssi_cov"), MODAL_METHODS["ssi_cov"])
+    order = f"{st.settings.get('n_lags', '?')} block rows" if m.order == "block rows" else m.order
+    ax.set_title(f"Stabilization diagram ({m.display}, {order})")
     _legend_if(ax, loc="upper left", fontsize=8, framealpha=0.9)
     ax.grid(alpha=0.3)
     return ax
