@@ -205,7 +205,8 @@ def run(args) -> int:
     VibroscopeError
         When an output is an input file (``--json LOG``), or the analysis fails (the log named).
     """
-    from vibroscope.commands._outputs import check_out_dir, check_outputs, default_output, resolve_outputs
+    from vibroscope.commands._outputs import (check_out_dir, check_outputs, default_output, preload_outputs,
+                                              resolve_outputs)
     from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
 
@@ -240,6 +241,7 @@ def run(args) -> int:
                        nperseg=args.nperseg, estimator=args.estimator)
         except (ValueError, ConnectionError) as exc:
             raise VibroscopeError(f"{args.log}: {exc}") from None
+    preload_outputs(rrd=bool(rrd) or args.spawn, figures=bool(figures))  # imported while the analysis runs
     budget = memory_budget(args.max_memory)
     need = whole_read_bytes(args.log)
     if args.stream or need > budget:
@@ -719,7 +721,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     VibroscopeError
         When an output is the log or the coordinates file.
     """
-    from vibroscope.commands._outputs import AtomicOutputs, check_outputs
+    from vibroscope.commands._outputs import AtomicOutputs, check_outputs, preloaded
     from vibroscope.io.coords import line_coords, read_coords
     from vibroscope.pipeline import summary_dict
 
@@ -747,6 +749,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             print(f"ODS at {o.frequency_hz:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
                                                               for p, v in list(zip(o.points, o.shape))[:6]))
     done = []
+    preloaded()  # the libraries imported in the background (run): done before the figure workers fork
     with AtomicOutputs(inputs=[log, coords]) as tx:
         if json_path:
             d = (summary_dict(an, source=str(log), true_modes=true_modes) if sig is not None
@@ -756,10 +759,10 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             done.append(f"summary: {json_path}")
         kin = None
         if acc and (figures or rrd or spawn):  # integrated once, for the figure and the recording
-            from vibroscope.spectral.integration import integrate
+            from vibroscope.spectral.integration import velocity_and_displacement
 
             a = an.signals.select(acc)
-            kin = (integrate(a, order=1), integrate(a, order=2))
+            kin = velocity_and_displacement(a)
         pending = None
         if figures:  # drawn in worker processes while the recording is written (PendingFigures)
             from vibroscope.viewers.acquisition import plot_ods
@@ -782,7 +785,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
                                     coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
                                     spawn=spawn and not rrd,  # a recording under its final name is opened below
-                                    recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
+                                    recording_name=Path(log).stem, stabilization=stab, synthesized=synth,
+                                    singular_values=getattr(an, "singular_values", None))
                 written["rrd"] = tx.final(path) if path is not None else None
                 if rrd:
                     done.append(f"rerun recording: {rrd}  (open with: rerun {shlex.quote(str(rrd))})")
