@@ -124,8 +124,8 @@ def csd_fresh_warm(repeat: int) -> None:
     for i, j in itertools.combinations_with_replacement(range(10), 2):
         ss.csd(x[i], x[j], fs=1000.0, nperseg=4096)
     scipy_s = time.perf_counter() - t
-    print(f"case=csd_fresh_warm  10 ch x 2e6  first call of a fresh process (import of numpy and the data "
-          f"excluded) median_s={fresh:.3f}  warm (second call) median_s={warm:.3f}  pairwise scipy {scipy_s:.2f} s  "
+    print(f"case=csd_fresh_warm  10 ch x 2e6  first call of a fresh process (numba's import and "
+          f"kernel load included; numpy, vibroscope.spectral and the data not) median_s={fresh:.3f}  warm (second call) median_s={warm:.3f}  pairwise scipy {scipy_s:.2f} s  "
           f"ratio fresh={scipy_s / fresh:.1f}x warm={scipy_s / warm:.1f}x  runs={repeat}  "
           f"load_avg={load0:.1f}->{os.getloadavg()[0]:.1f}")
 
