@@ -9,7 +9,14 @@ at 12, 37 and 83 Hz under white noise, gravity on z), written with the project's
 `--log` names one. The runs alternate (analysis only, then all outputs) so that a change of the
 machine's load hits both; the figure is the ratio of the medians (all outputs / analysis only),
 with the medians of wall and CPU time (user + system, the worker processes included) and the load
-average before and after. On a shared machine compare the ratios, not the seconds.
+average before and after. On a shared machine compare the ratios, not the seconds. "All outputs"
+is the rerun recording, the PNG figures and the ``--json`` summary.
+
+``--csd`` adds what a command-line user sees of the cross-spectral engine: ``csd_matrix`` of 10
+channels × 2e6 samples (nperseg 4096, the README's case) as the first call of a fresh process
+(numba's compiled kernels loaded from its cache, the threads started) and as the second call of
+that process (warm), median over `--repeat` processes, against one pairwise ``scipy.signal.csd``
+pass over the same data in the same run.
 """
 
 from __future__ import annotations
@@ -61,12 +68,13 @@ def main() -> None:
     ap.add_argument("--messages", type=float, default=1e6, help="messages of the generated Imu log (default 1e6)")
     ap.add_argument("--repeat", type=int, default=3, help="runs of each case, alternated (default 3)")
     ap.add_argument("--log", type=Path, help="analyse this log instead of a generated one")
+    ap.add_argument("--csd", action="store_true", help="also time csd_matrix fresh (first call) and warm")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         log = args.log.resolve() if args.log else write_log(Path(d) / "imu.mcap", int(args.messages))
         cli = [sys.executable, "-m", "vibroscope.cli", "analyse", str(log), "--out", d]
         cases = {"analysis only (--no-rrd --no-figures)": [*cli, "--no-rrd", "--no-figures"],
-                 "all outputs (rrd + figures)": cli}
+                 "all outputs (rrd + figures + json)": [*cli, "--json", "summary.json"]}
         res: dict[str, list] = {k: [] for k in cases}
         load0 = os.getloadavg()[0]
         for _ in range(args.repeat):
@@ -80,6 +88,46 @@ def main() -> None:
         print(f"case=analyse_outputs  {name}  {size}  median_wall_s={w:.2f}  median_cpu_s={c:.2f}  runs={args.repeat}")
     print(f"case=analyse_outputs  ratio all/none  wall={w1 / w0:.2f}x  cpu={c1 / c0:.2f}x  "
           f"load_avg={load0:.1f}->{load1:.1f}  cores={len(os.sched_getaffinity(0))}")
+    if args.csd:
+        csd_fresh_warm(args.repeat)
+
+
+_CSD = """
+import time
+t = time.perf_counter()
+import numpy as np
+from vibroscope.spectral import csd_matrix
+x = np.random.default_rng(0).standard_normal((10, 2_000_000))
+t1 = time.perf_counter()
+csd_matrix(x, fs=1000.0, nperseg=4096)
+t2 = time.perf_counter()
+csd_matrix(x, fs=1000.0, nperseg=4096)
+t3 = time.perf_counter()
+print(t2 - t1, t3 - t2, t1 - t)
+"""
+
+
+def csd_fresh_warm(repeat: int) -> None:
+    """Print the fresh-process and warm ``csd_matrix`` times (10 ch × 2e6) and their ratios to one
+    pairwise ``scipy.signal.csd`` pass (55 calls) timed in this process."""
+    import itertools
+
+    import numpy as np
+    import scipy.signal as ss
+
+    load0 = os.getloadavg()[0]
+    runs = [tuple(map(float, subprocess.run([sys.executable, "-c", _CSD], check=True, capture_output=True,
+                                             text=True).stdout.split())) for _ in range(repeat)]
+    fresh, warm = statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs)
+    x = np.random.default_rng(0).standard_normal((10, 2_000_000))
+    t = time.perf_counter()
+    for i, j in itertools.combinations_with_replacement(range(10), 2):
+        ss.csd(x[i], x[j], fs=1000.0, nperseg=4096)
+    scipy_s = time.perf_counter() - t
+    print(f"case=csd_fresh_warm  10 ch x 2e6  first call of a fresh process (numba's import and "
+          f"kernel load included; numpy, vibroscope.spectral and the data not) median_s={fresh:.3f}  warm (second call) median_s={warm:.3f}  pairwise scipy {scipy_s:.2f} s  "
+          f"ratio fresh={scipy_s / fresh:.1f}x warm={scipy_s / warm:.1f}x  runs={repeat}  "
+          f"load_avg={load0:.1f}->{os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

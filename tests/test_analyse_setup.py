@@ -139,6 +139,88 @@ def test_an_output_only_method_never_takes_the_force(short_log, tmp_path):
     assert json.loads(js.read_text())["input"] is None
 
 
+# ------------------------------------------- item 1 in every mode: --stream, --connect, --dask
+
+def test_stream_takes_the_force_as_input(shaker_log, tmp_path, capsys):
+    """``--stream`` (block by block): the same force is the input, found in the first and last
+    chunks of its topic; the report and the JSON say so in the same line, and the modes are the
+    model's within 1 %. ``--output-only`` still ignores it."""
+    js = tmp_path / "s.json"
+    assert main(["analyse", str(shaker_log), "--stream", "--json", str(js), "--no-rrd", "--no-figures"]) == 0
+    out = capsys.readouterr().out
+    assert CHOICE in out.splitlines() and f"input {FORCE} -> 3 outputs" in out
+    s = json.loads(js.read_text())
+    assert s["input"] == FORCE and s["input_choice"] == CHOICE and s["modal_method"] == "lscf"
+    assert "input_choice" not in s["settings"]
+    found = np.sort([m["frequency_hz"] for m in s["modes"]])
+    np.testing.assert_allclose(found, _shaker_model().modes().natural_frequencies, rtol=0.01)
+    assert main(["analyse", str(shaker_log), "--stream", "--output-only", "--json", str(js), "--no-rrd",
+                 "--no-figures"]) == 0
+    s = json.loads(js.read_text())
+    assert s["input"] is None and "input_choice" not in s and "force-like" not in capsys.readouterr().out
+
+
+def test_the_grid_finds_the_same_input_as_a_whole_read(short_log, tmp_path):
+    """:meth:`LogGrid.force_input` (first and last chunks only) takes what the whole read takes;
+    the responses' topics are never the input; two moving forces on two topics: none taken."""
+    from vibroscope.io.blocks import open_grid
+    from vibroscope.io.select import find_force_input
+
+    got = open_grid(short_log).force_input()
+    assert got.channel == FORCE and got.line() == CHOICE == find_force_input(short_log).line()
+    assert open_grid(short_log).force_input(exclude_channels=[FORCE]).channel is None
+    sig = lambda t: np.random.default_rng(0).standard_normal(t.size)  # noqa: E731
+    two = _json_log(tmp_path / "two.mcap", {"/left/force.x": sig, "/right/force.x": sig, "/acc.a": sig})
+    got = open_grid(two, ["/acc.a"]).force_input(exclude_channels=["/acc.a"])
+    assert got.channel is None and set(got.candidates) == {"/left/force.x", "/right/force.x"}
+
+
+def test_connect_streams_and_analyses_with_the_force(short_log, tmp_path, monkeypatch, capsys):
+    """``--connect``: the live view is a log read block by block, its topics known ahead: the live
+    FRFs and the analysis after it take the same force as the input (the viewer is stood in for:
+    the call is recorded). ``--output-only``: neither takes it."""
+    import vibroscope.viewers.rerun_live as live
+
+    calls = []
+    monkeypatch.setattr(live, "stream_log", lambda log, **kw: calls.append(kw))
+    js = tmp_path / "s.json"
+    assert main(["analyse", str(short_log), "--connect", "--json", str(js), "--no-rrd", "--no-figures"]) == 0
+    assert calls[-1]["input"] == FORCE
+    assert CHOICE in capsys.readouterr().out.splitlines()
+    s = json.loads(js.read_text())
+    assert s["input"] == FORCE and s["input_choice"] == CHOICE
+    assert main(["analyse", str(short_log), "--connect", "--output-only", "--json", str(js), "--no-rrd",
+                 "--no-figures"]) == 0
+    assert calls[-1]["input"] is None and json.loads(js.read_text())["input"] is None
+
+
+def test_dask_fleet_takes_the_first_logs_force_for_every_log(shaker_log, short_log, tmp_path, capsys):
+    """``--dask``: the first log that plans chooses the input as it chooses the channels; every
+    log's FRF modes come from it (the model's within 1 % on the long log), and the line is
+    printed and in ``fleet.json``'s settings."""
+    pytest.importorskip("dask.distributed")
+    from dask.distributed import Client
+
+    from vibroscope.fleet import local_cluster
+
+    logs = [str(shaker_log), str(short_log)]
+    with local_cluster(1) as lc, Client(lc) as c:
+        assert main(["analyse", "--dask", c.scheduler.address, *logs, "--out", str(tmp_path / "auto"),
+                     "--no-figures"]) == 0
+        assert CHOICE in capsys.readouterr().out.splitlines()
+        assert main(["analyse", "--dask", c.scheduler.address, *logs, "--input", FORCE, "--out",
+                     str(tmp_path / "given"), "--no-figures"]) == 0
+        assert "force-like" not in capsys.readouterr().out
+    d = json.loads((tmp_path / "auto" / "fleet.json").read_text())
+    assert d["settings"]["input"] == FORCE and d["settings"]["input_choice"] == CHOICE
+    assert d["settings"]["channels"][0] == FORCE and len(d["settings"]["channels"]) == 10  # + 3 Imu × xyz
+    given = json.loads((tmp_path / "given" / "fleet.json").read_text())
+    assert [r["modes"] for r in d["logs"]] == [r["modes"] for r in given["logs"]]  # as with --input
+    long = np.array([m["frequency_hz"] for m in d["logs"][0]["modes"]])  # the fleet's fixed resolution keeps
+    true = _shaker_model().modes().natural_frequencies  # the upper two of the model's modes, within 1 %
+    assert all(np.min(np.abs(long / f - 1)) < 0.01 for f in true[1:]), long
+
+
 # ---------------------------------------------------------------- item 4: finding field paths
 
 def test_info_fields_lists_numeric_paths_with_unit_and_sample(short_log, capsys):

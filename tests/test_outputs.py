@@ -344,3 +344,19 @@ def test_a_log_of_a_few_samples_is_too_short(tmp_path, capsys):
     assert main(["analyse", str(log), "--out", str(tmp_path / "o")]) == 1
     err = _err_lines(capsys)
     assert len(err) == 1 and "too short to analyse: 2 samples" in err[0]
+
+
+def test_preload_imports_the_output_libraries_in_the_background_only_when_asked():
+    """``preload_outputs`` imports rerun (with pandas, which pyarrow imports on the blueprint's
+    first array) and pyplot with PIL in a thread that :func:`preloaded` joins; with no output it
+    starts nothing (a fresh process each, so that nothing was imported before)."""
+    code = ("import sys, threading; from vibroscope.commands._outputs import preload_outputs, preloaded; "
+            "preload_outputs(rrd={rrd}, figures={fig}); n = threading.active_count(); preloaded(); "
+            "print(n, threading.active_count(), *(m in sys.modules for m in "
+            "('rerun', 'pandas', 'matplotlib.pyplot', 'PIL.Image')))")
+    run = lambda rrd, fig: subprocess.run([sys.executable, "-c", code.format(rrd=rrd, fig=fig)],  # noqa: E731
+                                          capture_output=True, text=True, check=True).stdout.split()
+    pandas = __import__("importlib.util").util.find_spec("pandas") is not None
+    assert run(True, True) == ["2", "1", "True", str(pandas), "True", "True"]
+    assert run(False, True) == ["2", "1", "False", "False", "True", "True"]
+    assert run(False, False) == ["1", "1", "False", "False", "False", "False"]

@@ -367,7 +367,7 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
                   input: str | None = None, fs: float | None = None, nperseg: int | None = None,
                   window: str = "hann", bands: Sequence[tuple[float, float]] | None = None,
                   tasks_per_log: int | None = None, method: str = "auto", fmin: float | None = None,
-                  fmax: float | None = None) -> FleetResult:
+                  fmax: float | None = None, find_input: bool = False) -> FleetResult:
     """Spectra, modes and band RMS of many logs, the accumulation spread over a Dask cluster.
 
     Parameters
@@ -404,6 +404,11 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         ('auto', 'lscf', 'peak', 'fdd', 'efdd'); identification per log (:func:`vibroscope.stream.analyse_stream`).
     fmin, fmax : float, optional
         Band (Hz) searched for modes; default from each log's spectra.
+    find_input : bool, optional
+        Without `input`, the first log that plans chooses the input as it chooses the channels:
+        its one force-like channel that moves (:meth:`vibroscope.io.blocks.LogGrid.force_input`),
+        then the input of every log; the line saying so (or why none was taken) is
+        ``settings["input_choice"]``. Default False.
 
     Returns
     -------
@@ -441,9 +446,19 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         return ValueError("no log of the fleet can be analysed: " + "; ".join(f"{paths[k]}: {e}"
                                                                               for k, e in sorted(errors.items())))
 
-    first, k0 = None, 0
+    first, k0, choice = None, 0, None
     for k0 in range(len(paths)):  # the first log that plans chooses the channels and the rate
         first = plan(k0, channels, fs, (input.split(".", 1)[0],) if input and channels is None else ())
+        if first is not None and find_input and input is None:  # and the input, as a whole read takes it
+            found = first.force_input(exclude_channels=channels or ())
+            choice = found.line() or None
+            if found.channel:
+                input = found.channel
+                if channels is not None:
+                    channels = [input, *(c for c in channels if c != input)]
+                    first = plan(k0, channels, fs)
+                else:  # its topic holds the force, not a response
+                    first = plan(k0, None, fs, (input.split(".", 1)[0],))
         if first is not None and channels is None and input is not None:
             first = plan(k0, [input] + [c for c in first.channels if c != input], fs)
         if first is not None:
@@ -529,5 +544,6 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         warns.append(f"resampled onto the fleet's {fs:.6g} Hz (rate within {100 * RATE_TOLERANCE:g} %): "
                      + ", ".join(resampled))
     settings = dict(sett, fs=fs, channels=list(channels), bands_hz=[list(b) for b in bands], tasks=n_tasks,
-                    workers=n_workers, input=input, excluded=excluded, warnings=warns)
+                    workers=n_workers, input=input, excluded=excluded, warnings=warns,
+                    **({"input_choice": choice} if choice else {}))
     return FleetResult(tuple(rows), per_log, merged, settings)

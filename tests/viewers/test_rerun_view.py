@@ -95,6 +95,26 @@ def test_csd_singular_values(analysis, data):
     assert "/csd/singular_values/s3" in data and "/csd/singular_values/s4" not in data
 
 
+def test_given_singular_values_are_logged_as_computed(analysis, data, tmp_path):
+    """The analysis' own singular values (``singular_values=``) are what is logged, and equal the
+    recording's own SVD to rounding (1e-12 of the largest; the Hermitian eigen-solver of
+    :func:`singular_values` and the SVD differ there); values of another frequency axis are not
+    used."""
+    from vibroscope.modal.fdd import SingularValues, singular_values
+
+    sv = singular_values(analysis["csd"])
+    d = read_rrd(log_analysis(csd=analysis["csd"], singular_values=sv, rrd_path=tmp_path / "sv.rrd"))
+    for k in range(3):
+        got = d[f"/csd/singular_values/s{k + 1}"]["Scalars:scalars"]
+        np.testing.assert_array_equal(got, 10 * np.log10(sv.S[:, k]))
+        ref = data[f"/csd/singular_values/s{k + 1}"]["Scalars:scalars"]
+        np.testing.assert_allclose(10 ** (got / 10), 10 ** (ref / 10), rtol=0, atol=1e-12 * sv.S.max())
+    other = SingularValues(sv.frequencies + 1.0, 2 * sv.S)  # another axis: the recording computes its own
+    d = read_rrd(log_analysis(csd=analysis["csd"], singular_values=other, rrd_path=tmp_path / "o.rrd"))
+    np.testing.assert_allclose(d["/csd/singular_values/s1"]["Scalars:scalars"],
+                               data["/csd/singular_values/s1"]["Scalars:scalars"], atol=1e-9)
+
+
 @pytest.mark.parametrize("frame", [0, 10, 27])
 def test_mode_shape_points_are_the_displaced_sensors(analysis, data, frame):
     modal = analysis["modal"]

@@ -44,7 +44,8 @@ from vibroscope.errors import VibroscopeError
 from vibroscope.provenance import written_by_vibroscope
 
 __all__ = ["default_output", "same_file", "check_outputs", "check_out_dir", "check_writable", "special_kind",
-           "check_ours", "resolve_outputs", "AtomicOutputs", "TEMP_MARK", "FOLDER_OPTIONS", "FIGURE_SUFFIX"]
+           "check_ours", "resolve_outputs", "AtomicOutputs", "TEMP_MARK", "FOLDER_OPTIONS", "FIGURE_SUFFIX",
+           "preload_outputs", "preloaded"]
 
 #: what every temporary name contains (``.<name>.tmp-<pid>``)
 TEMP_MARK = ".tmp-"
@@ -591,3 +592,49 @@ class AtomicOutputs:
         for tmp, _ in self._dirs:
             shutil.rmtree(tmp, ignore_errors=True)
         self._files, self._dirs = [], []
+
+
+#: the running :func:`preload_outputs` thread, joined by :func:`preloaded`
+_PRELOAD: list = []
+
+
+def preload_outputs(*, rrd: bool, figures: bool) -> None:
+    """Import the libraries of the outputs (rerun with pyarrow and pandas; matplotlib and PIL) in
+    a background thread while the analysis computes, so that a fresh process does not import
+    them, one after the other, after the analysis (about a second of the 2-core machine's time:
+    imports run while the analysis waits in compiled code without the GIL, or on the idle core).
+
+    A failed import is left for the output's own import to report. :func:`preloaded` joins the
+    thread: call it before forking (:class:`vibroscope.viewers.figures.PendingFigures`), so that
+    no worker inherits an import lock held by the thread.
+
+    Parameters
+    ----------
+    rrd : bool
+        A rerun recording (or viewer) will be written.
+    figures : bool
+        PNG figures will be written.
+    """
+    if not (rrd or figures) or _PRELOAD:
+        return
+
+    def load() -> None:
+        with contextlib.suppress(Exception):
+            if figures:
+                from vibroscope.viewers.figures import preload
+
+                preload()
+            if rrd:
+                from vibroscope.viewers.rerun_view import preload
+
+                preload()
+
+    t = threading.Thread(target=load, name="vibroscope-preload", daemon=True)
+    _PRELOAD.append(t)
+    t.start()
+
+
+def preloaded() -> None:
+    """Wait for the :func:`preload_outputs` thread, if one was started."""
+    while _PRELOAD:
+        _PRELOAD.pop().join()

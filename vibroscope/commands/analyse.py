@@ -205,7 +205,8 @@ def run(args) -> int:
     VibroscopeError
         When an output is an input file (``--json LOG``), or the analysis fails (the log named).
     """
-    from vibroscope.commands._outputs import check_out_dir, check_outputs, default_output, resolve_outputs
+    from vibroscope.commands._outputs import (check_out_dir, check_outputs, default_output, preload_outputs,
+                                              resolve_outputs)
     from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
 
@@ -235,11 +236,13 @@ def run(args) -> int:
     if live:  # the live view first, read block by block (vibroscope.viewers.rerun_live), then the analysis
         from vibroscope.viewers.rerun_live import stream_log
 
-        try:
-            stream_log(args.log, url=args.connect or None, input=args.input, outputs=args.outputs, fs=args.fs,
+        live_input = grid_input(args.log, args.outputs, args.fs)[0] if looks_for_input(args) else args.input
+        try:  # the analysis below takes (and reports) the same force-like input
+            stream_log(args.log, url=args.connect or None, input=live_input, outputs=args.outputs, fs=args.fs,
                        nperseg=args.nperseg, estimator=args.estimator)
         except (ValueError, ConnectionError) as exc:
             raise VibroscopeError(f"{args.log}: {exc}") from None
+    preload_outputs(rrd=bool(rrd) or args.spawn, figures=bool(figures))  # imported while the analysis runs
     budget = memory_budget(args.max_memory)
     need = whole_read_bytes(args.log)
     if args.stream or need > budget:
@@ -370,6 +373,56 @@ def _stream_kw(args) -> dict:
                 method="auto" if _needs_time_series(args) else args.method, select=None)
 
 
+def looks_for_input(args) -> bool:
+    """Whether ``analyse`` takes the log's force-like channel as the input: no ``--input``, no
+    ``--output-only``, and a method that uses an input (as :func:`analyse_log` with `find_input`).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The parsed command line.
+
+    Returns
+    -------
+    bool
+    """
+    from vibroscope.modal.methods import uses_input
+
+    return (not getattr(args, "input", None) and not getattr(args, "output_only", False)
+            and uses_input(getattr(args, "method", "auto")))
+
+
+def grid_input(log: Path, outputs=None, fs=None) -> tuple[str | None, str | None]:
+    """The force input of a log read block by block (``--stream``, ``--connect``): the one force-like
+    channel that moves in the first and last chunks of its topic
+    (:meth:`vibroscope.io.blocks.LogGrid.force_input`), as :func:`analyse_log` finds it in a whole
+    read.
+
+    Parameters
+    ----------
+    log : Path
+        The MCAP log.
+    outputs : sequence of str, optional
+        The response channels (their topics are never the input); default chosen automatically.
+    fs : float, optional
+        Grid rate in Hz; default the highest topic rate.
+
+    Returns
+    -------
+    tuple of (str or None, str or None)
+        (the input's message path, or None; the report's line saying what was taken or why none
+        was, or None when the log holds no force-like field).
+    """
+    from vibroscope.errors import VibroscopeError
+    from vibroscope.io.blocks import open_grid
+
+    try:
+        found = open_grid(log, outputs, fs=fs).force_input(exclude_channels=outputs or ())
+    except (VibroscopeError, ValueError) as exc:  # the search never stops an output-only analysis
+        return None, f"no force input looked for: {exc}"
+    return found.channel, found.line() or None
+
+
 def run_stream(args) -> int:
     """``vibroscope analyse --stream LOG``: the log read block by block (:func:`vibroscope.stream.analyse_stream`);
     prints the report and writes the ``--json`` summary, the figures and the rerun recording of the
@@ -402,12 +455,19 @@ def run_stream(args) -> int:
                   {"log": args.log, "coordinates": args.coords})
     kw = _stream_kw(args)
     kw["select"] = _select_freqs(args.select)
+    choice = None
+    if looks_for_input(args):  # the log's force-like channel, as a whole read takes it
+        kw["input"], choice = grid_input(args.log, args.outputs, args.fs)
     if _needs_time_series(args):
         print(f"--method {args.method} needs the time series: output-only modes by EFDD on the spectra instead")
     try:
         an = analyse_stream(args.log, **kw)
     except ValueError as exc:
         raise VibroscopeError(f"{args.log}: {exc}") from None
+    if choice:
+        import dataclasses
+
+        an = dataclasses.replace(an, settings={**an.settings, "input_choice": choice})
     print(stream_report_text(an, source=str(args.log)))
     # the spectra, FRFs, modes and stabilization diagram need no time series: drawn and recorded as
     # for a whole read (no signals.png, kinematics.png or /signals entities); the summary goes with
@@ -440,6 +500,8 @@ def stream_report_text(an, *, source: str = "") -> str:
     how = display_name(an.modal.method)
     lines.append(f"input {s['input']} -> {len(s['outputs'])} outputs, {s['estimator']} FRF, modes by {how}"
                  if s.get("input") else f"output-only: {len(s['outputs'])} responses, modes by {how}")
+    if s.get("input_choice"):  # the force-like channel taken as the input, or why none was
+        lines.append(s["input_choice"])
     lines += [f"  warning: {w}" for w in an.warnings]
     lines.append(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9}  method")
     for k, (f, z) in enumerate(zip(an.modal.natural_frequencies, an.modal.damping_ratios)):
@@ -468,7 +530,8 @@ def _not_estimated(method: str) -> str:
 
 def stream_summary(an, *, source: str | None = None) -> dict:
     """The ``--json`` summary of a streamed analysis: ``source``, ``fs``, ``n_samples``, ``channels``,
-    ``units``, ``input``, ``outputs``, ``warnings``, ``modes``, ``rejected_modes``, ``settings``
+    ``units``, ``input``, ``input_choice`` (when the force-like channel was looked for: see
+    :func:`grid_input`), ``outputs``, ``warnings``, ``modes``, ``rejected_modes``, ``settings``
     (``streamed: true``).
 
     Parameters
@@ -493,7 +556,8 @@ def stream_summary(an, *, source: str | None = None) -> dict:
                       "input": an.settings.get("input"), "outputs": an.settings.get("outputs"),
                       "warnings": list(an.warnings), "modal_method": an.modal.method, "modes": doc["modes"],
                       "rejected_modes": doc["rejected"],
-                      "settings": {k: v for k, v in an.settings.items() if k != "outputs"}})
+                      **({"input_choice": an.settings["input_choice"]} if an.settings.get("input_choice") else {}),
+                      "settings": {k: v for k, v in an.settings.items() if k not in ("outputs", "input_choice")}})
 
 
 def run_fleet(args, logs: list) -> int:
@@ -539,9 +603,11 @@ def run_fleet(args, logs: list) -> int:
     try:
         res = analyse_fleet([str(p) for p in logs], client=args.dask or None, channels=chans, input=args.input,
                             fs=args.fs, nperseg=args.nperseg, method=_stream_kw(args)["method"], fmin=args.fmin,
-                            fmax=args.fmax)
+                            fmax=args.fmax, find_input=looks_for_input(args))
     except ValueError as exc:
         raise VibroscopeError(f"fleet analysis: {exc}") from None
+    if res.settings.get("input_choice"):  # the first log's force-like channel, the input of every log
+        print(res.settings["input_choice"])
     for r in res.rows:
         modes = ", ".join(f"{f:.3f} Hz ({_percent(z)} %)" for f, z in zip(r.frequencies_hz, r.damping_ratios))
         print(f"{r.log}: {r.duration_s:.1f} s; modes {modes or '(none)'}" + (f"; {r.error}" if r.error else ""))
@@ -735,7 +801,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     VibroscopeError
         When an output is the log or the coordinates file.
     """
-    from vibroscope.commands._outputs import AtomicOutputs, check_outputs
+    from vibroscope.commands._outputs import AtomicOutputs, check_outputs, preloaded
     from vibroscope.provenance import json_report
     from vibroscope.io.coords import line_coords, read_coords
     from vibroscope.pipeline import summary_dict
@@ -764,6 +830,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             print(f"ODS at {o.frequency_hz:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
                                                               for p, v in list(zip(o.points, o.shape))[:6]))
     done = []
+    preloaded()  # the libraries imported in the background (run): done before the figure workers fork
     with AtomicOutputs(inputs=[log, coords]) as tx:
         if json_path:
             d = (summary_dict(an, source=str(log), true_modes=true_modes) if sig is not None
@@ -773,10 +840,10 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             done.append(f"summary: {json_path}")
         kin = None
         if acc and (figures or rrd or spawn):  # integrated once, for the figure and the recording
-            from vibroscope.spectral.integration import integrate
+            from vibroscope.spectral.integration import velocity_and_displacement
 
             a = an.signals.select(acc)
-            kin = (integrate(a, order=1), integrate(a, order=2))
+            kin = velocity_and_displacement(a)
         pending = None
         if figures:  # drawn in worker processes while the recording is written (PendingFigures)
             from vibroscope.viewers.acquisition import plot_ods
@@ -799,7 +866,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
                                     coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
                                     spawn=spawn and not rrd,  # a recording under its final name is opened below
-                                    recording_name=Path(log).stem, stabilization=stab, synthesized=synth)
+                                    recording_name=Path(log).stem, stabilization=stab, synthesized=synth,
+                                    singular_values=getattr(an, "singular_values", None))
                 written["rrd"] = tx.final(path) if path is not None else None
                 if rrd:
                     done.append(f"rerun recording: {rrd}  (open with: rerun {shlex.quote(str(rrd))})")

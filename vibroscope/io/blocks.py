@@ -268,6 +268,28 @@ class LogGrid:
         """
         return int(np.ceil(round((t_s * 1e9 - self.t0_ns) * 1e-9 * self.fs, 6)))
 
+    def force_input(self, *, exclude_channels: Sequence[str] = ()):
+        """The log's one force-like channel that moves, as a whole read finds it
+        (:func:`vibroscope.io.select.find_force_input`), looked for in the first and last chunks of
+        each topic only (the log is not read whole), the topics' message counts from the summary.
+
+        Parameters
+        ----------
+        exclude_channels : sequence of str, optional
+            Message paths of the responses: their topics are never taken.
+
+        Returns
+        -------
+        vibroscope.io.select.ForceInput
+            Its ``channel`` is None when the log holds no force-like field that moves in those
+            chunks, or several (``line()`` says which).
+        """
+        from vibroscope.io.select import find_force_input
+
+        log, counts = _end_chunks(self)
+        topics = {log.topic_of(c).topic for c in exclude_channels}
+        return find_force_input(log, exclude_topics=topics, message_counts=counts)
+
     def _index(self, spans: Sequence[ChunkSpan], topics: set[str]):
         """A LogIndex over the chunks `spans` only (damaged ones skipped and reported)."""
         from vibroscope.io import _scan
@@ -484,6 +506,24 @@ def _refine_jittered(ta: np.ndarray, tb: np.ndarray, r: float, jit: float, *, sn
     return _snap(r, 3.0 * jit * (1.0 / rel_a.size + 1.0 / rel_b.size) ** 0.5 / span) if snap else r
 
 
+def _end_chunks(grid: LogGrid):
+    """(LogIndex of the first and last chunks of every channel, messages per topic in the whole
+    log: the summary's statistics, else the sampled chunks' counts scaled to all chunks)."""
+    chans = grid._channels
+    held = {cid: [c for c in grid.chunks if c.channel_ids is None or cid in c.channel_ids] for cid in chans}
+    ends = {cid: {sp[0].offset: sp[0], sp[-1].offset: sp[-1]} for cid, sp in held.items() if sp}
+    sample = sorted({o: c for e in ends.values() for o, c in e.items()}.values(), key=lambda c: c.offset)
+    log = grid._index(sample, None)
+    by_topic: dict[str, int] = {}
+    for cid, ch in chans.items():
+        if grid._counts is not None:
+            n = int(grid._counts.get(cid, 0))
+        else:  # no statistics: the sampled chunks' messages scaled to all chunks holding the channel
+            n = round(log.log_times(cid).size * len(held.get(cid, ())) / max(1, len(ends.get(cid, ()))))
+        by_topic[ch.topic] = by_topic.get(ch.topic, 0) + n
+    return log, by_topic
+
+
 def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
     """The channels of a log given none, chosen as the whole read chooses them
     (:func:`vibroscope.io.select.auto_channels`) without reading the whole log.
@@ -506,17 +546,7 @@ def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
                   and schemas[ch.schema_id].name in ACCELERATION_TYPES})
     if imu:
         return [f"{t}.linear_acceleration.{a}" for t in imu for a in "xyz"]
-    held = {cid: [c for c in grid.chunks if c.channel_ids is None or cid in c.channel_ids] for cid in chans}
-    ends = {cid: {sp[0].offset: sp[0], sp[-1].offset: sp[-1]} for cid, sp in held.items() if sp}
-    sample = sorted({o: c for e in ends.values() for o, c in e.items()}.values(), key=lambda c: c.offset)
-    log = grid._index(sample, None)
-    by_topic: dict[str, int] = {}
-    for cid, ch in chans.items():
-        if grid._counts is not None:
-            n = int(grid._counts.get(cid, 0))
-        else:  # no statistics: the sampled chunks' messages scaled to all chunks holding the channel
-            n = round(log.log_times(cid).size * len(held.get(cid, ())) / max(1, len(ends.get(cid, ()))))
-        by_topic[ch.topic] = by_topic.get(ch.topic, 0) + n
+    log, by_topic = _end_chunks(grid)
     try:
         sel = auto_channels(log, message_counts=by_topic, exclude_topics=exclude_topics)
     except ChannelError as exc:

@@ -546,7 +546,8 @@ def _gap_counts(lt: np.ndarray) -> tuple[int, float]:
     missing period), after sorting and dropping repeated log times."""
     if lt.size < 3:
         return 0, 0.0
-    ts = np.unique(lt)
+    ts = np.sort(lt)  # np.unique of numpy 2.4 takes ~1 s on 1e6 stamps, sorting and comparing ~15 ms
+    ts = ts[np.r_[True, ts[1:] != ts[:-1]]]
     if ts.size < 3:
         return 0, 0.0
     fit = fit_stamps(ts)

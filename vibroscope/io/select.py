@@ -294,8 +294,8 @@ def field_hint(path: str | Path | LogIndex, channel: str, n: int = 8) -> str:
     return f"; numeric paths near it: {', '.join(near)} (all of them: vibroscope info --fields LOG)" if near else ""
 
 
-def force_candidates(path: str | Path | LogIndex, *, exclude_topics=(), min_messages: int = 64
-                     ) -> tuple[tuple[str, str], ...]:
+def force_candidates(path: str | Path | LogIndex, *, exclude_topics=(), min_messages: int = 64,
+                     message_counts: dict | None = None) -> tuple[tuple[str, str], ...]:
     """The force-like numeric fields of a log: what could be an FRF's input.
 
     A field is force-like when its topic has at least `min_messages` messages, is not an Imu
@@ -316,6 +316,9 @@ def force_candidates(path: str | Path | LogIndex, *, exclude_topics=(), min_mess
         Topics never taken (e.g. the responses' topics).
     min_messages : int, optional
         Fewest messages of a candidate topic; default 64.
+    message_counts : dict of str to int, optional
+        Messages per topic in the whole log, for an index that holds only some of its chunks
+        (:meth:`vibroscope.io.blocks.LogGrid.force_input`); default the index's own counts.
 
     Returns
     -------
@@ -331,7 +334,8 @@ def force_candidates(path: str | Path | LogIndex, *, exclude_topics=(), min_mess
     out = []
     fields = log.discover_fields()
     for t in info.topics:
-        if (t.topic in exclude_topics or t.schema_name in ACCELERATION_TYPES or t.message_count < min_messages
+        n = t.message_count if message_counts is None else int(message_counts.get(t.topic, 0))
+        if (t.topic in exclude_topics or t.schema_name in ACCELERATION_TYPES or n < min_messages
                 or t.topic not in fields):
             continue
         short = t.schema_name.rsplit("/", 1)[-1]
@@ -419,7 +423,7 @@ class ForceInput:
 
 
 def find_force_input(path: str | Path | LogIndex, *, exclude_topics=(), min_messages: int = 64,
-                     n_look: int = 512) -> ForceInput:
+                     n_look: int = 512, message_counts: dict | None = None) -> ForceInput:
     """The one force-like channel of a log that moves, to take as the FRF input.
 
     The candidates of :func:`force_candidates` are looked at in at most `n_look` messages of
@@ -437,6 +441,9 @@ def find_force_input(path: str | Path | LogIndex, *, exclude_topics=(), min_mess
         Fewest messages of a candidate topic; default 64.
     n_look : int, optional
         Most messages decoded per candidate topic; default 512.
+    message_counts : dict of str to int, optional
+        Messages per topic in the whole log, for an index of some of its chunks (see
+        :func:`force_candidates`).
 
     Returns
     -------
@@ -445,7 +452,8 @@ def find_force_input(path: str | Path | LogIndex, *, exclude_topics=(), min_mess
     import numpy as np
 
     log = _index(path)
-    cands = force_candidates(log, exclude_topics=exclude_topics, min_messages=min_messages)
+    cands = force_candidates(log, exclude_topics=exclude_topics, min_messages=min_messages,
+                             message_counts=message_counts)
     if not cands:
         return ForceInput(None, "")
     why = dict(cands)

@@ -20,7 +20,7 @@ from vibroscope._checks import check_option, read_only
 from vibroscope.signals import Signals, true_runs
 from vibroscope.spectral._results import FRF, CrossSpectralMatrix, channel_index
 
-__all__ = ["integrate", "default_f_cut", "vibration_severity", "Severity", "ods", "OperatingShape",
+__all__ = ["integrate", "velocity_and_displacement", "default_f_cut", "vibration_severity", "Severity", "ods", "OperatingShape",
            "highpass_gain"]
 
 #: order of the Butterworth high-pass (applied forward and backward: zero phase, 2×4 poles)
@@ -222,6 +222,40 @@ def integrate(signals: Signals, *, order: Literal[1, 2] = 1, f_cut: float | None
     (('m/s',), 1.0)
     """
     check_option("order", order, (1, 2))
+    return _integrals(signals, order, f_cut, method)[-1]
+
+
+def velocity_and_displacement(signals: Signals, *, f_cut: float | None = None,
+                              method: Literal["frequency", "highpass"] = "frequency") -> tuple[Signals, Signals]:
+    """Velocity and displacement of accelerations in one pass: ``(integrate(signals, order=1),
+    integrate(signals, order=2))``, the same numbers, the first integration done once.
+
+    Parameters
+    ----------
+    signals : Signals
+        ``data`` shape (n_channels, n_samples), accelerations in m/s², ``fs`` in Hz.
+    f_cut : float, optional
+        High-pass cut-off in Hz (see :func:`integrate`).
+    method : {'frequency', 'highpass'}, optional
+        See :func:`integrate`.
+
+    Returns
+    -------
+    tuple of Signals
+        (velocity, displacement), each as :func:`integrate` returns it (units m/s and m for
+        m/s²), equal to it bit for bit.
+
+    Raises
+    ------
+    ValueError
+        As :func:`integrate`.
+    """
+    vel, disp = _integrals(signals, 2, f_cut, method)
+    return vel, disp
+
+
+def _integrals(signals: Signals, order: int, f_cut, method: str) -> list[Signals]:
+    """The integrals of orders 1..`order` of `signals` (:func:`integrate`), each step done once."""
     check_option("method", method, ("frequency", "highpass"))
     fs = signals.fs
     n = signals.n_samples
@@ -230,38 +264,44 @@ def integrate(signals: Signals, *, order: Literal[1, 2] = 1, f_cut: float | None
     f_cut = _check_f_cut(f_cut, fs, n)
     step = _integrate_frequency if method == "frequency" else _integrate_highpass
 
-    def run(x: np.ndarray) -> np.ndarray:
+    def run(x: np.ndarray) -> list[np.ndarray]:
         x = scipy.signal.detrend(x, axis=-1, type="linear")
+        out = []
         for _ in range(order):
             x = step(x, fs, f_cut)
-        return x
+            out.append(x)
+        return out
 
     data = np.asarray(signals.data, dtype=float)
     finite = np.isfinite(data)
     stretches = None
     if finite.all():
-        x = run(data)
+        xs = run(data)
     else:  # a gap is not bridged: each stretch between gaps is integrated on its own, the gaps stay NaN
-        x = np.full(data.shape, np.nan)
+        xs = [np.full(data.shape, np.nan) for _ in range(order)]
         stretches = 0
         for r in range(data.shape[0]):
             for a, b in zip(*true_runs(finite[r])):
                 if b - a >= 4:  # shorter: too short to integrate, left NaN
-                    x[r, a:b] = run(data[r : r + 1, a:b])[0]
+                    for x, y in zip(xs, run(data[r : r + 1, a:b])):
+                        x[r, a:b] = y[0]
                     stretches += 1
-    info = {
-        "order": int(order),
-        "f_cut_hz": f_cut,
-        "method": method,
-        "highpass": f"zero-phase Butterworth order {BUTTER_ORDER} forward-backward per integration, "
-                    f"|W|=1/(1+(f_cut/f)^{2 * BUTTER_ORDER}), -6 dB at {f_cut:.4g} Hz",
-        "detrend": "linear",
-    }
-    if stretches is not None:
-        info["gaps"] = (f"{stretches} stretches between missing samples integrated one by one (each detrended, "
-                        f"with its own edge zones); missing samples and stretches under 4 samples are NaN")
-    return Signals(x, fs, signals.channels, [_integral_unit(u, order) for u in signals.units], signals.t0,
-                   {**signals.meta, "integration": info})
+    out = []
+    for k, x in enumerate(xs, start=1):
+        info = {
+            "order": k,
+            "f_cut_hz": f_cut,
+            "method": method,
+            "highpass": f"zero-phase Butterworth order {BUTTER_ORDER} forward-backward per integration, "
+                        f"|W|=1/(1+(f_cut/f)^{2 * BUTTER_ORDER}), -6 dB at {f_cut:.4g} Hz",
+            "detrend": "linear",
+        }
+        if stretches is not None:
+            info["gaps"] = (f"{stretches} stretches between missing samples integrated one by one (each detrended, "
+                            f"with its own edge zones); missing samples and stretches under 4 samples are NaN")
+        out.append(Signals(x, fs, signals.channels, [_integral_unit(u, k) for u in signals.units], signals.t0,
+                           {**signals.meta, "integration": info}))
+    return out
 
 
 # ---------------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ from typing import Any, Literal, Mapping
 import numpy as np
 
 from vibroscope.signals import true_runs
-from vibroscope.spectral.integration import OperatingShape, integrate
+from vibroscope.spectral.integration import OperatingShape, velocity_and_displacement
 from vibroscope.viewers.figures import _distinct_labels, _pyplot, _short, plot_mode_shapes
 
 __all__ = ["plot_kinematics", "plot_ods", "ods_as_modal_model", "log_ods"]
@@ -98,8 +98,7 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
         vel, disp = (s.select(range(nc)) for s in integrals)
         method = vel.meta["integration"].get("method", method)
     else:
-        vel = integrate(acc, order=1, f_cut=f_cut, method=method)
-        disp = integrate(acc, order=2, f_cut=f_cut, method=method)
+        vel, disp = velocity_and_displacement(acc, f_cut=f_cut, method=method)
     fc = vel.meta["integration"]["f_cut_hz"]
     if fig is None:
         plt = _pyplot()

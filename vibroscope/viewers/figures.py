@@ -19,7 +19,7 @@ from vibroscope.viewers._common import mode_label, nearest_frequencies, real_sha
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
            "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d",
-           "summary_figures", "figure_jobs", "PendingFigures", "in_figure_order", "FIGURE_ORDER"]
+           "summary_figures", "figure_jobs", "PendingFigures", "in_figure_order", "FIGURE_ORDER", "preload"]
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
@@ -39,6 +39,14 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+
+def preload() -> None:
+    """Import what drawing and writing a figure needs (pyplot, with Agg when there is no display,
+    and PIL), so that the first figure does not wait for it; run in a background thread while an
+    analysis computes (:func:`vibroscope.commands._outputs.preload_outputs`)."""
+    _pyplot()
+    import PIL.Image  # noqa: F401
 
 
 def _short(name: str, n: int = 38) -> str:

@@ -41,7 +41,7 @@ from vibroscope.signals import true_runs
 from vibroscope.viewers._common import mode_label, sensor_geometry
 
 __all__ = ["log_analysis", "open_in_viewer", "show_recording", "flush_recording", "viewer_executable", "VIEWER_PORT", "read_rrd", "channel_entity", "mode_entity", "frequency_index",
-           "mode_frames", "node_frames", "envelope_indices", "MAX_POINTS"]
+           "mode_frames", "node_frames", "envelope_indices", "MAX_POINTS", "preload"]
 
 #: animation frames per cycle of a mode
 FRAMES = 40
@@ -171,6 +171,19 @@ def _mode_table(modal) -> str:
     return "\n".join(lines)
 
 
+def preload() -> None:
+    """Import rerun and what its first recording needs, so that :func:`log_analysis` does not wait
+    for it; run in a background thread while an analysis computes
+    (:func:`vibroscope.commands._outputs.preload_outputs`). pyarrow imports pandas (when
+    installed) on the first array it builds from a list, as the blueprint does: that import is
+    done here too."""
+    import pyarrow as pa
+    import rerun  # noqa: F401
+    import rerun.blueprint  # noqa: F401
+
+    pa.array([0], type=pa.int8())
+
+
 def _whole(rrb, timeline: str, start: dict, end: dict):
     """Axis showing [start, end] of `timeline` and every datum of it (not a window at the cursor)."""
     axis = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(**start),
@@ -273,7 +286,7 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
                  spawn: bool = False, application_id: str = "vibroscope",
                  recording_name: str | None = None, frames: int = FRAMES,
                  recording_id: str | None = None, stabilization=None, synthesized=None,
-                 kinematics=None, max_points: int | None = MAX_POINTS) -> Path | None:
+                 kinematics=None, max_points: int | None = MAX_POINTS, singular_values=None) -> Path | None:
     """Log the results of one analysis to one rerun recording, with a blueprint.
 
     Entities (channel names are split on ``/`` into entity path parts):
@@ -341,6 +354,10 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         Most points logged per time-series channel (default :data:`MAX_POINTS`, 100 000): a
         longer channel is logged as its min/max envelope over ``max_points // 2`` bins; None logs
         every sample.
+    singular_values : SingularValues, optional
+        The singular values of `csd` already computed (:func:`vibroscope.modal.fdd.singular_values`,
+        ``Analysis.singular_values``), logged instead of computing them again; used only when its
+        frequencies are those of `csd`.
 
     Returns
     -------
@@ -401,7 +418,7 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         if psd is not None:
             _log_psd(rec, psd)
         if csd is not None:
-            _log_singular_values(rec, csd)
+            _log_singular_values(rec, csd, singular_values)
         if frf is not None:
             _log_frf(rec, frf)
         if synthesized is not None:
@@ -728,12 +745,14 @@ def _log_about(rec, *, signals, psd, frf, ftl, max_points=None) -> None:
     rec.log("about", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN), static=True)
 
 
-def _log_singular_values(rec, csd, n_sv: int = 3) -> None:
+def _log_singular_values(rec, csd, sv=None, n_sv: int = 3) -> None:
     import rerun as rr
 
     ftl, fidx = frequency_index(csd.frequencies)
-    G = np.asarray(csd.G)
-    S = np.linalg.svd(G, compute_uv=False)  # descending, (n_freqs, n)
+    if sv is not None and np.array_equal(np.asarray(sv[0]), np.asarray(csd.frequencies)):
+        S = np.asarray(sv[1])  # the analysis' own (descending, (n_freqs, n))
+    else:
+        S = np.linalg.svd(np.asarray(csd.G), compute_uv=False)  # descending, (n_freqs, n)
     for k in range(min(n_sv, S.shape[1])):
         ent = f"/csd/singular_values/s{k + 1}"
         rec.log(ent, rr.SeriesLines(names=f"s{k + 1} [dB]"), static=True)
