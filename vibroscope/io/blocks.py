@@ -43,7 +43,7 @@ import numpy as np
 
 from vibroscope.errors import ChannelError, LogFormatError
 from vibroscope.io.timebase import _snap
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, block_bounds
 
 __all__ = ["ChunkSpan", "LogGrid", "open_grid", "iter_blocks"]
 
@@ -391,11 +391,8 @@ class LogGrid:
         ValueError
             If `block_samples` is not positive.
         """
-        if block_samples < 1:
-            raise ValueError(f"{block_samples=} must be at least 1")
-        stop = self.n_samples if stop is None else stop
-        for i in range(start, stop, block_samples):
-            yield self.read(i, min(i + block_samples, stop))
+        for a, b in block_bounds(block_samples, self.n_samples if stop is None else stop, start=start):
+            yield self.read(a, b)
 
 
 def _first_last(grid: LogGrid, topic: str, cids: set[int], *,

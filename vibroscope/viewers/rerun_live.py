@@ -48,7 +48,7 @@ from typing import Any, Callable, Iterable, Iterator, Literal, Sequence
 
 import numpy as np
 
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, block_bounds
 from vibroscope.viewers.rerun_view import channel_entity, envelope_indices, frequency_index
 
 __all__ = ["LiveView", "LiveRefresh", "live_blueprint", "record_blocks", "mcap_blocks", "stream_blocks", "stream_log",
@@ -472,8 +472,7 @@ def record_blocks(sig: Signals, block_size: int) -> Iterator[Signals]:
     """
     if block_size < 1:
         raise ValueError(f"{block_size=} must be a positive number of samples")
-    for a in range(0, sig.n_samples, int(block_size)):
-        b = min(a + int(block_size), sig.n_samples)
+    for a, b in block_bounds(int(block_size), sig.n_samples):
         yield Signals(sig.data[:, a:b], sig.fs, sig.channels, sig.units, t0=sig.t0 + a / sig.fs,
                       meta={"n_samples_total": sig.n_samples})
 
