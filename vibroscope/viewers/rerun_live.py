@@ -266,7 +266,7 @@ class LiveView:
         import rerun as rr
 
         from vibroscope.spectral._results import CrossSpectralMatrix
-        from vibroscope.spectral.estimators import _settings_dict, frf as frf_of
+        from vibroscope.spectral.estimators import settings_dict, frf as frf_of
         from vibroscope.viewers.rerun_view import _db
 
         acc = self._acc
@@ -274,7 +274,7 @@ class LiveView:
             raise ValueError(f"no complete segment yet: {self.n_samples} samples fed, nperseg={self.settings.nperseg}")
         st = self.settings
         cnt = acc.n_averages
-        settings = _settings_dict(self.fs, st, int(cnt.min()), acc.n_segments)
+        settings = settings_dict(self.fs, st, int(cnt.min()), acc.n_segments)
         with np.errstate(divide="ignore", invalid="ignore"):
             csd = CrossSpectralMatrix(self.frequencies, acc.result("density"), self.channels, self.units,
                                       "density", settings, cnt)
