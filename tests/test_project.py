@@ -62,6 +62,25 @@ def test_import_graph_sees_imports_inside_functions():
     assert not re.search(r"^from vibroscope\.commands\.analyse", src, re.M)  # not at module level
 
 
+@pytest.mark.parametrize("package, name, module", [
+    ("vibroscope", "welch", "vibroscope.spectral"), ("vibroscope.io", "read_frf", "vibroscope.io.frf_files"),
+    ("vibroscope.viewers", "plot_frf", "vibroscope.viewers.figures"),
+])
+def test_packages_load_names_lazily_through_one_helper(package, name, module):
+    """The package ``__init__`` modules share one lazy-import helper (vibroscope._lazy): the name is the
+    defining module's object, listed by ``dir``, and an unknown name is an AttributeError naming the package."""
+    import importlib
+
+    from vibroscope._lazy import lazy_attributes
+
+    pkg = importlib.import_module(package)
+    assert pkg.__getattr__.__qualname__ == lazy_attributes.__qualname__ + ".<locals>.__getattr__"
+    assert getattr(pkg, name) is getattr(importlib.import_module(module), name)
+    assert name in dir(pkg)
+    with pytest.raises(AttributeError, match=f"module '{package}' has no attribute 'nope'"):
+        getattr(pkg, "nope")
+
+
 def test_models_never_import_instruments():
     """GUIDE: instruments may use models, not the other way round (not even lazily)."""
     for f in (REPO / "vibroscope" / "models").glob("*.py"):
