@@ -508,14 +508,14 @@ def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
        (the warning says so; name it with ``--outputs``).
     """
     from vibroscope.io._extract import extract
-    from vibroscope.io.log_index import ACCELERATION_TYPES
+    from vibroscope.io.log_index import ACCELERATION_TYPES, acceleration_paths
     from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels
 
     chans, schemas = grid._channels, grid._schemas
     imu = sorted({ch.topic for ch in chans.values() if ch.schema_id in schemas and ch.topic not in exclude_topics
                   and schemas[ch.schema_id].name in ACCELERATION_TYPES})
     if imu:
-        return [f"{t}.linear_acceleration.{a}" for t in imu for a in "xyz"]
+        return [c for t in imu for c in acceleration_paths(t)]
     held = {cid: [c for c in grid.chunks if c.channel_ids is None or cid in c.channel_ids] for cid in chans}
     ends = {cid: {sp[0].offset: sp[0], sp[-1].offset: sp[-1]} for cid, sp in held.items() if sp}
     sample = sorted({o: c for e in ends.values() for o, c in e.items()}.values(), key=lambda c: c.offset)
