@@ -71,3 +71,21 @@ def test_gap_excited_band_is_the_modal_law_at_30_db():
     idx = idx[idx > 0]
     assert (lo, hi) == (f[idx[0]], f[idx[-1]])
     assert excited_band(np.zeros((1, 1000)), fs, 256) == (0.0, fs / 2)
+
+
+def test_masked_csd_a_diverged_channel_is_nan_the_others_unchanged():
+    """A residual of a diverged simulation (inf inside the mask) gives NaN in its row and column, as
+    the sum over segments did; the other channels' spectra are those computed without it."""
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((3, 2000))
+    mask = np.ones(2000, bool)
+    mask[:100] = False
+    x[1, 1500] = np.inf
+    x[2, 50] = np.nan  # outside the mask: no harm
+    f, G, n_avg = masked_csd(x, mask, 100.0, 128)
+    keep = [0, 2]
+    _, G2, n2 = masked_csd(x[keep], mask, 100.0, 128)
+    assert n_avg == n2 > 0
+    assert np.isnan(G[:, 1, :]).all() and np.isnan(G[:, :, 1]).all()
+    np.testing.assert_array_equal(G[:, 0::2, 0::2], G2)
+    assert np.isfinite(G2).all()

@@ -274,18 +274,30 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int, window:
     -----
     :func:`vibroscope.spectral.csd_matrix` of `x` with the samples outside `mask` set to NaN
     (a segment touching a NaN is left out), except that no segment gives zeros and ``n_avg = 0``
-    instead of an error.
+    instead of an error, and a channel with a non-finite sample inside the segments gets NaN in its
+    row and column (not an error).
     """
     x = np.asarray(x, dtype=float)
     n = x.shape[1]
     step = nperseg if window == "boxcar" else nperseg // 2
-    n_avg = sum(1 for s in range(0, n - nperseg + 1, step) if mask[s : s + nperseg].all())
-    if n_avg == 0:  # no segment: zeros, not csd_matrix's error (the callers skip such a log)
-        return np.fft.rfftfreq(nperseg, 1 / fs), np.zeros((nperseg // 2 + 1, x.shape[0], x.shape[0]), complex), 0
-    with warnings.catch_warnings():  # few averages are the caller's to judge (it gets n_avg)
-        warnings.simplefilter("ignore", FewAveragesWarning)
-        c = csd_matrix(np.where(mask, x, np.nan), fs, nperseg=nperseg, noverlap=nperseg - step, window=window)
-    return c.frequencies, c.G, n_avg
+    starts = [s for s in range(0, n - nperseg + 1, step) if mask[s : s + nperseg].all()]
+    f = np.fft.rfftfreq(nperseg, 1 / fs)
+    if not starts:  # no segment: zeros, not csd_matrix's error (the callers skip such a log)
+        return f, np.zeros((f.size, x.shape[0], x.shape[0]), complex), 0
+    covered = np.zeros(n, bool)
+    for s in starts:
+        covered[s : s + nperseg] = True
+    # a channel non-finite inside the segments (a diverged simulation's residual) poisons its row and
+    # column, as the sum over the segments would; the other channels are estimated without it
+    good = np.isfinite(x[:, covered]).all(axis=1)
+    G = np.full((f.size, x.shape[0], x.shape[0]), np.nan, complex)
+    if good.any():
+        with warnings.catch_warnings():  # few averages are the caller's to judge (it gets n_avg)
+            warnings.simplefilter("ignore", FewAveragesWarning)
+            c = csd_matrix(np.where(mask, x[good], np.nan), fs, nperseg=nperseg, noverlap=nperseg - step,
+                           window=window)
+        G[:, good[:, None] & good[None, :]] = c.G.reshape(f.size, -1)
+    return f, G, len(starts)
 
 
 @dataclass(frozen=True)
