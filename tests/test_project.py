@@ -108,11 +108,6 @@ KNOWN_PRIVATE_IMPORTS = {
     ("vibroscope.spectral.estimators", "vibroscope.spectral._results", "_KIND_UNITS"),
     ("vibroscope.spectral.periodic", "vibroscope.spectral._results", "_KIND_UNITS"),
     ("vibroscope.spectral.periodic", "vibroscope.spectral.estimators", "_unpack"),
-    ("vibroscope.viewers.rerun_gap", "vibroscope.viewers.rerun_view", "_db"),
-    ("vibroscope.viewers.rerun_gap", "vibroscope.viewers.rerun_view", "_whole"),
-    ("vibroscope.viewers.rerun_live", "vibroscope.viewers.rerun_view", "_db"),
-    ("vibroscope.viewers.rerun_live", "vibroscope.viewers.rerun_view", "_log_frf"),
-    ("vibroscope.viewers.rerun_live", "vibroscope.viewers.rerun_view", "_log_psd"),
 }
 
 

@@ -267,7 +267,7 @@ class LiveView:
 
         from vibroscope.spectral._results import CrossSpectralMatrix
         from vibroscope.spectral.estimators import settings_dict, frf as frf_of
-        from vibroscope.viewers.rerun_view import _db
+        from vibroscope.viewers.rerun_view import decibels
 
         acc = self._acc
         if not acc.n_segments:
@@ -294,12 +294,12 @@ class LiveView:
         rec.set_time("averages", sequence=acc.n_segments)
         rec.log("/live/n_averages", rr.Scalars(float(acc.n_segments)))
         for k, ch in enumerate(self.channels):
-            rec.log(channel_entity("live/psd", ch), rr.BarChart(_db(psd.values[k])))
+            rec.log(channel_entity("live/psd", ch), rr.BarChart(decibels(psd.values[k])))
         if frf is not None:
             for o, out_ch in enumerate(frf.outputs):
                 h = frf.H[:, o, 0]
                 rec.log(channel_entity("live/frf/magnitude_db", out_ch),
-                        rr.BarChart(_db(np.abs(h), 20.0)))
+                        rr.BarChart(decibels(np.abs(h), 20.0)))
                 rec.log(channel_entity("live/frf/phase_deg", out_ch),
                         rr.BarChart(np.degrees(np.angle(h))))
                 rec.log(channel_entity("live/frf/coherence", out_ch),
@@ -313,11 +313,11 @@ class LiveView:
         return out
 
     def _log_final(self, out: LiveRefresh) -> None:
-        from vibroscope.viewers.rerun_view import _log_frf, _log_psd
+        from vibroscope.viewers.rerun_view import log_frf, log_psd
 
-        _log_psd(self.rec, out.psd)
+        log_psd(self.rec, out.psd)
         if out.frf is not None:
-            _log_frf(self.rec, out.frf)
+            log_frf(self.rec, out.frf)
 
     def close(self) -> LiveRefresh | None:
         """The final refresh: the spectra of the whole record, also on the frequency timeline.
