@@ -99,14 +99,57 @@ def test_clean_tf_cancels():
 
 
 def test_plots_are_lazy_and_work():
-    """The results draw through vibroscope.viewers.instruments."""
+    """Importing the instruments does not import their viewer (python-control itself imports
+    matplotlib.pyplot, so that module is not the measure); ``.plot()`` imports it and draws the
+    result's own numbers."""
+    import subprocess
+    import sys
+
+    code = ("import sys, vibroscope.instruments.lti as m; "
+            "f = m.bode(m.control.tf([1.0], [1.0, 1.0]), [1.0]); "
+            "print('vibroscope.viewers.instruments' in sys.modules, 'vibroscope.viewers' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "False"]
+
+    import matplotlib
+
+    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     f = np.logspace(-1, 1, 50)
-    bode(G2, f).plot(label="G2")
-    nyquist(G2, f).plot()
-    step_response(G2, np.linspace(0, 5, 100)).plot()
-    plt.close("all")
+    try:
+        b = bode(G2, f)
+        a_mag, a_ph = b.plot(label="G2")
+        assert a_mag.figure is a_ph.figure and isinstance(a_mag.figure, matplotlib.figure.Figure)
+        assert len(a_mag.figure.axes) == 2 and a_mag.get_xscale() == "log"
+        (line,) = a_mag.get_lines()
+        assert line.get_label() == "G2"
+        np.testing.assert_array_equal(line.get_xdata(), b.frequencies_hz)
+        np.testing.assert_array_equal(line.get_ydata(), b.magnitude_db)
+        np.testing.assert_array_equal(a_ph.get_lines()[0].get_ydata(), b.phase_deg)
+        # G2(jw) = (1 + jw) / (5 - w^2 + 2jw) at the lowest line, 0.1 Hz
+        w = 2 * np.pi * 0.1
+        assert line.get_ydata()[0] == pytest.approx(20 * np.log10(abs((1 + 1j * w) / (5 - w**2 + 2j * w))), rel=1e-12)
+
+        n = nyquist(G2, f)
+        ax = n.plot()
+        locus, mirror, critical = ax.get_lines()
+        np.testing.assert_array_equal(locus.get_xdata(), n.response.real)
+        np.testing.assert_array_equal(locus.get_ydata(), n.response.imag)
+        np.testing.assert_array_equal(mirror.get_ydata(), -n.response.imag)
+        assert (critical.get_xdata()[0], critical.get_ydata()[0]) == (-1, 0)
+        assert len(nyquist(G2, f).plot(mirror=False).get_lines()) == 2
+
+        t = np.linspace(0, 5, 100)
+        s = step_response(G2, t)
+        ax = s.plot()
+        (line,) = ax.get_lines()
+        np.testing.assert_array_equal(line.get_xdata(), t)
+        np.testing.assert_array_equal(line.get_ydata(), s.response)
+        assert ax.get_xlabel() == "time [s]"
+        assert "vibroscope.viewers.instruments" in sys.modules
+    finally:
+        plt.close("all")
 
 
 # Values of the earlier in-house implementation (numpy polyval for the frequency response, a

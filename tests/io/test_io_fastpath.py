@@ -17,7 +17,8 @@ from mcap.writer import CompressionType, Writer
 
 from vibroscope.io import _extract, read_mcap
 from vibroscope.io._ros2 import FLOAT_FIELDS, MSGDEFS, encode_fixed
-from vibroscope.io._scan import _index_messages, scan
+from vibroscope.io._index_kernels import index_messages
+from vibroscope.io._scan import scan
 from vibroscope.io.log_index import LogIndex
 from vibroscope.io.paths import parse_path
 
@@ -224,11 +225,11 @@ def test_compiled_walk_equals_record_walk():
             + int(rng.integers(0, 2**63)).to_bytes(8, "little") + (7).to_bytes(8, "little") + payload
         recs.append(b"\x05" + len(body).to_bytes(8, "little") + body)
     buf = b"".join(recs)
-    a, b = _index_messages(buf, 0, len(buf), [], True), _index_messages(buf, 0, len(buf), [], False)
+    a, b = index_messages(buf, 0, len(buf), [], True), index_messages(buf, 0, len(buf), [], False)
     for x, y in zip(a, b):
         assert x.dtype == y.dtype and np.array_equal(x, y)
     cut = buf[:-5]
     for fast in (True, False):
         with pytest.raises(ValueError, match="needs"):
-            _index_messages(cut, 0, len(cut), [], fast)
+            index_messages(cut, 0, len(cut), [], fast)
     assert set(FLOAT_FIELDS) == {IMU, WRENCH}

@@ -15,9 +15,10 @@ import lz4.frame
 import numpy as np
 import pytest
 import zstandard
+from mcap.records import Chunk, ChunkIndex
 
 from vibroscope.errors import LogFormatError
-from vibroscope.io import _extract, _scan, read_mcap
+from vibroscope.io import _chunks, _extract, _records, _scan, _summary, read_mcap
 from vibroscope.io.log_index import LogIndex
 from vibroscope.io.mcap_read import _wanted_topics
 
@@ -42,7 +43,7 @@ def test_lz4_frame_into_buffer_equals_lz4(block_size, linked, checksums):
     rng = np.random.default_rng(block_size + 2 * linked + checksums)
 
     def chunk(frame, n):
-        return _scan.Chunk(compression="lz4", data=memoryview(frame), message_end_time=0, message_start_time=0,
+        return Chunk(compression="lz4", data=memoryview(frame), message_end_time=0, message_start_time=0,
                            uncompressed_crc=0, uncompressed_size=n)
 
     for n in (1, 1000, 300_000, 1_500_000):
@@ -50,19 +51,19 @@ def test_lz4_frame_into_buffer_equals_lz4(block_size, linked, checksums):
         for store_size in (True, False):
             frame = lz4.frame.compress(data, block_size=block_size, block_linked=linked, content_checksum=checksums,
                                        block_checksum=checksums, store_size=store_size)
-            got = _scan._decompress_into(chunk(frame, n))
+            got = _chunks.decompress_into(chunk(frame, n))
             assert got is not None and bytes(got) == data == lz4.frame.decompress(frame)
     data = _payload(rng, 200_000)
     frame = lz4.frame.compress(data, block_size=block_size, block_linked=linked)
-    assert _scan._decompress_into(chunk(frame[:-3], len(data))) is None  # cut off: the usual path decides
-    assert _scan._decompress_into(chunk(frame + b"\0" * 4, len(data))) is None  # trailing bytes
-    assert _scan._decompress_into(chunk(b"\x05" + frame[1:], len(data))) is None  # not an LZ4 frame
-    assert _scan._decompress_into(chunk(frame, len(data) - 1)) is None  # more data than the chunk states
+    assert _chunks.decompress_into(chunk(frame[:-3], len(data))) is None  # cut off: the usual path decides
+    assert _chunks.decompress_into(chunk(frame + b"\0" * 4, len(data))) is None  # trailing bytes
+    assert _chunks.decompress_into(chunk(b"\x05" + frame[1:], len(data))) is None  # not an LZ4 frame
+    assert _chunks.decompress_into(chunk(frame, len(data) - 1)) is None  # more data than the chunk states
 
 
-def _chunk(data: bytes, compression: str) -> _scan.Chunk:
+def _chunk(data: bytes, compression: str) -> Chunk:
     comp = {"zstd": zstandard.ZstdCompressor().compress, "lz4": lz4.frame.compress}[compression](data)
-    return _scan.Chunk(compression=compression, data=comp, message_end_time=0, message_start_time=0,
+    return Chunk(compression=compression, data=comp, message_end_time=0, message_start_time=0,
                        uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data))
 
 
@@ -72,27 +73,27 @@ def test_decompress_into_reused_buffer(compression):
     stating another size, or a damaged one, is left to the usual path (None)."""
     rng = np.random.default_rng(3)
     big, small = _payload(rng, 2_500_000), _payload(rng, 70_000)
-    a = _scan._decompress_into(_chunk(big, compression))
+    a = _chunks.decompress_into(_chunk(big, compression))
     assert bytes(a) == big
-    b = _scan._decompress_into(_chunk(small, compression))
+    b = _chunks.decompress_into(_chunk(small, compression))
     assert bytes(b) == small and b.obj is a.obj  # the same buffer, not fresh pages
     c = _chunk(small, compression)
     for usize in (len(small) - 1, len(small) + 1):
-        wrong = _scan.Chunk(compression=c.compression, data=c.data, message_end_time=0, message_start_time=0,
+        wrong = Chunk(compression=c.compression, data=c.data, message_end_time=0, message_start_time=0,
                             uncompressed_crc=c.uncompressed_crc, uncompressed_size=usize)
-        assert _scan._decompress_into(wrong) is None
-    cut = _scan.Chunk(compression=c.compression, data=c.data[: len(c.data) // 2], message_end_time=0,
+        assert _chunks.decompress_into(wrong) is None
+    cut = Chunk(compression=c.compression, data=c.data[: len(c.data) // 2], message_end_time=0,
                       message_start_time=0, uncompressed_crc=c.uncompressed_crc, uncompressed_size=len(small))
-    assert _scan._decompress_into(cut) is None
+    assert _chunks.decompress_into(cut) is None
     with pytest.raises(Exception):
-        _scan._decompress(cut)
+        _chunks.decompress(cut)
 
 
 def test_crc32_equals_zlib():
     rng = np.random.default_rng(4)
     for n in (0, 1, 7, 4096, 1_000_003):
         data = bytes(rng.integers(0, 256, n, dtype=np.uint8))
-        assert _scan._crc32(data) == zlib.crc32(data)
+        assert _chunks.crc32(data) == zlib.crc32(data)
 
 
 def _chans() -> list[str]:
@@ -191,22 +192,22 @@ def test_chunk_index_parse_equals_mcap(tmp_path, monkeypatch):
     rng = np.random.default_rng(15)
     path, _ = _log(tmp_path, rng, "lz4", True, "regular", chunk_size=8_000)
     data = path.read_bytes()
-    summary, why = _scan._read_summary(data, len(data))
+    summary, why = _summary.read_summary(data, len(data))
     assert why is None and len(summary.chunks) > 5
     n, pos, seen = 0, summary.start, 0
     while data[pos] != 0x02:  # up to the footer
-        op, length = _scan._REC_HDR.unpack_from(data, pos)
+        op, length = _records.REC_HDR.unpack_from(data, pos)
         body, end = pos + 9, pos + 9 + length
         if op == 0x08:  # chunk index
-            ref = _scan._parse(_scan.ChunkIndex, data[body:end])
+            ref = _records.parse_record(ChunkIndex, data[body:end])
             with monkeypatch.context() as m:
-                m.setattr(_scan, "_parse", None)  # the struct parse alone
-                ci = _scan._chunk_index(data, body, end)
+                m.setattr(_summary, "parse_record", None)  # the struct parse alone
+                ci = _summary.chunk_index(data, body, end)
             assert ci == ref == summary.chunks[ci.chunk_start_offset]
             n += len(ci.message_index_offsets) > 1
             seen += 1
             with pytest.raises(Exception):
-                _scan._chunk_index(data, body, end - 3)
+                _summary.chunk_index(data, body, end - 3)
         pos = end
     assert seen == len(summary.chunks) and n  # chunks holding several channels among them
 

@@ -52,15 +52,16 @@ def test_close_modes_model_has_two_modes_two_percent_apart(model):
 
 
 def test_lscf_noise_free_finds_all_modes(model):
-    """Analytic FRF, default orders: all five modes, 0.01 % in frequency, 1 % in damping."""
+    """Analytic FRF, default orders: all five modes, to round-off (measured 2e-11 in frequency,
+    2.6e-9 in damping; the issue's machine 8e-11 / 7e-9; tolerances ~25x the larger)."""
     h = analytic_frf(model)
     st = lscf(h)
     mm = st.modal_model()
     md = model.modes()
     assert mm.method == "lscf" and st.settings["method"] == "lscf"
     assert len(mm) == 5, mm.natural_frequencies
-    np.testing.assert_allclose(mm.natural_frequencies, md.natural_frequencies, rtol=1e-4)
-    np.testing.assert_allclose(mm.damping_ratios, md.damping_ratios, rtol=0.01)
+    np.testing.assert_allclose(mm.natural_frequencies, md.natural_frequencies, rtol=2e-9)
+    np.testing.assert_allclose(mm.damping_ratios, md.damping_ratios, rtol=2e-7)
     assert set(np.unique(st.stable)) <= {0, 1, 2, 3}
     assert st.shapes.shape == (len(st.order), 5) and st.points == h.outputs
 
@@ -87,7 +88,8 @@ def test_lsfd_shapes_on_noisy_frf(model, noisy, noisy_modes):
 
 
 def test_lscf_multiple_inputs(model):
-    """Poly-reference: two force inputs, analytic FRF."""
+    """Poly-reference: two force inputs, analytic FRF (measured 4.4e-10 in frequency, 9.5e-9 in
+    damping; tolerances ~50x)."""
     from vibroscope.models import Input
 
     m2 = model.replace(inputs=(Input("m5", channel="/f5"), Input("m2", channel="/f2")))
@@ -95,18 +97,20 @@ def test_lscf_multiple_inputs(model):
     mm = lscf(h, orders=range(1, 31)).modal_model()
     md = m2.modes()
     assert len(mm) == 5
-    np.testing.assert_allclose(mm.natural_frequencies, md.natural_frequencies, rtol=1e-6)
-    np.testing.assert_allclose(mm.damping_ratios, md.damping_ratios, rtol=1e-4)
+    np.testing.assert_allclose(mm.natural_frequencies, md.natural_frequencies, rtol=2e-8)
+    np.testing.assert_allclose(mm.damping_ratios, md.damping_ratios, rtol=5e-7)
     settings = lscf(h, orders=range(1, 31)).settings
     assert settings["n_inputs"] == 2 and settings["orders"][-1] == 30
 
 
 def test_lsfd_synthesis_and_residuals(model):
-    """Exact poles: the synthesis reproduces the noise-free FRF; out-of-band modes need the residuals."""
+    """Exact poles: the synthesis reproduces the noise-free FRF (measured 1.4e-13; the issue's
+    machine 5e-14); out-of-band modes need the residuals (band-limited fit: measured error 0.0088
+    with them, >= 13.6x that without, in-band residues within 3.6e-4 of the largest residue)."""
     md = model.modes()
     h = analytic_frf(model)
     full = lsfd(h, md.natural_frequencies, md.damping_ratios)
-    assert np.all(full.error(h) < 1e-6)
+    assert np.all(full.error(h) < 1e-11)
     syn = full.synthesize()
     assert syn.estimator == "lsfd" and syn.kind == "accelerance" and np.all(np.isnan(syn.coherence))
     np.testing.assert_allclose(syn.frequencies, h.frequencies)
@@ -119,13 +123,19 @@ def test_lsfd_synthesis_and_residuals(model):
     assert np.all(e_with < 0.02) and np.all(e_without > 5 * e_with)
     assert np.all(without.lower_residual == 0) and np.any(with_r.lower_residual != 0)
     # in-band residues barely depend on the residuals when they are fitted
-    np.testing.assert_allclose(with_r.residues, full.residues[inband], rtol=0.05,
-                               atol=0.05 * np.abs(full.residues).max())
+    np.testing.assert_allclose(with_r.residues, full.residues[inband], rtol=0,
+                               atol=0.01 * np.abs(full.residues).max())
 
 
-@pytest.mark.parametrize("quantity", ["acceleration", "velocity", "displacement"])
+# quantity -> (shape error / largest entry, |φᵀMφ - 1|): measured 2.0e-13 / 2.6e-14, 2.6e-13 / 5.9e-13,
+# 5.5e-13 / 1.3e-12 on the analytic FRFs; each tolerance within 100x of its measured value.
+_UNIT_MASS_TOL = {"acceleration": (2e-11, 2e-12), "velocity": (2e-11, 5e-11), "displacement": (5e-11, 1e-10)}
+
+
+@pytest.mark.parametrize("quantity", sorted(_UNIT_MASS_TOL))
 def test_lsfd_unit_modal_mass(quantity):
     """Proportional damping (C = βK) with a driving point: mass-normalised shapes φᵀMφ = 1."""
+    tol_shape, tol_mass = _UNIT_MASS_TOL[quantity]
     model = LumpedModel.chain([2.0, 1.5, 1.0, 0.8], [1.0e5, 8.0e4, 5.0e4, 4.0e4],
                               1e-4 * np.array([1.0e5, 8.0e4, 5.0e4, 4.0e4]), input_dof=2)
     md = model.modes()
@@ -139,9 +149,9 @@ def test_lsfd_unit_modal_mass(quantity):
     for r in range(len(md)):
         s = mm.shapes[r]
         sign = np.sign(np.real(s @ phi[r]))
-        np.testing.assert_allclose(s, sign * phi[r], atol=0.01 * np.abs(phi[r]).max())
+        np.testing.assert_allclose(s, sign * phi[r], rtol=0, atol=tol_shape * np.abs(phi[r]).max())
     gm = np.real(mm.shapes @ model.M @ mm.shapes.T)
-    np.testing.assert_allclose(np.diag(gm), 1.0, rtol=0.01)
+    np.testing.assert_allclose(np.diag(gm), 1.0, rtol=tol_mass)
     # the same by name, given to modal_model
     mm2 = lsfd(h, md.natural_frequencies, md.damping_ratios).modal_model(driving_point=h.outputs[2])
     np.testing.assert_allclose(mm2.shapes, mm.shapes)

@@ -21,27 +21,36 @@ from __future__ import annotations
 
 import math
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 from scipy.optimize import least_squares
 
 from vibroscope.gap.closed_loop import is_closed_loop, log_channels, measured_rows
 from vibroscope.models.lumped import LumpedModel
-from vibroscope.models.simulate import default_oversample, reconstruct_input
+from vibroscope.models.simulate import reconstruct_input
 from vibroscope.models.simulate import simulate as _sim
 
 __all__ = ["LogSimulator", "best_start", "fit_linear_frf", "fit_time_domain", "frf_residual"]
 
 
+#: the nonlinear simulations of the diagnosis discretise the linear part exactly
+#: (:func:`vibroscope.models.integrate.flatten_model`): no frequency warping, so fewer sub-steps
+#: than the trapezoidal rule reach the same accuracy (a 2-DOF cubic spring, modes to 80 Hz at
+#: 1 kHz: 8e-4 nrmse at 5 sub-steps against 5e-3 for the trapezoidal rule at 8)
+SCHEME = "exponential"
+
+
 def _oversample_for(model: LumpedModel, fs: float, fast: bool) -> int:
-    """The simulator's default sub-steps, or a coarser ``max(8, 16 f_max / fs)`` for screening."""
-    if not fast:
-        return default_oversample(model, fs)
+    """Sub-steps of the exponential scheme: ``max(10, 20 f_max / fs)``, or a coarser
+    ``max(5, 8 f_max / fs)`` for screening."""
     try:
         fmax = float(np.max(model.modes().natural_frequencies))
     except Exception:  # noqa: BLE001 - no modes (free body)
         fmax = 0.0
-    return max(8, int(math.ceil(16.0 * fmax / fs)))
+    if not fast:
+        return max(10, int(math.ceil(20.0 * fmax / fs)))
+    return max(5, int(math.ceil(8.0 * fmax / fs)))
 
 
 class LogSimulator:
@@ -73,9 +82,10 @@ class LogSimulator:
         n : int, optional
             Number of leading samples to simulate; default all.
         fast : bool, optional
-            For nonlinear models, integrate with the coarser screening oversampling
-            ``max(8, ceil(16 f_max / fs))`` instead of the simulator's default; default False.
-            Linear models always use 8 sub-steps.
+            For nonlinear models, integrate with the coarser screening sub-steps
+            ``max(5, ceil(8 f_max / fs))`` instead of ``max(10, ceil(20 f_max / fs))``
+            (both with the exponential scheme, :data:`SCHEME`); default False. Linear models
+            always take the exact linear path at 8 sub-steps.
 
         Returns
         -------
@@ -99,7 +109,7 @@ class LogSimulator:
             return y if np.all(np.isfinite(y)) else np.full_like(y, np.nan)
         linear = all(e.is_linear for e in model.elements)
         kw = {}
-        # linear models: the exact FOH path at 8 sub-steps; nonlinear: the trapezoidal kernel
+        # linear models: the exact FOH path at 8 sub-steps; nonlinear: the compiled kernel
         R = 8 if linear else _oversample_for(model, self.fs, fast)
         key = (R, n)
         if key not in self._fine:
@@ -108,7 +118,7 @@ class LogSimulator:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = _sim(model, u, self.fs, **kw)
+                s = _sim(model, u, self.fs, scheme=SCHEME, **kw)
             y = np.asarray(s.data[len(model.inputs):])
         except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
             y = np.full((len(model.outputs), n), np.nan)
@@ -196,7 +206,8 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
     return build(x), x[:nl], x[nl:], float(best.cost)
 
 
-def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, max_nfev=30, diff_step=1e-3):
+def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, max_nfev=30, diff_step=1e-3,
+                    jac_workers=2):
     """Least-squares fit of parameters `x` of ``build(x) -> LumpedModel`` to the outputs.
 
     Parameters
@@ -219,6 +230,10 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
     diff_step : float, optional
         Relative finite-difference step of the Jacobian (``least_squares``'s
         ``diff_step``); default 1e-3.
+    jac_workers : int, optional
+        Threads evaluating the finite-difference Jacobian's columns (``least_squares``'s
+        ``workers``, scipy >= 1.16); default 2. The simulation kernels release the GIL, so
+        the columns run on several cores; the result does not depend on it.
 
     Returns
     -------
@@ -227,7 +242,7 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
     # each channel normalised by its own energy (the metric of vibroscope.gap.measure.nrmse)
     den_c = sum(np.sum(y[:, :n][:, m[:n]] ** 2, axis=1) for y, m, n in zip(ys, masks, ns) if n)
     den = np.sqrt(np.maximum(np.asarray(den_c, float), 1e-300) * len(np.atleast_1d(den_c)))[:, None]
-    count = [0]
+    calls: list = []  # one entry per simulation (list.append is atomic across threads)
 
     def res(x):
         m = build(x)
@@ -236,7 +251,7 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
             if not n:
                 continue
             yh = sim.run(m, n, fast=fast)
-            count[0] += 1
+            calls.append(1)
             r = (y[:, :n] - yh)[:, mk[:n]] / den
             if not np.all(np.isfinite(r)):
                 r = np.full_like(r, 10.0 / math.sqrt(r.size))
@@ -244,9 +259,14 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
         return np.concatenate(out)
 
     x0 = np.clip(np.asarray(x0, float), lower + 1e-9, upper - 1e-9)
-    sol = least_squares(res, x0, bounds=(lower, upper), method="trf", x_scale=1.0, diff_step=diff_step,
-                        max_nfev=max_nfev)
-    return sol.x, float(math.sqrt(2 * sol.cost)), count[0]
+    kw = {"x_scale": 1.0, "diff_step": diff_step, "max_nfev": max_nfev}
+    if jac_workers > 1 and x0.size > 1:
+        # the Jacobian's columns in parallel threads (the simulation kernels release the GIL)
+        with ThreadPoolExecutor(min(jac_workers, x0.size)) as ex:
+            sol = least_squares(res, x0, bounds=(lower, upper), method="trf", workers=ex.map, **kw)
+    else:
+        sol = least_squares(res, x0, bounds=(lower, upper), method="trf", **kw)
+    return sol.x, float(math.sqrt(2 * sol.cost)), len(calls)
 
 
 def best_start(build, starts, sims, ys, masks, ns):

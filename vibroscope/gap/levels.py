@@ -566,7 +566,7 @@ def _groups(u, mask, fs):
 
 
 def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = None, f_band=None,
-               window: str | None = None, min_prominence_db: float = 6.0) -> LevelEvidence:
+               window: str | None = None, min_prominence_db: float = 6.0, input_unit: str = "N") -> LevelEvidence:
     """BLA per log and excitation level, each resonance's ``f_n`` and ``zeta`` per level, and the
     test of their level dependence.
 
@@ -593,6 +593,8 @@ def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = 
     min_prominence_db : float, optional
         Least prominence (dB) of a peak of the mode indicator (the normalised mean over outputs
         of ``gamma^2 |H|^2``) at the reference (lowest) level; default 6.
+    input_unit : str, optional
+        Unit of the input in the description (a closed loop's reference: m); default 'N'.
 
     Returns
     -------
@@ -781,7 +783,7 @@ def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = 
     else:
         parts = [f"{m.frequency_hz:.4g} Hz: f_n {100 * m.frequency_change:+.2f} % (z {m.frequency_z:+.1f}), "
                  f"zeta {100 * m.damping_change:+.1f} % (z {m.damping_z:+.1f})" for m in modes]
-        desc = (f"{len(levels)} levels (input RMS {levels[0].rms:.3g} -> {levels[-1].rms:.3g} N): "
+        desc = (f"{len(levels)} levels (input RMS {levels[0].rms:.3g} -> {levels[-1].rms:.3g} {input_unit}): "
                 + "; ".join(parts) + (f" -> level dependent, {trend}" if dep else " -> no level dependence"))
     return LevelEvidence(tuple(levels), tuple(modes), bool(dep), trend, damping_rises, (f_lo, f_hi), fs,
                          nperseg, window, desc)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from vibroscope.gap.fit import LogSimulator, _oversample_for
+from vibroscope.gap.fit import SCHEME, LogSimulator, _oversample_for
 from vibroscope.models.lumped import LumpedModel
 from vibroscope.models.simulate import reconstruct_input
 from vibroscope.models.simulate import simulate as _sim
@@ -128,7 +128,7 @@ def simulate_with_offsets(sim: LogSimulator, model: LumpedModel, n: int | None =
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = _sim(model, sim.u[:, :n] - u0, sim.fs, fine_input=U)
+                s = _sim(model, sim.u[:, :n] - u0, sim.fs, fine_input=U, scheme=SCHEME)
             y = np.asarray(s.data[len(model.inputs):])
         except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
             y = np.full((len(model.outputs), n), np.nan)

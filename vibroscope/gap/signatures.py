@@ -52,7 +52,7 @@ def _corr(a, b) -> float:
 
 
 def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, resid, u, states, fs,
-                   out_channels, level_stat=None) -> tuple[SignatureTest, ...]:
+                   out_channels, level_stat=None, input_unit: str = "N") -> tuple[SignatureTest, ...]:
     """The signature tests.
 
     Parameters
@@ -80,6 +80,8 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         The BLA level test of the diagnosis (``stat``: the fraction of lines whose change
         between the lowest and highest level exceeds 3 standard deviations, ``flagged``, ``trend``,
         ``shift``); when given, it is the level-dependence test's statistic.
+    input_unit : str, optional
+        Unit of the input `u` and of `level_rms` (a closed loop's reference: m); default 'N'.
     """
     tests = []
     # 1. level dependence of the BLA
@@ -90,7 +92,7 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         trend = level_stat.get("trend", "none")
         tests.append(SignatureTest(
             "level_dependence", val, 0.01, bool(level_stat.get("flagged")), _by_trend(trend),
-            f"BLA change from the lowest to the highest level (input RMS {level_rms[0]:.3g} -> {level_rms[-1]:.3g} N): "
+            f"BLA change from the lowest to the highest level (input RMS {level_rms[0]:.3g} -> {level_rms[-1]:.3g} {input_unit}): "
             f"{100 * val:.1f} % of the lines beyond 3 standard deviations; resonance {trend} "
             f"({100 * level_stat.get('shift', 0.0):+.2f} %)",
             f, np.mean(ratio_db, axis=1), "frequency [Hz]", "H1 high / low level [dB]"))
@@ -103,7 +105,7 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         tests.append(SignatureTest(
             "level_dependence", val, 0.5, val > 0.5, _NONLIN,
             f"mean |H(level {len(H_levels)}) / H(level 1)| = {val:.2f} dB (input RMS {level_rms[0]:.3g} -> "
-            f"{level_rms[-1]:.3g} N)",
+            f"{level_rms[-1]:.3g} {input_unit})",
             f, np.mean(ratio_db, axis=1), "frequency [Hz]", "H1 high / low level [dB]"))
     # 2. coherence drop beyond the noise
     drop = float(np.mean(np.clip(noise_coh - coh, 0, 1)))
@@ -160,7 +162,7 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
     tests.append(SignatureTest(
         "residual_vs_input", abs(ci), 0.1, abs(ci) > 0.1, ("saturation",),
         f"residual correlates with the input beyond its 90 % quantile: r = {ci:+.2f}",
-        xs, ys, "input [N]", f"residual {out_channels[0]}"))
+        xs, ys, f"input [{input_unit}]", f"residual {out_channels[0]}"))
     # 8. whiteness (Ljung): fraction of autocorrelation lags 1..50 outside +-2.58/sqrt(N)
     n = r.size
     rr = r - r.mean()

@@ -305,6 +305,11 @@ class BlockSchema:
             Exogenous input stepped (default: the reference).
         amplitude : float
             Step height, in the unit of that input.
+
+        Returns
+        -------
+        dict of str to StepResult
+            The step response at each named point (signal name -> result).
         """
         return {s: step_response(g, t, amplitude=amplitude) for s, g in self.transfers(from_).items()}
 
@@ -334,6 +339,11 @@ class BlockSchema:
             Input samples on `t`, in the unit of that input.
         from_ : str, optional
             Exogenous input driven (default: the reference).
+
+        Returns
+        -------
+        dict of str to ndarray
+            The response on `t` at each named point (signal name -> samples).
         """
         return {s: np.asarray(control.forced_response(g, T=t, U=u).outputs, dtype=float).reshape(-1)
                 for s, g in self.transfers(from_).items()}

@@ -67,6 +67,11 @@ def hydraulic_natural_frequency_rad_s(beta_e: float, A: float, V_t: float, m_t: 
         Total compressed volume of both chambers, m^3.
     m_t : float
         Total moving mass, kg.
+
+    Returns
+    -------
+    float
+        The natural frequency ``omega_h`` in rad/s.
     """
     for name, v in dict(beta_e=beta_e, A=A, V_t=V_t, m_t=m_t).items():
         if not np.isfinite(v) or v <= 0:
@@ -126,7 +131,7 @@ def hydraulic_closed_loop(k_p: float, k_d: float = 0.0, k_a: float = 0.0, **plan
     Returns
     -------
     control.TransferFunction
-        x/r, dimensionless; DC gain 1 (the plant integrates).
+        The ratio x/r, dimensionless; DC gain 1 (the plant integrates).
     """
     p = dict(HYDRAULIC_NOMINAL, **plant)
     wh = hydraulic_natural_frequency_rad_s(p["beta_e"], p["A"], p["V_t"], p["m_t"])

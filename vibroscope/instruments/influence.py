@@ -174,6 +174,11 @@ def differentiate(sys, order: int = 1) -> control.TransferFunction:
         SISO system.
     order : int
         Number of derivatives, >= 0.
+
+    Returns
+    -------
+    control.TransferFunction
+        ``s^order * sys``.
     """
     if order < 0:
         raise ValueError(f"{order=} must be >= 0")
@@ -411,6 +416,11 @@ def influence_table(
         Parameters varied, one row each.
     rel_step, method
         As in :func:`influence_coefficient`.
+
+    Returns
+    -------
+    InfluenceTable
+        One row per parameter, one column per criterion.
     """
     vals = np.array(
         [[influence_coefficient(f, nominal, p, rel_step=rel_step, method=method) for f in criteria.values()] for p in parameters]
@@ -429,6 +439,11 @@ def pneumatic_influence_table(nominal: Mapping[str, float] | None = None, *, rel
         by default.
     rel_step : float
         Relative step of the central difference.
+
+    Returns
+    -------
+    InfluenceTable
+        Rows A, V, m; columns t_r, a_max, nu_r, nu_c.
     """
     nominal = dict(PNEUMATIC_NOMINAL if nominal is None else nominal)
     return influence_table(PNEUMATIC_CRITERIA, nominal, ("A", "V", "m"), rel_step=rel_step)

@@ -287,6 +287,11 @@ def nyquist(sys, frequencies_hz) -> NyquistResult:
         SISO system (time unit s).
     frequencies_hz : array_like
         Frequencies in Hz.
+
+    Returns
+    -------
+    NyquistResult
+        The complex response at `frequencies_hz`.
     """
     f = np.asarray(frequencies_hz, dtype=float)
     h = _freq_response(sys, f)

@@ -470,6 +470,11 @@ def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequenc
         Displacement amplitude, m.
     frequency_hz : float
         Frequency, Hz.
+
+    Returns
+    -------
+    float
+        Energy dissipated per cycle in J.
     """
     c = coeffs
     w = 2 * np.pi * frequency_hz

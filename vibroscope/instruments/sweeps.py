@@ -98,6 +98,11 @@ def builtin_sweep_model(name: str) -> SweepModel:
     ----------
     name : {"pneumatic", "hydraulic", "block-schema"}
         The model.
+
+    Returns
+    -------
+    SweepModel
+        The named model.
     """
     if name == "pneumatic":
         return SweepModel(name, lambda **p: pneumatic_motor(**p, output="velocity"), dict(PNEUMATIC_NOMINAL), 1,
@@ -220,6 +225,11 @@ def model_file_sweep_model(path) -> SweepModel:
     ----------
     path : str or path-like
         The ``.toml`` model file (:func:`vibroscope.models.modelfile.load_model`).
+
+    Returns
+    -------
+    SweepModel
+        The model of the file, its columns the dotted keys.
     """
     path = Path(path)
     load_model(path)  # validate once, with the file's own error messages

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import os
 import struct
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator, Sequence
@@ -104,29 +103,17 @@ def _open_chunk(fd: int, span: ChunkSpan):
     return raw, recs, _scan._index_messages(raw, 0, len(raw), recs, True)
 
 
-def _summary_valid(fd: int, size: int) -> bool:
-    """Whether the footer's summary section lies in the file and matches its CRC-32 (when stored)."""
-    flen = 1 + 8 + 20
-    if size < 8 + flen + 8 or _pread(fd, 8, size - 8) != _MAGIC:
-        return False
-    fpos = size - 8 - flen
-    foot = _pread(fd, flen, fpos)
-    if foot[0] != _FOOTER_OP:
-        return False
-    start, _sos, crc = struct.unpack_from("<QQI", foot, 9)
-    if not 8 <= start <= fpos:
-        return False
-    return crc == 0 or zlib.crc32(_pread(fd, fpos + 9 + 16 - start, start)) == crc
-
-
 def _summary_plan(path: Path, fh: Any):
     """(schemas, channels, chunk spans, header, messages per channel id or None) from the summary
     section (the counts from its statistics record), or None without a usable one (none, a CRC-32
     mismatch, a chunk index not pointing at a chunk record)."""
     from mcap.reader import SeekingReader
 
+    from vibroscope.io._summary import locate_summary
+
     fd = fh.fileno()
-    if not _summary_valid(fd, os.fstat(fd).st_size):
+    place, why = locate_summary(lambda off, k: _pread(fd, k, off), os.fstat(fd).st_size)
+    if place is None or why is not None:
         return None
     try:
         rd = SeekingReader(fh)
@@ -728,6 +715,11 @@ def iter_blocks(path: str | Path, channels: Sequence[str] | None = None, *, fs: 
         As :func:`open_grid`.
     ValueError
         If `block_s` is not positive, or `time_range` is empty.
+
+    See Also
+    --------
+    vibroscope.io.read_mcap : The whole log on one grid, in memory.
+    open_grid : The grid these blocks are cut from.
 
     Examples
     --------

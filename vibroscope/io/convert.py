@@ -359,7 +359,7 @@ def read_csv(
     Returns
     -------
     Signals
-        shape (n_channels, n_rows).
+        Shape (n_channels, n_rows).
 
     Raises
     ------
@@ -631,6 +631,12 @@ def read_any(
         For an unknown suffix or an unreadable file.
     ValueError
         For an option that does not apply to the format, an unknown channel name, or no rate.
+
+    See Also
+    --------
+    read_csv, read_mat, read_uff58 : The readers it picks from.
+    vibroscope.io.read_mcap : MCAP logs.
+    convert_to_mcap : A file of these formats written as an MCAP log.
     """
     path = Path(path)
     suf = path.suffix.lower()

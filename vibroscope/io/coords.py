@@ -186,13 +186,14 @@ def read_coords(path: str | Path, channels: Sequence[str]) -> SensorCoords:
 
 def _uff_coords(path: Path, channels: Sequence[str]) -> SensorCoords:
     """Channels named like UFF DOFs (``"12+Z"``) placed at the nodes of a UFF geometry file."""
-    from vibroscope.io.frf_files import _parse_dof, read_geometry
+    from vibroscope.io.uff import parse_dof
+    from vibroscope.io.uff_geometry import read_geometry
 
     ids, xyz = read_geometry(path)
     where = {int(i): k for k, i in enumerate(ids)}
     pos, dirs = [], []
     for ch in channels:
-        dof = _parse_dof(ch)
+        dof = parse_dof(ch)
         if dof is None or dof[0] not in where:
             raise ChannelError(f"{path}: channel {ch!r} is not a DOF of a node in the geometry "
                                f"({len(ids)} nodes, e.g. {int(ids[0])})")

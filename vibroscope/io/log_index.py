@@ -378,9 +378,9 @@ class LogIndex:
         cid : int
             Channel id.
 
-        Returns
-        -------
-        iterable of (int, memoryview)
+        Yields
+        ------
+        (int, memoryview)
             In file order; the offset is -1 for messages outside chunks.
         """
         for bi, idx in self.where(cid):
@@ -530,9 +530,9 @@ class LogIndex:
     def raw_messages(self) -> Iterator[tuple[str, int, int, bytes]]:
         """Every intact message, undecoded: (topic, channel id, log time ns, payload).
 
-        Returns
-        -------
-        iterator of (str, int, int, bytes)
+        Yields
+        ------
+        (str, int, int, bytes)
             In file order; see :func:`iter_raw_messages`.
         """
         for b in self.scan.blocks:

@@ -98,14 +98,14 @@ def frequency_shift(measured: tuple[np.ndarray, np.ndarray], model: tuple[np.nda
     tolerance : float, optional
         Largest relative distance of a pair; default 0.15.
 
+    Returns
+    -------
+    FrequencyShift
+
     Notes
     -----
     Peaks below 1 % of the measured axis' top frequency are ignored (near 0 Hz a measured FRF is
     noise).
-
-    Returns
-    -------
-    FrequencyShift
     """
     lo = 0.01 * float(np.max(measured[0]))  # the near-0 Hz lines of a measurement are noise
     fa = resonance_peaks(*measured, prominence=prominence, fmin=lo)
@@ -259,6 +259,11 @@ def compare_mode_sets(a, b, *, mac_min: float = 0.5, max_frequency_error: float 
     ------
     ValueError
         If the sets share no point name and have different numbers of points, or one is empty.
+
+    See Also
+    --------
+    vibroscope.modal.mac.match_modes : Pairs of an estimate with reference modes.
+    frequency_shift : Shifts of resonance peaks between measured and model FRFs.
 
     References
     ----------

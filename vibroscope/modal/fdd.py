@@ -287,6 +287,14 @@ def fdd(
     ValueError
         If the band holds fewer than 5 bins or the matrix has fewer than 2 channels.
 
+    See Also
+    --------
+    vibroscope.spectral.csd_matrix : The cross-spectral matrix this decomposes.
+    singular_values : The singular-value spectra alone (the FDD plot).
+    ssi_cov : Output-only poles from the time series (SSI-COV).
+    lscf : Poles from measured FRFs (input and output).
+    peak_picking : The input-output counterpart (peaks of an FRF).
+
     Notes
     -----
     Where EFDD cannot fit (fewer than 3 usable extrema, e.g. a bell of a few bins, a decay longer
@@ -299,6 +307,23 @@ def fdd(
        frequency domain decomposition", Smart Materials and Structures 10, 441–445, 2001.
     .. [2] R. Brincker, C. E. Ventura and P. Andersen, "Damping estimation by frequency domain
        decomposition", Proc. 19th IMAC, 698–703, 2001.
+
+    Examples
+    --------
+    One mode at 5 Hz (a resonator driven by white noise), seen by two sensors in antiphase with
+    5 % noise each: its frequency and shape.
+
+    >>> import numpy as np, scipy.signal
+    >>> from vibroscope.spectral import csd_matrix
+    >>> rng = np.random.default_rng(0)
+    >>> b, a = scipy.signal.iirpeak(5.0, Q=25.0, fs=100.0)
+    >>> x = np.outer([1.0, -0.5], scipy.signal.lfilter(b, a, rng.standard_normal(20_000)))
+    >>> x += 0.05 * x.std(axis=1, keepdims=True) * rng.standard_normal(x.shape)
+    >>> mm = fdd(csd_matrix(x, fs=100.0, nperseg=1024), n_modes=1)
+    >>> mm.method, len(mm), round(float(mm.natural_frequencies[0]), 1)
+    ('efdd', 1, 5.0)
+    >>> np.round(mm.shapes.real, 3)
+    array([[ 1. , -0.5]])
     """
     if csd.G.shape[1] < 2:
         raise ValueError(f"FDD needs at least 2 channels, got {csd.G.shape[1]}")

@@ -123,6 +123,14 @@ def lscf(
     ValueError
         If the band holds too few lines for the highest order, or an order is below 1.
 
+    See Also
+    --------
+    lsfd : Residues and mode shapes for the selected poles.
+    auto_lscf : LSCF with automatic settings, pole selection and LSFD.
+    peak_picking : Single-mode fits at the FRF's peaks.
+    ssi_cov : Output-only poles from the time series (SSI-COV).
+    fdd : Output-only modes from the cross-spectral matrix (FDD/EFDD).
+
     Notes
     -----
     The z-domain basis maps the band onto the unit circle (``ω Δt ≤ π``), which keeps the normal

@@ -403,6 +403,11 @@ def lsfd(
     of the modes below the band, the upper residual ``UR`` the stiffness line of those above.
     ``R_r`` is the residue of ``H`` at ``λ_r``.
 
+    See Also
+    --------
+    lscf : The poles this fit takes.
+    auto_lscf : LSCF, automatic pole selection and this fit in one call.
+
     Notes
     -----
     The modal terms are those of a receptance, ``ρ_r/(jω − λ_r) + c.c.`` with ``ρ_r = R_r/λ_r^p``,

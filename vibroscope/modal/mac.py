@@ -43,6 +43,13 @@ def mac(a, b=None) -> np.ndarray:
     ValueError
         If the shapes have different numbers of points.
 
+    See Also
+    --------
+    match_modes : Pairs of modes by MAC and frequency.
+    compare_mode_sets : Two mode sets compared (MAC matrix, pairs, frequency differences).
+    vibroscope.modal.quality.automac : The MAC of every pair of modes of one set.
+    vibroscope.modal.quality.comac : The agreement of two paired sets per point.
+
     References
     ----------
     .. [1] R. J. Allemang and D. L. Brown, "A correlation coefficient for modal vector analysis",
@@ -114,6 +121,11 @@ def match_modes(est, ref, *, mac_min: float = 0.0, max_frequency_error: float = 
     ------
     ValueError
         If the shapes have different numbers of points.
+
+    See Also
+    --------
+    mac : The criterion it pairs by.
+    compare_mode_sets : Pairs, MAC matrix and frequency differences of two mode sets, with a report.
     """
 
     def unpack(m):

@@ -187,6 +187,11 @@ def peak_picking(
     ValueError
         If the band holds fewer than 5 bins, `refine` is not allowed, or `input` is unknown.
 
+    See Also
+    --------
+    lscf : All modes of a band at once, close modes included (LSCF/polyMAX).
+    fdd : The output-only counterpart on a cross-spectral matrix.
+
     Notes
     -----
     Peak picking assumes well separated, lightly damped modes; for close modes the quadrature

@@ -29,6 +29,11 @@ def automac(shapes) -> np.ndarray:
         Off-diagonal values near 1 flag modes that the measurement points cannot tell apart
         (spatial aliasing) or a spurious duplicate.
 
+    See Also
+    --------
+    vibroscope.modal.mac.mac : The MAC between two sets.
+    comac : The agreement of two paired sets per point.
+
     References
     ----------
     .. [1] R. J. Allemang, "The modal assurance criterion – twenty years of use and abuse",
@@ -152,6 +157,11 @@ def comac(shapes_a, shapes_b) -> np.ndarray:
     ------
     ValueError
         If the two sets differ in shape.
+
+    See Also
+    --------
+    vibroscope.modal.mac.mac : The agreement per mode pair.
+    automac : The MAC of every pair of modes of one set.
 
     Notes
     -----

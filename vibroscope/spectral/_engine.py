@@ -97,6 +97,11 @@ def segment_settings(
     nfft : int or None
         FFT length (zero padding); None gives `nperseg`.
 
+    Returns
+    -------
+    SegmentSettings
+        The completed settings.
+
     Raises
     ------
     ValueError
@@ -263,7 +268,7 @@ class CrossSpectralAccumulator:
         Returns
         -------
         CrossSpectralAccumulator
-            self.
+            Itself.
 
         Raises
         ------
@@ -405,7 +410,7 @@ class CrossSpectralAccumulator:
         Returns
         -------
         CrossSpectralAccumulator
-            self.
+            Itself.
 
         Raises
         ------

@@ -151,6 +151,11 @@ class Spectrum:
     def rms(self) -> np.ndarray:
         """RMS of each channel from the integral of a density, shape (n_channels,).
 
+        Returns
+        -------
+        ndarray
+            RMS per channel in the signal unit, shape (n_channels,).
+
         Raises
         ------
         ValueError

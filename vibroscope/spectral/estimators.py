@@ -317,6 +317,13 @@ def csd_matrix(
         When segments were skipped for missing samples and fewer than :data:`MIN_AVERAGES` (8)
         remain for a pair.
 
+    See Also
+    --------
+    welch : The diagonal only (power spectral densities), one channel at a time.
+    frf : H1, H2 or Hv from this matrix.
+    coherence : Ordinary coherence from this matrix.
+    vibroscope.modal.fdd : Output-only modes from this matrix.
+
     Notes
     -----
     With segments ``x_s`` of length N, window w and ``X_i,s = FFT(w·x_i,s)``:
@@ -394,6 +401,12 @@ def welch(
     FewAveragesWarning
         As :func:`csd_matrix`.
 
+    See Also
+    --------
+    csd_matrix : All channel pairs (cross-spectral densities) in the same pass.
+    amplitude_spectrum : Amplitude (not power) per line.
+    spectrogram : Short-time spectra over time.
+
     Notes
     -----
     ``P(f_k) = (2 / (K fs Σw²)) Σ_s |X_s(f_k)|²``. With ``scaling='spectrum'`` a sine of amplitude
@@ -450,6 +463,10 @@ def amplitude_spectrum(
     -------
     Spectrum
         ``scaling='amplitude'``; a sine of amplitude A on a bin reads A (signal units).
+
+    See Also
+    --------
+    welch : Power (``'density'`` or ``'spectrum'``) per line.
 
     Notes
     -----
@@ -542,7 +559,7 @@ def frf(
         the smallest eigenvector of the ``[inputs, output]`` spectral matrix per output); with
         ``Gxy = E[conj(X) Y]`` as in Notes.
     {welch_params}
-        (The Welch settings are ignored when `x` is a CrossSpectralMatrix.)
+        The Welch settings are ignored when `x` is a CrossSpectralMatrix.
     kind : {'accelerance', 'mobility', 'receptance'}, optional
         Declare the FRF kind; default inferred from the channel units (N in; m/s², m/s or m out).
     workers : int, optional
@@ -567,6 +584,15 @@ def frf(
     KeyError
         If a channel name is not in the record.
 
+    See Also
+    --------
+    csd_matrix : The spectral matrix the estimators read; pass it as `x` for several estimates.
+    coherence : Ordinary coherence of channel pairs.
+    multiple_coherence : Coherence of each output with all inputs together.
+    frf_periodic : H1 from whole periods of a periodic excitation.
+    vibroscope.modal.lscf : Poles from the FRF (LSCF/polyMAX); :func:`vibroscope.modal.lsfd` the shapes.
+    vibroscope.modal.peak_picking : Modes from the FRF's peaks.
+
     Notes
     -----
     With ``Sxx[a, b] = E[conj(X_a) X_b]``, ``Sxy[a, o] = E[conj(X_a) Y_o]`` and ``Y = H X``:
@@ -585,6 +611,26 @@ def frf(
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010.
     .. [2] G. T. Rocklin, J. Crowley and H. Vold, "A comparison of H1, H2, and Hv frequency response
        functions", Proc. 3rd IMAC, 1985.
+
+    Examples
+    --------
+    A gain of 2.5 with output noise of unit variance: H1 recovers the gain; H2 is biased up by the
+    noise, by ``1 / γ² = (6.25 + 1) / 6.25``:
+
+    >>> import numpy as np
+    >>> from vibroscope import Signals
+    >>> rng = np.random.default_rng(0)
+    >>> x = rng.standard_normal(100_000)
+    >>> y = 2.5 * x + rng.standard_normal(100_000)
+    >>> sig = Signals(np.vstack([x, y]), fs=1000.0, channels=["/f.x", "/a.x"], units=["N", "m/s^2"])
+    >>> h1 = frf(sig, "/f.x", nperseg=1000)
+    >>> h1.kind, h1.H.shape  # H[f, output, input]; N in, m/s² out: accelerance
+    ('accelerance', (501, 1, 1))
+    >>> round(float(np.abs(h1.H[1:-1, 0, 0]).mean()), 2), round(float(h1.coherence[1:-1, 0].mean()), 2)
+    (2.5, 0.86)
+    >>> h2 = frf(sig, "/f.x", estimator="H2", nperseg=1000)
+    >>> round(float(np.abs(h2.H[1:-1, 0, 0]).mean()), 2)  # 2.5 · 7.25 / 6.25
+    2.9
     """
     check_option("estimator", estimator, ("H1", "H2", "Hv"))
     if isinstance(x, CrossSpectralMatrix):
@@ -691,6 +737,11 @@ def coherence(
         ``γ²_ij = |G_ij|² / (G_ii G_jj)`` ∈ [0, 1]; ``gamma2[:, i, j]`` equals
         ``scipy.signal.coherence(x[i], x[j])``.
 
+    See Also
+    --------
+    multiple_coherence : An output against several inputs together.
+    frf : The FRF with its coherence.
+
     References
     ----------
     .. [1] J. S. Bendat and A. G. Piersol, *Random Data*, 4th ed., Wiley, 2010, §5.2.5.
@@ -728,6 +779,11 @@ def multiple_coherence(
         Unpacks as ``(frequencies, gamma2)``: ``frequencies`` in Hz, shape (n_freqs,), and
         ``gamma2`` of shape (n_freqs, n_outputs),
         ``γ²_{y:x} = Gxyᴴ Gxx⁻¹ Gxy / Gyy`` ∈ [0, 1]; equals the ordinary coherence for one input.
+
+    See Also
+    --------
+    coherence : Ordinary coherence of channel pairs.
+    frf : The FRF with this coherence.
 
     References
     ----------
@@ -770,6 +826,10 @@ def spectrogram(
     -------
     Spectrogram
         ``values`` shape (n_channels, n_freqs, n_times).
+
+    See Also
+    --------
+    welch : The spectra averaged over the whole record.
     """
     data, fs, channels, units = _unpack(x, fs)
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,

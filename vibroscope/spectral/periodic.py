@@ -205,7 +205,7 @@ def frf_periodic(
     drop_periods : int, optional
         Periods left out at the start of the record as the transient; default 1. (The segments end
         at the last whole segment of the record, so a partial period is dropped at the start as
-        well.)
+        well).
     min_line_snr : float, optional
         An excited line must have ``|X̄|² ≥ min_line_snr · σ²_X`` (the averaged input line above
         the noise of the mean, ``σ²_X`` estimated from the spread of the segments and pooled by a
@@ -233,6 +233,11 @@ def frf_periodic(
         `input` is also an output, or an option is unknown.
     KeyError
         If a channel name is not in the record.
+
+    See Also
+    --------
+    detect_period : The period of the input, when it is not known.
+    vibroscope.spectral.frf : H1, H2 or Hv by Welch averaging, for random excitation.
 
     Notes
     -----
