@@ -174,15 +174,15 @@ def flatten_model(model: LumpedModel, dt: float, scheme: str = "trapezoid") -> F
     -------
     FlatModel
 
-    References
-    ----------
-    .. [3] C. F. Van Loan, "Computing integrals involving the matrix exponential", IEEE Trans.
-       Automatic Control 23(3):395-404, 1978.
-
     Raises
     ------
     ValueError
         If `dt` is not positive, or an element type has no kernel implementation.
+
+    References
+    ----------
+    .. [3] C. F. Van Loan, "Computing integrals involving the matrix exponential", IEEE Trans.
+       Automatic Control 23(3):395-404, 1978.
     """
     dt = float(dt)
     if not np.isfinite(dt) or dt <= 0:
