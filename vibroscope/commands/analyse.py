@@ -762,7 +762,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             kin = (integrate(a, order=1), integrate(a, order=2))
         pending = None
         if figures:  # drawn in worker processes while the recording is written (PendingFigures)
-            from vibroscope.viewers.acquisition import plot_ods
+            from vibroscope.viewers.figures import plot_ods
             from vibroscope.viewers.figures import PendingFigures, figure_jobs
 
             tmp = tx.directory(figures)

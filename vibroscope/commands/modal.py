@@ -375,7 +375,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
             if coords is not None:  # a mode set with its geometry: also the shapes on it in 3-D
                 paths += _shapes_3d(mm, coords, tmp)
             for o in ods:
-                from vibroscope.viewers.acquisition import plot_ods
+                from vibroscope.viewers.figures import plot_ods
 
                 paths.append(_save(plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png"))
             done.append(f"figures: {', '.join(str(tx.final(p)) for p in paths)}")

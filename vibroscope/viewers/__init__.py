@@ -27,7 +27,7 @@ _LAZY = {
     "log_analysis": "rerun_view", "read_rrd": "rerun_view",
     "plot_gap_report": "gap_figures", "log_gap_report": "rerun_gap",
     "plot_stabilization": "figures", "plot_frf_synthesis": "figures",
-    "plot_kinematics": "acquisition", "plot_ods": "acquisition", "ods_as_modal_model": "acquisition",
+    "plot_kinematics": "acquisition", "plot_ods": "figures", "ods_as_modal_model": "acquisition",
     "log_ods": "acquisition",
 }
 

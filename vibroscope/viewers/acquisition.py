@@ -3,7 +3,7 @@ displacement against time, and the operating deflection shape (the relative move
 robot's bodies) at a resonance, drawn and animated like a mode.
 
 matplotlib and rerun are imported inside the functions (through
-:func:`vibroscope.viewers.figures.pyplot` and :func:`vibroscope.viewers.rerun_view.log_analysis`),
+:func:`vibroscope.viewers._common.pyplot` and :func:`vibroscope.viewers.rerun_view.log_analysis`),
 so importing this module costs nothing.
 """
 
@@ -17,9 +17,9 @@ import numpy as np
 from vibroscope.modal._results import ods_as_modal_model
 from vibroscope.signals import true_runs
 from vibroscope.spectral.integration import OperatingShape, integrate
-from vibroscope.viewers.figures import distinct_labels, pyplot, short_label, plot_mode_shapes
+from vibroscope.viewers._common import distinct_labels, pyplot
 
-__all__ = ["plot_kinematics", "plot_ods", "ods_as_modal_model", "log_ods"]
+__all__ = ["plot_kinematics", "ods_as_modal_model", "log_ods"]
 
 _PREFIX = {0: "", -3: "m", -6: "µ", -9: "n"}
 _PRETTY = {"m/s^2": "m/s²", "m/s2": "m/s²", "m s^-2": "m/s²", "m/s²": "m/s²", "m/s": "m/s", "m": "m"}
@@ -158,50 +158,6 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
              "(shaded: 1/f_cut edge zones" + ("; red: missing, each stretch between gaps integrated apart"
                                               if not np.isfinite(acc.data).all() else "") + f"{more})"]
     fig.suptitle("\n".join(w for line in lines for w in textwrap.wrap(line, width)), fontsize=9.5)
-    return fig
-
-
-def plot_ods(ods_result: OperatingShape, coords: Mapping[str, Any] | None = None, *, fig=None, true_modes=None):
-    """Draw an operating deflection shape like a mode shape.
-
-    Wraps it with :func:`ods_as_modal_model` and draws it with
-    :func:`vibroscope.viewers.figures.plot_mode_shapes` (in-phase part relative to the
-    reference point, and the modulus dotted), titled as an ODS.
-
-    Parameters
-    ----------
-    ods_result : OperatingShape
-        From :func:`vibroscope.spectral.integration.ods`.
-    coords : mapping, optional
-        Sensor positions and directions (see :func:`vibroscope.viewers._common.sensor_geometry`);
-        points on a line when None.
-    fig : matplotlib.figure.Figure, optional
-        Figure to draw in (cleared); a new one when None.
-    true_modes : ModalModel, optional
-        Reference modes; the one nearest in frequency is named and drawn dashed.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
-    o = ods_result
-    if fig is None:
-        fig = pyplot().figure(figsize=(6.4, 4.0), layout="constrained")
-    fig = plot_mode_shapes(ods_as_modal_model(o), coords, fig=fig, true_modes=true_modes)
-    ax = fig.axes[0]
-    old = ax.get_title().split("\n")[1:]
-    src = {"frf": f"FRF (input {short_label(str(o.input), 24)})", "csd": "CSD (output-only)"}.get(o.source, o.source)
-    asked = "" if f"{o.requested_hz:.4g}" == f"{o.frequency_hz:.4g}" else f", nearest line to {o.requested_hz:.4g} Hz"
-    ref = distinct_labels(o.points)[o.points.index(o.reference)] if o.reference in o.points else o.reference
-    title = f"ODS at {o.frequency_hz:.4g} Hz{asked}\nfrom {src}, phase reference {ref}"
-    ax.set_title("\n".join([title, *old]), fontsize=9)
-    for line in ax.get_lines():
-        if line.get_label() == "identified (real part)":
-            line.set_label("in phase with the reference")
-        elif line.get_label() == "|φ|":
-            line.set_label("modulus")
-    ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"Operating deflection shape ({len(o.points)} points)", fontsize=11)
     return fig
 
 

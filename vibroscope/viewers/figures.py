@@ -15,84 +15,18 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from vibroscope.signals import true_runs
-from vibroscope.viewers._common import mode_label, nearest_frequencies, real_shape, sensor_geometry
+from vibroscope.viewers._common import (distinct_labels, mode_label, nearest_frequencies, pyplot, real_shape,
+                                       sensor_geometry, short_label)
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
            "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d",
-           "summary_figures", "figure_jobs", "PendingFigures", "in_figure_order", "FIGURE_ORDER"]
+           "summary_figures", "figure_jobs", "PendingFigures", "in_figure_order", "FIGURE_ORDER", "plot_ods"]
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
 #: zlib level of the written PNGs (lossless at any level)
 PNG_LEVEL = 6
 _MAX_LEGEND = 12
-
-
-def pyplot():
-    """Import pyplot, choosing Agg when no display is available and no backend was chosen.
-
-    Returns
-    -------
-    module
-        ``matplotlib.pyplot``.
-    """
-    import matplotlib
-
-    if "matplotlib.pyplot" not in sys.modules and sys.platform.startswith("linux") \
-            and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) \
-            and "MPLBACKEND" not in os.environ:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def short_label(name: str, n: int = 38) -> str:
-    """`name` cut to its last `n` characters behind an ellipsis when longer.
-
-    Parameters
-    ----------
-    name : str
-        A channel or file name.
-    n : int, optional
-        Most characters kept (default 38).
-
-    Returns
-    -------
-    str
-    """
-    return name if len(name) <= n else "…" + name[-(n - 1):]
-
-
-def distinct_labels(names: Sequence[str], n: int = 16) -> list[str]:
-    """Short tick labels: the names less the prefix and suffix they all share (cut at ``/`` or
-    ``.``), e.g. ``/imu/m1.linear_acceleration.x`` -> ``m1``.
-
-    Parameters
-    ----------
-    names : sequence of str
-        Channel or point names.
-    n : int, optional
-        Most characters per label (:func:`short_label`; default 16).
-
-    Returns
-    -------
-    list of str
-        One label per name; the names themselves (shortened) when the cut labels would not be
-        distinct.
-    """
-    names = [str(x) for x in names]
-    if len(names) < 2:
-        return [short_label(x, n) for x in names]
-    pre = os.path.commonprefix(names)
-    cut = max(pre.rfind("/"), pre.rfind(".")) + 1
-    rev = [x[::-1] for x in names]
-    suf = os.path.commonprefix(rev)
-    cut_s = max(suf.rfind("/"), suf.rfind(".")) + 1
-    out = [x[cut:len(x) - cut_s] if len(x) - cut_s > cut else x for x in names]
-    if len(set(out)) < len(out) or not all(out):
-        out = names
-    return [short_label(x, n) for x in out]
 
 
 def _legend_if(ax, **kw) -> None:
@@ -1104,3 +1038,49 @@ def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, mo
                        true_modes=true_modes, stabilization=stabilization, synthesized=synthesized)
     with PendingFigures(jobs, workers=workers) as pending:
         return in_figure_order(pending.wait())
+
+
+def plot_ods(ods_result, coords: Mapping[str, Any] | None = None, *, fig=None, true_modes=None):
+    """Draw an operating deflection shape like a mode shape.
+
+    Wraps it with :func:`ods_as_modal_model` and draws it with
+    :func:`vibroscope.viewers.figures.plot_mode_shapes` (in-phase part relative to the
+    reference point, and the modulus dotted), titled as an ODS.
+
+    Parameters
+    ----------
+    ods_result : OperatingShape
+        From :func:`vibroscope.spectral.integration.ods`.
+    coords : mapping, optional
+        Sensor positions and directions (see :func:`vibroscope.viewers._common.sensor_geometry`);
+        points on a line when None.
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+    true_modes : ModalModel, optional
+        Reference modes; the one nearest in frequency is named and drawn dashed.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from vibroscope.modal import ods_as_modal_model
+
+    o = ods_result
+    if fig is None:
+        fig = pyplot().figure(figsize=(6.4, 4.0), layout="constrained")
+    fig = plot_mode_shapes(ods_as_modal_model(o), coords, fig=fig, true_modes=true_modes)
+    ax = fig.axes[0]
+    old = ax.get_title().split("\n")[1:]
+    src = {"frf": f"FRF (input {short_label(str(o.input), 24)})", "csd": "CSD (output-only)"}.get(o.source, o.source)
+    asked = "" if f"{o.requested_hz:.4g}" == f"{o.frequency_hz:.4g}" else f", nearest line to {o.requested_hz:.4g} Hz"
+    ref = distinct_labels(o.points)[o.points.index(o.reference)] if o.reference in o.points else o.reference
+    title = f"ODS at {o.frequency_hz:.4g} Hz{asked}\nfrom {src}, phase reference {ref}"
+    ax.set_title("\n".join([title, *old]), fontsize=9)
+    for line in ax.get_lines():
+        if line.get_label() == "identified (real part)":
+            line.set_label("in phase with the reference")
+        elif line.get_label() == "|φ|":
+            line.set_label("modulus")
+    ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"Operating deflection shape ({len(o.points)} points)", fontsize=11)
+    return fig
