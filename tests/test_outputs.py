@@ -17,6 +17,23 @@ import pytest
 from vibroscope.cli import main
 from vibroscope.commands._outputs import TEMP_MARK, AtomicOutputs, check_outputs, default_output
 from vibroscope.errors import VibroscopeError
+from vibroscope.provenance import json_report
+
+#: an earlier recording as vibroscope writes them (rerun's magic, the application id in the store info)
+EARLIER_RRD = b"RRF2 application vibroscope: an earlier complete recording"
+
+
+def _ours_json(text: str) -> str:
+    """A JSON report as vibroscope writes it (its first key the generator), holding `text`."""
+    import json
+
+    return json.dumps(json_report({"text": text}))
+
+
+def _ours_png(text: bytes) -> bytes:
+    """PNG bytes as vibroscope's figures start (the ``Software`` text before the image), then `text`."""
+    data = b"Software\0vibroscope test"
+    return b"\x89PNG\r\n\x1a\n" + len(data).to_bytes(4, "big") + b"tEXt" + data + b"\0\0\0\0" + text
 
 REPO = Path(__file__).resolve().parents[1]
 FORCE = "/actuator/force.wrench.force.x"
@@ -87,16 +104,16 @@ def test_check_outputs_refuses_an_input_by_any_spelling(tmp_path, monkeypatch):
 
 def test_atomic_outputs_commit_replace_and_discard(tmp_path, capsys):
     old = tmp_path / "r.json"
-    old.write_text("earlier")
+    old.write_text(_ours_json("earlier"))
     with AtomicOutputs() as tx:
         t = tx.file(old)
         assert t.parent == tmp_path and t.name.startswith(".r") and TEMP_MARK in t.name and t.suffix == ".json"
-        t.write_text("new")
-        assert old.read_text() == "earlier"  # nothing moves before the end
+        t.write_text(_ours_json("new"))
+        assert old.read_text() == _ours_json("earlier")  # nothing moves before the end
         d = tx.directory(tmp_path / "figs")
         (d / "a.png").write_bytes(b"png")
         assert tx.final(d / "a.png") == tmp_path / "figs" / "a.png"
-    assert old.read_text() == "new" and (tmp_path / "figs" / "a.png").read_bytes() == b"png"
+    assert old.read_text() == _ours_json("new") and (tmp_path / "figs" / "a.png").read_bytes() == b"png"
     assert capsys.readouterr().out == f"replacing {old} (earlier output)\n"
     assert not _temps(tmp_path)
     with pytest.raises(KeyboardInterrupt):
@@ -104,14 +121,14 @@ def test_atomic_outputs_commit_replace_and_discard(tmp_path, capsys):
             tx.file(old).write_text("partial")
             (tx.directory(tmp_path / "figs") / "b.png").write_bytes(b"partial")
             raise KeyboardInterrupt
-    assert old.read_text() == "new" and sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["a.png"]
+    assert old.read_text() == _ours_json("new") and sorted(p.name for p in (tmp_path / "figs").iterdir()) == ["a.png"]
     assert not _temps(tmp_path)
 
 
 def test_figures_folder_swapped_whole_or_merged_when_it_holds_other_files(tmp_path, capsys):
     figs = tmp_path / "figs"
     figs.mkdir()
-    (figs / "stale.png").write_bytes(b"old run")
+    (figs / "stale.png").write_bytes(_ours_png(b"old run"))
     with AtomicOutputs() as tx:
         (tx.directory(figs) / "new.png").write_bytes(b"new")
     assert sorted(p.name for p in figs.iterdir()) == ["new.png"]  # an earlier run's figures: replaced whole
@@ -199,7 +216,7 @@ def test_interrupt_while_writing_the_recording_leaves_no_partial_rrd(tiny_log, t
 
     monkeypatch.chdir(tmp_path)
     rrd = tmp_path / "tiny_analyse.rrd"
-    rrd.write_bytes(b"an earlier complete recording")
+    rrd.write_bytes(EARLIER_RRD)
     seen = []
 
     def interrupted(**kw):
@@ -210,14 +227,14 @@ def test_interrupt_while_writing_the_recording_leaves_no_partial_rrd(tiny_log, t
     monkeypatch.setattr(rv, "log_analysis", interrupted)
     assert main(["analyse", str(tiny_log), "--no-figures"]) == 130
     assert seen and Path(seen[0]) != rrd and Path(seen[0]).parent == tmp_path
-    assert rrd.read_bytes() == b"an earlier complete recording"
+    assert rrd.read_bytes() == EARLIER_RRD
     assert not _temps(tmp_path)
 
 
 def test_sigint_during_analyse_leaves_nothing_that_looks_complete(tiny_log, tmp_path):
     """A real Ctrl-C (SIGINT) to ``python -m vibroscope.cli analyse`` once it writes its temporaries."""
     earlier = tmp_path / "tiny_analyse.rrd"
-    earlier.write_bytes(b"earlier complete output")
+    earlier.write_bytes(EARLIER_RRD)
     env = {**os.environ, "PYTHONPATH": str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     proc = subprocess.Popen([sys.executable, "-m", "vibroscope.cli", "analyse", str(tiny_log)], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
@@ -234,7 +251,7 @@ def test_sigint_during_analyse_leaves_nothing_that_looks_complete(tiny_log, tmp_
         pytest.skip("SIGINT arrived after the outputs were complete: timing unreliable here")
     assert proc.returncode == 130, err
     assert "vibroscope analyse: interrupted" in err and "Traceback" not in err
-    assert earlier.read_bytes() == b"earlier complete output"
+    assert earlier.read_bytes() == EARLIER_RRD
     assert not (tmp_path / "tiny_analyse_figures").exists()
     assert not _temps(tmp_path)
 

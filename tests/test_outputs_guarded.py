@@ -22,6 +22,12 @@ import pytest
 from vibroscope.cli import main
 from vibroscope.commands._outputs import TEMP_MARK, AtomicOutputs, check_outputs, special_kind
 from vibroscope.errors import VibroscopeError
+from vibroscope.provenance import json_report
+
+
+def _j(text: str) -> str:
+    """A JSON report as vibroscope writes it (its first key the generator), holding `text`."""
+    return json.dumps(json_report({"text": text}))
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "data"
@@ -145,10 +151,10 @@ def test_simulate_refuses_a_device_as_out(targets, tmp_path, capsys):
 def test_special_kind_and_check_outputs(targets, tmp_path):
     for target, what in targets.values():
         assert special_kind(target) == what
-        with pytest.raises(VibroscopeError, match=f"is {what}: only a regular file"):
+        with pytest.raises(VibroscopeError, match=f"is {what}: only vibroscope's own earlier outputs"):
             check_outputs({"--json": target}, {})
     regular = tmp_path / "earlier.json"
-    regular.write_text("{}")
+    regular.write_text(_j("earlier"))
     assert special_kind(regular) is None and special_kind(tmp_path) is None and special_kind(tmp_path / "no") is None
     check_outputs({"--json": regular, "--figures": tmp_path / "figs"}, {})  # an earlier output: fine
     with pytest.raises(VibroscopeError, match="is a folder: give a file name"):
@@ -161,19 +167,19 @@ def test_commit_refuses_a_target_that_became_special_and_keeps_the_set_whole(tmp
     """A final path turned into a FIFO between the check and the commit: nothing is moved, the
     earlier outputs stay, no temporary is left."""
     a, b = tmp_path / "a.json", tmp_path / "b.json"
-    a.write_text("earlier a")
+    a.write_text(_j("earlier a"))
     with pytest.raises(VibroscopeError, match="is a FIFO"):
         with AtomicOutputs() as tx:
             tx.file(a).write_text("new a")
             tx.file(b).write_text("new b")
             (tx.directory(tmp_path / "figs") / "psd.png").write_bytes(b"png")
             os.mkfifo(b)
-    assert a.read_text() == "earlier a" and stat.S_ISFIFO(os.lstat(b).st_mode)
+    assert a.read_text() == _j("earlier a") and stat.S_ISFIFO(os.lstat(b).st_mode)
     assert not (tmp_path / "figs").exists() and not _temps(tmp_path)
     # a figures folder holding a link among its PNGs is merged into, never swapped away whole
     figs = tmp_path / "figs2"
     figs.mkdir()
-    (figs / "old.png").write_bytes(b"old")
+    (figs / "old.png").write_bytes(b"\x89PNG\r\n\x1a\n\0\0\0\x18tEXtSoftware\0vibroscope test\0\0\0\0")
     (figs / "linked.png").symlink_to(tmp_path / "a.json")
     with AtomicOutputs() as tx:
         (tx.directory(figs) / "psd.png").write_bytes(b"psd")
@@ -181,14 +187,14 @@ def test_commit_refuses_a_target_that_became_special_and_keeps_the_set_whole(tmp
     with pytest.raises(VibroscopeError, match="is a symbolic link"):
         with AtomicOutputs() as tx:
             (tx.directory(figs) / "linked.png").write_bytes(b"figure")
-    assert (figs / "linked.png").is_symlink() and a.read_text() == "earlier a" and not _temps(tmp_path)
+    assert (figs / "linked.png").is_symlink() and a.read_text() == _j("earlier a") and not _temps(tmp_path)
 
 
 def test_a_failed_move_puts_the_earlier_outputs_back(tmp_path, monkeypatch):
     """All or none: when the second move fails, the first output is put back as it was."""
     a, b = tmp_path / "a.json", tmp_path / "b.json"
-    a.write_text("earlier a")
-    b.write_text("earlier b")
+    a.write_text(_j("earlier a"))
+    b.write_text(_j("earlier b"))
     real = os.replace
     calls = []
 
@@ -204,7 +210,7 @@ def test_a_failed_move_puts_the_earlier_outputs_back(tmp_path, monkeypatch):
             tx.file(a).write_text("new a")
             tx.file(b).write_text("new b")
     monkeypatch.setattr(os, "replace", real)
-    assert a.read_text() == "earlier a" and b.read_text() == "earlier b" and not _temps(tmp_path)
+    assert a.read_text() == _j("earlier a") and b.read_text() == _j("earlier b") and not _temps(tmp_path)
 
 
 def test_a_signal_during_the_moves_is_held_until_the_set_is_complete(tmp_path):

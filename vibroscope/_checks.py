@@ -6,19 +6,64 @@
   (scipy's ``ShortTimeFFT`` returns read-only windows the same way).
 - :func:`atomic_file`: write one file under a temporary name, renamed when complete.
 - :func:`jsonable`: numpy values and containers as plain JSON values (NaN/Inf as null).
+- :class:`LazyChoices`: allowed values read from a registry on first use (``argparse`` choices
+  that do not import the room that holds the registry until they are checked or shown).
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib
 import os
 import secrets
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-__all__ = ["check_option", "read_only", "atomic_file", "jsonable"]
+__all__ = ["check_option", "read_only", "atomic_file", "jsonable", "LazyChoices"]
+
+
+class LazyChoices(Sequence):
+    """The tuple ``module.name``, imported on first use.
+
+    ``argparse`` reads its ``choices`` only to check a value given on the command line and to
+    format the help, so a parser built with these does not import the registry's room (and its
+    numerical libraries) when the option is not used.
+
+    Parameters
+    ----------
+    module : str
+        The module that holds the values, e.g. ``'vibroscope.modal.methods'``.
+    name : str
+        The tuple's name in it, e.g. ``'METHOD_CHOICES'``.
+
+    Examples
+    --------
+    >>> c = LazyChoices("vibroscope.spectral.kinds", "FRF_KINDS")
+    >>> "mobility" in c, list(c)
+    (True, ['accelerance', 'mobility', 'receptance'])
+    """
+
+    def __init__(self, module: str, name: str) -> None:
+        self.module, self.name, self._values = module, name, None
+
+    def _get(self) -> tuple:
+        if self._values is None:
+            self._values = tuple(getattr(importlib.import_module(self.module), self.name))
+        return self._values
+
+    def __getitem__(self, i):
+        return self._get()[i]
+
+    def __len__(self) -> int:
+        return len(self._get())
+
+    def __contains__(self, value: object) -> bool:
+        return value in self._get()
+
+    def __repr__(self) -> str:
+        return f"LazyChoices({self.module}.{self.name})"
 
 
 @contextlib.contextmanager

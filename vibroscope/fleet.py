@@ -255,8 +255,10 @@ class FleetResult:
         -------
         Path
         """
+        from vibroscope.provenance import json_report
+
         path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
+        path.write_text(json.dumps(json_report(self.to_dict()), indent=2))
         return path
 
 
@@ -397,8 +399,9 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
         Bands (Hz) for the RMS; default :func:`octave_bands`.
     tasks_per_log : int, optional
         Ranges each log is split into; default enough for two tasks per worker over the fleet.
-    method : {'auto', 'lscf', 'peak', 'fdd', 'efdd'}, optional
-        Identification per log (:func:`vibroscope.stream.analyse_stream`).
+    method : str, optional
+        A method of :data:`vibroscope.modal.methods.METHOD_CHOICES` that needs no time series
+        ('auto', 'lscf', 'peak', 'fdd', 'efdd'); identification per log (:func:`vibroscope.stream.analyse_stream`).
     fmin, fmax : float, optional
         Band (Hz) searched for modes; default from each log's spectra.
 
@@ -411,16 +414,19 @@ def analyse_fleet(paths: Sequence[str | Path], *, client: Any = None, channels: 
     Raises
     ------
     ValueError
-        If `paths` is empty, or no log can be analysed (each named with its error).
+        If `paths` is empty, `method` is unknown or does not fit (spectra only, with or without
+        `input`), or no log can be analysed (each named with its error).
     ImportError
         If ``dask.distributed`` is not installed (the ``[dask]`` extra).
     """
     from vibroscope.errors import VibroscopeError
     from vibroscope.io.blocks import open_grid
+    from vibroscope.modal.methods import resolve_method
 
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no logs given")
+    resolve_method(method, has_input=bool(input), time_series=False)  # as every log would, before any work
     fs_given = fs  # every log goes onto this rate when given
     errors: dict[int, str] = {}  # by position in `paths` (a log may be given twice)
 

@@ -19,6 +19,7 @@ from vibroscope.faults import apply_faults, detect_faults
 from vibroscope.signals import Signals, true_runs
 from vibroscope.spectral import FRF, CrossSpectralMatrix, Spectrum, csd_matrix, frf
 from vibroscope.spectral.estimators import MIN_AVERAGES, FewAveragesWarning
+from vibroscope.modal.methods import METHOD_CHOICES, MODAL_METHODS, identify, resolve_method
 
 __all__ = ["Analysis", "IdentifySettings", "METHODS", "analyse_signals", "decimate", "decimation_stages", "default_nperseg",
            "summary_dict"]
@@ -236,8 +237,8 @@ def _decimate_stages(data: np.ndarray, stages: list) -> np.ndarray:
     return data
 
 
-#: identification methods of ``analyse`` and ``modal``; "auto" is LSCF with an input, SSI-COV without
-METHODS = ("auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak")
+#: identification methods of ``analyse`` and ``modal`` (:data:`vibroscope.modal.methods.METHOD_CHOICES`)
+METHODS = METHOD_CHOICES
 
 
 @dataclass(frozen=True)
@@ -264,8 +265,8 @@ class IdentifySettings:
         FRF estimator with an input.
     prominence : float
         Smallest peak prominence in dB for FDD/EFDD.
-    method : {'auto', 'lscf', 'ssi', 'polymax', 'fdd', 'efdd', 'peak'}
-        Identification method.
+    method : str
+        Identification method, one of :data:`vibroscope.modal.methods.METHOD_CHOICES`.
     f_low : float, optional
         Output-only: the lowest resonance (Hz) found in the response, which sets the SSI /
         polyMAX time lags; default None (derived from the band or ``10 fs / nperseg``).
@@ -298,42 +299,22 @@ class IdentifySettings:
 
 def _identify(sig: Signals, s: IdentifySettings):
     """One identification pass at one resolution: (CSD of all channels, FRF or None, Identification)."""
-    from vibroscope import modal
-    from vibroscope.modal.automatic import Identification, _line_spacing, auto_lscf, auto_ssi
-    from vibroscope.modal.selection import select_modes
-
+    resolve_method(s.method, has_input=bool(s.input))  # a misfit fails before any spectrum
     G = csd_matrix(sig, nperseg=s.nperseg, window=s.window)
     outputs = list(s.outputs)
-    Gout = G.select(outputs)
     lo, hi = s.band if s.band is not None else (s.fmin, s.fmax)
+    h = None
     if s.input:
         h = frf(G, s.input, outputs, estimator=s.estimator)
         if s.period:  # periodic excitation: whole periods, rectangular window, no leakage
             from vibroscope.spectral.periodic import frf_periodic
 
             h = frf_periodic(sig, s.input, outputs, period=s.period, drop_periods=1)
-        if s.method == "peak":
-            mm = modal.peak_picking(h, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax)
-            sel = select_modes(mm, fmin=lo, fmax=hi, coherence=(h.frequencies, h.coherence),
-                               resolution_hz=_line_spacing(h.frequencies))
-            return G, h, Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria})
-        if s.method in ("ssi", "polymax", "fdd", "efdd"):
-            raise ValueError(f"method={s.method!r} is output-only; with an input use 'lscf' or 'peak'")
-        return G, h, auto_lscf(h, fmin=lo, fmax=hi, select=s.select)
-    if s.method in ("lscf", "peak"):
-        raise ValueError(f"method={s.method!r} needs an input (force) channel; output-only: 'ssi', 'fdd', 'efdd'")
     f_low = s.f_low or (lo or sig.fs / s.nperseg * 10)  # the lowest resonance sets the lags
-    if s.method == "polymax":
-        from vibroscope.modal.automatic import polymax_oma
-
-        return G, None, polymax_oma(sig.select(outputs), f_low=f_low, fmin=s.fmin, fmax=hi)
-    if s.method in ("auto", "ssi"):
-        return G, None, auto_ssi(sig.select(outputs), f_low=f_low, fmin=s.fmin, fmax=hi, select=s.select)
-    # two singular values: close modes (e.g. a tower's two bending directions) both show
-    mm = modal.fdd(Gout, n_modes=s.n_modes, fmin=s.fmin, fmax=s.fmax, n_singular=min(2, len(outputs)),
-                   prominence=s.prominence, efdd=s.method == "efdd")
-    sel = select_modes(mm, fmin=s.fmin, fmax=hi, resolution_hz=_line_spacing(Gout.frequencies))
-    return G, None, Identification(sel.modes, sel.rejected, None, {"method": mm.method, **sel.criteria})
+    ident = identify(s.method, frf=h, csd=G.select(outputs), signals=None if h is not None else sig.select(outputs),
+                     time_series=True, fmin=s.fmin, fmax=s.fmax, band=(lo, hi), n_modes=s.n_modes,
+                     prominence=s.prominence, select=s.select, f_low=f_low)
+    return G, h, ident
 
 
 def analyse_signals(
@@ -387,12 +368,15 @@ def analyse_signals(
     prominence : float, optional
         Smallest prominence (dB) of a peak of the first singular values for FDD/EFDD; default
         10 dB.
-    method : {'auto', 'lscf', 'ssi', 'polymax', 'fdd', 'efdd', 'peak'}, optional
-        Identification: 'auto' (default) is LSCF/polyMAX with LSFD with an input (Peeters et al.
+    method : str, optional
+        One of :data:`vibroscope.modal.methods.METHOD_CHOICES` (the registry
+        :data:`~vibroscope.modal.methods.MODAL_METHODS`; each method's result name, such as
+        'ssi_cov', is accepted too). 'auto' (default) is LSCF/polyMAX with LSFD with an input (Peeters et al.
         2004) and covariance-driven SSI with clustering of stable poles without (Peeters & De
         Roeck 1999); 'polymax' polyMAX on the output positive power spectra (Peeters & Van der
         Auweraer 2005, the output-only cross-check); 'fdd' / 'efdd' frequency-domain decomposition (Brincker et al. 2001) with
-        half-power / enhanced damping; 'peak' peak picking on the FRFs.
+        half-power / enhanced damping; 'peak' peak picking on the FRFs. With an input, 'polymax'
+        is LSCF (polyMAX is the poly-reference LSCF).
     select : sequence of float, optional
         LSCF and SSI-COV: take the modes at these frequencies (Hz) from the stabilization diagram
         instead of the automatic physical-mode selection.
@@ -443,8 +427,9 @@ def analyse_signals(
     from vibroscope._checks import check_option
 
     check_option("method", method, METHODS)
-    if select is not None and method not in ("auto", "lscf", "ssi"):
-        raise ValueError(f"select= picks poles from a stabilization diagram: method 'lscf' or 'ssi', not {method!r}")
+    if select is not None and not resolve_method(method, has_input=input is not None).selects:
+        raise ValueError(f"select= picks poles from a stabilization diagram: method "
+                         f"{' or '.join(repr(m.key) for m in MODAL_METHODS.values() if m.selects)}, not {method!r}")
     notes = list(signals.meta.get("warnings", []))
     if fmin is not None and fmax is not None and fmin > fmax:
         raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")

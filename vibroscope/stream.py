@@ -440,29 +440,20 @@ class StreamAnalysis:
 def _modes_from_spectra(G: CrossSpectralMatrix, input: str | None, outputs: list[str], *, fmin, fmax, n_modes,
                         estimator: str, prominence: float, method: str, select, notes: list):
     """(FRF or None, Identification, band) from a cross-spectral matrix."""
-    from vibroscope import modal
-    from vibroscope.modal.automatic import Identification, auto_lscf
-    from vibroscope.modal.selection import excited_band, response_band, select_modes
+    from vibroscope.modal.methods import identify
+    from vibroscope.modal.selection import excited_band, response_band
 
     f = G.frequencies
     nyq = 0.4 * G.settings["fs"]
+    # (merge_duplicates=False: the streamed analysis has never merged duplicate candidates)
     if input:
-        if method in ("ssi", "polymax", "fdd", "efdd"):
-            raise ValueError(f"method={method!r} is output-only; with an input use 'lscf' or 'peak'")
         lo_x, hi_x = excited_band(f, G.G[:, G.index(input), G.index(input)].real)
         band = (max(fmin or 0.0, lo_x), min(fmax if fmax is not None else nyq, hi_x))
         notes.append(f"band from the input: {lo_x:.4g}–{hi_x:.4g} Hz (its PSD within 20 dB of the maximum)")
         h = frf(G, input, outputs, estimator=estimator)
-        if method == "peak":
-            mm = modal.peak_picking(h, n_modes=n_modes, fmin=fmin, fmax=band[1])
-            sel = select_modes(mm, fmin=band[0], fmax=band[1], coherence=(h.frequencies, h.coherence))
-            return h, Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria}), band
-        return h, auto_lscf(h, fmin=band[0], fmax=band[1], select=select), band
-    if method in ("lscf", "peak"):
-        raise ValueError(f"method={method!r} needs an input (force) channel; output-only streaming: 'fdd', 'efdd'")
-    if method in ("ssi", "polymax"):
-        raise ValueError(f"method={method!r} needs the time series; a streamed analysis has the spectra only: "
-                         "use 'fdd' or 'efdd' (or 'auto')")
+        ident = identify(method, frf=h, time_series=False, fmin=fmin, fmax=band[1], band=band, n_modes=n_modes,
+                         select=select, merge_duplicates=False)
+        return h, ident, band
     Gout = G.select(outputs)
     P = np.stack([Gout.G[:, i, i].real for i in range(len(outputs))])
     f_low, hi_r = response_band(f, P, fmin=fmin)
@@ -479,10 +470,9 @@ def _modes_from_spectra(G: CrossSpectralMatrix, input: str | None, outputs: list
     if method == "auto":
         notes.append("output-only modes by EFDD on the spectra (SSI-COV needs the time series, which a streamed "
                      "analysis does not hold)")
-    mm = modal.fdd(Gout, n_modes=n_modes, fmin=fmin, fmax=hi, n_singular=min(2, len(outputs)),
-                   prominence=prominence, efdd=method != "fdd")
-    sel = select_modes(mm, fmin=fmin, fmax=hi)
-    return None, Identification(sel.modes, sel.rejected, None, {"method": mm.method, **sel.criteria}), (fmin, hi)
+    ident = identify(method, csd=Gout, time_series=False, fmin=fmin, fmax=hi, n_modes=n_modes, prominence=prominence,
+                     select=select, merge_duplicates=False)
+    return None, ident, (fmin, hi)
 
 
 def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, outputs: Sequence[str] | None = None,
@@ -516,8 +506,10 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
         FRF estimator with an input.
     prominence : float, optional
         Smallest peak prominence in dB for FDD/EFDD; default 10.
-    method : {'auto', 'lscf', 'peak', 'fdd', 'efdd'}, optional
-        'auto': LSCF with an input, EFDD without.
+    method : str, optional
+        A method of :data:`vibroscope.modal.methods.METHOD_CHOICES` that needs no time series
+        ('auto', 'lscf', 'peak', 'fdd', 'efdd'; 'polymax' with an input is LSCF); 'auto': LSCF
+        with an input, EFDD without.
     select : sequence of float, optional
         LSCF: the modes at these frequencies (Hz) from the stabilization diagram.
     block_samples : int, optional
@@ -536,10 +528,9 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
         output-only method, ``fmin > fmax``), or a channel has no segment free of gaps.
     """
     from vibroscope import modal
-    from vibroscope._checks import check_option
-    from vibroscope.pipeline import METHODS
+    from vibroscope.modal.methods import resolve_method
 
-    check_option("method", method, METHODS)
+    resolve_method(method, has_input=bool(input), time_series=False)  # before reading the log
     if fmin is not None and fmax is not None and fmin > fmax:
         raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
     if isinstance(path, LogSpectra):

@@ -137,6 +137,11 @@ KINDS = {"open": CLASSES, "closed_loop": CLOSED_LOOP_CLASSES, "modal": MODAL_CLA
 #: the effects a two-effect case draws its (distinct) pair from
 PAIR_EFFECTS = ("coulomb_friction", "offset", "backlash", "cubic_stiffness", "saturation", "time_delay",
                 "hysteresis", "asymmetric_friction")
+#: pairs that are one effect: Coulomb friction F plus asymmetric friction (F+, F-) at a connection is
+#: asymmetric friction (F + F+, F + F-) exactly, and at two connections it still is whenever they act
+#: on the same relative motion; such a pair cannot be named as two (the diagnoser names one member of
+#: a nested family, ``vibroscope.gap.diagnosis.NESTED_FAMILIES``), so it is not drawn
+NESTED_PAIRS = ({"coulomb_friction", "asymmetric_friction"},)
 #: effects that sit on a connection (``where = {"between": [a, b]}``)
 ELEMENT_EFFECTS = ("coulomb_friction", "backlash", "hysteresis", "cubic_stiffness", "asymmetric_friction",
                    "joint_friction")
@@ -1183,6 +1188,8 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     for attempt in range(10):
         if effect == "two_effects":
             pair = [PAIR_EFFECTS[i] for i in rng.choice(len(PAIR_EFFECTS), 2, replace=False)]
+            while set(pair) in NESTED_PAIRS:  # one effect in disguise: drawn again
+                pair = [PAIR_EFFECTS[i] for i in rng.choice(len(PAIR_EFFECTS), 2, replace=False)]
         else:
             pair = [effect]
         if modal:

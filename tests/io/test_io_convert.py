@@ -220,7 +220,7 @@ def test_convert_refuses_to_overwrite_its_input(tmp_path, capsys):
     np.savetxt(p, np.ones((10, 2)), delimiter=",")
     before = p.read_bytes()
     assert main(["convert", str(p), str(p), "--fs", "10"]) == 1
-    assert "is the input file" in capsys.readouterr().err
+    assert "is the input IN" in capsys.readouterr().err  # refused by the command's output check, before any work
     with pytest.raises(ValueError, match="is the input file"):
         convert_to_mcap(p, tmp_path / "." / ".." / tmp_path.name / "in.csv", fs=10.0)
     link = tmp_path / "link.mcap"

@@ -5,10 +5,12 @@ Rules every command follows:
 - Default outputs go to the current directory (or ``--out DIR``), named after the input and the
   command (:func:`default_output`: ``<stem>_<command><suffix>``), never beside the input.
 - Every output is checked before any work (:func:`check_outputs`, :func:`check_out_dir`): an
-  output never overwrites an input; an existing output path must be a plain regular file (a
-  folder for a figures folder): a symbolic link, FIFO, socket or device node is refused, named
-  (only regular files, an earlier run's outputs, are ever replaced); the folder it goes into must
-  be writable (probed with a temporary file, so a read-only file system is found too).
+  output never overwrites an input; an existing output path must be a regular file that
+  vibroscope wrote (:func:`vibroscope.provenance.written_by_vibroscope`; a folder for a figures
+  folder, whose existing PNG files must be vibroscope's): a symbolic link, FIFO, socket, device
+  node or a file vibroscope did not write is refused, named (only an earlier run's outputs are
+  ever replaced); the folder it goes into must be writable (probed with a temporary file, so a
+  read-only file system is found too).
 - Relative output paths given with ``--out DIR`` are taken inside ``DIR``
   (:func:`resolve_outputs`).
 - Every output is written under a temporary name in its own directory (``.<name>.tmp-<pid>``,
@@ -19,6 +21,10 @@ Rules every command follows:
   together or not at all: Ctrl-C or SIGTERM during the moves is held until they are done, and a
   failed move puts back the earlier outputs already replaced.
 - Replacing an earlier output prints one line: ``replacing <path> (earlier output)``.
+- What vibroscope wrote is recognised by the mark each format carries
+  (:mod:`vibroscope.provenance`): an MCAP's writer library, an RRD's application id, a PNG's
+  ``Software`` text, a JSON report's first key ``generator``, a TOML's first comment line, a
+  Universal File's dataset 151.
 """
 
 from __future__ import annotations
@@ -35,15 +41,62 @@ from pathlib import Path
 from typing import Iterable, Mapping
 
 from vibroscope.errors import VibroscopeError
+from vibroscope.provenance import written_by_vibroscope
 
 __all__ = ["default_output", "same_file", "check_outputs", "check_out_dir", "check_writable", "special_kind",
-           "resolve_outputs", "AtomicOutputs", "TEMP_MARK", "FOLDER_OPTIONS"]
+           "check_ours", "resolve_outputs", "AtomicOutputs", "TEMP_MARK", "FOLDER_OPTIONS", "FIGURE_SUFFIX"]
 
 #: what every temporary name contains (``.<name>.tmp-<pid>``)
 TEMP_MARK = ".tmp-"
 
 #: options of :func:`check_outputs` whose output is a folder by default (every other one names a file)
 FOLDER_OPTIONS = ("--figures",)
+
+#: what a figures folder holds (the only files of an existing folder that a command may replace)
+FIGURE_SUFFIX = ".png"
+
+
+def check_ours(path: str | os.PathLike, option: str = "output") -> None:
+    """Refuse an existing output file that vibroscope did not write.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output file; nothing there passes.
+    option : str, optional
+        The option named in the message, e.g. ``"--json"``; default ``"output"``.
+
+    Raises
+    ------
+    VibroscopeError
+        ``--json X: not written by vibroscope: X; remove it or choose another path`` (also for
+        a link, FIFO, device or folder there: :func:`special_kind` names those first).
+    """
+    if not os.path.lexists(path):
+        return
+    kind = special_kind(path)
+    if kind is not None:
+        raise VibroscopeError(f"{option}: {path} is {kind}: only vibroscope's own earlier outputs are replaced; "
+                              f"give another path")
+    if os.path.isdir(path):
+        raise VibroscopeError(f"{option}: {path} is a folder: give a file name")
+    if not written_by_vibroscope(path):
+        raise VibroscopeError(f"{option}: not written by vibroscope: {path}; remove it or choose another path "
+                              f"(only vibroscope's own earlier outputs are replaced)")
+
+
+def _check_folder(folder: str | os.PathLike, option: str) -> None:
+    """Refuse an existing figures folder holding a figure file (``*.png``) that vibroscope did not write
+    (or a link, FIFO, device or folder of that name): a run could replace it."""
+    if not os.path.isdir(folder):
+        return
+    try:
+        names = sorted(os.listdir(folder))
+    except OSError as exc:
+        raise VibroscopeError(f"{option} {folder}: cannot list it ({exc.strerror or exc})") from None
+    for name in names:
+        if name.lower().endswith(FIGURE_SUFFIX):
+            check_ours(Path(folder) / name, f"{option} {folder}")
 
 
 def default_output(source: str | os.PathLike, command: str, suffix: str = "",
@@ -225,8 +278,10 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike | None],
     ------
     VibroscopeError
         ``--json X is the input log X: an output never overwrites an input``; ``--json X is a
-        FIFO: only a regular file (an earlier output) is replaced``; ``--json X is a folder``;
-        ``--rrd X: cannot write in D (Permission denied)``.
+        FIFO: only vibroscope's own earlier outputs are replaced``; ``--json X: not written by
+        vibroscope: X; remove it or choose another path``; ``--json X is a folder``; ``--rrd X:
+        cannot write in D (Permission denied)``; a figures folder holding a PNG file that
+        vibroscope did not write, named.
     """
     flat = []
     for what, p in inputs.items():
@@ -245,15 +300,17 @@ def check_outputs(outputs: Mapping[str, str | os.PathLike | None],
                 raise VibroscopeError(f"{opt} {o} is the input {what} {i}: an output never overwrites an input")
         kind = special_kind(o)
         if kind is not None:
-            raise VibroscopeError(f"{opt} {o} is {kind}: only a regular file or folder (an earlier output) is "
-                                  f"replaced; give another path")
+            raise VibroscopeError(f"{opt} {o} is {kind}: only vibroscope's own earlier outputs are replaced; "
+                                  f"give another path")
         if opt in folders:
             if os.path.exists(o) and not os.path.isdir(o):
                 raise VibroscopeError(f"{opt} {o} is a file, not a folder")
+            _check_folder(o, opt)
             check_writable(o, f"{opt} {o}")
         else:
             if os.path.isdir(o):
                 raise VibroscopeError(f"{opt} {o} is a folder: give a file name")
+            check_ours(o, opt)
             check_writable(Path(o).parent, f"{opt} {o}")
 
 
@@ -301,9 +358,10 @@ class AtomicOutputs:
     exception (``KeyboardInterrupt`` included) every temporary is removed (:meth:`discard`) and
     the exception propagates.
 
-    A figures directory replaces an earlier one whole when that one holds only PNG files (an
-    earlier run's figures); otherwise (a folder with other files, such as ``.``) the new files
-    are moved in one by one, so nothing else in it is removed.
+    A figures directory replaces an earlier one whole when that one holds only PNG files that
+    vibroscope wrote (an earlier run's figures); otherwise (a folder with other files, such as
+    ``.``) the new files are moved in one by one, so nothing else in it is removed, and a file
+    of the same name that vibroscope did not write is refused before the first move.
 
     Parameters
     ----------
@@ -340,8 +398,10 @@ class AtomicOutputs:
                 raise VibroscopeError(f"output {final} is the input {i}: an output never overwrites an input")
         kind = special_kind(final)
         if kind is not None:
-            raise VibroscopeError(f"output {final} is {kind}: only a regular file or folder (an earlier output) is "
-                                  f"replaced")
+            raise VibroscopeError(f"output {final} is {kind}: only vibroscope's own earlier outputs are replaced")
+        if final.is_file() and not written_by_vibroscope(final):
+            raise VibroscopeError(f"output: not written by vibroscope: {final}; remove it or choose another path "
+                                  f"(only vibroscope's own earlier outputs are replaced)")
 
     def file(self, path: str | os.PathLike) -> Path:
         """The temporary path to write the output file `path` to (its folder is created).
@@ -358,7 +418,8 @@ class AtomicOutputs:
         Raises
         ------
         VibroscopeError
-            If `path` is an input, a folder, or not a regular file (a link, FIFO, device).
+            If `path` is an input, a folder, not a regular file (a link, FIFO, device), or a
+            file that vibroscope did not write.
         """
         final = Path(path)
         self._guard(final)
@@ -436,8 +497,9 @@ class AtomicOutputs:
         return moves
 
     def _swap_whole(self, final: Path) -> bool:
-        """Whether an existing figures folder holds only regular PNG files (an earlier run's), none an input."""
-        return all(special_kind(p) is None and p.is_file() and p.suffix.lower() == ".png" for p in final.iterdir()) \
+        """Whether an existing figures folder holds only PNG files vibroscope wrote (an earlier run's),
+        none an input."""
+        return all(p.suffix.lower() == FIGURE_SUFFIX and written_by_vibroscope(p) for p in final.iterdir()) \
             and not any(same_file(p, i) for p in final.iterdir() for i in self._inputs)
 
     def commit(self) -> None:

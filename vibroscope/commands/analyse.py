@@ -9,13 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroscope._checks import LazyChoices
+
 __all__ = ["add_parser", "run", "analyse_log", "run_stream", "run_fleet", "memory_budget", "whole_read_bytes",
            "parse_size", "stream_report_text", "stream_summary"]
-
-#: how the report names each identification method
-METHOD_NAMES = {"lscf": "LSCF/polyMAX + LSFD", "ssi_cov": "SSI-COV", "fdd": "FDD", "efdd": "EFDD",
-                "peak_picking": "peak picking", "polymax_oma": "polyMAX on the output spectra"}
-
 
 def add_parser(sub) -> None:
     """Register ``analyse`` on the CLI's sub-parsers.
@@ -70,9 +67,10 @@ def add_parser(sub) -> None:
                         "only by a factor that divides its period)")
     p.add_argument("--n-modes", type=int, help="number of modes to report")
     p.add_argument("--estimator", default="H1", choices=["H1", "H2", "Hv"], help="FRF estimator (default H1)")
-    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
-                   help="modal identification: auto (default: LSCF with --input, SSI-COV without), lscf, ssi, "
-                        "fdd, efdd (output-only), peak (peak picking on the FRFs)")
+    p.add_argument("--method", default="auto", choices=LazyChoices("vibroscope.modal.methods", "METHOD_CHOICES"),
+                   metavar="METHOD", help="modal identification: %(choices)s (the methods of "
+                                          "vibroscope.modal.methods by key or result name); default auto: LSCF "
+                                          "with --input, SSI-COV without")
     p.add_argument("--select", metavar="F1,F2,..",
                    help="LSCF/SSI-COV: take the modes at these frequencies (Hz) from the stabilization diagram")
     p.add_argument("--ods", type=float, nargs="+", metavar="F",
@@ -128,7 +126,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     find_input : bool, optional
         Without `input`, take the log's one force-like channel as the input (see above);
         default False (output-only without `input`). Only for the methods that use an input
-        (``method`` "auto", "lscf", "peak").
+        (:func:`vibroscope.modal.methods.uses_input`).
     max_memory : int, optional
         Memory budget in bytes for reading the log (:func:`vibroscope.io.read_mcap`); default
         half the available memory.
@@ -145,7 +143,9 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     from vibroscope.pipeline import analyse_signals
 
     notes, fallback, source, choice = [], False, log, None
-    find_input = find_input and input is None and kw.get("method", "auto") in ("auto", "lscf", "peak")
+    from vibroscope.modal.methods import uses_input
+
+    find_input = find_input and input is None and uses_input(kw.get("method", "auto"))
     if outputs is None or find_input:  # scan the log once: the index serves the choices and the read
         source = LogIndex.open(log, progress=progress, max_memory=max_memory)
     if find_input:
@@ -356,11 +356,18 @@ def whole_read_bytes(log: Path) -> int:
     return int(size + 1.5 * inner)
 
 
+def _needs_time_series(args) -> bool:
+    """``--method`` names an output-only method that needs the time series, and no --input is given."""
+    from vibroscope.modal.methods import lookup_method
+
+    m = lookup_method(args.method)
+    return not args.input and m is not None and m.needs_time_series
+
+
 def _stream_kw(args) -> dict:
     return dict(input=args.input, outputs=args.outputs, fs=args.fs, nperseg=args.nperseg, fmin=args.fmin,
                 fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator,
-                method="auto" if args.method in ("ssi", "polymax") and not args.input else args.method,
-                select=None)
+                method="auto" if _needs_time_series(args) else args.method, select=None)
 
 
 def run_stream(args) -> int:
@@ -395,7 +402,7 @@ def run_stream(args) -> int:
                   {"log": args.log, "coordinates": args.coords})
     kw = _stream_kw(args)
     kw["select"] = _select_freqs(args.select)
-    if args.method in ("ssi", "polymax"):
+    if _needs_time_series(args):
         print(f"--method {args.method} needs the time series: output-only modes by EFDD on the spectra instead")
     try:
         an = analyse_stream(args.log, **kw)
@@ -424,11 +431,13 @@ def stream_report_text(an, *, source: str = "") -> str:
     -------
     str
     """
+    from vibroscope.modal.methods import display_name
+
     s = an.settings
     lines = [f"{source}: {len(an.spectra.channels)} channels x {an.spectra.samples} samples at {an.spectra.fs:g} Hz "
              f"({an.spectra.samples / an.spectra.fs:.2f} s), streamed; nperseg={s['nperseg']} "
              f"(df={an.spectra.fs / s['nperseg']:.4g} Hz, {s['n_averages']} averages)"]
-    how = METHOD_NAMES.get(an.modal.method, an.modal.method)
+    how = display_name(an.modal.method)
     lines.append(f"input {s['input']} -> {len(s['outputs'])} outputs, {s['estimator']} FRF, modes by {how}"
                  if s.get("input") else f"output-only: {len(s['outputs'])} responses, modes by {how}")
     lines += [f"  warning: {w}" for w in an.warnings]
@@ -517,7 +526,12 @@ def run_fleet(args, logs: list) -> int:
         import dask.distributed  # noqa: F401 - the [dask] extra
     except ImportError as exc:
         raise VibroscopeError(f"--dask needs dask.distributed (pip install 'vibroscope[dask]'): {exc}") from None
+    from vibroscope.commands._outputs import check_out_dir, check_outputs
+
     out = Path(args.out) if args.out else Path.cwd()
+    check_out_dir(args.out)  # before any work: only vibroscope's own earlier outputs are replaced
+    check_outputs({"--json": args.json or out / "fleet.json", "--out (table)": out / "fleet.csv",
+                   "--out (figure)": None if args.no_figures else out / "fleet_spectra.png"}, {"log": list(logs)})
     out.mkdir(parents=True, exist_ok=True)
     chans = None if args.outputs is None else ([args.input] if args.input else []) + list(args.outputs)
     where = args.dask or "a local cluster"
@@ -598,13 +612,15 @@ def report_text(an, *, source: str = "", true_modes=None, verbose: bool = False)
     -------
     str
     """
+    from vibroscope.modal.methods import display_name
+
     sig = an.signals
     n_seg = an.settings.get("n_segments")
     avg = f"{an.settings['n_averages']} of {n_seg} averages" if n_seg else f"{an.settings['n_averages']} averages"
     lines = [f"{source}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
              f"({sig.duration:.2f} s){decimation_text(an.settings.get('decimation'))}; nperseg={an.settings['nperseg']} "
              f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {avg})"]
-    how = METHOD_NAMES.get(an.modal.method, an.modal.method)
+    how = display_name(an.modal.method)
     if an.settings.get("input"):
         lines.append(f"input {an.settings['input']} -> {len(an.settings['outputs'])} outputs, "
                      f"{an.settings['estimator']} FRF, modes by {how}")
@@ -720,6 +736,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         When an output is the log or the coordinates file.
     """
     from vibroscope.commands._outputs import AtomicOutputs, check_outputs
+    from vibroscope.provenance import json_report
     from vibroscope.io.coords import line_coords, read_coords
     from vibroscope.pipeline import summary_dict
 
@@ -751,7 +768,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         if json_path:
             d = (summary_dict(an, source=str(log), true_modes=true_modes) if sig is not None
                  else stream_summary(an, source=str(log)))
-            tx.file(json_path).write_text(json.dumps(d, indent=2))
+            tx.file(json_path).write_text(json.dumps(json_report(d), indent=2))
             written["json"] = json_path
             done.append(f"summary: {json_path}")
         kin = None

@@ -224,6 +224,7 @@ def compare_modes(args, names: list[str]) -> int:
 
     from vibroscope.commands._outputs import AtomicOutputs, check_out_dir, check_outputs
     from vibroscope.io.mode_sets import read_mode_set
+    from vibroscope.provenance import json_report
     from vibroscope.modal.compare import compare_mode_sets
 
     if args.rrd:
@@ -272,7 +273,7 @@ def compare_modes(args, names: list[str]) -> int:
         _save(plot_mode_set_comparison(c), tx.file(png))
         done.append(f"wrote {png}")
         if args.json:
-            tx.file(args.json).write_text(json.dumps(c.to_dict(), indent=2))
+            tx.file(args.json).write_text(json.dumps(json_report(c.to_dict()), indent=2))
             done.append(f"wrote {args.json}")
     for line in done:
         print(line)

@@ -43,8 +43,11 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     """Convert; returns the exit status (1 for an input or option the converter cannot use, said in
     one line, as every command's errors; 2 stays argparse's usage errors)."""
+    from vibroscope.commands._outputs import check_outputs
     from vibroscope.io.convert import convert_to_mcap
 
+    # before any work: OUT is not the input, not a link, FIFO or device, nor a file vibroscope did not write
+    check_outputs({"OUT": args.output}, {"IN": args.input})
     tc = args.time_column
     if tc is not None and tc.strip().lstrip("-").isascii() and tc.strip().lstrip("-").isdigit():
         tc = int(tc)

@@ -86,7 +86,7 @@ def run(args) -> int:
     args : argparse.Namespace
         The parsed command line.
     """
-    from vibroscope.commands._outputs import AtomicOutputs
+    from vibroscope.commands._outputs import AtomicOutputs, check_out_dir, check_outputs
     from vibroscope.commands.analyse import analyse_log, report_text, write_outputs
 
     import math
@@ -103,6 +103,10 @@ def run(args) -> int:
                               f"{args.duration * args.fs:.4g} samples, the demo needs 64 to 1e8")
     out: Path = args.out
     log = out / "demo.mcap"
+    check_out_dir(out)  # every output checked before any work (only vibroscope's own earlier outputs are replaced)
+    check_outputs({"--out (log)": log, "--out (summary)": out / "demo_summary.json",
+                   "--out (recording)": out / "demo.rrd", "--out (figures)": out / "figures"}, {},
+                  folders=("--out (figures)",))
     with AtomicOutputs() as tx:  # the log is complete (renamed into place) before it is analysed
         model, sig = make_demo_log(tx.file(log), fs=args.fs, duration=args.duration, seed=args.seed,
                                    noise=args.noise)

@@ -68,6 +68,7 @@ def run(args) -> int:
         When an output is an input file; ModelFileError when the model cannot be diagnosed.
     """
     from vibroscope.commands._outputs import AtomicOutputs, check_outputs
+    from vibroscope.provenance import json_report, toml_header
     from vibroscope.errors import ModelFileError
     from vibroscope.gap import diagnose
     from vibroscope.gap.report import EFFECTS
@@ -99,10 +100,11 @@ def run(args) -> int:
     done = []
     with AtomicOutputs(inputs=[args.model, *args.logs]) as tx:
         if args.json:
-            tx.file(args.json).write_text(json.dumps(report.to_dict(), indent=2) + "\n", encoding="utf-8")
+            tx.file(args.json).write_text(json.dumps(json_report(report.to_dict()), indent=2) + "\n",
+                                          encoding="utf-8")
             done.append(f"wrote {args.json}")
         if args.export_model:
-            tx.file(args.export_model).write_text(report.augmented_model_toml, encoding="utf-8")
+            tx.file(args.export_model).write_text(toml_header() + report.augmented_model_toml, encoding="utf-8")
             done.append(f"wrote {args.export_model}")
         if args.figures:
             import matplotlib

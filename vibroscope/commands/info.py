@@ -1,7 +1,8 @@
 """``vibroscope info LOG.mcap [--json]``: topics, types, counts, rates, time span and gaps
-(log-time increments over 1.5 median periods, and the time missing in them) and outlier log
-times of a log. ``--fields`` (or ``--topic T``) lists the numeric message paths instead, with
-their unit and a sample value: the paths ``--input``/``--outputs`` take."""
+(log-time increments over 1.5 median periods, and the time missing in them), outlier log
+times and messages lost in damaged or missing chunks of a log. ``--fields`` (or ``--topic T``)
+lists the numeric message paths instead, with their unit and a sample value: the paths
+``--input``/``--outputs`` take."""
 
 from __future__ import annotations
 
@@ -62,14 +63,19 @@ def run(args) -> int:
         return 0
     print(f"{info.path}: {info.message_count} messages, {len(info.topics)} topics, {info.duration_s:.3f} s"
           f"{' (profile ' + info.profile + ')' if info.profile else ''}")
-    rows = [("topic", "type", "enc", "messages", "rate Hz", "span s", "gaps", "missing s", "outliers", "decodable")]
+    # lost: messages of the topic in damaged or missing chunks ("?" where a damaged place names it without a count)
+    rows = [("topic", "type", "enc", "messages", "rate Hz", "span s", "gaps", "missing s", "outliers", "lost",
+             "decodable")]
     for t in info.topics:
         span = (t.end_ns - t.start_ns) * 1e-9 if t.message_count else 0.0
+        lost = "?" if t.lost_messages is None else str(t.lost_messages)
         rows.append((t.topic, t.schema_name or "-", t.message_encoding, str(t.message_count), _fmt_rate(t.rate_hz),
-                     f"{span:.3f}", str(t.gaps), f"{t.gap_time_s:.3f}", str(t.outliers), "yes" if t.decodable else f"no: {t.reason}"))
-    w = [max(len(r[i]) for r in rows) for i in range(9)]
+                     f"{span:.3f}", str(t.gaps), f"{t.gap_time_s:.3f}", str(t.outliers), lost,
+                     "yes" if t.decodable else f"no: {t.reason}"))
+    w = [max(len(r[i]) for r in rows) for i in range(10)]
     for r in rows:
-        print("  ".join(c.ljust(w[i]) if i in (0, 1, 2) else c.rjust(w[i]) for i, c in enumerate(r[:9])) + "  " + r[9])
+        cells = (c.ljust(w[i]) if i in (0, 1, 2) else c.rjust(w[i]) for i, c in enumerate(r[:10]))
+        print("  ".join(cells) + "  " + r[10])
     for off, reason in info.skipped:
         print(f"skipped at byte offset {off}: {reason}")
     for wmsg in info.warnings:

@@ -18,14 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
+from vibroscope._checks import LazyChoices
 from vibroscope.commands._options import select_frequencies as _select_freqs
 
 __all__ = ["add_parser", "run", "identify_frf", "FRF_SUFFIXES"]
 
 #: file suffixes read as FRF files (everything else is read as an MCAP log)
 FRF_SUFFIXES = (".uff", ".unv", ".uf", ".csv", ".txt")
-
-_KIND_QUANTITY = {"accelerance": "acceleration", "mobility": "velocity", "receptance": "displacement", None: "displacement"}
 
 
 def add_parser(sub) -> None:
@@ -50,8 +49,10 @@ def add_parser(sub) -> None:
     p.add_argument("source", nargs="+", type=Path,
                    help="an MCAP log, one or more FRF files, or a mode set to show (UFF 55 with its geometry, "
                         "a model file, a MODES.json)")
-    p.add_argument("--method", default="auto", choices=["auto", "lscf", "ssi", "polymax", "fdd", "efdd", "peak"],
-                   help="auto (default): LSCF with an input or an FRF file, SSI-COV without an input")
+    p.add_argument("--method", default="auto", choices=LazyChoices("vibroscope.modal.methods", "METHOD_CHOICES"),
+                   metavar="METHOD", help="modal identification: %(choices)s (the methods of "
+                                          "vibroscope.modal.methods by key or result name); default auto: LSCF "
+                                          "with an input or an FRF file, SSI-COV without an input")
     p.add_argument("--select", default="auto", metavar="auto|F1,F2,..",
                    help="modes: 'auto' (physical-mode selection) or the frequencies (Hz) to take from the "
                         "stabilization diagram")
@@ -61,8 +62,8 @@ def add_parser(sub) -> None:
     p.add_argument("--fs", type=float, help="resample a log to this rate (Hz)")
     p.add_argument("--fmin", type=float, help="lowest frequency of the band (Hz); default from the data")
     p.add_argument("--fmax", type=float, help="highest frequency of the band (Hz); default from the data")
-    p.add_argument("--kind", choices=["accelerance", "mobility", "receptance"],
-                   help="what an FRF file holds when it does not say (default: unknown)")
+    p.add_argument("--kind", choices=LazyChoices("vibroscope.spectral.kinds", "FRF_KINDS"), metavar="KIND",
+                   help="what an FRF file holds when it does not say: %(choices)s (default: unknown)")
     p.add_argument("--df", type=float, default=1.0, help="line spacing (Hz) of text FRFs without an axis (default 1)")
     p.add_argument("--json", type=Path, metavar="MODES.json", help="write the modes (and rejected candidates)")
     p.add_argument("--export-model", type=Path, metavar="MODEL.toml",
@@ -90,7 +91,9 @@ def identify_frf(frf, *, method: str = "auto", fmin=None, fmax=None, select=None
     ----------
     frf : FRF
         Measured FRFs.
-    method : {'auto', 'lscf', 'peak'}, optional
+    method : str, optional
+        A method of :data:`vibroscope.modal.methods.METHOD_CHOICES` that runs on FRFs: 'auto'
+        or 'lscf' (LSCF + LSFD, also for 'polymax'), 'peak' (peak picking); default 'auto'.
     fmin, fmax : float, optional
         Band in Hz; default the FRF's axis (where the coherence, if any, is defined).
     select : sequence of float, optional
@@ -104,20 +107,12 @@ def identify_frf(frf, *, method: str = "auto", fmin=None, fmax=None, select=None
     Raises
     ------
     ValueError
-        For an output-only method.
+        For an unknown or an output-only method (:func:`vibroscope.modal.methods.resolve_method`).
     """
-    from vibroscope import modal
-    from vibroscope.modal.automatic import Identification, auto_lscf
-    from vibroscope.modal.selection import select_modes
+    from vibroscope.modal.methods import identify
 
-    if method in ("ssi", "fdd", "efdd"):
-        raise ValueError(f"--method {method} is output-only: an FRF file needs lscf or peak")
-    if method == "peak":
-        mm = modal.peak_picking(frf, fmin=fmin, fmax=fmax)
-        coh = (frf.frequencies, frf.coherence) if np.any(np.isfinite(frf.coherence)) else None
-        sel = select_modes(mm, fmin=fmin, fmax=fmax, coherence=coh)
-        return Identification(sel.modes, sel.rejected, None, {"method": "peak_picking", **sel.criteria})
-    return auto_lscf(frf, fmin=fmin, fmax=fmax, select=select)
+    # (merge_duplicates=False: peak picking on FRF files has never merged duplicate candidates)
+    return identify(method, frf=frf, fmin=fmin, fmax=fmax, select=select, merge_duplicates=False)
 
 
 def _default_out(source: Path, suffix: str, out_dir=None) -> Path:
@@ -156,7 +151,8 @@ def run(args) -> int:
         When an output is an input file, or the identification fails.
     """
     from vibroscope.commands._outputs import check_out_dir, check_outputs, resolve_outputs
-    from vibroscope.commands.analyse import METHOD_NAMES, report_text
+    from vibroscope.commands.analyse import report_text
+    from vibroscope.modal.methods import display_name
     from vibroscope.errors import VibroscopeError
 
     check_out_dir(args.out)
@@ -196,7 +192,7 @@ def run(args) -> int:
         mm = ident.modes
         print(f"{first}{' + %d more' % (len(sources) - 1) if len(sources) > 1 else ''}: FRF {len(h.outputs)} outputs x "
               f"{len(h.inputs)} inputs, {h.frequencies.size} lines {h.frequencies[0]:.4g}–{h.frequencies[-1]:.4g} Hz; "
-              f"modes by {METHOD_NAMES.get(mm.method, mm.method)}")
+              f"modes by {display_name(mm.method)}")
         _print_modes(ident, args.json)
         signals = psd = csd = None
         sv = _mif(h)
@@ -306,8 +302,16 @@ def _print_modes(ident, json_path=None) -> None:
             print(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
 
 
+def _mark_uff(path: Path, header: str) -> None:
+    """Put `header` (a dataset 151 naming vibroscope, :func:`vibroscope.provenance.uff_header`) before the
+    datasets of the Universal File `path`: the mark by which a later run knows the file as its own output."""
+    path = Path(path)
+    path.write_bytes(header.encode("ascii") + path.read_bytes())
+
+
 def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=None) -> None:
     from vibroscope.commands._outputs import AtomicOutputs
+    from vibroscope.provenance import json_report, uff_header
     from vibroscope.errors import VibroscopeError
     from vibroscope._checks import jsonable as _jsonable
     from vibroscope.io.coords import line_coords, read_coords
@@ -330,7 +334,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
         if args.json:
             doc = ident.to_dict()
             doc["source"] = [str(s) for s in args.source]
-            tx.file(args.json).write_text(json.dumps(_jsonable(doc), indent=2))  # NaN -> null
+            tx.file(args.json).write_text(json.dumps(json_report(_jsonable(doc)), indent=2))  # NaN -> null
             done.append(f"modes: {args.json}")
         if args.uff55:
             from vibroscope.io.frf_files import write_modes_uff55
@@ -344,12 +348,12 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
         if args.uff15:
             from vibroscope.io.frf_files import write_geometry_uff15
 
-            write_geometry_uff15(tx.file(args.uff15), list(range(1, len(pts) + 1)), sc.xyz)
+            _mark_uff(write_geometry_uff15(tx.file(args.uff15), list(range(1, len(pts) + 1)), sc.xyz), uff_header())
             done.append(f"geometry (UFF 15, node k = point k of the mode shapes): {args.uff15}")
         if args.uff58:
             from vibroscope.io.frf_files import write_frf_uff58
 
-            write_frf_uff58(h, tx.file(args.uff58))
+            _mark_uff(write_frf_uff58(h, tx.file(args.uff58)), uff_header())
             done.append(f"FRFs (UFF 58): {args.uff58}")
         if args.export_model:
             export_modal_model(ident.lsfd, tx.file(args.export_model),
@@ -425,11 +429,15 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     -------
     Path
     """
+    from vibroscope._checks import atomic_file
     from vibroscope.models import Input, Output
     from vibroscope.models.modal_model import PoleResidueModel
-    from vibroscope.models.modelfile import dump_model
+    from vibroscope.models.modelfile import dumps_model
+    from vibroscope.provenance import toml_header
 
-    q = _KIND_QUANTITY.get(res.kind, "displacement")
+    from vibroscope.spectral.kinds import FRF_KIND_TABLE
+
+    q = FRF_KIND_TABLE[res.kind].quantity if res.kind in FRF_KIND_TABLE else "displacement"
     R, LR, UR = res.residues, res.lower_residual, res.upper_residual
     if frf is not None:
         from vibroscope.modal.lsfd import pole_residue_form
@@ -446,7 +454,8 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
                                                  inputs=inputs, outputs=outputs, lower=LR, upper=UR, name=name)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    dump_model(model, path)
+    with atomic_file(path) as tmp:  # the model file, after the line that marks it as vibroscope's
+        Path(tmp).write_text(toml_header() + dumps_model(model), encoding="utf-8")
     return path
 
 

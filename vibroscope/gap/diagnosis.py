@@ -792,7 +792,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     lin_specs = [s for s in specs if s.linear]
     nl_specs = [s for s in specs if not s.linear]
     not_tried: dict[str, str] = {}  # effect -> why its candidates were not fitted
-    linear_nominal = not closed and all(e.is_linear for e in refit.elements)
+    linear_nominal = (not closed and all(e.is_linear for e in refit.elements)
+                      and all(i.saturation is None for i in refit.inputs))
     if lin_specs and level["flagged"] and linear_nominal:
         # a linear effect in a linear model cannot change the BLA with the level: it would be
         # inadmissible (see admissible() below), so it is not fitted

@@ -10,8 +10,10 @@ References
 
 from __future__ import annotations
 
-#: FRF kind -> SI units of the response per unit force
-KIND_UNITS = {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}
+from vibroscope.spectral.kinds import FRF_KIND_TABLE
+
+#: FRF kind -> SI units of the response per unit force (read from the FRF-kind table)
+KIND_UNITS = {k.name: k.unit for k in FRF_KIND_TABLE.values()}
 
 
 class FrfTable:

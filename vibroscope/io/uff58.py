@@ -17,6 +17,7 @@ import numpy as np
 
 from vibroscope.errors import LogFormatError
 from vibroscope.io.frf_table import KIND_UNITS, FrfTable
+from vibroscope.spectral.kinds import FRF_KIND_TABLE
 from vibroscope.io.uff import (
     dataset_summary,
     date_line,
@@ -33,9 +34,7 @@ from vibroscope.spectral._results import FRF
 __all__ = ["write_frf_uff58"]
 
 #: UFF specific data types (dataset 58 records 8-10): response quantity -> FRF kind
-_SPEC_TO_KIND = {12: "accelerance", 11: "mobility", 8: "receptance"}
-_KIND_TO_SPEC = {v: k for k, v in _SPEC_TO_KIND.items()}
-_KIND_NUM_LABEL = {"accelerance": "m/s^2", "mobility": "m/s", "receptance": "m"}
+_SPEC_TO_KIND = {k.uff_data_type: k.name for k in FRF_KIND_TABLE.values()}
 _FORCE_SPEC = (13, 9)  # excitation force, reaction force
 _FUNC_TYPES = {
     0: "general", 1: "time response", 2: "auto spectrum", 3: "cross spectrum", 4: "FRF",
@@ -194,8 +193,9 @@ def write_frf_uff58(frf: FRF, path: str | Path, *, binary: bool = False) -> Path
     d = np.diff(f)
     even = bool(np.allclose(d, d[0], rtol=1e-6, atol=0.0))
     kind = frf.kind
-    num_spec, den_spec = (_KIND_TO_SPEC[kind], 13) if kind in _KIND_TO_SPEC else (0, 0)
-    num_lab, den_lab = (_KIND_NUM_LABEL[kind], "N") if kind in _KIND_NUM_LABEL else ("NONE", "NONE")
+    k = FRF_KIND_TABLE.get(kind)
+    num_spec, den_spec = (k.uff_data_type, 13) if k else (0, 0)
+    num_lab, den_lab = (k.response_unit, "N") if k else ("NONE", "NONE")
     common = dict(binary=int(bool(binary)), abscissa_spacing=int(even), abscissa_spec_data_type=18,
                   abscissa_axis_units_lab="Hz", x=f, id3=date_line())
     dsets: list[dict] = []

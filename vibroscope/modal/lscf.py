@@ -9,9 +9,10 @@ import numpy as np
 import scipy.linalg
 
 from vibroscope.modal._results import normalize_shapes
-from vibroscope.modal.lsfd import _POWER, _band, _fit
+from vibroscope.modal.lsfd import _band, _fit
 from vibroscope.modal.ssi import Stabilization, stability_codes
 from vibroscope.spectral import FRF
+from vibroscope.spectral.kinds import power_of_jw
 
 __all__ = ["lscf"]
 
@@ -175,7 +176,7 @@ def lscf(
         raise ValueError(f"{nf} lines in [{lo}, {hi}] Hz are too few for order {P} with {ni} inputs")
     dt = 1.0 / (2.0 * hi)
     w = 2 * np.pi * f
-    power = _POWER[frf.kind]
+    power = power_of_jw(frf.kind)
     rows = []
     prev = None
     for p, alpha in _denominators(w, H, dt, orders):

@@ -12,11 +12,9 @@ import scipy.linalg
 from vibroscope._checks import read_only
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.spectral import FRF
+from vibroscope.spectral.kinds import power_of_jw
 
 __all__ = ["pole_residue_form", "lsfd", "LSFDResult"]
-
-#: power of jω that turns a receptance into the FRF kind (None: treated as a receptance)
-_POWER = {"receptance": 0, "mobility": 1, "accelerance": 2, None: 0}
 
 
 def _band(frf: FRF, fmin: float | None, fmax: float | None) -> tuple[np.ndarray, float, float]:
@@ -218,7 +216,7 @@ class LSFDResult:
     @property
     def power(self) -> int:
         """Power of jω of the FRF kind: 0 receptance (or unknown), 1 mobility, 2 accelerance."""
-        return _POWER[self.kind]
+        return power_of_jw(self.kind)
 
     def synthesize(self, frequencies_hz=None) -> FRF:
         """The fitted model evaluated on a frequency axis.
@@ -479,7 +477,7 @@ def lsfd(
     if 2 * len(f) < n_unknown:
         raise ValueError(f"{len(f)} lines in [{lo}, {hi}] Hz are too few for {n_unknown} real unknowns")
     lam = _poles(fn, zeta)
-    power = _POWER[frf.kind]
+    power = power_of_jw(frf.kind)
     R, LR, UR = _fit(2 * np.pi * f, frf.H[sel], lam, power, residuals)
     dp = _resolve_driving_point(driving_point, frf.outputs, frf.inputs)
     return LSFDResult(fn, zeta, lam, R, LR, UR, frf.outputs, frf.inputs, frf.kind, lo, hi, f,

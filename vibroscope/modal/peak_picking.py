@@ -219,7 +219,7 @@ def peak_picking(
     15.92 Hz, zeta = 0.0200
     """
     check_option("refine", refine, ("sdof", None))
-    rec, acc, mob = (_as_kind(frf, k) for k in ("receptance", "accelerance", "mobility"))
+    rec, acc, mob = _as_kind(frf, "receptance"), _as_kind(frf, "accelerance"), _as_kind(frf, "mobility")
     idx = band_indices(frf.frequencies, fmin, fmax)
     f = frf.frequencies[idx]
     R, Aacc = rec[idx], acc[idx]  # (n_f, n_out, n_in)

@@ -9,13 +9,10 @@ from typing import Any, Iterator, Literal, Sequence
 import numpy as np
 
 from vibroscope._checks import check_option, read_only
+from vibroscope.spectral.kinds import FRF_KIND_TABLE, FRF_KINDS
 
 __all__ = ["Spectrum", "CrossSpectralMatrix", "FRF", "Spectrogram", "Coherence", "MultipleCoherence", "FRF_KINDS"]
 
-#: FRF kinds by response quantity per unit force (Ewins, *Modal Testing*, 2000, §1.3)
-FRF_KINDS = ("accelerance", "mobility", "receptance")
-_POWER_OF_JW = {"receptance": 0, "mobility": 1, "accelerance": 2}
-_KIND_UNITS = {"accelerance": "m/s^2/N", "mobility": "m/s/N", "receptance": "m/N"}
 
 
 
@@ -408,7 +405,7 @@ class FRF:
         check_option("kind", kind, FRF_KINDS)
         if self.kind is None:
             raise ValueError("this FRF has no known kind (accelerance/mobility/receptance) to convert from")
-        p = _POWER_OF_JW[kind] - _POWER_OF_JW[self.kind]
+        p = FRF_KIND_TABLE[kind].power - FRF_KIND_TABLE[self.kind].power
         jw = 2j * np.pi * self.frequencies
         with np.errstate(divide="ignore", invalid="ignore"):
             fac = jw**p
@@ -416,7 +413,7 @@ class FRF:
                 fac[self.frequencies == 0] = np.nan
         H = self.H * fac[:, None, None]
         return FRF(self.frequencies, H, self.coherence, self.inputs, self.outputs, self.estimator, kind,
-                   _KIND_UNITS[kind], dict(self.settings))
+                   FRF_KIND_TABLE[kind].unit, dict(self.settings))
 
     def plot(self, *, output=0, input=0, fig=None):
         """Bode-style figure (magnitude dB, phase, coherence); imports matplotlib lazily. Returns the Figure.

@@ -21,9 +21,7 @@ from vibroscope._checks import check_option
 from vibroscope.signals import Signals
 from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
 from vibroscope.spectral._results import (
-    _KIND_UNITS,
     FRF,
-    FRF_KINDS,
     Coherence,
     CrossSpectralMatrix,
     MultipleCoherence,
@@ -32,6 +30,7 @@ from vibroscope.spectral._results import (
 )
 from vibroscope.spectral._results import channel_index
 from vibroscope.spectral._results import power_units as _power_units
+from vibroscope.spectral.kinds import FRF_KIND_TABLE, FRF_KINDS, kind_of_response_unit
 
 __all__ = [
     "welch",
@@ -517,9 +516,9 @@ def frf_kind(input_units: Sequence[str], output_units: Sequence[str]) -> tuple[s
     """
     ins, outs = set(input_units), set(output_units)
     if ins == {"N"} and len(outs) == 1:
-        kind = {"m/s^2": "accelerance", "m/s": "mobility", "m": "receptance"}.get(outs.pop())
+        kind = kind_of_response_unit(outs.pop())
         if kind:
-            return kind, _KIND_UNITS[kind]
+            return kind, FRF_KIND_TABLE[kind].unit
     if len(ins) == 1 and len(outs) == 1:
         i, o = ins.pop(), outs.pop()
         return None, (f"{o}/{i}" if i or o else "")
@@ -681,7 +680,7 @@ def frf(
     k_inf, unit = frf_kind(in_units, out_units)
     if kind is not None:
         check_option("kind", kind, FRF_KINDS)
-        k_inf, unit = kind, _KIND_UNITS[kind]
+        k_inf, unit = kind, FRF_KIND_TABLE[kind].unit
     return FRF(G.frequencies, H, coh, [G.channels[i] for i in ii], [G.channels[o] for o in oo],
                estimator, k_inf, unit, settings)
 

@@ -19,7 +19,8 @@ import scipy.stats
 
 from vibroscope._checks import check_option
 from vibroscope.signals import Signals
-from vibroscope.spectral._results import FRF, FRF_KINDS, _KIND_UNITS
+from vibroscope.spectral._results import FRF
+from vibroscope.spectral.kinds import FRF_KIND_TABLE, FRF_KINDS
 from vibroscope.spectral.estimators import _unpack, frf_kind
 
 __all__ = ["Periodicity", "detect_period", "frf_periodic"]
@@ -328,7 +329,7 @@ def frf_periodic(
     stdH[:, ~excited] = np.nan
     k_inf, unit = frf_kind([units[i_in]], [units[o] for o in oo])
     if kind is not None:
-        k_inf, unit = kind, _KIND_UNITS[kind]
+        k_inf, unit = kind, FRF_KIND_TABLE[kind].unit
     std_arr = np.ascontiguousarray(stdH.T[:, :, None])
     std_arr.flags.writeable = False
     settings = dict(fs=fs, period_samples=period, periods_per_segment=periods_per_segment, nperseg=L,

@@ -548,10 +548,11 @@ def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
             ax.axvline(fn, color="tab:red", lw=0.6, ls="--")
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("model order")
-    if st.settings.get("method") == "lscf":
-        ax.set_title("Stabilization diagram (LSCF / polyMAX, polynomial order)")
-    else:
-        ax.set_title(f"Stabilization diagram (SSI-COV, {st.settings.get('n_lags', '?')} block rows)")
+    from vibroscope.modal.methods import MODAL_METHODS
+
+    m = MODAL_METHODS.get(st.settings.get("method", "ssi_cov"), MODAL_METHODS["ssi_cov"])
+    order = f"{st.settings.get('n_lags', '?')} block rows" if m.order == "block rows" else m.order
+    ax.set_title(f"Stabilization diagram ({m.display}, {order})")
     _legend_if(ax, loc="upper left", fontsize=8, framealpha=0.9)
     ax.grid(alpha=0.3)
     return ax
@@ -788,7 +789,9 @@ def save_figure(fig, path: Path) -> Path:
 
     The figure is rendered to raw RGBA pixels and encoded once, as the quantised PNG (not encoded
     by matplotlib, decoded and encoded again), at zlib level :data:`PNG_LEVEL` (the pixels of
-    level 9 with ``optimize``, in a seventh of the time, the file ~10 % larger).
+    level 9 with ``optimize``, in a seventh of the time, the file ~10 % larger). The PNG's
+    ``Software`` text is :data:`vibroscope.provenance.GENERATOR`: the mark by which a later run
+    knows the file as its own output (and may replace it).
 
     Parameters
     ----------
@@ -804,11 +807,14 @@ def save_figure(fig, path: Path) -> Path:
     """
     import io
 
+    from vibroscope.provenance import GENERATOR
+
     buf = io.BytesIO()
     try:
         from PIL import Image
+        from PIL.PngImagePlugin import PngInfo
     except ImportError:  # pragma: no cover - pillow comes with matplotlib
-        fig.savefig(path, dpi=DPI, format="png")
+        fig.savefig(path, dpi=DPI, format="png", metadata={"Software": GENERATOR})
         pyplot().close(fig)
         return path
     w, h = (int(v) for v in (fig.get_figwidth() * DPI, fig.get_figheight() * DPI))
@@ -823,9 +829,11 @@ def save_figure(fig, path: Path) -> Path:
         fig.savefig(buf, dpi=DPI, format="png")
         buf.seek(0)
         im = Image.open(buf)
+    info = PngInfo()
+    info.add_text("Software", GENERATOR)
     with im:
         im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) \
-            .save(path, format="PNG", compress_level=PNG_LEVEL)
+            .save(path, format="PNG", compress_level=PNG_LEVEL, pnginfo=info)
     return path
 
 
