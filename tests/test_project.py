@@ -104,7 +104,6 @@ KNOWN_PRIVATE_IMPORTS = {
     ("vibroscope.models.simulate", "vibroscope.models.linear_sim", "_dlsim_modal"),
     ("vibroscope.models.simulate", "vibroscope.models.linear_sim", "_foh"),
     ("vibroscope.models.simulate", "vibroscope.models.linear_sim", "_triangle_hold_compensation"),
-    ("vibroscope.pipeline", "vibroscope.modal.automatic", "_line_spacing"),
     ("vibroscope.spectral.estimators", "vibroscope.spectral._results", "_KIND_UNITS"),
     ("vibroscope.spectral.periodic", "vibroscope.spectral._results", "_KIND_UNITS"),
     ("vibroscope.spectral.periodic", "vibroscope.spectral.estimators", "_unpack"),
