@@ -86,7 +86,7 @@ def test_every_writer_marks_its_file_and_foreign_files_are_not_taken_for_ours(tm
 
     from vibroscope.io.mcap_write import write_ros2_mcap
     from vibroscope.signals import Signals
-    from vibroscope.viewers.figures import _save
+    from vibroscope.viewers.figures import save_figure as _save
 
     ours, theirs = [], []
     fig = plt.figure()

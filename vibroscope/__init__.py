@@ -23,9 +23,7 @@ Examples
 
 from __future__ import annotations
 
-from importlib import import_module
-from typing import Any
-
+from vibroscope._lazy import lazy_attributes
 from vibroscope.errors import ChannelError, LogFormatError, ModelFileError, VibroscopeError
 from vibroscope.signals import Signals
 
@@ -55,13 +53,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(import_module(_LAZY[name]), name)
-        globals()[name] = value  # cache: the next access skips __getattr__
-        return value
-    raise AttributeError(f"module 'vibroscope' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY)

@@ -5,6 +5,7 @@
 - :func:`read_only`: a private, read-only copy of an array, as results store their arrays
   (scipy's ``ShortTimeFFT`` returns read-only windows the same way).
 - :func:`atomic_file`: write one file under a temporary name, renamed when complete.
+- :func:`jsonable`: numpy values and containers as plain JSON values (NaN/Inf as null).
 - :class:`LazyChoices`: allowed values read from a registry on first use (``argparse`` choices
   that do not import the room that holds the registry until they are checked or shown).
 """
@@ -20,7 +21,7 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-__all__ = ["check_option", "read_only", "atomic_file", "LazyChoices"]
+__all__ = ["check_option", "read_only", "atomic_file", "jsonable", "LazyChoices"]
 
 
 class LazyChoices(Sequence):
@@ -132,3 +133,35 @@ def read_only(a: Any, dtype: Any = None) -> np.ndarray:
     out = np.array(a, dtype=dtype, copy=True)
     out.flags.writeable = False
     return out
+
+
+def jsonable(v: Any) -> Any:
+    """`v` with numpy scalars and arrays as Python numbers and lists, tuples as lists, dict keys
+    as strings and non-finite floats as None (JSON ``null``), recursively.
+
+    Parameters
+    ----------
+    v : object
+        A value of a summary (dict, list, tuple, numpy scalar or array, number, str, ...).
+
+    Returns
+    -------
+    object
+        A value :func:`json.dumps` writes as strict JSON (no ``NaN``).
+
+    Examples
+    --------
+    >>> jsonable({"f": np.array([1.5, np.nan]), 2: (np.int64(3),)})
+    {'f': [1.5, None], '2': [3]}
+    """
+    if isinstance(v, dict):
+        return {str(k): jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [jsonable(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return jsonable(v.tolist())  # NaN entries become null too
+    if isinstance(v, float) and not np.isfinite(v):
+        return None
+    return v

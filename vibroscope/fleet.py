@@ -237,9 +237,9 @@ class FleetResult:
         f = G.frequencies
         peaks = {c: (float(f[1 + int(np.nanargmax(p[1:]))]) if np.nanmax(p[1:], initial=0.0) > 0 else None)
                  for c, p in zip(G.channels, np.nan_to_num(P, nan=0.0))}
-        from vibroscope.pipeline import _jsonable
+        from vibroscope._checks import jsonable
 
-        return {"logs": [r.to_dict() for r in self.rows], "settings": _jsonable(self.settings),
+        return {"logs": [r.to_dict() for r in self.rows], "settings": jsonable(self.settings),
                 "merged": {"channels": list(G.channels), "n_samples": self.merged.samples,
                            "n_segments": self.merged.accumulator.n_segments, "psd_peak_hz": peaks}}
 

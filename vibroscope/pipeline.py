@@ -14,6 +14,7 @@ from typing import Any, Sequence
 import numpy as np
 import scipy.signal
 
+from vibroscope._checks import jsonable
 from vibroscope.faults import apply_faults, detect_faults
 from vibroscope.signals import Signals, true_runs
 from vibroscope.spectral import FRF, CrossSpectralMatrix, Spectrum, csd_matrix, frf
@@ -642,20 +643,6 @@ def _severity(sig: Signals, notes: list):
         return None
 
 
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, np.generic):
-        return v.item()
-    if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())  # NaN entries become null too
-    if isinstance(v, float) and not np.isfinite(v):
-        return None
-    return v
-
-
 def _modes(analysis: Analysis) -> dict:
     from vibroscope.modal.automatic import modes_document
 
@@ -724,4 +711,4 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
             {"frequency_hz": float(f), "damping_ratio": float(z)}
             for f, z in zip(true_modes.natural_frequencies, true_modes.damping_ratios)
         ]
-    return _jsonable(out)
+    return jsonable(out)

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Signals", "true_runs"]
+__all__ = ["Signals", "true_runs", "block_bounds"]
 
 
 def true_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -29,6 +29,43 @@ def true_runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     d = np.diff(np.concatenate(([0], np.asarray(mask, bool).view(np.int8), [0])))
     return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def block_bounds(block_samples: int, stop: int, *, start: int = 0) -> Iterator[tuple[int, int]]:
+    """Consecutive sample ranges ``[a, b)`` of `block_samples` from `start` to `stop`, the last shorter.
+
+    The one blocking law of a record, in memory (:func:`vibroscope.viewers.rerun_live.record_blocks`)
+    or read from a log (:meth:`vibroscope.io.blocks.LogGrid.blocks`).
+
+    Parameters
+    ----------
+    block_samples : int
+        Samples per block (at least 1).
+    stop : int
+        End of the range (sample index, exclusive).
+    start : int, optional
+        First sample index (default 0).
+
+    Yields
+    ------
+    (int, int)
+        ``(a, min(a + block_samples, stop))`` for ``a = start, start + block_samples, ...``.
+
+    Raises
+    ------
+    ValueError
+        If `block_samples` is not positive.
+
+    Examples
+    --------
+    >>> list(block_bounds(4, 10))
+    [(0, 4), (4, 8), (8, 10)]
+    """
+    if block_samples < 1:
+        raise ValueError(f"{block_samples=} must be at least 1")
+    block_samples = int(block_samples)
+    for a in range(int(start), int(stop), block_samples):
+        yield a, min(a + block_samples, int(stop))
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:

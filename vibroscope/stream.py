@@ -183,7 +183,7 @@ class LogSpectra:
             If no complete segment was accumulated, or a channel (pair) has no segment free of
             missing samples (names it).
         """
-        from vibroscope.spectral.estimators import _check_averages, _settings_dict
+        from vibroscope.spectral.estimators import check_averages as _check_averages, settings_dict as _settings_dict
 
         acc = self.accumulator
         with _warnings.catch_warnings():

@@ -256,7 +256,7 @@ def test_plot_kinematics_has_three_rows_per_channel(sines, tmp_path, check_png):
 
 
 def test_plot_ods_draws_it_like_a_mode(demo_frf, tmp_path, check_png):
-    from vibroscope.viewers.acquisition import ods_as_modal_model
+    from vibroscope.modal import ods_as_modal_model
 
     model, h = demo_frf
     fn = model.modes().natural_frequencies[1]

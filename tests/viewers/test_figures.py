@@ -52,7 +52,7 @@ def test_summary_figures_writes_every_png(tmp_path, results):
         img = mpimg.imread(p)
         assert img.ndim == 3 and img.shape[0] > 300 and img.shape[1] > 600
         assert img[..., :3].std() > 0.05  # not blank
-        with Image.open(p) as im:  # palette-quantised, as written by figures._save
+        with Image.open(p) as im:  # palette-quantised, as written by figures.save_figure
             assert im.format == "PNG" and im.mode == "P" and len(im.getcolors(256)) > 8
     # the PNG is the figure at figures.DPI, pixel for pixel
     fig = figures.plot_mode_shapes(results["modal"], syn.coords(), true_modes=results["modal"])

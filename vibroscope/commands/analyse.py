@@ -205,9 +205,9 @@ def run(args) -> int:
     VibroscopeError
         When an output is an input file (``--json LOG``), or the analysis fails (the log named).
     """
+    from vibroscope.commands._options import select_frequencies as _select_freqs
     from vibroscope.commands._outputs import (check_out_dir, check_outputs, default_output, preload_outputs,
                                               resolve_outputs)
-    from vibroscope.commands.modal import _select_freqs
     from vibroscope.errors import VibroscopeError
 
     check_out_dir(args.out)
@@ -445,7 +445,7 @@ def run_stream(args) -> int:
         When the analysis fails (the log named).
     """
     from vibroscope.commands._outputs import check_outputs, default_output
-    from vibroscope.commands.modal import _select_freqs
+    from vibroscope.commands._options import select_frequencies as _select_freqs
     from vibroscope.errors import VibroscopeError
     from vibroscope.stream import analyse_stream
 
@@ -547,7 +547,7 @@ def stream_summary(an, *, source: str | None = None) -> dict:
         JSON-serialisable.
     """
     from vibroscope.modal.automatic import modes_document
-    from vibroscope.pipeline import _jsonable
+    from vibroscope._checks import jsonable as _jsonable
 
     doc = modes_document(an.modal, an.identification.rejected if an.identification is not None else ())
     sp = an.spectra
@@ -619,7 +619,7 @@ def run_fleet(args, logs: list) -> int:
     json_path = res.write_json(args.json or out / "fleet.json")
     print(f"fleet table: {csv_path}, {json_path}")
     if not args.no_figures:
-        from vibroscope.viewers.figures import _save
+        from vibroscope.viewers.figures import save_figure as _save
 
         import dataclasses
 
@@ -846,7 +846,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             kin = velocity_and_displacement(a)
         pending = None
         if figures:  # drawn in worker processes while the recording is written (PendingFigures)
-            from vibroscope.viewers.acquisition import plot_ods
+            from vibroscope.viewers.figures import plot_ods
             from vibroscope.viewers.figures import PendingFigures, figure_jobs
 
             tmp = tx.directory(figures)
@@ -858,8 +858,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             pending = PendingFigures(jobs)
         with pending or contextlib.nullcontext():  # an error or Ctrl-C here stops the figure workers
             if rrd or spawn:
-                from vibroscope.commands.modal import _with_ods
-                from vibroscope.viewers.acquisition import ods_as_modal_model
+                from vibroscope.modal import ods_as_modal_model, with_operating_shapes as _with_ods
                 from vibroscope.viewers.rerun_view import log_analysis
 
                 modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal

@@ -268,7 +268,7 @@ def compare_modes(args, names: list[str]) -> int:
                   + ", ".join(f"{k + 1} ({f[k]:.4g} Hz)" for k in idx))
     done = []
     with AtomicOutputs(inputs=[a_p, b_p]) as tx:
-        from vibroscope.viewers.figures import _save, plot_mode_set_comparison
+        from vibroscope.viewers.figures import plot_mode_set_comparison, save_figure as _save
 
         _save(plot_mode_set_comparison(c), tx.file(png))
         done.append(f"wrote {png}")

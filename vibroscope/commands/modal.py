@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from vibroscope._checks import LazyChoices
+from vibroscope.commands._options import select_frequencies as _select_freqs
 
 __all__ = ["add_parser", "run", "identify_frf", "FRF_SUFFIXES"]
 
@@ -81,20 +82,6 @@ def add_parser(sub) -> None:
     p.add_argument("--no-rrd", action="store_true", help="write no rerun recording")
     p.add_argument("--spawn", action="store_true", help="open a rerun viewer")
     p.set_defaults(func=run)
-
-
-def _select_freqs(spec: str) -> list[float] | None:
-    from vibroscope.errors import VibroscopeError
-
-    if spec is None or spec.strip().lower() == "auto":
-        return None
-    try:
-        fr = [float(x) for x in spec.replace(";", ",").split(",") if x.strip()]
-    except ValueError:
-        raise VibroscopeError(f"--select {spec!r}: expected 'auto' or frequencies in Hz such as 6.5,17.5") from None
-    if not fr or any(f <= 0 for f in fr):
-        raise VibroscopeError(f"--select {spec!r}: frequencies must be positive (Hz)")
-    return fr
 
 
 def identify_frf(frf, *, method: str = "auto", fmin=None, fmax=None, select=None):
@@ -265,7 +252,7 @@ def _show_mode_set(args, sources: list, select) -> int:
 
 def _shapes_3d(mm, coords, folder: Path) -> list[Path]:
     """``modes_3d.png`` (shapes on the geometry) when the points spread in a plane or a volume."""
-    from vibroscope.viewers.figures import _save, plot_mode_shapes_3d
+    from vibroscope.viewers.figures import plot_mode_shapes_3d, save_figure as _save
 
     if coords is None or not len(mm) or np.count_nonzero(np.ptp(coords.xyz, axis=0) > 0) < 2:
         return []  # points on a line: modes.png says it all
@@ -326,7 +313,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
     from vibroscope.commands._outputs import AtomicOutputs
     from vibroscope.provenance import json_report, uff_header
     from vibroscope.errors import VibroscopeError
-    from vibroscope.pipeline import _jsonable
+    from vibroscope._checks import jsonable as _jsonable
     from vibroscope.io.coords import line_coords, read_coords
 
     planned = _planned_outputs(args)
@@ -376,7 +363,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
         ods = []
         for f in args.ods or ():
             from vibroscope.spectral.integration import ods as ods_at
-            from vibroscope.viewers.acquisition import ods_as_modal_model
+            from vibroscope.modal import ods_as_modal_model, with_operating_shapes as _with_ods
 
             src = h if h is not None else csd
             try:
@@ -384,7 +371,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
             except ValueError as exc:
                 raise VibroscopeError(f"--ods {f:g}: {exc}") from None
         if planned["--figures"] is not None:
-            from vibroscope.viewers.figures import summary_figures, _save
+            from vibroscope.viewers.figures import save_figure as _save, summary_figures
 
             tmp = tx.directory(planned["--figures"])
             paths = summary_figures(tmp, frf=h, modal=mm if len(mm) else None, sv=sv, coords=sc.as_mapping(),
@@ -392,7 +379,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
             if coords is not None:  # a mode set with its geometry: also the shapes on it in 3-D
                 paths += _shapes_3d(mm, coords, tmp)
             for o in ods:
-                from vibroscope.viewers.acquisition import plot_ods
+                from vibroscope.viewers.figures import plot_ods
 
                 paths.append(_save(plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png"))
             done.append(f"figures: {', '.join(str(tx.final(p)) for p in paths)}")
@@ -415,16 +402,6 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
         from vibroscope.viewers.rerun_view import show_recording
 
         show_recording(planned["--rrd"])
-
-
-def _with_ods(mm, ods):
-    """The modes followed by the operating deflection shapes (animated alike in rerun)."""
-    from vibroscope.modal import ModalModel
-
-    f = np.concatenate([mm.natural_frequencies, [o.natural_frequencies[0] for o in ods]])
-    z = np.concatenate([mm.damping_ratios, [np.nan] * len(ods)])
-    s = np.concatenate([np.reshape(mm.shapes, (len(mm), ods[0].shapes.shape[-1])), *[o.shapes for o in ods]])
-    return ModalModel(f, z, s, mm.points, mm.method + "+ods")
 
 
 def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_points=None) -> Path:

@@ -11,12 +11,15 @@ References
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import signal
 
 from vibroscope.gap.report import Band, RegimeGap
+from vibroscope.modal.selection import excited_band as _input_band
+from vibroscope.spectral.estimators import FewAveragesWarning, csd_matrix
 
 __all__ = ["nrmse", "Split", "make_split", "input_levels", "NoiseFloor", "noise_floor", "locate_bands",
            "masked_csd", "regime_gaps"]
@@ -266,25 +269,35 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int, window:
         convention, ``scaling='density'``); Hann window, 50 % overlap, mean removed.
     n_avg : int
         Segments averaged.
+
+    Notes
+    -----
+    :func:`vibroscope.spectral.csd_matrix` of `x` with the samples outside `mask` set to NaN
+    (a segment touching a NaN is left out), except that no segment gives zeros and ``n_avg = 0``
+    instead of an error, and a channel with a non-finite sample inside the segments gets NaN in its
+    row and column (not an error).
     """
+    x = np.asarray(x, dtype=float)
     n = x.shape[1]
     step = nperseg if window == "boxcar" else nperseg // 2
-    win = signal.get_window(window, nperseg)
-    scale = 1.0 / (fs * np.sum(win**2))
     starts = [s for s in range(0, n - nperseg + 1, step) if mask[s : s + nperseg].all()]
-    nf = nperseg // 2 + 1
-    G = np.zeros((nf, x.shape[0], x.shape[0]), complex)
+    f = np.fft.rfftfreq(nperseg, 1 / fs)
+    if not starts:  # no segment: zeros, not csd_matrix's error (the callers skip such a log)
+        return f, np.zeros((f.size, x.shape[0], x.shape[0]), complex), 0
+    covered = np.zeros(n, bool)
     for s in starts:
-        seg = x[:, s : s + nperseg]
-        seg = (seg - seg.mean(axis=1, keepdims=True)) * win
-        X = np.fft.rfft(seg, axis=1)
-        G += np.einsum("if,jf->fij", X.conj(), X)
-    if starts:
-        G *= scale / len(starts)
-        G[1:-1] *= 2.0 if nperseg % 2 == 0 else 1.0
-        if nperseg % 2:
-            G[1:] *= 2.0
-    return np.fft.rfftfreq(nperseg, 1 / fs), G, len(starts)
+        covered[s : s + nperseg] = True
+    # a channel non-finite inside the segments (a diverged simulation's residual) poisons its row and
+    # column, as the sum over the segments would; the other channels are estimated without it
+    good = np.isfinite(x[:, covered]).all(axis=1)
+    G = np.full((f.size, x.shape[0], x.shape[0]), np.nan, complex)
+    if good.any():
+        with warnings.catch_warnings():  # few averages are the caller's to judge (it gets n_avg)
+            warnings.simplefilter("ignore", FewAveragesWarning)
+            c = csd_matrix(np.where(mask, x[good], np.nan), fs, nperseg=nperseg, noverlap=nperseg - step,
+                           window=window)
+        G[:, good[:, None] & good[None, :]] = c.G.reshape(f.size, -1)
+    return f, G, len(starts)
 
 
 @dataclass(frozen=True)
@@ -312,16 +325,18 @@ class NoiseFloor:
 
 
 def excited_band(u: np.ndarray, fs: float, nperseg: int) -> tuple[float, float]:
-    """Band (Hz) where the input PSD is within 30 dB of its maximum (lines smoothed)."""
-    f, P = signal.welch(np.atleast_2d(u)[0], fs=fs, nperseg=min(nperseg, np.atleast_2d(u).shape[1]))
-    Ps = np.convolve(P, np.ones(5) / 5, mode="same")
-    Ps = np.maximum(Ps, P)
-    on = Ps > 1e-3 * Ps[1:].max()
-    on[0] = False
-    idx = np.nonzero(on)[0]
-    if idx.size == 0:
+    """Band (Hz) where the input PSD is within 30 dB of its maximum (lines smoothed).
+
+    The input's Welch PSD (Hann, 50 % overlap, `nperseg` at most the record) handed to
+    :func:`vibroscope.modal.selection.excited_band` with ``drop_db=30`` and a 5-line moving
+    average; ``(0, fs/2)`` for an input that excites nothing.
+    """
+    x = np.atleast_2d(u)[0]
+    f, P = signal.welch(x, fs=fs, nperseg=min(nperseg, x.shape[0]))
+    try:
+        return _input_band(f, P, drop_db=30.0, smooth=5)
+    except ValueError:  # a zero (or non-finite) input
         return (0.0, fs / 2)
-    return (float(f[idx[0]]), float(f[idx[-1]]))
 
 
 def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> NoiseFloor:

@@ -15,7 +15,8 @@ at every point), a magnetorheological damper, and comparative sweeps.  One modul
 - :mod:`vibroscope.instruments.mr_damper`: Spencer et al. (1997) MR damper with cubic
   current laws (paper eq. 5), :func:`simulate_mr_damper`;
 - :mod:`vibroscope.instruments.influence`: influence coefficients (paper eq. 2-3, Table 1);
-- :mod:`vibroscope.instruments.sweeps`: comparative sweeps (``vibroscope compare``).
+- :mod:`vibroscope.instruments.sweeps`: comparative sweeps (``vibroscope compare``);
+- :mod:`vibroscope.instruments.scenarios`: the paper's figures computed (what the viewer draws).
 
 The instruments use :mod:`vibroscope.models` (the MR-damper law of its elements, model
 files); their figures live in :mod:`vibroscope.viewers.instruments`.

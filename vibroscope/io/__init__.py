@@ -8,8 +8,7 @@ converters and the FRF/UFF files (which use scipy and the modal room) load on fi
 ``vibroscope info LOG`` starts without them.
 """
 
-import importlib as _importlib
-
+from vibroscope._lazy import lazy_attributes
 from vibroscope.io.mcap_read import (
     LogIndex,
     LogInfo,
@@ -66,13 +65,4 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
-    mod = _LAZY.get(name)
-    if mod is None:
-        raise AttributeError(f"module 'vibroscope.io' has no attribute {name!r}")
-    return getattr(_importlib.import_module(f"vibroscope.io.{mod}"), name)
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
-
+__getattr__, __dir__ = lazy_attributes(__name__, {k: f".{m}" for k, m in _LAZY.items()})

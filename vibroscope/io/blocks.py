@@ -42,7 +42,7 @@ import numpy as np
 
 from vibroscope.errors import ChannelError, LogFormatError
 from vibroscope.io.timebase import _snap
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, block_bounds
 
 __all__ = ["ChunkSpan", "LogGrid", "open_grid", "iter_blocks"]
 
@@ -400,11 +400,8 @@ class LogGrid:
         ValueError
             If `block_samples` is not positive.
         """
-        if block_samples < 1:
-            raise ValueError(f"{block_samples=} must be at least 1")
-        stop = self.n_samples if stop is None else stop
-        for i in range(start, stop, block_samples):
-            yield self.read(i, min(i + block_samples, stop))
+        for a, b in block_bounds(block_samples, self.n_samples if stop is None else stop, start=start):
+            yield self.read(a, b)
 
 
 def _first_last(grid: LogGrid, topic: str, cids: set[int], *,
@@ -538,14 +535,14 @@ def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
        (the warning says so; name it with ``--outputs``).
     """
     from vibroscope.io._extract import extract
-    from vibroscope.io.log_index import ACCELERATION_TYPES
+    from vibroscope.io.log_index import ACCELERATION_TYPES, acceleration_paths
     from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels
 
     chans, schemas = grid._channels, grid._schemas
     imu = sorted({ch.topic for ch in chans.values() if ch.schema_id in schemas and ch.topic not in exclude_topics
                   and schemas[ch.schema_id].name in ACCELERATION_TYPES})
     if imu:
-        return [f"{t}.linear_acceleration.{a}" for t in imu for a in "xyz"]
+        return [c for t in imu for c in acceleration_paths(t)]
     log, by_topic = _end_chunks(grid)
     try:
         sel = auto_channels(log, message_counts=by_topic, exclude_topics=exclude_topics)

@@ -31,6 +31,7 @@ __all__ = [
     "discover_fields",
     "iter_raw_messages",
     "select_acceleration_channels",
+    "acceleration_paths",
     "unit_for",
     "ACCELERATION_TYPES",
     "UNITS_KEY",
@@ -724,6 +725,31 @@ def discover_fields(path: str | Path | LogIndex) -> dict[str, list[str]]:
     return _as_index(path).discover_fields()
 
 
+def acceleration_paths(topic: str) -> list[str]:
+    """The acceleration channels of one ``sensor_msgs/msg/Imu`` topic: ``linear_acceleration.{x,y,z}``.
+
+    The one place that names them, for the automatic choice of a whole read
+    (:func:`select_acceleration_channels`) and of a block-by-block read
+    (:func:`vibroscope.io.blocks.open_grid`).
+
+    Parameters
+    ----------
+    topic : str
+        The Imu topic.
+
+    Returns
+    -------
+    list of str
+        Three message paths.
+
+    Examples
+    --------
+    >>> acceleration_paths("/imu")
+    ['/imu.linear_acceleration.x', '/imu.linear_acceleration.y', '/imu.linear_acceleration.z']
+    """
+    return [f"{topic}.linear_acceleration.{c}" for c in "xyz"]
+
+
 def select_acceleration_channels(info: LogInfo) -> tuple[list[str], list[tuple[str, str]]]:
     """Acceleration channels of a log: ``linear_acceleration.{x,y,z}`` of every Imu topic.
 
@@ -743,7 +769,7 @@ def select_acceleration_channels(info: LogInfo) -> tuple[list[str], list[tuple[s
     selected, skipped = [], []
     for t in info.topics:
         if t.schema_name in ACCELERATION_TYPES:
-            paths = [f"{t.topic}.linear_acceleration.{c}" for c in "xyz"]
+            paths = acceleration_paths(t.topic)
             if not t.decodable:
                 skipped.extend((p, t.reason) for p in paths)
             elif t.message_count == 0:

@@ -10,7 +10,7 @@
 Imports nothing of vibroscope's but :mod:`vibroscope.spectral` and :mod:`vibroscope.signals`.
 """
 
-from vibroscope.modal._results import ModalModel, Mode, mpc, normalize_shapes
+from vibroscope.modal._results import ModalModel, Mode, mpc, normalize_shapes, ods_as_modal_model, with_operating_shapes
 from vibroscope.modal.automatic import Identification, auto_lscf, auto_ssi, modes_document
 from vibroscope.modal.compare import ModeSetComparison, compare_mode_sets
 from vibroscope.modal.fdd import SingularValues, efdd_damping, fdd, singular_values
@@ -24,7 +24,7 @@ from vibroscope.modal.ssi import Stabilization, output_covariances, ssi_cov
 from vibroscope.modal.uncertainty import ModalUncertainty, ssi_bootstrap
 
 __all__ = [
-    "ModalModel", "Mode", "normalize_shapes", "mpc",
+    "ModalModel", "Mode", "normalize_shapes", "mpc", "ods_as_modal_model", "with_operating_shapes",
     "lscf", "lsfd", "LSFDResult",
     "peak_picking", "half_power_bandwidth", "fit_sdof",
     "fdd", "singular_values", "SingularValues", "efdd_damping",

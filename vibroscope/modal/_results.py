@@ -9,7 +9,7 @@ import numpy as np
 
 from vibroscope._checks import read_only
 
-__all__ = ["Mode", "ModalModel", "normalize_shapes", "mpc"]
+__all__ = ["Mode", "ModalModel", "normalize_shapes", "mpc", "ods_as_modal_model", "with_operating_shapes"]
 
 
 def normalize_shapes(shapes: np.ndarray) -> np.ndarray:
@@ -195,3 +195,50 @@ class ModalModel:
         fs = ", ".join(f"{f:.4g}" for f in self.natural_frequencies[:6])
         return (f"ModalModel({len(self)} modes by {self.method!r} at {len(self.points)} points; "
                 f"f = [{fs}{', ...' if len(self) > 6 else ''}] Hz)")
+
+
+def ods_as_modal_model(ods_result) -> ModalModel:
+    """An operating deflection shape as a one-mode :class:`vibroscope.modal.ModalModel`.
+
+    So that everything that draws or animates modes (:func:`vibroscope.viewers.figures.plot_mode_shapes`,
+    :func:`vibroscope.viewers.rerun_view.log_analysis`) shows the ODS like a mode (built here, in the
+    modal room, not in a viewer).
+
+    Parameters
+    ----------
+    ods_result : OperatingShape
+        From :func:`vibroscope.spectral.integration.ods`.
+
+    Returns
+    -------
+    ModalModel
+        ``natural_frequencies = [frequency_hz]``, ``damping_ratios = [nan]``,
+        ``shapes = [shape]``, ``points``, ``method = 'ods'``; ``extra`` holds ``source``,
+        ``reference``, ``requested_hz``, ``input``, ``units`` and ``values`` (shape (1, n_points)).
+    """
+    o = ods_result
+    extra = {"source": o.source, "reference": o.reference, "requested_hz": np.array([o.requested_hz]),
+             "input": o.input, "units": o.units, "values": np.asarray(o.values)[None, :]}
+    return ModalModel([o.frequency_hz], [np.nan], [o.shape], o.points, "ods", extra)
+
+
+def with_operating_shapes(model: ModalModel, shapes: list[ModalModel]) -> ModalModel:
+    """The modes of `model` followed by operating deflection shapes (animated alike in rerun).
+
+    Parameters
+    ----------
+    model : ModalModel
+        The identified modes, shapes ``(n_modes, n_points)``.
+    shapes : list of ModalModel
+        One-mode models of the same points (:func:`ods_as_modal_model`), at least one.
+
+    Returns
+    -------
+    ModalModel
+        ``n_modes + len(shapes)`` entries, the shapes' damping ratios NaN, ``method``
+        ``model.method + "+ods"`` (its ``extra`` not carried).
+    """
+    f = np.concatenate([model.natural_frequencies, [o.natural_frequencies[0] for o in shapes]])
+    z = np.concatenate([model.damping_ratios, [np.nan] * len(shapes)])
+    s = np.concatenate([np.reshape(model.shapes, (len(model), shapes[0].shapes.shape[-1])), *[o.shapes for o in shapes]])
+    return ModalModel(f, z, s, model.points, model.method + "+ods")

@@ -202,8 +202,19 @@ def ssi_lags(fs: float, f_low: float, n_samples: int, *, periods: float = 2.0) -
     return int(max(20, min(want, 300, n_samples // 40)))
 
 
-def _line_spacing(frequencies: np.ndarray) -> float | None:
-    """The median line spacing (Hz) of a frequency axis; None when it has fewer than two lines."""
+def line_spacing(frequencies: np.ndarray) -> float | None:
+    """The median line spacing (Hz) of a frequency axis; None when it has fewer than two lines.
+
+    Parameters
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Frequency axis in Hz.
+
+    Returns
+    -------
+    float or None
+        The median of the positive, finite spacings.
+    """
     d = np.diff(np.asarray(frequencies, float))
     d = d[np.isfinite(d) & (d > 0)]
     return float(np.median(d)) if d.size else None
@@ -430,7 +441,7 @@ def auto_lscf(
             coh = (f, frf.coherence)
         # candidates within two lines of the FRF with the same shape are one (split) mode
         sel = select_modes(cand, fmin=lo, fmax=hi, damping_range=damping_range, min_mpc=min_mpc, coherence=coh,
-                           min_coherence=min_coherence, rejected=unstable, resolution_hz=_line_spacing(f))
+                           min_coherence=min_coherence, rejected=unstable, resolution_hz=line_spacing(f))
     kept = sel.modes
     rejected = list(sel.rejected)
     res = None
@@ -564,7 +575,7 @@ def polymax_oma(signals: Signals, *, f_low: float, fmin: float | None = None, fm
     st = dataclasses.replace(st, frequency=f, damping=z,
                              settings={**st.settings, "method": "polymax_oma", "window_sigma": sigma})
     cand, unstable = cluster_poles(st)
-    sel = select_modes(cand, fmin=fmin, fmax=fmax, rejected=unstable, resolution_hz=_line_spacing(h.frequencies))
+    sel = select_modes(cand, fmin=fmin, fmax=fmax, rejected=unstable, resolution_hz=line_spacing(h.frequencies))
     mm = _add_quality(sel.modes)
     settings = {"method": "polymax_oma", "n_lags": n_lags, "window_sigma_per_s": sigma,
                 "references": [signals.channels[i] for i in ref], "band_hz": [fmin, fmax],

@@ -25,7 +25,7 @@ from typing import Any, Callable
 import numpy as np
 
 from vibroscope._checks import check_option
-from vibroscope.modal.automatic import Identification, _line_spacing, auto_lscf, auto_ssi, polymax_oma
+from vibroscope.modal.automatic import Identification, auto_lscf, auto_ssi, line_spacing, polymax_oma
 from vibroscope.modal.fdd import fdd
 from vibroscope.modal.peak_picking import peak_picking
 from vibroscope.modal.selection import select_modes
@@ -125,7 +125,7 @@ class ModalMethod:
 
 def _selected(mm, call: MethodCall, lo, hi, axis, coherence=None) -> Identification:
     """The physical modes among `mm`'s candidates in ``[lo, hi]`` Hz."""
-    res = _line_spacing(axis) if call.merge_duplicates else None
+    res = line_spacing(axis) if call.merge_duplicates else None
     sel = select_modes(mm, fmin=lo, fmax=hi, coherence=coherence, resolution_hz=res)
     return Identification(sel.modes, sel.rejected, None, {"method": mm.method, **sel.criteria})
 

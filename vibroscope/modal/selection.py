@@ -130,7 +130,8 @@ def _subset(model: ModalModel, keep: np.ndarray) -> ModalModel:
                       model.shapes[keep] if n else model.shapes, model.points, model.method, extra)
 
 
-def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: float = 20.0) -> tuple[float, float]:
+def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: float = 20.0,
+                 smooth: int = 1) -> tuple[float, float]:
     """The band a measured input excites: where its PSD is within `drop_db` of its maximum.
 
     Parameters
@@ -141,7 +142,12 @@ def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: flo
         PSD of the input (unit²/Hz).
     drop_db : float, optional
         Level below the maximum (dB) that still counts as excited; default 20 dB (a hammer test's
-        usual −10 to −20 dB roll-off criterion, Ewins 2000 §3.6).
+        usual −10 to −20 dB roll-off criterion, Ewins 2000 §3.6); the gap diagnosis passes 30 dB
+        (:func:`vibroscope.gap.measure.excited_band`).
+    smooth : int, optional
+        Lines of a centred moving average taken before the threshold, the PSD kept where it is
+        higher (so a line is never lowered and a lone line widens to its neighbours); default 1:
+        none.
 
     Returns
     -------
@@ -156,6 +162,8 @@ def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: flo
     """
     f = np.asarray(frequencies, float)
     p = np.asarray(input_psd, float)
+    if smooth > 1:
+        p = np.maximum(np.convolve(p, np.ones(smooth) / smooth, mode="same"), p)
     m = (f > 0) & np.isfinite(p)
     if not np.any(p[m] > 0):
         raise ValueError("the input PSD is zero everywhere: the input excites nothing")

@@ -54,8 +54,6 @@ from vibroscope.models.lumped import LumpedModel
 
 __all__ = ["ELEMENT_CODES", "FlatModel", "IntegrationResult", "closed_loop_kernel", "flatten_model", "integrate"]
 
-#: element type name -> integer code used by the kernel
-ELEMENT_CODES = {"cubic_spring": 0, "backlash": 1, "friction": 2, "bouc_wen": 3, "mr_damper": 4}
 #: width of a parameter row
 N_PARAMS = 9
 #: most internal states an element may have
@@ -128,23 +126,30 @@ class FlatModel:
         return int(self.state_offsets[-1])
 
 
+def _mr_damper_row(e: MRDamper) -> tuple:
+    alpha, c0, c1 = e._coeffs()
+    if c0 + c1 <= 0:
+        raise ValueError(f"MR damper needs c0 + c1 > 0, got {c0=}, {c1=}")
+    return alpha, c0, c1, e.k0, e.k1, e.gamma, e.beta, e.A, e.n
+
+
+#: The kernel's element types, the one table of them: type name -> (the integer code that
+#: :func:`_element` switches on, the element's parameter row ``prm[i]`` in the order read there).
+KERNEL_ELEMENTS = {
+    CubicSpring.type: (0, lambda e: (e.k, e.k3)),
+    Backlash.type: (1, lambda e: (e.k, e.gap)),
+    Friction.type: (2, lambda e: (e.force_, e.v_eps, e.force_negative)),
+    BoucWen.type: (3, lambda e: (e.alpha, e.beta, e.gamma, e.delta, e.nu)),
+    MRDamper.type: (4, _mr_damper_row),
+}
+#: element type name -> integer code used by the kernel
+ELEMENT_CODES = {t: code for t, (code, _) in KERNEL_ELEMENTS.items()}
+
+
 def _param_row(e: Element) -> np.ndarray:
     row = np.zeros(N_PARAMS)
-    if isinstance(e, CubicSpring):
-        row[:2] = e.k, e.k3
-    elif isinstance(e, Backlash):
-        row[:2] = e.k, e.gap
-    elif isinstance(e, Friction):
-        row[:3] = e.force_, e.v_eps, e.force_negative
-    elif isinstance(e, BoucWen):
-        row[:5] = e.alpha, e.beta, e.gamma, e.delta, e.nu
-    elif isinstance(e, MRDamper):
-        alpha, c0, c1 = e._coeffs()
-        row[:] = alpha, c0, c1, e.k0, e.k1, e.gamma, e.beta, e.A, e.n
-        if c0 + c1 <= 0:
-            raise ValueError(f"MR damper needs c0 + c1 > 0, got {c0=}, {c1=}")
-    else:  # pragma: no cover - guarded by the caller
-        raise TypeError(type(e))
+    p = KERNEL_ELEMENTS[e.type][1](e)
+    row[: len(p)] = p
     return row
 
 
@@ -169,15 +174,15 @@ def flatten_model(model: LumpedModel, dt: float, scheme: str = "trapezoid") -> F
     -------
     FlatModel
 
-    References
-    ----------
-    .. [3] C. F. Van Loan, "Computing integrals involving the matrix exponential", IEEE Trans.
-       Automatic Control 23(3):395-404, 1978.
-
     Raises
     ------
     ValueError
         If `dt` is not positive, or an element type has no kernel implementation.
+
+    References
+    ----------
+    .. [3] C. F. Van Loan, "Computing integrals involving the matrix exponential", IEEE Trans.
+       Automatic Control 23(3):395-404, 1978.
     """
     dt = float(dt)
     if not np.isfinite(dt) or dt <= 0:

@@ -144,7 +144,26 @@ def _accumulate(data, fs, st, *, cross: bool, workers: int | None, dtype: str = 
     return accs[0]
 
 
-def _settings_dict(fs, st, n_avg, n_segments=None) -> dict:
+def settings_dict(fs, st, n_avg, n_segments=None) -> dict:
+    """The ``settings`` a spectral result carries.
+
+    Parameters
+    ----------
+    fs : float
+        Sampling frequency in Hz.
+    st : SegmentSettings
+        From :func:`vibroscope.spectral.segment_settings`.
+    n_avg : int
+        Segments averaged (the fewest over the channels or pairs).
+    n_segments : int, optional
+        Segments in the record; stored as ``n_segments`` when it differs from `n_avg`.
+
+    Returns
+    -------
+    dict
+        ``fs``, ``nperseg``, ``noverlap``, ``nfft``, ``window`` (``"custom"`` for an array),
+        ``detrend``, ``n_averages`` and maybe ``n_segments``.
+    """
     win = st.window_spec if isinstance(st.window_spec, (str, tuple)) else "custom"
     out = dict(fs=fs, nperseg=st.nperseg, noverlap=st.noverlap, nfft=st.nfft, window=win,
                detrend=st.detrend, n_averages=n_avg)
@@ -153,12 +172,32 @@ def _settings_dict(fs, st, n_avg, n_segments=None) -> dict:
     return out
 
 
-def _check_averages(acc: CrossSpectralAccumulator, channels: Sequence[str], *, cross: bool) -> np.ndarray:
+def check_averages(acc: CrossSpectralAccumulator, channels: Sequence[str], *, cross: bool) -> np.ndarray:
     """Valid segments per pair (``cross``) or per channel; raise when one has none, warn when few.
 
-    Returns the counts, shape (n, n) or (n,). Raises ValueError naming the channel(s) with no
-    segment free of NaN/Inf; warns (:class:`FewAveragesWarning`) when segments were skipped and
-    fewer than :data:`MIN_AVERAGES` remain for a pair.
+    Parameters
+    ----------
+    acc : CrossSpectralAccumulator
+        The accumulator after the record.
+    channels : sequence of str
+        Channel names (for the messages).
+    cross : bool
+        Count per pair (shape (n, n)) rather than per channel (shape (n,)).
+
+    Returns
+    -------
+    ndarray of int
+        The counts, shape (n, n) or (n,).
+
+    Raises
+    ------
+    ValueError
+        Naming the channel(s) with no segment free of NaN/Inf.
+
+    Warns
+    -----
+    FewAveragesWarning
+        When segments were skipped and fewer than :data:`MIN_AVERAGES` remain for a pair.
     """
     cnt = acc.n_averages
     if not cross:
@@ -206,8 +245,8 @@ def _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling, worker
             references = [references]
         ref_idx = list(dict.fromkeys(channel_index(channels, r) for r in references))  # unique, in order
     acc = _accumulate(data, fs, st, cross=cross, workers=workers, dtype=dtype, references=ref_idx)
-    cnt = _check_averages(acc, channels, cross=cross)
-    settings = _settings_dict(fs, st, int(cnt.min()), acc.n_segments)
+    cnt = check_averages(acc, channels, cross=cross)
+    settings = settings_dict(fs, st, int(cnt.min()), acc.n_segments)
     if dtype != "float64":
         settings["dtype"] = dtype
     if ref_idx is not None:
@@ -797,4 +836,4 @@ def spectrogram(
     f, t, S = scipy.signal.spectrogram(data, fs, window=st.window, nperseg=st.nperseg,
                                        noverlap=st.noverlap, detrend=detrend, scaling=scaling, axis=-1)
     u = _power_units(units, scaling)
-    return Spectrogram(f, t, S, channels, u, scaling, _settings_dict(fs, st, S.shape[-1]))
+    return Spectrogram(f, t, S, channels, u, scaling, settings_dict(fs, st, S.shape[-1]))

@@ -512,7 +512,7 @@ class OperatingShape:
 
     def plot(self, coords=None, **kwargs):
         """Draw it like a mode shape; imports matplotlib lazily through
-        :func:`vibroscope.viewers.acquisition.plot_ods` (arguments passed on).
+        :func:`vibroscope.viewers.figures.plot_ods` (arguments passed on).
 
         Parameters
         ----------
@@ -520,14 +520,14 @@ class OperatingShape:
             Sensor positions and directions (see
             :func:`vibroscope.viewers._common.sensor_geometry`); points on a line when None.
         **kwargs
-            Passed to :func:`~vibroscope.viewers.acquisition.plot_ods` (``fig``,
+            Passed to :func:`~vibroscope.viewers.figures.plot_ods` (``fig``,
             ``true_modes``).
 
         Returns
         -------
         matplotlib.figure.Figure
         """
-        from vibroscope.viewers.acquisition import plot_ods
+        from vibroscope.viewers.figures import plot_ods
 
         return plot_ods(self, coords, **kwargs)
 

@@ -19,8 +19,7 @@ functions below load their modules (and those libraries) on first use.
 
 from __future__ import annotations
 
-from importlib import import_module
-from typing import Any
+from vibroscope._lazy import lazy_attributes
 
 _LAZY = {
     "plot_spectrum": "figures", "plot_frf": "figures", "plot_mode_shapes": "figures",
@@ -28,18 +27,11 @@ _LAZY = {
     "log_analysis": "rerun_view", "read_rrd": "rerun_view",
     "plot_gap_report": "gap_figures", "log_gap_report": "rerun_gap",
     "plot_stabilization": "figures", "plot_frf_synthesis": "figures",
-    "plot_kinematics": "acquisition", "plot_ods": "acquisition", "ods_as_modal_model": "acquisition",
+    "plot_kinematics": "acquisition", "plot_ods": "figures", "ods_as_modal_model": "acquisition",
     "log_ods": "acquisition",
 }
 
 __all__ = sorted(_LAZY)
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        return getattr(import_module(f"vibroscope.viewers.{_LAZY[name]}"), name)
-    raise AttributeError(f"module 'vibroscope.viewers' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(list(globals()) + list(_LAZY))
+__getattr__, __dir__ = lazy_attributes(__name__, {k: f".{m}" for k, m in _LAZY.items()})

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import os
+import sys
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["sensor_geometry", "real_shape", "mode_label", "nearest_frequencies"]
+__all__ = ["sensor_geometry", "real_shape", "mode_label", "nearest_frequencies", "pyplot", "short_label", "distinct_labels"]
 
 _AXES = {"1": (1.0, 0.0, 0.0), "2": (0.0, 1.0, 0.0), "3": (0.0, 0.0, 1.0),
          "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
@@ -145,3 +147,70 @@ def nearest_frequencies(f_est: np.ndarray, f_true: np.ndarray) -> np.ndarray:
     if f_true.size == 0:
         return np.full(f_est.shape, -1)
     return np.argmin(np.abs(f_est[:, None] - f_true[None, :]), axis=1)
+
+
+def pyplot():
+    """Import pyplot, choosing Agg when no display is available and no backend was chosen.
+
+    Returns
+    -------
+    module
+        ``matplotlib.pyplot``.
+    """
+    import matplotlib
+
+    if "matplotlib.pyplot" not in sys.modules and sys.platform.startswith("linux") \
+            and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) \
+            and "MPLBACKEND" not in os.environ:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def short_label(name: str, n: int = 38) -> str:
+    """`name` cut to its last `n` characters behind an ellipsis when longer.
+
+    Parameters
+    ----------
+    name : str
+        A channel or file name.
+    n : int, optional
+        Most characters kept (default 38).
+
+    Returns
+    -------
+    str
+    """
+    return name if len(name) <= n else "…" + name[-(n - 1):]
+
+
+def distinct_labels(names: Sequence[str], n: int = 16) -> list[str]:
+    """Short tick labels: the names less the prefix and suffix they all share (cut at ``/`` or
+    ``.``), e.g. ``/imu/m1.linear_acceleration.x`` -> ``m1``.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Channel or point names.
+    n : int, optional
+        Most characters per label (:func:`short_label`; default 16).
+
+    Returns
+    -------
+    list of str
+        One label per name; the names themselves (shortened) when the cut labels would not be
+        distinct.
+    """
+    names = [str(x) for x in names]
+    if len(names) < 2:
+        return [short_label(x, n) for x in names]
+    pre = os.path.commonprefix(names)
+    cut = max(pre.rfind("/"), pre.rfind(".")) + 1
+    rev = [x[::-1] for x in names]
+    suf = os.path.commonprefix(rev)
+    cut_s = max(suf.rfind("/"), suf.rfind(".")) + 1
+    out = [x[cut:len(x) - cut_s] if len(x) - cut_s > cut else x for x in names]
+    if len(set(out)) < len(out) or not all(out):
+        out = names
+    return [short_label(x, n) for x in out]

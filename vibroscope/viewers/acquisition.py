@@ -3,7 +3,7 @@ displacement against time, and the operating deflection shape (the relative move
 robot's bodies) at a resonance, drawn and animated like a mode.
 
 matplotlib and rerun are imported inside the functions (through
-:func:`vibroscope.viewers.figures._pyplot` and :func:`vibroscope.viewers.rerun_view.log_analysis`),
+:func:`vibroscope.viewers._common.pyplot` and :func:`vibroscope.viewers.rerun_view.log_analysis`),
 so importing this module costs nothing.
 """
 
@@ -14,11 +14,12 @@ from typing import Any, Literal, Mapping
 
 import numpy as np
 
+from vibroscope.modal._results import ods_as_modal_model
 from vibroscope.signals import true_runs
-from vibroscope.spectral.integration import OperatingShape, velocity_and_displacement
-from vibroscope.viewers.figures import _distinct_labels, _pyplot, _short, plot_mode_shapes
+from vibroscope.spectral.integration import OperatingShape, integrate, velocity_and_displacement
+from vibroscope.viewers._common import distinct_labels, pyplot
 
-__all__ = ["plot_kinematics", "plot_ods", "ods_as_modal_model", "log_ods"]
+__all__ = ["plot_kinematics", "ods_as_modal_model", "log_ods"]
 
 _PREFIX = {0: "", -3: "m", -6: "µ", -9: "n"}
 _PRETTY = {"m/s^2": "m/s²", "m/s2": "m/s²", "m s^-2": "m/s²", "m/s²": "m/s²", "m/s": "m/s", "m": "m"}
@@ -101,14 +102,14 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
         vel, disp = velocity_and_displacement(acc, f_cut=f_cut, method=method)
     fc = vel.meta["integration"]["f_cut_hz"]
     if fig is None:
-        plt = _pyplot()
+        plt = pyplot()
         fig = plt.figure(figsize=(min(3.9 * nc + 1.3, 16), 7.2), layout="constrained")
     else:
         fig.clf()
     axes = fig.subplots(3, nc, sharex=True, sharey="row", squeeze=False)
     t = np.arange(acc.n_samples) / acc.fs
     T = acc.duration
-    names = _distinct_labels(acc.channels, 30)
+    names = distinct_labels(acc.channels, 30)
     rows = [("acceleration", acc), ("velocity", vel), ("displacement", disp)]
     edge = 1.0 / fc
     for r, (what, sig) in enumerate(rows):
@@ -156,76 +157,6 @@ def plot_kinematics(acc_signals, *, f_cut: float | None = None,
              "(shaded: 1/f_cut edge zones" + ("; red: missing, each stretch between gaps integrated apart"
                                               if not np.isfinite(acc.data).all() else "") + f"{more})"]
     fig.suptitle("\n".join(w for line in lines for w in textwrap.wrap(line, width)), fontsize=9.5)
-    return fig
-
-
-def ods_as_modal_model(ods_result: OperatingShape):
-    """An operating deflection shape as a one-mode :class:`vibroscope.modal.ModalModel`.
-
-    So that everything that draws or animates modes (:func:`vibroscope.viewers.figures.plot_mode_shapes`,
-    :func:`vibroscope.viewers.rerun_view.log_analysis`) shows the ODS like a mode.
-
-    Parameters
-    ----------
-    ods_result : OperatingShape
-        From :func:`vibroscope.spectral.integration.ods`.
-
-    Returns
-    -------
-    ModalModel
-        ``natural_frequencies = [frequency_hz]``, ``damping_ratios = [nan]``,
-        ``shapes = [shape]``, ``points``, ``method = 'ods'``; ``extra`` holds ``source``,
-        ``reference``, ``requested_hz``, ``input``, ``units`` and ``values`` (shape (1, n_points)).
-    """
-    from vibroscope.modal import ModalModel
-
-    o = ods_result
-    extra = {"source": o.source, "reference": o.reference, "requested_hz": np.array([o.requested_hz]),
-             "input": o.input, "units": o.units, "values": np.asarray(o.values)[None, :]}
-    return ModalModel([o.frequency_hz], [np.nan], [o.shape], o.points, "ods", extra)
-
-
-def plot_ods(ods_result: OperatingShape, coords: Mapping[str, Any] | None = None, *, fig=None, true_modes=None):
-    """Draw an operating deflection shape like a mode shape.
-
-    Wraps it with :func:`ods_as_modal_model` and draws it with
-    :func:`vibroscope.viewers.figures.plot_mode_shapes` (in-phase part relative to the
-    reference point, and the modulus dotted), titled as an ODS.
-
-    Parameters
-    ----------
-    ods_result : OperatingShape
-        From :func:`vibroscope.spectral.integration.ods`.
-    coords : mapping, optional
-        Sensor positions and directions (see :func:`vibroscope.viewers._common.sensor_geometry`);
-        points on a line when None.
-    fig : matplotlib.figure.Figure, optional
-        Figure to draw in (cleared); a new one when None.
-    true_modes : ModalModel, optional
-        Reference modes; the one nearest in frequency is named and drawn dashed.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
-    o = ods_result
-    if fig is None:
-        fig = _pyplot().figure(figsize=(6.4, 4.0), layout="constrained")
-    fig = plot_mode_shapes(ods_as_modal_model(o), coords, fig=fig, true_modes=true_modes)
-    ax = fig.axes[0]
-    old = ax.get_title().split("\n")[1:]
-    src = {"frf": f"FRF (input {_short(str(o.input), 24)})", "csd": "CSD (output-only)"}.get(o.source, o.source)
-    asked = "" if f"{o.requested_hz:.4g}" == f"{o.frequency_hz:.4g}" else f", nearest line to {o.requested_hz:.4g} Hz"
-    ref = _distinct_labels(o.points)[o.points.index(o.reference)] if o.reference in o.points else o.reference
-    title = f"ODS at {o.frequency_hz:.4g} Hz{asked}\nfrom {src}, phase reference {ref}"
-    ax.set_title("\n".join([title, *old]), fontsize=9)
-    for line in ax.get_lines():
-        if line.get_label() == "identified (real part)":
-            line.set_label("in phase with the reference")
-        elif line.get_label() == "|φ|":
-            line.set_label("modulus")
-    ax.legend(fontsize=7, loc="best")
-    fig.suptitle(f"Operating deflection shape ({len(o.points)} points)", fontsize=11)
     return fig
 
 

@@ -15,11 +15,13 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from vibroscope.signals import true_runs
-from vibroscope.viewers._common import mode_label, nearest_frequencies, real_shape, sensor_geometry
+from vibroscope.viewers._common import (distinct_labels, mode_label, nearest_frequencies, pyplot, real_shape,
+                                       sensor_geometry, short_label)
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
            "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d",
-           "summary_figures", "figure_jobs", "PendingFigures", "in_figure_order", "FIGURE_ORDER", "preload"]
+           "summary_figures", "figure_jobs", "PendingFigures", "in_figure_order", "FIGURE_ORDER", "preload",
+           "plot_ods"]
 
 #: resolution of the written PNGs (dots per inch)
 DPI = 110
@@ -28,46 +30,12 @@ PNG_LEVEL = 6
 _MAX_LEGEND = 12
 
 
-def _pyplot():
-    """Import pyplot, choosing Agg when no display is available and no backend was chosen."""
-    import matplotlib
-
-    if "matplotlib.pyplot" not in sys.modules and sys.platform.startswith("linux") \
-            and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")) \
-            and "MPLBACKEND" not in os.environ:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
 def preload() -> None:
     """Import what drawing and writing a figure needs (pyplot, with Agg when there is no display,
     and PIL), so that the first figure does not wait for it; run in a background thread while an
     analysis computes (:func:`vibroscope.commands._outputs.preload_outputs`)."""
-    _pyplot()
+    pyplot()
     import PIL.Image  # noqa: F401
-
-
-def _short(name: str, n: int = 38) -> str:
-    return name if len(name) <= n else "…" + name[-(n - 1):]
-
-
-def _distinct_labels(names: Sequence[str], n: int = 16) -> list[str]:
-    """Short tick labels: the names less the prefix and suffix they all share (cut at ``/`` or
-    ``.``), e.g. ``/imu/m1.linear_acceleration.x`` -> ``m1``."""
-    names = [str(x) for x in names]
-    if len(names) < 2:
-        return [_short(x, n) for x in names]
-    pre = os.path.commonprefix(names)
-    cut = max(pre.rfind("/"), pre.rfind(".")) + 1
-    rev = [x[::-1] for x in names]
-    suf = os.path.commonprefix(rev)
-    cut_s = max(suf.rfind("/"), suf.rfind(".")) + 1
-    out = [x[cut:len(x) - cut_s] if len(x) - cut_s > cut else x for x in names]
-    if len(set(out)) < len(out) or not all(out):
-        out = names
-    return [_short(x, n) for x in out]
 
 
 def _legend_if(ax, **kw) -> None:
@@ -114,7 +82,7 @@ def plot_spectrum(spectrum, ax=None, *, db: bool = False, channels: Sequence[str
     matplotlib.axes.Axes
     """
     if ax is None:
-        plt = _pyplot()
+        plt = pyplot()
         _, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
     idx = range(len(spectrum.channels)) if channels is None else [
         c if isinstance(c, (int, np.integer)) else spectrum.channels.index(c) for c in channels]
@@ -123,7 +91,7 @@ def plot_spectrum(spectrum, ax=None, *, db: bool = False, channels: Sequence[str
     n = 0
     for i in idx:
         v = np.asarray(spectrum.values[i], dtype=float)
-        label = _short(spectrum.channels[i])
+        label = short_label(spectrum.channels[i])
         if len(set(spectrum.units)) > 1 and spectrum.units[i]:
             label += f" [{spectrum.units[i]}]"
         if db:
@@ -177,7 +145,7 @@ def plot_frf(frf, *, output: str | int = 0, input: str | int = 0, fig=None):
     o = output if isinstance(output, (int, np.integer)) else frf.outputs.index(output)
     i = input if isinstance(input, (int, np.integer)) else frf.inputs.index(input)
     if fig is None:
-        plt = _pyplot()
+        plt = pyplot()
         fig = plt.figure(figsize=(8, 7), layout="constrained")
     else:
         fig.clf()
@@ -205,7 +173,7 @@ def plot_frf(frf, *, output: str | int = 0, input: str | int = 0, fig=None):
     if f.size:
         axc.set_xlim(f[0], f[-1])
     kind = f" {frf.kind}" if frf.kind else ""
-    axm.set_title(f"FRF{kind} ({frf.estimator}): {_short(frf.outputs[o], 34)} / {_short(frf.inputs[i], 34)}",
+    axm.set_title(f"FRF{kind} ({frf.estimator}): {short_label(frf.outputs[o], 34)} / {short_label(frf.inputs[i], 34)}",
                   fontsize=10)
     return fig
 
@@ -301,7 +269,7 @@ def _mode_axes(fig, n_modes: int, vertical: bool):
     ncols = min(max(n_modes, 1), 5 if vertical else 3)
     nrows = int(np.ceil(max(n_modes, 1) / ncols))
     if fig is None:
-        plt = _pyplot()
+        plt = pyplot()
         w = 2.6 * ncols + 0.8 if vertical else 4.0 * ncols + 0.6
         h = 4.2 * nrows + 0.6 if vertical else 2.9 * nrows + 0.7
         fig = plt.figure(figsize=(min(w, 16), min(h, 14)), layout="constrained")
@@ -350,7 +318,7 @@ def _label_shape_axes(ax, points, xcoord, order, vertical: bool, coord_label: st
     ax.set_xlabel(coord_label)
     xs = xcoord[order]
     if len(points) <= 12 and np.all(np.diff(xs) > 0):
-        short = _distinct_labels(points)
+        short = distinct_labels(points)
         ax.set_xticks(xs, [short[k] for k in order], rotation=30 if len(points) > 5 else 0,
                       ha="right" if len(points) > 5 else "center", fontsize=7)
         if from_coords:
@@ -381,7 +349,7 @@ def plot_singular_values(frequencies, S, modes=None, *, ax=None, n_sv: int = 3, 
     matplotlib.axes.Axes
     """
     if ax is None:
-        plt = _pyplot()
+        plt = pyplot()
         _, ax = plt.subplots(figsize=(8, 4.5), layout="constrained")
     f = np.asarray(frequencies, dtype=float)
     S = np.asarray(S, dtype=float)
@@ -457,7 +425,7 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
     """
     n = min(signals.n_channels, max_channels)
     if fig is None:
-        plt = _pyplot()
+        plt = pyplot()
         fig = plt.figure(figsize=(8, 1.5 + 1.35 * n), layout="constrained")
     else:
         fig.clf()
@@ -488,7 +456,7 @@ def plot_signals(signals, *, fig=None, max_channels: int = 6, max_points: int = 
             _legend_if(ax, loc="upper right", fontsize=7)
         u = signals.units[k]
         ax.set_ylabel(f"[{u}]" if u else "[-]", fontsize=8)
-        ax.set_title(_short(signals.channels[k], 60), fontsize=8, loc="left")
+        ax.set_title(short_label(signals.channels[k], 60), fontsize=8, loc="left")
         ax.grid(True, alpha=0.4)
     t0 = f"{signals.t0:.3f}" if abs(signals.t0) >= 1e6 else f"{signals.t0:g}"
     axes[-1].set_xlabel(f"time since t0 = {t0} s [s]")
@@ -566,7 +534,7 @@ def plot_stabilization(stabilization, sv=None, modes=None, *, ax=None):
     .. [1] B. Peeters and G. De Roeck, "Reference-based stochastic subspace identification for
        output-only modal analysis", Mech. Syst. Signal Process. 13(6), 855–878, 1999.
     """
-    plt = _pyplot()
+    plt = pyplot()
     if ax is None:
         _, ax = plt.subplots(figsize=(9, 5), layout="constrained")
     st = stabilization
@@ -622,7 +590,7 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
         Per output: magnitude (dB, measured and synthesized) and phase; a bottom panel with the
         relative error ``|H − Ĥ| / |H|`` (dB) of every output, and the overall error in the title.
     """
-    plt = _pyplot()
+    plt = pyplot()
     n = min(max_outputs, len(frf.outputs))
     if fig is None:
         fig = plt.figure(figsize=(10, 2.2 * n + 2.2), layout="constrained")
@@ -642,7 +610,7 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
         with np.errstate(divide="ignore", invalid="ignore"):
             e = 20 * np.log10(np.abs(h - hs) / np.abs(h))
         if o < 8:
-            err_ax.plot(f[band], e, lw=0.7, label=_short(frf.outputs[o], 20))
+            err_ax.plot(f[band], e, lw=0.7, label=short_label(frf.outputs[o], 20))
         if o >= n:
             continue
         ax, axp = axes[o]
@@ -652,7 +620,7 @@ def plot_frf_synthesis(frf, synthesized, modal=None, *, max_outputs: int = 4, in
         axp.plot(f, np.degrees(np.angle(frf.H[:, o, input])), color="0.35", lw=0.8)
         axp.plot(fs_, np.degrees(np.angle(Hs[:, o, input])), color="tab:red", lw=0.9, ls="--")
         ax.set_ylabel(f"|H| [dB re 1 {frf.units or 'unit'}]", fontsize=8)
-        ax.set_title(f"{_short(frf.outputs[o])} / {_short(frf.inputs[input], 24)}", fontsize=9)
+        ax.set_title(f"{short_label(frf.outputs[o])} / {short_label(frf.inputs[input], 24)}", fontsize=9)
         axp.set_ylabel("phase [deg]", fontsize=8)
         axp.set_ylim(-185, 185)
         if modal is not None:
@@ -705,7 +673,7 @@ def plot_mode_shapes_3d(modal, coords: Mapping[str, Any], *, fig=None, max_modes
     """
     from matplotlib.ticker import MaxNLocator
 
-    plt = _pyplot()
+    plt = pyplot()
     fn = np.asarray(modal.natural_frequencies, dtype=float)
     zeta = np.asarray(modal.damping_ratios, dtype=float)
     shapes = np.atleast_2d(np.asarray(modal.shapes, dtype=complex))
@@ -776,7 +744,7 @@ def plot_mode_set_comparison(comparison, *, fig=None):
     """
     from matplotlib.patches import Rectangle
 
-    plt = _pyplot()
+    plt = pyplot()
     c = comparison
     M = np.nan_to_num(np.asarray(c.mac, float))
     na, nb = M.shape
@@ -791,8 +759,8 @@ def plot_mode_set_comparison(comparison, *, fig=None):
     ax.set_yticks(range(na), [f"{i + 1}: {f:.4g} Hz" for i, f in enumerate(c.frequencies_a)], fontsize=7)
     ax.set_xticks(range(nb), [f"{j + 1}: {f:.4g} Hz" for j, f in enumerate(c.frequencies_b)], fontsize=7,
                   rotation=60, ha="right")
-    ax.set_ylabel(f"A: {_short(c.labels[0], 40)}")
-    ax.set_xlabel(f"B: {_short(c.labels[1], 40)}")
+    ax.set_ylabel(f"A: {short_label(c.labels[0], 40)}")
+    ax.set_xlabel(f"B: {short_label(c.labels[1], 40)}")
     if max(na, nb) <= 16:
         for i in range(na):
             for j in range(nb):
@@ -825,14 +793,27 @@ def plot_mode_set_comparison(comparison, *, fig=None):
     return fig
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
     """Write `fig` as a PNG at :data:`DPI`, palette-quantised (256 colours) to stay small.
 
     The figure is rendered to raw RGBA pixels and encoded once, as the quantised PNG (not encoded
     by matplotlib, decoded and encoded again), at zlib level :data:`PNG_LEVEL` (the pixels of
     level 9 with ``optimize``, in a seventh of the time, the file ~10 % larger). The PNG's
     ``Software`` text is :data:`vibroscope.provenance.GENERATOR`: the mark by which a later run
-    knows the file as its own output (and may replace it)."""
+    knows the file as its own output (and may replace it).
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure; closed once written.
+    path : Path
+        The PNG file to write.
+
+    Returns
+    -------
+    Path
+        `path`.
+    """
     import io
 
     from vibroscope.provenance import GENERATOR
@@ -843,11 +824,11 @@ def _save(fig, path: Path) -> Path:
         from PIL.PngImagePlugin import PngInfo
     except ImportError:  # pragma: no cover - pillow comes with matplotlib
         fig.savefig(path, dpi=DPI, format="png", metadata={"Software": GENERATOR})
-        _pyplot().close(fig)
+        pyplot().close(fig)
         return path
     w, h = (int(v) for v in (fig.get_figwidth() * DPI, fig.get_figheight() * DPI))
     fig.savefig(buf, dpi=DPI, format="rgba")
-    _pyplot().close(fig)
+    pyplot().close(fig)
     raw = buf.getbuffer()
     if raw.nbytes == 4 * w * h:
         im = Image.frombuffer("RGBA", (w, h), raw, "raw", "RGBA", 0, 1)
@@ -874,7 +855,7 @@ def _render(k: int) -> str:
     """Worker: draw and save job `k` of :data:`_JOBS`; returns the path written."""
     draw, path = _JOBS[k]
     fig = draw()
-    return str(_save(getattr(fig, "figure", fig), path))
+    return str(save_figure(getattr(fig, "figure", fig), path))
 
 
 def _quiet_worker() -> None:
@@ -910,7 +891,7 @@ class PendingFigures:
     ----------
     jobs : sequence of (callable, Path)
         ``draw()`` returns a matplotlib Figure (or an Axes of one), written to the path by
-        :func:`_save` (PNG at :data:`DPI`, palette-quantised).
+        :func:`save_figure` (PNG at :data:`DPI`, palette-quantised).
     workers : int, optional
         Worker processes; default the CPU cores this process may use, at most one per job.
     """
@@ -925,7 +906,7 @@ class PendingFigures:
 
             import PIL.Image  # noqa: F401 - imported once, here, not in each worker
 
-            _pyplot()
+            pyplot()
             _JOBS = self._jobs
             try:
                 self._pool = multiprocessing.get_context("fork").Pool(n, initializer=_quiet_worker)
@@ -947,7 +928,7 @@ class PendingFigures:
             The first error of a job, as raised in its worker.
         """
         if self._pool is None:
-            return [_save(getattr(f, "figure", f), p) for f, p in ((d(), p) for d, p in self._jobs)]
+            return [save_figure(getattr(f, "figure", f), p) for f, p in ((d(), p) for d, p in self._jobs)]
         try:
             return [Path(p) for p in self._result.get()]
         finally:
@@ -1074,3 +1055,49 @@ def summary_figures(out_dir: str | Path, *, signals=None, psd=None, frf=None, mo
                        true_modes=true_modes, stabilization=stabilization, synthesized=synthesized)
     with PendingFigures(jobs, workers=workers) as pending:
         return in_figure_order(pending.wait())
+
+
+def plot_ods(ods_result, coords: Mapping[str, Any] | None = None, *, fig=None, true_modes=None):
+    """Draw an operating deflection shape like a mode shape.
+
+    Wraps it with :func:`ods_as_modal_model` and draws it with
+    :func:`vibroscope.viewers.figures.plot_mode_shapes` (in-phase part relative to the
+    reference point, and the modulus dotted), titled as an ODS.
+
+    Parameters
+    ----------
+    ods_result : OperatingShape
+        From :func:`vibroscope.spectral.integration.ods`.
+    coords : mapping, optional
+        Sensor positions and directions (see :func:`vibroscope.viewers._common.sensor_geometry`);
+        points on a line when None.
+    fig : matplotlib.figure.Figure, optional
+        Figure to draw in (cleared); a new one when None.
+    true_modes : ModalModel, optional
+        Reference modes; the one nearest in frequency is named and drawn dashed.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from vibroscope.modal import ods_as_modal_model
+
+    o = ods_result
+    if fig is None:
+        fig = pyplot().figure(figsize=(6.4, 4.0), layout="constrained")
+    fig = plot_mode_shapes(ods_as_modal_model(o), coords, fig=fig, true_modes=true_modes)
+    ax = fig.axes[0]
+    old = ax.get_title().split("\n")[1:]
+    src = {"frf": f"FRF (input {short_label(str(o.input), 24)})", "csd": "CSD (output-only)"}.get(o.source, o.source)
+    asked = "" if f"{o.requested_hz:.4g}" == f"{o.frequency_hz:.4g}" else f", nearest line to {o.requested_hz:.4g} Hz"
+    ref = distinct_labels(o.points)[o.points.index(o.reference)] if o.reference in o.points else o.reference
+    title = f"ODS at {o.frequency_hz:.4g} Hz{asked}\nfrom {src}, phase reference {ref}"
+    ax.set_title("\n".join([title, *old]), fontsize=9)
+    for line in ax.get_lines():
+        if line.get_label() == "identified (real part)":
+            line.set_label("in phase with the reference")
+        elif line.get_label() == "|φ|":
+            line.set_label("modulus")
+    ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"Operating deflection shape ({len(o.points)} points)", fontsize=11)
+    return fig

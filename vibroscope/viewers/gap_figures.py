@@ -29,7 +29,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from vibroscope.viewers.figures import _pyplot, _save, _short
+from vibroscope.viewers.figures import pyplot, save_figure, short_label
 
 __all__ = ["plot_gap_report", "plot_gap_time", "plot_gap_frf", "plot_gap_spectrum", "plot_gap_evidence",
            "plot_gap_candidates", "where_label", "candidate_label", "verdict_index", "zoom_window",
@@ -236,7 +236,7 @@ def _db(v: np.ndarray, fac: float = 20.0) -> np.ndarray:
 
 def _new_figure(figsize, fig=None):
     if fig is None:
-        plt = _pyplot()
+        plt = pyplot()
         return plt.figure(figsize=figsize, layout="constrained")
     fig.clf()
     return fig
@@ -323,10 +323,10 @@ def plot_gap_time(report, *, fig=None, zoom_s: float = 0.75, max_points: int = 4
             axf.axvspan(t[z0], t[z1 - 1], facecolor="none", edgecolor="0.3", ls="--", lw=0.9, zorder=3,
                         label="zoom")
         u = units[c] or "-"
-        axf.set_ylabel(f"{_short(names[c], 28)} [{u}]", fontsize=8)
+        axf.set_ylabel(f"{short_label(names[c], 28)} [{u}]", fontsize=8)
         cg = _channel_gap(report, names[c])
         gap = f": held-out nrmse nominal {_fmt(cg.gap)} → augmented {_fmt(cg.gap_after)}" if cg else ""
-        axf.set_title(f"{_short(names[c], 48)}{gap}{env}", fontsize=9, loc="left")
+        axf.set_title(f"{short_label(names[c], 48)}{gap}{env}", fontsize=9, loc="left")
         zoom = f"zoom {t[z0]:.2f}–{t[z1 - 1]:.2f} s"
         axz.set_title(f"{zoom}: largest held-out\n|measured − nominal| at {t[peak]:.3f} s" if c == 0 else zoom,
                       fontsize=8)
@@ -339,7 +339,7 @@ def plot_gap_time(report, *, fig=None, zoom_s: float = 0.75, max_points: int = 4
     t0 = f"{tr.t0:.3f}" if abs(tr.t0) >= 1e6 else f"{tr.t0:g}"
     axes[-1, 0].set_xlabel(f"time since t0 = {t0} s [s]")
     axes[-1, 1].set_xlabel("time [s]")
-    log = f" — {_short(Path(tr.log).name, 40)}" if tr.log else ""
+    log = f" — {short_label(Path(tr.log).name, 40)}" if tr.log else ""
     fig.suptitle(f"Measured vs nominal vs augmented model ({report.model_name or 'model'}, fs = {tr.fs:g} Hz){log}",
                  fontsize=10)
     return fig
@@ -424,7 +424,7 @@ def plot_gap_frf(report, *, fig=None):
         axc.set_ylabel("coherence γ² [-]", fontsize=8)
         axc.set_ylim(-0.02, 1.05)
         axc.set_xlabel("frequency [Hz]")
-        axm.set_title(f"{_short(names[o], 40)} / first input [{iu}]", fontsize=9)
+        axm.set_title(f"{short_label(names[o], 40)} / first input [{iu}]", fontsize=9)
         for a in (axm, axp, axc):
             a.grid(True, alpha=0.35)
         axc.set_xlim(lo, hi)
@@ -495,7 +495,7 @@ def plot_gap_spectrum(report, *, fig=None):
         ax.set_ylabel(f"PSD [{_psd_unit(units[c])}]", fontsize=8)
         cg = _channel_gap(report, names[c])
         gap = f" (held-out nrmse {_fmt(cg.gap)} → {_fmt(cg.gap_after)})" if cg else ""
-        ax.set_title(f"{_short(names[c], 48)}{gap}", fontsize=9, loc="left")
+        ax.set_title(f"{short_label(names[c], 48)}{gap}", fontsize=9, loc="left")
         ax.grid(True, which="major", alpha=0.35)
         ax.grid(True, which="minor", alpha=0.1)
         ax.set_xlim(*focus_band(report, f))
@@ -622,7 +622,7 @@ def plot_gap_candidates(report, *, fig=None):
         bars[k].set_facecolor(BAR_VERDICT)
         bars[k].set_alpha(0.55)
         bars[k].set_edgecolor("k")
-    ax.set_yticks(y, [("+ " if k in added else "") + _short(candidate_label(c), 44) for k, c in enumerate(cands)],
+    ax.set_yticks(y, [("+ " if k in added else "") + short_label(candidate_label(c), 44) for k, c in enumerate(cands)],
                   fontsize=8)
     for k, lab in enumerate(ax.get_yticklabels()):
         if k == vi:
@@ -700,7 +700,7 @@ def plot_gap_report(report, out_dir: str | Path | None = None, *,
             continue
         figs[name] = fig
         if out is not None:
-            _save(fig, out / f"{name}.png")
+            save_figure(fig, out / f"{name}.png")
     return figs
 
 
@@ -735,7 +735,7 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
     ``zeta`` against the input RMS (log axis) with +-1 standard deviation error bars; the
     title states the test's verdict.
     """
-    plt = _pyplot()
+    plt = pyplot()
     if ax is None:
         fig = plt.figure(figsize=(9.5, 7.0), layout="constrained")
         gs = fig.add_gridspec(2, 2, height_ratios=[1.2, 1.0])
@@ -801,5 +801,5 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
     if out_path is not None:
         path = Path(out_path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        return _save(fig, path)
+        return save_figure(fig, path)
     return fig

@@ -1,7 +1,8 @@
 """Matplotlib figures (and a rerun recording) of the founding paper's virtual instruments.
 
-The numbers come from :mod:`vibroscope.instruments`; this module only draws them.
-matplotlib is imported inside the functions (:func:`vibroscope.viewers.figures._pyplot`
+The numbers come from :mod:`vibroscope.instruments` (the paper's scenarios from
+:mod:`vibroscope.instruments.scenarios`); this module only draws them.
+matplotlib is imported inside the functions (:func:`vibroscope.viewers.figures.pyplot`
 chooses Agg when there is no display), rerun inside :func:`log_sweep`.
 
 - result plots: :func:`plot_bode`, :func:`plot_nyquist`, :func:`plot_step`,
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vibroscope.viewers.figures import _pyplot, _save
+from vibroscope.viewers.figures import pyplot, save_figure
 
 __all__ = [
     "plot_bode",
@@ -57,7 +58,7 @@ def plot_bode(result, axes=None, label: str | None = None, **kwargs):
     (Axes, Axes)
     """
     if axes is None:
-        _, axes = _pyplot().subplots(2, 1, sharex=True, figsize=(6, 5))
+        _, axes = pyplot().subplots(2, 1, sharex=True, figsize=(6, 5))
     a1, a2 = axes
     a1.semilogx(result.frequencies_hz, result.magnitude_db, label=label, **kwargs)
     a2.semilogx(result.frequencies_hz, result.phase_deg, label=label, **kwargs)
@@ -91,7 +92,7 @@ def plot_nyquist(result, ax=None, label: str | None = None, mirror: bool = True,
     matplotlib.axes.Axes
     """
     if ax is None:
-        _, ax = _pyplot().subplots(figsize=(5, 5))
+        _, ax = pyplot().subplots(figsize=(5, 5))
     (line,) = ax.plot(result.response.real, result.response.imag, label=label, **kwargs)
     if mirror:
         ax.plot(result.response.real, -result.response.imag, "--", color=line.get_color(), lw=0.8)
@@ -121,7 +122,7 @@ def plot_step(result, ax=None, label: str | None = None, **kwargs):
     matplotlib.axes.Axes
     """
     if ax is None:
-        _, ax = _pyplot().subplots(figsize=(6, 3.5))
+        _, ax = pyplot().subplots(figsize=(6, 3.5))
     ax.plot(result.time_s, result.response, label=label, **kwargs)
     ax.set_xlabel("time [s]")
     ax.set_ylabel("response")
@@ -147,7 +148,7 @@ def plot_hydraulic_comparison(comparison, axes=None):
     from vibroscope.instruments.hydraulic import step_velocity
 
     if axes is None:
-        _, axes = _pyplot().subplots(1, 2, figsize=(11, 4))
+        _, axes = pyplot().subplots(1, 2, figsize=(11, 4))
     for r, lab in ((comparison.step_p, "P"), (comparison.step_pd2, "PD2")):
         axes[0].plot(r.time_s * 1e3, r.response, label=f"{lab}: settling {r.settling_time_s * 1e3:.0f} ms")
         axes[1].plot(r.time_s * 1e3, step_velocity(r), label=lab)
@@ -185,7 +186,7 @@ def plot_mr_loops(result, axes=None, label: str | None = None, last_s: float | N
     (Axes, Axes)
     """
     if axes is None:
-        _, axes = _pyplot().subplots(1, 2, figsize=(10, 4))
+        _, axes = pyplot().subplots(1, 2, figsize=(10, 4))
     m = slice(None) if last_s is None else result.time_s >= result.time_s[-1] - last_s
     axes[0].plot(result.x[m] * 1e3, result.force[m] * 1e-3, label=label, **kwargs)
     axes[1].plot(result.xdot[m] * 1e3, result.force[m] * 1e-3, label=label, **kwargs)
@@ -203,7 +204,7 @@ def _finish(fig, ax_flat, title: str, path) -> Path:
         a.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 # --------------------------------------------------------------------------- the paper's figures
@@ -229,25 +230,21 @@ def figure_pneumatic(path, areas_cm2=(60.0, 70.0, 80.0), flow: float = 50e-6, **
     Path
         The PNG written.
     """
-    from vibroscope.instruments.lti import bode, nyquist, step_response
-    from vibroscope.instruments.pneumatic import PNEUMATIC_NOMINAL, pneumatic_motor
+    from vibroscope.instruments.scenarios import PNEUMATIC_OUTPUTS, pneumatic_scenario
 
-    t = np.linspace(0.0, 1.5, 3001)
-    f = np.logspace(-1, 1.5, 600)
-    outputs = (("displacement", 1e3, "mm"), ("velocity", 1e3, "mm/s"), ("acceleration", 1e3, "mm/s²"))
-    fig, ax = _pyplot().subplots(2, 3, figsize=(13, 7))
-    for a_cm2 in areas_cm2:
-        kw = dict(PNEUMATIC_NOMINAL, **params, A=a_cm2 * 1e-4)
+    sc = pneumatic_scenario(areas_cm2, flow, **params)
+    scales = {"displacement": (1e3, "mm"), "velocity": (1e3, "mm/s"), "acceleration": (1e3, "mm/s²")}
+    fig, ax = pyplot().subplots(2, 3, figsize=(13, 7))
+    for a_cm2, steps, b, ny in zip(sc.areas_cm2, sc.steps, sc.bode, sc.nyquist):
         lab = f"A = {a_cm2:g} cm²"
-        for k, (out, scale, unit) in enumerate(outputs):
-            r = step_response(pneumatic_motor(**kw, output=out), t, amplitude=flow)
-            ax[0, k].plot(t, r.response * scale, label=lab)
+        for k, out in enumerate(PNEUMATIC_OUTPUTS):
+            scale, unit = scales[out]
+            r = steps[out]
+            ax[0, k].plot(r.time_s, r.response * scale, label=lab)
             ax[0, k].set_ylabel(f"{out} [{unit}]")
             ax[0, k].set_title(f"{out} for a {flow * 1e6:g} cm³/s flow step")
-        b = bode(pneumatic_motor(**kw, output="displacement"), f)
-        ax[1, 0].semilogx(f, b.magnitude_db, label=lab)
-        ax[1, 1].semilogx(f, b.phase_deg, label=lab)
-        ny = nyquist(pneumatic_motor(**kw, output="velocity"), np.logspace(-2, 2, 2000))
+        ax[1, 0].semilogx(b.frequencies_hz, b.magnitude_db, label=lab)
+        ax[1, 1].semilogx(b.frequencies_hz, b.phase_deg, label=lab)
         ax[1, 2].plot(ny.response.real * 1e-2, ny.response.imag * 1e-2, label=lab)
     for a in ax[0]:
         a.set_xlabel("time [s]")
@@ -278,16 +275,15 @@ def figure_hydraulic(path) -> Path:
     Path
         The PNG written.
     """
-    from vibroscope.instruments.hydraulic import hydraulic_comparison
+    from vibroscope.instruments.scenarios import hydraulic_scenario
 
-    fig, axes = _pyplot().subplots(2, 2, figsize=(11, 7))
-    for row, tuning in zip(axes, ("itae", "same-gain")):
-        c = hydraulic_comparison(tuning=tuning)
+    fig, axes = pyplot().subplots(2, 2, figsize=(11, 7))
+    for row, (tuning, c) in zip(axes, hydraulic_scenario(("itae", "same-gain")).items()):
         plot_hydraulic_comparison(c, row)
         row[0].set_title(f"position step, tuning '{tuning}'")
     fig.suptitle(f"Linear hydraulic motor (Merritt 1967), ω_h = {c.omega_h / 2 / np.pi:.0f} Hz: P vs PD2")
     fig.tight_layout()
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def figure_block_schema(path, load_step: float = -0.5, t_load: float = 15.0, t_end: float = 40.0) -> Path:
@@ -310,29 +306,24 @@ def figure_block_schema(path, load_step: float = -0.5, t_load: float = 15.0, t_e
     Path
         The PNG written.
     """
-    from vibroscope.instruments.block_schema import paper_block_schema
-    from vibroscope.instruments.lti import bode
+    from vibroscope.instruments.scenarios import block_schema_scenario
 
-    t = np.linspace(0.0, t_end, 6001)
-    fig, ax = _pyplot().subplots(2, 2, figsize=(12, 8))
-    cl = paper_block_schema(load=True)
-    ol = paper_block_schema(load=False, closed=False)
+    sc = block_schema_scenario(load_step, t_load, t_end)
+    t, reference, load = sc.time_s, sc.reference, sc.load
+    fig, ax = pyplot().subplots(2, 2, figsize=(12, 8))
     names = {"e": "error e", "u": "regulator out u", "c": "correction out c", "y": "plant out y", "r": "reference r"}
-    reference = {point: r.response for point, r in cl.step(t).items()}
-    load = cl.forced_response(t, (t >= t_load).astype(float) * load_step, from_="d")
     for point, lab in names.items():
         (ln,) = ax[0, 0].plot(t, reference[point], label=lab)
         if point in ("e", "y", "u"):
             ax[0, 1].plot(t, reference[point] + load[point], color=ln.get_color(),
                           label=f"{lab} (load {load_step:g} at {t_load:g} s)")
     ax[0, 1].plot(t, reference["y"], "k:", lw=1, label="plant out y, no load")
-    open_loop = ol.step(t)
     for point in ("u", "c", "y"):
-        ax[1, 0].plot(t, open_loop[point].response, label=names[point])
-    f = np.logspace(-3, 1, 500)
-    for name, b in cl.block_bode(f).items():
+        ax[1, 0].plot(t, sc.open_loop[point].response, label=names[point])
+    f = sc.frequencies_hz
+    for name, b in sc.block_bode.items():
         ax[1, 1].semilogx(f, b.magnitude_db, label=name)
-    ax[1, 1].semilogx(f, bode(cl.transfer("y"), f).magnitude_db, "k--", label="closed loop y/r")
+    ax[1, 1].semilogx(f, sc.closed_loop_bode.magnitude_db, "k--", label="closed loop y/r")
     ax[0, 0].set_title("closed loop: unit reference step, every point")
     ax[0, 1].set_title("closed loop with a load step at the plant input")
     ax[1, 0].set_title("open loop (no feedback): unit reference step")
@@ -379,7 +370,7 @@ def figure_mr_hysteresis(
 
     results = sine_test(currents, amplitude, frequency_hz, params=params)
     period = 1.0 / frequency_hz
-    fig, axes = _pyplot().subplots(1, 3, figsize=(14, 4.3))
+    fig, axes = pyplot().subplots(1, 3, figsize=(14, 4.3))
     for i, r in zip(currents, results):
         plot_mr_loops(r, axes[:2], label=f"i = {i:g} A", last_s=period)
         axes[2].plot(r.time_s, r.force * 1e-3, label=f"i = {i:g} A")
@@ -393,7 +384,7 @@ def figure_mr_hysteresis(
     fig.suptitle("MR damper, Spencer et al. (1997) model; loop energy per cycle: "
                  + ", ".join(f"{r.loop_energy(period):.0f} J" for r in results))
     fig.tight_layout()
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 # --------------------------------------------------------------------------- comparative sweep
@@ -417,7 +408,7 @@ def figure_sweep(result, path, title: str = "") -> Path:
     Path
         The PNG written.
     """
-    fig = _pyplot().figure(figsize=(12, 5.5))
+    fig = pyplot().figure(figsize=(12, 5.5))
     ax_t = fig.add_subplot(1, 2, 1)
     ax_m = fig.add_subplot(2, 2, 2)
     ax_p = fig.add_subplot(2, 2, 4, sharex=ax_m)
@@ -438,7 +429,7 @@ def figure_sweep(result, path, title: str = "") -> Path:
     ax_t.legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
-    return _save(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def log_sweep(result, path, tag: str) -> Path | None:

@@ -35,7 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from vibroscope.viewers.gap_figures import candidate_label, held_out_spans, verdict_index
-from vibroscope.viewers.rerun_view import _db, _whole, channel_entity, flush_recording, frequency_index, show_recording
+from vibroscope.viewers.rerun_view import (channel_entity, decibels, flush_recording, frequency_index, show_recording,
+                                           whole_time_axis)
 
 __all__ = ["log_gap_report", "TRACES", "SPECTRA", "FRF_CURVES", "GAP_BARS"]
 
@@ -143,7 +144,7 @@ def _blueprint(report, *, chans, units, ftl_s, fr_s, ftl_f, fr_f):
     tr = report.traces
     if tr is not None:
         dur = float(np.asarray(tr.measured).shape[-1] / tr.fs)
-        tx = _whole(rrb, "time", dict(seconds=0.0), dict(seconds=dur))
+        tx = whole_time_axis(rrb, "time", dict(seconds=0.0), dict(seconds=dur))
         views = [rrb.TimeSeriesView(origin=channel_entity("signals", c), name=f"{c} [{u or '-'}]",
                                     plot_legend=legend, **tx) for c, u in zip(chans, units)]
         views.append(rrb.TimeSeriesView(origin="/input", name="input [N]", plot_legend=legend, **tx))
@@ -152,14 +153,14 @@ def _blueprint(report, *, chans, units, ftl_s, fr_s, ftl_f, fr_f):
         tabs.append(rrb.Vertical(*views, row_shares=[3] * len(chans) + [1.5, 1],
                                  name="Time: measured / nominal / augmented (timeline: time)"))
     if ftl_s:
-        fx = _whole(rrb, ftl_s, dict(seq=int(fr_s[0])), dict(seq=int(fr_s[1])))
+        fx = whole_time_axis(rrb, ftl_s, dict(seq=int(fr_s[0])), dict(seq=int(fr_s[1])))
         views = [rrb.TimeSeriesView(origin=channel_entity("psd", c),
                                     name=f"{c}: PSD [dB re 1 ({u or 'unit'})²/Hz] vs frequency ({ftl_s})",
                                     plot_legend=legend, **fx) for c, u in zip(chans, units)]
         tabs.append(rrb.Horizontal(rrb.Vertical(*views), rrb.TextDocumentView(origin="/psd/bands", name="Gap bands"),
                                    column_shares=[4, 1], name=f"Gap spectrum (timeline: {ftl_s})"))
     if ftl_f:
-        fx = _whole(rrb, ftl_f, dict(seq=int(fr_f[0])), dict(seq=int(fr_f[1])))
+        fx = whole_time_axis(rrb, ftl_f, dict(seq=int(fr_f[0])), dict(seq=int(fr_f[1])))
         tabs.append(rrb.Vertical(
             rrb.TimeSeriesView(origin="/frf/magnitude_db", name=f"FRF magnitude [dB] vs frequency ({ftl_f})",
                                plot_legend=legend, **fx),
@@ -284,7 +285,7 @@ def log_gap_report(report, *, recording=None, path: str | Path | None = None, sp
                 for what, col in SPECTRA.items():
                     v = np.atleast_2d(getattr(sp, what))[c]
                     _series(rec, channel_entity("psd", ch) + f"/{what}",
-                            f"{what} [dB re 1 ({u})²/Hz]", col, idx, _db(v, 10.0))
+                            f"{what} [dB re 1 ({u})²/Hz]", col, idx, decibels(v, 10.0))
             rec.log("psd/bands", rr.TextDocument(_band_table(report), media_type=rr.MediaType.MARKDOWN), static=True)
         if ftl_f is not None:
             _log_frf(rec, sp, chans, units, ftl_f, fidx_f)
@@ -340,7 +341,7 @@ def _log_frf(rec, sp, chans, units, ftl, fidx) -> None:
         for what, col in FRF_CURVES.items():
             h = H[what][:, o]
             _series(rec, channel_entity("frf/magnitude_db", ch) + f"/{what}",
-                    f"|H| {what} [dB re 1 {units[o] or 'unit'}/N]", col, idx, _db(np.abs(h), 20.0))
+                    f"|H| {what} [dB re 1 {units[o] or 'unit'}/N]", col, idx, decibels(np.abs(h), 20.0))
             _series(rec, channel_entity("frf/phase_deg", ch) + f"/{what}", f"∠H {what} [deg]", col, idx,
                     np.degrees(np.angle(h)))
         if o < coh.shape[1]:

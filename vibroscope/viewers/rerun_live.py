@@ -48,7 +48,7 @@ from typing import Any, Callable, Iterable, Iterator, Literal, Sequence
 
 import numpy as np
 
-from vibroscope.signals import Signals
+from vibroscope.signals import Signals, block_bounds
 from vibroscope.viewers.rerun_view import channel_entity, envelope_indices, frequency_index
 
 __all__ = ["LiveView", "LiveRefresh", "live_blueprint", "record_blocks", "mcap_blocks", "stream_blocks", "stream_log",
@@ -266,15 +266,15 @@ class LiveView:
         import rerun as rr
 
         from vibroscope.spectral._results import CrossSpectralMatrix
-        from vibroscope.spectral.estimators import _settings_dict, frf as frf_of
-        from vibroscope.viewers.rerun_view import _db
+        from vibroscope.spectral.estimators import settings_dict, frf as frf_of
+        from vibroscope.viewers.rerun_view import decibels
 
         acc = self._acc
         if not acc.n_segments:
             raise ValueError(f"no complete segment yet: {self.n_samples} samples fed, nperseg={self.settings.nperseg}")
         st = self.settings
         cnt = acc.n_averages
-        settings = _settings_dict(self.fs, st, int(cnt.min()), acc.n_segments)
+        settings = settings_dict(self.fs, st, int(cnt.min()), acc.n_segments)
         with np.errstate(divide="ignore", invalid="ignore"):
             csd = CrossSpectralMatrix(self.frequencies, acc.result("density"), self.channels, self.units,
                                       "density", settings, cnt)
@@ -294,12 +294,12 @@ class LiveView:
         rec.set_time("averages", sequence=acc.n_segments)
         rec.log("/live/n_averages", rr.Scalars(float(acc.n_segments)))
         for k, ch in enumerate(self.channels):
-            rec.log(channel_entity("live/psd", ch), rr.BarChart(_db(psd.values[k])))
+            rec.log(channel_entity("live/psd", ch), rr.BarChart(decibels(psd.values[k])))
         if frf is not None:
             for o, out_ch in enumerate(frf.outputs):
                 h = frf.H[:, o, 0]
                 rec.log(channel_entity("live/frf/magnitude_db", out_ch),
-                        rr.BarChart(_db(np.abs(h), 20.0)))
+                        rr.BarChart(decibels(np.abs(h), 20.0)))
                 rec.log(channel_entity("live/frf/phase_deg", out_ch),
                         rr.BarChart(np.degrees(np.angle(h))))
                 rec.log(channel_entity("live/frf/coherence", out_ch),
@@ -313,11 +313,11 @@ class LiveView:
         return out
 
     def _log_final(self, out: LiveRefresh) -> None:
-        from vibroscope.viewers.rerun_view import _log_frf, _log_psd
+        from vibroscope.viewers.rerun_view import log_frf, log_psd
 
-        _log_psd(self.rec, out.psd)
+        log_psd(self.rec, out.psd)
         if out.frf is not None:
-            _log_frf(self.rec, out.frf)
+            log_frf(self.rec, out.frf)
 
     def close(self) -> LiveRefresh | None:
         """The final refresh: the spectra of the whole record, also on the frequency timeline.
@@ -472,8 +472,7 @@ def record_blocks(sig: Signals, block_size: int) -> Iterator[Signals]:
     """
     if block_size < 1:
         raise ValueError(f"{block_size=} must be a positive number of samples")
-    for a in range(0, sig.n_samples, int(block_size)):
-        b = min(a + int(block_size), sig.n_samples)
+    for a, b in block_bounds(int(block_size), sig.n_samples):
         yield Signals(sig.data[:, a:b], sig.fs, sig.channels, sig.units, t0=sig.t0 + a / sig.fs,
                       meta={"n_samples_total": sig.n_samples})
 

@@ -145,7 +145,20 @@ def mode_frames(shape: np.ndarray, positions: np.ndarray, directions: np.ndarray
     return positions[None, :, :] + scale * amp[:, :, None] * directions[None, :, :]
 
 
-def _db(v: np.ndarray, fac: float = 10.0) -> np.ndarray:
+def decibels(v: np.ndarray, fac: float = 10.0) -> np.ndarray:
+    """``fac · log10(v)``: 10 for a power (PSD), 20 for an amplitude (|H|); NaN where ``v <= 0``.
+
+    Parameters
+    ----------
+    v : array_like
+        Non-negative values.
+    fac : float, optional
+        10 (default) or 20.
+
+    Returns
+    -------
+    ndarray of float, shape of `v`
+    """
     v = np.asarray(v, dtype=float)
     out = np.full(v.shape, np.nan)
     pos = v > 0
@@ -184,7 +197,7 @@ def preload() -> None:
     pa.array([0], type=pa.int8())
 
 
-def _whole(rrb, timeline: str, start: dict, end: dict):
+def whole_time_axis(rrb, timeline: str, start: dict, end: dict):
     """Axis showing [start, end] of `timeline` and every datum of it (not a window at the cursor)."""
     axis = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.absolute(**start),
                                                  end=rrb.TimeRangeBoundary.absolute(**end)))
@@ -211,18 +224,18 @@ def _build_blueprint(*, signals, spec_entities, frf_present, csd_present, modal,
 
     tabs = []
     active = None
-    fx = {} if f_range is None else _whole(rrb, ftl, dict(seq=int(f_range[0])), dict(seq=int(f_range[1])))
+    fx = {} if f_range is None else whole_time_axis(rrb, ftl, dict(seq=int(f_range[0])), dict(seq=int(f_range[1])))
     # resonances sit low in the band: keep the legends out of their way
     legend = rrb.PlotLegend(corner=rrb.Corner2D.RightTop)
     if signals is not None:
-        tx = _whole(rrb, "time", dict(seconds=0.0), dict(seconds=float(signals.duration)))
+        tx = whole_time_axis(rrb, "time", dict(seconds=0.0), dict(seconds=float(signals.duration)))
         views = [rrb.TimeSeriesView(origin=channel_entity("signals", c), name=f"{c} [{u or '-'}]", **tx)
                  for c, u in zip(signals.channels, signals.units)]
         tabs.append(rrb.Grid(*views, grid_columns=1 if len(views) <= 4 else 2,
                              name="Time series (timeline: time)"))
     if kinematics is not None:
         vel, disp = kinematics
-        tx = _whole(rrb, "time", dict(seconds=0.0), dict(seconds=float(vel.duration)))
+        tx = whole_time_axis(rrb, "time", dict(seconds=0.0), dict(seconds=float(vel.duration)))
         fc = vel.meta.get("integration", {}).get("f_cut_hz")
         cut = f", high-pass {fc:.3g} Hz" if fc else ""
         tabs.append(rrb.Vertical(
@@ -416,13 +429,13 @@ def log_analysis(*, signals=None, psd=None, csd=None, frf=None, modal=None,
         for ks in kinematics or ():
             _log_time_series(rec, "velocity" if ks is kinematics[0] else "displacement", ks, max_points)
         if psd is not None:
-            _log_psd(rec, psd)
+            log_psd(rec, psd)
         if csd is not None:
             _log_singular_values(rec, csd, singular_values)
         if frf is not None:
-            _log_frf(rec, frf)
+            log_frf(rec, frf)
         if synthesized is not None:
-            _log_frf(rec, synthesized, prefix="synthesized/", coherence=False)
+            log_frf(rec, synthesized, prefix="synthesized/", coherence=False)
         if stabilization is not None and ftl is not None:
             _log_stabilization(rec, stabilization, ftl)
         if modal is not None:
@@ -710,7 +723,7 @@ def _log_time_series(rec, prefix: str, sig, max_points: int | None = None) -> No
         rec.reset_time()
 
 
-def _log_psd(rec, psd) -> None:
+def log_psd(rec, psd) -> None:
     """``/psd/<channel>`` in dB (20 log10 for an amplitude spectrum) on the frequency timeline."""
     import rerun as rr
 
@@ -720,7 +733,7 @@ def _log_psd(rec, psd) -> None:
         ent = channel_entity("psd", ch)
         rec.log(ent, rr.SeriesLines(names=f"{ch} [dB re 1 {psd.units[k] or 'unit'}]"), static=True)
         rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],
-                         columns=rr.Scalars.columns(scalars=_db(psd.values[k], fac)))
+                         columns=rr.Scalars.columns(scalars=decibels(psd.values[k], fac)))
 
 
 def _log_about(rec, *, signals, psd, frf, ftl, max_points=None) -> None:
@@ -757,7 +770,7 @@ def _log_singular_values(rec, csd, sv=None, n_sv: int = 3) -> None:
         ent = f"/csd/singular_values/s{k + 1}"
         rec.log(ent, rr.SeriesLines(names=f"s{k + 1} [dB]"), static=True)
         rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=fidx)],
-                         columns=rr.Scalars.columns(scalars=_db(S[:, k])))
+                         columns=rr.Scalars.columns(scalars=decibels(S[:, k])))
 
 
 #: (entity name, colour, marker) of the stability classes 0–3 of a stabilization diagram
@@ -783,7 +796,22 @@ def _log_stabilization(rec, st, ftl: str) -> None:
                              columns=rr.Scalars.columns(scalars=np.full(idx.size, float(order))))
 
 
-def _log_frf(rec, frf, prefix: str = "", coherence: bool = True) -> None:
+def log_frf(rec, frf, prefix: str = "", coherence: bool = True) -> None:
+    """The FRF's ``frf/magnitude_db`` and ``frf/phase_deg`` series of each output (entity tag
+    ``prefix + output``, with ``in<i>/`` for several inputs), and ``frf/coherence`` of the first
+    input, on the frequency timeline.
+
+    Parameters
+    ----------
+    rec : rerun.RecordingStream
+        The recording.
+    frf : FRF
+        ``H[f, output, input]``.
+    prefix : str, optional
+        Prefix of the entity tag and, when given, "synthesized" in the series names.
+    coherence : bool, optional
+        Also log the coherence (default True).
+    """
     import rerun as rr
 
     ftl, fidx = frequency_index(frf.frequencies)
@@ -795,7 +823,7 @@ def _log_frf(rec, frf, prefix: str = "", coherence: bool = True) -> None:
             tag = prefix + (out if n_in == 1 else f"in{i}/{out}")
             h = H[:, o, i]
             for what, vals, name in (
-                    ("frf/magnitude_db", _db(np.abs(h), 20.0),
+                    ("frf/magnitude_db", decibels(np.abs(h), 20.0),
                      f"{'synthesized ' if prefix else ''}|H| {out} / {frf.inputs[i]} [dB re 1 {frf.units or 'unit'}]"),
                     ("frf/phase_deg", np.degrees(np.angle(h)),
                      f"{'synthesized ' if prefix else ''}∠H {out} / {frf.inputs[i]} [deg]")):

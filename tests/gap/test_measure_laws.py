@@ -1,0 +1,91 @@
+"""The gap's spectral laws are the spectral and modal rooms' own (issue 22, item 2)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from vibroscope.gap.measure import excited_band, masked_csd
+from vibroscope.modal.selection import excited_band as modal_excited_band
+from vibroscope.spectral import csd_matrix
+
+
+def _reference_masked_csd(x, mask, fs, nperseg, window):
+    """The gap's former own loop: Welch over the segments wholly inside the mask, scipy's scaling."""
+    step = nperseg if window == "boxcar" else nperseg // 2
+    starts = [s for s in range(0, x.shape[1] - nperseg + 1, step) if mask[s : s + nperseg].all()]
+    f = np.fft.rfftfreq(nperseg, 1 / fs)
+    G = np.zeros((f.size, x.shape[0], x.shape[0]), complex)
+    for i in range(x.shape[0]):
+        for j in range(x.shape[0]):
+            for s in starts:
+                seg = x[:, s : s + nperseg]
+                G[:, i, j] += signal.csd(seg[i], seg[j], fs=fs, window=window, nperseg=nperseg)[1]
+    return f, G / max(len(starts), 1), len(starts)
+
+
+@pytest.mark.parametrize("window", ["hann", "boxcar"])
+@pytest.mark.parametrize("nperseg", [64, 65])
+def test_masked_csd_is_csd_matrix_of_the_nan_masked_record(window, nperseg):
+    rng = np.random.default_rng(3)
+    fs = 200.0
+    x = rng.standard_normal((3, 4000))
+    mask = np.ones(4000, bool)
+    mask[700:1100] = False
+    mask[2500:2510] = False
+    f, G, n_avg = masked_csd(x, mask, fs, nperseg, window)
+    fr, Gr, nr = _reference_masked_csd(x, mask, fs, nperseg, window)
+    assert n_avg == nr and 0 < n_avg
+    np.testing.assert_allclose(f, fr)
+    np.testing.assert_allclose(G, Gr, rtol=0, atol=1e-13 * np.abs(Gr).max())
+    c = csd_matrix(np.where(mask, x, np.nan), fs, nperseg=nperseg, window=window,
+                   noverlap=0 if window == "boxcar" else nperseg - nperseg // 2)
+    np.testing.assert_array_equal(G, c.G)
+    assert np.all(c.n_averages == n_avg)
+
+
+def test_masked_csd_without_a_segment_gives_zeros():
+    f, G, n_avg = masked_csd(np.ones((2, 100)), np.zeros(100, bool), 10.0, 32)
+    assert n_avg == 0 and f.shape == (17,) and G.shape == (17, 2, 2) and not G.any()
+
+
+def test_gap_excited_band_is_the_modal_law_at_30_db():
+    """A band-limited input (10-40 Hz, flat) is excited within 30 dB there; the gap's band is the
+    modal room's function of the input's Welch PSD with drop_db=30 and 5-line smoothing."""
+    rng = np.random.default_rng(0)
+    fs, n, nperseg = 200.0, 2**15, 512
+    F = np.zeros(n // 2 + 1, complex)
+    fr = np.fft.rfftfreq(n, 1 / fs)
+    on = (fr >= 10) & (fr <= 40)
+    F[on] = np.exp(2j * np.pi * rng.random(on.sum()))
+    u = np.fft.irfft(F, n)[None, :] + 1e-6 * rng.standard_normal((1, n))
+    lo, hi = excited_band(u, fs, nperseg)
+    # the smoothing (2 lines) and the Hann main lobe (2 lines) widen it by at most 4 x 0.39 Hz
+    assert lo == pytest.approx(10.0, abs=1.6) and hi == pytest.approx(40.0, abs=1.6)
+    f, P = signal.welch(u[0], fs=fs, nperseg=nperseg)
+    assert (lo, hi) == modal_excited_band(f, P, drop_db=30.0, smooth=5)
+    # the former gap code: 5-line moving average kept at least the PSD, 1e-3 of the maximum
+    Ps = np.maximum(np.convolve(P, np.ones(5) / 5, mode="same"), P)
+    idx = np.nonzero(Ps > 1e-3 * Ps[1:].max())[0]
+    idx = idx[idx > 0]
+    assert (lo, hi) == (f[idx[0]], f[idx[-1]])
+    assert excited_band(np.zeros((1, 1000)), fs, 256) == (0.0, fs / 2)
+
+
+def test_masked_csd_a_diverged_channel_is_nan_the_others_unchanged():
+    """A residual of a diverged simulation (inf inside the mask) gives NaN in its row and column, as
+    the sum over segments did; the other channels' spectra are those computed without it."""
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((3, 2000))
+    mask = np.ones(2000, bool)
+    mask[:100] = False
+    x[1, 1500] = np.inf
+    x[2, 50] = np.nan  # outside the mask: no harm
+    f, G, n_avg = masked_csd(x, mask, 100.0, 128)
+    keep = [0, 2]
+    _, G2, n2 = masked_csd(x[keep], mask, 100.0, 128)
+    assert n_avg == n2 > 0
+    assert np.isnan(G[:, 1, :]).all() and np.isnan(G[:, :, 1]).all()
+    np.testing.assert_array_equal(G[:, 0::2, 0::2], G2)
+    assert np.isfinite(G2).all()
