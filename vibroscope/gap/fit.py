@@ -151,7 +151,8 @@ def frf_residual(model: LumpedModel, f: np.ndarray, H: np.ndarray, w: np.ndarray
     return np.concatenate([r.real.ravel(), r.imag.ravel()])
 
 
-def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None, prior: float = 0.02):
+def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None, prior: float = 0.02,
+                   max_nfev: int = 200):
     """Fit linear log-factors `lin` (and a linear effect `spec`'s parameters) to the FRF.
 
     Parameters
@@ -173,6 +174,8 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
     prior : float
         Weight of a small pull of the log-factors towards 0 (keeps unidentifiable
         parameters at their nominal values).
+    max_nfev : int, optional
+        Function evaluations per start (:func:`scipy.optimize.least_squares`); default 200.
 
     Returns
     -------
@@ -199,7 +202,7 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
         lo = np.concatenate([np.full(nl, -2.5), spec.lower if spec is not None else []])
         hi = np.concatenate([np.full(nl, 2.5), spec.upper if spec is not None else []])
         x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-        sol = least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=200)
+        sol = least_squares(res, x0, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
     x = best.x
