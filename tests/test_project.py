@@ -65,6 +65,7 @@ def test_import_graph_sees_imports_inside_functions():
 @pytest.mark.parametrize("package, name, module", [
     ("vibroscope", "welch", "vibroscope.spectral"), ("vibroscope.io", "read_frf", "vibroscope.io.frf_files"),
     ("vibroscope.viewers", "plot_frf", "vibroscope.viewers.figures"),
+    ("vibroscope.gap", "diagnose", "vibroscope.gap.diagnosis"),
 ])
 def test_packages_load_names_lazily_through_one_helper(package, name, module):
     """The package ``__init__`` modules share one lazy-import helper (vibroscope._lazy): the name is the

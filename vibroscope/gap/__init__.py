@@ -10,13 +10,7 @@ from __future__ import annotations
 __all__ = ["diagnose", "fit_linear_model", "GapReport", "EFFECTS"]
 
 
-def __getattr__(name):
-    if name in ("diagnose", "fit_linear_model"):
-        import importlib
+from vibroscope._lazy import lazy_attributes
 
-        return getattr(importlib.import_module("vibroscope.gap.diagnosis"), name)
-    if name in ("GapReport", "EFFECTS"):
-        import importlib
-
-        return getattr(importlib.import_module("vibroscope.gap.report"), name)
-    raise AttributeError(f"module 'vibroscope.gap' has no attribute {name!r}")
+__getattr__, __dir__ = lazy_attributes(__name__, {"diagnose": ".diagnosis", "fit_linear_model": ".diagnosis",
+                                                  "GapReport": ".report", "EFFECTS": ".report"})
