@@ -774,7 +774,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     sigs_tests = run_signatures(
         f=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
         noise_coh=noise_coh, resid=resid[:, mfit0], u=u_fit[mfit0], states={"relative": rel_fit}, fs=fs,
-        out_channels=out_ch, level_stat=level, input_unit=in_unit)
+        out_channels=out_ch, level_stat=level, input_unit=in_unit, u_unit="N" if closed else in_unit)
     tau = next((s.value for s in sigs_tests if s.name == "phase_slope"), 0.0)
     scales["delay0"] = float(min(max(tau, 1e-4), 0.05))
     n_reg = min(n_sc, int(20 * fs))

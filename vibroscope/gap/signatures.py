@@ -52,7 +52,8 @@ def _corr(a, b) -> float:
 
 
 def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, resid, u, states, fs,
-                   out_channels, level_stat=None, input_unit: str = "N") -> tuple[SignatureTest, ...]:
+                   out_channels, level_stat=None, input_unit: str = "N",
+                   u_unit: str = "N") -> tuple[SignatureTest, ...]:
     """The signature tests.
 
     Parameters
@@ -81,7 +82,9 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         between the lowest and highest level exceeds 3 standard deviations, ``flagged``, ``trend``,
         ``shift``); when given, it is the level-dependence test's statistic.
     input_unit : str, optional
-        Unit of the input `u` and of `level_rms` (a closed loop's reference: m); default 'N'.
+        Unit of `level_rms`, the logged input's (a closed loop's reference: m); default 'N'.
+    u_unit : str, optional
+        Unit of `u` (a closed loop's actuator force: N); default 'N'.
     """
     tests = []
     # 1. level dependence of the BLA
@@ -162,7 +165,7 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
     tests.append(SignatureTest(
         "residual_vs_input", abs(ci), 0.1, abs(ci) > 0.1, ("saturation",),
         f"residual correlates with the input beyond its 90 % quantile: r = {ci:+.2f}",
-        xs, ys, f"input [{input_unit}]", f"residual {out_channels[0]}"))
+        xs, ys, f"input [{u_unit}]", f"residual {out_channels[0]}"))
     # 8. whiteness (Ljung): fraction of autocorrelation lags 1..50 outside +-2.58/sqrt(N)
     n = r.size
     rr = r - r.mean()
