@@ -166,6 +166,23 @@ def test_read_mcap_of_a_real_log_without_its_first_chunk(tmp_path, shared_data):
     assert np.array_equal(a.data[0][-b.n_samples :], b.data[0])  # the later messages, values unchanged
 
 
+def test_streaming_a_real_log_without_its_first_chunk(tmp_path, shared_data):
+    """The block reader (--stream) finds the shifted summary as the whole read does: the joint
+    states defined only in the lost first chunk are still named, and the loss is said."""
+    from vibroscope.io.blocks import open_grid
+
+    p = shared_data / "mcap" / "capstan" / "bagfile_0.mcap"
+    data = p.read_bytes()
+    q = tmp_path / "del.mcap"
+    q.write_bytes(_delete(data, _chunks(p, data)[0], True))
+    ch = "/robot/joint_state.position[0]"
+    g = open_grid(q, [ch])
+    assert g.channels == (ch,) and g.n_samples > 3000
+    assert any("summary" in w and "lost" in w for w in g.warnings)
+    whole = open_grid(p, [ch])
+    assert abs(g.fs - whole.fs) < 0.02 * whole.fs  # each estimated from its first and last chunks
+
+
 # -- lying sizes and bombs ----------------------------------------------------------------------
 def _chunk_record(start: int, end: int, usize: int, comp: bytes, payload: bytes, crc: int = 0) -> bytes:
     body = struct.pack("<QQQI", start, end, usize, crc) + struct.pack("<I", len(comp)) + comp

@@ -103,18 +103,21 @@ def _open_chunk(fd: int, span: ChunkSpan):
     return raw, recs, _scan._index_messages(raw, 0, len(raw), recs, True)
 
 
-def _summary_plan(path: Path, fh: Any):
+def _summary_plan(path: Path, fh: Any, warnings: list[str] | None = None):
     """(schemas, channels, chunk spans, header, messages per channel id or None) from the summary
     section (the counts from its statistics record), or None without a usable one (none, a CRC-32
-    mismatch, a chunk index not pointing at a chunk record)."""
+    mismatch that is not a deletion before it, a chunk index not pointing at a chunk record)."""
     from mcap.reader import SeekingReader
 
     from vibroscope.io._summary import locate_summary
 
     fd = fh.fileno()
-    place, why = locate_summary(lambda off, k: _pread(fd, k, off), os.fstat(fd).st_size)
-    if place is None or why is not None:
+    size = os.fstat(fd).st_size
+    place, why = locate_summary(lambda off, k: _pread(fd, k, off), size)
+    if place is None:
         return None
+    if why is not None:  # bytes before the summary deleted (a lost chunk): found again, as the scan does
+        return _relocated_plan(path, fh, size, warnings)
     try:
         rd = SeekingReader(fh)
         header = rd.get_header()
@@ -130,6 +133,38 @@ def _summary_plan(path: Path, fh: Any):
         return None
     counts = dict(summ.statistics.channel_message_counts) if summ.statistics is not None else None
     return dict(summ.schemas), dict(summ.channels), sorted(spans, key=lambda s: s.offset), header, counts
+
+
+def _relocated_plan(path: Path, fh: Any, size: int, warnings: list[str] | None):
+    """The plan from a summary whose stated start is wrong because bytes before it were deleted
+    (:func:`vibroscope.io._summary.read_summary` finds it again and places its chunk indexes on the
+    chunk records where they now lie), or None. The chunks it lists that are not in the file are
+    said in `warnings` (their messages are lost)."""
+    import mmap
+
+    from mcap.records import Header
+
+    from vibroscope.io._records import REC_HDR, parse_record
+    from vibroscope.io._summary import read_summary
+
+    try:
+        with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
+            summ, _why = read_summary(mm, size)
+            header = None
+            if summ is not None and mm[8] == 0x01:
+                _op, ln = REC_HDR.unpack_from(mm, 8)
+                header = parse_record(Header, mm[8 + REC_HDR.size: 8 + REC_HDR.size + ln])
+    except (ValueError, OSError):
+        return None
+    if summ is None or not summ.chunks:
+        return None
+    spans = [ChunkSpan(o, ci.chunk_length, ci.message_start_time, ci.message_end_time,
+                       frozenset(ci.message_index_offsets) if ci.message_index_offsets else None)
+             for o, ci in summ.chunks.items()]
+    if warnings is not None:
+        warnings.append(f"{path}: {summ.note or 'the summary found again after deleted bytes'}"
+                        + ("; the messages of the missing chunks are lost" if summ.lost else ""))
+    return dict(summ.schemas), dict(summ.channels), sorted(spans, key=lambda sp: sp.offset), header, None
 
 
 def _linear_plan(path: Path, fd: int, size: int, warnings: list[str], skipped: list[tuple[int, str]]):
@@ -661,7 +696,7 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
         size = os.fstat(fh.fileno()).st_size
         if size < 8 or _pread(fh.fileno(), 8, 0) != _MAGIC:
             raise LogFormatError(f"{path}: not an MCAP file (bad magic at byte offset 0)")
-        plan = _summary_plan(path, fh)
+        plan = _summary_plan(path, fh, warnings)
         indexed = plan is not None
         if plan is None:
             warnings.append(f"{path}: no usable summary section: chunks located by one linear pass")
