@@ -269,7 +269,7 @@ def test_stream_without_channels_takes_the_moving_fields_of_the_busiest_topic(tm
     whole = analyse_log(p, method="fdd")
     assert tuple(whole.signals.channels) == g.channels  # the whole read's choice
     plan = blocks._summary_plan
-    monkeypatch.setattr(blocks, "_summary_plan", lambda path, fh: (*plan(path, fh)[:4], None))
+    monkeypatch.setattr(blocks, "_summary_plan", lambda path, fh, *a: (*plan(path, fh, *a)[:4], None))
     assert open_grid(p).channels == g.channels  # counts estimated from the sampled chunks
     monkeypatch.undo()
     an = analyse_stream(p)
