@@ -795,16 +795,17 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     lin_specs = [s for s in specs if s.linear]
     nl_specs = [s for s in specs if not s.linear]
     not_tried: dict[str, str] = {}  # effect -> why its candidates were not fitted
-    linear_nominal = (not closed and all(e.is_linear for e in refit.elements)
-                      and all(i.saturation is None for i in refit.inputs))
-    if lin_specs and level["flagged"] and linear_nominal:
+    if lin_specs and level["flagged"] and not closed and refit.is_linear:
         # a linear effect in a linear model cannot change the BLA with the level: it would be
         # inadmissible (see admissible() below), so it is not fitted
         for s in lin_specs:
             not_tried[s.effect] = "the BLA changes with the level, which no linear effect of a linear model does"
         lin_specs = []
-    bar = tqdm(total=len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs})), desc="gap candidates",
-               disable=not progress, leave=False)
+    def n_steps():
+        """Progress steps: every linear and nonlinear spec, and the joint fits of the best classes."""
+        return len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs}))
+
+    bar = tqdm(total=n_steps(), desc="gap candidates", disable=not progress, leave=False)
     results = []  # (spec, augmented model, p, gap_fit, base model without the effect)
 
     # linear effects: FRF fit jointly with the linear parameters, best per effect polished in time
@@ -854,7 +855,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                                            f"{NONE_FACTOR} x the noise floor {floor:.3g}, and the BLA does not change "
                                            f"with the level")
             nl_specs = [s for s in nl_specs if not EFFECT_TABLE[s.effect].level_dependent]
-            bar.total = len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs}))
+            bar.total = n_steps()
             bar.refresh()
 
     # nonlinear effects: screening at every location with the linear parameters at the refit

@@ -262,13 +262,11 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
         return np.concatenate(out)
 
     x0 = np.clip(np.asarray(x0, float), lower + 1e-9, upper - 1e-9)
-    kw = {"x_scale": 1.0, "diff_step": diff_step, "max_nfev": max_nfev}
-    if jac_workers > 1 and x0.size > 1:
-        # the Jacobian's columns in parallel threads (the simulation kernels release the GIL)
-        with ThreadPoolExecutor(min(jac_workers, x0.size)) as ex:
-            sol = least_squares(res, x0, bounds=(lower, upper), method="trf", workers=ex.map, **kw)
-    else:
-        sol = least_squares(res, x0, bounds=(lower, upper), method="trf", **kw)
+    n_thr = max(1, min(jac_workers, x0.size))
+    # the Jacobian's columns in parallel threads (the simulation kernels release the GIL)
+    with ThreadPoolExecutor(n_thr) as ex:
+        sol = least_squares(res, x0, bounds=(lower, upper), method="trf", x_scale=1.0, diff_step=diff_step,
+                            max_nfev=max_nfev, workers=ex.map if n_thr > 1 else None)
     return sol.x, float(math.sqrt(2 * sol.cost)), len(calls)
 
 
