@@ -65,7 +65,7 @@ def mpc(shapes: np.ndarray) -> np.ndarray:
         return num / den
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Mode:
     """One identified mode (an item of :class:`ModalModel`).
 
@@ -166,8 +166,8 @@ class ModalModel:
 
     def __getitem__(self, r: int) -> Mode:
         r = range(len(self))[r]
-        return Mode(float(self.natural_frequencies[r]), float(self.damping_ratios[r]), self.shapes[r],
-                    self.points, r, self.method)
+        return Mode(frequency_hz=float(self.natural_frequencies[r]), damping_ratio=float(self.damping_ratios[r]),
+                    shape=self.shapes[r], points=self.points, index=r, method=self.method)
 
     def __iter__(self) -> Iterator[Mode]:
         return (self[r] for r in range(len(self)))

@@ -382,7 +382,7 @@ def _peak_candidates(S: np.ndarray, idx: np.ndarray, prominence: float, n_singul
     return out
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class _Peak:
     """An accepted FDD peak: its bin, singular value, shape, prominence and SDOF bell."""
 
@@ -454,7 +454,7 @@ def _distinct_peaks(candidates, U, S, mac_min: float, mac_duplicate: float, min_
         bell, lo, hi = _bell(U, S, k, q, phi, mac_min, _valley_limits(S[:, q], k, tops))
         if hi - lo + 1 < min_bell_bins:  # incoherent from bin to bin: noise, not a mode
             continue
-        accepted.append(_Peak(k, q, phi, prom, bell, lo, hi))
+        accepted.append(_Peak(k=k, q=q, shape=phi, prominence=prom, bell=bell, lo=lo, hi=hi))
         if n_modes is not None and len(accepted) >= n_modes:
             break
     return sorted(accepted, key=lambda a: a.k)

@@ -137,7 +137,7 @@ def _resolve_driving_point(dp, outputs: Sequence[str], inputs: Sequence[str]) ->
     return index(o, outputs, "output"), index(i, inputs, "input")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class LSFDResult:
     """Residues and residuals of a pole-residue model fitted to an FRF (:func:`lsfd`).
 
@@ -480,8 +480,9 @@ def lsfd(
     power = power_of_jw(frf.kind)
     R, LR, UR = _fit(2 * np.pi * f, frf.H[sel], lam, power, residuals)
     dp = _resolve_driving_point(driving_point, frf.outputs, frf.inputs)
-    return LSFDResult(fn, zeta, lam, R, LR, UR, frf.outputs, frf.inputs, frf.kind, lo, hi, f,
-                      frf.units, dp, bool(residuals))
+    return LSFDResult(natural_frequencies=fn, damping_ratios=zeta, poles=lam, residues=R, lower_residual=LR,
+                      upper_residual=UR, outputs=frf.outputs, inputs=frf.inputs, kind=frf.kind, fmin=lo, fmax=hi,
+                      frequencies=f, units=frf.units, driving_point=dp, residuals=bool(residuals))
 
 
 def pole_residue_form(frf: FRF, result: "LSFDResult") -> tuple[np.ndarray, np.ndarray, np.ndarray]:

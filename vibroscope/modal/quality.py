@@ -202,7 +202,7 @@ def comac(shapes_a, shapes_b) -> np.ndarray:
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class QualityTable:
     """Shape quality indicators of a :class:`~vibroscope.modal.ModalModel`, one row per mode.
 
@@ -310,7 +310,8 @@ def modal_quality(modal_model: ModalModel) -> QualityTable:
     with np.errstate(invalid="ignore"):
         amax = np.full(n, np.nan) if n < 2 else np.nanmax(off, axis=1)
     return QualityTable(
-        np.asarray(getattr(modal_model, "natural_frequencies", np.full(n, np.nan)), float),
-        np.asarray(getattr(modal_model, "damping_ratios", np.full(n, np.nan)), float),
-        mpc(S) if n else np.zeros(0), mpd(S), complexity(S) if n else np.zeros(0), M, amax,
-        tuple(getattr(modal_model, "points", ())), str(getattr(modal_model, "method", "")))
+        natural_frequencies=np.asarray(getattr(modal_model, "natural_frequencies", np.full(n, np.nan)), float),
+        damping_ratios=np.asarray(getattr(modal_model, "damping_ratios", np.full(n, np.nan)), float),
+        mpc=mpc(S) if n else np.zeros(0), mpd_deg=mpd(S), complexity=complexity(S) if n else np.zeros(0),
+        automac=M, automac_max=amax,
+        points=tuple(getattr(modal_model, "points", ())), method=str(getattr(modal_model, "method", "")))

@@ -71,7 +71,7 @@ class _Unpacks:
         return tuple(self)[i]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Spectrum:
     """Real spectra of several channels on one frequency axis.
 
@@ -264,7 +264,8 @@ class CrossSpectralMatrix:
         vals = np.real(np.einsum("fii->if", self.G))
         units = power_units(self.units, self.scaling)
         n_avg = None if self.n_averages is None else np.diag(self.n_averages)
-        return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings), n_avg)
+        return Spectrum(frequencies=self.frequencies, values=vals, channels=self.channels, units=units,
+                        scaling=self.scaling, settings=dict(self.settings), n_averages=n_avg)
 
     def select(self, channels) -> "CrossSpectralMatrix":
         """The sub-matrix of `channels` (names or indices), in that order.
@@ -435,7 +436,7 @@ class FRF:
         return plot_frf(self, output=output, input=input, fig=fig)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Spectrogram:
     """Short-time spectra of several channels.
 

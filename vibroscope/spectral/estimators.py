@@ -428,8 +428,8 @@ def welch(
     """
     acc, channels, units, settings, cnt = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
                                                       workers, cross=False, dtype=dtype)
-    return Spectrum(acc.frequencies(), acc.result(scaling), channels, _power_units(units, scaling), scaling,
-                    settings, cnt)
+    return Spectrum(frequencies=acc.frequencies(), values=acc.result(scaling), channels=channels,
+                    units=_power_units(units, scaling), scaling=scaling, settings=settings, n_averages=cnt)
 
 
 def amplitude_spectrum(
@@ -486,7 +486,8 @@ def amplitude_spectrum(
     amp = np.sqrt(sp.values)  # RMS of each line; peak = sqrt(2) RMS except at DC and Nyquist
     last = None if sp.settings["nfft"] % 2 else -1
     amp[:, 1:last] *= np.sqrt(2.0)
-    return Spectrum(sp.frequencies, amp, channels, units, "amplitude", dict(sp.settings), sp.n_averages)
+    return Spectrum(frequencies=sp.frequencies, values=amp, channels=channels, units=units, scaling="amplitude",
+                    settings=dict(sp.settings), n_averages=sp.n_averages)
 
 
 def _resolve(G: CrossSpectralMatrix, chans: Sequence[Channel] | Channel) -> list[int]:
@@ -836,4 +837,5 @@ def spectrogram(
     f, t, S = scipy.signal.spectrogram(data, fs, window=st.window, nperseg=st.nperseg,
                                        noverlap=st.noverlap, detrend=detrend, scaling=scaling, axis=-1)
     u = _power_units(units, scaling)
-    return Spectrogram(f, t, S, channels, u, scaling, settings_dict(fs, st, S.shape[-1]))
+    return Spectrogram(frequencies=f, times=t, values=S, channels=channels, units=u, scaling=scaling,
+                       settings=settings_dict(fs, st, S.shape[-1]))
