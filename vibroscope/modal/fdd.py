@@ -14,7 +14,7 @@ from vibroscope.modal._peaks import band_indices, parabolic_peak, parabolic_vert
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.modal.mac import mac
 from vibroscope.spectral import CrossSpectralMatrix
-from vibroscope.spectral._results import _axis_summary, _names, _Unpacks
+from vibroscope.spectral._results import UnpacksAsTuple, axis_summary, names_summary
 
 __all__ = ["fdd", "singular_values", "efdd_damping", "SingularValues"]
 
@@ -34,7 +34,7 @@ def _db(x: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class SingularValues(_Unpacks):
+class SingularValues(UnpacksAsTuple):
     """Singular values of a cross-spectral matrix at every frequency (:func:`singular_values`).
 
     Unpacks like the tuple ``(frequencies, S)``.
@@ -65,8 +65,8 @@ class SingularValues(_Unpacks):
         object.__setattr__(self, "channels", tuple(self.channels))
 
     def __repr__(self) -> str:
-        return (f"SingularValues({self.S.shape[-1]} of {len(self.channels)} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)})")
+        return (f"SingularValues({self.S.shape[-1]} of {len(self.channels)} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)})")
 
 
 def singular_values(csd: CrossSpectralMatrix) -> SingularValues:

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.linalg
 
 from vibroscope.modal._results import normalize_shapes
-from vibroscope.modal.lsfd import _band, _fit
+from vibroscope.modal.lsfd import fit_band, fit_residues
 from vibroscope.modal.ssi import Stabilization, stability_codes
 from vibroscope.spectral import FRF
 from vibroscope.spectral.kinds import power_of_jw
@@ -162,7 +162,7 @@ def lscf(
     >>> np.round(model.modes().natural_frequencies, 3)
     array([13.911, 36.419])
     """
-    sel, lo, hi = _band(frf, fmin, fmax)
+    sel, lo, hi = fit_band(frf, fmin, fmax)
     f = frf.frequencies[sel]
     H = frf.H[sel]
     nf, no, ni = H.shape
@@ -244,6 +244,6 @@ def _order_poles(alpha, p: int, ni: int, dt: float, w, H, power: int, max_dampin
     lam, fr, zr = lam[srt], fr[srt], zr[srt]
     if not len(lam):
         return fr, zr, np.zeros((0, H.shape[1]), complex)
-    res = _fit(w, H, lam, power, True, fast=True)[0]  # (n_poles, n_o, n_i)
+    res = fit_residues(w, H, lam, power, True, fast=True)[0]  # (n_poles, n_o, n_i)
     ref = np.argmax(np.linalg.norm(res, axis=1), axis=1)
     return fr, zr, normalize_shapes(res[np.arange(len(lam)), :, ref])

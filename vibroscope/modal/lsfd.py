@@ -17,7 +17,7 @@ from vibroscope.spectral.kinds import power_of_jw
 __all__ = ["pole_residue_form", "lsfd", "LSFDResult"]
 
 
-def _band(frf: FRF, fmin: float | None, fmax: float | None) -> tuple[np.ndarray, float, float]:
+def fit_band(frf: FRF, fmin: float | None, fmax: float | None) -> tuple[np.ndarray, float, float]:
     """Mask of the FRF lines used: ``fmin <= f <= fmax``, ``f > 0`` and all of ``H`` finite."""
     f = frf.frequencies
     pos = f > 0
@@ -58,7 +58,7 @@ def _basis(w: np.ndarray, poles: np.ndarray, power: int, residuals: bool) -> np.
     return np.concatenate(cols, axis=1)
 
 
-def _fit(w: np.ndarray, H: np.ndarray, poles: np.ndarray, power: int, residuals: bool,
+def fit_residues(w: np.ndarray, H: np.ndarray, poles: np.ndarray, power: int, residuals: bool,
          fast: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Real-valued least squares of residues (and residuals) for given poles.
 
@@ -312,7 +312,7 @@ class LSFDResult:
         if frf.H.shape[1:] != self.residues.shape[1:]:
             raise ValueError(f"FRF of shape {frf.H.shape[1:]} (outputs, inputs) for a model of "
                              f"{self.residues.shape[1:]}")
-        sel, _, _ = _band(frf, self.fmin, self.fmax)
+        sel, _, _ = fit_band(frf, self.fmin, self.fmax)
         H = frf.H[sel]
         Hs = self.synthesize(frf.frequencies[sel]).H
         return np.sqrt(np.sum(np.abs(H - Hs) ** 2, axis=(0, 2)) / np.sum(np.abs(H) ** 2, axis=(0, 2)))
@@ -471,14 +471,14 @@ def lsfd(
         raise ValueError("natural frequencies must be positive (Hz) and damping ratios in [0, 1)")
     order = np.argsort(fn)
     fn, zeta = fn[order], zeta[order]
-    sel, lo, hi = _band(frf, fmin, fmax)
+    sel, lo, hi = fit_band(frf, fmin, fmax)
     f = frf.frequencies[sel]
     n_unknown = 2 * len(fn) + (4 if residuals else 0)
     if 2 * len(f) < n_unknown:
         raise ValueError(f"{len(f)} lines in [{lo}, {hi}] Hz are too few for {n_unknown} real unknowns")
     lam = _poles(fn, zeta)
     power = power_of_jw(frf.kind)
-    R, LR, UR = _fit(2 * np.pi * f, frf.H[sel], lam, power, residuals)
+    R, LR, UR = fit_residues(2 * np.pi * f, frf.H[sel], lam, power, residuals)
     dp = _resolve_driving_point(driving_point, frf.outputs, frf.inputs)
     return LSFDResult(natural_frequencies=fn, damping_ratios=zeta, poles=lam, residues=R, lower_residual=LR,
                       upper_residual=UR, outputs=frf.outputs, inputs=frf.inputs, kind=frf.kind, fmin=lo, fmax=hi,
@@ -509,7 +509,7 @@ def pole_residue_form(frf: FRF, result: "LSFDResult") -> tuple[np.ndarray, np.nd
     lower, upper : ndarray, complex, shape (n_outputs, n_inputs)
         Coefficients of ``(jω)^(p−2)`` and ``(jω)^p``.
     """
-    sel, _, _ = _band(frf, result.fmin, result.fmax)
+    sel, _, _ = fit_band(frf, result.fmin, result.fmax)
     w = 2 * np.pi * frf.frequencies[sel]
     H = np.asarray(frf.H)[sel]
     nf, no, ni = H.shape

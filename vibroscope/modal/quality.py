@@ -9,7 +9,7 @@ import numpy as np
 
 from vibroscope._checks import read_only
 from vibroscope.modal._results import ModalModel, mpc
-from vibroscope.modal.mac import _shapes, mac
+from vibroscope.modal.mac import as_shapes, mac
 
 __all__ = ["automac", "mpd", "comac", "complexity", "modal_quality", "QualityTable"]
 
@@ -84,7 +84,7 @@ def mpd(shapes) -> np.ndarray:
     >>> round(float(mpd([1, np.exp(1j * a), 1, np.exp(-1j * a)])[0]), 9)
     5.0
     """
-    S = _shapes(shapes)
+    S = as_shapes(shapes)
     out = np.full(S.shape[0], np.nan)
     for r, phi in enumerate(S):
         w = np.abs(phi)
@@ -132,7 +132,7 @@ def complexity(shapes) -> np.ndarray:
     >>> complexity([[1, -2, 3], [1, 1j, 0]])
     array([0., 1.])
     """
-    return 1.0 - mpc(_shapes(shapes))
+    return 1.0 - mpc(as_shapes(shapes))
 
 
 def comac(shapes_a, shapes_b) -> np.ndarray:
@@ -190,7 +190,7 @@ def comac(shapes_a, shapes_b) -> np.ndarray:
     >>> comac(a, b).round(12)
     array([1., 1., 1.])
     """
-    A, B = _shapes(shapes_a), _shapes(shapes_b)
+    A, B = as_shapes(shapes_a), as_shapes(shapes_b)
     if A.shape != B.shape:
         raise ValueError(f"{A.shape=} and {B.shape=} must be equal: paired modes at the same points")
     bb = np.real(np.sum(np.conj(B) * B, axis=1))
@@ -303,7 +303,7 @@ def modal_quality(modal_model: ModalModel) -> QualityTable:
     """
     if not hasattr(modal_model, "shapes"):
         raise TypeError(f"modal_model must be a ModalModel, got {type(modal_model).__name__}")
-    S = _shapes(modal_model.shapes)
+    S = as_shapes(modal_model.shapes)
     n = S.shape[0]
     M = automac(S) if n else np.zeros((0, 0))
     off = np.where(np.eye(n, dtype=bool), np.nan, M)

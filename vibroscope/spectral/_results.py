@@ -42,20 +42,20 @@ def channel_index(channels: Sequence[str], channel: str | int) -> int:
         raise KeyError(f"no channel {channel!r}; channels are {list(channels)}") from None
 
 
-def _axis_summary(f: np.ndarray) -> str:
+def axis_summary(f: np.ndarray) -> str:
     """``"129 lines, 0–256 Hz"`` for a frequency axis."""
     if f.size == 0:
         return "0 lines"
     return f"{f.size} lines, {f[0]:.4g}–{f[-1]:.4g} Hz"
 
 
-def _names(names: Sequence[str], k: int = 3) -> str:
+def names_summary(names: Sequence[str], k: int = 3) -> str:
     """At most `k` names, then the count of the others."""
     head = ", ".join(repr(n) for n in names[:k])
     return f"[{head}{f', … +{len(names) - k}' if len(names) > k else ''}]"
 
 
-class _Unpacks:
+class UnpacksAsTuple:
     """Tuple behaviour of a result: it unpacks, has a length and indexes like the tuple of its
     ``_tuple_fields`` (what the function returned before it returned a result object)."""
 
@@ -137,8 +137,8 @@ class Spectrum:
         return self.values[channel_index(self.channels, channel)]
 
     def __repr__(self) -> str:
-        return (f"Spectrum({len(self.channels)} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)}, scaling={self.scaling!r})")
+        return (f"Spectrum({len(self.channels)} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)}, scaling={self.scaling!r})")
 
     @property
     def df(self) -> float:
@@ -230,8 +230,8 @@ class CrossSpectralMatrix:
         return iter((self.frequencies, self.G))
 
     def __repr__(self) -> str:
-        return (f"CrossSpectralMatrix({self.n_channels}×{self.n_channels} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)}, scaling={self.scaling!r})")
+        return (f"CrossSpectralMatrix({self.n_channels}×{self.n_channels} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)}, scaling={self.scaling!r})")
 
     @property
     def n_channels(self) -> int:
@@ -368,8 +368,8 @@ class FRF:
 
     def __repr__(self) -> str:
         kind = f", kind={self.kind!r}" if self.kind else ""
-        return (f"FRF({self.estimator}, {len(self.outputs)} outputs {_names(self.outputs)} per "
-                f"{len(self.inputs)} inputs {_names(self.inputs)}, {_axis_summary(self.frequencies)}{kind})")
+        return (f"FRF({self.estimator}, {len(self.outputs)} outputs {names_summary(self.outputs)} per "
+                f"{len(self.inputs)} inputs {names_summary(self.inputs)}, {axis_summary(self.frequencies)}{kind})")
 
     @property
     def magnitude_db(self) -> np.ndarray:
@@ -472,12 +472,12 @@ class Spectrogram:
     def __repr__(self) -> str:
         t = self.times
         span = f"{t.size} times, {t[0]:.4g}–{t[-1]:.4g} s" if t.size else "0 times"
-        return (f"Spectrogram({len(self.channels)} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)}, {span}, scaling={self.scaling!r})")
+        return (f"Spectrogram({len(self.channels)} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)}, {span}, scaling={self.scaling!r})")
 
 
 @dataclass(frozen=True, eq=False)
-class Coherence(_Unpacks):
+class Coherence(UnpacksAsTuple):
     """Ordinary coherence of every channel pair (:func:`~vibroscope.spectral.coherence`).
 
     Unpacks like the tuple ``(frequencies, gamma2)`` that scipy's ``coherence`` returns.
@@ -507,11 +507,11 @@ class Coherence(_Unpacks):
         object.__setattr__(self, "channels", tuple(self.channels))
 
     def __repr__(self) -> str:
-        return f"Coherence({len(self.channels)} channels {_names(self.channels)}, {_axis_summary(self.frequencies)})"
+        return f"Coherence({len(self.channels)} channels {names_summary(self.channels)}, {axis_summary(self.frequencies)})"
 
 
 @dataclass(frozen=True, eq=False)
-class MultipleCoherence(_Unpacks):
+class MultipleCoherence(UnpacksAsTuple):
     """Multiple coherence of each output with all inputs together
     (:func:`~vibroscope.spectral.multiple_coherence`); unpacks as ``(frequencies, gamma2)``.
 
@@ -542,5 +542,5 @@ class MultipleCoherence(_Unpacks):
         object.__setattr__(self, "outputs", tuple(self.outputs))
 
     def __repr__(self) -> str:
-        return (f"MultipleCoherence({len(self.outputs)} outputs {_names(self.outputs)} on "
-                f"{len(self.inputs)} inputs {_names(self.inputs)}, {_axis_summary(self.frequencies)})")
+        return (f"MultipleCoherence({len(self.outputs)} outputs {names_summary(self.outputs)} on "
+                f"{len(self.inputs)} inputs {names_summary(self.inputs)}, {axis_summary(self.frequencies)})")

@@ -77,8 +77,8 @@ def _fill_doc(fn):
     return fn
 
 
-def _unpack(x: Signals | np.ndarray, fs: float | None, *,
-            keep_float32: bool = False) -> tuple[np.ndarray, float, tuple, tuple]:
+def unpack_signals(x: Signals | np.ndarray, fs: float | None, *,
+                   keep_float32: bool = False) -> tuple[np.ndarray, float, tuple, tuple]:
     """(data (n_ch, n), fs, channels, units) from Signals or an array (1-D = one channel); a float32
     array stays float32 (not copied) with `keep_float32`."""
     if isinstance(x, Signals):
@@ -235,7 +235,7 @@ def _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling, worker
                 dtype: str = "float64", references=None):
     """Validate, then one pass of the engine: (accumulator, channels, units, settings dict, counts)."""
     check_option("dtype", dtype, ("float64", "float32"))
-    data, fs, channels, units = _unpack(x, fs, keep_float32=dtype == "float32")
+    data, fs, channels, units = unpack_signals(x, fs, keep_float32=dtype == "float32")
     check_option("scaling", scaling, ("density", "spectrum"))
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
                           detrend=detrend, nfft=nfft)
@@ -479,7 +479,7 @@ def amplitude_spectrum(
     .. [1] A. Brandt, *Noise and Vibration Analysis: Signal Analysis and Experimental Procedures*,
        Wiley, 2011.
     """
-    data, fs, channels, units = _unpack(x, fs)
+    data, fs, channels, units = unpack_signals(x, fs)
     n = data.shape[1]
     nperseg = n if nperseg is None else nperseg
     sp = welch(data, fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend, scaling="spectrum")
@@ -831,7 +831,7 @@ def spectrogram(
     --------
     welch : The spectra averaged over the whole record.
     """
-    data, fs, channels, units = _unpack(x, fs)
+    data, fs, channels, units = unpack_signals(x, fs)
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
                           detrend=detrend)
     f, t, S = scipy.signal.spectrogram(data, fs, window=st.window, nperseg=st.nperseg,

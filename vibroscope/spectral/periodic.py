@@ -21,7 +21,7 @@ from vibroscope._checks import check_option
 from vibroscope.signals import Signals
 from vibroscope.spectral._results import FRF
 from vibroscope.spectral.kinds import FRF_KIND_TABLE, FRF_KINDS
-from vibroscope.spectral.estimators import _unpack, frf_kind
+from vibroscope.spectral.estimators import frf_kind, unpack_signals
 
 __all__ = ["Periodicity", "detect_period", "frf_periodic"]
 
@@ -272,7 +272,7 @@ def frf_periodic(
     >>> bool(np.nanmax(np.abs(h.H[:, 0, 0] - H_true)) < 1e-10)
     True
     """
-    data, fs, channels, units = _unpack(signals, fs)
+    data, fs, channels, units = unpack_signals(signals, fs)
     n_ch, n = data.shape
     i_in = _index(channels, input)
     if outputs is None:
