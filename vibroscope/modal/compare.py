@@ -274,8 +274,10 @@ def compare_mode_sets(a, b, *, mac_min: float = 0.5, max_frequency_error: float 
     Examples
     --------
     >>> from vibroscope.modal import ModalModel
-    >>> a = ModalModel([10.0, 20.0], [0.01, 0.01], [[1, 1], [1, -1]], ["p", "q"], "test")
-    >>> b = ModalModel([20.4, 10.1], [0.01, 0.01], [[1, -1], [1, 1]], ["p", "q"], "model")
+    >>> a = ModalModel(natural_frequencies=[10.0, 20.0], damping_ratios=[0.01, 0.01],
+    ...                shapes=[[1, 1], [1, -1]], points=["p", "q"], method="test")
+    >>> b = ModalModel(natural_frequencies=[20.4, 10.1], damping_ratios=[0.01, 0.01],
+    ...                shapes=[[1, -1], [1, 1]], points=["p", "q"], method="model")
     >>> c = compare_mode_sets(a, b)
     >>> c.pairs.tolist(), c.frequency_difference_hz.round(3).tolist()
     ([[0, 1], [1, 0]], [0.1, 0.4])

@@ -362,7 +362,8 @@ def fdd(
                          mac_duplicate=mac_duplicate, efdd=efdd, max_level=max_level, min_level=min_level,
                          window_correction=window_correction, n_singular=n_singular, csd=dict(csd.settings or {})),
     }
-    return ModalModel(column("fn"), column("zeta"), shapes, csd.channels, "efdd" if efdd else "fdd", extra)
+    return ModalModel(natural_frequencies=column("fn"), damping_ratios=column("zeta"), shapes=shapes,
+                      points=csd.channels, method="efdd" if efdd else "fdd", extra=extra)
 
 
 def _peak_candidates(S: np.ndarray, idx: np.ndarray, prominence: float, n_singular: int,

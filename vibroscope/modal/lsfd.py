@@ -245,8 +245,9 @@ class LSFDResult:
             with np.errstate(divide="ignore", invalid="ignore"):
                 H = H + self.lower_residual * jw ** (self.power - 2) + self.upper_residual * jw**self.power
         coh = np.full((len(f), len(self.outputs)), np.nan)
-        return FRF(f, H, coh, self.inputs, self.outputs, "lsfd", self.kind, self.units,
-                   dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals))
+        return FRF(frequencies=f, H=H, coherence=coh, inputs=self.inputs, outputs=self.outputs, estimator="lsfd",
+                   kind=self.kind, units=self.units,
+                   settings=dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals))
 
     def peak_magnitude(self) -> np.ndarray:
         """Modulus of each mode's own term at its resonance, at the output/input pair where it is
@@ -371,11 +372,12 @@ class LSFDResult:
             shapes = (normalize_shapes(self.residues[np.arange(n), :, ref]) if n
                       else np.zeros((0, no), complex))
             norm = "unit_maximum"
-        return ModalModel(self.natural_frequencies, self.damping_ratios, shapes, self.outputs, "lscf",
-                          {"normalisation": norm, "mpc": mpc(shapes) if n else np.zeros(0),
-                           "reference_input": np.asarray(ref, int), "driving_point": dp,
-                           "settings": dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals,
-                                            kind=self.kind)})
+        return ModalModel(natural_frequencies=self.natural_frequencies, damping_ratios=self.damping_ratios,
+                          shapes=shapes, points=self.outputs, method="lscf",
+                          extra={"normalisation": norm, "mpc": mpc(shapes) if n else np.zeros(0),
+                                 "reference_input": np.asarray(ref, int), "driving_point": dp,
+                                 "settings": dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals,
+                                                  kind=self.kind)})
 
 
 def lsfd(
@@ -457,7 +459,8 @@ def lsfd(
     >>> from vibroscope.spectral import FRF
     >>> model = LumpedModel.chain([1.0], [1e4], [2.0])
     >>> f = np.linspace(1, 50, 500)
-    >>> h = FRF(f, model.frf(f), np.ones((500, 1)), ["u"], ["y"], "analytic", "accelerance")
+    >>> h = FRF(frequencies=f, H=model.frf(f), coherence=np.ones((500, 1)), inputs=["u"], outputs=["y"],
+    ...         estimator="analytic", kind="accelerance")
     >>> md = model.modes()
     >>> res = lsfd(h, md.natural_frequencies, md.damping_ratios)
     >>> bool(res.error(h)[0] < 1e-9)

@@ -296,7 +296,8 @@ def modal_quality(modal_model: ModalModel) -> QualityTable:
 
     Examples
     --------
-    >>> m = ModalModel([10.0, 20.0], [0.01, 0.02], [[1, 1], [1, -1]], ["a", "b"], "fdd")
+    >>> m = ModalModel(natural_frequencies=[10.0, 20.0], damping_ratios=[0.01, 0.02], shapes=[[1, 1], [1, -1]],
+    ...                points=["a", "b"], method="fdd")
     >>> q = modal_quality(m)
     >>> q.mpc, q.mpd_deg, q.automac_max
     (array([1., 1.]), array([0., 0.]), array([0., 0.]))

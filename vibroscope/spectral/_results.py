@@ -286,13 +286,13 @@ class CrossSpectralMatrix:
         """
         idx = [self.index(c) for c in channels]
         return CrossSpectralMatrix(
-            self.frequencies,
-            self.G[:, idx][:, :, idx],
-            [self.channels[i] for i in idx],
-            [self.units[i] for i in idx],
-            self.scaling,
-            dict(self.settings),
-            None if self.n_averages is None else self.n_averages[np.ix_(idx, idx)],
+            frequencies=self.frequencies,
+            G=self.G[:, idx][:, :, idx],
+            channels=[self.channels[i] for i in idx],
+            units=[self.units[i] for i in idx],
+            scaling=self.scaling,
+            settings=dict(self.settings),
+            n_averages=None if self.n_averages is None else self.n_averages[np.ix_(idx, idx)],
         )
 
     def band(self, fmin: float, fmax: float) -> "CrossSpectralMatrix":
@@ -315,10 +315,9 @@ class CrossSpectralMatrix:
         if fmin > fmax:
             raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
         m = (self.frequencies >= fmin) & (self.frequencies <= fmax)
-        return CrossSpectralMatrix(
-            self.frequencies[m], self.G[m], self.channels, self.units, self.scaling, dict(self.settings),
-            self.n_averages,
-        )
+        return CrossSpectralMatrix(frequencies=self.frequencies[m], G=self.G[m], channels=self.channels,
+                                   units=self.units, scaling=self.scaling, settings=dict(self.settings),
+                                   n_averages=self.n_averages)
 
 
 @dataclass(frozen=True, eq=False)
@@ -413,8 +412,9 @@ class FRF:
             if p < 0:
                 fac[self.frequencies == 0] = np.nan
         H = self.H * fac[:, None, None]
-        return FRF(self.frequencies, H, self.coherence, self.inputs, self.outputs, self.estimator, kind,
-                   FRF_KIND_TABLE[kind].unit, dict(self.settings))
+        return FRF(frequencies=self.frequencies, H=H, coherence=self.coherence, inputs=self.inputs,
+                   outputs=self.outputs, estimator=self.estimator, kind=kind, units=FRF_KIND_TABLE[kind].unit,
+                   settings=dict(self.settings))
 
     def plot(self, *, output=0, input=0, fig=None):
         """Bode-style figure (magnitude dB, phase, coherence); imports matplotlib lazily. Returns the Figure.

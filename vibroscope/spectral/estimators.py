@@ -351,7 +351,8 @@ def csd_matrix(
     """
     acc, channels, units, settings, cnt = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
                                                       workers, cross=True, dtype=dtype, references=references)
-    return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), channels, units, scaling, settings, cnt)
+    return CrossSpectralMatrix(frequencies=acc.frequencies(), G=acc.result(scaling), channels=channels, units=units,
+                               scaling=scaling, settings=settings, n_averages=cnt)
 
 
 @_fill_doc
@@ -682,8 +683,8 @@ def frf(
     if kind is not None:
         check_option("kind", kind, FRF_KINDS)
         k_inf, unit = kind, FRF_KIND_TABLE[kind].unit
-    return FRF(G.frequencies, H, coh, [G.channels[i] for i in ii], [G.channels[o] for o in oo],
-               estimator, k_inf, unit, settings)
+    return FRF(frequencies=G.frequencies, H=H, coherence=coh, inputs=[G.channels[i] for i in ii],
+               outputs=[G.channels[o] for o in oo], estimator=estimator, kind=k_inf, units=unit, settings=settings)
 
 
 def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:

@@ -337,8 +337,8 @@ def frf_periodic(
                     first_sample=start, window="boxcar", detrend=False, periodicity_score=score,
                     excited_lines=[int(k) for k in np.flatnonzero(excited)], H_std=std_arr)
     freqs = scipy.fft.rfftfreq(L, 1.0 / fs)
-    return FRF(freqs, H.T[:, :, None], coh.T, [name], [channels[o] for o in oo], "periodic", k_inf, unit,
-               settings)
+    return FRF(frequencies=freqs, H=H.T[:, :, None], coherence=coh.T, inputs=[name], outputs=[channels[o] for o in oo],
+               estimator="periodic", kind=k_inf, units=unit, settings=settings)
 
 
 def _local_noise(v: np.ndarray, M: int, half_width: int = 16) -> np.ndarray:
