@@ -363,6 +363,7 @@ def diagnose(
     workers: int = 2,
     n_full: int = 2,
     progress: bool = False,
+    holdout: str = "auto",
 ) -> GapReport:
     """Diagnose the gap between `model` and the logged behaviour.
 
@@ -394,6 +395,10 @@ def diagnose(
         screening.
     progress : bool
         Show a progress bar over the candidates.
+    holdout : {'auto', 'last'}, optional
+        Several logs: ``'auto'`` (default) holds out the last log when every log is at one
+        input level, else the end of each log; ``'last'`` always holds out the last log (a
+        validation log the user has chosen, such as a benchmark's test part).
 
     Returns
     -------
@@ -452,7 +457,7 @@ def diagnose(
         # optimiser rejects that step by itself
         warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"scipy\.optimize")
         return _diagnose(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg,
-                         workers=workers, n_full=n_full, progress=progress)
+                         workers=workers, n_full=n_full, progress=progress, holdout=holdout)
 
 
 def _level_groups(us, masks, fs):
@@ -666,7 +671,7 @@ def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
 
 
 @one_blas_thread  # the fits run in a thread pool: a BLAS pool per thread only spins against it
-def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress) -> GapReport:
+def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout) -> GapReport:
     from tqdm.auto import tqdm
 
     t_start = time.perf_counter()
@@ -689,7 +694,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     in_ch0 = log_channels(model)[0][0]
     in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
     skips = [_skip_samples(model, fs, u.shape[1], transient_s) for u in us]
-    split = make_split(us, fs, skip=skips)
+    split = make_split(us, fs, skip=skips, holdout=holdout)
     sims = [LogSimulator(u, fs) for u in us]
     n_min = min(u.shape[1] for u in us)
     window = "hann"

@@ -155,7 +155,7 @@ LOG_LEVEL_RATIO = 1.5
 
 
 def make_split(us: list, fs: float, *, skip: list | None = None, validation_fraction: float = 1 / 3,
-               screen_s: float = 8.0) -> Split:
+               screen_s: float = 8.0, holdout: str = "auto") -> Split:
     """The fit/validation split.
 
     One log: the last `validation_fraction` of the record is held out when every input level
@@ -181,16 +181,26 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     screen_s : float, optional
         Shortest screening prefix in s after `skip` (extended until every input level is in
         it); default 8.0 (several logs split in time: shared among them, at least 4 s each).
+    holdout : {'auto', 'last'}, optional
+        Several logs: ``'auto'`` (default) as above; ``'last'``: the last log is held out
+        whatever the levels.
 
     Returns
     -------
     Split
+
+    Raises
+    ------
+    ValueError
+        If `holdout` is not one of the two.
     """
+    if holdout not in ("auto", "last"):
+        raise ValueError(f"holdout={holdout!r} must be 'auto' or 'last'")
     skip = skip or [0] * len(us)
     n_logs = len(us)
     if n_logs >= 2:
         rms = [float(np.sqrt(np.mean(np.atleast_2d(u)[0, sk:] ** 2))) for u, sk in zip(us, skip)]
-        if max(rms) > LOG_LEVEL_RATIO * max(min(rms), 1e-300):
+        if holdout == "auto" and max(rms) > LOG_LEVEL_RATIO * max(min(rms), 1e-300):
             parts = [_one_log_split(u, fs, sk, validation_fraction, max(4.0, 2 * screen_s / n_logs))
                      for u, sk in zip(us, skip)]
             desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}): each log "
