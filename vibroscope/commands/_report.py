@@ -9,12 +9,16 @@ __all__ = ["report_text", "stream_report_text", "decimation_text", "stream_summa
 
 
 def report_text(an, *, source: str = "", true_modes=None, verbose: bool = False) -> str:
-    """Human-readable report: record, signal faults, warnings, and the modes (beside true ones when given).
+    """Human-readable report: record, plan, signal faults, warnings, and the modes (beside true ones when given).
+
+    One report for both kinds of analysis: a whole read (:func:`vibroscope.pipeline.analyse_signals`)
+    and a streamed one (:func:`vibroscope.stream.analyse_stream`, ``an.streamed``: the record said
+    "streamed", no decimation, no faults, candidates or severity, which need the time series).
 
     Parameters
     ----------
     an : Analysis
-        From :func:`vibroscope.pipeline.analyse_signals`.
+        From :func:`vibroscope.pipeline.analyse_signals` or :func:`vibroscope.stream.analyse_stream`.
     source : str, optional
         What was analysed (the log's path), at the head of the first line.
     true_modes : ModalModel, optional
@@ -28,41 +32,40 @@ def report_text(an, *, source: str = "", true_modes=None, verbose: bool = False)
     -------
     str
     """
+    from vibroscope.faults import fault_lines, fault_summary
     from vibroscope.modal.methods import display_name
 
-    sig = an.signals
-    n_seg = an.settings.get("n_segments")
-    avg = f"{an.settings['n_averages']} of {n_seg} averages" if n_seg else f"{an.settings['n_averages']} averages"
-    lines = [f"{source}: {sig.n_channels} channels x {sig.n_samples} samples at {sig.fs:g} Hz "
-             f"({sig.duration:.2f} s){decimation_text(an.settings.get('decimation'))}; nperseg={an.settings['nperseg']} "
-             f"(df={sig.fs / an.settings['nperseg']:.4g} Hz, {avg})"]
+    s = an.settings
+    n_seg = None if an.streamed else s.get("n_segments")
+    avg = f"{s['n_averages']} of {n_seg} averages" if n_seg else f"{s['n_averages']} averages"
+    how_read = ", streamed" if an.streamed else decimation_text(s.get("decimation"))
+    lines = [f"{source}: {len(an.channels)} channels x {an.n_samples} samples at {an.fs:g} Hz "
+             f"({an.duration_s:.2f} s){how_read}; nperseg={s['nperseg']} (df={an.fs / s['nperseg']:.4g} Hz, {avg})"]
     how = display_name(an.modal.method)
-    if an.settings.get("input"):
-        lines.append(f"input {an.settings['input']} -> {len(an.settings['outputs'])} outputs, "
-                     f"{an.settings['estimator']} FRF, modes by {how}")
+    if s.get("input"):
+        lines.append(f"input {s['input']} -> {len(s['outputs'])} outputs, {s['estimator']} FRF, modes by {how}")
     else:
-        lines.append(f"output-only: {len(an.settings['outputs'])} responses, modes by {how}")
-    if sig.meta.get("input_choice"):  # the force-like channel taken as the input, or why none was
-        lines.append(sig.meta["input_choice"])
-    from vibroscope.faults import fault_lines, fault_summary
-
-    faults = tuple(f for f in getattr(an, "faults", ()) or () if not f.note)
-    notes = tuple(getattr(an, "notes", ()) or ())
+        lines.append(f"output-only: {len(s['outputs'])} responses, modes by {how}")
+    if an.input_choice:  # the force-like channel taken as the input, or why none was
+        lines.append(an.input_choice)
+    if an.plan is not None:
+        lines.append(an.plan.line())
+    faults = tuple(f for f in an.faults if not f.note)
+    notes = tuple(an.notes)
     if verbose:
         lines += [f"  fault: {line}" for line in fault_lines(faults)]
         lines += [f"  note: {line}" for line in fault_lines(notes)]
     elif faults:
         lines.append(f"  faults: {fault_summary(faults)} (details: --verbose or --json)")
     shown = {str(f) for f in faults + notes}
-    for w in an.warnings:
-        if w not in shown:
-            lines.append(f"  warning: {w}")
+    lines += [f"  warning: {w}" for w in an.warnings if w not in shown]
     mm = an.modal
     fstd = mm.extra.get("frequency_std_hz")
     zstd = mm.extra.get("damping_std")
-    ident = getattr(an, "identification", None)
-    unc = (isinstance(fstd, np.ndarray) and fstd.shape == mm.natural_frequencies.shape and np.any(np.isfinite(fstd))
-           and ident is not None and "bootstrap" in str(ident.settings.get("uncertainty")))
+    ident = an.identification
+    unc = (not an.streamed and isinstance(fstd, np.ndarray) and fstd.shape == mm.natural_frequencies.shape
+           and np.any(np.isfinite(fstd)) and ident is not None
+           and "bootstrap" in str(ident.settings.get("uncertainty")))
     lines.append(f"{'mode':>4} {'f_n [Hz]':>10}" + (f" {'+-std':>7}" if unc else "") + f" {'zeta [%]':>9}"
                  + (f" {'+-std':>7}" if unc else "")
                  + (f" {'true f_n':>10} {'err [%]':>8} {'true zeta':>9}" if true_modes is not None else "") + "  method")
@@ -79,14 +82,13 @@ def report_text(an, *, source: str = "", true_modes=None, verbose: bool = False)
         lines.append("   (no mode passed the physical-mode selection in the band)")
     elif not np.isfinite(mm.damping_ratios).all():
         lines.append(not_estimated(mm.method))
-    ident = getattr(an, "identification", None)
-    if ident is not None and ident.rejected:
+    if ident is not None and ident.rejected and not an.streamed:
         lines.append(f"  {len(ident.rejected)} candidates rejected (listed in the --json summary), e.g.:")
         for r in ident.rejected[:4]:
             lines.append(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
     if ident is not None and ident.settings.get("uncertainty") and unc:
         lines.append(f"  std: {ident.settings['uncertainty']}")
-    sev = getattr(an, "severity", None)
+    sev = an.severity
     if sev is not None:
         v = sev.velocity_rms_mm_s
         k = int(np.argmax(v))
@@ -94,6 +96,10 @@ def report_text(an, *, source: str = "", true_modes=None, verbose: bool = False)
                      f"max {v[k]:.3g} mm/s at {sev.channels[k]}; median {np.median(v):.3g} mm/s over "
                      f"{len(v)} channels" + (f" ({sev.note})" if sev.note else ""))
     return "\n".join(lines)
+
+
+#: the report of a streamed analysis is :func:`report_text` (one result type, one report)
+stream_report_text = report_text
 
 
 def decimation_text(dec: dict | None) -> str:
@@ -116,42 +122,6 @@ def decimation_text(dec: dict | None) -> str:
     if dec.get("factors"):
         return f"; decimated {dec['fs_in']:g} → {dec['fs_out']:g} Hz ({dec['reason']})"
     return f"; not decimated ({dec['reason']})"
-
-
-def stream_report_text(an, *, source: str = "") -> str:
-    """Human-readable report of a :class:`vibroscope.stream.StreamAnalysis`.
-
-    Parameters
-    ----------
-    an : StreamAnalysis
-        The streamed analysis.
-    source : str, optional
-        The log, named on the first line.
-
-    Returns
-    -------
-    str
-    """
-    from vibroscope.modal.methods import display_name
-
-    s = an.settings
-    lines = [f"{source}: {len(an.spectra.channels)} channels x {an.spectra.samples} samples at {an.spectra.fs:g} Hz "
-             f"({an.spectra.samples / an.spectra.fs:.2f} s), streamed; nperseg={s['nperseg']} "
-             f"(df={an.spectra.fs / s['nperseg']:.4g} Hz, {s['n_averages']} averages)"]
-    how = display_name(an.modal.method)
-    lines.append(f"input {s['input']} -> {len(s['outputs'])} outputs, {s['estimator']} FRF, modes by {how}"
-                 if s.get("input") else f"output-only: {len(s['outputs'])} responses, modes by {how}")
-    if s.get("input_choice"):  # the force-like channel taken as the input, or why none was
-        lines.append(s["input_choice"])
-    lines += [f"  warning: {w}" for w in an.warnings]
-    lines.append(f"{'mode':>4} {'f_n [Hz]':>10} {'zeta [%]':>9}  method")
-    for k, (f, z) in enumerate(zip(an.modal.natural_frequencies, an.modal.damping_ratios)):
-        lines.append(f"{k + 1:>4} {f:>10.3f} {percent(z):>9}  {an.modal.method}")
-    if len(an.modal.natural_frequencies) == 0:
-        lines.append("   (no mode passed the physical-mode selection in the band)")
-    elif not np.isfinite(an.modal.damping_ratios).all():
-        lines.append(not_estimated(an.modal.method))
-    return "\n".join(lines)
 
 
 def percent(z: float) -> str:
@@ -190,15 +160,13 @@ def not_estimated(method: str) -> str:
 
 
 def stream_summary(an, *, source: str | None = None) -> dict:
-    """The ``--json`` summary of a streamed analysis: ``source``, ``fs``, ``n_samples``, ``channels``,
-    ``units``, ``input``, ``input_choice`` (when the force-like channel was looked for: see
-    :func:`vibroscope.commands._read_log.grid_input`), ``outputs``, ``warnings``, ``modes``, ``rejected_modes``, ``settings``
-    (``streamed: true``).
+    """The ``--json`` summary of a streamed analysis: :func:`vibroscope.pipeline.summary_dict`, the
+    one summary of the one result type (kept under this name for its callers).
 
     Parameters
     ----------
-    an : StreamAnalysis
-        The streamed analysis.
+    an : Analysis
+        The streamed analysis (:func:`vibroscope.stream.analyse_stream`).
     source : str, optional
         The log.
 
@@ -207,15 +175,6 @@ def stream_summary(an, *, source: str | None = None) -> dict:
     dict
         JSON-serialisable.
     """
-    from vibroscope.modal.automatic import modes_document
-    from vibroscope._checks import jsonable as _jsonable
+    from vibroscope.pipeline import summary_dict
 
-    doc = modes_document(an.modal, an.identification.rejected if an.identification is not None else ())
-    sp = an.spectra
-    return _jsonable({"source": source, "fs": sp.fs, "n_samples": sp.samples, "duration_s": sp.samples / sp.fs,
-                      "channels": list(sp.channels), "units": dict(zip(sp.channels, sp.units)),
-                      "input": an.settings.get("input"), "outputs": an.settings.get("outputs"),
-                      "warnings": list(an.warnings), "modal_method": an.modal.method, "modes": doc["modes"],
-                      "rejected_modes": doc["rejected"],
-                      **({"input_choice": an.settings["input_choice"]} if an.settings.get("input_choice") else {}),
-                      "settings": {k: v for k, v in an.settings.items() if k not in ("outputs", "input_choice")}})
+    return summary_dict(an, source=source)

@@ -68,7 +68,7 @@ def run_stream(args) -> int:
     from vibroscope.commands._options import select_frequencies as _select_freqs
     from vibroscope.errors import VibroscopeError
     from vibroscope.commands._read_log import grid_input, looks_for_input
-    from vibroscope.commands._report import stream_report_text
+    from vibroscope.commands._report import report_text
     from vibroscope.commands._writers import write_outputs
     from vibroscope.stream import analyse_stream
 
@@ -91,7 +91,7 @@ def run_stream(args) -> int:
         import dataclasses
 
         an = dataclasses.replace(an, settings={**an.settings, "input_choice": choice})
-    print(stream_report_text(an, source=str(args.log)))
+    print(report_text(an, source=str(args.log)))
     # the spectra, FRFs, modes and stabilization diagram need no time series: drawn and recorded as
     # for a whole read (no signals.png, kinematics.png or /signals entities); the summary goes with
     # them, so that all outputs appear together or none

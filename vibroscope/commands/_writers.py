@@ -26,11 +26,11 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
 
     Parameters
     ----------
-    an : Analysis or StreamAnalysis
+    an : Analysis
         The analysis (:func:`vibroscope.pipeline.analyse_signals`), or a streamed one
         (:func:`vibroscope.stream.analyse_stream`: no time series, so no ``signals.png``,
-        ``kinematics.png`` or ``/signals`` entities; its `json_path` summary is
-        :func:`stream_summary`).
+        ``kinematics.png`` or ``/signals`` entities); its `json_path` summary is
+        :func:`vibroscope.pipeline.summary_dict`.
     log : Path
         The analysed log (named in the summary and the recording; never written).
     coords : Path, optional
@@ -61,7 +61,6 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     from vibroscope.commands._outputs import AtomicOutputs, check_outputs, preloaded
     from vibroscope.provenance import json_report
     from vibroscope.io.coords import line_coords, read_coords
-    from vibroscope.commands._report import stream_summary
     from vibroscope.pipeline import summary_dict
 
     check_outputs({"--json": json_path, "--rrd": rrd, "--figures": figures}, {"log": log, "coordinates": coords})
@@ -71,7 +70,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     ident = getattr(an, "identification", None)
     stab = ident.stabilization if ident is not None else None
     synth = ident.lsfd.synthesize() if ident is not None and ident.lsfd is not None and an.frf is not None else None
-    sig = getattr(an, "signals", None)  # a streamed analysis holds the spectra only
+    sig = an.signals  # None: a streamed analysis holds the spectra only
     acc = [] if sig is None else [c for c, u in zip(sig.channels, sig.units) if c in outs and u in ("m/s^2", "m/s²")]
     ods_shapes = []
     if ods:
@@ -91,8 +90,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     preloaded()  # the libraries imported in the background (run): done before the figure workers fork
     with AtomicOutputs(inputs=[log, coords]) as tx:
         if json_path:
-            d = (summary_dict(an, source=str(log), true_modes=true_modes) if sig is not None
-                 else stream_summary(an, source=str(log)))
+            d = summary_dict(an, source=str(log), true_modes=true_modes)
             tx.file(json_path).write_text(json.dumps(json_report(d), indent=2))
             written["json"] = json_path
             done.append(f"summary: {json_path}")
