@@ -119,8 +119,9 @@ class AnalysisPlan:
         """
         rate = (f"{self.fs_in:g} → {self.fs:g} Hz (factors {list(self.factors)})" if self.factors
                 else f"{self.fs:g} Hz")
-        lo = "-" if self.band[0] is None else f"{self.band[0]:.4g}"
-        parts = [f"plan: {rate}", f"band up to {self.fmax:.4g} Hz, modes in {lo}–{self.band[1]:.4g} Hz",
+        modes = (f"modes below {self.band[1]:.4g} Hz" if self.band[0] is None
+                 else f"modes in {self.band[0]:.4g}–{self.band[1]:.4g} Hz")
+        parts = [f"plan: {rate}", f"band up to {self.fmax:.4g} Hz, {modes}",
                  f"nperseg {self.nperseg}", f"method {self.method}"]
         if self.f_low is not None:
             parts.append(f"lowest resonance {self.f_low:.4g} Hz")
