@@ -395,7 +395,7 @@ def _decimate_stages(data: np.ndarray, stages: list) -> np.ndarray:
 METHODS = METHOD_CHOICES
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class IdentifySettings:
     """Settings of one identification pass (see :func:`analyse_signals` for their meaning).
 
@@ -770,9 +770,10 @@ def _execute(plan: AnalysisPlan, sig: Signals, undecimated: Signals, *, auto_npe
     :func:`_identify_refined`), the spectra, the severity of the record before any decimation."""
     from vibroscope import modal
 
-    s = IdentifySettings(plan.input, plan.outputs, plan.nperseg, plan.window, plan.fmin, plan.fmax, n_modes,
-                         plan.estimator, prominence, method,
-                         plan.f_low, plan.band, None if select is None else tuple(select), plan.period)
+    s = IdentifySettings(input=plan.input, outputs=plan.outputs, nperseg=plan.nperseg, window=plan.window,
+                         fmin=plan.fmin, fmax=plan.fmax, n_modes=n_modes, estimator=plan.estimator,
+                         prominence=prominence, method=method, f_low=plan.f_low, band=plan.band,
+                         select=None if select is None else tuple(select), period=plan.period)
     G, h, ident, nperseg = _identify_refined(sig, s, auto=auto_nperseg, gappy=gappy, notes=notes)
     mm = ident.modes
     psd = G.psd()
