@@ -22,7 +22,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     With `find_input` and no `input`, the log's one force-like channel that moves
     (:func:`vibroscope.io.select.find_force_input`: a Wrench force, a field in N, or one named
     force/command/input, outside the responses' topics) is the input; the line saying so (or why
-    none was taken) is ``signals.meta["input_choice"]``, printed by :func:`report_text` and
+    none was taken) is ``signals.meta["input_choice"]``, printed by :func:`vibroscope.commands._report.report_text` and
     written to the summary JSON.
 
     Parameters

@@ -46,7 +46,7 @@ def stream_kw(args) -> dict:
 def run_stream(args) -> int:
     """``vibroscope analyse --stream LOG``: the log read block by block (:func:`vibroscope.stream.analyse_stream`);
     prints the report and writes the ``--json`` summary, the figures and the rerun recording of the
-    spectra, FRFs and modes (:func:`write_outputs`; no time-series figure or entity: a streamed
+    spectra, FRFs and modes (:func:`vibroscope.commands._writers.write_outputs`; no time-series figure or entity: a streamed
     analysis never holds the record).
 
     Parameters
