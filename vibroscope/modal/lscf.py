@@ -105,8 +105,10 @@ def lscf(
     max_damping : float, optional
         Poles with ``ζ`` outside ``(0, max_damping]`` are discarded; default 0.2.
     tol_frequency, tol_damping : float, optional
-        Stability criteria against the nearest pole of the previous order: relative frequency
-        change ≤ `tol_frequency` (default 1 %), relative damping change ≤ `tol_damping` (5 %).
+        Stability criteria against the pole's match in the previous order (among the poles within
+        `tol_frequency`, the nearest in pole distance plus ``1 − MAC``; see
+        :func:`vibroscope.modal.ssi.stability_codes`): relative frequency change ≤ `tol_frequency`
+        (default 1 %), relative damping change ≤ `tol_damping` (5 %).
     mac_min : float, optional
         Smallest MAC with that pole accepted as a stable shape; default 0.98.
 
