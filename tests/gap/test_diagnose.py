@@ -13,7 +13,7 @@ from scipy import signal
 from vibroscope.gap import diagnose
 from vibroscope.gap.diagnosis import as_lumped
 from vibroscope.gap.measure import input_levels, make_split, noise_floor, nrmse
-from vibroscope.models.elements import CubicSpring, Damper, Friction, Spring
+from vibroscope.models.elements import Backlash, CubicSpring, Damper, Friction, Spring
 from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
 from vibroscope.models.modelfile import TransferFunctionModel, loads_model
 from vibroscope.models.simulate import simulate
@@ -190,3 +190,25 @@ def test_a_log_too_gappy_to_diagnose_is_named(u20):
     gappy = Signals(x, sig.fs, sig.channels, sig.units, sig.t0, {"source": "run7.mcap"})
     with pytest.raises(ValueError, match=r"^run7\.mcap: missing samples .* needs .*: give a log with fewer gaps"):
         diagnose(nominal(), [gappy])
+
+
+@pytest.mark.slow  # the full diagnosis of a 1-DOF case and the forward selection, ~40-90 s wall
+def test_friction_and_a_clearance_at_one_spring_are_both_named():
+    """Coulomb friction and a clearance in the same spring (1-DOF, 13 Hz): fitted alone, the
+    friction bends the spring to mimic the clearance; the added clearance is fitted jointly with
+    the linear parameters, so both are named and the gap closes to the noise floor."""
+    base = LumpedModel((Dof("m1", 1.12),), (Spring(("m1", "ground"), k=7460.0), Damper(("m1", "ground"), c=3.8)),
+                       (Input("m1", channel=IN),), (Output("m1", "acceleration", "/imu/m1.linear_acceleration.x"),),
+                       "one mass")
+    truth = replace(base, elements=(Backlash(("m1", "ground"), k=7460.0, gap=1.5e-4), base.elements[1],
+                                    Friction(("m1", "ground"), force_=1.0)))
+    u = excitation(40000, seed=5) * 0.3
+    s = simulate(truth, u, FS)
+    y = np.asarray(s.data[1:])
+    y = y + 0.02 * np.std(y) * np.random.default_rng(6).standard_normal(y.shape)
+    log = Signals(np.vstack([u, y]), FS, base.input_channels() + base.output_channels(), ["N", "m/s^2"])
+    r = diagnose(base, log, effects=["coulomb_friction", "backlash", "cubic_stiffness"])
+    assert set(r.verdicts) == {"coulomb_friction", "backlash"}, r.summary()
+    clear = next(c for c in r.candidates if c.effect == "backlash")
+    assert clear.parameters["gap_m"] == pytest.approx(1.5e-4, rel=0.25)
+    assert r.gap_after < 1.5 * r.noise_floor

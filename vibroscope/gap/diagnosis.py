@@ -126,6 +126,9 @@ UNEXPLAINED_SCORE = 0.3
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
 ADD_FACTOR = 0.5
+#: an addition within REFINE_FACTOR (but not ADD_FACTOR) times the current penalised excess is
+#: fitted further (jointly with the linear parameters) before the decision
+REFINE_FACTOR = 0.8
 #: without level dependence of the BLA, a nonlinear verdict needs a penalised held-out excess gap
 #: below this factor times the best linear explanation's
 NL_MARGIN = 0.8
@@ -1179,7 +1182,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     shares = []
     if chosen and chosen[0][3] is not None:
         chosen, shares = _forward_selection(chosen[0], per_class, sims, ys, split, held_out, key, k_before,
-                                            floor, gap_before, workers)
+                                            floor, gap_before, workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l)
         if len(chosen) > 1:
             # the combination polished jointly with the linear parameters, at full accuracy
             chain = [(c[3], c[4]) for c in chosen]
@@ -1272,11 +1275,15 @@ def _where_key(where: dict) -> str:
     return str(where.get("dof") or where.get("side") or "model")
 
 
-def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers):
+def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers,
+                       lin=None, model=None, lo_l=None, hi_l=None):
     """Forward selection of further effects on top of the winner [Ljung 1999, sec. 16.4].
 
     Each other effect class (its best screened location) is added to the current augmented
-    model and only its own parameters are fitted (screening prefix, coarse integration); the
+    model and its own parameters are fitted (screening prefix, coarse integration), then again
+    jointly with the linear parameters of `lin` (the chosen effects kept): a first effect fitted
+    alone bends the linear parameters to mimic the second (a spring softened for a clearance),
+    and only a joint fit can undo that; the better on the fitting data is kept. The
     best addition is kept when its penalised held-out excess gap falls below
     :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
     floor explain); then the next, up to three effects. Returns the chosen candidates
@@ -1294,6 +1301,22 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
                  if eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)][:4]
         if not cands:
             break
+
+        nl = len(lin) if lin is not None else 0
+        chain = [(c[3], c[4]) for c in chosen]
+
+        def joint_fit(s, x0, nfev, chain=chain):
+            """The added effect's parameters and the linear ones fitted together (the chosen
+            effects kept): ``(p, fitting gap, model, linear base, x)``."""
+            def build_j(x, s=s):
+                m_ = lin.apply(model, x[:nl])
+                for s_c, p_c in chain:
+                    m_ = s_c.apply(m_, p_c)
+                return s.apply(m_, x[nl:])
+
+            x, gj, _ = fit_time_domain(build_j, x0, np.concatenate([lo_l, s.lower]), np.concatenate([hi_l, s.upper]),
+                                       sims, ys, split.fit, sp, fast=True, max_nfev=nfev)
+            return x[nl:], gj, build_j(x), lin.apply(model, x[:nl]), x
 
         def add(s, cur_m=cur_m):
             p0s = [per_class[s.effect][1]] + list(s.starts[:2])
@@ -1316,23 +1339,42 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
 
             p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
                                          max_nfev=4 + 2 * s.n)
-            m_new = build(p)
+            m_new, base_new, x_j = build(p), chosen[-1][5], None
+            if nl:
+                v0, vb = lin.values(model), lin.values(chosen[-1][5])
+                th0 = np.array([math.log(vb[n] / v0[n]) if v0[n] > 0 and vb[n] > 0 else 0.0 for n in lin.names])
+                try:
+                    pj, gj, mj, bj, xj = joint_fit(s, np.concatenate([np.clip(th0, lo_l, hi_l), p]), 4)
+                except (ValueError, TypeError):
+                    gj = float("inf")
+                if gj < gfit:
+                    p, gfit, m_new, base_new, x_j = pj, gj, mj, bj, xj
             g, yh = held_out(m_new, fast=True)
-            return s, p, m_new, g, yh, gfit
+            return s, p, m_new, g, yh, gfit, base_new, x_j
 
         with ThreadPoolExecutor(max(1, workers)) as ex:
             tries = [r for r in ex.map(add, cands) if r is not None]
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:
             break
-        s, p, m_new, g, yh, gfit = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
-        if not key(g, n_par + s.n) < ADD_FACTOR * key(cur_c.gap_after, n_par):
+        s, p, m_new, g, yh, gfit, base_new, x_j = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
+        k_cur = key(cur_c.gap_after, n_par)
+        if x_j is not None and ADD_FACTOR * k_cur <= key(g, n_par + s.n) < REFINE_FACTOR * k_cur:
+            # promising but not yet significant: the joint fit is carried further before deciding
+            try:
+                pr, gr, mr, br, _ = joint_fit(s, x_j, 10)
+                if gr < gfit:
+                    gh, yhr = held_out(mr, fast=True)
+                    p, gfit, m_new, base_new, g, yh = pr, gr, mr, br, gh, yhr
+            except (ValueError, TypeError):
+                pass
+        if not key(g, n_par + s.n) < ADD_FACTOR * k_cur:
             break
         n_par += s.n
         used.add(s.effect)
         c_new = Candidate(s.effect, dict(s.where) | s.qualifiers(p), s.describe(p), g,
                           1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0, gfit, s.n, _dumps(m_new))
-        chosen.append((c_new, m_new, yh, s, p, first[5]))
+        chosen.append((c_new, m_new, yh, s, p, base_new))
         cur_c, cur_m = c_new, m_new
         shares_g.append(g)
     total = shares_g[0] - shares_g[-1]
