@@ -24,9 +24,10 @@ Procedure
    from the FRF fit or from the nominal, whichever fits better; the refit is never worse on
    the fitting data than the nominal itself (both are reported in ``meta["refit"]``).
 5. **Level evidence**: the BLA per log and excitation level; its change from the lowest to
-   the highest level is tested against the H1 uncertainty (Bendat & Piersol), and the
-   resonances' natural frequency and damping per level are estimated
-   (:func:`~vibroscope.gap.levels.level_blas`).
+   the highest level is tested line by line against the H1 uncertainty (Bendat & Piersol),
+   and the resonances' natural frequency and damping per level are estimated
+   (:func:`~vibroscope.gap.levels.level_blas`); a natural frequency that moves beyond its
+   uncertainty (less the refitted model's own change) makes the BLA level dependent too.
 6. **Candidates**: start values derived from the data (the residual regressed on each element
    law's force computed from the refitted motion; clearance and limit levels from the
    distributions of the relative displacement and of the input); linear effects (time
@@ -47,7 +48,8 @@ Procedure
    best admissible candidate's score is below :data:`UNEXPLAINED_SCORE`, else that candidate,
    polished jointly with the linear parameters at full accuracy.
 8. **Forward selection**: each other class is added to the verdict's model (its own
-   parameters fitted); the best is kept when the penalised excess falls below
+   parameters fitted, then jointly with the linear ones; a promising addition is fitted
+   further before the decision); the best is kept when the penalised excess falls below
    :data:`ADD_FACTOR` times the current one, up to three effects, then the combination is
    polished jointly; each effect's share of the shrink is reported.
 

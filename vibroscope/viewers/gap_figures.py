@@ -731,9 +731,9 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
     -----
     Top: ``20 log10 |H1|`` of the output fitted for the first mode, one curve per level
     (lowest dark blue to highest orange), within the band around the modes (+-20 % of the outermost
-    natural frequencies, clipped to the analysed band). Bottom: per mode, ``f_n`` and
-    ``zeta`` against the input RMS (log axis) with +-1 standard deviation error bars; the
-    title states the test's verdict.
+    natural frequencies, clipped to the analysed band). Bottom: per mode, the relative change
+    of ``f_n`` from its lowest fitted level (%) and ``zeta`` against the input RMS (log axis)
+    with +-1 standard deviation error bars; the title states the test's verdict.
     """
     plt = pyplot()
     if ax is None:
@@ -776,11 +776,14 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
         ze = np.array([lv.damping_ratios[j] for lv in levels])
         sz = np.array([lv.damping_std[j] for lv in levels])
         lab = f"mode {j + 1} ({m.frequency_hz:.4g} Hz)" + (f": {m.trend}" if m.trend != "none" else "")
-        axes[1].errorbar(rms, fn, yerr=sf, marker="o", capsize=3, color=f"C{j}", label=lab)
+        ok = np.flatnonzero(np.isfinite(fn))
+        f_ref = fn[ok[0]] if ok.size else np.nan  # each mode against its lowest fitted level: a 1 % shift shows
+        axes[1].errorbar(rms, 100 * (fn / f_ref - 1), yerr=100 * sf / f_ref, marker="o", capsize=3, color=f"C{j}",
+                         label=lab)
         axes[2].errorbar(rms, 100 * ze, yerr=100 * sz, marker="o", capsize=3, color=f"C{j}", label=lab)
     from matplotlib.ticker import FixedLocator, FormatStrFormatter, NullLocator
 
-    for a, yl in ((axes[1], "natural frequency f_n [Hz]"), (axes[2], "damping ratio ζ [%]")):
+    for a, yl in ((axes[1], "f_n change from the lowest level [%]"), (axes[2], "damping ratio ζ [%]")):
         a.set_xscale("log")
         if rms.size:
             # one tick per level, thinned where two levels lie within 15 % (labels would collide)
