@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import scipy.signal
@@ -332,6 +332,7 @@ def analyse_signals(
     method: str = "auto",
     select: Sequence[float] | None = None,
     decimation: bool = True,
+    on_signals: Callable[[Signals, tuple], None] | None = None,
 ) -> Analysis:
     """Spectra, FRFs, coherence and modal vectors of a record.
 
@@ -383,6 +384,11 @@ def analyse_signals(
     decimation : bool, optional
         Decimate to the band (:func:`decimate`) when ``fmax < 0.4 fs`` (default True); False
         analyses the record at its own rate.
+    on_signals : callable, optional
+        Called once as ``on_signals(signals, outputs)`` with the record the modes are identified
+        from (faults applied, decimated: ``Analysis.signals``) and the response channels, before
+        the identification: outputs that need only the time series start from them while the
+        modes are computed (:class:`vibroscope.viewers.ahead.TimeSeriesAhead`).
 
     Returns
     -------
@@ -547,6 +553,8 @@ def analyse_signals(
     if auto:
         nperseg = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs,
                                                     fmin=fmin or (f_low / 6 if f_low else None)))
+    if on_signals is not None:
+        on_signals(sig, tuple(outputs))
     refinements = []
     meth = method
     while True:

@@ -207,8 +207,9 @@ def run(args) -> int:
     """
     from vibroscope.commands._options import select_frequencies as _select_freqs
     from vibroscope.commands._outputs import (check_out_dir, check_outputs, default_output, preload_outputs,
-                                              resolve_outputs)
+                                              preloaded, resolve_outputs)
     from vibroscope.errors import VibroscopeError
+    from vibroscope.viewers.ahead import TimeSeriesAhead
 
     check_out_dir(args.out)
     resolve_outputs(args, ("json", "rrd", "figures"), args.out)  # `--out res --json s.json`: res/s.json
@@ -252,26 +253,36 @@ def run(args) -> int:
         print(f"streaming {args.log} block by block: {why}")
         return run_stream(args)
     select = _select_freqs(args.select)
-    try:
-        an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
-                         find_input=not getattr(args, "output_only", False), nperseg=args.nperseg, fmin=args.fmin,
-                         fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator, method=args.method,
-                         select=select, decimation=not getattr(args, "no_decimate", False),
-                         max_memory=budget)
-    except ValueError as exc:
-        raise VibroscopeError(f"{args.log}: {exc}") from None
-    nyq = an.psd.frequencies[-1]
-    for f in args.ods or ():  # before the report: nothing is printed as done that will not be written
-        if f > nyq:
-            raise VibroscopeError(f"--ods {f:g}: above the analysed band's top, {nyq:g} Hz (the Nyquist frequency of "
-                                  f"{an.signals.fs:g} Hz)")
-    if args.coords:  # the rows against the channels analysed, before the report (one line if they differ)
-        from vibroscope.io.coords import read_coords
+    # what needs only the time series (integrals, signals and kinematics figures) is made in a worker
+    # process while the modes are identified on the other core (the background imports joined first:
+    # no worker inherits a held import lock)
+    ahead = TimeSeriesAhead(figures=bool(figures), kinematics=bool(rrd) or args.spawn)
 
-        read_coords(args.coords, an.settings["outputs"])
-    print(report_text(an, source=str(args.log), verbose=getattr(args, "verbose", False)))
-    write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
-                  spawn=args.spawn, ods=args.ods)
+    def on_signals(sig, outputs) -> None:
+        preloaded()
+        ahead.start(sig, outputs)
+
+    with ahead:
+        try:
+            an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
+                             find_input=not getattr(args, "output_only", False), nperseg=args.nperseg, fmin=args.fmin,
+                             fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator, method=args.method,
+                             select=select, decimation=not getattr(args, "no_decimate", False),
+                             max_memory=budget, on_signals=on_signals)
+        except ValueError as exc:
+            raise VibroscopeError(f"{args.log}: {exc}") from None
+        nyq = an.psd.frequencies[-1]
+        for f in args.ods or ():  # before the report: nothing is printed as done that will not be written
+            if f > nyq:
+                raise VibroscopeError(f"--ods {f:g}: above the analysed band's top, {nyq:g} Hz (the Nyquist "
+                                      f"frequency of {an.signals.fs:g} Hz)")
+        if args.coords:  # the rows against the channels analysed, before the report (one line if they differ)
+            from vibroscope.io.coords import read_coords
+
+            read_coords(args.coords, an.settings["outputs"])
+        print(report_text(an, source=str(args.log), verbose=getattr(args, "verbose", False)))
+        write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
+                      spawn=args.spawn, ods=args.ods, ahead=ahead)
     return 0
 
 
@@ -757,7 +768,7 @@ def decimation_text(dec: dict | None) -> str:
 
 
 def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,
-                  true_modes=None, ods=None) -> dict:
+                  true_modes=None, ods=None, ahead=None) -> dict:
     """Write the summary JSON, the rerun recording and the figures of an analysis, atomically.
 
     With `ods` (frequencies in Hz) the operating deflection shapes at those frequencies (from the
@@ -790,6 +801,9 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         Reference modes, written beside the identified ones.
     ods : sequence of float, optional
         Operating deflection shape frequencies in Hz.
+    ahead : TimeSeriesAhead, optional
+        The integrals and time-series figures made while the modes were identified
+        (:class:`vibroscope.viewers.ahead.TimeSeriesAhead`), taken instead of computing them again.
 
     Returns
     -------
@@ -839,7 +853,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             written["json"] = json_path
             done.append(f"summary: {json_path}")
         kin = None
-        if acc and (figures or rrd or spawn):  # integrated once, for the figure and the recording
+        early = ahead is not None and sig is not None and ahead.holds(sig, acc)
+        if acc and (figures or rrd or spawn) and not early:  # integrated once, for the figure and the recording
             from vibroscope.spectral.integration import velocity_and_displacement
 
             a = an.signals.select(acc)
@@ -852,7 +867,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             tmp = tx.directory(figures)
             jobs = figure_jobs(tmp, signals=sig, psd=an.psd, frf=an.frf, modal=an.modal, sv=an.singular_values,
                                coords=sc.as_mapping(), true_modes=true_modes, stabilization=stab, synthesized=synth,
-                               kinematics=(an.signals.select(acc), *kin) if kin else None)
+                               kinematics=(an.signals.select(acc), *kin) if kin else None,
+                               ahead=ahead if early else None)
             jobs += [(lambda o=o: plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png")
                      for o in ods_shapes]
             pending = PendingFigures(jobs)
@@ -862,6 +878,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 from vibroscope.viewers.rerun_view import log_analysis
 
                 modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
+                if early and acc:
+                    kin = ahead.kinematics()
                 path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
                                     coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
                                     spawn=spawn and not rrd,  # a recording under its final name is opened below
