@@ -110,16 +110,20 @@ def log_stabilization(rec, st, ftl: str) -> None:
     import rerun as rr
 
     fac = 1e6 if ftl == "frequency_uHz" else 1e3
+    orders = np.unique(st.order)
     for code, (name, colour, marker) in STABILITY_CLASSES.items():
-        for order in np.unique(st.order):
+        style = None  # one archetype per class, logged on each of its series (built once)
+        for order in orders:
             m = (st.stable == code) & (st.order == order)
             if not m.any():
                 continue
             idx = np.round(np.asarray(st.frequency[m]) * fac).astype(np.int64)
-            idx, first = np.unique(idx, return_index=True)
+            idx = np.unique(idx)
             ent = f"/stabilization/{name}/order_{int(order):03d}"
-            rec.log(ent, rr.SeriesPoints(colors=colour, markers=marker, marker_sizes=2.0 if code == 3 else 1.5,
-                                         names=f"{name.replace('_', ' ')}"), static=True)
+            if style is None:
+                style = rr.SeriesPoints(colors=colour, markers=marker, marker_sizes=2.0 if code == 3 else 1.5,
+                                        names=f"{name.replace('_', ' ')}")
+            rec.log(ent, style, static=True)
             rec.send_columns(ent, indexes=[rr.TimeColumn(ftl, sequence=idx)],
                              columns=rr.Scalars.columns(scalars=np.full(idx.size, float(order))))
 
