@@ -64,12 +64,13 @@ def test_drawn_figures_are_written_in_the_job_order_beside_the_drawn_ones(tmp_pa
     assert not multiprocessing.active_children()
 
 
-def test_nothing_asked_starts_no_worker():
+def test_nothing_asked_or_a_record_too_large_starts_no_worker():
     sig = syn.signals()
-    with TimeSeriesAhead(figures=False, kinematics=False) as ahead:
-        ahead.start(sig, list(sig.channels))
-        assert not ahead.holds(sig, list(sig.channels)) and ahead.drawn(sig) == {}
-    assert not multiprocessing.active_children()
+    for kw in (dict(figures=False, kinematics=False), dict(figures=True, kinematics=True, max_bytes=sig.data.nbytes - 1)):
+        with TimeSeriesAhead(**kw) as ahead:
+            ahead.start(sig, list(sig.channels))
+            assert not ahead.holds(sig, list(sig.channels)) and ahead.drawn(sig) == {}
+        assert not multiprocessing.active_children()
 
 
 def test_the_pipeline_hands_over_the_record_it_identifies_from():

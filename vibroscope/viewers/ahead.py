@@ -21,10 +21,15 @@ import functools
 import io
 import sys
 
-__all__ = ["TimeSeriesAhead", "ACCELERATION_UNITS"]
+__all__ = ["TimeSeriesAhead", "ACCELERATION_UNITS", "MAX_BYTES"]
 
 #: units of the channels integrated to velocity and displacement (those of ``write_outputs``)
 ACCELERATION_UNITS = ("m/s^2", "m/s²")
+
+#: largest record (bytes of its samples) worked on ahead: the integrals come back to the parent
+#: pickled (twice the record's size in the worker, in the pipe and in the parent for a moment), so a
+#: record near the memory budget is left to the outputs, which integrate it in place
+MAX_BYTES = 256 * 2**20
 
 #: the tasks of the running :class:`TimeSeriesAhead`, read by its forked worker (inherited with the
 #: parent's memory: nothing is pickled but an index and the results)
@@ -81,10 +86,14 @@ class TimeSeriesAhead:
         Draw ``kinematics.png`` and ``signals.png``.
     kinematics : bool
         Integrate the accelerations (for the figure or the recording).
+    max_bytes : int, optional
+        Largest record (bytes of its samples) worked on ahead; default :data:`MAX_BYTES`
+        (256 MiB). A larger one is left to the outputs.
     """
 
-    def __init__(self, *, figures: bool, kinematics: bool):
+    def __init__(self, *, figures: bool, kinematics: bool, max_bytes: int = MAX_BYTES):
         self._figures, self._kin = bool(figures), bool(kinematics)
+        self._max_bytes = int(max_bytes)
         self._pool = None
         self._results: dict = {}
         self._signals = None
@@ -104,7 +113,8 @@ class TimeSeriesAhead:
             The response channels; those in m/s² are integrated.
         """
         global _TASKS
-        if self._pool is not None or not (self._figures or self._kin) or not sys.platform.startswith("linux"):
+        if (self._pool is not None or not (self._figures or self._kin) or not sys.platform.startswith("linux")
+                or signals.data.nbytes > self._max_bytes):
             return
         acc = [c for c, u in zip(signals.channels, signals.units) if c in outputs and u in ACCELERATION_UNITS]
         tasks = {}
