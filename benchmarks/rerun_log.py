@@ -59,8 +59,9 @@ def main() -> None:
     sig = Signals(rng.standard_normal((args.channels, args.samples)), fs,
                   [f"/imu/s{k}.linear_acceleration.z" for k in range(args.channels)], ["m/s^2"] * args.channels)
     f = np.linspace(0.0, fs / 2, args.bins)
-    psd = Spectrum(f, rng.random((args.spectra, args.bins)) + 1e-3, [f"/fleet/log{k:04d}.z" for k in range(args.spectra)],
-                   ["m^2/s^4/Hz"] * args.spectra, "density", {"fs": fs})
+    psd = Spectrum(frequencies=f, values=rng.random((args.spectra, args.bins)) + 1e-3,
+                   channels=[f"/fleet/log{k:04d}.z" for k in range(args.spectra)],
+                   units=["m^2/s^4/Hz"] * args.spectra, scaling="density", settings={"fs": fs})
     n_total = args.channels * args.samples
     with tempfile.TemporaryDirectory() as d:
         d = Path(d)

@@ -134,7 +134,7 @@ def _nonlinear_seeds() -> list[str]:
     """Lumped models with every nonlinear element type (backlash, friction, MR damper, Bouc-Wen)."""
     from vibroscope.models.elements import Backlash, Friction, MRDamper
     from vibroscope.models.modelfile import dumps_model
-    from vibroscope.models.simulate import boucwen_benchmark_model
+    from vibroscope.models.boucwen_benchmark import boucwen_benchmark_model
 
     chain = LumpedModel.chain([1.0, 2.0], [1e4, 2e4], [1.0, 0.0], nonlinear=(
         Backlash(("m1", "m2"), k=1e5, gap=1e-3), Friction(("m2", "ground"), force_=2.0, v_eps=0.01),

@@ -291,7 +291,8 @@ def test_modal_names_no_json_it_was_not_asked_for(tmp_path, capsys):
     import numpy as np
 
     rej = Rejected(12.5, 0.02, "not stable across orders")
-    ident = Identification(ModalModel(np.array([5.0]), np.array([0.01]), np.ones((1, 2)), ("a", "b"), "lscf"),
+    ident = Identification(ModalModel(natural_frequencies=np.array([5.0]), damping_ratios=np.array([0.01]),
+                                      shapes=np.ones((1, 2)), points=("a", "b"), method="lscf"),
                            [rej], None, {})
     _print_modes(ident, None)
     out = capsys.readouterr().out

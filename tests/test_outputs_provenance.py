@@ -140,7 +140,7 @@ def test_uff_files_carry_a_dataset_151_and_read_back_the_same(tmp_path):
         np.testing.assert_array_equal(x, y)
     f = np.linspace(1.0, 50.0, 50)
     H = (1.0 / (1.0 - (f / 20.0) ** 2 + 0.1j * f / 20.0))[:, None, None]
-    frf = FRF(f, H, np.ones((50, 1)), ("2+X",), ("1+X",), "H1")
+    frf = FRF(frequencies=f, H=H, coherence=np.ones((50, 1)), inputs=("2+X",), outputs=("1+X",), estimator="H1")
     a = write_frf_uff58(frf, tmp_path / "a58.uff")
     b = write_frf_uff58(frf, tmp_path / "b58.uff")
     _mark_uff(b, uff_header())
@@ -152,8 +152,8 @@ def test_uff_files_carry_a_dataset_151_and_read_back_the_same(tmp_path):
     from vibroscope.io.frf_files import write_modes_uff55
     from vibroscope.modal import ModalModel
 
-    mm = ModalModel(np.array([10.0, 20.0]), np.array([0.01, 0.02]), np.array([[1, 0.5], [0.3, 1]], complex),
-                    ("a", "b"), "lscf")
+    mm = ModalModel(natural_frequencies=np.array([10.0, 20.0]), damping_ratios=np.array([0.01, 0.02]),
+                    shapes=np.array([[1, 0.5], [0.3, 1]], complex), points=("a", "b"), method="lscf")
     assert written_by_vibroscope(write_modes_uff55(mm, tmp_path / "m55.uff"))
 
 

@@ -8,7 +8,7 @@ adds the edges (reading MCAP, writing rerun recordings and figures).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -20,19 +20,126 @@ from vibroscope.signals import Signals, true_runs
 from vibroscope.spectral import FRF, CrossSpectralMatrix, Spectrum, csd_matrix, frf
 from vibroscope.spectral.estimators import MIN_AVERAGES, FewAveragesWarning
 from vibroscope.modal.methods import METHOD_CHOICES, MODAL_METHODS, identify, resolve_method
+from vibroscope.modal.selection import excited_band, response_band
 
-__all__ = ["Analysis", "IdentifySettings", "METHODS", "analyse_signals", "decimate", "decimation_stages", "default_nperseg",
+__all__ = ["Analysis", "AnalysisPlan", "IdentifySettings", "METHODS", "analyse_signals", "decimate", "decimation_stages", "default_nperseg",
            "summary_dict"]
 
 
-@dataclass(frozen=True, eq=False)
-class Analysis:
-    """Everything one analysis produced.
+@dataclass(frozen=True, kw_only=True)
+class AnalysisPlan:
+    """The settings of one analysis, chosen once from the prepared record before the pass that
+    identifies the modes (:func:`analyse_signals`; printed by the report, under ``plan`` in the summary).
 
     Attributes
     ----------
-    signals : Signals
-        The analysed record (after any decimation), input channel first when there is one.
+    input : str or None
+        The force channel; None for an output-only analysis.
+    outputs : tuple of str
+        The response channels analysed (constant ones already left out).
+    fs_in : float
+        Rate of the record in Hz.
+    fs : float
+        Rate analysed in Hz (after any decimation).
+    factors : tuple of int
+        The decimation's stages (:func:`decimation_stages`); empty when not decimated.
+    decimation_reason : str or None
+        Why this decimation (or why none); None when decimating would not gain.
+    fmin : float or None
+        Lower edge (Hz) of the band searched for modes, as asked.
+    fmax : float
+        Upper edge (Hz) of that band (asked, or chosen from the data, else ``0.4 fs``).
+    band : tuple of (float or None, float)
+        The band (Hz) the modes are selected in (with an input: the excited band within
+        `fmin`, `fmax`).
+    f_low : float or None
+        Output-only: the lowest resonance (Hz) found in the response; it sets the SSI / polyMAX lags.
+    period : int or None
+        Period in samples (at `fs`) of a periodic input: the FRFs are period-synchronous.
+    nperseg : int
+        The planned Welch segment length; with an input and the automatic length the
+        identification may refine it for the damping (``Analysis.settings["nperseg"]`` is the
+        length used).
+    window : str
+        Welch window.
+    estimator : str or None
+        FRF estimator with an input; None output-only.
+    method : str
+        The identification method (the registry's result name, e.g. ``'lscf'``, ``'ssi_cov'``;
+        :func:`vibroscope.modal.methods.resolve_method`).
+    """
+
+    input: str | None
+    outputs: tuple
+    fs_in: float
+    fs: float
+    factors: tuple
+    decimation_reason: str | None
+    fmin: float | None
+    fmax: float
+    band: tuple
+    f_low: float | None
+    period: int | None
+    nperseg: int
+    window: str
+    estimator: str | None
+    method: str
+
+    def decimation_dict(self) -> dict:
+        """``Analysis.settings["decimation"]``: ``fs_in``, ``fs_out`` (Hz), ``factors``, ``reason``.
+
+        Returns
+        -------
+        dict
+            In the key order the summary has always written (that of ``Signals.meta["decimated"]``
+            when decimated).
+        """
+        if self.factors:
+            return {"factors": list(self.factors), "fs_in": self.fs_in, "fs_out": self.fs,
+                    "reason": self.decimation_reason}
+        return {"fs_in": self.fs_in, "fs_out": self.fs, "factors": [], "reason": self.decimation_reason}
+
+    def to_dict(self) -> dict:
+        """The plan as a JSON-ready dict (the summary's ``plan``).
+
+        Returns
+        -------
+        dict
+            The attributes by name (tuples as lists).
+        """
+        return jsonable({k: list(v) if isinstance(v, tuple) else v for k, v in self.__dict__.items()})
+
+    def line(self) -> str:
+        """The plan in one line of the report.
+
+        Returns
+        -------
+        str
+            ``"plan: 1000 → 250 Hz (factors [4]); band 2–100 Hz, modes in 2–98 Hz; nperseg 2048; ..."``.
+        """
+        rate = (f"{self.fs_in:g} → {self.fs:g} Hz (factors {list(self.factors)})" if self.factors
+                else f"{self.fs:g} Hz")
+        modes = (f"modes below {self.band[1]:.4g} Hz" if self.band[0] is None
+                 else f"modes in {self.band[0]:.4g}–{self.band[1]:.4g} Hz")
+        parts = [f"plan: {rate}", f"band up to {self.fmax:.4g} Hz, {modes}",
+                 f"nperseg {self.nperseg}", f"method {self.method}"]
+        if self.f_low is not None:
+            parts.append(f"lowest resonance {self.f_low:.4g} Hz")
+        if self.period is not None:
+            parts.append(f"input period {self.period} samples")
+        return "; ".join(parts)
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class Analysis:
+    """Everything one analysis produced, from the time series (:func:`analyse_signals`) or from
+    spectra accumulated block by block (:func:`vibroscope.stream.analyse_stream`, `streamed`).
+
+    Attributes
+    ----------
+    signals : Signals or None
+        The analysed record (after any decimation), input channel first when there is one; None
+        for a streamed analysis (the record is never held whole).
     psd : Spectrum
         Welch PSD of every channel (unit²/Hz).
     csd : CrossSpectralMatrix
@@ -46,7 +153,8 @@ class Analysis:
         n_channels))``.
     settings : dict
         Welch settings, the band analysed and the decimation (``decimation``: ``fs_in``,
-        ``fs_out``, ``factors``, ``reason``; see :func:`analyse_signals`).
+        ``fs_out``, ``factors``, ``reason``; see :func:`analyse_signals`); streamed: ``streamed``
+        True and ``n_samples``.
     warnings : list of str
         What the reader and the analysis noticed (gaps, jitter, skipped channels, ...).
     identification : Identification or None
@@ -54,27 +162,73 @@ class Analysis:
         settings chosen and, for LSCF, the LSFD residues (:mod:`vibroscope.modal.automatic`).
     severity : Severity or None
         ISO 20816 vibration severity (velocity RMS over 10–1000 Hz, mm/s) of the acceleration
-        channels, from the record before any decimation.
+        channels, from the record before any decimation; None streamed.
     faults : tuple of Fault
         The signal faults found (:func:`vibroscope.faults.detect_faults`) and handled; each is
         also one line of `warnings`.
     notes : tuple of Fault
         Expected properties of the signals, handled like faults but no warning (gravity on an
         accelerometer axis, a constant output channel left out; :attr:`vibroscope.faults.Fault.note`).
+    spectra : LogSpectra or None
+        A streamed analysis's accumulated sums (:class:`vibroscope.stream.LogSpectra`; merge them
+        with other logs' through :func:`vibroscope.stream.merge_spectra`); None for a whole read.
+    plan : AnalysisPlan or None
+        The settings chosen from the data before the identification (:func:`analyse_signals`);
+        None streamed.
     """
 
-    signals: Signals
+    signals: Signals | None
     psd: Spectrum
     csd: CrossSpectralMatrix
     frf: FRF | None
     modal: Any
-    singular_values: tuple
+    singular_values: Any
     settings: dict
     warnings: list = field(default_factory=list)
     identification: Any = None
     severity: Any = None
     faults: tuple = ()
     notes: tuple = ()
+    spectra: Any = None
+    plan: AnalysisPlan | None = None
+
+    @property
+    def streamed(self) -> bool:
+        """True for an analysis of accumulated spectra (no time series held)."""
+        return self.signals is None
+
+    @property
+    def fs(self) -> float:
+        """Rate analysed in Hz."""
+        return self.signals.fs if self.signals is not None else self.spectra.fs
+
+    @property
+    def n_samples(self) -> int:
+        """Samples analysed (streamed: the grid samples read)."""
+        return self.signals.n_samples if self.signals is not None else self.spectra.samples
+
+    @property
+    def duration_s(self) -> float:
+        """Length of the record analysed in s, ``n_samples / fs``."""
+        return self.n_samples / self.fs
+
+    @property
+    def channels(self) -> tuple:
+        """The channels of the record (streamed: those accumulated)."""
+        return tuple(self.signals.channels if self.signals is not None else self.spectra.channels)
+
+    @property
+    def units(self) -> tuple:
+        """The units of `channels`."""
+        return tuple(self.signals.units if self.signals is not None else self.spectra.units)
+
+    @property
+    def input_choice(self) -> str | None:
+        """The line naming the force-like channel taken as the input (or why none was), when the
+        log was searched for one; else None."""
+        if self.settings.get("input_choice"):
+            return self.settings["input_choice"]
+        return self.signals.meta.get("input_choice") if self.signals is not None else None
 
 
 def default_nperseg(n: int, fs: float, *, fmin: float | None = None, averages: int = 16) -> int:
@@ -241,7 +395,7 @@ def _decimate_stages(data: np.ndarray, stages: list) -> np.ndarray:
 METHODS = METHOD_CHOICES
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class IdentifySettings:
     """Settings of one identification pass (see :func:`analyse_signals` for their meaning).
 
@@ -428,20 +582,39 @@ def analyse_signals(
 
     An input in an acceleration unit (m/s², g) gets a note: its FRFs are transmissibilities.
     """
-    from vibroscope import modal
-    from vibroscope.modal.selection import excited_band, response_band
+    _check_arguments(signals, input=input, fmin=fmin, fmax=fmax, method=method, select=select)
+    notes = list(signals.meta.get("warnings", []))
+    outputs = _select_outputs(signals, input, outputs, notes)
+    sig, outputs, faults, expected = _handle_faults(signals, input, outputs, nperseg, notes)
+    sig, gappy = _common_gaps(sig, notes)
+    undecimated = sig
+    plan, sig = _plan(sig, input=input, outputs=outputs, nperseg=nperseg, window=window, fmin=fmin, fmax=fmax,
+                      estimator=estimator, method=method, decimation=decimation, gappy=gappy, notes=notes)
+    if on_signals is not None:
+        on_signals(sig, tuple(plan.outputs))
+    return _execute(plan, sig, undecimated, auto_nperseg=nperseg is None, gappy=gappy, n_modes=n_modes,
+                    prominence=prominence, method=method, select=select, notes=notes, faults=faults,
+                    expected=expected)
+
+
+def _check_arguments(signals: Signals, *, input, fmin, fmax, method, select) -> None:
+    """The options' own errors, before any look at the data."""
     from vibroscope._checks import check_option
 
     check_option("method", method, METHODS)
     if select is not None and not resolve_method(method, has_input=input is not None).selects:
         raise ValueError(f"select= picks poles from a stabilization diagram: method "
                          f"{' or '.join(repr(m.key) for m in MODAL_METHODS.values() if m.selects)}, not {method!r}")
-    notes = list(signals.meta.get("warnings", []))
     if fmin is not None and fmax is not None and fmin > fmax:
         raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
     if fmax is not None and fmax > signals.fs / 2:
         raise ValueError(f"fmax={fmax:g} Hz is above the Nyquist frequency {signals.fs / 2:g} Hz (fs={signals.fs:g} "
                          f"Hz): nothing above fs/2 is measured")
+
+
+def _select_outputs(signals: Signals, input, outputs, notes: list) -> list:
+    """The response channels (default every channel but the input), each checked to be in `signals`;
+    an input in an acceleration unit gets its note (transmissibilities)."""
     outputs = [c for c in signals.channels if c != input] if outputs is None else list(outputs)
     if input is not None:
         unit = signals.units[signals.index(input)]
@@ -451,8 +624,13 @@ def analyse_signals(
                          f"held at the input point")
     for c in outputs:
         signals.index(c)
-    # signal faults: detected on the data, their documented actions applied (masking as NaN,
-    # dropping constant outputs), or a ValueError naming the channel and the remedy
+    return outputs
+
+
+def _handle_faults(signals: Signals, input, outputs: list, nperseg, notes: list):
+    """Signal faults detected on the data and their documented actions applied (masking as NaN,
+    dropping constant outputs), or a ValueError naming the channel and the remedy:
+    (the input and the responses left, the responses left, faults, notes)."""
     chans = ([input] if input else []) + outputs
     sig = signals.select(chans)
     present = np.isfinite(sig.data)
@@ -469,10 +647,14 @@ def analyse_signals(
     if not outputs:
         raise ValueError("no non-constant response channel to analyse")
     notes += [str(f) for f in faults]
-    sig = apply_faults(sig, found)
-    # a sample missing in one channel is missing in all: every spectral entry and covariance then
-    # comes from the same segments (consistent H1/H2/Hv, coherence and SSI covariances) -- unless
-    # that leaves less than half the record: then each pair keeps its own segments
+    return apply_faults(sig, found), outputs, faults, expected
+
+
+def _common_gaps(sig: Signals, notes: list) -> tuple[Signals, bool]:
+    """(the record, whether it has gaps): a sample missing in one channel made missing in all, so
+    that every spectral entry and covariance comes from the same segments (consistent H1/H2/Hv,
+    coherence and SSI covariances) -- unless that leaves less than half the record: then each pair
+    keeps its own segments."""
     present = np.isfinite(sig.data).all(axis=0)
     gappy = not present.all()
     if gappy:
@@ -490,9 +672,54 @@ def analyse_signals(
             notes.append(f"{sig.n_samples - n_valid} of {sig.n_samples} samples missing in at least one "
                          f"channel: too many to drop them from every channel; each channel pair is averaged "
                          f"over its own segments (estimates from different segment sets)")
+    return sig, gappy
+
+
+def _plan(sig: Signals, *, input, outputs, nperseg, window, fmin, fmax, estimator, method, decimation, gappy,
+          notes) -> tuple[AnalysisPlan, Signals]:
+    """The plan of the analysis from the prepared record, and the record at the planned rate:
+    the band, the input's period, the decimation, the band the modes are selected in at the
+    analysed rate, the segment length and the method."""
+    f_low, fmax = _band_from_data(sig, input, outputs, fmin, fmax, notes)
+    fs_in = sig.fs
+    # a periodic input is looked for at the full rate (low-passed to the band when a decimation
+    # would gain): the decimation factor must divide its period (whole periods for the FRFs)
+    wanted = bool(fmax is not None and fmax < 0.4 * sig.fs and decimation_stages(sig.fs, fmax))
+    per = _input_period(sig, input, fmax if wanted else None, gappy, notes)
+    sig, factors, reason = _decimate_to_band(sig, fmax, per, wanted=wanted, decimation=decimation, gappy=gappy,
+                                             notes=notes)
+    fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
+    if input:  # the excited band again at the analysed rate
+        fw, P = _quick_welch(sig[input][None], sig.fs, _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs)))
+        lo_x, hi_x = excited_band(fw, P[0])
+        band = (max(fmin or 0.0, lo_x), min(fmax_eff, hi_x))
+    else:
+        band = (fmin, fmax_eff)
+    period = None
+    if per is not None:
+        q = int(round(fs_in / sig.fs))
+        period = per.period_samples // q
+        rate = f" at {sig.fs:g} Hz; {per.period_samples} at {fs_in:g} Hz" if q > 1 else ""
+        notes.append(f"periodic input: period {per.period_s:.6g} s ({period} samples{rate}, "
+                     f"{per.n_periods} periods, score {per.score:.4f}); FRFs period-synchronous "
+                     f"(rectangular window over whole periods, the first period dropped)")
+    if nperseg is None:
+        nperseg = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs,
+                                                    fmin=fmin or (f_low / 6 if f_low else None)))
+    plan = AnalysisPlan(input=input, outputs=tuple(outputs), fs_in=fs_in, fs=sig.fs, factors=tuple(factors),
+                        decimation_reason=reason, fmin=fmin, fmax=fmax_eff, band=tuple(band), f_low=f_low,
+                        period=period, nperseg=nperseg, window=window,
+                        estimator=estimator if input else None,
+                        method=resolve_method(method, has_input=bool(input)).name)
+    return plan, sig
+
+
+def _band_from_data(sig: Signals, input, outputs, fmin, fmax, notes: list) -> tuple[float | None, float | None]:
+    """(the lowest resonance output-only or None, the band's top): without `fmax` (and always
+    output-only, for the lowest resonance) from a quick Welch pass at ~16 averages: with an input its
+    excited band, without the responses' band (:mod:`vibroscope.modal.selection`)."""
     f_low, band_note = None, None
     if fmax is None or not input:
-        # the band from the data: a quick Welch pass at ~16 averages
         n0 = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs))
         fw, P = _quick_welch(sig.data, sig.fs, n0)
         if input:
@@ -507,79 +734,58 @@ def analyse_signals(
                              f"below {hi_r:.4g} Hz")
         if band_note:
             notes.append(band_note + " (set --fmin/--fmax to choose)")
-    undecimated = sig
-    # a periodic input is looked for at the full rate (low-passed to the band when a decimation
-    # would gain): the decimation factor must divide its period (whole periods for the FRFs)
-    wanted = bool(fmax is not None and fmax < 0.4 * sig.fs and decimation_stages(sig.fs, fmax))
-    per = None
+    return f_low, fmax
+
+
+def _input_period(sig: Signals, input, fmax, gappy: bool, notes: list):
+    """The input's period (:func:`vibroscope.spectral.periodic.detect_period`, low-passed to `fmax`
+    when given) when it is periodic over at least 3 periods, else None; not looked for in a
+    record with gaps."""
     if input and gappy:
         notes.append("periodic input not looked for: the record has gaps")
-    elif input:
-        from vibroscope.spectral.periodic import detect_period
+        return None
+    if not input:
+        return None
+    from vibroscope.spectral.periodic import detect_period
 
-        per = detect_period(sig[input], sig.fs, fmax=fmax if wanted else None)
-        per = per if per.is_periodic and per.n_periods >= 3 else None
-    dec_info = {"fs_in": sig.fs, "fs_out": sig.fs, "factors": [], "reason": None}
+    per = detect_period(sig[input], sig.fs, fmax=fmax)
+    return per if per.is_periodic and per.n_periods >= 3 else None
+
+
+def _decimate_to_band(sig: Signals, fmax, per, *, wanted: bool, decimation: bool, gappy: bool, notes: list):
+    """(the record at the analysed rate, the decimation's stage factors, the reason or None): a
+    periodic input only by a factor that divides its period, a record with gaps only when enough
+    segments survive the filter's settling."""
     if wanted and not decimation:
-        dec_info["reason"] = "decimation turned off"
-    elif wanted:
-        dec = decimate(sig, fmax, period=per.period_samples if per else None)
-        if dec is sig:  # a periodic input whose period no allowed factor divides
-            dec_info["reason"] = (f"no factor up to {int(sig.fs // (2.5 * fmax))} divides the input's period of "
-                                  f"{per.period_samples} samples: a periodic excitation needs whole periods")
-        elif not gappy or _clean_segments(dec, 16) >= 8:
-            sig = dec
-            dec_info = dict(dec.meta["decimated"])
-        else:  # the decimation filter's settling eats short stretches between gaps
-            notes.append(f"not decimated to the {fmax:.4g} Hz band: the stretches between gaps are too short "
-                         f"for the decimation filter to settle")
-            dec_info["reason"] = "the stretches between gaps are too short for the decimation filter"
-    fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
-    if input:
-        fw, P = _quick_welch(sig[input][None], sig.fs, _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs)))
-        lo_x, hi_x = excited_band(fw, P[0])
-        band = (max(fmin or 0.0, lo_x), min(fmax_eff, hi_x))
-    else:
-        band = (fmin, fmax_eff)
-    period = None
-    if per is not None:
-        q = int(round(undecimated.fs / sig.fs))
-        period = per.period_samples // q
-        rate = f" at {sig.fs:g} Hz; {per.period_samples} at {undecimated.fs:g} Hz" if q > 1 else ""
-        notes.append(f"periodic input: period {per.period_s:.6g} s ({period} samples{rate}, "
-                     f"{per.n_periods} periods, score {per.score:.4f}); FRFs period-synchronous "
-                     f"(rectangular window over whole periods, the first period dropped)")
-    auto = nperseg is None
-    if auto:
-        nperseg = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs,
-                                                    fmin=fmin or (f_low / 6 if f_low else None)))
-    if on_signals is not None:
-        on_signals(sig, tuple(outputs))
-    refinements = []
-    meth = method
-    while True:
-        s = IdentifySettings(input, tuple(outputs), nperseg, window, fmin, fmax_eff, n_modes, estimator, prominence,
-                             meth, f_low, band, None if select is None else tuple(select), period)
-        with warnings.catch_warnings():  # said once below, as a note
-            warnings.simplefilter("ignore", FewAveragesWarning)
-            G, h, ident = _identify(sig, s)
-        mm = ident.modes
-        # half-power bands should span several bins for the damping to be resolved (Brandt 2011,
-        # §14.3): refine the resolution while that is not so and >= 5 averages remain (with gaps:
-        # >= 5 segments free of missing samples). FRFs only: output-only FDD loses more to the
-        # fewer averages than it gains in resolution
-        bw = 2 * np.asarray(mm.damping_ratios) * np.asarray(mm.natural_frequencies)
-        df = sig.fs / nperseg
-        if (not auto or not input or period or not np.any(np.isfinite(bw) & (bw < 8 * df))
-                or 2 * nperseg > 2 * sig.n_samples / 6 or (gappy and _clean_segments(sig, 2 * nperseg) < 5)):
-            break
-        refinements.append(nperseg)
-        nperseg *= 2
-    if refinements:
-        notes.append(f"resolution refined for the damping: nperseg {refinements[0]} -> {nperseg} "
-                        f"(df {sig.fs / refinements[0]:.4g} -> {sig.fs / nperseg:.4g} Hz)")
+        return sig, [], "decimation turned off"
+    if not wanted:
+        return sig, [], None
+    dec = decimate(sig, fmax, period=per.period_samples if per else None)
+    if dec is sig:  # a periodic input whose period no allowed factor divides
+        return sig, [], (f"no factor up to {int(sig.fs // (2.5 * fmax))} divides the input's period of "
+                         f"{per.period_samples} samples: a periodic excitation needs whole periods")
+    if not gappy or _clean_segments(dec, 16) >= 8:
+        return dec, list(dec.meta["decimated"]["factors"]), dec.meta["decimated"]["reason"]
+    # the decimation filter's settling eats short stretches between gaps
+    notes.append(f"not decimated to the {fmax:.4g} Hz band: the stretches between gaps are too short "
+                 f"for the decimation filter to settle")
+    return sig, [], "the stretches between gaps are too short for the decimation filter"
+
+
+def _execute(plan: AnalysisPlan, sig: Signals, undecimated: Signals, *, auto_nperseg: bool, gappy: bool, n_modes,
+             prominence, method, select, notes: list, faults, expected) -> Analysis:
+    """The straight pass of a plan: identification (the automatic segment refined for the damping,
+    :func:`_identify_refined`), the spectra, the severity of the record before any decimation."""
+    from vibroscope import modal
+
+    s = IdentifySettings(input=plan.input, outputs=plan.outputs, nperseg=plan.nperseg, window=plan.window,
+                         fmin=plan.fmin, fmax=plan.fmax, n_modes=n_modes, estimator=plan.estimator,
+                         prominence=prominence, method=method, f_low=plan.f_low, band=plan.band,
+                         select=None if select is None else tuple(select), period=plan.period)
+    G, h, ident, nperseg = _identify_refined(sig, s, auto=auto_nperseg, gappy=gappy, notes=notes)
+    mm = ident.modes
     psd = G.psd()
-    Gout = G.select(outputs)
+    Gout = G.select(list(plan.outputs))
     sv = modal.singular_values(Gout)
     if "n_segments" in G.settings:
         k = G.settings["n_averages"]
@@ -587,10 +793,39 @@ def analyse_signals(
                if k < MIN_AVERAGES else "")
         notes.append(f"{k} of {G.settings['n_segments']} Welch segments averaged (nperseg={nperseg}); "
                      f"those touching a missing sample were skipped{few}")
-    severity = _severity(undecimated.select(outputs), notes)
-    settings = dict(G.settings, fmin=fmin, fmax=fmax_eff, estimator=estimator if input else None,
-                    input=input, outputs=list(outputs), method=mm.method, band_hz=list(band), decimation=dec_info)
-    return Analysis(sig, psd, Gout, h, mm, sv, settings, notes, ident, severity, faults, expected)
+    severity = _severity(undecimated.select(list(plan.outputs)), notes)
+    settings = dict(G.settings, fmin=plan.fmin, fmax=plan.fmax, estimator=plan.estimator, input=plan.input,
+                    outputs=list(plan.outputs), method=mm.method, band_hz=list(plan.band),
+                    decimation=plan.decimation_dict())
+    return Analysis(signals=sig, psd=psd, csd=Gout, frf=h, modal=mm, singular_values=sv, settings=settings,
+                    warnings=notes, identification=ident, severity=severity, faults=faults, notes=expected, plan=plan)
+
+
+def _identify_refined(sig: Signals, s: IdentifySettings, *, auto: bool, gappy: bool, notes: list):
+    """(CSD of all channels, FRF or None, Identification, final nperseg): with an input and the
+    automatic segment, the resolution is refined (nperseg doubled) while an identified mode's
+    half-power band spans fewer than 8 bins and >= 5 averages remain (with gaps: >= 5 segments free
+    of missing samples). Half-power bands should span several bins for the damping to be resolved
+    (Brandt 2011, §14.3); FRFs only: output-only FDD loses more to the fewer averages than it gains
+    in resolution."""
+    refinements = []
+    nperseg = s.nperseg
+    while True:
+        with warnings.catch_warnings():  # said once below, as a note
+            warnings.simplefilter("ignore", FewAveragesWarning)
+            G, h, ident = _identify(sig, replace(s, nperseg=nperseg))
+        mm = ident.modes
+        bw = 2 * np.asarray(mm.damping_ratios) * np.asarray(mm.natural_frequencies)
+        df = sig.fs / nperseg
+        if (not auto or not s.input or s.period or not np.any(np.isfinite(bw) & (bw < 8 * df))
+                or 2 * nperseg > 2 * sig.n_samples / 6 or (gappy and _clean_segments(sig, 2 * nperseg) < 5)):
+            break
+        refinements.append(nperseg)
+        nperseg *= 2
+    if refinements:
+        notes.append(f"resolution refined for the damping: nperseg {refinements[0]} -> {nperseg} "
+                     f"(df {sig.fs / refinements[0]:.4g} -> {sig.fs / nperseg:.4g} Hz)")
+    return G, h, ident, nperseg
 
 
 #: units of an acceleration channel (an input in one of them makes a transmissibility)
@@ -651,13 +886,6 @@ def _severity(sig: Signals, notes: list):
         return None
 
 
-def _modes(analysis: Analysis) -> dict:
-    from vibroscope.modal.automatic import modes_document
-
-    ident = analysis.identification
-    return modes_document(analysis.modal, ident.rejected if ident is not None else ())
-
-
 def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: Any = None) -> dict:
     """The machine-readable summary (the ``--json`` file of ``vibroscope analyse``).
 
@@ -667,13 +895,16 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
     (expected properties, e.g. gravity on an accelerometer axis, in the same form), ``modes`` (each ``frequency_hz``,
     ``damping_ratio``, ``frequency_std_hz``, ``damping_std``, ``shape`` {path: [re, im]}, ``mpc``,
     ``mpd``, ``stable``), ``rejected_modes`` (``frequency_hz``, ``damping_ratio``, ``reason``), plus ``input``, ``outputs``,
-    ``settings``, ``timebase``, ``input_choice`` (the line naming the force-like channel taken as the
-    input, or why none was, when the log was searched for one) and, with `true_modes`, ``true_modes``.
+    ``settings``, ``plan`` (:meth:`AnalysisPlan.to_dict`), ``timebase``, ``input_choice`` (the line naming the
+    force-like channel taken as the input, or why none was, when the log was searched for one) and,
+    with `true_modes`, ``true_modes``. A streamed analysis (``settings["streamed"]``) holds no time
+    series: no ``faults``, ``notes``, ``plan``, ``vibration_severity``, ``identification`` or record
+    meta keys.
 
     Parameters
     ----------
     analysis : Analysis
-        The result of :func:`analyse_signals`.
+        The result of :func:`analyse_signals` or :func:`vibroscope.stream.analyse_stream`.
     source : str, optional
         Where the record came from (e.g. the log's path), stored under ``source``.
     true_modes : Modes, optional
@@ -685,35 +916,42 @@ def summary_dict(analysis: Analysis, *, source: str | None = None, true_modes: A
     dict
         JSON-serialisable.
     """
-    sig = analysis.signals
+    from vibroscope.modal.automatic import modes_document
+
+    ident = analysis.identification
+    doc = modes_document(analysis.modal, ident.rejected if ident is not None else ())
+    whole = not analysis.streamed  # faults, severity and the record's meta need the time series
     out = {
         "source": source,
-        "fs": sig.fs,
-        "n_samples": sig.n_samples,
-        "duration_s": sig.duration,
-        "channels": list(sig.channels),
-        "units": dict(zip(sig.channels, sig.units)),
+        "fs": analysis.fs,
+        "n_samples": analysis.n_samples,
+        "duration_s": analysis.duration_s,
+        "channels": list(analysis.channels),
+        "units": dict(zip(analysis.channels, analysis.units)),
         "input": analysis.settings.get("input"),
         "outputs": analysis.settings.get("outputs"),
         "warnings": list(analysis.warnings),
-        "faults": [f.to_dict() for f in getattr(analysis, "faults", ())],
-        "notes": [f.to_dict() for f in getattr(analysis, "notes", ())],
-        "modal_method": analysis.modal.method,
-        "modes": _modes(analysis)["modes"],
-        "rejected_modes": _modes(analysis)["rejected"],
-        "settings": {k: v for k, v in analysis.settings.items() if k not in ("outputs",)},
     }
+    if whole:
+        out["faults"] = [f.to_dict() for f in analysis.faults]
+        out["notes"] = [f.to_dict() for f in analysis.notes]
+    out.update(modal_method=analysis.modal.method, modes=doc["modes"], rejected_modes=doc["rejected"])
+    if not whole and analysis.input_choice:
+        out["input_choice"] = analysis.input_choice
+    out["settings"] = {k: v for k, v in analysis.settings.items() if k not in ("outputs", "input_choice")}
+    if analysis.plan is not None:
+        out["plan"] = analysis.plan.to_dict()
     sev = analysis.severity
     if sev is not None:
         out["vibration_severity"] = {"standard": "ISO 20816-1 (velocity RMS)", "band_hz": list(sev.band_hz),
                                      "velocity_rms_mm_s": dict(zip(sev.channels, sev.velocity_rms_mm_s.tolist())),
                                      "note": sev.note}
-    ident = analysis.identification
-    if ident is not None:
+    if ident is not None and whole:
         out["identification"] = {k: v for k, v in ident.settings.items() if k not in ("orders",)}
+    meta = analysis.signals.meta if whole else {}
     for key in ("timebase", "skipped", "decimated", "resampled", "input_choice"):
-        if key in sig.meta:
-            out[key] = sig.meta[key]
+        if key in meta:
+            out[key] = meta[key]
     if true_modes is not None:
         out["true_modes"] = [
             {"frequency_hz": float(f), "damping_ratio": float(z)}

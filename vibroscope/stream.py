@@ -26,8 +26,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from vibroscope.pipeline import Analysis
 from vibroscope.signals import true_runs
-from vibroscope.spectral import CrossSpectralMatrix, FRF, Spectrum, frf
+from vibroscope.spectral import CrossSpectralMatrix, frf
 from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
 
 __all__ = ["LogSpectra", "StreamAnalysis", "segment_ranges", "accumulate_log", "merge_spectra", "analyse_stream",
@@ -400,41 +401,9 @@ def _covered(ranges) -> int:
     return total
 
 
-@dataclass(frozen=True, eq=False)
-class StreamAnalysis:
-    """What :func:`analyse_stream` found, from the spectra only.
-
-    Attributes
-    ----------
-    spectra : LogSpectra
-        The accumulated sums (merge them with other logs' through :func:`merge_spectra`).
-    psd : Spectrum
-        Welch PSD of every channel.
-    csd : CrossSpectralMatrix
-        Cross-spectral matrix of the response channels.
-    frf : FRF or None
-        From the input to every response, with coherence; None without input.
-    modal : ModalModel
-        The modes (Hz, damping ratios, shapes over the responses).
-    singular_values : SingularValues
-        Of the response CSD.
-    identification : Identification
-        Modes, rejected candidates and settings.
-    settings : dict
-        Welch settings, band, input, outputs, method.
-    warnings : list of str
-        What the reading and the analysis noticed.
-    """
-
-    spectra: LogSpectra
-    psd: Spectrum
-    csd: CrossSpectralMatrix
-    frf: FRF | None
-    modal: Any
-    singular_values: Any
-    identification: Any
-    settings: dict
-    warnings: list = field(default_factory=list)
+#: what :func:`analyse_stream` returns: the one result type of an analysis,
+#: :class:`vibroscope.pipeline.Analysis`, with ``spectra`` (the accumulated sums) and no ``signals``
+StreamAnalysis = Analysis
 
 
 def _modes_from_spectra(G: CrossSpectralMatrix, input: str | None, outputs: list[str], *, fmin, fmax, n_modes,
@@ -479,7 +448,7 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
                    fs: float | None = None, nperseg: int | None = None, window: str = "hann",
                    fmin: float | None = None, fmax: float | None = None, n_modes: int | None = None,
                    estimator: str = "H1", prominence: float = 10.0, method: str = "auto",
-                   select: Sequence[float] | None = None, block_samples: int = BLOCK_SAMPLES) -> StreamAnalysis:
+                   select: Sequence[float] | None = None, block_samples: int = BLOCK_SAMPLES) -> Analysis:
     """Spectra, FRFs, coherence and modes of a log read block by block (memory bounded by the block).
 
     Parameters
@@ -517,7 +486,9 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
 
     Returns
     -------
-    StreamAnalysis
+    Analysis
+        :class:`vibroscope.pipeline.Analysis` with ``spectra`` (the accumulated sums, which
+        :func:`merge_spectra` merges with other logs') and no ``signals`` (``streamed`` True).
 
     Raises
     ------
@@ -579,7 +550,8 @@ def analyse_stream(path: str | Path | LogSpectra, *, input: str | None = None, o
     settings = dict(G.settings, fmin=fmin, fmax=band[1], estimator=estimator if input else None, input=input,
                     outputs=list(outs), method=ident.modes.method, band_hz=list(band), streamed=True,
                     n_samples=sp.samples)
-    return StreamAnalysis(sp, G.psd(), Gout, h, ident.modes, modal.singular_values(Gout), ident, settings, notes)
+    return Analysis(signals=None, spectra=sp, psd=G.psd(), csd=Gout, frf=h, modal=ident.modes,
+                    singular_values=modal.singular_values(Gout), identification=ident, settings=settings, warnings=notes)
 
 
 def _analyse_spectra(sp: LogSpectra, input, outputs, **kw):

@@ -121,3 +121,37 @@ def test_segment_length_resolves_a_narrow_mode_or_takes_the_period():
     assert nperseg == 8192 and "period" in reason
     # neither: the power-of-two default about 4 s
     assert frf_segment_length(u, fs)[0] == 1024  # diagnose's default: 2**floor(log2(min(4 fs, n/8)))
+
+
+def test_mode_shift_evidence_less_the_models_own():
+    from vibroscope.gap.diagnosis import _modal_level_test
+
+    assert _modal_level_test(evidence(0.0, 120.0), None) is None  # a linear system: no shift
+    soft = _modal_level_test(evidence(-2e4, 90.0), None)
+    assert soft["trend"] == "softening" and soft["shift"] < -0.005 and soft["z"] < -3
+    assert soft["frequency_hz"] == pytest.approx(FN, rel=0.02)
+    # a model whose own simulation shifts the same way explains the shift: no evidence left
+    assert _modal_level_test(evidence(-2e4, 90.0), evidence(-2e4, 90.0)) is None
+    assert _modal_level_test(evidence(1e5, 60.0), None)["trend"] == "hardening"
+
+
+def test_logs_at_different_levels_are_each_split_and_a_softening_spring_is_found():
+    """Three logs at 1 : 2.5 : 6, the softening only visible at the top one: with the last log
+    held out (fitted on the two low levels) the spring could not be identified."""
+    from vibroscope.gap import diagnose
+    from vibroscope.gap.measure import make_split
+    from vibroscope.signals import Signals
+
+    us, ys = logs(-2e4, 30.0, seed=4)
+    sp = make_split(us, FS)
+    assert "each log split in time" in sp.description
+    assert all(f.any() and v.any() and not np.any(f & v) for f, v in zip(sp.fit, sp.validation))
+    same = make_split([u / np.std(u) for u in us], FS)  # one level: the last log is held out
+    assert not same.fit[-1].any() and not any(v.any() for v in same.validation[:-1])
+    last = make_split(us, FS, holdout="last")  # the user's choice: the last log, whatever the levels
+    assert not last.fit[-1].any() and last.validation[-1].any() and not last.validation[0].any()
+    sigs = [Signals(np.vstack([u, y]), FS, ["/u.x", "/a.x"], ["N", "m/s^2"]) for u, y in zip(us, ys)]
+    r = diagnose(duffing(0.0), sigs, effects=["cubic_stiffness", "time_delay", "coulomb_friction"], progress=False)
+    assert r.verdict == "cubic_stiffness"
+    assert r.candidates[0].where["character"] == "softening"
+    assert r.candidates[0].parameters["k3_N_per_m3"] == pytest.approx(-2e4, rel=0.3)

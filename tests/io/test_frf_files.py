@@ -34,7 +34,8 @@ def _synthetic_frf(outputs=("1+Z", "2+Z", "3-X"), inputs=("1+Z",), n=401, df=0.2
             H[:, o, i] = (o + 1 + 0.5 * i) * _sdof_frf(f, 12.0 + 7 * o, 0.02)
     coh = np.clip(0.9 + 0.05 * np.cos(f[:, None] / 7 + np.arange(len(outputs))), 0, 1) if coherence \
         else np.full((n, len(outputs)), np.nan)
-    return FRF(f, H, coh, inputs, outputs, "H1", "accelerance", "m/s^2/N", {})
+    return FRF(frequencies=f, H=H, coherence=coh, inputs=inputs, outputs=outputs, estimator="H1", kind="accelerance",
+               units="m/s^2/N", settings={})
 
 
 # --- the Southampton shear frame: measured complex FRFs ------------------------------------
@@ -176,7 +177,8 @@ def test_uff58_several_inputs_named_channels_and_no_coherence(tmp_path):
     coherence of several inputs is not written, so it reads back NaN."""
     frf = _synthetic_frf(outputs=("/imu/s01.linear_acceleration.x", "floor 2"), inputs=("shaker", "7+Y"),
                          n=64, df=1 / 3, coherence=True)
-    frf = FRF(frf.frequencies, frf.H, frf.coherence, frf.inputs, frf.outputs, "H1", None, "", {})
+    frf = FRF(frequencies=frf.frequencies, H=frf.H, coherence=frf.coherence, inputs=frf.inputs, outputs=frf.outputs,
+              estimator="H1", kind=None, units="", settings={})
     back = read_frf(write_frf_uff58(frf, tmp_path / "m.unv"))
     assert back.outputs == frf.outputs and back.inputs == frf.inputs and back.kind is None
     assert np.allclose(back.H, frf.H, rtol=1e-9) and np.all(np.isnan(back.coherence))
@@ -209,7 +211,8 @@ def test_uff58_frf_among_other_records(tmp_path):
 def test_uff55_modes_round_trip(tmp_path):
     rng = np.random.default_rng(3)
     shapes = rng.standard_normal((3, 4)) + 1j * rng.standard_normal((3, 4))
-    mm = ModalModel([6.5, 17.47, 26.5], [0.012, 0.004, np.nan], shapes, ["1+Z", "2+Z", "3+Z", "3+X"], "lscf")
+    mm = ModalModel(natural_frequencies=[6.5, 17.47, 26.5], damping_ratios=[0.012, 0.004, np.nan], shapes=shapes,
+                    points=["1+Z", "2+Z", "3+Z", "3+X"], method="lscf")
     back = read_modes_uff55(write_modes_uff55(mm, tmp_path / "modes.uff"))
     assert back.method == "lscf" and back.points == ("1+Z", "2+Z", "3+X", "3+Z")
     assert np.allclose(back.natural_frequencies, mm.natural_frequencies, rtol=1e-5)
@@ -224,7 +227,8 @@ def test_uff55_named_points_and_normal_modes(tmp_path):
     records (analysis type 2) read with their frequency and viscous damping ratio."""
     import pyuff
 
-    mm = ModalModel([10.0], [0.03], [[1.0, -0.5j]], ["a", "b"], "fdd")
+    mm = ModalModel(natural_frequencies=[10.0], damping_ratios=[0.03], shapes=[[1.0, -0.5j]], points=["a", "b"],
+                    method="fdd")
     back = read_modes_uff55(write_modes_uff55(mm, tmp_path / "m.uff", node_ids=[5, 9], directions=["-y", 1]))
     assert back.points == ("5+Y", "9+X") and np.allclose(back.shapes, [[-1.0, -0.5j]], atol=1e-6)
     with pytest.raises(ValueError, match="share node"):

@@ -44,8 +44,8 @@ def analytic_frf(model: LumpedModel, frequencies_hz=None, quantity: str = "accel
         frequencies_hz = np.arange(1, NPERSEG // 2 + 1) * FS / NPERSEG
     f = np.asarray(frequencies_hz, float)
     kind = {"acceleration": "accelerance", "velocity": "mobility", "displacement": "receptance"}[quantity]
-    return FRF(f, model.frf(f, quantity), np.ones((len(f), len(model.outputs))), model.input_channels(),
-               model.output_channels(), "analytic", kind)
+    return FRF(frequencies=f, H=model.frf(f, quantity), coherence=np.ones((len(f), len(model.outputs))),
+               inputs=model.input_channels(), outputs=model.output_channels(), estimator="analytic", kind=kind)
 
 
 def forced_frf(model: LumpedModel, noise: float = 0.02, seed: int = 3, n_segments: int = 16) -> FRF:

@@ -61,7 +61,8 @@ def _split_candidates(orders=True, sizes=(48, 30, 48)):
                  frozenset(range(15, 101))]
         extra["cluster_orders"] = co
     shapes = np.array([SHAPE, SHAPE * 1.01, SHAPE, [1.0, -0.2, -0.6]], complex)
-    return ModalModel(f, [0.009, 0.015, 0.011, 0.023], shapes, ["a", "b", "c"], "lscf", extra)
+    return ModalModel(natural_frequencies=f, damping_ratios=[0.009, 0.015, 0.011, 0.023], shapes=shapes,
+                      points=["a", "b", "c"], method="lscf", extra=extra)
 
 
 def test_split_mode_is_one_mode_the_cluster_alone_at_its_orders():
@@ -91,14 +92,16 @@ def test_close_modes_with_different_shapes_or_farther_than_two_lines_are_kept():
     # (4.5 lines apart), and a pair within one line whose shapes differ (MAC 0.5)
     a, b = np.array([1.0, 0.8]), np.array([1.0, 0.6])
     c, d = np.array([1.0, 1.0]), np.array([1.0, 0.0])
-    mm = ModalModel([10.0, 10.3, 40.0, 44.5], [0.01] * 4, np.array([c, d, a, b], complex), ["x", "y"], "lscf")
+    mm = ModalModel(natural_frequencies=[10.0, 10.3, 40.0, 44.5], damping_ratios=[0.01] * 4,
+                    shapes=np.array([c, d, a, b], complex), points=["x", "y"], method="lscf")
 
     assert mac(mm.shapes[0], mm.shapes[1])[0, 0] == pytest.approx(0.5)
     assert mac(mm.shapes[2], mm.shapes[3])[0, 0] > 0.96
     sel = select_modes(mm, resolution_hz=1.0)
     assert list(sel.modes.natural_frequencies) == [10.0, 10.3, 40.0, 44.5] and sel.rejected == ()
     # the same shapes (MAC 1) within two lines are one mode
-    same = ModalModel([40.0, 41.5], [0.01] * 2, np.array([a, a], complex), ["x", "y"], "lscf")
+    same = ModalModel(natural_frequencies=[40.0, 41.5], damping_ratios=[0.01] * 2, shapes=np.array([a, a], complex),
+                      points=["x", "y"], method="lscf")
     assert len(select_modes(same, resolution_hz=1.0).modes) == 1
     assert len(select_modes(same, resolution_hz=0.5).modes) == 2  # 3 lines apart: resolved
 

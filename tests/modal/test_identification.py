@@ -126,7 +126,8 @@ def test_peak_picking_analytic_frf(kind):
     f = np.arange(0, 200.0, 0.01)
     H = model.frf(f, "acceleration")
     H[0] = 0.0
-    frf_ = FRF(f, H, np.ones(H.shape[:2]), ["/f"], [f"/a{k}" for k in range(5)], "analytic", kind)
+    frf_ = FRF(frequencies=f, H=H, coherence=np.ones(H.shape[:2]), inputs=["/f"], outputs=[f"/a{k}" for k in range(5)],
+               estimator="analytic", kind=kind)
     est = peak_picking(frf_, n_modes=5, fmin=5.0, prominence=1.0)
     ref = model.modes()
     m = match_modes(est, ref)

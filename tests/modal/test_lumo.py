@@ -99,3 +99,63 @@ def test_lumo_ssi_cov(lumo_raw):
     for fp in (2.82, 15.99):
         k = int(np.argmin(np.abs(f - fp)))
         assert 0.001 < model.damping_ratios[k] < 0.005, (fp, model.damping_ratios[k])
+
+
+# ---------------------------------------------------------------- the defaults, with no option
+
+#: published natural frequencies (Hz) of the seven modes (../shared/data/README.md), the first
+#: bending pair (one mode per direction) counted once
+PUBLISHED_ALL_HZ = [2.82, 13.55, 15.99, 16.33, 30.8, 40.5, 42.6]
+
+
+@pytest.fixture(scope="module")
+def lumo_default(lumo_raw):
+    """``analyse_signals`` with no option (band from the data, decimation, SSI-COV, selection): the
+    path of ``vibroscope analyse`` / ``vibroscope modal`` on the converted log."""
+    from vibroscope import Signals
+    from vibroscope.pipeline import analyse_signals
+
+    acc, direction = lumo_raw
+    sig = Signals(acc, 1651.0, channels=[f"/lumo/s{i + 1:02d}.linear_acceleration.x" for i in range(18)],
+                  units=["m/s^2"] * 18)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ident = analyse_signals(sig).identification
+    return ident.modes, direction
+
+
+def test_lumo_defaults_find_the_published_modes_none_split(lumo_default):
+    """With no option: the first bending pair (2.777 and 2.813 Hz: -1.5 % and -0.25 % from the
+    published 2.82 Hz; the lower one sits 1.5 % low with every method on this 60 s record), and
+    13.55, 15.99, 16.33, 40.5, 42.6 Hz within 1.5 % (40.5 Hz is found at 41.03 Hz, +1.3 %).
+
+    No mode is reported twice: every two modes within 5 % of each other have different shapes
+    (MAC < 0.5). The pair near 40.5 Hz, 39.81 and 41.03 Hz, is two modes, not one split: MAC 0.28;
+    41.03 Hz is the y-direction third bending mode (two nodes along the height; its y shape has
+    MAC > 0.7 with the x shape of the 42.56 Hz x-direction third bending mode, as 15.99/16.33 Hz
+    pair as second bending), 39.81 Hz moves the y sensors in a one-node shape like that of the
+    15.99 Hz second bending mode (MAC > 0.9) -- a mode the published list does not hold."""
+    model, direction = lumo_default
+    f = model.natural_frequencies
+    assert np.sum(np.abs(f / 2.82 - 1) < 0.02) == 2, f  # one per direction
+    for fp in (13.55, 15.99, 16.33, 40.5, 42.6):
+        assert np.min(np.abs(f / fp - 1)) < 0.015, (fp, f)
+    M = mac(model.shapes, model.shapes)
+    close = np.abs(f[:, None] / f[None, :] - 1) < 0.05
+    np.fill_diagonal(close, False)
+    assert np.all(M[close] < 0.5), (f, np.round(M, 2))
+    y, x = direction == 2, direction == 1
+    k40, k42, k16 = (int(np.argmin(np.abs(f - v))) for v in (41.0, 42.6, 15.99))
+    assert mac(model.shapes[k40][y], model.shapes[k42][x])[0, 0] > 0.7
+    k39 = int(np.argmin(np.abs(f - 39.8)))
+    assert abs(f[k39] / 39.8 - 1) < 0.01 and mac(model.shapes[k39][y], model.shapes[k16][y])[0, 0] > 0.9
+    assert len(f) <= 9
+
+
+@pytest.mark.xfail(strict=True, reason="30.8 Hz is not a stable pole of this 60 s record: a heavily damped "
+                   "(4-9 %) pole with a consistent shape wanders over 30.5-32.2 Hz (1-4 % between consecutive "
+                   "orders) at orders 24-52 and is never stable within the 1 % frequency tolerance")
+def test_lumo_defaults_find_30_8_hz(lumo_default):
+    """The published 30.8 Hz mode with no option (within 2 %)."""
+    f = lumo_default[0].natural_frequencies
+    assert np.min(np.abs(f / 30.8 - 1)) < 0.02, f

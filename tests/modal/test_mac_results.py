@@ -49,7 +49,8 @@ def test_match_modes_permuted():
     shapes = np.linalg.qr(rng.standard_normal((5, 5)))[0].T  # orthonormal rows
     f = np.array([3.0, 7.0, 12.0, 20.0, 31.0])
     perm = [3, 0, 4, 1]  # a subset, shuffled
-    est = ModalModel(f[perm] * 1.01, np.full(4, 0.01), shapes[perm] * 2j, list("abcde"), "test")
+    est = ModalModel(natural_frequencies=f[perm] * 1.01, damping_ratios=np.full(4, 0.01), shapes=shapes[perm] * 2j,
+                     points=list("abcde"), method="test")
     m = match_modes(est, (f, shapes))
     assert m.pairs.tolist() == [[1, 0], [3, 1], [0, 3], [2, 4]]
     assert np.allclose(m.frequency_errors, 0.01)
@@ -65,8 +66,8 @@ def test_normalize_and_mpc():
 
 
 def test_modal_model_container():
-    m = ModalModel([2.0, 5.0], [0.01, np.nan], [[1, 0.5j], [-0.3, 1]], ["/a.x", "/b.x"], "fdd",
-                   {"mpc": np.ones(2)})
+    m = ModalModel(natural_frequencies=[2.0, 5.0], damping_ratios=[0.01, np.nan], shapes=[[1, 0.5j], [-0.3, 1]],
+                   points=["/a.x", "/b.x"], method="fdd", extra={"mpc": np.ones(2)})
     assert len(m) == 2
     modes = list(m)
     assert all(isinstance(x, Mode) for x in modes)
@@ -81,9 +82,9 @@ def test_modal_model_container():
     assert d["modes"][1]["damping_ratio"] is None
     assert not m.shapes.flags.writeable
     with pytest.raises(ValueError):
-        ModalModel([1.0], [0.1, 0.2], [[1, 2]], ["a", "b"], "x")
+        ModalModel(natural_frequencies=[1.0], damping_ratios=[0.1, 0.2], shapes=[[1, 2]], points=["a", "b"], method="x")
     with pytest.raises(ValueError):
-        ModalModel([1.0], [0.1], [[1, 2, 3]], ["a", "b"], "x")
+        ModalModel(natural_frequencies=[1.0], damping_ratios=[0.1], shapes=[[1, 2, 3]], points=["a", "b"], method="x")
     assert "2 modes" in repr(m)
 
 
@@ -117,7 +118,8 @@ def _two_dof_frf():
 
     model = LumpedModel.chain([1.0, 1.0], [2e4, 2e4], [4.0, 4.0])
     f = np.arange(1, 2001) * 0.05
-    return model, FRF(f, model.frf(f), np.ones((2000, 2)), ["u"], ["a1", "a2"], "analytic", "accelerance")
+    return model, FRF(frequencies=f, H=model.frf(f), coherence=np.ones((2000, 2)), inputs=["u"], outputs=["a1", "a2"],
+                      estimator="analytic", kind="accelerance")
 
 
 def test_stabilization_is_read_only_and_prints_a_summary():

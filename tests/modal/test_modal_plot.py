@@ -12,7 +12,8 @@ def test_modal_model_plot(tmp_path):
     panel per mode, titled with its frequency."""
     from PIL import Image
 
-    m = modal.ModalModel([2.0, 5.0], [0.01, 0.02], [[1, 0.5, 0.2], [-0.3, 1, 0.4]], ["a", "b", "c"], "fdd")
+    m = modal.ModalModel(natural_frequencies=[2.0, 5.0], damping_ratios=[0.01, 0.02],
+                         shapes=[[1, 0.5, 0.2], [-0.3, 1, 0.4]], points=["a", "b", "c"], method="fdd")
     fig = m.plot()
     titles = [ax.get_title() for ax in fig.axes]
     assert any("2 Hz" in t for t in titles) and any("5 Hz" in t for t in titles), titles

@@ -32,7 +32,8 @@ def tower_modes() -> ModalModel:
     S[:3, 0::2] = mx.shapes
     S[3:, 1::2] = my.shapes
     o = np.argsort(f)
-    return ModalModel(f[o], z[o], S[o], [f"{n}+{d}" for n in (1, 2, 3) for d in "XY"], "test")
+    return ModalModel(natural_frequencies=f[o], damping_ratios=z[o], shapes=S[o],
+                      points=[f"{n}+{d}" for n in (1, 2, 3) for d in "XY"], method="test")
 
 
 def write_lms_export(path, mm: ModalModel):
@@ -109,7 +110,8 @@ def test_compare_pairs_a_perturbed_shuffled_copy(lms, tmp_path, capsys, check_pn
     factor = np.array([1.02, 0.97, 1.05, 1.0, 0.99, 1.03])
     order = [3, 0, 5, 1, 4]  # B's k-th mode is A's order[k]; A's mode 3 (index 2) absent
     fb = (a.natural_frequencies * factor)[order]
-    b = ModalModel(fb, a.damping_ratios[order], a.shapes[order] * (-0.7 + 0.4j), a.points, "model")
+    b = ModalModel(natural_frequencies=fb, damping_ratios=a.damping_ratios[order],
+                   shapes=a.shapes[order] * (-0.7 + 0.4j), points=a.points, method="model")
     c = compare_mode_sets(a, b)
     expect = sorted((ia, k) for k, ia in enumerate(order))
     assert c.pairs.tolist() == [list(p) for p in expect]
@@ -172,7 +174,8 @@ def test_model_files_and_modes_json_are_mode_sets(tmp_path, capsys):
 
 
 def test_compare_refuses_sets_without_common_points(lms, tmp_path):
-    other = ModalModel([5.0], [0.01], [[1.0, 0.5]], ["a", "b"], "x")
+    other = ModalModel(natural_frequencies=[5.0], damping_ratios=[0.01], shapes=[[1.0, 0.5]], points=["a", "b"],
+                       method="x")
     with pytest.raises(ValueError, match="share no point name"):
         compare_mode_sets(tower_modes(), other)
     assert main(["compare", str(lms), str(write_modes_uff55(other, tmp_path / "o.unv", node_ids=[7, 8])),
@@ -198,7 +201,8 @@ def test_shapes_on_a_plane_geometry_are_drawn_in_3d(tmp_path, check_png):
     mn = [(1, 1), (2, 1), (1, 2), (2, 2)]
     shapes = np.array([np.sin(m * np.pi * X / a) * np.sin(n * np.pi * Y / b) for m, n in mn])
     f = np.array([20 * ((m / a) ** 2 + (n / b) ** 2) for m, n in mn])
-    mm = ModalModel(f, np.full(4, 0.01), shapes, [f"{k}+Z" for k in nodes], "plate")
+    mm = ModalModel(natural_frequencies=f, damping_ratios=np.full(4, 0.01), shapes=shapes,
+                    points=[f"{k}+Z" for k in nodes], method="plate")
     geo = tmp_path / "g.unv"
     pyuff.UFF(str(geo)).write_sets([pyuff.prepare_2411(
         node_nums=nodes, def_cs=np.zeros(nodes.size, int), disp_cs=np.zeros(nodes.size, int),

@@ -90,8 +90,8 @@ def test_automac_of_orthogonal_shapes_is_identity():
 
 def test_modal_quality_table():
     modes = demo_model_5dof().modes()
-    est = ModalModel(modes.natural_frequencies, modes.damping_ratios, modes.shapes,
-                     [f"/imu/{d}" for d in modes.dofs], "analytic")
+    est = ModalModel(natural_frequencies=modes.natural_frequencies, damping_ratios=modes.damping_ratios,
+                     shapes=modes.shapes, points=[f"/imu/{d}" for d in modes.dofs], method="analytic")
     q = modal_quality(est)
     assert isinstance(q, QualityTable) and len(q) == 5
     assert q.automac.shape == (5, 5) and not q.mpc.flags.writeable
@@ -104,7 +104,8 @@ def test_modal_quality_table():
     d = q.to_dict()
     assert d["method"] == "analytic" and len(d["modes"]) == 5 and len(d["automac"]) == 5
     # an empty model
-    empty = ModalModel(np.zeros(0), np.zeros(0), np.zeros((0, 3)), ["a", "b", "c"], "fdd")
+    empty = ModalModel(natural_frequencies=np.zeros(0), damping_ratios=np.zeros(0), shapes=np.zeros((0, 3)),
+                       points=["a", "b", "c"], method="fdd")
     assert len(modal_quality(empty)) == 0
     with pytest.raises(TypeError):
         modal_quality(np.zeros(3))

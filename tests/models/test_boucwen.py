@@ -4,7 +4,7 @@ noise-free validation outputs from their inputs. Data: ../shared/data/boucwen (s
 import numpy as np
 import pytest
 
-from vibroscope.models.simulate import boucwen_benchmark_model, simulate_boucwen_benchmark
+from vibroscope.models.boucwen_benchmark import boucwen_benchmark_model, simulate_boucwen_benchmark
 
 
 @pytest.fixture(scope="module")

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 
 from vibroscope.errors import ModelFileError
+from vibroscope.models.boucwen_benchmark import boucwen_benchmark_model
 from vibroscope.models.elements import Backlash, BoucWen, CubicSpring, Friction, MRDamper
 from vibroscope.models.lumped import LumpedModel, demo_model
 from vibroscope.models.modelfile import TransferFunctionModel, dump_model, load_model, loads_model
-from vibroscope.models.simulate import boucwen_benchmark_model, simulate
+from vibroscope.models.simulate import simulate
 
 GOOD = """\
 kind = "lumped"

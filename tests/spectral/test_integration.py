@@ -174,8 +174,8 @@ def demo_frf():
     model = demo_model()
     f = np.arange(0.0, 120.0, 0.01)
     H = model.frf(f, "acceleration")
-    h = FRF(f, H, np.ones(H.shape[:2]), model.input_channels(), model.output_channels(), "analytic",
-            "accelerance", "m/s^2/N")
+    h = FRF(frequencies=f, H=H, coherence=np.ones(H.shape[:2]), inputs=model.input_channels(),
+            outputs=model.output_channels(), estimator="analytic", kind="accelerance", units="m/s^2/N")
     return model, h
 
 

@@ -54,9 +54,11 @@ def spectra(nf: int = 257, fs: float = 100.0):
         resp += -w ** 2 / (wn ** 2 - w ** 2 + 2j * z * wn * w)
     H = np.stack([resp * (k + 1) for k in range(len(POINTS))], axis=1)[:, :, None]
     G = np.einsum("fi,fj->fij", np.conj(H[:, :, 0]), H[:, :, 0]) + 1e-6 * np.eye(len(POINTS))
-    csd = CrossSpectralMatrix(f, G, POINTS, ["m/s^2"] * len(POINTS), "density", {"fs": fs, "nperseg": 512})
+    csd = CrossSpectralMatrix(frequencies=f, G=G, channels=POINTS, units=["m/s^2"] * len(POINTS), scaling="density",
+                              settings={"fs": fs, "nperseg": 512})
     psd = csd.psd()
     coh = np.clip(0.95 - 0.4 * np.exp(-((f[:, None] - 20) / 5) ** 2), 0, 1) * np.ones((1, len(POINTS)))
-    frf = FRF(f, H, coh, ("/shaker/force",), POINTS, "H1", "accelerance", "m/s^2/N", {"fs": fs})
+    frf = FRF(frequencies=f, H=H, coherence=coh, inputs=("/shaker/force",), outputs=POINTS, estimator="H1",
+              kind="accelerance", units="m/s^2/N", settings={"fs": fs})
     S = np.sort(np.linalg.svd(G, compute_uv=False), axis=1)[:, ::-1]
     return psd, csd, frf, (f, S)

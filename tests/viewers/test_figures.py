@@ -137,7 +137,8 @@ def test_plot_mode_shapes_of_a_real_modal_model(results):
     if ModalModel is None:
         pytest.skip("vibroscope.modal has no ModalModel yet")
     fake = results["modal"]
-    mm = ModalModel(fake.natural_frequencies, fake.damping_ratios, fake.shapes, fake.points, "fdd")
+    mm = ModalModel(natural_frequencies=fake.natural_frequencies, damping_ratios=fake.damping_ratios,
+                    shapes=fake.shapes, points=fake.points, method="fdd")
     fig = mm.plot(syn.coords())
     assert len([a for a in fig.axes if a.get_visible()]) == 3
 

@@ -87,7 +87,9 @@ def run(args) -> int:
         The parsed command line.
     """
     from vibroscope.commands._outputs import AtomicOutputs, check_out_dir, check_outputs
-    from vibroscope.commands.analyse import analyse_log, report_text, write_outputs
+    from vibroscope.commands._read_log import analyse_log
+    from vibroscope.commands._report import report_text
+    from vibroscope.commands._writers import write_outputs
 
     import math
 

@@ -32,7 +32,7 @@ def add_parser(sub) -> None:
         description=__doc__.split("\n\n")[0].replace("``", ""),
     )
     p.add_argument("model", type=Path, metavar="MODEL.toml", help="nominal model file (kind = lumped | transfer_function)")
-    p.add_argument("logs", type=Path, nargs="+", metavar="LOG.mcap", help="log(s) of the real machine; the last of several is held out")
+    p.add_argument("logs", type=Path, nargs="+", metavar="LOG.mcap", help="log(s) of the real machine (several: see --holdout)")
     p.add_argument("--json", type=Path, metavar="REPORT.json", help="write the report")
     p.add_argument("--rrd", type=Path, metavar="FILE", help="write a rerun recording of the diagnosis")
     p.add_argument("--figures", type=Path, metavar="DIR", help="write PNG figures there")
@@ -47,6 +47,9 @@ def add_parser(sub) -> None:
     p.add_argument("--workers", type=int, default=2, metavar="N",
                    help="parallel candidate fits (default 2)")
     p.add_argument("--transient", type=float, metavar="S", help="seconds left out at the start of each log")
+    p.add_argument("--holdout", choices=("auto", "last"), default="auto",
+                   help="several logs: 'auto' holds out the last log when all are at one input level, else the "
+                        "end of each log (every level fitted and validated); 'last' always holds out the last log")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -93,6 +96,7 @@ def run(args) -> int:
         if args.nperseg is not None and args.nperseg < 16:
             raise ValueError(f"--nperseg {args.nperseg} must be at least 16 samples")
         report = diagnose(model, sigs, effects=effects, transient_s=args.transient, nperseg=args.nperseg,
+                          holdout=args.holdout,
                           workers=max(1, args.workers), progress=not args.no_progress)
     except ValueError as exc:
         raise ModelFileError(f"{args.model}: cannot diagnose: {exc}") from None

@@ -151,14 +151,14 @@ def run(args) -> int:
         When an output is an input file, or the identification fails.
     """
     from vibroscope.commands._outputs import check_out_dir, check_outputs, resolve_outputs
-    from vibroscope.commands.analyse import report_text
+    from vibroscope.commands._report import report_text
     from vibroscope.modal.methods import display_name
     from vibroscope.errors import VibroscopeError
 
     check_out_dir(args.out)
     # `--out res --json m.json`: res/m.json
     resolve_outputs(args, ("json", "export_model", "uff55", "uff15", "uff58", "figures", "rrd"), args.out)
-    from vibroscope.commands.analyse import _check_options
+    from vibroscope.commands._options import check_options as _check_options
 
     _check_options(args)
     check_outputs(_planned_outputs(args), {"source": list(args.source), "coordinates": args.coords})
@@ -197,7 +197,7 @@ def run(args) -> int:
         signals = psd = csd = None
         sv = _mif(h)
     else:
-        from vibroscope.commands.analyse import analyse_log
+        from vibroscope.commands._read_log import analyse_log
 
         try:
             an = analyse_log(first, input=args.input, outputs=args.outputs, fs=args.fs, fmin=args.fmin,

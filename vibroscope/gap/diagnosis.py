@@ -11,7 +11,9 @@ close significantly more (forward selection).
 Procedure
 ---------
 1. **Split** (:func:`~vibroscope.gap.measure.make_split`): one log: a time split that keeps
-   every excitation level on both sides; several logs: the last one is held out.
+   every excitation level on both sides; several logs at one level: the last one is held
+   out; several logs at different levels: each is split in time (every level is fitted and
+   held out: a held-out level the fit never saw would test an extrapolation).
 2. **Nominal**: simulate the model with the logged input (band-limited reconstruction,
    output sample k aligned with input sample k); gap = held-out nrmse (each channel
    normalised by its own energy, :func:`~vibroscope.gap.measure.nrmse`).
@@ -90,10 +92,11 @@ from vibroscope.gap.effects import (
     pair_name,
 )
 from vibroscope.gap.fit import LogSimulator, best_start, fit_linear_frf, fit_time_domain
-from vibroscope.gap.levels import frf_segment_length
+from vibroscope.gap.levels import frf_segment_length, level_blas
 from vibroscope.gap.measure import (
     input_levels,
     locate_bands,
+    LOG_LEVEL_RATIO,
     make_split,
     masked_csd,
     noise_floor,
@@ -132,6 +135,11 @@ NL_MARGIN = 0.8
 #: that one's penalised held-out excess gap is within TREND_MARGIN times it
 TREND_MARGIN = 1.5
 TREND_SHARE = 0.3
+#: a resonance's natural frequency that moves from the lowest to the highest level by more than
+#: LEVEL_MODE_Z standard deviations and LEVEL_MODE_CHANGE (relative), beyond the model's own
+#: estimate on the same groups, makes the BLA level dependent (:func:`_modal_level_test`)
+LEVEL_MODE_Z = 3.0
+LEVEL_MODE_CHANGE = 0.005
 #: effects of which forward selection names one member only (asymmetric friction contains Coulomb
 #: friction; a Jenkins joint is a Bouc-Wen element)
 NESTED_FAMILIES = ({"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"})
@@ -355,6 +363,7 @@ def diagnose(
     workers: int = 2,
     n_full: int = 2,
     progress: bool = False,
+    holdout: str = "auto",
 ) -> GapReport:
     """Diagnose the gap between `model` and the logged behaviour.
 
@@ -366,7 +375,8 @@ def diagnose(
     signals : Signals or list of Signals
         The log(s), each holding the model's input and output channels on one grid (read
         with ``read_mcap(path, channels=model.input_channels() + model.output_channels())``).
-        With several logs the last is held out for validation.
+        With several logs at one input level the last is held out for validation; logs at
+        different levels are each split in time (:func:`~vibroscope.gap.measure.make_split`).
     effects : sequence of str, optional
         Restrict the candidates (default: the whole vocabulary).
     transient_s : float, optional
@@ -385,6 +395,10 @@ def diagnose(
         screening.
     progress : bool
         Show a progress bar over the candidates.
+    holdout : {'auto', 'last'}, optional
+        Several logs: ``'auto'`` (default) holds out the last log when every log is at one
+        input level, else the end of each log; ``'last'`` always holds out the last log (a
+        validation log the user has chosen, such as a benchmark's test part).
 
     Returns
     -------
@@ -443,7 +457,7 @@ def diagnose(
         # optimiser rejects that step by itself
         warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"scipy\.optimize")
         return _diagnose(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg,
-                         workers=workers, n_full=n_full, progress=progress)
+                         workers=workers, n_full=n_full, progress=progress, holdout=holdout)
 
 
 def _level_groups(us, masks, fs):
@@ -542,6 +556,57 @@ def _level_test(f, blas, blas_model=None):
             "levels_rms": [b[0] for b in blas], "lines": n_ok, "lines_beyond_3_sigma": n_out}
 
 
+def _mode_change(ev, f_hz: float):
+    """Relative natural-frequency change, lowest to highest level where fitted, of the mode of
+    `ev` (:class:`~vibroscope.gap.levels.LevelEvidence`) nearest `f_hz` (within 5 %), with the
+    indices of those two levels; None without one."""
+    if ev is None or len(ev.levels) < 2 or not ev.modes:
+        return None
+    j = int(np.argmin([abs(m.frequency_hz - f_hz) for m in ev.modes]))
+    if abs(ev.modes[j].frequency_hz - f_hz) > 0.05 * f_hz:
+        return None
+    fn = np.array([lv.natural_frequencies[j] for lv in ev.levels])
+    sf = np.array([lv.natural_frequency_std[j] for lv in ev.levels])
+    ok = np.flatnonzero(np.isfinite(fn) & np.isfinite(sf))
+    if ok.size < 2:
+        return None
+    a, b = int(ok[0]), int(ok[-1])
+    return float((fn[b] - fn[a]) / fn[a]), a, b
+
+
+def _modal_level_test(ev, ev_model) -> dict | None:
+    """The level dependence of the resonances (:func:`~vibroscope.gap.levels.level_blas`):
+    each mode's relative natural-frequency change from the lowest to the highest level, less
+    the change the model's own simulation shows on the same groups (`ev_model`, noise-free:
+    the estimator's bias at each level), over the measured standard deviation. A mode fits
+    many lines at once, so this sees a shift of a narrow or weakly observed resonance that
+    the line-wise test of :func:`_level_test` cannot (a 1 % softening of a mode whose
+    half-power bandwidth is one or two lines). Damping changes are not used: their estimates
+    scatter more than their standard deviations say.
+
+    Returns None without a significant mode (``|z|`` above :data:`LEVEL_MODE_Z` and a change
+    above :data:`LEVEL_MODE_CHANGE`), else a dict: ``trend``, ``shift`` (relative change of
+    the mode with the largest ``|z|``), ``z``, ``frequency_hz``."""
+    if ev is None or len(ev.levels) < 2:
+        return None
+    best = None
+    for j, md in enumerate(ev.modes):
+        ch = _mode_change(ev, md.frequency_hz)
+        if ch is None:
+            continue
+        change, a, b = ch
+        if ev.levels[b].rms < LOG_LEVEL_RATIO * ev.levels[a].rms:
+            continue
+        sf = float(np.hypot(ev.levels[a].natural_frequency_std[j], ev.levels[b].natural_frequency_std[j]))
+        chm = _mode_change(ev_model, md.frequency_hz)
+        d = change - (chm[0] if chm is not None else 0.0)
+        z = d * float(ev.levels[a].natural_frequencies[j]) / sf if sf > 0 else 0.0
+        if abs(z) > LEVEL_MODE_Z and abs(d) > LEVEL_MODE_CHANGE and (best is None or abs(z) > abs(best["z"])):
+            best = {"trend": "hardening" if d > 0 else "softening", "shift": float(d), "z": float(z),
+                    "frequency_hz": float(md.frequency_hz)}
+    return best
+
+
 def _pair_force_model(model: LumpedModel, pair) -> LumpedModel:
     """`model` with its inputs replaced by a force pair at the ends of `pair`: ``-f`` on the
     first end, ``+f`` on the second (an element's force); ground ends are left out."""
@@ -606,7 +671,7 @@ def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
 
 
 @one_blas_thread  # the fits run in a thread pool: a BLAS pool per thread only spins against it
-def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress) -> GapReport:
+def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout) -> GapReport:
     from tqdm.auto import tqdm
 
     t_start = time.perf_counter()
@@ -629,7 +694,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     in_ch0 = log_channels(model)[0][0]
     in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
     skips = [_skip_samples(model, fs, u.shape[1], transient_s) for u in us]
-    split = make_split(us, fs, skip=skips)
+    split = make_split(us, fs, skip=skips, holdout=holdout)
     sims = [LogSimulator(u, fs) for u in us]
     n_min = min(u.shape[1] for u in us)
     window = "hann"
@@ -708,7 +773,10 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
 
     # 3. scales, signatures, level evidence ------------------------------------------------------
     t = time.perf_counter()
-    fit_log = next(i for i, n in enumerate(ns_fit) if n)
+    # the scales, start values and signatures come from the fitting log of the highest input
+    # level (several logs at different levels): an effect that grows with the level shows most there
+    fit_logs = [i for i, n in enumerate(ns_fit) if n]
+    fit_log = max(fit_logs, key=lambda i: float(np.mean(us[i][0, split.fit[i]] ** 2)) if split.fit[i].any() else 0.0)
     n_sc = ns_fit[fit_log]
     scales: dict = {"fs": fs}
     rels = []
@@ -764,6 +832,23 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     blas = _bla_levels(us, ys, groups, fs, nps, f_s)
     # against the refitted model's own level dependence on the same groups (noise-free)
     level = _level_test(f_s, blas, _bla_levels(us, y_ref, groups, fs, nps, f_s))
+    level["evidence"] = "lines" if level["flagged"] else None
+    # the resonances per level (the report's level evidence), against the refitted model's own
+    level_ev, level_ev_ref = None, None
+    if len(groups) >= 2:
+        np_ev = _pow2(min(nps, max(min(int(np.sum(g[1])) for g in groups) // 4, 256)))
+        try:
+            level_ev = level_blas(us, ys, all_masks, fs, np_ev, f_band=tuple(nf.excited_band), input_unit=in_unit)
+            level_ev_ref = level_blas(us, y_ref, all_masks, fs, np_ev, f_band=tuple(nf.excited_band),
+                                      window=level_ev.window, input_unit=in_unit)
+        except (ValueError, np.linalg.LinAlgError):  # evidence only: the diagnosis goes on without it
+            pass
+    modal_level = _modal_level_test(level_ev, level_ev_ref)
+    if modal_level is not None:
+        level["modal"] = modal_level
+        if not level["flagged"] or level["trend"] == "none":
+            level.update(flagged=True, trend=modal_level["trend"], shift=modal_level["shift"],
+                         evidence=level["evidence"] or "modes")
     scales["level_trend"] = level["trend"]
     H_lv = [b[1] for b in blas]
     lv_rms = [b[0] for b in blas]
@@ -1046,7 +1131,19 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     def reproduces_trend(c):
         if bla_of(c) is None:  # its outputs do not cover every level (multi-log): no evidence
             return True
-        sc, sm = float(_level_test(f_s, bla_of(c))["shift"]), float(level["shift"])
+        sm = float(level["shift"])
+        md = level.get("modal")
+        if md is not None and md["trend"] == level["trend"]:
+            # the evidence is a mode's shift: the candidate's own simulation, the same mode
+            try:
+                ev_c = level_blas(us, [c[2].get(i) for i in range(len(ys))], all_masks, fs, level_ev.nperseg,
+                                  f_band=level_ev.f_band, window=level_ev.window)
+            except (ValueError, np.linalg.LinAlgError):
+                return True
+            ch, chm = _mode_change(ev_c, md["frequency_hz"]), _mode_change(level_ev_ref, md["frequency_hz"])
+            sc = (ch[0] - (chm[0] if chm else 0.0)) if ch else 0.0
+        else:
+            sc = float(_level_test(f_s, bla_of(c))["shift"])
         trend_shifts[f"{c[0].effect}@{_where_key(c[0].where)}"] = sc
         return sc * sm > 0 and abs(sc) >= TREND_SHARE * abs(sm)
 
@@ -1127,15 +1224,6 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     spectrum = GapSpectrum(fr, Pm, Pb, Pr, Pa, noise_psd, fdt[0], fdt[1], fdn[1], fda[1], fdt[2])
     traces = GapTraces(fs, float(sigs[tr].t0), tuple(out_ch), tuple(units), ys[tr], y_nom[tr], y_ref[tr],
                        y_aug_full, vmask, us[tr][0], str(sigs[tr].meta.get("source", "")) if sigs[tr].meta else "")
-    level_ev = None
-    if len(groups) >= 2:
-        try:
-            from vibroscope.gap.levels import level_blas
-
-            np_ev = _pow2(min(nps, max(min(int(np.sum(g[1])) for g in groups) // 4, 256)))
-            level_ev = level_blas(us, ys, all_masks, fs, np_ev, f_band=tuple(nf.excited_band), input_unit=in_unit)
-        except (ValueError, np.linalg.LinAlgError):  # evidence only: the report goes on without it
-            level_ev = None
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
     shrink = 1.0 - gap_after / gap_before if gap_before > 0 else 0.0
@@ -1172,7 +1260,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
               "not_tried": not_tried,
               "closed_loop": ({"inputs": log_channels(model)[0], "outputs": out_ch,
                                "excluded_effects": excluded} if closed else None),
-              "localisation": "bands, channels and regimes of the nominal model on the held-out log "
+              "localisation": "bands, channels and regimes of the nominal model on the last log's held-out samples "
                               "(the nominal model is fitted on nothing)"},
     )
 

@@ -150,14 +150,23 @@ class Split:
     levels: list
 
 
+#: several logs count as one level when their input RMS values lie within this factor
+LOG_LEVEL_RATIO = 1.5
+
+
 def make_split(us: list, fs: float, *, skip: list | None = None, validation_fraction: float = 1 / 3,
-               screen_s: float = 8.0) -> Split:
+               screen_s: float = 8.0, holdout: str = "auto") -> Split:
     """The fit/validation split.
 
     One log: the last `validation_fraction` of the record is held out when every input level
     occurs on both sides (levels: :func:`input_levels`); otherwise blocks of 2 s alternate
-    (two fitting, one held out) so that every level is on both sides. Several logs: the last
-    log is held out, the others fit.
+    (two fitting, one held out) so that every level is on both sides. Several logs at one
+    input level (RMS within :data:`LOG_LEVEL_RATIO`): the last log is held out, the others
+    fit. Several logs at different levels: each log is split in time as one log is, so that
+    every level is on both sides - a held-out log at a level the fit never saw would test an
+    extrapolation, on which a level-dependent effect cannot be identified from the fitting
+    data (validation data inside the range of the estimation data: Schoukens & Ljung,
+    "Nonlinear system identification: a user-oriented road map", IEEE CSM 39(6), 2019).
 
     Parameters
     ----------
@@ -168,19 +177,37 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     skip : list of int, optional
         Samples at the start of each log left out of every metric (initial transient).
     validation_fraction : float, optional
-        One log: the share of the record at its end held out by the time split; default 1/3.
+        Time split: the share of each record at its end held out; default 1/3.
     screen_s : float, optional
         Shortest screening prefix in s after `skip` (extended until every input level is in
-        it); default 8.0.
+        it); default 8.0 (several logs split in time: shared among them, at least 4 s each).
+    holdout : {'auto', 'last'}, optional
+        Several logs: ``'auto'`` (default) as above; ``'last'``: the last log is held out
+        whatever the levels.
 
     Returns
     -------
     Split
+
+    Raises
+    ------
+    ValueError
+        If `holdout` is not one of the two.
     """
+    if holdout not in ("auto", "last"):
+        raise ValueError(f"holdout={holdout!r} must be 'auto' or 'last'")
     skip = skip or [0] * len(us)
     n_logs = len(us)
-    fit, val, fpre, spre, nlev = [], [], [], [], []
     if n_logs >= 2:
+        rms = [float(np.sqrt(np.mean(np.atleast_2d(u)[0, sk:] ** 2))) for u, sk in zip(us, skip)]
+        if holdout == "auto" and max(rms) > LOG_LEVEL_RATIO * max(min(rms), 1e-300):
+            parts = [_one_log_split(u, fs, sk, validation_fraction, max(4.0, 2 * screen_s / n_logs))
+                     for u, sk in zip(us, skip)]
+            desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}): each log "
+                    f"split in time, so every level is fitted and held out; "
+                    + "; ".join(f"log {i + 1}: {p[5]}" for i, p in enumerate(parts)))
+            return Split(*[[p[k] for p in parts] for k in range(4)], desc, [p[4] for p in parts])
+        fit, val, fpre, spre, nlev = [], [], [], [], []
         for i, u in enumerate(us):
             n = u.shape[1]
             m = np.zeros(n, bool)
@@ -200,20 +227,25 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
         desc = (f"held-out log: the model is fitted on log(s) 1..{n_logs - 1} and every gap is measured "
                 f"on log {n_logs}")
         return Split(fit, val, fpre, spre, desc, nlev)
-    u = us[0]
+    m_fit, m_val, fpre, spre, nlev, desc = _one_log_split(us[0], fs, skip[0], validation_fraction, screen_s)
+    return Split([m_fit], [m_val], [fpre], [spre], desc, [nlev])
+
+
+def _one_log_split(u, fs, skip, validation_fraction, screen_s):
+    """One log's split: ``(fit mask, held-out mask, fit prefix, screening prefix, n_levels,
+    description)`` (see :func:`make_split`)."""
     n = u.shape[1]
     labels, lv = input_levels(u, fs)
-    nlev.append(len(lv))
     cut = int(round(n * (1 - validation_fraction)))
     m_fit = np.zeros(n, bool)
-    m_fit[skip[0]:cut] = True
+    m_fit[skip:cut] = True
     m_val = np.zeros(n, bool)
     m_val[cut:] = True
     ok = all(np.any(labels[m_fit] == k) and np.any(labels[m_val] == k) for k in range(len(lv)))
     if ok:
-        desc = (f"time split: samples {skip[0]}..{cut - 1} fit, the last {n - cut} samples "
+        desc = (f"time split: samples {skip}..{cut - 1} fit, the last {n - cut} samples "
                 f"({(n - cut) / fs:.1f} s) held out; {len(lv)} input level(s), each on both sides")
-        return Split([m_fit], [m_val], [cut], [_screen_prefix(labels, cut, fs, screen_s, skip[0])], desc, nlev)
+        return m_fit, m_val, cut, _screen_prefix(labels, cut, fs, screen_s, skip), len(lv), desc
     # blocks of 2 s; within each level's blocks (in time order) every third is held out
     b = int(round(2.0 * fs))
     nb = int(np.ceil(n / b))
@@ -226,11 +258,11 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     blk = np.repeat(held, b)[:n]
     m_val = blk.copy()
     m_fit = ~blk
-    m_fit[: skip[0]] = False
-    m_val[: skip[0]] = False
+    m_fit[:skip] = False
+    m_val[:skip] = False
     desc = (f"interleaved time split: 2 s blocks, every third block of each level held out ({m_val.sum() / fs:.1f} s); "
             f"{len(lv)} input level(s), each on both sides")
-    return Split([m_fit], [m_val], [n], [min(n, max(int(screen_s * fs), 3 * b))], desc, nlev)
+    return m_fit, m_val, n, min(n, max(int(screen_s * fs), 3 * b)), len(lv), desc
 
 
 def _screen_prefix(labels, n_fit, fs, screen_s, skip):

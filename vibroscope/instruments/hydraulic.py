@@ -140,7 +140,7 @@ def hydraulic_closed_loop(k_p: float, k_d: float = 0.0, k_a: float = 0.0, **plan
     return control.tf([kv * k_p], den)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class HydraulicComparison:
     """Proportional versus PD2 position control of the linear hydraulic motor.
 

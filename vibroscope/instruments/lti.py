@@ -179,7 +179,7 @@ class NyquistResult:
         return plot_nyquist(self, ax, label=label, mirror=mirror, **kwargs)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class StepResult:
     """Step response with its standard time-domain criteria.
 
@@ -383,5 +383,6 @@ def step_response(sys, t, amplitude: float = 1.0) -> StepResult:
     info = step_info(t, y, final_value=fv if np.isfinite(fv) else None)
     if not np.isfinite(fv):
         info = dict(info, rise_time_s=np.nan, settling_time_s=np.nan, overshoot_pct=np.nan)
-    return StepResult(_ro(t), _ro(y), info["rise_time_s"], info["settling_time_s"],
-                      info["overshoot_pct"], info["peak"], fv)
+    return StepResult(time_s=_ro(t), response=_ro(y), rise_time_s=info["rise_time_s"],
+                      settling_time_s=info["settling_time_s"], overshoot_pct=info["overshoot_pct"],
+                      peak=info["peak"], final_value=fv)

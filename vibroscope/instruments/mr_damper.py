@@ -71,7 +71,7 @@ SPENCER_VOLTAGES = (0.0, 0.75, 1.5, 2.25)
 SPENCER_AMPS_PER_VOLT = 2.0 / 2.25
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MRDamperCoefficients:
     """Coefficients of the Spencer model at one current (SI).
 
@@ -114,7 +114,7 @@ def _poly(c: Sequence[float], i: float) -> float:
     return c0 + i * (c1 + i * (c2 + i * c3))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MRDamperParams:
     """Current-dependent Spencer MR damper: cubic polynomials in current i (A).
 
@@ -258,7 +258,7 @@ def mr_damper_force(x, xdot, y, z, coeffs: MRDamperCoefficients):
     return coeffs.c1 * ydot + coeffs.k1 * (x - coeffs.x0)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class MRDamperResult:
     """Time simulation of the MR damper under a prescribed displacement.
 
@@ -447,12 +447,12 @@ def simulate_mr_damper(
     y, z = _rk4_scalar(x, xd, 1.0 / fs, nsub, c, y0, z0)
     f = mr_damper_force(x, xd, y, z, c)
     t = np.arange(x.size) / fs
-    arrays = []
-    for a in (t, x, xd, f, y, z):
+    arrays = {}
+    for name, a in (("time_s", t), ("x", x), ("xdot", xd), ("force", f), ("y", y), ("z", z)):
         a = np.array(a)
         a.flags.writeable = False
-        arrays.append(a)
-    return MRDamperResult(*arrays, current=float(current), coeffs=c, step_s=1.0 / fs / nsub)
+        arrays[name] = a
+    return MRDamperResult(**arrays, current=float(current), coeffs=c, step_s=1.0 / fs / nsub)
 
 
 def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequency_hz: float) -> float:

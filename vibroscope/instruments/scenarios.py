@@ -100,7 +100,7 @@ def hydraulic_scenario(tunings=("itae", "same-gain")) -> dict[str, HydraulicComp
     return {tuning: hydraulic_comparison(tuning=tuning) for tuning in tunings}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BlockSchemaScenario:
     """The paper's PI + correction block schema at every point (paper fig. 7).
 
@@ -160,6 +160,7 @@ def block_schema_scenario(load_step: float = -0.5, t_load: float = 15.0, t_end: 
     reference = {point: r.response for point, r in cl.step(t).items()}
     load = cl.forced_response(t, (t >= t_load).astype(float) * load_step, from_="d")
     f = np.logspace(-3, 1, 500)
-    return BlockSchemaScenario(t, reference, load, float(load_step), float(t_load), ol.step(t), f,
-                               cl.block_bode(f), bode(cl.transfer("y"), f))
+    return BlockSchemaScenario(time_s=t, reference=reference, load=load, load_step=float(load_step),
+                               t_load=float(t_load), open_loop=ol.step(t), frequencies_hz=f,
+                               block_bode=cl.block_bode(f), closed_loop_bode=bode(cl.transfer("y"), f))
 

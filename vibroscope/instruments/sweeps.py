@@ -58,7 +58,7 @@ BUILTIN_SWEEP_MODELS = ("pneumatic", "hydraulic", "block-schema")
 CRITERIA = ("t_r", "a_max", "nu_r", "nu_c")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SweepModel:
     """A system built from named parameters, for :func:`sweep`.
 
@@ -105,21 +105,23 @@ def builtin_sweep_model(name: str) -> SweepModel:
         The named model.
     """
     if name == "pneumatic":
-        return SweepModel(name, lambda **p: pneumatic_motor(**p, output="velocity"), dict(PNEUMATIC_NOMINAL), 1,
-                          "velocity per flow", "m/s per m³/s", "m/s² per m³/s")
+        return SweepModel(name=name, factory=lambda **p: pneumatic_motor(**p, output="velocity"),
+                          nominal=dict(PNEUMATIC_NOMINAL), order=1, quantity="velocity per flow",
+                          unit="m/s per m³/s", a_max_unit="m/s² per m³/s")
     if name == "hydraulic":
         nominal = dict(HYDRAULIC_NOMINAL, k_p=hydraulic_comparison().gains_p["k_p"])
 
         def hyd(k_p, **p):
             return hydraulic_closed_loop(k_p, **p)
 
-        return SweepModel(name, hyd, nominal, 2, "position x/r", "-")
+        return SweepModel(name=name, factory=hyd, nominal=nominal, order=2, quantity="position x/r", unit="-")
     if name == "block-schema":
         def bs(K, omega_n, zeta):
             plant = control.tf([K], [1.0 / omega_n**2, 2.0 * zeta / omega_n, 1.0])
             return paper_block_schema(plant=plant).transfer("y")
 
-        return SweepModel(name, bs, {"K": 1.0, "omega_n": 5.0, "zeta": 0.7}, 2, "plant output y/r", "-")
+        return SweepModel(name=name, factory=bs, nominal={"K": 1.0, "omega_n": 5.0, "zeta": 0.7}, order=2,
+                          quantity="plant output y/r", unit="-")
     raise ValueError(f"{name=} is not a built-in model; known: {', '.join(BUILTIN_SWEEP_MODELS)}")
 
 
@@ -244,13 +246,13 @@ def model_file_sweep_model(path) -> SweepModel:
             return clean_tf(m.state_space()[0, 0])
         return control.tf(m.tf())
 
-    return SweepModel(path.stem, factory, {}, 2, "output per input", "")
+    return SweepModel(name=path.stem, factory=factory, nominal={}, order=2, quantity="output per input", unit="")
 
 
 # --------------------------------------------------------------------------- the sweep
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class SweepResult:
     """Responses and criteria of every case of a sweep.
 

@@ -275,16 +275,20 @@ def scan(
             continue  # its place was reported damaged by the walk (with the loss its message indexes list)
         counts = index_counts(ci)
         res.damage.append(Damage(
-            ci.chunk_start_offset, f"chunk of {ci.chunk_length} bytes listed by the summary's chunk index (at this "
-            f"stated byte offset) is not in the file (deleted?)", sum(counts.values()) if counts is not None else None,
-            tuple(sorted(ci.message_index_offsets)), tuple(sorted(counts.items())) if counts is not None else (),
-            (int(ci.message_start_time), int(ci.message_end_time))))
+            offset=ci.chunk_start_offset,
+            reason=f"chunk of {ci.chunk_length} bytes listed by the summary's chunk index (at this "
+            f"stated byte offset) is not in the file (deleted?)",
+            messages=sum(counts.values()) if counts is not None else None,
+            channel_ids=tuple(sorted(ci.message_index_offsets)),
+            per_channel=tuple(sorted(counts.items())) if counts is not None else (),
+            span_ns=(int(ci.message_start_time), int(ci.message_end_time))))
     if summary is not None and summary.message_count is not None and topics is None and not res.damage:
         got = sum(b.n for b in res.blocks)
         if got < summary.message_count:  # a loss no damaged place explains: reported all the same
-            res.damage.append(Damage(summary.start, f"the summary's statistics (section at this byte offset) count "
-                                                    f"{summary.message_count} messages, {got} were found",
-                                     summary.message_count - got))
+            res.damage.append(Damage(offset=summary.start,
+                                     reason=f"the summary's statistics (section at this byte offset) count "
+                                     f"{summary.message_count} messages, {got} were found",
+                                     messages=summary.message_count - got))
     res.damage = [with_loss(d, sc) for d in res.damage]
     res.damage.sort(key=lambda d: d.offset)
     res.skipped.extend((d.offset, d.describe(res.channels)) for d in res.damage)

@@ -77,7 +77,7 @@ class Block:
                 f"bytes={'kept' if self._buf is not None else 'dropped'})")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Damage:
     """One damaged place of a file and what was lost there.
 
@@ -119,7 +119,7 @@ class Damage:
         return text
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ScanResult:
     """What a scan found: schemas, channels, message blocks, and the damage.
 

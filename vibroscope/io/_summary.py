@@ -17,7 +17,7 @@ from mcap.records import Channel, ChunkIndex, Schema, Statistics
 from vibroscope.io._records import FOOTER_LEN, MAGIC, REC_HDR, opname, parse_record, valid_opcode
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Summary:
     """A summary section that validated: its start offset, schemas, channels, chunk indexes by
     chunk offset, the statistics' message count (None without one), and, when it was found again
@@ -244,7 +244,7 @@ def parse_summary(data: Any, summary_start: int, fpos: int, summary_crc: int,
         except Exception as exc:  # noqa: BLE001 - any parse failure invalidates the summary
             return None, f"summary {opname(op)} record at byte offset {pos} does not parse ({type(exc).__name__}: {exc})"
         pos = end
-    return Summary(summary_start, schemas, channels, chunks, count), None
+    return Summary(start=summary_start, schemas=schemas, channels=channels, chunks=chunks, message_count=count), None
 
 
 _CI_HEAD = struct.Struct("<QQQQI")

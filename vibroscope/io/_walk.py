@@ -168,8 +168,9 @@ class Scanner:
                     end = pos + ci.chunk_length
                     if self._plausible(end, stop):
                         msgs, cids = self.loss_of_chunk(pos, end, stop)
-                        self.res.damage.append(Damage(pos, f"chunk record damaged (found {opname(data[pos])} where "
-                                                           f"the summary's chunk index lists a chunk)", msgs, cids))
+                        self.res.damage.append(Damage(
+                            offset=pos, reason=f"chunk record damaged (found {opname(data[pos])} where the summary's "
+                            "chunk index lists a chunk)", messages=msgs, channel_ids=cids))
                         self.done.add(pos)
                         pos = end
                         continue
@@ -283,7 +284,7 @@ class Scanner:
         else resynchronise from the next byte."""
         if self._plausible(end, stop):
             msgs, cids = self.loss_of_chunk(pos, end, stop) if chunk else (None, ())
-            self.res.damage.append(Damage(pos, reason, msgs, cids))
+            self.res.damage.append(Damage(offset=pos, reason=reason, messages=msgs, channel_ids=cids))
             self.done.add(pos)
             return end
         return self.damaged(pos, reason + "; its record length is not trustworthy", stop)
@@ -324,8 +325,10 @@ class Scanner:
             opened = self.open_chunk(body, end)
         except Exception as exc:  # noqa: BLE001 - framed like a chunk, but damaged
             msgs, cids = self.loss_of_chunk(pos, end, self.n)
-            self.res.damage.append(Damage(pos, f"record with a damaged opcode ({opname(op)}) framed like a chunk, "
-                                               f"chunk skipped: {type(exc).__name__}: {exc}", msgs, cids))
+            self.res.damage.append(Damage(offset=pos,
+                                          reason=f"record with a damaged opcode ({opname(op)}) framed like a chunk, "
+                                          f"chunk skipped: {type(exc).__name__}: {exc}", messages=msgs,
+                                          channel_ids=cids))
             self.done.add(pos)
             return True
         self.take(pos, opened, end)
@@ -433,8 +436,9 @@ class Scanner:
             self.res.blocks.append(Block(raw, pos, cid, lt, st, ln, decoded, reopen))
         listed, cids = self.loss_of_chunk(pos, end, self.n)
         if listed is not None and listed > cid.size:
-            self.res.damage.append(Damage(pos, f"chunk holds {cid.size} messages where its message indexes list "
-                                               f"{listed}: damaged", listed - int(cid.size), cids))
+            self.res.damage.append(Damage(offset=pos, reason=f"chunk holds {cid.size} messages where its message "
+                                          f"indexes list {listed}: damaged", messages=listed - int(cid.size),
+                                          channel_ids=cids))
 
     def indexed_chunk(self, pos: int, stop: int) -> int | None:
         """A chunk the summary's index lists at `pos`: passed over when not wanted, read through
@@ -513,8 +517,8 @@ class Scanner:
             keep = [i for i, st in enumerate(self.loose[2]) if st < back]
             for col in self.loose:
                 col[:] = [col[i] for i in keep]
-            self.res.damage.append(Damage(pos, f"damaged record: {problem}; resumed back at byte offset {back} (a "
-                                               f"valid chunk that a damaged record length had passed over)"))
+            self.res.damage.append(Damage(offset=pos, reason=f"damaged record: {problem}; resumed back at byte offset "
+                                          f"{back} (a valid chunk that a damaged record length had passed over)"))
             return back
         nxt = self.resync(pos + 1, stop)
         if nxt >= self.n:
@@ -530,12 +534,14 @@ class Scanner:
             msgs, cids = self.loss_of_chunk(pos, None, stop)
         elif not lost and not self.index:
             msgs, cids = self.trailing_indexes(pos, nxt)
-        self.res.damage.append(Damage(pos, f"damaged record: {problem}; {tail}", msgs, cids))
+        self.res.damage.append(Damage(offset=pos, reason=f"damaged record: {problem}; {tail}", messages=msgs,
+                                      channel_ids=cids))
         for o in lost:
             self.done.add(o)
             if o != pos:
                 m, c = self.loss_of_chunk(o, None, stop)
-                self.res.damage.append(Damage(o, "chunk lost in the damaged bytes", m, c))
+                self.res.damage.append(Damage(offset=o, reason="chunk lost in the damaged bytes", messages=m,
+                                              channel_ids=c))
         return nxt
 
     def trailing_indexes(self, a: int, b: int) -> tuple[int | None, tuple[int, ...]]:

@@ -216,7 +216,7 @@ def _linear_plan(path: Path, fd: int, size: int, warnings: list[str], skipped: l
     return schemas, channels, spans, header, counts
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, kw_only=True)
 class LogGrid:
     """A log planned for reading in blocks on one uniform grid (build with :func:`open_grid`).
 
@@ -704,8 +704,9 @@ def open_grid(path: str | Path, channels: Sequence[str] | None = None, *, fs: fl
     schemas, chans, spans, header, counts = plan
     if not spans:
         raise LogFormatError(f"{path}: no readable chunk (streaming reads chunked logs)")
-    grid = LogGrid(path, (), (), 1.0, 0, 0, tuple(spans), float(margin_s), indexed, warnings, skipped,
-                   schemas, chans, header)
+    grid = LogGrid(path=path, channels=(), units=(), fs=1.0, t0_ns=0, n_samples=0, chunks=tuple(spans),
+                   margin_s=float(margin_s), indexed=indexed, warnings=warnings, skipped=skipped,
+                   _schemas=schemas, _channels=chans, _header=header)
     grid._counts = counts
     probe = LogIndex(grid._index([], set()).scan)  # channels and schemas only: names and units
     if channels is None:

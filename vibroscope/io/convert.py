@@ -734,7 +734,7 @@ def parse_topic(spec: str) -> tuple[str, str, str, str]:
 def _topic_layout(specs: Sequence[str], channels: Sequence[str], units: Sequence[str],
                   src: Path) -> dict[int, tuple[str, str]]:
     """Row -> (message path, unit) written for the channels that ``--topic`` names."""
-    from vibroscope.io.mcap_write import _sanitize
+    from vibroscope.io.mcap_write import sanitize_name
 
     rows: dict[int, tuple[str, str]] = {}
     kinds: dict[str, str] = {}
@@ -752,7 +752,7 @@ def _topic_layout(specs: Sequence[str], channels: Sequence[str], units: Sequence
             raise ValueError(f"--topic {spec!r}: topic {topic!r} is already a {kinds[topic]} topic, not {kind}")
         fixed = None
         if kind == "json":
-            field = field or _sanitize(ch)
+            field = field or sanitize_name(ch)
             if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", field):
                 raise ValueError(f"--topic {spec!r}: JSON field {field!r} must be a name such as force or a.b")
         else:
@@ -841,7 +841,7 @@ def convert_to_mcap(
     LogFormatError
         If `src` does not exist or cannot be read.
     """
-    from vibroscope.io.mcap_write import _sanitize, write_ros2_mcap
+    from vibroscope.io.mcap_write import sanitize_name, write_ros2_mcap
 
     if kind not in ("auto", "acceleration", "other"):
         raise ValueError(f"{kind=} must be one of 'auto', 'acceleration', 'other'")
@@ -871,7 +871,7 @@ def convert_to_mcap(
             new_names.append(f"{prefix}/s{k + 1:02d}.linear_acceleration.x")
             new_units.append("m/s^2")
         else:
-            new_names.append(f"{prefix or '/signals'}.{_sanitize(nm)}")
+            new_names.append(f"{prefix or '/signals'}.{sanitize_name(nm)}")
             new_units.append(u)
     written = Signals(sig.data, sig.fs, new_names, new_units, sig.t0,
                       {**sig.meta, "original_channels": list(sig.channels)})

@@ -254,7 +254,8 @@ def read_frf(
         settings["warnings"] = notes
         for line in notes:
             warnings.warn(f"{settings['source']}: {line}", stacklevel=2)
-    return FRF(t.f, t.H, t.coh, inputs, outputs, "unknown", k, units, settings)
+    return FRF(frequencies=t.f, H=t.H, coherence=t.coh, inputs=inputs, outputs=outputs, estimator="unknown", kind=k,
+               units=units, settings=settings)
 
 
 def _non_finite_notes(f: np.ndarray, H: np.ndarray, outputs: list, inputs: list) -> list[str]:

@@ -114,7 +114,7 @@ class _Decoders:
 
 
 # -- info ----------------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TopicInfo:
     """One topic of a log.
 
@@ -164,7 +164,7 @@ class TopicInfo:
     lost_s: float = 0.0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LogInfo:
     """Summary of an MCAP log (see :func:`mcap_info`).
 
@@ -580,36 +580,38 @@ def _info(log: LogIndex) -> LogInfo:
             rate = float("nan")
             dec, reason = log.decoders.get(ch, sch)
             ok = dec is not None
+        lost_messages, lost_s = lost.get(topic, (0, 0.0))
         topics.append(
             TopicInfo(
-                topic,
-                sch.name if sch is not None else "",
-                sch.encoding if sch is not None else "",
-                ch.message_encoding,
-                n,
-                rate,
-                t0,
-                t1,
-                ok,
-                "" if ok else reason,
-                gaps,
-                missing,
-                outliers,
-                *lost.get(topic, (0, 0.0)),
+                topic=topic,
+                schema_name=sch.name if sch is not None else "",
+                schema_encoding=sch.encoding if sch is not None else "",
+                message_encoding=ch.message_encoding,
+                message_count=n,
+                rate_hz=rate,
+                start_ns=t0,
+                end_ns=t1,
+                decodable=ok,
+                reason="" if ok else reason,
+                gaps=gaps,
+                gap_time_s=missing,
+                outliers=outliers,
+                lost_messages=lost_messages,
+                lost_s=lost_s,
             )
         )
     withmsg = [t for t in topics if t.message_count]
     hdr = log.scan.header
     return LogInfo(
-        str(log.path),
-        hdr.profile if hdr else "",
-        hdr.library if hdr else "",
-        sum(t.message_count for t in topics),
-        min((t.start_ns for t in withmsg), default=0),
-        max((t.end_ns for t in withmsg), default=0),
-        tuple(topics),
-        tuple(log.scan.skipped),
-        tuple(log.scan.warnings),
+        path=str(log.path),
+        profile=hdr.profile if hdr else "",
+        library=hdr.library if hdr else "",
+        message_count=sum(t.message_count for t in topics),
+        start_ns=min((t.start_ns for t in withmsg), default=0),
+        end_ns=max((t.end_ns for t in withmsg), default=0),
+        topics=tuple(topics),
+        skipped=tuple(log.scan.skipped),
+        warnings=tuple(log.scan.warnings),
     )
 
 

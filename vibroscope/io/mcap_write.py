@@ -51,7 +51,10 @@ def stamps_ns(signals: Signals) -> np.ndarray:
     return t0 + np.round(np.arange(signals.n_samples) * (1e9 / signals.fs)).astype(np.int64)
 
 
-def _sanitize(name: str) -> str:
+def sanitize_name(name: str) -> str:
+    """A channel name as a topic or field name: characters other than letters, digits and ``_``
+    become ``_`` (leading and trailing ``/`` dropped), prefixed ``c_`` where it would not start with
+    a letter or ``_``."""
     s = re.sub(r"[^A-Za-z0-9_]", "_", name.strip().strip("/"))
     if not s or not (s[0].isalpha() or s[0] == "_"):
         s = "c_" + s
@@ -84,13 +87,13 @@ def _plan(
     groups: dict[str, list[tuple[int, tuple]]] = defaultdict(list)
     for i, name in enumerate(signals.channels):
         if name in force_channels:
-            groups["/" + _sanitize(name)].append((i, ("wrench", "force", "x")))
+            groups["/" + sanitize_name(name)].append((i, ("wrench", "force", "x")))
         elif name in accel_channels:
-            groups["/" + _sanitize(name)].append((i, ("linear_acceleration", "x")))
+            groups["/" + sanitize_name(name)].append((i, ("linear_acceleration", "x")))
         else:
             mp = _as_path(name)
             if mp is None:
-                groups[json_topic].append((i, (_sanitize(name),)))
+                groups[json_topic].append((i, (sanitize_name(name),)))
             else:
                 groups[mp.topic].append((i, mp.fields))
     plan = {}

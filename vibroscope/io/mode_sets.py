@@ -169,8 +169,9 @@ def _model_file_modes(p: Path) -> tuple[ModalModel, str]:
         best = np.argmax(cols, axis=1)
         shapes = np.array([A[r, :, best[r]] for r in range(A.shape[0])])
         points = [o.channel or o.dof for o in model.outputs]
-        return ModalModel(model.natural_frequencies, model.damping_ratios, normalize_shapes(shapes), points,
-                          f"model file {name}", {"source": str(p)}), "model file (modal)"
+        return ModalModel(natural_frequencies=model.natural_frequencies, damping_ratios=model.damping_ratios,
+                          shapes=normalize_shapes(shapes), points=points, method=f"model file {name}",
+                          extra={"source": str(p)}), "model file (modal)"
     if isinstance(model, LumpedModel):
         md = model.modes()
         pts = list(model.point_names())
@@ -186,8 +187,9 @@ def _model_file_modes(p: Path) -> tuple[ModalModel, str]:
             if o.channel and o.dof not in logged:
                 logged[o.dof] = o.channel
         pts = [logged.get(q, q) for q in pts]
-        return ModalModel(md.natural_frequencies, md.damping_ratios, normalize_shapes(shapes), pts,
-                          f"model file {name}", {"source": str(p)}), "model file (lumped)"
+        return ModalModel(natural_frequencies=md.natural_frequencies, damping_ratios=md.damping_ratios,
+                          shapes=normalize_shapes(shapes), points=pts, method=f"model file {name}",
+                          extra={"source": str(p)}), "model file (lumped)"
     raise ModelFileError(f"{p}: a {type(model).__name__} has no mode shapes; a mode set needs kind = \"modal\" "
                          f"(vibroscope modal --export-model) or kind = \"lumped\"")
 
@@ -214,6 +216,6 @@ def _modes_json(p: Path) -> ModalModel:
             raise LogFormatError(f"{p}: mode {r}: missing or bad field ({type(exc).__name__}: {exc})") from None
     if not f:
         raise LogFormatError(f"{p}: the MODES.json holds no mode")
-    return ModalModel(f, z, np.array(S, complex).reshape(len(f), len(points)), points,
-                      str(doc.get("method") or "MODES.json"),
-                      {"source": str(p), "normalisation": doc.get("normalisation", "unit_maximum")})
+    return ModalModel(natural_frequencies=f, damping_ratios=z, shapes=np.array(S, complex).reshape(len(f), len(points)),
+                      points=points, method=str(doc.get("method") or "MODES.json"),
+                      extra={"source": str(p), "normalisation": doc.get("normalisation", "unit_maximum")})

@@ -45,7 +45,7 @@ INVALID_STAMP_NS = -(1 << 62)
 DOWNSAMPLE_RATIO = 1.01
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TimebaseReport:
     """What the time stamps of one topic look like and what was done to them.
 
@@ -208,13 +208,14 @@ def analyse_stamps(topic: str, stamps_ns: np.ndarray, *, time_source: str = "log
         max_dev = (fit.max_dev_s if np.isfinite(fit.max_dev_s) else
                    float(np.max(np.abs(reg - fit.median_s))) if reg.size else 0.0)
     rep = TimebaseReport(
-        topic, n, fs_est, jitter, max_dev, gaps, gap_time, where, duplicates, out_of_order, time_source,
+        topic=topic, n_messages=n, fs_est=fs_est, jitter_s=jitter, max_dev_s=max_dev, gaps=gaps, gap_time_s=gap_time,
+        gap_where_s=where, duplicates=duplicates, out_of_order=out_of_order, time_source=time_source,
         outliers=outliers, missing=missing,
     )
     return order, rep
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class StampFit:
     """The time base of one stream of increasing stamps (:func:`fit_stamps`).
 
@@ -318,7 +319,8 @@ def fit_stamps(ts_ns: np.ndarray, dt_s: np.ndarray | None = None) -> StampFit:
     if dev <= ON_GRID_TOL * med:
         miss = (np.where(isgap, np.maximum(1, np.rint(dt / med) - 1), 0).astype(np.int64) if anygap
                 else np.zeros(n - 1, np.int64))
-        return StampFit(_rate(reg, med), med, med, 0.0, True, isgap, miss, dev)
+        return StampFit(fs=_rate(reg, med), period_s=med, median_s=med, jitter_s=0.0, regular=True, gap=isgap,
+                        missing=miss, max_dev_s=dev)
     rel = (ts - ts[0]).astype(np.float64) * 1e-9  # s from the first stamp
     w = min(GAP_WINDOW, n - 1)  # the median increment over w messages / w: robust to bursts of stamps
     tw = float(median(ts[w:] - ts[:-w])) * 1e-9 / w
@@ -357,10 +359,11 @@ def fit_stamps(ts_ns: np.ndarray, dt_s: np.ndarray | None = None) -> StampFit:
         # increment outside the gaps: that mean keeps the short increments of a burst and drops the long
         # ones before it, so it grew with the share of bursty stretches (a log's first seconds read at
         # 160 Hz, the whole log at 100 Hz); the windowed median is the same wherever the log ends
-        return StampFit(_snap(1.0 / tw, 1.5e-9 / max(rel[-1], 1e-300)), med, med, jit, False, isgap, miss)
+        return StampFit(fs=_snap(1.0 / tw, 1.5e-9 / max(rel[-1], 1e-300)), period_s=med, median_s=med, jitter_s=jit,
+                        regular=False, gap=isgap, missing=miss)
     snap = 3.0 * _slope_se(rel, isgap, jit) / T if np.isfinite(jit) else 0.0
     fs = _snap(1.0 / T, max(1.5e-9 / max(rel[-1], 1e-300), snap))
-    return StampFit(fs, T, med, jit, False, isgap, miss)
+    return StampFit(fs=fs, period_s=T, median_s=med, jitter_s=jit, regular=False, gap=isgap, missing=miss)
 
 
 #: stamps averaged on each side of a candidate gap (:func:`fit_stamps`)

@@ -237,4 +237,5 @@ def read_modes_uff55(path: str | Path) -> ModalModel:
     method = read_label(recs[0][1].get("id1")) or "uff55"
     extra = {"mode_numbers": np.asarray(mode_n), "analysis_types": np.asarray(ats),
              "modal_a": np.asarray(ma, complex), "modal_b": np.asarray(mb, complex), "source": str(path)}
-    return ModalModel(freqs, zetas, shapes, [dof_name(n, c) for n, c in nonzero], method, extra)
+    return ModalModel(natural_frequencies=freqs, damping_ratios=zetas, shapes=shapes,
+                      points=[dof_name(n, c) for n, c in nonzero], method=method, extra=extra)

@@ -65,7 +65,7 @@ def mpc(shapes: np.ndarray) -> np.ndarray:
         return num / den
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Mode:
     """One identified mode (an item of :class:`ModalModel`).
 
@@ -130,7 +130,8 @@ class ModalModel:
 
     Examples
     --------
-    >>> m = ModalModel([10.0], [0.02], [[1.0, 0.5]], ["a", "b"], "peak_picking")
+    >>> m = ModalModel(natural_frequencies=[10.0], damping_ratios=[0.02], shapes=[[1.0, 0.5]], points=["a", "b"],
+    ...                method="peak_picking")
     >>> len(m), m[0].frequency_hz
     (1, 10.0)
     """
@@ -166,8 +167,8 @@ class ModalModel:
 
     def __getitem__(self, r: int) -> Mode:
         r = range(len(self))[r]
-        return Mode(float(self.natural_frequencies[r]), float(self.damping_ratios[r]), self.shapes[r],
-                    self.points, r, self.method)
+        return Mode(frequency_hz=float(self.natural_frequencies[r]), damping_ratio=float(self.damping_ratios[r]),
+                    shape=self.shapes[r], points=self.points, index=r, method=self.method)
 
     def __iter__(self) -> Iterator[Mode]:
         return (self[r] for r in range(len(self)))
@@ -219,7 +220,8 @@ def ods_as_modal_model(ods_result) -> ModalModel:
     o = ods_result
     extra = {"source": o.source, "reference": o.reference, "requested_hz": np.array([o.requested_hz]),
              "input": o.input, "units": o.units, "values": np.asarray(o.values)[None, :]}
-    return ModalModel([o.frequency_hz], [np.nan], [o.shape], o.points, "ods", extra)
+    return ModalModel(natural_frequencies=[o.frequency_hz], damping_ratios=[np.nan], shapes=[o.shape], points=o.points,
+                      method="ods", extra=extra)
 
 
 def with_operating_shapes(model: ModalModel, shapes: list[ModalModel]) -> ModalModel:
@@ -241,4 +243,5 @@ def with_operating_shapes(model: ModalModel, shapes: list[ModalModel]) -> ModalM
     f = np.concatenate([model.natural_frequencies, [o.natural_frequencies[0] for o in shapes]])
     z = np.concatenate([model.damping_ratios, [np.nan] * len(shapes)])
     s = np.concatenate([np.reshape(model.shapes, (len(model), shapes[0].shapes.shape[-1])), *[o.shapes for o in shapes]])
-    return ModalModel(f, z, s, model.points, model.method + "+ods")
+    return ModalModel(natural_frequencies=f, damping_ratios=z, shapes=s, points=model.points,
+                      method=model.method + "+ods")

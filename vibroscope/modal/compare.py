@@ -18,7 +18,7 @@ from vibroscope.modal.mac import mac, match_modes
 __all__ = ["FrequencyShift", "resonance_peaks", "frequency_shift", "ModeSetComparison", "compare_mode_sets"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FrequencyShift:
     """Resonances of a measurement and of a model, paired, and their shifts.
 
@@ -120,12 +120,13 @@ def frequency_shift(measured: tuple[np.ndarray, np.ndarray], model: tuple[np.nda
             used.add(j)
     A = np.array([p[0] for p in pairs])
     B = np.array([p[1] for p in pairs])
-    return FrequencyShift(A, B, B - A, (B - A) / A if A.size else np.zeros(0),
-                          np.array([a for a in fa if a not in A]),
-                          np.array([b for j, b in enumerate(fb) if j not in used]))
+    return FrequencyShift(measured_hz=A, model_hz=B, shift_hz=B - A,
+                          shift_relative=(B - A) / A if A.size else np.zeros(0),
+                          unpaired_measured_hz=np.array([a for a in fa if a not in A]),
+                          unpaired_model_hz=np.array([b for j, b in enumerate(fb) if j not in used]))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ModeSetComparison:
     """Two mode sets compared: MAC matrix, paired modes and their frequency differences.
 
@@ -273,8 +274,10 @@ def compare_mode_sets(a, b, *, mac_min: float = 0.5, max_frequency_error: float 
     Examples
     --------
     >>> from vibroscope.modal import ModalModel
-    >>> a = ModalModel([10.0, 20.0], [0.01, 0.01], [[1, 1], [1, -1]], ["p", "q"], "test")
-    >>> b = ModalModel([20.4, 10.1], [0.01, 0.01], [[1, -1], [1, 1]], ["p", "q"], "model")
+    >>> a = ModalModel(natural_frequencies=[10.0, 20.0], damping_ratios=[0.01, 0.01],
+    ...                shapes=[[1, 1], [1, -1]], points=["p", "q"], method="test")
+    >>> b = ModalModel(natural_frequencies=[20.4, 10.1], damping_ratios=[0.01, 0.01],
+    ...                shapes=[[1, -1], [1, 1]], points=["p", "q"], method="model")
     >>> c = compare_mode_sets(a, b)
     >>> c.pairs.tolist(), c.frequency_difference_hz.round(3).tolist()
     ([[0, 1], [1, 0]], [0.1, 0.4])
@@ -293,8 +296,11 @@ def compare_mode_sets(a, b, *, mac_min: float = 0.5, max_frequency_error: float 
     pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
     d = fb[pairs[:, 1]] - fa[pairs[:, 0]]
     return ModeSetComparison(
-        fa, fb, np.asarray(a.damping_ratios, float), np.asarray(b.damping_ratios, float), M, pairs, d,
-        d / fa[pairs[:, 0]], M[pairs[:, 0], pairs[:, 1]] if len(pairs) else np.zeros(0),
-        np.setdiff1d(np.arange(fa.size), pairs[:, 0]), np.setdiff1d(np.arange(fb.size), pairs[:, 1]),
-        tuple(a.points[k] for k in ia), how, tuple(labels),
-        {"mac_min": mac_min, "max_frequency_error": max_frequency_error, "frequency_weight": frequency_weight})
+        frequencies_a=fa, frequencies_b=fb, damping_a=np.asarray(a.damping_ratios, float),
+        damping_b=np.asarray(b.damping_ratios, float), mac=M, pairs=pairs, frequency_difference_hz=d,
+        frequency_difference=d / fa[pairs[:, 0]],
+        mac_pairs=M[pairs[:, 0], pairs[:, 1]] if len(pairs) else np.zeros(0),
+        unpaired_a=np.setdiff1d(np.arange(fa.size), pairs[:, 0]),
+        unpaired_b=np.setdiff1d(np.arange(fb.size), pairs[:, 1]),
+        points=tuple(a.points[k] for k in ia), matched_by=how, labels=tuple(labels),
+        settings={"mac_min": mac_min, "max_frequency_error": max_frequency_error, "frequency_weight": frequency_weight})

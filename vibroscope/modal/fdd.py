@@ -14,7 +14,7 @@ from vibroscope.modal._peaks import band_indices, parabolic_peak, parabolic_vert
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.modal.mac import mac
 from vibroscope.spectral import CrossSpectralMatrix
-from vibroscope.spectral._results import _axis_summary, _names, _Unpacks
+from vibroscope.spectral._results import UnpacksAsTuple, axis_summary, names_summary
 
 __all__ = ["fdd", "singular_values", "efdd_damping", "SingularValues"]
 
@@ -34,7 +34,7 @@ def _db(x: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True, eq=False)
-class SingularValues(_Unpacks):
+class SingularValues(UnpacksAsTuple):
     """Singular values of a cross-spectral matrix at every frequency (:func:`singular_values`).
 
     Unpacks like the tuple ``(frequencies, S)``.
@@ -65,8 +65,8 @@ class SingularValues(_Unpacks):
         object.__setattr__(self, "channels", tuple(self.channels))
 
     def __repr__(self) -> str:
-        return (f"SingularValues({self.S.shape[-1]} of {len(self.channels)} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)})")
+        return (f"SingularValues({self.S.shape[-1]} of {len(self.channels)} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)})")
 
 
 def singular_values(csd: CrossSpectralMatrix) -> SingularValues:
@@ -362,7 +362,8 @@ def fdd(
                          mac_duplicate=mac_duplicate, efdd=efdd, max_level=max_level, min_level=min_level,
                          window_correction=window_correction, n_singular=n_singular, csd=dict(csd.settings or {})),
     }
-    return ModalModel(column("fn"), column("zeta"), shapes, csd.channels, "efdd" if efdd else "fdd", extra)
+    return ModalModel(natural_frequencies=column("fn"), damping_ratios=column("zeta"), shapes=shapes,
+                      points=csd.channels, method="efdd" if efdd else "fdd", extra=extra)
 
 
 def _peak_candidates(S: np.ndarray, idx: np.ndarray, prominence: float, n_singular: int,
@@ -382,7 +383,7 @@ def _peak_candidates(S: np.ndarray, idx: np.ndarray, prominence: float, n_singul
     return out
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class _Peak:
     """An accepted FDD peak: its bin, singular value, shape, prominence and SDOF bell."""
 
@@ -454,7 +455,7 @@ def _distinct_peaks(candidates, U, S, mac_min: float, mac_duplicate: float, min_
         bell, lo, hi = _bell(U, S, k, q, phi, mac_min, _valley_limits(S[:, q], k, tops))
         if hi - lo + 1 < min_bell_bins:  # incoherent from bin to bin: noise, not a mode
             continue
-        accepted.append(_Peak(k, q, phi, prom, bell, lo, hi))
+        accepted.append(_Peak(k=k, q=q, shape=phi, prominence=prom, bell=bell, lo=lo, hi=hi))
         if n_modes is not None and len(accepted) >= n_modes:
             break
     return sorted(accepted, key=lambda a: a.k)

@@ -9,7 +9,7 @@ import numpy as np
 import scipy.linalg
 
 from vibroscope.modal._results import normalize_shapes
-from vibroscope.modal.lsfd import _band, _fit
+from vibroscope.modal.lsfd import fit_band, fit_residues
 from vibroscope.modal.ssi import Stabilization, stability_codes
 from vibroscope.spectral import FRF
 from vibroscope.spectral.kinds import power_of_jw
@@ -105,8 +105,10 @@ def lscf(
     max_damping : float, optional
         Poles with ``ζ`` outside ``(0, max_damping]`` are discarded; default 0.2.
     tol_frequency, tol_damping : float, optional
-        Stability criteria against the nearest pole of the previous order: relative frequency
-        change ≤ `tol_frequency` (default 1 %), relative damping change ≤ `tol_damping` (5 %).
+        Stability criteria against the pole's match in the previous order (among the poles within
+        `tol_frequency`, the nearest in pole distance plus ``1 − MAC``; see
+        :func:`vibroscope.modal.ssi.stability_codes`): relative frequency change ≤ `tol_frequency`
+        (default 1 %), relative damping change ≤ `tol_damping` (5 %).
     mac_min : float, optional
         Smallest MAC with that pole accepted as a stable shape; default 0.98.
 
@@ -155,14 +157,15 @@ def lscf(
     >>> from vibroscope.spectral import FRF
     >>> model = LumpedModel.chain([1.0, 1.0], [2e4, 2e4], [4.0, 4.0])
     >>> f = np.arange(1, 2001) * 0.05
-    >>> h = FRF(f, model.frf(f), np.ones((2000, 2)), ["u"], ["a1", "a2"], "analytic", "accelerance")
+    >>> h = FRF(frequencies=f, H=model.frf(f), coherence=np.ones((2000, 2)), inputs=["u"], outputs=["a1", "a2"],
+    ...         estimator="analytic", kind="accelerance")
     >>> modes = lscf(h, orders=range(2, 21)).modal_model()
     >>> np.round(modes.natural_frequencies, 3), np.round(modes.damping_ratios, 4)
     (array([13.911, 36.419]), array([0.0087, 0.0229]))
     >>> np.round(model.modes().natural_frequencies, 3)
     array([13.911, 36.419])
     """
-    sel, lo, hi = _band(frf, fmin, fmax)
+    sel, lo, hi = fit_band(frf, fmin, fmax)
     f = frf.frequencies[sel]
     H = frf.H[sel]
     nf, no, ni = H.shape
@@ -187,10 +190,11 @@ def lscf(
         prev = (fr, zr, phi)
     order_a, f_a, z_a, phi_a, code_a = (np.concatenate(c) for c in zip(*rows))
     phi_a = phi_a.reshape(-1, no)
-    return Stabilization(order_a, f_a, z_a, phi_a, code_a, tuple(frf.outputs),
-                         dict(method="lscf", fmin=lo, fmax=hi, dt=dt, orders=tuple(orders), n_inputs=ni,
-                              n_lines=nf, kind=frf.kind, max_damping=max_damping,
-                              tol_frequency=tol_frequency, tol_damping=tol_damping, mac_min=mac_min))
+    return Stabilization(order=order_a, frequency=f_a, damping=z_a, shapes=phi_a, stable=code_a,
+                         points=tuple(frf.outputs),
+                         settings=dict(method="lscf", fmin=lo, fmax=hi, dt=dt, orders=tuple(orders), n_inputs=ni,
+                                       n_lines=nf, kind=frf.kind, max_damping=max_damping,
+                                       tol_frequency=tol_frequency, tol_damping=tol_damping, mac_min=mac_min))
 
 
 def _denominators(w: np.ndarray, H: np.ndarray, dt: float, orders: list[int]):
@@ -244,6 +248,6 @@ def _order_poles(alpha, p: int, ni: int, dt: float, w, H, power: int, max_dampin
     lam, fr, zr = lam[srt], fr[srt], zr[srt]
     if not len(lam):
         return fr, zr, np.zeros((0, H.shape[1]), complex)
-    res = _fit(w, H, lam, power, True, fast=True)[0]  # (n_poles, n_o, n_i)
+    res = fit_residues(w, H, lam, power, True, fast=True)[0]  # (n_poles, n_o, n_i)
     ref = np.argmax(np.linalg.norm(res, axis=1), axis=1)
     return fr, zr, normalize_shapes(res[np.arange(len(lam)), :, ref])

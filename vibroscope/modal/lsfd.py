@@ -17,7 +17,7 @@ from vibroscope.spectral.kinds import power_of_jw
 __all__ = ["pole_residue_form", "lsfd", "LSFDResult"]
 
 
-def _band(frf: FRF, fmin: float | None, fmax: float | None) -> tuple[np.ndarray, float, float]:
+def fit_band(frf: FRF, fmin: float | None, fmax: float | None) -> tuple[np.ndarray, float, float]:
     """Mask of the FRF lines used: ``fmin <= f <= fmax``, ``f > 0`` and all of ``H`` finite."""
     f = frf.frequencies
     pos = f > 0
@@ -58,7 +58,7 @@ def _basis(w: np.ndarray, poles: np.ndarray, power: int, residuals: bool) -> np.
     return np.concatenate(cols, axis=1)
 
 
-def _fit(w: np.ndarray, H: np.ndarray, poles: np.ndarray, power: int, residuals: bool,
+def fit_residues(w: np.ndarray, H: np.ndarray, poles: np.ndarray, power: int, residuals: bool,
          fast: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Real-valued least squares of residues (and residuals) for given poles.
 
@@ -137,7 +137,7 @@ def _resolve_driving_point(dp, outputs: Sequence[str], inputs: Sequence[str]) ->
     return index(o, outputs, "output"), index(i, inputs, "input")
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class LSFDResult:
     """Residues and residuals of a pole-residue model fitted to an FRF (:func:`lsfd`).
 
@@ -245,8 +245,9 @@ class LSFDResult:
             with np.errstate(divide="ignore", invalid="ignore"):
                 H = H + self.lower_residual * jw ** (self.power - 2) + self.upper_residual * jw**self.power
         coh = np.full((len(f), len(self.outputs)), np.nan)
-        return FRF(f, H, coh, self.inputs, self.outputs, "lsfd", self.kind, self.units,
-                   dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals))
+        return FRF(frequencies=f, H=H, coherence=coh, inputs=self.inputs, outputs=self.outputs, estimator="lsfd",
+                   kind=self.kind, units=self.units,
+                   settings=dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals))
 
     def peak_magnitude(self) -> np.ndarray:
         """Modulus of each mode's own term at its resonance, at the output/input pair where it is
@@ -312,7 +313,7 @@ class LSFDResult:
         if frf.H.shape[1:] != self.residues.shape[1:]:
             raise ValueError(f"FRF of shape {frf.H.shape[1:]} (outputs, inputs) for a model of "
                              f"{self.residues.shape[1:]}")
-        sel, _, _ = _band(frf, self.fmin, self.fmax)
+        sel, _, _ = fit_band(frf, self.fmin, self.fmax)
         H = frf.H[sel]
         Hs = self.synthesize(frf.frequencies[sel]).H
         return np.sqrt(np.sum(np.abs(H - Hs) ** 2, axis=(0, 2)) / np.sum(np.abs(H) ** 2, axis=(0, 2)))
@@ -371,11 +372,12 @@ class LSFDResult:
             shapes = (normalize_shapes(self.residues[np.arange(n), :, ref]) if n
                       else np.zeros((0, no), complex))
             norm = "unit_maximum"
-        return ModalModel(self.natural_frequencies, self.damping_ratios, shapes, self.outputs, "lscf",
-                          {"normalisation": norm, "mpc": mpc(shapes) if n else np.zeros(0),
-                           "reference_input": np.asarray(ref, int), "driving_point": dp,
-                           "settings": dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals,
-                                            kind=self.kind)})
+        return ModalModel(natural_frequencies=self.natural_frequencies, damping_ratios=self.damping_ratios,
+                          shapes=shapes, points=self.outputs, method="lscf",
+                          extra={"normalisation": norm, "mpc": mpc(shapes) if n else np.zeros(0),
+                                 "reference_input": np.asarray(ref, int), "driving_point": dp,
+                                 "settings": dict(fmin=self.fmin, fmax=self.fmax, residuals=self.residuals,
+                                                  kind=self.kind)})
 
 
 def lsfd(
@@ -457,7 +459,8 @@ def lsfd(
     >>> from vibroscope.spectral import FRF
     >>> model = LumpedModel.chain([1.0], [1e4], [2.0])
     >>> f = np.linspace(1, 50, 500)
-    >>> h = FRF(f, model.frf(f), np.ones((500, 1)), ["u"], ["y"], "analytic", "accelerance")
+    >>> h = FRF(frequencies=f, H=model.frf(f), coherence=np.ones((500, 1)), inputs=["u"], outputs=["y"],
+    ...         estimator="analytic", kind="accelerance")
     >>> md = model.modes()
     >>> res = lsfd(h, md.natural_frequencies, md.damping_ratios)
     >>> bool(res.error(h)[0] < 1e-9)
@@ -471,17 +474,18 @@ def lsfd(
         raise ValueError("natural frequencies must be positive (Hz) and damping ratios in [0, 1)")
     order = np.argsort(fn)
     fn, zeta = fn[order], zeta[order]
-    sel, lo, hi = _band(frf, fmin, fmax)
+    sel, lo, hi = fit_band(frf, fmin, fmax)
     f = frf.frequencies[sel]
     n_unknown = 2 * len(fn) + (4 if residuals else 0)
     if 2 * len(f) < n_unknown:
         raise ValueError(f"{len(f)} lines in [{lo}, {hi}] Hz are too few for {n_unknown} real unknowns")
     lam = _poles(fn, zeta)
     power = power_of_jw(frf.kind)
-    R, LR, UR = _fit(2 * np.pi * f, frf.H[sel], lam, power, residuals)
+    R, LR, UR = fit_residues(2 * np.pi * f, frf.H[sel], lam, power, residuals)
     dp = _resolve_driving_point(driving_point, frf.outputs, frf.inputs)
-    return LSFDResult(fn, zeta, lam, R, LR, UR, frf.outputs, frf.inputs, frf.kind, lo, hi, f,
-                      frf.units, dp, bool(residuals))
+    return LSFDResult(natural_frequencies=fn, damping_ratios=zeta, poles=lam, residues=R, lower_residual=LR,
+                      upper_residual=UR, outputs=frf.outputs, inputs=frf.inputs, kind=frf.kind, fmin=lo, fmax=hi,
+                      frequencies=f, units=frf.units, driving_point=dp, residuals=bool(residuals))
 
 
 def pole_residue_form(frf: FRF, result: "LSFDResult") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -508,7 +512,7 @@ def pole_residue_form(frf: FRF, result: "LSFDResult") -> tuple[np.ndarray, np.nd
     lower, upper : ndarray, complex, shape (n_outputs, n_inputs)
         Coefficients of ``(jω)^(p−2)`` and ``(jω)^p``.
     """
-    sel, _, _ = _band(frf, result.fmin, result.fmax)
+    sel, _, _ = fit_band(frf, result.fmin, result.fmax)
     w = 2 * np.pi * frf.frequencies[sel]
     H = np.asarray(frf.H)[sel]
     nf, no, ni = H.shape

@@ -10,7 +10,9 @@ import scipy.optimize
 __all__ = ["mac", "mac_matrix", "match_modes", "ModeMatch"]
 
 
-def _shapes(x) -> np.ndarray:
+def as_shapes(x) -> np.ndarray:
+    """Mode shapes as a complex array (n_modes, n_points): `x` itself or its ``shapes`` (a 1-D array
+    is one mode); raises ValueError for another number of dimensions."""
     s = getattr(x, "shapes", x)
     s = np.asarray(s, dtype=complex)
     if s.ndim == 1:
@@ -60,8 +62,8 @@ def mac(a, b=None) -> np.ndarray:
     >>> mac([1, 2, 3], [-2j, -4j, -6j])
     array([[1.]])
     """
-    A = _shapes(a)
-    B = A if b is None else _shapes(b)
+    A = as_shapes(a)
+    B = A if b is None else as_shapes(b)
     if A.shape[1] != B.shape[1]:
         raise ValueError(f"shapes have {A.shape[1]} and {B.shape[1]} points; they must match")
     num = np.abs(A.conj() @ B.T) ** 2
@@ -133,7 +135,7 @@ def match_modes(est, ref, *, mac_min: float = 0.0, max_frequency_error: float = 
             f, s = m
         else:
             f, s = m.natural_frequencies, m.shapes
-        return np.atleast_1d(np.asarray(f, dtype=float)), _shapes(s)
+        return np.atleast_1d(np.asarray(f, dtype=float)), as_shapes(s)
 
     fe, se = unpack(est)
     fr, sr = unpack(ref)

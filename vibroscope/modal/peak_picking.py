@@ -213,7 +213,8 @@ def peak_picking(
     >>> f = np.arange(0.0, 40.0, 0.01)
     >>> w, wn = 2 * np.pi * f, np.sqrt(1e4)
     >>> H = (-w**2 / (1e4 - w**2 + 2j * 0.02 * wn * w))[:, None, None]
-    >>> frf = FRF(f, H, np.ones((f.size, 1)), ["force"], ["acc"], "analytic", "accelerance")
+    >>> frf = FRF(frequencies=f, H=H, coherence=np.ones((f.size, 1)), inputs=["force"], outputs=["acc"],
+    ...           estimator="analytic", kind="accelerance")
     >>> m = peak_picking(frf)
     >>> print(f"{m.natural_frequencies[0]:.2f} Hz, zeta = {m.damping_ratios[0]:.4f}")
     15.92 Hz, zeta = 0.0200
@@ -261,7 +262,8 @@ def peak_picking(
         "settings": dict(fmin=fmin, fmax=fmax, min_coherence=min_coherence, prominence=prominence,
                          refine=refine, frf_kind=frf.kind, estimator=frf.estimator),
     }
-    return ModalModel(column("fn"), column("zeta"), shapes, frf.outputs, "peak_picking", extra)
+    return ModalModel(natural_frequencies=column("fn"), damping_ratios=column("zeta"), shapes=shapes,
+                      points=frf.outputs, method="peak_picking", extra=extra)
 
 
 def _as_kind(frf: FRF, kind: str) -> np.ndarray:

@@ -9,7 +9,7 @@ import numpy as np
 
 from vibroscope._checks import read_only
 from vibroscope.modal._results import ModalModel, mpc
-from vibroscope.modal.mac import _shapes, mac
+from vibroscope.modal.mac import as_shapes, mac
 
 __all__ = ["automac", "mpd", "comac", "complexity", "modal_quality", "QualityTable"]
 
@@ -84,7 +84,7 @@ def mpd(shapes) -> np.ndarray:
     >>> round(float(mpd([1, np.exp(1j * a), 1, np.exp(-1j * a)])[0]), 9)
     5.0
     """
-    S = _shapes(shapes)
+    S = as_shapes(shapes)
     out = np.full(S.shape[0], np.nan)
     for r, phi in enumerate(S):
         w = np.abs(phi)
@@ -132,7 +132,7 @@ def complexity(shapes) -> np.ndarray:
     >>> complexity([[1, -2, 3], [1, 1j, 0]])
     array([0., 1.])
     """
-    return 1.0 - mpc(_shapes(shapes))
+    return 1.0 - mpc(as_shapes(shapes))
 
 
 def comac(shapes_a, shapes_b) -> np.ndarray:
@@ -190,7 +190,7 @@ def comac(shapes_a, shapes_b) -> np.ndarray:
     >>> comac(a, b).round(12)
     array([1., 1., 1.])
     """
-    A, B = _shapes(shapes_a), _shapes(shapes_b)
+    A, B = as_shapes(shapes_a), as_shapes(shapes_b)
     if A.shape != B.shape:
         raise ValueError(f"{A.shape=} and {B.shape=} must be equal: paired modes at the same points")
     bb = np.real(np.sum(np.conj(B) * B, axis=1))
@@ -202,7 +202,7 @@ def comac(shapes_a, shapes_b) -> np.ndarray:
         return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.nan)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class QualityTable:
     """Shape quality indicators of a :class:`~vibroscope.modal.ModalModel`, one row per mode.
 
@@ -296,21 +296,23 @@ def modal_quality(modal_model: ModalModel) -> QualityTable:
 
     Examples
     --------
-    >>> m = ModalModel([10.0, 20.0], [0.01, 0.02], [[1, 1], [1, -1]], ["a", "b"], "fdd")
+    >>> m = ModalModel(natural_frequencies=[10.0, 20.0], damping_ratios=[0.01, 0.02], shapes=[[1, 1], [1, -1]],
+    ...                points=["a", "b"], method="fdd")
     >>> q = modal_quality(m)
     >>> q.mpc, q.mpd_deg, q.automac_max
     (array([1., 1.]), array([0., 0.]), array([0., 0.]))
     """
     if not hasattr(modal_model, "shapes"):
         raise TypeError(f"modal_model must be a ModalModel, got {type(modal_model).__name__}")
-    S = _shapes(modal_model.shapes)
+    S = as_shapes(modal_model.shapes)
     n = S.shape[0]
     M = automac(S) if n else np.zeros((0, 0))
     off = np.where(np.eye(n, dtype=bool), np.nan, M)
     with np.errstate(invalid="ignore"):
         amax = np.full(n, np.nan) if n < 2 else np.nanmax(off, axis=1)
     return QualityTable(
-        np.asarray(getattr(modal_model, "natural_frequencies", np.full(n, np.nan)), float),
-        np.asarray(getattr(modal_model, "damping_ratios", np.full(n, np.nan)), float),
-        mpc(S) if n else np.zeros(0), mpd(S), complexity(S) if n else np.zeros(0), M, amax,
-        tuple(getattr(modal_model, "points", ())), str(getattr(modal_model, "method", "")))
+        natural_frequencies=np.asarray(getattr(modal_model, "natural_frequencies", np.full(n, np.nan)), float),
+        damping_ratios=np.asarray(getattr(modal_model, "damping_ratios", np.full(n, np.nan)), float),
+        mpc=mpc(S) if n else np.zeros(0), mpd_deg=mpd(S), complexity=complexity(S) if n else np.zeros(0),
+        automac=M, automac_max=amax,
+        points=tuple(getattr(modal_model, "points", ())), method=str(getattr(modal_model, "method", "")))

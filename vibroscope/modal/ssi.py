@@ -204,8 +204,10 @@ def ssi_cov(
     max_damping : float, optional
         Poles with ``ζ`` outside ``(0, max_damping]`` are discarded; default 0.2.
     tol_frequency, tol_damping : float, optional
-        Stability criteria against the nearest pole of the previous order: relative frequency
-        change ≤ `tol_frequency` (default 1 %), relative damping change ≤ `tol_damping` (5 %).
+        Stability criteria against the pole's match in the previous order (among the poles within
+        `tol_frequency`, the nearest in pole distance plus ``1 − MAC``; see
+        :func:`vibroscope.modal.ssi.stability_codes`): relative frequency change ≤ `tol_frequency`
+        (default 1 %), relative damping change ≤ `tol_damping` (5 %).
     mac_min : float, optional
         Smallest MAC with that pole accepted as a stable shape; default 0.98.
 
@@ -342,7 +344,15 @@ def observability_poles(O: np.ndarray, n_ch: int, fs: float) -> tuple[np.ndarray
 
 def stability_codes(prev, f: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_frequency: float,
                     tol_damping: float, mac_min: float) -> np.ndarray:
-    """Stability code of each pole of one order against the nearest pole of the previous order.
+    """Stability code of each pole of one order against its match among the previous order's poles.
+
+    The match of a pole is, among the previous order's poles within `tol_frequency` of it, the one
+    nearest in the pole distance of Reynders et al. (2012): ``|λ − λ'| / |λ| + 1 − MAC``, with
+    ``λ = 2π f (−ζ + j √(1 − ζ²))`` (so that a change of damping counts as much as one of
+    frequency, in units of the pole's modulus). Matching on frequency alone compares a pole with
+    whichever pole of the previous order lies nearest in frequency; where two lie within the
+    tolerance -- a mode and a noise pole of other damping and shape beside it, or two close modes
+    -- a pole that is stable in every respect is refused when the other one is the nearer.
 
     Parameters
     ----------
@@ -361,17 +371,34 @@ def stability_codes(prev, f: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_
     -------
     ndarray of int, shape (n_poles,)
         0 new, 1 frequency stable, 2 and damping, 3 and shape (see :class:`Stabilization`).
+
+    References
+    ----------
+    .. [1] E. Reynders, J. Houbrechts and G. De Roeck, "Fully automated (operational) modal
+       analysis", Mechanical Systems and Signal Processing 29, 228–250, 2012.
     """
     code = np.zeros(len(f), int)
     if prev is None or not len(prev[0]) or not len(f):
         return code
-    pf, pz, pphi = prev
+    pf, pz, pphi = (np.asarray(v) for v in prev)
+    f, z = np.asarray(f, float), np.asarray(z, float)
+
+    def pole(fr, zr):
+        return 2 * np.pi * fr * (-zr + 1j * np.sqrt(np.maximum(1 - zr**2, 0.0)))
+
+    plam = pole(pf, pz)
     for k in range(len(f)):
-        j = int(np.argmin(np.abs(pf - f[k])))
-        if abs(pf[j] - f[k]) / f[k] <= tol_frequency:
-            code[k] = 1
-            if abs(pz[j] - z[k]) / z[k] <= tol_damping:
-                code[k] = 2
-                if mac(pphi[j], phi[k])[0, 0] >= mac_min:
-                    code[k] = 3
+        near = np.flatnonzero(np.abs(pf - f[k]) / f[k] <= tol_frequency)
+        if not near.size:
+            continue
+        code[k] = 1
+        m = mac(phi[k], pphi[near])[0]
+        lam = pole(f[k], z[k])
+        dist = np.abs(plam[near] - lam) / np.abs(lam) + 1 - np.nan_to_num(m, nan=0.0)
+        i = int(np.argmin(dist))
+        j = near[i]
+        if abs(pz[j] - z[k]) / z[k] <= tol_damping:
+            code[k] = 2
+            if m[i] >= mac_min:
+                code[k] = 3
     return code

@@ -232,8 +232,8 @@ def lscf_bootstrap(signals, input: str, outputs, modes: ModalModel, *, nperseg: 
     for i in range(n_boot):
         w = np.bincount(rng.integers(0, n_blocks, n_blocks), minlength=n_blocks) * nb
         G = np.tensordot(w / w.sum(), Gb, axes=1)
-        csd = CrossSpectralMatrix(parts[0].frequencies, G, tuple(chans), parts[0].units, parts[0].scaling,
-                                  dict(parts[0].settings))
+        csd = CrossSpectralMatrix(frequencies=parts[0].frequencies, G=G, channels=tuple(chans), units=parts[0].units,
+                                  scaling=parts[0].scaling, settings=dict(parts[0].settings))
         h = frf(csd, input, list(outputs))
         st = lscf(h, orders=[order - 1, order], fmin=fmin, fmax=fmax)
         keep = st.order == order

@@ -1,10 +1,12 @@
 """Models: lumped multi-DOF structures, nonlinear elements, excitations, time simulation
 and model files.
 
-``vibroscope.models`` imports nothing of vibroscope's but :mod:`vibroscope.signals` and
-:mod:`vibroscope.errors`.
+``vibroscope.models`` imports nothing of vibroscope's but :mod:`vibroscope.signals`,
+:mod:`vibroscope.errors` and the lazy-import helper :mod:`vibroscope._lazy` (simulation,
+excitations and model files load on first use).
 """
 
+from vibroscope._lazy import lazy_attributes
 from vibroscope.models.controller import Controller
 from vibroscope.models.elements import (
     Backlash,
@@ -44,17 +46,19 @@ __all__ = [
 ]
 
 
-def __getattr__(name):  # lazy: simulate / excitation / modelfile load on first use
-    import importlib
-    import importlib.util
+#: names loaded on first use (simulation, excitations, model files), by the module that defines them
+_LAZY = {
+    "simulate_periodic": "simulate", "reconstruct_input": "simulate", "default_oversample": "simulate",
+    "upsample": "resample", "decimate_fir": "resample",
+    "boucwen_benchmark_model": "boucwen_benchmark", "simulate_boucwen_benchmark": "boucwen_benchmark",
+    "band_limited_random": "excitation", "multisine": "excitation", "sine_sweep": "excitation",
+    "impact": "excitation", "step": "excitation", "Excitation": "excitation", "parse_excitation": "excitation",
+    "TransferFunctionModel": "modelfile", "load_model": "modelfile", "dump_model": "modelfile",
+    "loads_model": "modelfile", "dumps_model": "modelfile",
+}
 
-    # A submodule's name always means the submodule, as it does once anything has imported it
-    # (`from vibroscope.models.simulate import upsample` binds it here): `vibroscope.models.simulate`
-    # is the module, its function `vibroscope.models.simulate.simulate` (or `vibroscope.simulate`).
-    if importlib.util.find_spec(f"{__name__}.{name}") is not None:
-        return importlib.import_module(f"{__name__}.{name}")
-    for mod in ("simulate", "excitation", "modelfile"):
-        m = importlib.import_module(f"vibroscope.models.{mod}")
-        if name in getattr(m, "__all__", ()):
-            return getattr(m, name)
-    raise AttributeError(f"module 'vibroscope.models' has no attribute {name!r}")
+# A submodule's name always means the submodule (submodules=True), as it does once anything has
+# imported it (`from vibroscope.models.simulate import upsample` binds it here):
+# `vibroscope.models.simulate` is the module, its function `vibroscope.models.simulate.simulate`
+# (or `vibroscope.simulate`).
+__getattr__, __dir__ = lazy_attributes(__name__, {k: f".{m}" for k, m in _LAZY.items()}, submodules=True)

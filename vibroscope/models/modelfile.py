@@ -667,6 +667,35 @@ def load_model(path) -> LumpedModel | TransferFunctionModel | PoleResidueModel:
         (negative mass or stiffness, frequency <= 0, damping ratio outside [0, 1), residue
         arrays whose shape is not (n_outputs, n_inputs, 2), ...); the message names
         ``file:line`` and the key.
+
+    Examples
+    --------
+    One DOF of 2 kg on a 5e4 N/m spring: its natural frequency is ``sqrt(k/m) / (2 pi)`` =
+    25.16 Hz.
+
+    >>> import math, tempfile
+    >>> from pathlib import Path
+    >>> text = '''
+    ... kind = "lumped"
+    ... [[dof]]
+    ... name = "m1"
+    ... mass = 2.0
+    ... [[element]]
+    ... type = "spring"
+    ... between = ["m1", "ground"]
+    ... k = 5.0e4
+    ... '''
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     path = Path(tmp) / "sdof.toml"
+    ...     _ = path.write_text(text)
+    ...     model = load_model(path)
+    >>> model.dof_names
+    ('m1',)
+    >>> f_n = float(model.modes().natural_frequencies[0])
+    >>> round(f_n, 2)
+    25.16
+    >>> math.isclose(f_n, math.sqrt(5.0e4 / 2.0) / (2 * math.pi), rel_tol=1e-9)
+    True
     """
     path = Path(path)
     try:

@@ -16,8 +16,9 @@ Conventions
 
 Module layout: :mod:`~vibroscope.models.resample` (:func:`upsample`,
 :func:`decimate_fir`), :mod:`~vibroscope.models.linear_sim` (FOH path),
-:mod:`~vibroscope.models.integrate` (numba kernel), :mod:`~vibroscope.models.boucwen_benchmark`;
-their public names are re-exported here.
+:mod:`~vibroscope.models.integrate` (numba kernel); their public names are re-exported here.
+The Bouc-Wen benchmark [3]_ (:mod:`~vibroscope.models.boucwen_benchmark`, which simulates with
+this module) is offered by :mod:`vibroscope.models`.
 
 References
 ----------
@@ -37,7 +38,6 @@ from typing import Literal
 import numpy as np
 from scipy import signal
 
-from vibroscope.models.boucwen_benchmark import boucwen_benchmark_model, simulate_boucwen_benchmark
 from vibroscope.models.integrate import integrate
 from vibroscope.models.linear_sim import _dlsim_modal, _foh, _triangle_hold_compensation
 from vibroscope.models.lumped import UNITS, LumpedModel
@@ -51,8 +51,6 @@ __all__ = [
     "default_oversample",
     "upsample",
     "decimate_fir",
-    "boucwen_benchmark_model",
-    "simulate_boucwen_benchmark",
 ]
 
 #: linear path's default oversampling factor

@@ -48,7 +48,7 @@ _BLOCK_BYTES = 8 * 2**20
 _NUMPY2 = int(np.__version__.split(".")[0]) >= 2  # np.fft.rfft(..., out=)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SegmentSettings:
     """Validated Welch segmenting settings (see :func:`segment_settings`)."""
 
@@ -146,7 +146,8 @@ def segment_settings(
         raise ValueError(f"{nfft=} must be at least {nperseg=}")
     check_option("detrend", detrend, ("constant", "linear", False))
     win.flags.writeable = False
-    return SegmentSettings(nperseg, noverlap, nfft, win, window, detrend)
+    return SegmentSettings(nperseg=nperseg, noverlap=noverlap, nfft=nfft, window=win, window_spec=window,
+                           detrend=detrend)
 
 
 def _flat_rows(buf: np.ndarray) -> tuple[np.ndarray, int]:

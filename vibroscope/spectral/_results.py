@@ -42,20 +42,20 @@ def channel_index(channels: Sequence[str], channel: str | int) -> int:
         raise KeyError(f"no channel {channel!r}; channels are {list(channels)}") from None
 
 
-def _axis_summary(f: np.ndarray) -> str:
+def axis_summary(f: np.ndarray) -> str:
     """``"129 lines, 0–256 Hz"`` for a frequency axis."""
     if f.size == 0:
         return "0 lines"
     return f"{f.size} lines, {f[0]:.4g}–{f[-1]:.4g} Hz"
 
 
-def _names(names: Sequence[str], k: int = 3) -> str:
+def names_summary(names: Sequence[str], k: int = 3) -> str:
     """At most `k` names, then the count of the others."""
     head = ", ".join(repr(n) for n in names[:k])
     return f"[{head}{f', … +{len(names) - k}' if len(names) > k else ''}]"
 
 
-class _Unpacks:
+class UnpacksAsTuple:
     """Tuple behaviour of a result: it unpacks, has a length and indexes like the tuple of its
     ``_tuple_fields`` (what the function returned before it returned a result object)."""
 
@@ -71,7 +71,7 @@ class _Unpacks:
         return tuple(self)[i]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Spectrum:
     """Real spectra of several channels on one frequency axis.
 
@@ -137,8 +137,8 @@ class Spectrum:
         return self.values[channel_index(self.channels, channel)]
 
     def __repr__(self) -> str:
-        return (f"Spectrum({len(self.channels)} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)}, scaling={self.scaling!r})")
+        return (f"Spectrum({len(self.channels)} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)}, scaling={self.scaling!r})")
 
     @property
     def df(self) -> float:
@@ -230,8 +230,8 @@ class CrossSpectralMatrix:
         return iter((self.frequencies, self.G))
 
     def __repr__(self) -> str:
-        return (f"CrossSpectralMatrix({self.n_channels}×{self.n_channels} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)}, scaling={self.scaling!r})")
+        return (f"CrossSpectralMatrix({self.n_channels}×{self.n_channels} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)}, scaling={self.scaling!r})")
 
     @property
     def n_channels(self) -> int:
@@ -264,7 +264,8 @@ class CrossSpectralMatrix:
         vals = np.real(np.einsum("fii->if", self.G))
         units = power_units(self.units, self.scaling)
         n_avg = None if self.n_averages is None else np.diag(self.n_averages)
-        return Spectrum(self.frequencies, vals, self.channels, units, self.scaling, dict(self.settings), n_avg)
+        return Spectrum(frequencies=self.frequencies, values=vals, channels=self.channels, units=units,
+                        scaling=self.scaling, settings=dict(self.settings), n_averages=n_avg)
 
     def select(self, channels) -> "CrossSpectralMatrix":
         """The sub-matrix of `channels` (names or indices), in that order.
@@ -285,13 +286,13 @@ class CrossSpectralMatrix:
         """
         idx = [self.index(c) for c in channels]
         return CrossSpectralMatrix(
-            self.frequencies,
-            self.G[:, idx][:, :, idx],
-            [self.channels[i] for i in idx],
-            [self.units[i] for i in idx],
-            self.scaling,
-            dict(self.settings),
-            None if self.n_averages is None else self.n_averages[np.ix_(idx, idx)],
+            frequencies=self.frequencies,
+            G=self.G[:, idx][:, :, idx],
+            channels=[self.channels[i] for i in idx],
+            units=[self.units[i] for i in idx],
+            scaling=self.scaling,
+            settings=dict(self.settings),
+            n_averages=None if self.n_averages is None else self.n_averages[np.ix_(idx, idx)],
         )
 
     def band(self, fmin: float, fmax: float) -> "CrossSpectralMatrix":
@@ -314,10 +315,9 @@ class CrossSpectralMatrix:
         if fmin > fmax:
             raise ValueError(f"{fmin=} Hz must not exceed {fmax=} Hz: swap them")
         m = (self.frequencies >= fmin) & (self.frequencies <= fmax)
-        return CrossSpectralMatrix(
-            self.frequencies[m], self.G[m], self.channels, self.units, self.scaling, dict(self.settings),
-            self.n_averages,
-        )
+        return CrossSpectralMatrix(frequencies=self.frequencies[m], G=self.G[m], channels=self.channels,
+                                   units=self.units, scaling=self.scaling, settings=dict(self.settings),
+                                   n_averages=self.n_averages)
 
 
 @dataclass(frozen=True, eq=False)
@@ -367,8 +367,8 @@ class FRF:
 
     def __repr__(self) -> str:
         kind = f", kind={self.kind!r}" if self.kind else ""
-        return (f"FRF({self.estimator}, {len(self.outputs)} outputs {_names(self.outputs)} per "
-                f"{len(self.inputs)} inputs {_names(self.inputs)}, {_axis_summary(self.frequencies)}{kind})")
+        return (f"FRF({self.estimator}, {len(self.outputs)} outputs {names_summary(self.outputs)} per "
+                f"{len(self.inputs)} inputs {names_summary(self.inputs)}, {axis_summary(self.frequencies)}{kind})")
 
     @property
     def magnitude_db(self) -> np.ndarray:
@@ -412,8 +412,9 @@ class FRF:
             if p < 0:
                 fac[self.frequencies == 0] = np.nan
         H = self.H * fac[:, None, None]
-        return FRF(self.frequencies, H, self.coherence, self.inputs, self.outputs, self.estimator, kind,
-                   FRF_KIND_TABLE[kind].unit, dict(self.settings))
+        return FRF(frequencies=self.frequencies, H=H, coherence=self.coherence, inputs=self.inputs,
+                   outputs=self.outputs, estimator=self.estimator, kind=kind, units=FRF_KIND_TABLE[kind].unit,
+                   settings=dict(self.settings))
 
     def plot(self, *, output=0, input=0, fig=None):
         """Bode-style figure (magnitude dB, phase, coherence); imports matplotlib lazily. Returns the Figure.
@@ -435,7 +436,7 @@ class FRF:
         return plot_frf(self, output=output, input=input, fig=fig)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Spectrogram:
     """Short-time spectra of several channels.
 
@@ -471,12 +472,12 @@ class Spectrogram:
     def __repr__(self) -> str:
         t = self.times
         span = f"{t.size} times, {t[0]:.4g}–{t[-1]:.4g} s" if t.size else "0 times"
-        return (f"Spectrogram({len(self.channels)} channels {_names(self.channels)}, "
-                f"{_axis_summary(self.frequencies)}, {span}, scaling={self.scaling!r})")
+        return (f"Spectrogram({len(self.channels)} channels {names_summary(self.channels)}, "
+                f"{axis_summary(self.frequencies)}, {span}, scaling={self.scaling!r})")
 
 
 @dataclass(frozen=True, eq=False)
-class Coherence(_Unpacks):
+class Coherence(UnpacksAsTuple):
     """Ordinary coherence of every channel pair (:func:`~vibroscope.spectral.coherence`).
 
     Unpacks like the tuple ``(frequencies, gamma2)`` that scipy's ``coherence`` returns.
@@ -506,11 +507,11 @@ class Coherence(_Unpacks):
         object.__setattr__(self, "channels", tuple(self.channels))
 
     def __repr__(self) -> str:
-        return f"Coherence({len(self.channels)} channels {_names(self.channels)}, {_axis_summary(self.frequencies)})"
+        return f"Coherence({len(self.channels)} channels {names_summary(self.channels)}, {axis_summary(self.frequencies)})"
 
 
 @dataclass(frozen=True, eq=False)
-class MultipleCoherence(_Unpacks):
+class MultipleCoherence(UnpacksAsTuple):
     """Multiple coherence of each output with all inputs together
     (:func:`~vibroscope.spectral.multiple_coherence`); unpacks as ``(frequencies, gamma2)``.
 
@@ -541,5 +542,5 @@ class MultipleCoherence(_Unpacks):
         object.__setattr__(self, "outputs", tuple(self.outputs))
 
     def __repr__(self) -> str:
-        return (f"MultipleCoherence({len(self.outputs)} outputs {_names(self.outputs)} on "
-                f"{len(self.inputs)} inputs {_names(self.inputs)}, {_axis_summary(self.frequencies)})")
+        return (f"MultipleCoherence({len(self.outputs)} outputs {names_summary(self.outputs)} on "
+                f"{len(self.inputs)} inputs {names_summary(self.inputs)}, {axis_summary(self.frequencies)})")

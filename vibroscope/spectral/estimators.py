@@ -77,8 +77,8 @@ def _fill_doc(fn):
     return fn
 
 
-def _unpack(x: Signals | np.ndarray, fs: float | None, *,
-            keep_float32: bool = False) -> tuple[np.ndarray, float, tuple, tuple]:
+def unpack_signals(x: Signals | np.ndarray, fs: float | None, *,
+                   keep_float32: bool = False) -> tuple[np.ndarray, float, tuple, tuple]:
     """(data (n_ch, n), fs, channels, units) from Signals or an array (1-D = one channel); a float32
     array stays float32 (not copied) with `keep_float32`."""
     if isinstance(x, Signals):
@@ -235,7 +235,7 @@ def _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling, worker
                 dtype: str = "float64", references=None):
     """Validate, then one pass of the engine: (accumulator, channels, units, settings dict, counts)."""
     check_option("dtype", dtype, ("float64", "float32"))
-    data, fs, channels, units = _unpack(x, fs, keep_float32=dtype == "float32")
+    data, fs, channels, units = unpack_signals(x, fs, keep_float32=dtype == "float32")
     check_option("scaling", scaling, ("density", "spectrum"))
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
                           detrend=detrend, nfft=nfft)
@@ -351,7 +351,8 @@ def csd_matrix(
     """
     acc, channels, units, settings, cnt = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
                                                       workers, cross=True, dtype=dtype, references=references)
-    return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), channels, units, scaling, settings, cnt)
+    return CrossSpectralMatrix(frequencies=acc.frequencies(), G=acc.result(scaling), channels=channels, units=units,
+                               scaling=scaling, settings=settings, n_averages=cnt)
 
 
 @_fill_doc
@@ -428,8 +429,8 @@ def welch(
     """
     acc, channels, units, settings, cnt = _welch_pass(x, fs, nperseg, noverlap, window, detrend, nfft, scaling,
                                                       workers, cross=False, dtype=dtype)
-    return Spectrum(acc.frequencies(), acc.result(scaling), channels, _power_units(units, scaling), scaling,
-                    settings, cnt)
+    return Spectrum(frequencies=acc.frequencies(), values=acc.result(scaling), channels=channels,
+                    units=_power_units(units, scaling), scaling=scaling, settings=settings, n_averages=cnt)
 
 
 def amplitude_spectrum(
@@ -479,14 +480,15 @@ def amplitude_spectrum(
     .. [1] A. Brandt, *Noise and Vibration Analysis: Signal Analysis and Experimental Procedures*,
        Wiley, 2011.
     """
-    data, fs, channels, units = _unpack(x, fs)
+    data, fs, channels, units = unpack_signals(x, fs)
     n = data.shape[1]
     nperseg = n if nperseg is None else nperseg
     sp = welch(data, fs, nperseg=nperseg, noverlap=noverlap, window=window, detrend=detrend, scaling="spectrum")
     amp = np.sqrt(sp.values)  # RMS of each line; peak = sqrt(2) RMS except at DC and Nyquist
     last = None if sp.settings["nfft"] % 2 else -1
     amp[:, 1:last] *= np.sqrt(2.0)
-    return Spectrum(sp.frequencies, amp, channels, units, "amplitude", dict(sp.settings), sp.n_averages)
+    return Spectrum(frequencies=sp.frequencies, values=amp, channels=channels, units=units, scaling="amplitude",
+                    settings=dict(sp.settings), n_averages=sp.n_averages)
 
 
 def _resolve(G: CrossSpectralMatrix, chans: Sequence[Channel] | Channel) -> list[int]:
@@ -681,8 +683,8 @@ def frf(
     if kind is not None:
         check_option("kind", kind, FRF_KINDS)
         k_inf, unit = kind, FRF_KIND_TABLE[kind].unit
-    return FRF(G.frequencies, H, coh, [G.channels[i] for i in ii], [G.channels[o] for o in oo],
-               estimator, k_inf, unit, settings)
+    return FRF(frequencies=G.frequencies, H=H, coherence=coh, inputs=[G.channels[i] for i in ii],
+               outputs=[G.channels[o] for o in oo], estimator=estimator, kind=k_inf, units=unit, settings=settings)
 
 
 def _batched_solve(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -830,10 +832,11 @@ def spectrogram(
     --------
     welch : The spectra averaged over the whole record.
     """
-    data, fs, channels, units = _unpack(x, fs)
+    data, fs, channels, units = unpack_signals(x, fs)
     st = segment_settings(data.shape[1], nperseg=nperseg, noverlap=noverlap, window=window,
                           detrend=detrend)
     f, t, S = scipy.signal.spectrogram(data, fs, window=st.window, nperseg=st.nperseg,
                                        noverlap=st.noverlap, detrend=detrend, scaling=scaling, axis=-1)
     u = _power_units(units, scaling)
-    return Spectrogram(f, t, S, channels, u, scaling, settings_dict(fs, st, S.shape[-1]))
+    return Spectrogram(frequencies=f, times=t, values=S, channels=channels, units=u, scaling=scaling,
+                       settings=settings_dict(fs, st, S.shape[-1]))

@@ -307,7 +307,7 @@ def _integrals(signals: Signals, order: int, f_cut, method: str) -> list[Signals
 # ---------------------------------------------------------------------------------------------
 # vibration severity
 # ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Severity:
     """ISO 20816-1 vibration severity: broadband RMS velocity per channel.
 
@@ -459,13 +459,14 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     settings = dict(fs=fs, nperseg=int(nperseg), noverlap=int(noverlap), window="hann", detrend="linear",
                     df_hz=df, n_averages=int(n_avg))
     method = "Welch PSD of acceleration / (2πf)², integrated over the band (Parseval)"
-    return Severity(signals.channels, 1000.0 * v_rms, (f_lo, f_hi), method, "; ".join(notes), settings)
+    return Severity(channels=signals.channels, velocity_rms_mm_s=1000.0 * v_rms, band_hz=(f_lo, f_hi), method=method,
+                    note="; ".join(notes), settings=settings)
 
 
 # ---------------------------------------------------------------------------------------------
 # operating deflection shape
 # ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class OperatingShape:
     """The operating deflection shape (ODS) of the measurement points at one frequency.
 
@@ -635,5 +636,6 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
     if shape[ref] != 0 and mx > 0:
         shape = shape * (np.conj(shape[ref]) / abs(shape[ref])) / mx
         shape[ref] = abs(vals[ref]) / mx  # exactly real positive
-    return OperatingShape(float(source.frequencies[k]), shape, points, kind, points[ref], vals, units,
-                          float(frequency_hz), in_name)
+    return OperatingShape(frequency_hz=float(source.frequencies[k]), shape=shape, points=points, source=kind,
+                          reference=points[ref], values=vals, units=units, requested_hz=float(frequency_hz),
+                          input=in_name)

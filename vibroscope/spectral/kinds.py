@@ -15,7 +15,7 @@ from dataclasses import dataclass
 __all__ = ["FRFKind", "FRF_KIND_TABLE", "FRF_KINDS", "power_of_jw", "kind_of_response_unit"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FRFKind:
     """One FRF kind.
 
@@ -47,9 +47,10 @@ class FRFKind:
 
 #: the FRF kinds by name, in the order of :data:`FRF_KINDS`
 FRF_KIND_TABLE: dict[str, FRFKind] = {k.name: k for k in (
-    FRFKind("accelerance", "acceleration", 2, "m/s^2", "m/s^2/N", 12),
-    FRFKind("mobility", "velocity", 1, "m/s", "m/s/N", 11),
-    FRFKind("receptance", "displacement", 0, "m", "m/N", 8),
+    FRFKind(name="accelerance", quantity="acceleration", power=2, response_unit="m/s^2", unit="m/s^2/N",
+            uff_data_type=12),
+    FRFKind(name="mobility", quantity="velocity", power=1, response_unit="m/s", unit="m/s/N", uff_data_type=11),
+    FRFKind(name="receptance", quantity="displacement", power=0, response_unit="m", unit="m/N", uff_data_type=8),
 )}
 
 #: FRF kinds by response quantity per unit force (Ewins, *Modal Testing*, 2000, §1.3)

@@ -21,7 +21,7 @@ from vibroscope._checks import check_option
 from vibroscope.signals import Signals
 from vibroscope.spectral._results import FRF
 from vibroscope.spectral.kinds import FRF_KIND_TABLE, FRF_KINDS
-from vibroscope.spectral.estimators import _unpack, frf_kind
+from vibroscope.spectral.estimators import frf_kind, unpack_signals
 
 __all__ = ["Periodicity", "detect_period", "frf_periodic"]
 
@@ -272,7 +272,7 @@ def frf_periodic(
     >>> bool(np.nanmax(np.abs(h.H[:, 0, 0] - H_true)) < 1e-10)
     True
     """
-    data, fs, channels, units = _unpack(signals, fs)
+    data, fs, channels, units = unpack_signals(signals, fs)
     n_ch, n = data.shape
     i_in = _index(channels, input)
     if outputs is None:
@@ -337,8 +337,8 @@ def frf_periodic(
                     first_sample=start, window="boxcar", detrend=False, periodicity_score=score,
                     excited_lines=[int(k) for k in np.flatnonzero(excited)], H_std=std_arr)
     freqs = scipy.fft.rfftfreq(L, 1.0 / fs)
-    return FRF(freqs, H.T[:, :, None], coh.T, [name], [channels[o] for o in oo], "periodic", k_inf, unit,
-               settings)
+    return FRF(frequencies=freqs, H=H.T[:, :, None], coherence=coh.T, inputs=[name], outputs=[channels[o] for o in oo],
+               estimator="periodic", kind=k_inf, units=unit, settings=settings)
 
 
 def _local_noise(v: np.ndarray, M: int, half_width: int = 16) -> np.ndarray:
