@@ -12,6 +12,10 @@ with the medians of wall and CPU time (user + system, the worker processes inclu
 average before and after. On a shared machine compare the ratios, not the seconds. "All outputs"
 is the rerun recording, the PNG figures and the ``--json`` summary.
 
+``--against TREE`` also runs both cases with another checkout's package first on ``PYTHONPATH``
+(e.g. ``/work/main``: the code before a change), alternated with this one's, so that the two
+ratios come from the same run and the same load.
+
 ``--csd`` adds what a command-line user sees of the cross-spectral engine: ``csd_matrix`` of 10
 channels × 2e6 samples (nperseg 4096, the README's case) as the first call of a fresh process
 (numba's compiled kernels loaded from its cache, the threads started) and as the second call of
@@ -53,11 +57,15 @@ def write_log(path: Path, n: int, fs: float = 1000.0) -> Path:
                                          t0=1.7e9), frame_id="imu_link")
 
 
-def _run(argv: list[str], cwd: str) -> tuple[float, float]:
-    """(wall s, CPU s of the process and its children) of one run of `argv`."""
+def _run(argv: list[str], cwd: str, tree: str | None = None) -> tuple[float, float]:
+    """(wall s, CPU s of the process and its children) of one run of `argv` (with `tree` first on
+    ``PYTHONPATH`` when given)."""
+    env = None
+    if tree:
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (tree, os.environ.get("PYTHONPATH")) if p))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
-    subprocess.run(argv, check=True, capture_output=True, cwd=cwd)
+    subprocess.run(argv, check=True, capture_output=True, cwd=cwd, env=env)
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -69,25 +77,31 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="runs of each case, alternated (default 3)")
     ap.add_argument("--log", type=Path, help="analyse this log instead of a generated one")
     ap.add_argument("--csd", action="store_true", help="also time csd_matrix fresh (first call) and warm")
+    ap.add_argument("--against", metavar="TREE", help="also run both cases with this checkout's package "
+                                                      "(e.g. /work/main), alternated, for its ratio in the same run")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as d:
         log = args.log.resolve() if args.log else write_log(Path(d) / "imu.mcap", int(args.messages))
         cli = [sys.executable, "-m", "vibroscope.cli", "analyse", str(log), "--out", d]
         cases = {"analysis only (--no-rrd --no-figures)": [*cli, "--no-rrd", "--no-figures"],
                  "all outputs (rrd + figures + json)": [*cli, "--json", "summary.json"]}
-        res: dict[str, list] = {k: [] for k in cases}
+        trees = {"": None, **({f" [{args.against}]": args.against} if args.against else {})}
+        res: dict[tuple, list] = {(tag, k): [] for tag in trees for k in cases}
         load0 = os.getloadavg()[0]
         for _ in range(args.repeat):
-            for name, argv in cases.items():
-                res[name].append(_run(argv, d))
+            for tag, tree in trees.items():
+                for name, argv in cases.items():
+                    res[tag, name].append(_run(argv, d, tree))
         load1 = os.getloadavg()[0]
     med = {k: (statistics.median(w for w, _ in v), statistics.median(c for _, c in v)) for k, v in res.items()}
-    (w0, c0), (w1, c1) = med.values()
     size = f"{log.name}, {log.stat().st_size / 2**20:.0f} MiB" if args.log else f"Imu log of {args.messages:.0e} messages"
-    for name, (w, c) in med.items():
-        print(f"case=analyse_outputs  {name}  {size}  median_wall_s={w:.2f}  median_cpu_s={c:.2f}  runs={args.repeat}")
-    print(f"case=analyse_outputs  ratio all/none  wall={w1 / w0:.2f}x  cpu={c1 / c0:.2f}x  "
-          f"load_avg={load0:.1f}->{load1:.1f}  cores={len(os.sched_getaffinity(0))}")
+    for (tag, name), (w, c) in med.items():
+        print(f"case=analyse_outputs{tag}  {name}  {size}  median_wall_s={w:.2f}  median_cpu_s={c:.2f}  "
+              f"runs={args.repeat}")
+    for tag in trees:
+        (w0, c0), (w1, c1) = (med[tag, name] for name in cases)
+        print(f"case=analyse_outputs{tag}  ratio all/none  wall={w1 / w0:.2f}x  cpu={c1 / c0:.2f}x  "
+              f"load_avg={load0:.1f}->{load1:.1f}  cores={len(os.sched_getaffinity(0))}")
     if args.csd:
         csd_fresh_warm(args.repeat)
 

@@ -449,9 +449,10 @@ def test_spawn_with_no_rrd_shows_a_file_of_its_own(tiny_log, tmp_path, monkeypat
     """``--spawn --no-rrd``: nothing is written among the outputs; the viewer is handed a complete
     recording in the system's temporary folder."""
     import vibroscope.viewers.rerun_view as rv
+    import vibroscope.viewers.rerun_viewer as viewer  # where show_recording looks open_in_viewer up
 
     seen = []
-    monkeypatch.setattr(rv, "open_in_viewer", lambda path, **k: seen.append(Path(path)) or None)
+    monkeypatch.setattr(viewer, "open_in_viewer", lambda path, **k: seen.append(Path(path)) or None)
     monkeypatch.chdir(tmp_path)
     assert main(["analyse", str(tiny_log), "--spawn", "--no-rrd", "--no-figures"]) == 0
     capsys.readouterr()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field, replace
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 import scipy.signal
@@ -486,6 +486,7 @@ def analyse_signals(
     method: str = "auto",
     select: Sequence[float] | None = None,
     decimation: bool = True,
+    on_signals: Callable[[Signals, tuple], None] | None = None,
 ) -> Analysis:
     """Spectra, FRFs, coherence and modal vectors of a record.
 
@@ -537,6 +538,11 @@ def analyse_signals(
     decimation : bool, optional
         Decimate to the band (:func:`decimate`) when ``fmax < 0.4 fs`` (default True); False
         analyses the record at its own rate.
+    on_signals : callable, optional
+        Called once as ``on_signals(signals, outputs)`` with the record the modes are identified
+        from (faults applied, decimated: ``Analysis.signals``) and the response channels, before
+        the identification: outputs that need only the time series start from them while the
+        modes are computed (:class:`vibroscope.viewers.ahead.TimeSeriesAhead`).
 
     Returns
     -------
@@ -584,6 +590,8 @@ def analyse_signals(
     undecimated = sig
     plan, sig = _plan(sig, input=input, outputs=outputs, nperseg=nperseg, window=window, fmin=fmin, fmax=fmax,
                       estimator=estimator, method=method, decimation=decimation, gappy=gappy, notes=notes)
+    if on_signals is not None:
+        on_signals(sig, tuple(plan.outputs))
     return _execute(plan, sig, undecimated, auto_nperseg=nperseg is None, gappy=gappy, n_modes=n_modes,
                     prominence=prominence, method=method, select=select, notes=notes, faults=faults,
                     expected=expected)

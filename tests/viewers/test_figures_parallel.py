@@ -77,3 +77,37 @@ def test_workers_end_although_the_parent_holds_sigterm(tmp_path):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["2", "2", "2"]
+
+
+def test_save_figure_draws_the_pixels_savefig_draws(tmp_path):
+    """save_figure draws once on the Agg canvas (savefig draws a laid-out figure twice): the same pixels
+    as savefig at the same dpi, quantised alike; the figure's own dpi is left as it was."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    def draw():
+        fig = figures.pyplot().figure(figsize=(4.33, 2.9), layout="constrained")  # 476.3 x 319 px at 110 dpi
+        axes = fig.subplots(2, 2, sharex=True, sharey="row")
+        for k, ax in enumerate(axes.ravel()):
+            ax.plot(np.sin(np.linspace(0, 7 + k, 400)) * 10 ** k, label=f"curve {k}")
+            ax.set_title(f"panel {k}")
+            ax.legend(loc="best")
+        fig.suptitle("a laid-out figure")
+        return fig
+
+    fig = draw()
+    buf = io.BytesIO()
+    fig.savefig(buf, dpi=figures.DPI, format="png")
+    buf.seek(0)
+    with Image.open(buf) as im:
+        ref = np.asarray(im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT,
+                                                     dither=Image.Dither.NONE).convert("RGB"))
+    fig = draw()
+    dpi = fig.dpi
+    path = figures.save_figure(fig, tmp_path / "f.png")
+    assert fig.dpi == dpi
+    with Image.open(path) as im:
+        got = np.asarray(im.convert("RGB"))
+    assert got.shape == ref.shape and np.array_equal(got, ref)

@@ -14,7 +14,7 @@ __all__ = ["write_outputs"]
 
 
 def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,
-                  true_modes=None, ods=None) -> dict:
+                  true_modes=None, ods=None, ahead=None) -> dict:
     """Write the summary JSON, the rerun recording and the figures of an analysis, atomically.
 
     With `ods` (frequencies in Hz) the operating deflection shapes at those frequencies (from the
@@ -47,6 +47,9 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
         Reference modes, written beside the identified ones.
     ods : sequence of float, optional
         Operating deflection shape frequencies in Hz.
+    ahead : TimeSeriesAhead, optional
+        The integrals and time-series figures made while the modes were identified
+        (:class:`vibroscope.viewers.ahead.TimeSeriesAhead`), taken instead of computing them again.
 
     Returns
     -------
@@ -95,7 +98,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             written["json"] = json_path
             done.append(f"summary: {json_path}")
         kin = None
-        if acc and (figures or rrd or spawn):  # integrated once, for the figure and the recording
+        early = ahead is not None and sig is not None and ahead.holds(sig, acc)
+        if acc and (figures or rrd or spawn) and not early:  # integrated once, for the figure and the recording
             from vibroscope.spectral.integration import velocity_and_displacement
 
             a = an.signals.select(acc)
@@ -108,7 +112,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             tmp = tx.directory(figures)
             jobs = figure_jobs(tmp, signals=sig, psd=an.psd, frf=an.frf, modal=an.modal, sv=an.singular_values,
                                coords=sc.as_mapping(), true_modes=true_modes, stabilization=stab, synthesized=synth,
-                               kinematics=(an.signals.select(acc), *kin) if kin else None)
+                               kinematics=(an.signals.select(acc), *kin) if kin else None,
+                               ahead=ahead if early else None)
             jobs += [(lambda o=o: plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png")
                      for o in ods_shapes]
             pending = PendingFigures(jobs)
@@ -118,6 +123,8 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 from vibroscope.viewers.rerun_view import log_analysis
 
                 modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
+                if early and acc:
+                    kin = ahead.kinematics()
                 path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
                                     coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
                                     spawn=spawn and not rrd,  # a recording under its final name is opened below

@@ -130,8 +130,9 @@ def run(args) -> int:
     """
     from vibroscope.commands._options import select_frequencies as _select_freqs
     from vibroscope.commands._outputs import (check_out_dir, check_outputs, default_output, preload_outputs,
-                                              resolve_outputs)
+                                              preloaded, resolve_outputs)
     from vibroscope.errors import VibroscopeError
+    from vibroscope.viewers.ahead import TimeSeriesAhead
 
     check_out_dir(args.out)
     resolve_outputs(args, ("json", "rrd", "figures"), args.out)  # `--out res --json s.json`: res/s.json
@@ -175,24 +176,34 @@ def run(args) -> int:
         print(f"streaming {args.log} block by block: {why}")
         return run_stream(args)
     select = _select_freqs(args.select)
-    try:
-        an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
-                         find_input=not getattr(args, "output_only", False), nperseg=args.nperseg, fmin=args.fmin,
-                         fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator, method=args.method,
-                         select=select, decimation=not getattr(args, "no_decimate", False),
-                         max_memory=budget)
-    except ValueError as exc:
-        raise VibroscopeError(f"{args.log}: {exc}") from None
-    nyq = an.psd.frequencies[-1]
-    for f in args.ods or ():  # before the report: nothing is printed as done that will not be written
-        if f > nyq:
-            raise VibroscopeError(f"--ods {f:g}: above the analysed band's top, {nyq:g} Hz (the Nyquist frequency of "
-                                  f"{an.signals.fs:g} Hz)")
-    if args.coords:  # the rows against the channels analysed, before the report (one line if they differ)
-        from vibroscope.io.coords import read_coords
+    # what needs only the time series (integrals, signals and kinematics figures) is made in a worker
+    # process while the modes are identified on the other core (the background imports joined first:
+    # no worker inherits a held import lock)
+    ahead = TimeSeriesAhead(figures=bool(figures), kinematics=bool(rrd) or args.spawn)
 
-        read_coords(args.coords, an.settings["outputs"])
-    print(report_text(an, source=str(args.log), verbose=getattr(args, "verbose", False)))
-    write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
-                  spawn=args.spawn, ods=args.ods)
+    def on_signals(sig, outputs) -> None:
+        preloaded()
+        ahead.start(sig, outputs)
+
+    with ahead:
+        try:
+            an = analyse_log(args.log, input=args.input, outputs=args.outputs, fs=args.fs, progress=args.progress,
+                             find_input=not getattr(args, "output_only", False), nperseg=args.nperseg, fmin=args.fmin,
+                             fmax=args.fmax, n_modes=args.n_modes, estimator=args.estimator, method=args.method,
+                             select=select, decimation=not getattr(args, "no_decimate", False),
+                             max_memory=budget, on_signals=on_signals)
+        except ValueError as exc:
+            raise VibroscopeError(f"{args.log}: {exc}") from None
+        nyq = an.psd.frequencies[-1]
+        for f in args.ods or ():  # before the report: nothing is printed as done that will not be written
+            if f > nyq:
+                raise VibroscopeError(f"--ods {f:g}: above the analysed band's top, {nyq:g} Hz (the Nyquist "
+                                      f"frequency of {an.signals.fs:g} Hz)")
+        if args.coords:  # the rows against the channels analysed, before the report (one line if they differ)
+            from vibroscope.io.coords import read_coords
+
+            read_coords(args.coords, an.settings["outputs"])
+        print(report_text(an, source=str(args.log), verbose=getattr(args, "verbose", False)))
+        write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
+                      spawn=args.spawn, ods=args.ods, ahead=ahead)
     return 0

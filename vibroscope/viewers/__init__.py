@@ -24,7 +24,7 @@ from vibroscope._lazy import lazy_attributes
 _LAZY = {
     "plot_spectrum": "figures", "plot_frf": "figures", "plot_mode_shapes": "figures",
     "plot_singular_values": "figures", "plot_signals": "figures", "summary_figures": "figures",
-    "log_analysis": "rerun_view", "read_rrd": "rerun_view",
+    "log_analysis": "rerun_view", "read_rrd": "rerun_read",
     "plot_gap_report": "gap_figures", "log_gap_report": "rerun_gap",
     "plot_stabilization": "figures", "plot_frf_synthesis": "figures",
     "plot_kinematics": "acquisition", "plot_ods": "figures", "ods_as_modal_model": "acquisition",

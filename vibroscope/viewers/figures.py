@@ -20,7 +20,7 @@ from vibroscope.viewers._common import (distinct_labels, mode_label, nearest_fre
 
 __all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
            "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d",
-           "summary_figures", "figure_jobs", "PendingFigures", "in_figure_order", "FIGURE_ORDER", "preload",
+           "summary_figures", "figure_jobs", "PendingFigures", "DrawnFigure", "quiet_worker", "in_figure_order", "FIGURE_ORDER", "preload",
            "plot_ods"]
 
 #: resolution of the written PNGs (dots per inch)
@@ -796,29 +796,31 @@ def plot_mode_set_comparison(comparison, *, fig=None):
 def save_figure(fig, path: Path) -> Path:
     """Write `fig` as a PNG at :data:`DPI`, palette-quantised (256 colours) to stay small.
 
-    The figure is rendered to raw RGBA pixels and encoded once, as the quantised PNG (not encoded
-    by matplotlib, decoded and encoded again), at zlib level :data:`PNG_LEVEL` (the pixels of
-    level 9 with ``optimize``, in a seventh of the time, the file ~10 % larger). The PNG's
-    ``Software`` text is :data:`vibroscope.provenance.GENERATOR`: the mark by which a later run
-    knows the file as its own output (and may replace it).
+    The figure is drawn once on its Agg canvas at :data:`DPI` (:meth:`Figure.savefig` draws a
+    figure with a layout engine twice, the first time only to place it: the same pixels for 25 %
+    more time here) and its RGBA pixels are encoded once, as the quantised PNG (not encoded by
+    matplotlib, decoded and encoded again), at zlib level :data:`PNG_LEVEL` (the pixels of level 9
+    with ``optimize``, in a seventh of the time, the file ~10 % larger). The PNG's ``Software``
+    text is :data:`vibroscope.provenance.GENERATOR`: the mark by which a later run knows the file
+    as its own output (and may replace it). A figure on another canvas than Agg's is drawn by
+    :meth:`Figure.savefig`.
 
     Parameters
     ----------
     fig : matplotlib.figure.Figure
         The figure; closed once written.
-    path : Path
-        The PNG file to write.
+    path : Path or file-like
+        The PNG file to write (or a binary file object, e.g. :class:`io.BytesIO`).
 
     Returns
     -------
-    Path
+    Path or file-like
         `path`.
     """
     import io
 
     from vibroscope.provenance import GENERATOR
 
-    buf = io.BytesIO()
     try:
         from PIL import Image
         from PIL.PngImagePlugin import PngInfo
@@ -826,22 +828,31 @@ def save_figure(fig, path: Path) -> Path:
         fig.savefig(path, dpi=DPI, format="png", metadata={"Software": GENERATOR})
         pyplot().close(fig)
         return path
-    w, h = (int(v) for v in (fig.get_figwidth() * DPI, fig.get_figheight() * DPI))
-    fig.savefig(buf, dpi=DPI, format="rgba")
-    pyplot().close(fig)
-    raw = buf.getbuffer()
-    if raw.nbytes == 4 * w * h:
-        im = Image.frombuffer("RGBA", (w, h), raw, "raw", "RGBA", 0, 1)
-    else:  # pragma: no cover - a size rounded otherwise than Agg's: let PIL read matplotlib's PNG
-        del raw
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = fig.canvas
+    if type(canvas) is FigureCanvasAgg:  # noqa: E721 - a subclass (a GUI canvas) may draw otherwise
+        dpi = fig.dpi
+        fig.dpi = DPI  # as savefig(dpi=DPI) does, restored below
+        try:
+            canvas.draw()
+            rgba = canvas.buffer_rgba()  # (h, w, 4) of the figure at DPI
+            im = Image.frombuffer("RGBA", (rgba.shape[1], rgba.shape[0]), rgba, "raw", "RGBA", 0, 1)
+            im = im.convert("RGB")  # a copy: the canvas may go
+        finally:
+            fig.dpi = dpi
+            pyplot().close(fig)
+    else:
         buf = io.BytesIO()
         fig.savefig(buf, dpi=DPI, format="png")
+        pyplot().close(fig)
         buf.seek(0)
-        im = Image.open(buf)
+        with Image.open(buf) as png:
+            im = png.convert("RGB")
     info = PngInfo()
     info.add_text("Software", GENERATOR)
     with im:
-        im.convert("RGB").quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) \
+        im.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE) \
             .save(path, format="PNG", compress_level=PNG_LEVEL, pnginfo=info)
     return path
 
@@ -858,8 +869,8 @@ def _render(k: int) -> str:
     return str(save_figure(getattr(fig, "figure", fig), path))
 
 
-def _quiet_worker() -> None:
-    """Worker start: Ctrl-C is the parent's to handle (it terminates the workers), not a traceback
+def quiet_worker() -> None:
+    """Start a worker process: Ctrl-C is the parent's to handle (it terminates the workers), not a traceback
     each; SIGTERM (``Pool.terminate``) ends a worker at once, whatever handler the parent had
     installed when it forked (a Python handler that raises or holds the signal would leave the
     worker waiting on the pool's queue, and the parent's join waiting for ever)."""
@@ -877,6 +888,36 @@ def _workers() -> int:
         return os.cpu_count() or 1
 
 
+class DrawnFigure:
+    """A figure drawn elsewhere (:class:`vibroscope.viewers.ahead.TimeSeriesAhead`): a job of
+    :class:`PendingFigures` whose PNG bytes are waited for and written as they are.
+
+    Parameters
+    ----------
+    png : callable
+        ``png()`` returns the PNG file's bytes (waiting for them if need be).
+    """
+
+    def __init__(self, png):
+        self.png = png
+
+    def write(self, path: Path) -> Path:
+        """Write the PNG bytes to `path`.
+
+        Parameters
+        ----------
+        path : Path
+            The PNG file to write.
+
+        Returns
+        -------
+        Path
+            `path`.
+        """
+        Path(path).write_bytes(self.png())
+        return Path(path)
+
+
 class PendingFigures:
     """Figures being drawn and saved in worker processes while the caller does other work.
 
@@ -891,14 +932,18 @@ class PendingFigures:
     ----------
     jobs : sequence of (callable, Path)
         ``draw()`` returns a matplotlib Figure (or an Axes of one), written to the path by
-        :func:`save_figure` (PNG at :data:`DPI`, palette-quantised).
+        :func:`save_figure` (PNG at :data:`DPI`, palette-quantised); a :class:`DrawnFigure`
+        in place of `draw` is written by :meth:`wait`, in this process.
     workers : int, optional
         Worker processes; default the CPU cores this process may use, at most one per job.
     """
 
     def __init__(self, jobs, *, workers: int | None = None):
         global _JOBS
-        self._jobs = list(jobs)
+        jobs = list(jobs)
+        self._paths = [p for _, p in jobs]
+        self._drawn = [(d, p) for d, p in jobs if isinstance(d, DrawnFigure)]
+        self._jobs = [(d, p) for d, p in jobs if not isinstance(d, DrawnFigure)]
         self._pool = self._result = None
         n = min(len(self._jobs), workers or _workers())
         if n > 1 and sys.platform.startswith("linux") and not _JOBS:
@@ -909,7 +954,7 @@ class PendingFigures:
             pyplot()
             _JOBS = self._jobs
             try:
-                self._pool = multiprocessing.get_context("fork").Pool(n, initializer=_quiet_worker)
+                self._pool = multiprocessing.get_context("fork").Pool(n, initializer=quiet_worker)
                 # the slowest first (listed first by the caller), one job at a time to whichever is free
                 self._result = self._pool.map_async(_render, range(len(self._jobs)), chunksize=1)
             finally:
@@ -928,11 +973,15 @@ class PendingFigures:
             The first error of a job, as raised in its worker.
         """
         if self._pool is None:
-            return [save_figure(getattr(f, "figure", f), p) for f, p in ((d(), p) for d, p in self._jobs)]
-        try:
-            return [Path(p) for p in self._result.get()]
-        finally:
-            self.close()
+            done = [save_figure(getattr(f, "figure", f), p) for f, p in ((d(), p) for d, p in self._jobs)]
+        else:
+            try:
+                done = [Path(p) for p in self._result.get()]
+            finally:
+                self.close()
+        done += [d.write(p) for d, p in self._drawn]
+        rank = {str(p): k for k, p in enumerate(self._paths)}
+        return sorted(done, key=lambda p: rank.get(str(p), len(rank)))
 
     def close(self) -> None:
         """Stop the workers (those still drawing are terminated; nothing of theirs is kept)."""
@@ -950,7 +999,7 @@ class PendingFigures:
 
 def figure_jobs(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=None, sv=None,
                 coords: Mapping[str, Any] | None = None, true_modes=None, stabilization=None,
-                synthesized=None, kinematics=None) -> list:
+                synthesized=None, kinematics=None, ahead=None) -> list:
     """The summary figures of an analysis as ``(draw, path)`` jobs, the slowest first.
 
     Parameters are those of :func:`summary_figures`.
@@ -964,6 +1013,10 @@ def figure_jobs(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=
     kinematics : tuple of Signals, optional
         ``(acceleration, velocity, displacement)``: writes ``kinematics.png``
         (:func:`vibroscope.viewers.acquisition.plot_kinematics` with these integrals).
+    ahead : TimeSeriesAhead, optional
+        Time-series figures already being drawn for `signals`
+        (:meth:`vibroscope.viewers.ahead.TimeSeriesAhead.drawn`): their jobs are
+        :class:`DrawnFigure` objects, and `kinematics` is not needed for ``kinematics.png``.
 
     Returns
     -------
@@ -973,7 +1026,10 @@ def figure_jobs(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     jobs = []
-    if kinematics is not None:
+    drawn = ahead.drawn(signals) if ahead is not None else {}
+    if "kinematics" in drawn:
+        jobs.append((drawn["kinematics"], out / "kinematics.png"))
+    elif kinematics is not None:
         from vibroscope.viewers.acquisition import plot_kinematics
 
         acc, vel, disp = kinematics
@@ -981,7 +1037,9 @@ def figure_jobs(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=
     if sv is not None and len(sv) == 2:
         ft = None if true_modes is None else true_modes.natural_frequencies
         jobs.append((lambda: plot_singular_values(sv[0], sv[1], modal, true_frequencies=ft), out / "singular_values.png"))
-    if signals is not None:
+    if "signals" in drawn:
+        jobs.append((drawn["signals"], out / "signals.png"))
+    elif signals is not None:
         jobs.append((lambda: plot_signals(signals), out / "signals.png"))
     if synthesized is not None and frf is not None:
         jobs.append((lambda: plot_frf_synthesis(frf, synthesized, modal), out / "frf_synthesis.png"))

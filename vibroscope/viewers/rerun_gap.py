@@ -3,10 +3,10 @@ recording, with a blueprint.
 
 rerun is imported inside the functions: importing this module never imports it. The
 conventions are those of :mod:`vibroscope.viewers.rerun_view`: channel names are split on ``/``
-into entity path parts (:func:`~vibroscope.viewers.rerun_view.channel_entity`), time series
+into entity path parts (:func:`~vibroscope.viewers.rerun_paths.channel_entity`), time series
 go on the ``time`` duration timeline (s since the first sample), spectra and FRFs on the
 ``frequency_mHz`` sequence timeline whose index is ``round(1000 f)``
-(:func:`~vibroscope.viewers.rerun_view.frequency_index`; ``frequency_uHz`` when bins are finer
+(:func:`~vibroscope.viewers.rerun_paths.frequency_index`; ``frequency_uHz`` when bins are finer
 than 1 mHz), power quantities and |H| in dB since the time series view has no log axis.
 
 Entities
@@ -35,8 +35,11 @@ from pathlib import Path
 import numpy as np
 
 from vibroscope.viewers.gap_figures import candidate_label, held_out_spans, verdict_index
-from vibroscope.viewers.rerun_view import (channel_entity, decibels, flush_recording, frequency_index, show_recording,
-                                           whole_time_axis)
+from vibroscope.viewers.rerun_blueprint import whole_time_axis
+from vibroscope.viewers.rerun_paths import channel_entity, frequency_index
+from vibroscope.viewers.rerun_recording import flush_recording
+from vibroscope.viewers.rerun_spectra import decibels
+from vibroscope.viewers.rerun_viewer import show_recording
 
 __all__ = ["log_gap_report", "TRACES", "SPECTRA", "FRF_CURVES", "GAP_BARS"]
 
@@ -209,7 +212,7 @@ def log_gap_report(report, *, recording=None, path: str | Path | None = None, sp
         Write the recording (and its blueprint) to this ``.rrd`` file.
     spawn : bool, optional
         Once the recording is complete, open it in the rerun viewer
-        (:func:`vibroscope.viewers.rerun_view.open_in_viewer`; without `path`, a file of its own
+        (:func:`vibroscope.viewers.rerun_viewer.open_in_viewer`; without `path`, a file of its own
         in the system's temporary folder); a one-line warning says why when none opens.
     application_id : str, optional
         Application id of a new stream.
@@ -260,7 +263,7 @@ def log_gap_report(report, *, recording=None, path: str | Path | None = None, sp
         rec.send_recording_name(recording_name or f"gap: {report.model_name or 'model'}")
     out = Path(path) if path is not None else None
     shown_only = spawn and out is None
-    if shown_only:  # the viewer opens a complete file (rerun_view.open_in_viewer): one of its own
+    if shown_only:  # the viewer opens a complete file (rerun_viewer.open_in_viewer): one of its own
         import tempfile
 
         out = Path(tempfile.mkdtemp(prefix="vibroscope-view-")) / "gap.rrd"

@@ -2,7 +2,7 @@
 
 :class:`LiveView` takes consecutive :class:`~vibroscope.signals.Signals` blocks (same channels and
 rate, each starting where the previous one ended), logs each block's time series as it arrives
-(decimated to a min/max envelope, :func:`vibroscope.viewers.rerun_view.envelope_indices`), feeds
+(decimated to a min/max envelope, :func:`vibroscope.viewers.rerun_series.envelope_indices`), feeds
 the one-pass cross-spectral engine (:class:`vibroscope.spectral._engine.CrossSpectralAccumulator`)
 and, every `every_blocks` blocks or `every_s` seconds, logs the PSD, the FRF (H1 by default) and
 the coherence computed from the cross-spectral matrix accumulated so far: Welch's estimate
@@ -49,7 +49,8 @@ from typing import Any, Callable, Iterable, Iterator, Literal, Sequence
 import numpy as np
 
 from vibroscope.signals import Signals, block_bounds
-from vibroscope.viewers.rerun_view import channel_entity, envelope_indices, frequency_index
+from vibroscope.viewers.rerun_paths import channel_entity, frequency_index
+from vibroscope.viewers.rerun_series import envelope_indices
 
 __all__ = ["LiveView", "LiveRefresh", "live_blueprint", "record_blocks", "mcap_blocks", "stream_blocks", "stream_log",
            "DEFAULT_URL"]
@@ -267,7 +268,7 @@ class LiveView:
 
         from vibroscope.spectral._results import CrossSpectralMatrix
         from vibroscope.spectral.estimators import settings_dict, frf as frf_of
-        from vibroscope.viewers.rerun_view import decibels
+        from vibroscope.viewers.rerun_spectra import decibels
 
         acc = self._acc
         if not acc.n_segments:
@@ -313,7 +314,7 @@ class LiveView:
         return out
 
     def _log_final(self, out: LiveRefresh) -> None:
-        from vibroscope.viewers.rerun_view import log_frf, log_psd
+        from vibroscope.viewers.rerun_spectra import log_frf, log_psd
 
         log_psd(self.rec, out.psd)
         if out.frf is not None:
