@@ -13,7 +13,7 @@ Writes, from ``../shared/data/boucwen``:
 Channels: force ``/shaker/force.wrench.force.x`` (N), displacement ``/shaker/mass.x`` (m).
 
     python examples/gap/boucwen.py [--data ../shared/data/boucwen] [--out boucwen]
-    vibroscope gap boucwen/boucwen_linear.toml boucwen/boucwen_multisine.mcap boucwen/boucwen_sinesweep.mcap --transient 10.92 --json boucwen/report.json
+    vibroscope gap boucwen/boucwen_linear.toml boucwen/boucwen_multisine.mcap boucwen/boucwen_sinesweep.mcap --transient 10.92 --holdout last --json boucwen/report.json
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ as the displacement ``/silverbox/output.x`` (m): the circuit emulates
 ``m y'' + d y' + a y + b y^3 = u``.
 
     python examples/gap/silverbox.py [--data ../shared/data/silverbox] [--out silverbox]
-    vibroscope gap silverbox/silverbox_linear.toml silverbox/silverbox_estimation.mcap silverbox/silverbox_arrow.mcap --json silverbox/report.json
+    vibroscope gap silverbox/silverbox_linear.toml silverbox/silverbox_estimation.mcap silverbox/silverbox_arrow.mcap --holdout last --json silverbox/report.json
 """
 
 from __future__ import annotations

@@ -203,9 +203,11 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
         if holdout == "auto" and max(rms) > LOG_LEVEL_RATIO * max(min(rms), 1e-300):
             parts = [_one_log_split(u, fs, sk, validation_fraction, max(4.0, 2 * screen_s / n_logs))
                      for u, sk in zip(us, skip)]
-            desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}): each log "
-                    f"split in time, so every level is fitted and held out; "
-                    + "; ".join(f"log {i + 1}: {p[5]}" for i, p in enumerate(parts)))
+            held = sum(int(p[1].sum()) for p in parts) / fs
+            kinds = {p[5].split(":")[0] for p in parts}
+            desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}), each split in "
+                    f"time ({' / '.join(sorted(kinds))}; {held:.1f} s held out in all), so every level is fitted "
+                    f"and validated")
             return Split(*[[p[k] for p in parts] for k in range(4)], desc, [p[4] for p in parts])
         fit, val, fpre, spre, nlev = [], [], [], [], []
         for i, u in enumerate(us):
