@@ -144,7 +144,7 @@ def test_logs_at_different_levels_are_each_split_and_a_softening_spring_is_found
 
     us, ys = logs(-2e4, 30.0, seed=4)
     sp = make_split(us, FS)
-    assert "each log split in time" in sp.description
+    assert "each split in time" in sp.description
     assert all(f.any() and v.any() and not np.any(f & v) for f, v in zip(sp.fit, sp.validation))
     same = make_split([u / np.std(u) for u in us], FS)  # one level: the last log is held out
     assert not same.fit[-1].any() and not any(v.any() for v in same.validation[:-1])
