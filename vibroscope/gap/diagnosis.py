@@ -901,31 +901,36 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # linear effects: FRF fit jointly with the linear parameters, best per effect polished in time
     best_lin: dict[str, tuple] = {}
     sp = split.screen_prefix
+    # when the refit closes less than half of the nominal's fitting gap, the refit has bent the
+    # linear parameters towards something they cannot express (a long delay): the linear effects
+    # are fitted from the nominal too
+    lin_bases = [refit] + ([model] if np.any(theta) and g_ref_fit > 0.5 * g_nom_fit else [])
     for s in lin_specs:
-        if closed:  # no FRF of the loop to fit: the start that fits the screening prefix best
-            p_s, cost = best_start(lambda p, s=s: s.apply(refit, p), s.starts, sims, ys, split.fit, sp)
-            th_s = np.zeros(len(lin))
-        else:
-            m_s, th_s, p_s, cost = fit_linear_frf(refit, lin, f_s, H_s, w[sel], spec=s, p_starts=s.starts,
-                                                  max_nfev=LIN_EFFECT_NFEV)
-        if s.effect not in best_lin or cost < best_lin[s.effect][3]:
-            best_lin[s.effect] = (s, th_s, p_s, cost)
+        for b_ in lin_bases:
+            if closed:  # no FRF of the loop to fit: the start that fits the screening prefix best
+                p_s, cost = best_start(lambda p, s=s, b_=b_: s.apply(b_, p), s.starts, sims, ys, split.fit, sp)
+                th_s = np.zeros(len(lin))
+            else:
+                m_s, th_s, p_s, cost = fit_linear_frf(b_, lin, f_s, H_s, w[sel], spec=s, p_starts=s.starts,
+                                                      max_nfev=LIN_EFFECT_NFEV)
+            if s.effect not in best_lin or cost < best_lin[s.effect][3]:
+                best_lin[s.effect] = (s, th_s, p_s, cost, b_)
         bar.update(1)
 
     def lin_polish(item):
         """A linear effect's FRF fit polished in time with the linear parameters, on the same
         (at most 20 s per log) samples as the linear refit."""
-        s, th_s, p_s, _ = item
+        s, th_s, p_s, _, b_ = item
         nl = len(lin)
 
         def build(x, s=s):
-            return s.apply(lin.apply(refit, x[:nl]), x[nl:])
+            return s.apply(lin.apply(b_, x[:nl]), x[nl:])
 
         x0 = np.concatenate([th_s, p_s])
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
         x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns_pol, fast=False, max_nfev=6)
-        return s, build(x), x[nl:], gfit, lin.apply(refit, x[:nl])
+        return s, build(x), x[nl:], gfit, lin.apply(b_, x[:nl])
 
     with ThreadPoolExecutor(max(1, workers)) as ex:
         results += list(ex.map(lin_polish, best_lin.values()))
