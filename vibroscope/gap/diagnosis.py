@@ -1348,8 +1348,7 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
                                          max_nfev=4 + 2 * s.n)
             m_new, base_new, x_j = build(p), chosen[-1][5], None
             if nl:
-                v0, vb = lin.values(model), lin.values(chosen[-1][5])
-                th0 = np.array([math.log(vb[n] / v0[n]) if v0[n] > 0 and vb[n] > 0 else 0.0 for n in lin.names])
+                th0 = lin.theta_between(model, chosen[-1][5])
                 try:
                     pj, gj, mj, bj, xj = joint_fit(s, np.concatenate([np.clip(th0, lo_l, hi_l), p]), 4)
                 except (ValueError, TypeError):
@@ -1396,8 +1395,7 @@ def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_ou
     full accuracy. The polished model is kept only when its held-out gap is not worse."""
     c, m_aug, _, s_last, p_last, base = cand
     nl = len(lin)
-    v0, v1 = lin.values(model), lin.values(base)
-    th = np.array([math.log(v1[k] / v0[k]) if v0[k] > 0 and v1[k] > 0 else 0.0 for k in lin.names])
+    th = lin.theta_between(model, base)
     sizes = [s_.n for s_, _ in chain]
     offs = np.cumsum([nl] + sizes)
 

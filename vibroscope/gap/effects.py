@@ -222,6 +222,22 @@ class LinearParams:
             out[n] = model.dofs[i].mass if kind == "m" else (model.elements[i].k if kind == "k" else model.elements[i].c)
         return out
 
+    def theta_between(self, model: LumpedModel, other: LumpedModel) -> np.ndarray:
+        """The log-factors that take `model`'s parameters to `other`'s (the inverse of :meth:`apply`).
+
+        Parameters
+        ----------
+        model, other : LumpedModel
+            Models with the same DOFs and elements (by position) as the nominal one.
+
+        Returns
+        -------
+        ndarray, shape (len(self),)
+            ``log(other_i / model_i)``; 0 where either value is not positive.
+        """
+        v0, v1 = self.values(model), self.values(other)
+        return np.array([math.log(v1[n] / v0[n]) if v0[n] > 0 and v1[n] > 0 else 0.0 for n in self.names])
+
 
 @dataclass
 class EffectSpec:

@@ -21,6 +21,8 @@ import functools
 import io
 import sys
 
+from vibroscope.viewers.figures import OwnsWorkerPool
+
 __all__ = ["TimeSeriesAhead", "ACCELERATION_UNITS", "MAX_BYTES"]
 
 #: units of the channels integrated to velocity and displacement (those of ``write_outputs``)
@@ -69,7 +71,7 @@ def _signals(sig) -> bytes:
     return _png(plot_signals(sig))
 
 
-class TimeSeriesAhead:
+class TimeSeriesAhead(OwnsWorkerPool):
     """Integrals and time-series figures of an analysed record, made in a worker process while the
     modes are identified.
 
@@ -195,15 +197,3 @@ class TimeSeriesAhead:
         out["signals"] = DrawnFigure(self._results["signals"].get)
         return out
 
-    def close(self) -> None:
-        """Stop the worker (a task still running is terminated)."""
-        if self._pool is not None:
-            self._pool.terminate()
-            self._pool.join()
-            self._pool = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()

@@ -18,7 +18,7 @@ from vibroscope.signals import true_runs
 from vibroscope.viewers._common import (distinct_labels, mode_label, nearest_frequencies, pyplot, real_shape,
                                        sensor_geometry, short_label)
 
-__all__ = ["plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
+__all__ = ["OwnsWorkerPool", "plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
            "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d",
            "summary_figures", "figure_jobs", "PendingFigures", "DrawnFigure", "quiet_worker", "in_figure_order", "FIGURE_ORDER", "preload",
            "plot_ods"]
@@ -888,6 +888,26 @@ def _workers() -> int:
         return os.cpu_count() or 1
 
 
+class OwnsWorkerPool:
+    """A ``multiprocessing`` pool held in ``self._pool`` (None when there is none), stopped by
+    :meth:`close` or on leaving a ``with`` block."""
+
+    _pool = None
+
+    def close(self) -> None:
+        """Stop the workers (those still running are terminated; nothing of theirs is kept)."""
+        if self._pool is not None:
+            self._pool.terminate()
+            self._pool.join()
+            self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 class DrawnFigure:
     """A figure drawn elsewhere (:class:`vibroscope.viewers.ahead.TimeSeriesAhead`): a job of
     :class:`PendingFigures` whose PNG bytes are waited for and written as they are.
@@ -918,7 +938,7 @@ class DrawnFigure:
         return Path(path)
 
 
-class PendingFigures:
+class PendingFigures(OwnsWorkerPool):
     """Figures being drawn and saved in worker processes while the caller does other work.
 
     Each job is drawn and written by one of up to `workers` processes forked from this one (they
@@ -983,18 +1003,6 @@ class PendingFigures:
         rank = {str(p): k for k, p in enumerate(self._paths)}
         return sorted(done, key=lambda p: rank.get(str(p), len(rank)))
 
-    def close(self) -> None:
-        """Stop the workers (those still drawing are terminated; nothing of theirs is kept)."""
-        if self._pool is not None:
-            self._pool.terminate()
-            self._pool.join()
-            self._pool = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def figure_jobs(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=None, sv=None,
