@@ -122,7 +122,7 @@ def test_iwan_joint_spreads_the_slip_forces_and_keeps_the_stiffness():
     """The Iwan form: the share r of the spring split over N Jenkins elements of stiffness
     r k / N whose slip forces are spread uniformly up to Fs; at small amplitude (every slider
     sticking) the connection keeps k, after the last one slips (1 - r) k remains."""
-    from vibroscope.gap.effects import IWAN_SLIDERS
+    from vibroscope.gap.effects import IWAN_NU, IWAN_SLIDERS
 
     model = chain()
     s = next(s for s in candidate_specs(model, scales(model)) if s.effect == "joint_friction"
@@ -134,9 +134,10 @@ def test_iwan_joint_spreads_the_slip_forces_and_keeps_the_stiffness():
     bws = [e for e in m.elements if e.type == "bouc_wen"]
     assert len(bws) == IWAN_SLIDERS and spring.k == pytest.approx((1 - r) * 4e4)
     assert sum(e.alpha for e in bws) == pytest.approx(r * 4e4)
-    assert sorted(e.alpha / e.beta for e in bws) == pytest.approx([fslip * i / IWAN_SLIDERS
-                                                                   for i in range(1, IWAN_SLIDERS + 1)])
-    assert all(e.gamma == 0.5 and e.delta == 0.5 and e.nu == 1.0 for e in bws)
+    # each slider's force saturates at (alpha / beta)^(1 / nu): z' = alpha v (1 - |z / F_i|^nu)
+    assert sorted((e.alpha / e.beta) ** (1 / e.nu) for e in bws) == pytest.approx(
+        [fslip * i / IWAN_SLIDERS for i in range(1, IWAN_SLIDERS + 1)])
+    assert all(e.gamma == 0.5 and e.delta == 0.5 and e.nu == IWAN_NU for e in bws)
     assert s.describe(p) == pytest.approx({"joint_share": r, "slip_force_N": fslip})
 
 

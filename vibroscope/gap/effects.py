@@ -624,6 +624,9 @@ def _hysteresis(model, scales):
 
 #: sliders of the Iwan form of a joint (slip forces uniform on (0, F_max], Iwan 1966)
 IWAN_SLIDERS = 4
+#: Bouc-Wen exponent of each Iwan slider: z = F tanh(k x / F) on loading, closer to a Coulomb
+#: slider's stick-then-slip than nu = 1's exponential approach (the one Jenkins keeps nu = 1)
+IWAN_NU = 2.0
 
 
 def _joint_friction(model, scales):
@@ -661,11 +664,9 @@ def _joint_friction(model, scales):
         # starts: the slip force a multiple c of the joint's elastic force r k d_rms at the RMS
         # deflection (c < 1: the joint slips through most of the record, c > 1: only at its peaks;
         # a start that slips everywhere at the true connection can probe worse than a start at a
-        # connection where the joint does little, so the range of c matters), then the slip
-        # force as a share of the input's RMS force
+        # connection where the joint does little, so the range of c matters)
         f_el = k_loc * d_rms if k_loc > 0 else u_ref
         rs = [(r, c * r * f_el / u_ref) for r, c in ((0.3, 1.0), (0.3, 0.25), (0.3, 4.0), (0.5, 1.0))]
-        rs += [(0.3, 0.1)]
         starts = [np.clip(np.array([math.log(r / (1 - r)), math.log(max(s, 1e-300))]), lo + 1e-6, hi - 1e-6)
                   for r, s in rs]
 
@@ -678,10 +679,11 @@ def _joint_friction(model, scales):
                 alpha = r * sp.k / n_sl
                 els = list(m.elements)
                 els[jj] = Spring(sp.between, k=(1.0 - r) * sp.k)
+                nu = 1.0 if n_sl == 1 else IWAN_NU
                 for i in range(1, n_sl + 1):  # Jenkins i slips at the force fs_ i / n_sl
                     f_i = fs_ * i / n_sl
-                    els.append(BoucWen(sp.between, alpha=alpha, beta=alpha / max(f_i, 1e-300), gamma=0.5, delta=0.5,
-                                       nu=1.0))
+                    els.append(BoucWen(sp.between, alpha=alpha, beta=alpha / max(f_i, 1e-300) ** nu, gamma=0.5,
+                                       delta=0.5, nu=nu))
                 return replace(m, elements=tuple(els))
 
             def desc(p, coeffs=coeffs):
