@@ -22,12 +22,13 @@ def preload(*, pandas: bool = True) -> None:
     Parameters
     ----------
     pandas : bool, optional
-        False: pyarrow is told, once for this process, that pandas is missing (its array
-        conversions then never import pandas only to ask whether a list is a pandas object:
-        ~0.3 s of a 2-core machine's CPU, a fifth of the outputs' imports). For a process that
-        hands rerun numpy arrays and lists only, as the command line does; an explicit
-        ``import pandas`` (and pyarrow's ``from_pandas``/``to_pandas``) still works afterwards.
-        Default True: pyarrow left as it is.
+        False: pyarrow's pandas shim is told, once for this process, that pandas is missing,
+        so that building an array of a given type from a list does not import pandas only to ask
+        whether the list is a pandas object (~0.3 s of the 2-core machine's CPU, a fifth of the
+        outputs' imports; a list converted with its type inferred may still import it). For a
+        process that hands rerun numpy arrays and lists only, as the command line does; an
+        explicit ``import pandas`` (and pyarrow's ``from_pandas``/``to_pandas``) still works
+        afterwards. Default True: pyarrow left as it is.
     """
     import pyarrow as pa
     import rerun  # noqa: F401
@@ -42,8 +43,9 @@ def preload(*, pandas: bool = True) -> None:
 def without_pandas_probe(pa) -> None:
     """Build pyarrow's first array from a list while ``import pandas`` fails, so that pyarrow's
     pandas shim records pandas as missing and never imports it to look at a list (it would import
-    it, ~0.3 s, on the first ``pa.array(list)``); ``sys.modules`` is restored at once. Does nothing
-    when pandas is already imported.
+    it, ~0.3 s, on the first ``pa.array(list)``); the import is blocked for that one call only (a
+    finder first on ``sys.meta_path`` that raises ImportError for pandas, removed at once). Does
+    nothing when pandas is already imported.
 
     Parameters
     ----------
@@ -54,12 +56,20 @@ def without_pandas_probe(pa) -> None:
 
     if "pandas" in sys.modules:
         return
-    sys.modules["pandas"] = None  # type: ignore[assignment] - `import pandas` raises ImportError meanwhile
+
+    class _NoPandas:
+        @staticmethod
+        def find_spec(name, path=None, target=None):
+            if name == "pandas" or name.startswith("pandas."):
+                raise ImportError("pandas is not needed here (vibroscope: pyarrow told it is missing)")
+            return None
+
+    finder = _NoPandas()
+    sys.meta_path.insert(0, finder)
     try:
         pa.array([0], type=pa.int8())
     finally:
-        if sys.modules.get("pandas", 0) is None:
-            del sys.modules["pandas"]
+        sys.meta_path.remove(finder)
 
 
 def open_recording(application_id: str, recording_id: str | None, recording_name: str | None,
