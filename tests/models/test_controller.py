@@ -288,3 +288,61 @@ def test_closed_loop_1dof_friction_converges_and_tracks():
     assert s.meta["newton_failures"] == 0
     q = s.data[list(s.channels).index("/emps/qm.x")]
     assert np.max(np.abs(q - r)) < 0.05 * np.max(np.abs(r))
+
+
+def test_controllers_at_two_rates_each_update_on_their_own_ticks():
+    """Two loops on a 2-DOF chain: a PID at 1 kHz on m1 and a PD at 250 Hz on m2. The kernel
+    equals the discrete loop built from the plant ZOH-sampled at the fast period (Åström &
+    Wittenmark sec. 2.3) in which the slow controller measures, differentiates and updates
+    every 4th tick and holds its command in between."""
+    T, every = 1e-3, 4
+    m = LumpedModel.chain([1.0, 0.5], [1e4, 5e3], [20.0, 10.0], output_quantity="displacement")
+    m = m.replace(inputs=(Input("m1", channel="/f1.x"), Input("m2", channel="/f2.x")))
+    fast = Controller("fast", "PID", {"kp": 3e4, "ki": 1e5, "kd": 50.0}, 1 / T, "m1", drives=0, reference="/r1.x")
+    slow = Controller("slow", "PD", {"kp": 2e3, "kd": 20.0}, 1 / (every * T), "m2", drives=1, reference="/r2.x")
+    mc = m.replace(controllers=(fast, slow))
+    n = 3000
+    r1 = np.r_[np.zeros(7), np.ones(n - 7)] * 1e-3
+    r2 = np.r_[np.zeros(13), -np.ones(n - 13)] * 5e-4
+    s = simulate(mc, np.vstack([r1, r2]), 1 / T)
+    A, B, C, _ = m.state_matrices()
+    Phi, Gam = zoh_matrices(A, B, T)
+    q = np.zeros(4)
+    u = np.zeros((2, n))
+    integ = e_prev = 0.0
+    pf_prev = np.zeros(2)
+    for k in range(n):
+        y = C @ q
+        # fast PID: trapezoidal integral, derivative of the measured position over T
+        e = r1[k] - y[0]
+        integ += 0.5 * 1e5 * T * (e + e_prev)
+        e_prev = e
+        vel = (y[0] - pf_prev[0]) / T
+        pf_prev[0] = y[0]
+        u[0, k] = 3e4 * e + integ - 50.0 * vel
+        if k % every == 0:  # slow PD: its own period every * T
+            vel2 = (y[1] - pf_prev[1]) / (every * T)
+            pf_prev[1] = y[1]
+            u[1, k] = 2e3 * (r2[k] - y[1]) - 20.0 * vel2
+        else:
+            u[1, k] = u[1, k - 1]
+        q = Phi @ q + Gam @ u[:, k]
+    cmd = s.data[-2:]
+    np.testing.assert_allclose(cmd, u, rtol=0, atol=1e-9 * np.max(np.abs(u)))
+    # the slow command changes only on its own ticks
+    changes = np.flatnonzero(np.diff(cmd[1]) != 0) + 1
+    assert changes.size > 10 and np.all(changes % every == 0)
+    # run at one rate, the slow loop would be another loop
+    one_rate = simulate(m.replace(controllers=(fast, Controller("slow", "PD", {"kp": 2e3, "kd": 20.0}, 1 / T, "m2",
+                                                                      drives=1, reference="/r2.x"))),
+                        np.vstack([r1, r2]), 1 / T)
+    assert np.max(np.abs(one_rate.data[-1] - cmd[1])) > 1e-3 * np.max(np.abs(cmd[1]))
+
+
+def test_a_controller_rate_that_does_not_divide_the_fastest_is_refused():
+    m = LumpedModel.chain([1.0, 0.5], [1e4, 5e3], [20.0, 10.0], output_quantity="displacement")
+    m = m.replace(inputs=(Input("m1", channel="/f1.x"), Input("m2", channel="/f2.x")))
+    a = Controller("a", "P", {"kp": 1e3}, 1000.0, "m1", drives=0, reference="/r1.x")
+    b = Controller("b", "P", {"kp": 1e3}, 300.0, "m2", drives=1, reference="/r2.x")
+    with pytest.raises(ValueError, match="'b'.*rate_hz=300"):
+        simulate(m.replace(controllers=(a, b)), np.zeros((2, 100)), 1000.0)

@@ -1,9 +1,10 @@
 """Time simulation of a lumped model inside its discrete controllers (closed loop).
 
 :func:`simulate_closed_loop` is what :func:`vibroscope.models.simulate.simulate` runs for a
-model with ``controllers``. The controllers (:mod:`vibroscope.models.controller`) tick at
-their common rate ``rate_hz`` (an integer multiple ``m >= 1`` of the log's `fs`); between
-ticks their commands are held (ZOH), and so are the logged rows (references,
+model with ``controllers``. The controllers (:mod:`vibroscope.models.controller`) run on
+the ticks of the fastest one's ``rate_hz`` (an integer multiple ``m >= 1`` of the log's
+`fs`); a slower controller (its rate the fastest divided by a whole number) updates on every
+so many ticks. Between its updates a command is held (ZOH), and so are the logged rows (references,
 feed-forwards, open-loop forces: each log sample is held for ``m`` ticks). The plant is
 stepped between ticks by
 
@@ -104,16 +105,24 @@ def zoh_matrices(A: np.ndarray, B: np.ndarray, T: float) -> tuple[np.ndarray, np
     return E[:n, :n], E[:n, n:]
 
 
-def _rate(model: LumpedModel, fs: float) -> tuple[float, int]:
-    rates = {c.rate_hz for c in model.controllers}
-    if len(rates) != 1:
-        raise ValueError(f"controllers must share one rate_hz, got {sorted(rates)}")
-    rate = rates.pop()
+def _rate(model: LumpedModel, fs: float) -> tuple[float, int, np.ndarray]:
+    """The tick rate (the fastest controller's), ticks per sample of `fs`, and each
+    controller's ticks per update."""
+    rates = [float(c.rate_hz) for c in model.controllers]
+    rate = max(rates)
+    every = []
+    for c, r in zip(model.controllers, rates):
+        e = rate / r
+        ei = int(round(e))
+        if abs(e - ei) > 1e-9 * e:
+            raise ValueError(f"controller {c.name!r}: rate_hz={r} must divide the fastest controller's rate "
+                             f"{rate} Hz by a whole number (controllers at several rates run on its ticks)")
+        every.append(ei)
     m = rate / fs
     mi = int(round(m))
     if mi < 1 or abs(m - mi) > 1e-9 * m:
-        raise ValueError(f"the controllers' rate_hz={rate} must be an integer multiple of {fs=}")
-    return rate, mi
+        raise ValueError(f"the fastest controller's rate_hz={rate} must be an integer multiple of {fs=}")
+    return rate, mi, np.array(every, dtype=np.int64)
 
 
 def _hold_rows(model: LumpedModel, u: np.ndarray, m: int, rate: float):
@@ -169,8 +178,8 @@ def simulate_closed_loop(
     Parameters
     ----------
     model : LumpedModel
-        A model with at least one controller (all at one ``rate_hz``, an integer multiple of
-        `fs`).
+        A model with at least one controller (the fastest one's ``rate_hz`` an integer
+        multiple of `fs`, every other ``rate_hz`` that rate divided by a whole number).
     u : array_like, shape (n_rows, n_samples) or (n_samples,)
         The logged rows of :func:`loop_inputs`: references (m), feed-forwards (command
         unit), then the forces (N) of the inputs no controller drives, sampled at `fs`.
@@ -212,7 +221,8 @@ def simulate_closed_loop(
     ------
     ValueError
         If `model` has no controllers, `u` has the wrong shape or non-finite values, the
-        rate is not an integer multiple of `fs`, ``method="linear"`` is asked for a model
+        fastest rate is not an integer multiple of `fs` or another rate does not divide it,
+        ``method="linear"`` is asked for a model
         with nonlinear elements, or `oversample` < 1.
 
     Warns
@@ -243,7 +253,7 @@ def simulate_closed_loop(
         raise ValueError(f"{method=} must be 'auto', 'linear' or 'nonlinear'")
     if method == "linear" and not linear:
         raise ValueError("method='linear' needs a model with only linear elements")
-    rate, m = _rate(model, fs)
+    rate, m, every = _rate(model, fs)
     T = 1.0 / rate
     if method == "linear":
         R = 1
@@ -294,6 +304,7 @@ def simulate_closed_loop(
         np.array([c.saturation if c.saturation is not None else np.inf for c in ctls]),
         np.array([c.gain for c in ctls], dtype=float),
         in_off, in_sat, in_delay, Ref, FF, np.ascontiguousarray(Uol), T, R, float(tol), int(max_iter), Y, Cout,
+        every,
     )  # fmt: skip
     fails, iters = int(fails), int(iters)
     if fails:

@@ -606,7 +606,7 @@ def _row(Cm, Dm, Hm, r, q, u, g):
 @numba.njit(**_JIT)
 def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, Dy, Hy,
                         Cm, Dm, Hm, claw, cgain, cflags, taps, ntaps, cdrive, csat, act_gain,
-                        in_off, in_sat, in_delay, Ref, FF, Uol, T, R, tol, max_iter, Y, Cout):  # fmt: skip
+                        in_off, in_sat, in_delay, Ref, FF, Uol, T, R, tol, max_iter, Y, Cout, cevery):  # fmt: skip
     """Closed loop: plant states, controller states and nonlinear elements, from rest.
 
     Per controller tick ``k`` (period ``T``, ``Nt`` ticks): the outputs ``Y[:, k]`` and the
@@ -620,7 +620,9 @@ def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, 
     command ``in_delay[j]`` ticks earlier, linearly interpolated between ticks and 0 before
     the start) and ``R``
     trapezoidal steps of ``T / R`` over them (with ``R = 1`` and the exact ZOH ``P``, ``Gu``
-    of a linear plant, the exact discretisation). Returns ``(newton_failures,
+    of a linear plant, the exact discretisation). Controller ``c`` runs every ``cevery[c]``
+    ticks (its own period ``cevery[c] T``: its measurement, filter, derivatives and integral
+    advance only then) and holds its command in between. Returns ``(newton_failures,
     newton_iterations)``.
     """
     n2 = P.shape[0]
@@ -668,6 +670,10 @@ def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, 
         for r in range(Y.shape[0]):
             Y[r, k] = _row(Cy, Dy, Hy, r, q, ucur, g)
         for c in range(n_c):
+            if k % cevery[c] != 0:  # between this controller's ticks: its command is held
+                Cout[c, k] = Cout[c, k - 1]
+                continue
+            Tc = T * cevery[c]
             pos = _row(Cm, Dm, Hm, 3 * c, q, ucur, g)
             for i in range(ntaps[c] - 1, 0, -1):
                 qh[c, i] = qh[c, i - 1]
@@ -675,8 +681,8 @@ def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, 
             pf = 0.0
             for i in range(ntaps[c]):
                 pf += taps[c, i] * qh[c, i]
-            vd = (pf - pf_prev[c]) / T
-            ad = (vd - v_prev[c]) / T
+            vd = (pf - pf_prev[c]) / Tc
+            ad = (vd - v_prev[c]) / Tc
             pf_prev[c] = pf
             v_prev[c] = vd
             vel = _row(Cm, Dm, Hm, 3 * c + 1, q, ucur, g) if cflags[c, 0] else vd
@@ -690,15 +696,15 @@ def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, 
             elif law == 1:  # PD
                 cmd = kp * e - kd * vel
             elif law == 2:  # PID
-                integ[c] += 0.5 * ki * T * (e + e_prev[c])
+                integ[c] += 0.5 * ki * Tc * (e + e_prev[c])
                 cmd = kp * e + integ[c] - kd * vel
             elif law == 3:  # PD2
                 cmd = kp * e - kd * vel - ka * acc
             elif law == 4:  # PI + PDT1 (Tustin)
-                integ[c] += 0.5 * ki * T * (e + e_prev[c])
+                integ[c] += 0.5 * ki * Tc * (e + e_prev[c])
                 w = kp * e + integ[c]
-                a1 = 2.0 * t1 / T
-                b1 = 2.0 * td / T
+                a1 = 2.0 * t1 / Tc
+                b1 = 2.0 * td / Tc
                 cmd = ((1.0 + b1) * w + (1.0 - b1) * w_prev[c] - (1.0 - a1) * c_prev[c]) / (1.0 + a1)
                 w_prev[c] = w
                 c_prev[c] = cmd

@@ -22,7 +22,8 @@ Schema (fixed)::
     name = "position"
     law = "cascade"                 # P | PD | PID | PD2 | PI_PDT1 | cascade
     gains = {kp = 160.18, kv = 243.45}   # per law (below); u = the command's unit
-    rate_hz = 1000.0                # Hz; zero-order hold on the command
+    rate_hz = 1000.0                # Hz; zero-order hold on the command (several controllers:
+                                    # each rate the fastest divided by a whole number)
     dof = "m1"                      # the measured DOF
     drives = "/actuator/force_cmd.wrench.force.x"   # the [[input]] driven: channel or index
     reference = "/emps/qg.x"        # optional: logged position reference (m); else 0
