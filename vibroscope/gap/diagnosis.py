@@ -885,11 +885,16 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     lin_specs = [s for s in specs if s.linear]
     nl_specs = [s for s in specs if not s.linear]
     not_tried: dict[str, str] = {}  # effect -> why its candidates were not fitted
+    lin_later: dict[str, object] = {}  # linear effects not fitted alone, tried by the forward selection
     if lin_specs and level["flagged"] and not closed and refit.is_linear:
         # a linear effect in a linear model cannot change the BLA with the level: it would be
         # inadmissible (see admissible() below), so it is not fitted
         for s in lin_specs:
             not_tried[s.effect] = "the BLA changes with the level, which no linear effect of a linear model does"
+        # alone it cannot be the verdict, but beside a nonlinear effect it can be a second one: the
+        # forward selection tries each such effect's first candidate
+        for s in lin_specs:
+            lin_later.setdefault(s.effect, s)
         lin_specs = []
     def n_steps():
         """Progress steps: every linear and nonlinear spec, and the joint fits of the best classes."""
@@ -1190,7 +1195,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     shares = []
     if chosen and chosen[0][3] is not None:
         chosen, shares = _forward_selection(chosen[0], per_class, sims, ys, split, held_out, key, k_before,
-                                            floor, gap_before, workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l)
+                                            floor, gap_before, workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l,
+                                            also=list(lin_later.values()))
         if len(chosen) > 1:
             # the combination polished jointly with the linear parameters, at full accuracy
             chain = [(c[3], c[4]) for c in chosen]
@@ -1284,7 +1290,7 @@ def _where_key(where: dict) -> str:
 
 
 def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers,
-                       lin=None, model=None, lo_l=None, hi_l=None):
+                       lin=None, model=None, lo_l=None, hi_l=None, also=()):
     """Forward selection of further effects on top of the winner [Ljung 1999, sec. 16.4].
 
     Each other effect class (its best screened location) is added to the current augmented
@@ -1295,7 +1301,9 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
     best addition is kept when its penalised held-out excess gap falls below
     :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
     floor explain); then the next, up to three effects. Returns the chosen candidates
-    (cumulative: the last holds the combined model) and each effect's share of the shrink."""
+    (cumulative: the last holds the combined model) and each effect's share of the shrink.
+    `also`: specs tried as additions beyond the four best screened classes (the linear effects
+    that were not fitted alone because the BLA changes with the level), from their own starts."""
     chosen = [first]
     cur_c, cur_m = first[0], first[1]
     n_par = cur_c.n_parameters
@@ -1307,6 +1315,7 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
             break
         cands = [s_ for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
                  if eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)][:4]
+        cands += [s_ for s_ in also if s_.effect not in used]
         if not cands:
             break
 
@@ -1327,7 +1336,7 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
             return x[nl:], gj, build_j(x), lin.apply(model, x[:nl]), x
 
         def add(s, cur_m=cur_m):
-            p0s = [per_class[s.effect][1]] + list(s.starts[:2])
+            p0s = [per_class[s.effect][1]] + list(s.starts[:2]) if s.effect in per_class else list(s.starts[:3])
             best = None
             for p0 in p0s:
                 try:
