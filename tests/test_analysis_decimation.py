@@ -181,7 +181,7 @@ def test_decimation_keeps_a_mean_such_as_gravity():
     from vibroscope.signals import Signals
 
     x = 9.80665 + 0.1 * band_limited_random(FS, 40_000, f_lo=2.0, f_hi=10.0, rms=1.0, seed=5)
-    out = decimate(Signals(x[None, :], FS, channels=("/imu.linear_acceleration.z",), units=("m/s^2",)), 10.0)
+    out = decimate(Signals(data=x[None, :], fs=FS, channels=("/imu.linear_acceleration.z",), units=("m/s^2",)), 10.0)
     assert out.fs == 40.0
     y = out.data[0, 200:-200]
     assert np.mean(y) == pytest.approx(np.mean(x[2000:-2000]), rel=2e-4)

@@ -62,7 +62,7 @@ def signals(d: dict):
     units = {"qg": "m", "qm": "m", "vir": "V", "pulses": "V"}
     # the estimation log has no pulses: a zero channel, so that both logs drive one model
     rows = [d[k] if k in d else np.zeros_like(d["qg"]) for k in keys]
-    return Signals(np.vstack(rows), FS, [CH[k] for k in keys], [units[k] for k in keys])
+    return Signals(data=np.vstack(rows), fs=FS, channels=[CH[k] for k in keys], units=[units[k] for k in keys])
 
 
 def model(d: dict, *, friction: bool, pulses: bool = True):

@@ -37,7 +37,7 @@ def demo_signals() -> Signals:
 def _with_nan(sig: Signals, rows: slice, start: int, stop: int) -> Signals:
     data = np.array(sig.data)
     data[rows, start:stop] = np.nan
-    return Signals(data, sig.fs, sig.channels, sig.units, sig.t0, sig.meta)
+    return Signals(data=data, fs=sig.fs, channels=sig.channels, units=sig.units, t0=sig.t0, meta=sig.meta)
 
 
 def _assert_true_modes(mm, rel=0.005):
@@ -135,7 +135,7 @@ def test_a_gap_does_not_split_a_mode(demo_signals, rows):
 def test_one_infinite_sample_does_not_split_a_mode(demo_signals):
     data = np.array(demo_signals.data)
     data[1, 7000] = np.inf
-    sig = Signals(data, demo_signals.fs, demo_signals.channels, demo_signals.units, demo_signals.t0)
+    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units, t0=demo_signals.t0)
     an = analyse_signals(sig, input=FORCE)
     assert an.settings["nperseg"] == 4096
     _assert_true_modes(an.modal)
@@ -148,7 +148,7 @@ def test_refinement_with_gaps_stops_when_fewer_than_five_clean_segments_fit(demo
     data = np.array(demo_signals.data)
     for k in range(3000, 20000, 4000):
         data[1:, k:k + 50] = np.nan
-    sig = Signals(data, demo_signals.fs, demo_signals.channels, demo_signals.units, demo_signals.t0)
+    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units, t0=demo_signals.t0)
     assert _clean_segments(sig, 4096) < 5 <= _clean_segments(sig, 2048)
     an = analyse_signals(sig, input=FORCE)
     assert an.settings["nperseg"] <= 2048

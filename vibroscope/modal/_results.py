@@ -102,7 +102,7 @@ class Mode:
         }
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ModalModel:
     """Identified modal parameters of a structure.
 

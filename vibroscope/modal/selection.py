@@ -126,8 +126,8 @@ def _subset(model: ModalModel, keep: np.ndarray) -> ModalModel:
             extra[k] = v[keep]
         else:
             extra[k] = v
-    return ModalModel(model.natural_frequencies[keep], model.damping_ratios[keep],
-                      model.shapes[keep] if n else model.shapes, model.points, model.method, extra)
+    return ModalModel(natural_frequencies=model.natural_frequencies[keep], damping_ratios=model.damping_ratios[keep],
+                      shapes=model.shapes[keep] if n else model.shapes, points=model.points, method=model.method, extra=extra)
 
 
 def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: float = 20.0,
@@ -287,16 +287,16 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
     settings = dict(st.settings, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min)
     if not modes:
         empty = np.zeros(0)
-        return ModalModel(empty, empty, np.zeros((0, len(st.points))), st.points, method,
-                          {"cluster_size": np.zeros(0, int), "damping_std": empty, "frequency_std_hz": empty,
+        return ModalModel(natural_frequencies=empty, damping_ratios=empty, shapes=np.zeros((0, len(st.points))), points=st.points, method=method,
+                          extra={"cluster_size": np.zeros(0, int), "damping_std": empty, "frequency_std_hz": empty,
                            "mpc": empty, "order": np.zeros(0, int), "cluster_orders": np.empty(0, object),
                            "settings": settings}), rejected
     f, z, s, c, zs, fsd, o, co = zip(*modes)
     shapes = normalize_shapes(np.array(s))
     orders = np.empty(len(co), object)
     orders[:] = co
-    return ModalModel(np.array(f), np.array(z), shapes, st.points, method,
-                      {"cluster_size": np.array(c), "damping_std": np.array(zs), "frequency_std_hz": np.array(fsd),
+    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points, method=method,
+                      extra={"cluster_size": np.array(c), "damping_std": np.array(zs), "frequency_std_hz": np.array(fsd),
                        "mpc": mpc(shapes), "order": np.array(o), "cluster_orders": orders,
                        "settings": settings}), rejected
 
@@ -500,6 +500,6 @@ def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float 
     rows.sort(key=lambda r: r[0])
     f, z, sh, o, req, fsd, zsd = zip(*rows)
     shapes = normalize_shapes(np.array(sh))
-    return ModalModel(np.array(f), np.array(z), shapes, st.points, st.settings.get("method", "ssi_cov"),
-                      {"order": np.array(o), "requested_hz": np.array(req), "frequency_std_hz": np.array(fsd),
+    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points, method=st.settings.get("method", "ssi_cov"),
+                      extra={"order": np.array(o), "requested_hz": np.array(req), "frequency_std_hz": np.array(fsd),
                        "damping_std": np.array(zsd), "mpc": mpc(shapes), "stable": np.ones(len(rows), bool)})

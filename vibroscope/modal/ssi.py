@@ -85,7 +85,7 @@ def center(y: np.ndarray) -> np.ndarray:
     return y - y.mean(axis=1, keepdims=True)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Stabilization:
     """Poles of SSI-COV at increasing model orders: the stabilization diagram.
 
@@ -284,8 +284,8 @@ def ssi_cov(
         prev = (f, z, phi)
     order_a, f_a, z_a, phi_a, code_a = (np.concatenate(c) for c in zip(*rows))
     phi_a = phi_a.reshape(-1, n_ch)
-    return Stabilization(order_a, f_a, z_a, phi_a, code_a, tuple(points),
-                         dict(method="ssi_cov", fs=fs, n_lags=n_lags, orders=tuple(orders),
+    return Stabilization(order=order_a, frequency=f_a, damping=z_a, shapes=phi_a, stable=code_a, points=tuple(points),
+                         settings=dict(method="ssi_cov", fs=fs, n_lags=n_lags, orders=tuple(orders),
                               ref=None if ref is None else tuple(ref),
                               max_damping=max_damping, tol_frequency=tol_frequency, tol_damping=tol_damping,
                               mac_min=mac_min))

@@ -184,7 +184,7 @@ class Spectrum:
         return plot_spectrum(self, ax=ax, db=db, channels=channels)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class CrossSpectralMatrix:
     """The one-sided cross-spectral matrix of several channels.
 
@@ -320,7 +320,7 @@ class CrossSpectralMatrix:
                                    n_averages=self.n_averages)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class FRF:
     """Frequency response function estimate ``H[f, output, input]``.
 

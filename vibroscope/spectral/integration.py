@@ -216,7 +216,7 @@ def integrate(signals: Signals, *, order: Literal[1, 2] = 1, f_cut: float | None
     >>> from vibroscope import Signals
     >>> fs = 1000.0
     >>> t = np.arange(20000) / fs
-    >>> acc = Signals(2.0 + np.sin(2 * np.pi * 10 * t), fs, ["/imu.z"], ["m/s^2"])
+    >>> acc = Signals(data=2.0 + np.sin(2 * np.pi * 10 * t), fs=fs, channels=["/imu.z"], units=["m/s^2"])
     >>> vel = integrate(acc)
     >>> vel.units, round(float(np.max(np.abs(vel.data[0, 2000:-2000])) * 2 * np.pi * 10), 3)
     (('m/s',), 1.0)
@@ -299,8 +299,8 @@ def _integrals(signals: Signals, order: int, f_cut, method: str) -> list[Signals
         if stretches is not None:
             info["gaps"] = (f"{stretches} stretches between missing samples integrated one by one (each detrended, "
                             f"with its own edge zones); missing samples and stretches under 4 samples are NaN")
-        out.append(Signals(x, fs, signals.channels, [_integral_unit(u, k) for u in signals.units], signals.t0,
-                           {**signals.meta, "integration": info}))
+        out.append(Signals(data=x, fs=fs, channels=signals.channels, units=[_integral_unit(u, k) for u in signals.units], t0=signals.t0,
+                           meta={**signals.meta, "integration": info}))
     return out
 
 
@@ -408,7 +408,7 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     >>> from vibroscope import Signals
     >>> fs = 4000.0
     >>> t = np.arange(40000) / fs
-    >>> s = Signals(10.0 * np.sin(2 * np.pi * 50 * t), fs, ["/imu.z"], ["m/s^2"])
+    >>> s = Signals(data=10.0 * np.sin(2 * np.pi * 50 * t), fs=fs, channels=["/imu.z"], units=["m/s^2"])
     >>> round(vibration_severity(s)["/imu.z"], 2)  # 10 / (2π·50·√2) m/s = 22.51 mm/s
     22.51
     """
