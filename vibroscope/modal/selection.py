@@ -213,12 +213,12 @@ def response_band(frequencies: np.ndarray, psd: np.ndarray, *, energy: float = 0
     return f_low, max(fmax, 2 * f_low)
 
 
-def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: float = 0.01, mac_min: float = 0.9,
+def cluster_poles(stabilization, *, min_count: int | None = None, tol_frequency: float = 0.01, mac_min: float = 0.9,
                   fmin: float | None = None, fmax: float | None = None) -> tuple[ModalModel, list[RejectedMode]]:
     """Modes as clusters of fully stable poles of a stabilization diagram.
 
     Fully stable poles (``stable == 3``) are taken by increasing frequency and grouped while within
-    `freq_tol` (relative) of the cluster's median frequency and with MAC ≥ `mac_min` to its first
+    `tol_frequency` (relative) of the cluster's median frequency and with MAC ≥ `mac_min` to its first
     member. A cluster with at least `min_count` poles is a mode (median frequency and damping, the
     shape of the member nearest the median frequency); smaller clusters of two or more poles are
     returned as rejected ("stable in k of N orders"). Magalhães et al. (2009) cluster the same way.
@@ -229,7 +229,7 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
         From :func:`vibroscope.modal.ssi_cov` or :func:`vibroscope.modal.lscf`.
     min_count : int, optional
         Smallest cluster; default ``max(3, n_orders // 4)``.
-    freq_tol : float, optional
+    tol_frequency : float, optional
         Relative frequency tolerance of a cluster; default 0.01.
     mac_min : float, optional
         Smallest MAC with the cluster's first pole; default 0.9.
@@ -243,7 +243,9 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
         cluster's orders, not a statistical uncertainty), ``mpc``, ``order`` (of the
         representative pole), ``cluster_orders`` (object array of frozensets: the model orders
         of each cluster's poles, which :func:`select_modes` uses to tell a split mode from the
-        mode) and ``settings``.
+        mode) and ``settings`` (the diagram's, with ``min_count``, ``cluster_tol_frequency``
+        (this `tol_frequency`; the diagram's own ``tol_frequency`` is its stability criterion)
+        and ``mac_min``).
     """
     st = stabilization
     n_orders = len(st.settings.get("orders", ())) or int(np.unique(st.order).size)
@@ -267,10 +269,10 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
             if used[b]:
                 continue
             fb = st.frequency[idx[b]]
-            if fb > f0 * (1 + 2 * freq_tol):
+            if fb > f0 * (1 + 2 * tol_frequency):
                 break
             fmed = np.median(st.frequency[idx[members]])
-            if abs(fb / fmed - 1) <= freq_tol and mac(st.shapes[idx[a]], st.shapes[idx[b]])[0, 0] >= mac_min:
+            if abs(fb / fmed - 1) <= tol_frequency and mac(st.shapes[idx[a]], st.shapes[idx[b]])[0, 0] >= mac_min:
                 members.append(b)
         p = idx[members]
         fmed = float(np.median(st.frequency[p]))
@@ -284,7 +286,7 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
             used[members] = True
             rejected.append(RejectedMode(fmed, float(np.median(st.damping[p])),
                                          f"not stable across orders: {len(p)} of {n_orders} orders (< {min_count})"))
-    settings = dict(st.settings, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min)
+    settings = dict(st.settings, min_count=min_count, cluster_tol_frequency=tol_frequency, mac_min=mac_min)
     if not modes:
         empty = np.zeros(0)
         return ModalModel(natural_frequencies=empty, damping_ratios=empty, shapes=np.zeros((0, len(st.points))), points=st.points, method=method,
@@ -456,12 +458,12 @@ def _drop_duplicates(model: ModalModel, keep: list, df: float, bins: float, mac_
 
 
 def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float = 0.05,
-               freq_tol: float = 0.01) -> ModalModel:
+               tol_frequency: float = 0.01) -> ModalModel:
     """Modes at chosen frequencies of a stabilization diagram (the engineer's pick).
 
     For each requested frequency the nearest pole that is stable in frequency and damping
     (``stable >= 2``, else any pole) within ±`search` (relative) is found; the poles within
-    `freq_tol` of it with the same or better stability form its cluster (median frequency and
+    `tol_frequency` of it with the same or better stability form its cluster (median frequency and
     damping, the shape of the highest-order member).
 
     Parameters
@@ -471,7 +473,7 @@ def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float 
         Requested natural frequencies in Hz.
     search : float, optional
         Relative search window; default 0.05.
-    freq_tol : float, optional
+    tol_frequency : float, optional
         Relative cluster width; default 0.01.
 
     Returns
@@ -492,7 +494,7 @@ def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float 
             raise ValueError(f"no pole within {100 * search:g} % of {fr:g} Hz in the stabilization diagram")
         best = near & (st.stable >= 2) if np.any(near & (st.stable >= 2)) else near
         k = np.flatnonzero(best)[np.argmin(np.abs(st.frequency[best] - fr))]
-        memb = best & (np.abs(st.frequency / st.frequency[k] - 1) <= freq_tol)
+        memb = best & (np.abs(st.frequency / st.frequency[k] - 1) <= tol_frequency)
         p = np.flatnonzero(memb)
         rep = p[np.argmax(st.order[p])]
         rows.append((float(np.median(st.frequency[p])), float(np.median(st.damping[p])), st.shapes[rep],
