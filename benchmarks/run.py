@@ -156,7 +156,7 @@ def bench_simulate(seconds: float = 60.0, ref_seconds: float = 6.0) -> list[dict
         "cubic": (CubicSpring(("m3", "m2"), k3=1e10),),
         "friction+cubic": (Friction(("m3", "ground"), force_=5.0), CubicSpring(("m3", "m2"), k3=1e10)),
     }
-    u = band_limited_random(fs, int(seconds * fs), f_lo=1, f_hi=200, rms=20, seed=0)
+    u = band_limited_random(fs, int(seconds * fs), fmin=1, fmax=200, rms=20, seed=0)
     n_ref = int(ref_seconds * fs)
     rows = []
     for name, nl in cases.items():

@@ -36,7 +36,7 @@ def _shaker_signals(n_periods: int, period: int = PERIOD) -> Signals:
     from vibroscope.models.excitation import multisine
     from vibroscope.models.simulate import simulate
 
-    u, _ = multisine(FS, period, f_lo=1.0, f_hi=20.0, rms=5.0, seed=1)
+    u, _ = multisine(FS, period, fmin=1.0, fmax=20.0, rms=5.0, seed=1)
     return simulate(_shaker_model(), np.tile(u, n_periods), FS, noise=0.01, seed=2)
 
 

@@ -26,7 +26,7 @@ TRUE = MODEL.modes().natural_frequencies
 def demo():
     """The demo's record (force then accelerations), 120 s at 1 kHz, as `vibroscope demo` makes it."""
     n = int(120 * FS)
-    u = band_limited_random(FS, n, f_lo=2.0, f_hi=0.3 * FS, rms=20.0, seed=1)
+    u = band_limited_random(FS, n, fmin=2.0, fmax=0.3 * FS, rms=20.0, seed=1)
     return simulate(MODEL, u, FS, noise=0.02, seed=2)
 
 
@@ -166,7 +166,7 @@ def test_gap_diagnosis_runs_on_the_stretches_of_a_log_with_a_gap():
     from vibroscope.gap import diagnose
 
     fs = 500.0
-    u = band_limited_random(fs, int(60 * fs), f_lo=2.0, f_hi=0.3 * fs, rms=20.0, seed=1)
+    u = band_limited_random(fs, int(60 * fs), fmin=2.0, fmax=0.3 * fs, rms=20.0, seed=1)
     sig = _with_nan(simulate(MODEL, u, fs, noise=0.02, seed=2), [("/imu/m2.linear_acceleration.x", 14_000, 14_050)])
     with pytest.warns(UserWarning, match=r"diagnosed as 2 gap-free stretches \(29950 of 30000 samples"):
         rep = diagnose(MODEL, sig, workers=1)

@@ -30,7 +30,7 @@ FORCE = MODEL.input_channels()[0]
 def demo_signals() -> Signals:
     """The demo's record (``vibroscope demo`` with ``--duration 20``): 20 s at 1 kHz, force first."""
     fs, n = 1000.0, 20000
-    u = band_limited_random(fs, n, f_lo=2.0, f_hi=0.3 * fs, rms=20.0, seed=1)
+    u = band_limited_random(fs, n, fmin=2.0, fmax=0.3 * fs, rms=20.0, seed=1)
     return simulate(MODEL, u, fs, t0=1.7e9, noise=0.02, seed=2)
 
 

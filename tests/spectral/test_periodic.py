@@ -26,7 +26,7 @@ def _sdof() -> LumpedModel:
 
 @pytest.fixture(scope="module")
 def excitation():
-    u1, lines = multisine(FS, N, f_lo=2.0, f_hi=60.0, seed=3)
+    u1, lines = multisine(FS, N, fmin=2.0, fmax=60.0, seed=3)
     return np.tile(u1, P), lines
 
 

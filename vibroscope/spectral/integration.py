@@ -318,7 +318,7 @@ class Severity:
     velocity_rms_mm_s : ndarray, shape (n_channels,)
         RMS velocity in mm/s over `band_hz`.
     band_hz : tuple of float
-        ``(f_lo, f_hi)`` in Hz actually integrated over (`f_hi` is clipped to ``fs / 2``).
+        ``(fmin, fmax)`` in Hz actually integrated over (`fmax` is clipped to ``fs / 2``).
     method : str
         How it was computed.
     note : str
@@ -368,8 +368,8 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
         Accelerations, ``data`` shape (n_channels, n_samples), in m/s² (``'m/s^2'``, ``'m/s²'``;
         ``'g'`` is converted with 9.80665 m/s²; ``''`` is taken as m/s² and said so in ``note``).
     band : tuple of float, optional
-        ``(f_lo, f_hi)`` in Hz; the standard's broadband range is 10–1000 Hz (2–1000 Hz for
-        machines below 600 r/min). `f_hi` above ``fs / 2`` is clipped to ``fs / 2``, and
+        ``(fmin, fmax)`` in Hz; the standard's broadband range is 10–1000 Hz (2–1000 Hz for
+        machines below 600 r/min). `fmax` above ``fs / 2`` is clipped to ``fs / 2``, and
         ``note`` says so.
 
     Returns
@@ -386,11 +386,11 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     Notes
     -----
     The PSD is Welch's (Hann, 50 % overlap, linear detrend per segment, one-sided density)
-    with segments of ``nperseg = min(n_samples, 20 fs / f_lo)`` rounded up to a fast FFT size:
-    ``Δf <= f_lo / 20`` (0.5 Hz for the standard band) so a tone just outside the band leaks
+    with segments of ``nperseg = min(n_samples, 20 fs / fmin)`` rounded up to a fast FFT size:
+    ``Δf <= fmin / 20`` (0.5 Hz for the standard band) so a tone just outside the band leaks
     less than −80 dB into it. Then
 
-    ``v_rms² = Σ_{f_lo <= f_k <= f_hi} G_aa(f_k) / (2π f_k)² · Δf``.
+    ``v_rms² = Σ_{fmin <= f_k <= fmax} G_aa(f_k) / (2π f_k)² · Δf``.
 
     A tone of amplitude ``A`` (m/s²) at ``f`` inside the band gives ``A / (2π f √2)`` m/s.
 
@@ -414,16 +414,16 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     """
     fs = signals.fs
     n = signals.n_samples
-    f_lo, f_hi = (float(b) for b in band)
-    if not (np.isfinite(f_lo) and np.isfinite(f_hi)) or not 0 < f_lo < f_hi:
-        raise ValueError(f"{band=} must be (f_lo, f_hi) with 0 < f_lo < f_hi in Hz")
+    fmin, fmax = (float(b) for b in band)
+    if not (np.isfinite(fmin) and np.isfinite(fmax)) or not 0 < fmin < fmax:
+        raise ValueError(f"{band=} must be (fmin, fmax) with 0 < fmin < fmax in Hz")
     notes = []
-    if f_hi > fs / 2:
-        notes.append(f"band upper edge {f_hi:g} Hz above the Nyquist frequency: integrated up to "
+    if fmax > fs / 2:
+        notes.append(f"band upper edge {fmax:g} Hz above the Nyquist frequency: integrated up to "
                      f"fs/2 = {fs / 2:g} Hz only")
-        f_hi = fs / 2
-    if f_lo >= f_hi:
-        raise ValueError(f"band lower edge {f_lo:g} Hz is not below fs/2 = {fs / 2:g} Hz")
+        fmax = fs / 2
+    if fmin >= fmax:
+        raise ValueError(f"band lower edge {fmin:g} Hz is not below fs/2 = {fs / 2:g} Hz")
     scale = np.ones(signals.n_channels)
     assumed = []
     for k, u in enumerate(signals.units):
@@ -439,7 +439,7 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
                              "accelerations in m/s^2 (or g)")
     if assumed:
         notes.append(f"no unit on {len(assumed)} channel(s), taken as m/s^2")
-    nperseg = min(n, scipy.fft.next_fast_len(int(np.ceil(20.0 * fs / f_lo))))
+    nperseg = min(n, scipy.fft.next_fast_len(int(np.ceil(20.0 * fs / fmin))))
     if nperseg < 8:
         raise ValueError(f"the record is too short for a spectrum: {n=} samples")
     noverlap = nperseg // 2
@@ -450,16 +450,16 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
                noverlap=noverlap, detrend="linear", scaling="density")
     f, P = sp.frequencies, sp.values
     df = float(f[1] - f[0])
-    if df > f_lo / 4:
-        notes.append(f"record of {n / fs:g} s resolves only {df:.3g} Hz: the band edge at {f_lo:g} Hz is coarse")
-    sel = (f >= f_lo) & (f <= f_hi) & (f > 0)
+    if df > fmin / 4:
+        notes.append(f"record of {n / fs:g} s resolves only {df:.3g} Hz: the band edge at {fmin:g} Hz is coarse")
+    sel = (f >= fmin) & (f <= fmax) & (f > 0)
     pv = P[:, sel] / (2 * np.pi * f[sel]) ** 2
     v_rms = np.sqrt(np.sum(pv, axis=-1) * df)
     n_avg = int(sp.n_averages.min())
     settings = dict(fs=fs, nperseg=int(nperseg), noverlap=int(noverlap), window="hann", detrend="linear",
                     df_hz=df, n_averages=int(n_avg))
     method = "Welch PSD of acceleration / (2πf)², integrated over the band (Parseval)"
-    return Severity(channels=signals.channels, velocity_rms_mm_s=1000.0 * v_rms, band_hz=(f_lo, f_hi), method=method,
+    return Severity(channels=signals.channels, velocity_rms_mm_s=1000.0 * v_rms, band_hz=(fmin, fmax), method=method,
                     note="; ".join(notes), settings=settings)
 
 
