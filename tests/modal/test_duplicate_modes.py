@@ -69,7 +69,7 @@ def test_split_mode_is_one_mode_the_cluster_alone_at_its_orders():
     sel = select_modes(_split_candidates(), resolution_hz=0.4883)
     assert list(sel.modes.natural_frequencies) == [18.375, 41.92]
     assert list(sel.modes.extra["cluster_size"]) == [30, 86]  # per-mode extras follow the kept modes
-    reasons = {r.frequency_hz: r.reason for r in sel.rejected}
+    reasons = {r.natural_frequency: r.reason for r in sel.rejected}
     assert sorted(reasons) == [18.056, 18.574]
     assert reasons[18.056].startswith("duplicate of 18.375 Hz: 0.319 Hz apart")
     assert "MAC 1.000" in reasons[18.574] and "only pole at 30 model orders" in reasons[18.574]
@@ -118,7 +118,7 @@ def test_coarse_resolution_gives_three_modes(demo_signals):
     an = analyse_signals(demo_signals, input=FORCE, nperseg=2048)
     _assert_true_modes(an.modal)
     dup = [r for r in an.identification.rejected if r.reason.startswith("duplicate of")]
-    assert len(dup) == 2 and all(abs(r.frequency_hz - 18.39) < 0.6 for r in dup)
+    assert len(dup) == 2 and all(abs(r.natural_frequency - 18.39) < 0.6 for r in dup)
 
 
 @pytest.mark.parametrize("rows", [slice(1, None), slice(0, 1), slice(None)], ids=["outputs", "force", "all"])

@@ -476,7 +476,7 @@ def auto_lscf(
                                 "random part from a record)") if len(mm) else None,
                 **{k: v for k, v in sel.criteria.items() if k != "band_hz"}}
     mm = dataclasses.replace(mm, extra={**mm.extra, "settings": settings, "stabilization": st})
-    return Identification(mm, tuple(sorted(rejected, key=lambda r: r.frequency_hz)), st, settings, res)
+    return Identification(mm, tuple(sorted(rejected, key=lambda r: r.natural_frequency)), st, settings, res)
 
 
 def positive_power_spectra(signals: Signals, *, n_lags: int, ref: Sequence[int] | None = None,

@@ -72,22 +72,22 @@ class RejectedMode:
 
     Attributes
     ----------
-    frequency_hz : float
-        Its natural frequency in Hz.
+    natural_frequency : float
+        Its natural frequency in Hz (the JSON key is ``frequency_hz``).
     damping_ratio : float
         Its damping ratio (dimensionless); NaN when not estimated.
     reason : str
         Why it was rejected, with the value and the threshold.
     """
 
-    frequency_hz: float
+    natural_frequency: float
     damping_ratio: float
     reason: str
 
     def to_dict(self) -> dict:
         """``{"frequency_hz", "damping_ratio", "reason"}`` (NaN damping as None)."""
         z = self.damping_ratio
-        return {"frequency_hz": float(self.frequency_hz),
+        return {"frequency_hz": float(self.natural_frequency),
                 "damping_ratio": None if not np.isfinite(z) else float(z), "reason": self.reason}
 
 
@@ -396,7 +396,7 @@ def select_modes(
         duplicate = {"resolution_hz": float(resolution_hz), "bins": duplicate_bins, "mac_min": duplicate_mac}
     kept = _subset(model, np.array(keep, dtype=int))
     kept = dataclasses.replace(kept, extra={**kept.extra, "stable": np.ones(len(kept), bool)})
-    out.sort(key=lambda x: x.frequency_hz)
+    out.sort(key=lambda x: x.natural_frequency)
     criteria = {"band_hz": [fmin, fmax], "damping_range": list(damping_range), "min_mpc": min_mpc,
                 "min_coherence": min_coherence if coherence is not None else None, "duplicates": duplicate}
     return Selection(kept, tuple(out), criteria)
@@ -457,7 +457,7 @@ def _drop_duplicates(model: ModalModel, keep: list, df: float, bins: float, mac_
     return sorted(int(idx[i]) for i in kept_local), rejected
 
 
-def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float = 0.05,
+def pick_poles(stabilization, natural_frequencies: Sequence[float], *, search: float = 0.05,
                tol_frequency: float = 0.01) -> ModalModel:
     """Modes at chosen frequencies of a stabilization diagram (the engineer's pick).
 
@@ -469,7 +469,7 @@ def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float 
     Parameters
     ----------
     stabilization : Stabilization
-    frequencies_hz : sequence of float
+    natural_frequencies : sequence of float
         Requested natural frequencies in Hz.
     search : float, optional
         Relative search window; default 0.05.
@@ -488,7 +488,7 @@ def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float 
     """
     st = stabilization
     rows = []
-    for fr in frequencies_hz:
+    for fr in natural_frequencies:
         near = np.abs(st.frequency / fr - 1) <= search
         if not near.any():
             raise ValueError(f"no pole within {100 * search:g} % of {fr:g} Hz in the stabilization diagram")

@@ -472,8 +472,8 @@ class OperatingShape:
 
     Attributes
     ----------
-    frequency_hz : float
-        The spectral line used, in Hz (the nearest to `requested_hz`).
+    frequency : float
+        The spectral line used, in Hz (the nearest to `requested_frequency`).
     shape : ndarray, complex, shape (n_points,)
         Relative amplitude and phase of the points, normalised to unit maximum modulus with the
         `reference` point's entry real and positive.
@@ -489,24 +489,24 @@ class OperatingShape:
         relative to the reference).
     units : str
         Units of `values` (the FRF's; ``'u/√Hz'`` for a CSD density, ``'u'`` for a power spectrum).
-    requested_hz : float
+    requested_frequency : float
         The frequency asked for, in Hz.
     input : str or None
         The FRF's input (excitation) channel; None for a CSD.
     """
 
-    frequency_hz: float
+    frequency: float
     shape: np.ndarray
     points: tuple[str, ...]
     source: Literal["frf", "csd"]
     reference: str
     values: np.ndarray
     units: str = ""
-    requested_hz: float = float("nan")
+    requested_frequency: float = float("nan")
     input: str | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "frequency_hz", float(self.frequency_hz))
+        object.__setattr__(self, "frequency", float(self.frequency))
         object.__setattr__(self, "shape", read_only(self.shape, complex))
         object.__setattr__(self, "values", read_only(self.values, complex))
         object.__setattr__(self, "points", tuple(str(p) for p in self.points))
@@ -533,17 +533,17 @@ class OperatingShape:
         return plot_ods(self, coords, **kwargs)
 
     def __repr__(self) -> str:
-        return (f"OperatingShape({self.frequency_hz:.4g} Hz from {self.source}, {len(self.points)} points, "
+        return (f"OperatingShape({self.frequency:.4g} Hz from {self.source}, {len(self.points)} points, "
                 f"reference {self.reference!r})")
 
 
-def _line(frequencies: np.ndarray, frequency_hz: float) -> int:
+def _line(frequencies: np.ndarray, frequency: float) -> int:
     f = np.asarray(frequencies, dtype=float)
     if f.size == 0:
         raise ValueError("the frequency axis is empty")
-    fr = float(frequency_hz)
+    fr = float(frequency)
     if not np.isfinite(fr) or fr < f[0] or fr > f[-1]:
-        raise ValueError(f"{frequency_hz=} Hz is outside the frequency axis [{f[0]:g}, {f[-1]:g}] Hz")
+        raise ValueError(f"{frequency=} Hz is outside the frequency axis [{f[0]:g}, {f[-1]:g}] Hz")
     return int(np.argmin(np.abs(f - fr)))
 
 
@@ -558,7 +558,7 @@ def _index(names: tuple[str, ...], key: str | int, what: str) -> int:
         raise KeyError(f"no {what} {key!r}; {what}s are {list(names)}") from None
 
 
-def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: str | int | None = None,
+def ods(source: FRF | CrossSpectralMatrix, frequency: float, *, reference: str | int | None = None,
         input: str | int = 0) -> OperatingShape:
     """Operating deflection shape at one frequency, from an FRF or a cross-spectral matrix.
 
@@ -567,7 +567,7 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
     source : FRF or CrossSpectralMatrix
         An FRF ``H[f, output, input]`` (the shape is the outputs' column of one input) or the
         cross-spectral matrix ``G[f, i, j]`` of the response channels (output-only).
-    frequency_hz : float
+    frequency : float
         Frequency in Hz; the nearest spectral line is used.
     reference : str or int, optional
         The point (output / channel name or index) whose phase is the zero of the shape.
@@ -585,7 +585,7 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
     Raises
     ------
     ValueError
-        If `frequency_hz` is outside the source's frequency axis, or the reference
+        If `frequency` is outside the source's frequency axis, or the reference
         auto-spectrum is zero at that line.
     KeyError
         If `reference` or `input` names no channel.
@@ -609,14 +609,14 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
        4th ed., Wiley, 2010, §5.2 (cross-spectral density functions).
     """
     if isinstance(source, FRF):
-        k = _line(source.frequencies, frequency_hz)
+        k = _line(source.frequencies, frequency)
         i_in = _index(source.inputs, input, "input")
         vals = np.array(source.H[k, :, i_in], dtype=complex)
         points = source.outputs
         ref = int(np.nanargmax(np.abs(vals))) if reference is None else _index(points, reference, "output")
         units, kind, in_name = source.units, "frf", source.inputs[i_in]
     elif isinstance(source, CrossSpectralMatrix):
-        k = _line(source.frequencies, frequency_hz)
+        k = _line(source.frequencies, frequency)
         points = source.channels
         auto = np.real(np.diagonal(source.G[k]))
         ref = int(np.argmax(auto)) if reference is None else _index(points, reference, "channel")
@@ -636,6 +636,6 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
     if shape[ref] != 0 and mx > 0:
         shape = shape * (np.conj(shape[ref]) / abs(shape[ref])) / mx
         shape[ref] = abs(vals[ref]) / mx  # exactly real positive
-    return OperatingShape(frequency_hz=float(source.frequencies[k]), shape=shape, points=points, source=kind,
-                          reference=points[ref], values=vals, units=units, requested_hz=float(frequency_hz),
+    return OperatingShape(frequency=float(source.frequencies[k]), shape=shape, points=points, source=kind,
+                          reference=points[ref], values=vals, units=units, requested_frequency=float(frequency),
                           input=in_name)
