@@ -71,7 +71,7 @@ def default_f_cut(fs: float, n_samples: int) -> float:
     return max(10.0 * float(fs) / max(int(n_samples), 1), 1.0)
 
 
-def highpass_gain(f, f_cut: float) -> np.ndarray:
+def highpass_gain(frequencies, f_cut: float) -> np.ndarray:
     """Magnitude of the zero-phase high-pass applied once per integration.
 
     ``W(f) = 1 / (1 + (f_cut / f)^8)``: a 4th-order Butterworth high-pass run forward and
@@ -80,20 +80,20 @@ def highpass_gain(f, f_cut: float) -> np.ndarray:
 
     Parameters
     ----------
-    f : array_like
+    frequencies : array_like
         Frequencies in Hz (≥ 0).
     f_cut : float
         Cut-off in Hz.
 
     Returns
     -------
-    ndarray, shape like `f`
+    ndarray, shape like `frequencies`
         Gains in [0, 1]; 0 at 0 Hz.
     """
-    f = np.abs(np.asarray(f, dtype=float))
-    out = np.zeros(f.shape)
-    pos = f > 0
-    out[pos] = 1.0 / (1.0 + (f_cut / f[pos]) ** (2 * BUTTER_ORDER))
+    frequencies = np.abs(np.asarray(frequencies, dtype=float))
+    out = np.zeros(frequencies.shape)
+    pos = frequencies > 0
+    out[pos] = 1.0 / (1.0 + (f_cut / frequencies[pos]) ** (2 * BUTTER_ORDER))
     return out
 
 
