@@ -187,7 +187,8 @@ def bench_closed_loop(seconds: float = 60.0) -> list[dict]:
     from vibroscope.models.simulate import simulate
 
     def drive(friction: bool) -> LumpedModel:
-        c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q", drives=0, reference="/qg.x",
+        c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q",
+                       drives=0, reference="/qg.x",
                        velocity_filter=(0.5, 0.5), gain=35.15, saturation=10.0)
         els = (Damper(("q", "ground"), c=203.5),) + ((make_element("friction", ("q", "ground"), force=20.39),)
                                                        if friction else ())

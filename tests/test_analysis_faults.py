@@ -203,7 +203,8 @@ def test_rerun_breaks_the_series_and_logs_each_gap(tmp_path):
     x[0, 500] = np.inf
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        log_analysis(signals=Signals(data=x, fs=100.0, channels=["/imu.x", "/imu.y"], units=["m/s^2"] * 2), rrd_path=tmp_path / "g.rrd")
+        log_analysis(signals=Signals(data=x, fs=100.0, channels=["/imu.x", "/imu.y"], units=["m/s^2"] * 2),
+                     rrd_path=tmp_path / "g.rrd")
     d = read_rrd(tmp_path / "g.rrd")
     vals = np.asarray(d["/signals/imu.x"]["Scalars:scalars"], float).ravel()
     assert vals.size == 989 and np.isfinite(vals).all()  # the 11 missing samples are not sent

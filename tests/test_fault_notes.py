@@ -55,7 +55,8 @@ def test_gravity_on_a_tilted_imu_is_a_note_a_larger_offset_a_fault():
 ])
 def test_one_axis_gravity_needs_an_acceleration_unit_and_a_mean_near_g(unit, mean, kind):
     x = _vibration()[:1] * 0.5 + mean
-    found = [f for f in detect_faults(Signals(data=x, fs=FS, channels=["/acc"], units=[unit]), nperseg=1024) if f.kind != "missing_unit"]
+    found = [f for f in detect_faults(Signals(data=x, fs=FS, channels=["/acc"], units=[unit]),
+                                      nperseg=1024) if f.kind != "missing_unit"]
     assert [(f.kind, f.note) for f in found] == [(kind, kind == "gravity")]
 
 
@@ -64,7 +65,8 @@ def test_a_constant_output_is_a_note_a_constant_input_a_fault():
     sig = Signals(data=np.vstack([x[:2], np.full((1, N), 0.25)]), fs=FS, channels=IMU, units=["m/s^2"] * 3)
     (c,) = detect_faults(sig, nperseg=1024)
     assert (c.kind, c.action, c.note) == ("constant", "drop", True)
-    sig = Signals(data=np.vstack([np.full((1, N), 3.0), x[:1]]), fs=FS, channels=["/force", "/acc"], units=["N", "m/s^2"])
+    sig = Signals(data=np.vstack([np.full((1, N), 3.0), x[:1]]), fs=FS, channels=["/force", "/acc"],
+                  units=["N", "m/s^2"])
     (c,) = detect_faults(sig, input="/force", nperseg=1024)
     assert (c.kind, c.action, c.note) == ("constant", "stop", False)
 

@@ -129,7 +129,8 @@ def test_a_log_of_another_rate_is_left_out_and_one_a_little_off_resampled(logs, 
 
     x = np.random.default_rng(0).standard_normal((3, 5000))
     fast = str(write_ros2_mcap(tmp_path / "fast.mcap", Signals(data=x, fs=1000.0, channels=CHS, t0=1.0)))
-    near = str(write_ros2_mcap(tmp_path / "near.mcap", Signals(data=read_mcap(logs[0]).data, fs=501.0, channels=CHS, t0=2.0)))
+    near = str(write_ros2_mcap(tmp_path / "near.mcap", Signals(data=read_mcap(logs[0]).data, fs=501.0, channels=CHS,
+                                                               t0=2.0)))
     res = analyse_fleet([logs[0], fast, near, logs[1]], client=client, nperseg=1024)
     assert res.settings["fs"] == 500.0
     err = res.rows[1].error
@@ -322,7 +323,8 @@ def test_rows_carry_what_reading_noticed_and_the_json_is_plain(logs, bad_logs, c
     assert all(isinstance(b, list) and len(b) == 2 for b in d["settings"]["bands_hz"])
     flat = str(_log(tmp_path / "flat.mcap", 6000, 9, 40.0))
     x = read_mcap(flat)
-    still = write_ros2_mcap(tmp_path / "still.mcap", Signals(data=np.vstack([x.data[:2], np.zeros((1, 6000))]), fs=500.0, channels=CHS,
+    still = write_ros2_mcap(tmp_path / "still.mcap", Signals(data=np.vstack([x.data[:2], np.zeros((1, 6000))]),
+                                                             fs=500.0, channels=CHS,
                                                              t0=90.0), chunk_size=60_000)
     d2 = analyse_fleet([str(still)], client=client, nperseg=256).to_dict()
     assert d2["merged"]["psd_peak_hz"][CHS[2]] is None and abs(d2["merged"]["psd_peak_hz"][CHS[0]] - 40.0) < 2.0

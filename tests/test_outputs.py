@@ -340,7 +340,8 @@ def test_a_log_of_a_few_samples_is_too_short(tmp_path, capsys):
     from vibroscope.signals import Signals
 
     log = write_ros2_mcap(tmp_path / "two.mcap", Signals(data=np.ones((3, 2)) * [[1], [2], [3]] + [[0, 1]], fs=1000.0,
-                                                         channels=[f"/imu.linear_acceleration.{a}" for a in "xyz"], t0=1.0))
+                                                         channels=[f"/imu.linear_acceleration.{a}" for a in "xyz"],
+                                                         t0=1.0))
     assert main(["analyse", str(log), "--out", str(tmp_path / "o")]) == 1
     err = _err_lines(capsys)
     assert len(err) == 1 and "too short to analyse: 2 samples" in err[0]

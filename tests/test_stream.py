@@ -371,7 +371,8 @@ def test_refinement_for_the_damping_stops_where_segments_no_longer_fit_between_g
     for s in range(300, n, 700):
         x[:, s : s + 40] = np.nan
     chs = ["/ft.wrench.force.x", "/imu.linear_acceleration.x", "/imu.linear_acceleration.y"]
-    p = write_ros2_mcap(tmp_path / "refine.mcap", Signals(data=x, fs=fs, channels=chs, units=["N", "m/s^2", "m/s^2"], t0=2.0))
+    p = write_ros2_mcap(tmp_path / "refine.mcap", Signals(data=x, fs=fs, channels=chs, units=["N", "m/s^2", "m/s^2"],
+                                                          t0=2.0))
     an = analyse_stream(p, input=chs[0], outputs=chs[1:])
     assert an.spectra.settings["nperseg"] == 512
     assert len(an.modal.natural_frequencies) == 1 and abs(an.modal.natural_frequencies[0] - 35.0) < 0.5
@@ -384,8 +385,10 @@ def test_streamed_value_beyond_any_measurement_is_missing(tmp_path):
     x = rng.standard_normal((3, 20_000))
     bad, nan = x.copy(), x.copy()
     bad[1, 7000], nan[1, 7000] = 1e300, np.nan
-    a = accumulate_log(write_ros2_mcap(tmp_path / "huge.mcap", Signals(data=bad, fs=1000.0, channels=CHS, t0=1.0)), nperseg=1024)
-    b = accumulate_log(write_ros2_mcap(tmp_path / "nan.mcap", Signals(data=nan, fs=1000.0, channels=CHS, t0=1.0)), nperseg=1024)
+    a = accumulate_log(write_ros2_mcap(tmp_path / "huge.mcap", Signals(data=bad, fs=1000.0, channels=CHS, t0=1.0)),
+                       nperseg=1024)
+    b = accumulate_log(write_ros2_mcap(tmp_path / "nan.mcap", Signals(data=nan, fs=1000.0, channels=CHS, t0=1.0)),
+                       nperseg=1024)
     assert np.array_equal(a.csd().G, b.csd().G) and np.array_equal(a.csd().n_averages, b.csd().n_averages)
     assert any("1 samples beyond" in w for w in a.warnings)
     analyse_stream(tmp_path / "huge.mcap")  # completes

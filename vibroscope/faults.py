@@ -239,7 +239,9 @@ def _where(spans, fs: float) -> str:
 
 def _fault(ch, kind, msg, action, spans, fs, n, note=False):
     spans = tuple((int(a), int(b)) for a, b in spans)
-    return Fault(channel=ch, kind=kind, message=msg, action=action, spans=spans, times=tuple((a / fs, b / fs) for a, b in spans), n_samples=int(n), note=note)
+    return Fault(channel=ch, kind=kind, message=msg, action=action, spans=spans,
+                 times=tuple((a / fs, b / fs) for a, b in spans),
+                 n_samples=int(n), note=note)
 
 
 def _sensor(channel: str) -> str:
@@ -509,7 +511,8 @@ def apply_faults(signals: Signals, faults: tuple[Fault, ...] | list[Fault]) -> S
             i = signals.index(f.channel)
             for a, b in f.spans:
                 data[i, a:b] = np.nan
-        out = Signals(data=data, fs=signals.fs, channels=signals.channels, units=signals.units, t0=signals.t0, meta=signals.meta)
+        out = Signals(data=data, fs=signals.fs, channels=signals.channels, units=signals.units, t0=signals.t0,
+                      meta=signals.meta)
     if drops:
         keep = [c for c in out.channels if c not in set(drops)]
         out = out.select(keep)

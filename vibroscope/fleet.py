@@ -286,7 +286,8 @@ def _task(path: str, channels: tuple, fs: float, t0_ns: int, n_samples: int, sta
 def _failed_row(path: str, n_samples: int, fs: float, bands: tuple, channels: tuple, error: str) -> FleetRow:
     """The row of a log that could not be analysed: NaN band RMS, no modes, the error."""
     nan = tuple(tuple(float("nan") for _ in bands) for _ in channels)
-    return FleetRow(log=path, n_samples=int(n_samples), duration_s=n_samples / fs, natural_frequencies=(), damping_ratios=(), bands_hz=bands, channels=tuple(channels), rms=nan, error=error)
+    return FleetRow(log=path, n_samples=int(n_samples), duration_s=n_samples / fs, natural_frequencies=(),
+                    damping_ratios=(), bands_hz=bands, channels=tuple(channels), rms=nan, error=error)
 
 
 def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
@@ -313,8 +314,10 @@ def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
         f_n, z, err = tuple(an.modal.natural_frequencies.tolist()), tuple(an.modal.damping_ratios.tolist()), ""
     except ValueError as exc:
         f_n, z, err = (), (), str(exc)
-    return sp, FleetRow(log=path, n_samples=sp.samples, duration_s=sp.samples / fs, natural_frequencies=f_n, damping_ratios=z, bands_hz=bands, channels=tuple(channels),
-                        rms=tuple(tuple(r) for r in rms.tolist()), error=err, warnings=tuple(dict.fromkeys(sp.warnings)))
+    return sp, FleetRow(log=path, n_samples=sp.samples, duration_s=sp.samples / fs, natural_frequencies=f_n,
+                        damping_ratios=z, bands_hz=bands, channels=tuple(channels),
+                        rms=tuple(tuple(r) for r in rms.tolist()), error=err,
+                        warnings=tuple(dict.fromkeys(sp.warnings)))
 
 
 #: glibc's mmap threshold set in worker processes: Dask's nannies set ``MALLOC_TRIM_THRESHOLD_``

@@ -232,7 +232,8 @@ class Signals:
 
     def with_meta(self, **meta: Any) -> "Signals":
         """A copy with `meta` updated."""
-        return Signals(data=self.data, fs=self.fs, channels=self.channels, units=self.units, t0=self.t0, meta={**self.meta, **meta})
+        return Signals(data=self.data, fs=self.fs, channels=self.channels, units=self.units, t0=self.t0,
+                       meta={**self.meta, **meta})
 
     @staticmethod
     def stack(parts: Sequence["Signals"]) -> "Signals":

@@ -70,7 +70,8 @@ def model(d: dict, *, friction: bool, pulses: bool = True):
     from vibroscope.models import Damper, Dof, Input, LumpedModel, Output, make_element
     from vibroscope.models.controller import Controller
 
-    ctl = Controller(name="position", law="cascade", gains={"kp": d["kp"], "kv": d["kv"]}, rate_hz=FS, dof="q", drives=FORCE,
+    ctl = Controller(name="position", law="cascade", gains={"kp": d["kp"], "kv": d["kv"]}, rate_hz=FS, dof="q",
+                     drives=FORCE,
                      reference=CH["qg"], velocity_filter=(0.5, 0.5), gain=d["gtau"], saturation=10.0,
                      output_channel=CH["vir"], output_unit="V", feedforward=CH["pulses"] if pulses else None)
     els = (Damper(("q", "ground"), c=FV),)

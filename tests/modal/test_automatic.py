@@ -84,7 +84,8 @@ def test_select_at_frequencies(ambient):
 def test_selection_rejects_with_reasons():
     """Each criterion rejects with its reason; a NaN damping (not estimated) is kept."""
     shapes = np.array([[1, 0.5], [1, 0.5], [1, 1j], [1, -0.5], [1, 0.2]], complex)
-    mm = ModalModel(natural_frequencies=[5.0, 20.0, 30.0, 40.0, 90.0], damping_ratios=[0.01, 0.3, 0.01, np.nan, 0.01], shapes=shapes, points=["a", "b"], method="x")
+    mm = ModalModel(natural_frequencies=[5.0, 20.0, 30.0, 40.0, 90.0], damping_ratios=[0.01, 0.3, 0.01, np.nan, 0.01],
+                    shapes=shapes, points=["a", "b"], method="x")
     sel = select_modes(mm, fmin=1.0, fmax=50.0, rejected=[RejectedMode(7.0, 0.01, "upstream")])
     assert list(sel.modes.natural_frequencies) == [5.0, 40.0]
     reasons = {r.natural_frequency: r.reason for r in sel.rejected}

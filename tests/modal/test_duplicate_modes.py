@@ -135,7 +135,8 @@ def test_a_gap_does_not_split_a_mode(demo_signals, rows):
 def test_one_infinite_sample_does_not_split_a_mode(demo_signals):
     data = np.array(demo_signals.data)
     data[1, 7000] = np.inf
-    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units, t0=demo_signals.t0)
+    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units,
+                  t0=demo_signals.t0)
     an = analyse_signals(sig, input=FORCE)
     assert an.settings["nperseg"] == 4096
     _assert_true_modes(an.modal)
@@ -148,7 +149,8 @@ def test_refinement_with_gaps_stops_when_fewer_than_five_clean_segments_fit(demo
     data = np.array(demo_signals.data)
     for k in range(3000, 20000, 4000):
         data[1:, k:k + 50] = np.nan
-    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units, t0=demo_signals.t0)
+    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units,
+                  t0=demo_signals.t0)
     assert _clean_segments(sig, 4096) < 5 <= _clean_segments(sig, 2048)
     an = analyse_signals(sig, input=FORCE)
     assert an.settings["nperseg"] <= 2048

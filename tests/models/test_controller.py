@@ -51,7 +51,8 @@ def hydraulic_controller(law: str, rate: float, measures=("position", "velocity"
     else:
         g = cmp.gains_pd2
         gains, gk = {"kp": float(g["k_p"]), "kd": 0.0, "ka": float(g["k_a"])}, (float(g["k_p"]), 0.0, float(g["k_a"]))
-    c = Controller(name="position", law=law, gains=gains, rate_hz=rate, dof="piston", drives=0, reference="/piston/reference.x",
+    c = Controller(name="position", law=law, gains=gains, rate_hz=rate, dof="piston", drives=0,
+                   reference="/piston/reference.x",
                    measures=measures, gain=ca * HN["K_q"] / HN["A"], output_channel="/valve/command.x")
     return c, gk
 
@@ -131,7 +132,8 @@ def test_a_delayed_actuator_applies_the_command_delay_s_late(delay_ticks):
 
 
 def test_trapezoidal_path_agrees_with_exact_zoh_path():
-    c = Controller(name="c", law="PID", gains={"kp": 3e4, "ki": 1e5, "kd": 100.0}, rate_hz=1000.0, dof="m1", drives=0, reference="/r.x")
+    c = Controller(name="c", law="PID", gains={"kp": 3e4, "ki": 1e5, "kd": 100.0}, rate_hz=1000.0, dof="m1", drives=0,
+                   reference="/r.x")
     m = LumpedModel.chain([1.0], [1e4], [20.0], output_quantity="displacement").replace(controllers=(c,))
     r = np.r_[np.zeros(10), np.ones(4990)] * 1e-3
     a = simulate(m, r, 1000.0)
@@ -198,7 +200,8 @@ def test_pi_pdt1_block_schema_matches_instruments():
     ki = 0.3 1/s, t1 = 0.7 s) around a 1 kg / 25 N/m / 7 N s/m mass (gain 25 N): step
     responses at y and at the correction output c match python-control's."""
     rate = 2e4
-    c = Controller(name="schema", law="PI_PDT1", gains={"kp": 0.9 * 9.9 / 3, "ki": 0.9 / 3, "t1": 0.7}, rate_hz=rate, dof="m1", drives=0,
+    c = Controller(name="schema", law="PI_PDT1", gains={"kp": 0.9 * 9.9 / 3, "ki": 0.9 / 3, "t1": 0.7}, rate_hz=rate,
+                   dof="m1", drives=0,
                    reference="/r.x", gain=25.0, output_channel="/schema/c.x")
     m = LumpedModel.chain([1.0], [25.0], [7.0], output_quantity="displacement").replace(controllers=(c,))
     t = np.arange(int(20 * rate)) / rate
@@ -212,10 +215,12 @@ def test_pi_pdt1_block_schema_matches_instruments():
 
 # ------------------------------------------------------------------------------ model file
 def test_modelfile_round_trip_with_controller():
-    c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q", drives="/emps/force.x",
+    c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q",
+                   drives="/emps/force.x",
                    reference="/emps/qg.x", velocity_filter=(0.5, 0.5), gain=35.15, saturation=10.0,
                    output_channel="/emps/vir.x", output_unit="V", feedforward="/emps/pulses.x")
-    c2 = Controller(name="aux", law="PD2", gains={"kp": 1.0, "ka": 0.1}, rate_hz=1000.0, dof="q", drives=1, measures=("acceleration",))
+    c2 = Controller(name="aux", law="PD2", gains={"kp": 1.0, "ka": 0.1}, rate_hz=1000.0, dof="q", drives=1,
+                    measures=("acceleration",))
     m = LumpedModel((Dof("q", 95.11),), (Damper(("q", "ground"), c=203.5), make_element("friction", ("q", "ground"), force=20.39)),
                     (Input("q", channel="/emps/force.x", offset=3.16), Input("q", channel="/aux.x")),
                     (Output("q", "displacement", "/emps/qm.x"),), "emps", (c, c2))
@@ -241,7 +246,8 @@ def test_modelfile_controller_errors_name_the_key():
 def emps_model(gtau, *, friction: bool, pulses: bool = False) -> LumpedModel:
     """EMPS (Janot et al. 2019): M q'' + Fv q' [+ Fc sign(q') + offset] = gtau vir in the
     cascade loop (eq. 6) with the two-tap velocity filter, IDIM-LS values."""
-    c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q", drives=0, reference="/emps/qg.x",
+    c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q", drives=0,
+                   reference="/emps/qg.x",
                    velocity_filter=(0.5, 0.5), gain=gtau, saturation=10.0, output_channel="/emps/vir.x",
                    output_unit="V", feedforward="/emps/pulses.x" if pulses else None)
     els = (Damper(("q", "ground"), c=203.5034),)

@@ -44,7 +44,8 @@ def sines():
     a = (AMP[:, None] * np.sin(arg)).sum(0) + 1.5 + 0.02 * t + 0.3 * np.sin(2 * np.pi * 0.05 * t)
     v = -(AMP[:, None] / w[:, None] * np.cos(arg)).sum(0)
     d = -(AMP[:, None] / w[:, None] ** 2 * np.sin(arg)).sum(0)
-    sig = Signals(data=np.vstack([a, -2.0 * a]), fs=FS, channels=["/imu/m1.linear_acceleration.x", "/imu/m2.linear_acceleration.x"],
+    sig = Signals(data=np.vstack([a, -2.0 * a]), fs=FS, channels=["/imu/m1.linear_acceleration.x",
+                                                                  "/imu/m2.linear_acceleration.x"],
                   units=["m/s^2", "m/s²"])
     return sig, v, d
 
@@ -143,7 +144,8 @@ def test_severity_of_a_50_hz_tone_excludes_a_5_hz_one(fs):
     A = 10.0
     a50 = A * np.sin(2 * np.pi * 50.3 * t + 0.4)
     a5 = A * np.sin(2 * np.pi * 5.0 * t + 1.0)
-    sig = Signals(data=np.vstack([a50, a50 + a5 + 0.7, a5]), fs=fs, channels=["tone", "tone+5Hz", "5Hz"], units=["m/s^2"] * 3)
+    sig = Signals(data=np.vstack([a50, a50 + a5 + 0.7, a5]), fs=fs, channels=["tone", "tone+5Hz", "5Hz"],
+                  units=["m/s^2"] * 3)
     sev = vibration_severity(sig)
     assert isinstance(sev, Severity)
     expect = A / (2 * np.pi * 50.3 * np.sqrt(2)) * 1000
@@ -297,7 +299,8 @@ def test_integrate_does_not_bridge_gaps(sines, method):
     assert np.array_equal(np.isnan(out.data), np.isnan(x) | (np.arange(x.shape[1]) >= 40_002)
                           & (np.arange(x.shape[1]) < 40_005) & (np.arange(2) == 1)[:, None])
     for row, (a, b) in ((0, (25_300, x.shape[1])), (1, (25_300, 40_000))):
-        alone = integrate(Signals(data=x[row : row + 1, a:b], fs=FS, channels=sig.channels[:1], units=sig.units[:1]), order=1,
+        alone = integrate(Signals(data=x[row : row + 1, a:b], fs=FS, channels=sig.channels[:1], units=sig.units[:1]),
+                          order=1,
                           f_cut=F_CUT, method=method)
         assert np.array_equal(out.data[row, a:b], alone.data[0])
     k = int(3 * FS / F_CUT)

@@ -12,7 +12,8 @@ from vibroscope.viewers.rerun_view import log_analysis, read_rrd
 
 def test_time_series_and_spectra_views_span_the_whole_axis(tmp_path):
     rng = np.random.default_rng(0)
-    sig = Signals(data=rng.standard_normal((2, 4000)), fs=200.0, channels=["/f.wrench.force.x", "/imu/a.linear_acceleration.x"],
+    sig = Signals(data=rng.standard_normal((2, 4000)), fs=200.0, channels=["/f.wrench.force.x",
+                                                                           "/imu/a.linear_acceleration.x"],
                   units=["N", "m/s^2"])
     G = csd_matrix(sig, nperseg=256)
     h = frf(G, "/f.wrench.force.x")

@@ -300,7 +300,8 @@ def test_connect_without_a_viewer_is_one_clear_error(tmp_path, capsys):
     from vibroscope.io import write_ros2_mcap
     from vibroscope.viewers.rerun_live import stream_log
 
-    sig = Signals(data=_record(2000).data[1:], fs=FS, channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"], units=["m/s^2"] * 3)
+    sig = Signals(data=_record(2000).data[1:], fs=FS, channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"],
+                  units=["m/s^2"] * 3)
     log = write_ros2_mcap(tmp_path / "x.mcap", sig)
     url = f"rerun+http://127.0.0.1:{_free_port()}/proxy"  # nothing listens there
     t = time.monotonic()

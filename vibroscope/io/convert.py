@@ -241,7 +241,8 @@ def select_channels(
             )
         else:
             un = list(spec)
-    return Signals(data=signals.data[idx], fs=signals.fs, channels=[names[i] for i in idx], units=[normalize_unit(u) for u in un],
+    return Signals(data=signals.data[idx], fs=signals.fs, channels=[names[i] for i in idx],
+                   units=[normalize_unit(u) for u in un],
                    t0=signals.t0, meta={**signals.meta, "selected": [names[i] for i in idx]})
 
 

@@ -463,4 +463,5 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
         data = np.vstack([trows[t][r] for t, r in picks])
     names = [str(parsed[i]) for i in keep]
     meta = _meta(log, notes, reports, resampled, fast_path, start, gaps, names, data)
-    return Signals(data=data, fs=fs, channels=names, units=[log.unit(parsed[i]) for i in keep], t0=start * 1e-9, meta=meta)
+    return Signals(data=data, fs=fs, channels=names, units=[log.unit(parsed[i]) for i in keep], t0=start * 1e-9,
+                   meta=meta)

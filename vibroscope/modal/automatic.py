@@ -526,8 +526,10 @@ def positive_power_spectra(signals: Signals, *, n_lags: int, ref: Sequence[int] 
     Rw[0] *= 0.5
     S = np.fft.rfft(Rw, n=2 * n_lags, axis=0)  # Σ R(τ) w(τ) e^{−jωτ}: a causal response's spectrum
     f = np.fft.rfftfreq(2 * n_lags, 1 / fs)
-    h = FRF(frequencies=f, H=S, coherence=np.full((f.size, y.shape[0]), np.nan), inputs=tuple(signals.channels[i] for i in ref),
-            outputs=tuple(signals.channels), estimator="positive_power_spectra", kind=None, units="", settings={"n_lags": n_lags, "sigma": sigma})
+    h = FRF(frequencies=f, H=S, coherence=np.full((f.size, y.shape[0]), np.nan),
+            inputs=tuple(signals.channels[i] for i in ref),
+            outputs=tuple(signals.channels), estimator="positive_power_spectra", kind=None, units="",
+            settings={"n_lags": n_lags, "sigma": sigma})
     return h, float(sigma)
 
 

@@ -59,7 +59,8 @@ def half_power_bandwidth(frequencies: np.ndarray, power: np.ndarray, k: int) -> 
     return walk(-1), walk(+1)
 
 
-def fit_sdof(frequencies: np.ndarray, H: np.ndarray, fn0: float, zeta0: float) -> tuple[float, float, np.ndarray, float]:
+def fit_sdof(frequencies: np.ndarray, H: np.ndarray, fn0: float,
+             zeta0: float) -> tuple[float, float, np.ndarray, float]:
     """Least-squares single-DOF fit of receptances around one resonance, all channels together.
 
     Each column ``k`` of `H` is modelled as ``A_k / (ωr² − ω² + 2jζωrω) + R_k + M_k / ω²`` with a

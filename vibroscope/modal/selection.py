@@ -127,7 +127,8 @@ def _subset(model: ModalModel, keep: np.ndarray) -> ModalModel:
         else:
             extra[k] = v
     return ModalModel(natural_frequencies=model.natural_frequencies[keep], damping_ratios=model.damping_ratios[keep],
-                      shapes=model.shapes[keep] if n else model.shapes, points=model.points, method=model.method, extra=extra)
+                      shapes=model.shapes[keep] if n else model.shapes, points=model.points, method=model.method,
+                      extra=extra)
 
 
 def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: float = 20.0,
@@ -289,7 +290,8 @@ def cluster_poles(stabilization, *, min_count: int | None = None, tol_frequency:
     settings = dict(st.settings, min_count=min_count, cluster_tol_frequency=tol_frequency, mac_min=mac_min)
     if not modes:
         empty = np.zeros(0)
-        return ModalModel(natural_frequencies=empty, damping_ratios=empty, shapes=np.zeros((0, len(st.points))), points=st.points, method=method,
+        return ModalModel(natural_frequencies=empty, damping_ratios=empty, shapes=np.zeros((0, len(st.points))),
+                          points=st.points, method=method,
                           extra={"cluster_size": np.zeros(0, int), "damping_std": empty, "frequency_std_hz": empty,
                            "mpc": empty, "order": np.zeros(0, int), "cluster_orders": np.empty(0, object),
                            "settings": settings}), rejected
@@ -297,8 +299,10 @@ def cluster_poles(stabilization, *, min_count: int | None = None, tol_frequency:
     shapes = normalize_shapes(np.array(s))
     orders = np.empty(len(co), object)
     orders[:] = co
-    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points, method=method,
-                      extra={"cluster_size": np.array(c), "damping_std": np.array(zs), "frequency_std_hz": np.array(fsd),
+    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points,
+                      method=method,
+                      extra={"cluster_size": np.array(c), "damping_std": np.array(zs),
+                             "frequency_std_hz": np.array(fsd),
                        "mpc": mpc(shapes), "order": np.array(o), "cluster_orders": orders,
                        "settings": settings}), rejected
 
@@ -502,6 +506,7 @@ def pick_poles(stabilization, natural_frequencies: Sequence[float], *, search: f
     rows.sort(key=lambda r: r[0])
     f, z, sh, o, req, fsd, zsd = zip(*rows)
     shapes = normalize_shapes(np.array(sh))
-    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points, method=st.settings.get("method", "ssi_cov"),
+    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points,
+                      method=st.settings.get("method", "ssi_cov"),
                       extra={"order": np.array(o), "requested_hz": np.array(req), "frequency_std_hz": np.array(fsd),
                        "damping_std": np.array(zsd), "mpc": mpc(shapes), "stable": np.ones(len(rows), bool)})

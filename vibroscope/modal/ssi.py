@@ -164,7 +164,8 @@ class Stabilization:
         """
         from vibroscope.modal.selection import cluster_poles
 
-        return cluster_poles(self, min_count=min_count, tol_frequency=tol_frequency, mac_min=mac_min, fmin=fmin, fmax=fmax)[0]
+        return cluster_poles(self, min_count=min_count, tol_frequency=tol_frequency, mac_min=mac_min, fmin=fmin,
+                             fmax=fmax)[0]
 
 
 def ssi_cov(

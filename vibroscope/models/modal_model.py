@@ -220,7 +220,8 @@ class PoleResidueModel:
         """
         ins = tuple(i if isinstance(i, Input) else Input("u", "force", str(i)) for i in inputs)
         outs = tuple(o if isinstance(o, Output) else Output("y", "acceleration", str(o)) for o in outputs)
-        return cls(natural_frequencies=natural_frequencies, damping_ratios=damping_ratios, residues=residues, inputs=ins,
+        return cls(natural_frequencies=natural_frequencies, damping_ratios=damping_ratios, residues=residues,
+                   inputs=ins,
                    outputs=outs, lower_residual=lower, upper_residual=upper, name=name)
 
     # -- the interface simulate() uses ---------------------------------------------------------

@@ -401,8 +401,11 @@ def _parse_controllers(ctx, doc, names, inputs):
         chans = {k: _string(ctx, t, tbl, i, k, required=False) for k in ("reference", "output_channel", "feedforward")}
         unit = _string(ctx, t, tbl, i, "output_unit", required=False, default="1")
         try:
-            out.append(Controller(name=name, law=law, gains=gains, rate_hz=rate, dof=dof, drives=drives, reference=chans["reference"], measures=tuple(meas), velocity_filter=taps, gain=gain, saturation=sat,
-                                  output_channel=chans["output_channel"], output_unit=unit, feedforward=chans["feedforward"]))
+            out.append(Controller(name=name, law=law, gains=gains, rate_hz=rate, dof=dof, drives=drives,
+                                  reference=chans["reference"], measures=tuple(meas), velocity_filter=taps, gain=gain,
+                                  saturation=sat,
+                                  output_channel=chans["output_channel"], output_unit=unit,
+                                  feedforward=chans["feedforward"]))
         except ValueError as exc:
             raise ctx.error(str(exc), tbl, i, "gains") from None
     return out

@@ -299,7 +299,9 @@ def _integrals(signals: Signals, order: int, f_cut, method: str) -> list[Signals
         if stretches is not None:
             info["gaps"] = (f"{stretches} stretches between missing samples integrated one by one (each detrended, "
                             f"with its own edge zones); missing samples and stretches under 4 samples are NaN")
-        out.append(Signals(data=x, fs=fs, channels=signals.channels, units=[_integral_unit(u, k) for u in signals.units], t0=signals.t0,
+        out.append(Signals(data=x, fs=fs, channels=signals.channels,
+                           units=[_integral_unit(u, k) for u in signals.units],
+                           t0=signals.t0,
                            meta={**signals.meta, "integration": info}))
     return out
 

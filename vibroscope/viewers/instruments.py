@@ -460,7 +460,8 @@ def log_sweep(result, path, tag: str) -> Path | None:
         rec.send_columns(f"step/{ent}", indexes=[rr.TimeColumn("time", duration=np.asarray(s.time_s))],
                          columns=rr.Scalars.columns(scalars=np.asarray(s.response)))
         rec.log(f"bode_db/{ent}", rr.SeriesLines(names=lab), static=True)
-        rec.send_columns(f"bode_db/{ent}", indexes=[rr.TimeColumn("frequency_bin", sequence=np.arange(b.frequencies.size))],
+        rec.send_columns(f"bode_db/{ent}", indexes=[rr.TimeColumn("frequency_bin",
+                                                                  sequence=np.arange(b.frequencies.size))],
                          columns=rr.Scalars.columns(scalars=np.asarray(b.magnitude_db)))
     rec.save(str(path))
     return Path(path)

@@ -277,7 +277,8 @@ class LiveView:
         cnt = acc.n_averages
         settings = settings_dict(self.fs, st, int(cnt.min()), acc.n_segments)
         with np.errstate(divide="ignore", invalid="ignore"):
-            csd = CrossSpectralMatrix(frequencies=self.frequencies, G=acc.result("density"), channels=self.channels, units=self.units,
+            csd = CrossSpectralMatrix(frequencies=self.frequencies, G=acc.result("density"), channels=self.channels,
+                                      units=self.units,
                                       scaling="density", settings=settings, n_averages=cnt)
             psd = csd.psd()
             frf = None
