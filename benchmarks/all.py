@@ -14,7 +14,9 @@ threads, caches and memory do not leak into the next:
 ``modal_threads.py``      SSI-COV on LUMO, one BLAS thread vs default, idle and loaded
 ``startup.py``            CLI start-up against ``python -c pass``
 ``analyse_outputs.py``    ``analyse`` of a 1e6-message Imu log with every output (rerun recording,
-                          figures) against ``--no-rrd --no-figures``, whole processes, alternated
+                          figures) against ``--no-rrd --no-figures``, whole processes, alternated;
+                          the same as the second run of one process (warm); one fresh run's
+                          time line (``--warm --phases``)
 ``scaling.py``            time and memory vs length and channels (``docs/bench/scaling.png``)
 ========================  =====================================================================
 
@@ -46,7 +48,7 @@ def _cases(quick: bool) -> list[list[str]]:
         ["rerun_log.py"],
         ["modal_threads.py"],
         ["startup.py"],
-        ["analyse_outputs.py"],
+        ["analyse_outputs.py", "--warm", "--phases"],
         ["scaling.py"],
     ]
 

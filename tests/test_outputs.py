@@ -348,8 +348,8 @@ def test_a_log_of_a_few_samples_is_too_short(tmp_path, capsys):
 
 
 def test_preload_imports_the_output_libraries_in_the_background_only_when_asked():
-    """``preload_outputs`` imports rerun (with pandas, which pyarrow imports on the blueprint's
-    first array) and pyplot with PIL in a thread that :func:`preloaded` joins; with no output it
+    """``preload_outputs`` imports rerun (not pandas: pyarrow is told it is missing, see the next
+    test) and pyplot with PIL in a thread that :func:`preloaded` joins; with no output it
     starts nothing (a fresh process each, so that nothing was imported before)."""
     code = ("import sys, threading; from vibroscope.commands._outputs import preload_outputs, preloaded; "
             "preload_outputs(rrd={rrd}, figures={fig}); n = threading.active_count(); preloaded(); "
@@ -357,7 +357,34 @@ def test_preload_imports_the_output_libraries_in_the_background_only_when_asked(
             "('rerun', 'pandas', 'matplotlib.pyplot', 'PIL.Image')))")
     run = lambda rrd, fig: subprocess.run([sys.executable, "-c", code.format(rrd=rrd, fig=fig)],  # noqa: E731
                                           capture_output=True, text=True, check=True).stdout.split()
-    pandas = __import__("importlib.util").util.find_spec("pandas") is not None
-    assert run(True, True) == ["2", "1", "True", str(pandas), "True", "True"]
+    assert run(True, True) == ["2", "1", "True", "False", "True", "True"]
     assert run(False, True) == ["2", "1", "False", "False", "True", "True"]
     assert run(False, False) == ["1", "1", "False", "False", "False", "False"]
+
+
+def test_recording_without_pandas_holds_the_samples_and_pandas_still_imports(tmp_path):
+    """The command line's rerun preload (``preload(pandas=False)``) keeps pandas out of the
+    process: a recording logged afterwards holds every sample exactly (float64) and its
+    blueprint, pandas is never imported on the way, and an explicit ``import pandas`` still
+    works afterwards (nothing is left blocked); with ``pandas=True`` pyarrow imports it, as
+    before (a fresh process each)."""
+    pytest.importorskip("pandas")
+    code = ("import sys, numpy as np; from vibroscope.viewers.rerun_recording import preload; "
+            "preload(pandas={pandas}); from vibroscope.signals import Signals; "
+            "from vibroscope.viewers.rerun_view import log_analysis; "
+            "x = np.sin(2 * np.pi * 5.0 * np.arange(3000) / 100.0)[None] + 0.25; "
+            "log_analysis(signals=Signals(x, 100.0, ['/imu.linear_acceleration.x'], ['m/s^2']), "
+            "rrd_path=sys.argv[1]); print('pandas' in sys.modules); import pandas; print(pandas.Series([1.5]).sum())")
+    for pandas in (False, True):
+        rrd = tmp_path / f"p{pandas}.rrd"
+        out = subprocess.run([sys.executable, "-c", code.format(pandas=pandas), str(rrd)], capture_output=True,
+                             text=True, check=True).stdout.split()
+        assert out == [str(pandas), "1.5"]
+        from vibroscope.viewers.rerun_view import read_rrd
+
+        d = read_rrd(rrd)
+        ent = [v for k, v in d.items() if k.startswith("/signals/")]
+        assert len(ent) == 1
+        x = np.sin(2 * np.pi * 5.0 * np.arange(3000) / 100.0) + 0.25
+        np.testing.assert_array_equal(ent[0]["Scalars:scalars"], x)
+        assert read_rrd(rrd, blueprint=True).keys() - d.keys()  # the blueprint is there too

@@ -169,6 +169,8 @@ def test_every_effect_has_a_gap_and_a_consistent_truth_model(effect):
         elif effect == "asymmetric_friction":
             p = t["parameters"]
             assert 1.5 <= max(p["Fp_N"], p["Fn_N"]) / min(p["Fp_N"], p["Fn_N"]) <= 4.0
+            # its mean force while sliding is a constant force: only a displacement sensor sees it
+            assert any(o.quantity == "displacement" for o in case.nominal.outputs)
         else:
             p = t["parameters"]
             assert 0.2 <= p["r"] <= 0.6 and 3 <= p["n_jenkins"] <= 5 and len(p["slip_forces_N"]) == p["n_jenkins"]

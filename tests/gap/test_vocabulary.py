@@ -76,7 +76,7 @@ def test_every_candidate_builds_a_model_that_simulates_and_round_trips():
         assert loads_model(dumps_model(m)).n_dofs == m.n_dofs
     # element effects sit at every connection
     for eff in ("coulomb_friction", "backlash", "cubic_stiffness", "joint_friction", "asymmetric_friction"):
-        where = sorted(tuple(s.where["between"]) for s in specs if s.effect == eff)
+        where = sorted({tuple(s.where["between"]) for s in specs if s.effect == eff})
         assert where == sorted(tuple(c) for c in connections(model))
 
 
@@ -114,6 +114,30 @@ def test_joint_friction_softens_a_connection_and_keeps_its_small_amplitude_stiff
     bw = m.elements[-1]
     assert spring.k == pytest.approx((1 - r) * 4e4)
     assert bw.alpha == pytest.approx(r * 4e4) and bw.alpha / bw.beta == pytest.approx(fslip)
+    assert s.describe(p) == pytest.approx({"joint_share": r, "slip_force_N": fslip})
+    assert s.where["form"] == "jenkins"
+
+
+def test_iwan_joint_spreads_the_slip_forces_and_keeps_the_stiffness():
+    """The Iwan form: the share r of the spring split over N Jenkins elements of stiffness
+    r k / N whose slip forces are spread uniformly up to Fs; at small amplitude (every slider
+    sticking) the connection keeps k, after the last one slips (1 - r) k remains."""
+    from vibroscope.gap.effects import IWAN_NU, IWAN_SLIDERS
+
+    model = chain()
+    s = next(s for s in candidate_specs(model, scales(model)) if s.effect == "joint_friction"
+             and s.where["between"] == ["m1", "ground"] and s.where["form"] == "iwan")
+    r, fslip = 0.4, 2.0
+    p = np.array([math.log(r / (1 - r)), math.log(fslip / 10.0)])
+    m = s.apply(model, p)
+    spring = next(e for e in m.elements if isinstance(e, Spring) and e.between == ("m1", "ground"))
+    bws = [e for e in m.elements if e.type == "bouc_wen"]
+    assert len(bws) == IWAN_SLIDERS and spring.k == pytest.approx((1 - r) * 4e4)
+    assert sum(e.alpha for e in bws) == pytest.approx(r * 4e4)
+    # each slider's force saturates at (alpha / beta)^(1 / nu): z' = alpha v (1 - |z / F_i|^nu)
+    assert sorted((e.alpha / e.beta) ** (1 / e.nu) for e in bws) == pytest.approx(
+        [fslip * i / IWAN_SLIDERS for i in range(1, IWAN_SLIDERS + 1)])
+    assert all(e.gamma == 0.5 and e.delta == 0.5 and e.nu == IWAN_NU for e in bws)
     assert s.describe(p) == pytest.approx({"joint_share": r, "slip_force_N": fslip})
 
 

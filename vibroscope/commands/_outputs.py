@@ -599,7 +599,7 @@ _PRELOAD: list = []
 
 
 def preload_outputs(*, rrd: bool, figures: bool) -> None:
-    """Import the libraries of the outputs (rerun with pyarrow and pandas; matplotlib and PIL) in
+    """Import the libraries of the outputs (rerun with pyarrow, not pandas; matplotlib and PIL) in
     a background thread while the analysis computes, so that a fresh process does not import
     them, one after the other, after the analysis (about a second of the 2-core machine's time:
     imports run while the analysis waits in compiled code without the GIL, or on the idle core).
@@ -627,7 +627,7 @@ def preload_outputs(*, rrd: bool, figures: bool) -> None:
             if rrd:
                 from vibroscope.viewers.rerun_view import preload
 
-                preload()
+                preload(pandas=False)  # this process hands rerun numpy arrays only: no pandas import
 
     t = threading.Thread(target=load, name="vibroscope-preload", daemon=True)
     _PRELOAD.append(t)

@@ -990,10 +990,11 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             if res is not None:
                 probed.append(res)
             bar.update(1)
-        # only the most promising locations of each class are refined (the others keep their best start)
-        by_class: dict[str, list] = {}
+        # only the most promising locations of each class (of each form of a class: the Jenkins and
+        # the Iwan joint) are refined (the others keep their best start)
+        by_class: dict[tuple, list] = {}
         for item in probed:
-            by_class.setdefault(item[0].effect, []).append(item)
+            by_class.setdefault((item[0].effect, item[0].where.get("form")), []).append(item)
         to_refine, kept = [], []
         for eff, items in by_class.items():
             items.sort(key=lambda r: r[2])

@@ -22,6 +22,7 @@ coulomb_friction     a ``friction`` element at a connection (``Fc_N``; ``v_eps``
 asymmetric_friction  a ``friction`` element with ``force_neg`` (``Fc_pos_N``, ``Fc_neg_N``)
 joint_friction       a share of the connection's spring replaced by a smooth Jenkins element
                      (``bouc_wen`` with gamma = delta = 1/2; ``joint_share``, ``slip_force_N``)
+                     or by an Iwan element of 4 of them (slip forces uniform up to ``slip_force_N``)
 backlash             the connection's spring replaced by a ``backlash`` element (``gap_m``)
 hysteresis           a ``bouc_wen`` element at a connection (``alpha_N_per_m``, ``beta_per_m``,
                      ``gamma``, ``delta``; nu = 1)
@@ -341,7 +342,8 @@ class EffectSpec:
     @property
     def label(self) -> str:
         if "between" in self.where:
-            return f"{self.effect}@{pair_name(self.where['between'])}"
+            form = f"({self.where['form']})" if "form" in self.where else ""
+            return f"{self.effect}{form}@{pair_name(self.where['between'])}"
         if "dof" in self.where:
             return f"{self.effect}@{self.where['dof']}"
         return self.effect
@@ -620,11 +622,25 @@ def _hysteresis(model, scales):
     return specs
 
 
+#: sliders of the Iwan form of a joint (slip forces uniform on (0, F_max], Iwan 1966)
+IWAN_SLIDERS = 4
+#: Bouc-Wen exponent of each Iwan slider: z = F tanh(k x / F) on loading, closer to a Coulomb
+#: slider's stick-then-slip than nu = 1's exponential approach (the one Jenkins keeps nu = 1)
+IWAN_NU = 2.0
+
+
 def _joint_friction(model, scales):
     """Microslip of a joint: a share ``r`` of the connection's spring becomes a smooth Jenkins
     element (a spring ``r k`` in series with a slider of slip force ``Fs``, written as a
     Bouc-Wen element with ``gamma = delta = 1/2``, ``nu = 1``, ``alpha = r k``,
-    ``beta = alpha / Fs``): stiff at low amplitude, softer and more damped as it slips."""
+    ``beta = alpha / Fs``): stiff at low amplitude, softer and more damped as it slips.
+
+    Each connection gets two forms with the same two parameters: that one Jenkins element, and
+    its parallel family, an Iwan element of :data:`IWAN_SLIDERS` Jenkins elements of stiffness
+    ``r k / N`` each with slip forces spread uniformly up to ``Fs`` (``Fs i / N``, i = 1..N;
+    the uniform slip-force density of Iwan 1966, whose joints soften gradually, the
+    microslip of a bolted lap joint; Segalman 2005). The report names both ``joint_friction``;
+    ``where["form"]`` says which (``jenkins``, ``iwan``)."""
     specs = []
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
@@ -639,32 +655,45 @@ def _joint_friction(model, scales):
             fs_ = u_ref * math.exp(p[1])  # the slip force scaled by the input's RMS force
             return r, fs_
 
-        def build(m, p, pair=pair, coeffs=coeffs):
-            jj, sp = _spring_at(m, pair)
-            if sp is None:  # another effect took the spring (a clearance): no joint to soften
-                raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
-            r, fs_ = coeffs(p)
-            alpha = r * sp.k
-            els = list(m.elements)
-            els[jj] = Spring(sp.between, k=(1.0 - r) * sp.k)
-            els.append(BoucWen(sp.between, alpha=alpha, beta=alpha / max(fs_, 1e-300), gamma=0.5, delta=0.5, nu=1.0))
-            return replace(m, elements=tuple(els))
-
-        def desc(p, coeffs=coeffs):
-            r, fs_ = coeffs(p)
-            return {"joint_share": r, "slip_force_N": fs_}
-
         def vanish(p, coeffs=coeffs):
             r, _ = coeffs(p)
             return f"the joint holds {100 * r:.2g} % of the connection's stiffness" if r < 0.01 else None
 
         lo = np.array([-5.0, math.log(1e-4)])
         hi = np.array([5.0, math.log(100.0)])
-        starts = [np.array([math.log(r / (1 - r)), math.log(s)]) for r, s in ((0.3, 0.1), (0.5, 0.3), (0.3, 0.02))]
-        specs.append(EffectSpec(
-            "joint_friction", {"between": [pair[0], pair[1]]}, 2, starts, lo, hi, build, desc, vanish=vanish,
-            character=lambda p: {"character": "softening"},
-        ))
+        # starts: the slip force a multiple c of the joint's elastic force r k d_rms at the RMS
+        # deflection (c < 1: the joint slips through most of the record, c > 1: only at its peaks;
+        # a start that slips everywhere at the true connection can probe worse than a start at a
+        # connection where the joint does little, so the range of c matters)
+        f_el = k_loc * d_rms if k_loc > 0 else u_ref
+        rs = [(r, c * r * f_el / u_ref) for r, c in ((0.3, 1.0), (0.3, 0.25), (0.3, 4.0), (0.5, 1.0))]
+        starts = [np.clip(np.array([math.log(r / (1 - r)), math.log(max(s, 1e-300))]), lo + 1e-6, hi - 1e-6)
+                  for r, s in rs]
+
+        for form, n_sl in (("jenkins", 1), ("iwan", IWAN_SLIDERS)):
+            def build(m, p, pair=pair, coeffs=coeffs, n_sl=n_sl):
+                jj, sp = _spring_at(m, pair)
+                if sp is None:  # another effect took the spring (a clearance): no joint to soften
+                    raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
+                r, fs_ = coeffs(p)
+                alpha = r * sp.k / n_sl
+                els = list(m.elements)
+                els[jj] = Spring(sp.between, k=(1.0 - r) * sp.k)
+                nu = 1.0 if n_sl == 1 else IWAN_NU
+                for i in range(1, n_sl + 1):  # Jenkins i slips at the force fs_ i / n_sl
+                    f_i = fs_ * i / n_sl
+                    els.append(BoucWen(sp.between, alpha=alpha, beta=alpha / max(f_i, 1e-300) ** nu, gamma=0.5,
+                                       delta=0.5, nu=nu))
+                return replace(m, elements=tuple(els))
+
+            def desc(p, coeffs=coeffs):
+                r, fs_ = coeffs(p)
+                return {"joint_share": r, "slip_force_N": fs_}
+
+            specs.append(EffectSpec(
+                "joint_friction", {"between": [pair[0], pair[1]], "form": form}, 2, starts, lo, hi, build, desc,
+                vanish=vanish, character=lambda p: {"character": "softening"},
+            ))
     return specs
 
 
