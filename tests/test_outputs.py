@@ -373,7 +373,7 @@ def test_recording_without_pandas_holds_the_samples_and_pandas_still_imports(tmp
             "preload(pandas={pandas}); from vibroscope.signals import Signals; "
             "from vibroscope.viewers.rerun_view import log_analysis; "
             "x = np.sin(2 * np.pi * 5.0 * np.arange(3000) / 100.0)[None] + 0.25; "
-            "log_analysis(signals=Signals(x, 100.0, ['/imu.linear_acceleration.x'], ['m/s^2']), "
+            "log_analysis(signals=Signals(data=x, fs=100.0, channels=['/imu.linear_acceleration.x'], units=['m/s^2']), "
             "rrd_path=sys.argv[1]); print('pandas' in sys.modules); import pandas; print(pandas.Series([1.5]).sum())")
     for pandas in (False, True):
         rrd = tmp_path / f"p{pandas}.rrd"
