@@ -73,7 +73,8 @@ def write_log(path: Path, n: int, fs: float = 1000.0) -> Path:
     mix = np.array([[1.0, 0.5, 0.3], [0.6, -1.0, 0.4], [-0.8, 0.3, 1.0]])
     x = mix @ np.array(modes) + 0.02 * rng.standard_normal((3, n))
     x[2] += 9.80665
-    return write_ros2_mcap(path, Signals(x, fs, [f"/imu.linear_acceleration.{c}" for c in "xyz"], ["m/s^2"] * 3,
+    return write_ros2_mcap(path, Signals(data=x, fs=fs, channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"],
+                                         units=["m/s^2"] * 3,
                                          t0=1.7e9), frame_id="imu_link")
 
 

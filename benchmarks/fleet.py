@@ -33,7 +33,7 @@ def _make_logs(d: Path, n_logs: int, n: int) -> list[str]:
     out = []
     for k in range(n_logs):
         x = np.random.default_rng(k).standard_normal((3, n))
-        out.append(str(write_ros2_mcap(d / f"robot{k}.mcap", Signals(x, 1000.0, chs, t0=100.0 * k))))
+        out.append(str(write_ros2_mcap(d / f"robot{k}.mcap", Signals(data=x, fs=1000.0, channels=chs, t0=100.0 * k))))
     return out
 
 

@@ -171,7 +171,7 @@ def bench_formats(n_msgs: int, formats=("json", "protobuf"), repeat: int = 3) ->
             path = Path(d) / f"accel-{fmt}.mcap"
             if fmt == "json":
                 chans = [f"{topic}.linear_acceleration.{c}" for c in "xyz"]
-                write_json_mcap(path, Signals(data, 1000.0, chans, ["m/s^2"] * 3, t0=1.7e9))
+                write_json_mcap(path, Signals(data=data, fs=1000.0, channels=chans, units=["m/s^2"] * 3, t0=1.7e9))
                 base, what = _json_loop, "mcap iter_messages + json.loads"
             else:
                 chans = [f"{topic}.{c}" for c in "xyz"]
@@ -200,7 +200,7 @@ def bench_mcap(n_msgs: int, compressions=("zstd", "lz4"), repeat: int = 5, basel
     rng = np.random.default_rng(1)
     topic = "/imu"
     chans = [f"{topic}.linear_acceleration.{c}" for c in "xyz"]
-    sig = Signals(rng.standard_normal((3, n_msgs)), 1000.0, chans, ["m/s^2"] * 3, t0=1.7e9)
+    sig = Signals(data=rng.standard_normal((3, n_msgs)), fs=1000.0, channels=chans, units=["m/s^2"] * 3, t0=1.7e9)
     rows = []
     with tempfile.TemporaryDirectory() as d:
         for comp in compressions:

@@ -56,8 +56,9 @@ def main() -> None:
 
     rng = np.random.default_rng(0)
     fs = 1000.0
-    sig = Signals(rng.standard_normal((args.channels, args.samples)), fs,
-                  [f"/imu/s{k}.linear_acceleration.z" for k in range(args.channels)], ["m/s^2"] * args.channels)
+    sig = Signals(data=rng.standard_normal((args.channels, args.samples)), fs=fs,
+                  channels=[f"/imu/s{k}.linear_acceleration.z" for k in range(args.channels)],
+                  units=["m/s^2"] * args.channels)
     f = np.linspace(0.0, fs / 2, args.bins)
     psd = Spectrum(frequencies=f, values=rng.random((args.spectra, args.bins)) + 1e-3,
                    channels=[f"/fleet/log{k:04d}.z" for k in range(args.spectra)],

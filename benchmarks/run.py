@@ -156,7 +156,7 @@ def bench_simulate(seconds: float = 60.0, ref_seconds: float = 6.0) -> list[dict
         "cubic": (CubicSpring(("m3", "m2"), k3=1e10),),
         "friction+cubic": (Friction(("m3", "ground"), force_=5.0), CubicSpring(("m3", "m2"), k3=1e10)),
     }
-    u = band_limited_random(fs, int(seconds * fs), f_lo=1, f_hi=200, rms=20, seed=0)
+    u = band_limited_random(fs, int(seconds * fs), fmin=1, fmax=200, rms=20, seed=0)
     n_ref = int(ref_seconds * fs)
     rows = []
     for name, nl in cases.items():
@@ -187,7 +187,8 @@ def bench_closed_loop(seconds: float = 60.0) -> list[dict]:
     from vibroscope.models.simulate import simulate
 
     def drive(friction: bool) -> LumpedModel:
-        c = Controller("emps", "cascade", {"kp": 160.18, "kv": 243.45}, 1000.0, "q", drives=0, reference="/qg.x",
+        c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q",
+                       drives=0, reference="/qg.x",
                        velocity_filter=(0.5, 0.5), gain=35.15, saturation=10.0)
         els = (Damper(("q", "ground"), c=203.5),) + ((make_element("friction", ("q", "ground"), force=20.39),)
                                                        if friction else ())

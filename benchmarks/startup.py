@@ -39,7 +39,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         log = Path(d) / "x.mcap"
         x = np.random.default_rng(0).standard_normal((3, 10_000))
-        write_ros2_mcap(log, Signals(x, 1000.0, [f"/imu.linear_acceleration.{c}" for c in "xyz"], ["m/s^2"] * 3))
+        write_ros2_mcap(log, Signals(data=x, fs=1000.0, channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"],
+                                     units=["m/s^2"] * 3))
         base = _median_s([sys.executable, "-c", "pass"], args.repeat)
         print(f"case=startup  python -c pass  median_s={base:.3f}")
         for name, argv in (("vibroscope --help", ["--help"]), ("vibroscope info LOG", ["info", str(log)])):

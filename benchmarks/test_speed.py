@@ -42,7 +42,8 @@ def imu_log(tmp_path_factory):
 
     x = np.random.default_rng(1).standard_normal((3, N_MSGS))
     return write_ros2_mcap(tmp_path_factory.mktemp("bench") / "imu.mcap",
-                           Signals(x, 1000.0, CHANNELS, ["m/s^2"] * 3, t0=1.7e9), frame_id="imu_link")
+                           Signals(data=x, fs=1000.0, channels=CHANNELS, units=["m/s^2"] * 3, t0=1.7e9),
+                           frame_id="imu_link")
 
 
 @pytest.mark.benchmark(group="mcap-read")

@@ -36,7 +36,7 @@ def _shaker_signals(n_periods: int, period: int = PERIOD) -> Signals:
     from vibroscope.models.excitation import multisine
     from vibroscope.models.simulate import simulate
 
-    u, _ = multisine(FS, period, f_lo=1.0, f_hi=20.0, rms=5.0, seed=1)
+    u, _ = multisine(FS, period, fmin=1.0, fmax=20.0, rms=5.0, seed=1)
     return simulate(_shaker_model(), np.tile(u, n_periods), FS, noise=0.01, seed=2)
 
 
@@ -108,7 +108,7 @@ def test_find_force_input_one_moving_axis_of_a_wrench(short_log):
 def _json_log(path, channels: dict, fs: float = 200.0, n: int = 512):
     t = np.arange(n) / fs
     data = np.array([f(t) for f in channels.values()])
-    write_json_mcap(path, Signals(data, fs, tuple(channels)))
+    write_json_mcap(path, Signals(data=data, fs=fs, channels=tuple(channels)))
     return path
 
 
@@ -344,4 +344,4 @@ def test_analyse_signals_refuses_fmax_above_nyquist():
 
     x = np.random.default_rng(0).standard_normal((2, 4096))
     with pytest.raises(ValueError, match=r"fmax=600 Hz is above the Nyquist frequency 500 Hz \(fs=1000 Hz\)"):
-        analyse_signals(Signals(x, 1000.0, ("a", "b")), fmax=600.0)
+        analyse_signals(Signals(data=x, fs=1000.0, channels=("a", "b")), fmax=600.0)

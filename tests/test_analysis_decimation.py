@@ -35,7 +35,7 @@ INPUT = MODEL.input_channels()[0]
 def _shaker(period: int = PERIOD, periods: int = 8, seed: int = 1):
     """Force (multisine, 2–15 Hz, 1 N rms, `period` samples repeated) and the three accelerations,
     2 % output noise."""
-    one, _ = multisine(FS, period, f_lo=2.0, f_hi=15.0, seed=seed)
+    one, _ = multisine(FS, period, fmin=2.0, fmax=15.0, seed=seed)
     return simulate(MODEL, np.tile(one, periods), FS, noise=0.02, seed=seed + 1)
 
 
@@ -104,7 +104,7 @@ def test_period_no_factor_divides_is_not_decimated():
 def test_broadband_record_decimates_as_before_and_the_option_turns_it_off():
     """Random force (not periodic): the factor floor(fs / (2.5 fmax)) in stages of at most 10, the
     data those of an order-9 Chebyshev I forward-backward low-pass; ``decimation=False`` keeps the rate and says so."""
-    u = band_limited_random(FS, 80_000, f_lo=2.0, f_hi=15.0, rms=1.0, seed=3)
+    u = band_limited_random(FS, 80_000, fmin=2.0, fmax=15.0, rms=1.0, seed=3)
     sig = simulate(MODEL, u, FS, noise=0.02, seed=4)
     assert not detect_period(sig[INPUT], FS, fmax=15.0).is_periodic
     an = analyse_signals(sig, input=INPUT, fmax=15.0)
@@ -140,7 +140,7 @@ def test_decimate_keeps_a_periodic_record_periodic(shaker):
 def test_period_found_at_full_rate_through_out_of_band_noise():
     """``detect_period(fmax=)``: broadband noise as strong as the multisine hides the period at the full
     rate (score about 0.5); low-passed to the 15 Hz band it is found exactly."""
-    one, _ = multisine(FS, 4096, f_lo=2.0, f_hi=15.0, seed=2)
+    one, _ = multisine(FS, 4096, fmin=2.0, fmax=15.0, seed=2)
     x = np.tile(one, 6) + np.random.default_rng(3).standard_normal(6 * 4096)
     assert not detect_period(x, FS).is_periodic
     p = detect_period(x, FS, fmax=15.0)
@@ -180,8 +180,8 @@ def test_decimation_keeps_a_mean_such_as_gravity():
     from vibroscope.pipeline import decimate
     from vibroscope.signals import Signals
 
-    x = 9.80665 + 0.1 * band_limited_random(FS, 40_000, f_lo=2.0, f_hi=10.0, rms=1.0, seed=5)
-    out = decimate(Signals(x[None, :], FS, channels=("/imu.linear_acceleration.z",), units=("m/s^2",)), 10.0)
+    x = 9.80665 + 0.1 * band_limited_random(FS, 40_000, fmin=2.0, fmax=10.0, rms=1.0, seed=5)
+    out = decimate(Signals(data=x[None, :], fs=FS, channels=("/imu.linear_acceleration.z",), units=("m/s^2",)), 10.0)
     assert out.fs == 40.0
     y = out.data[0, 200:-200]
     assert np.mean(y) == pytest.approx(np.mean(x[2000:-2000]), rel=2e-4)

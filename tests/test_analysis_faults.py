@@ -26,7 +26,7 @@ TRUE = MODEL.modes().natural_frequencies
 def demo():
     """The demo's record (force then accelerations), 120 s at 1 kHz, as `vibroscope demo` makes it."""
     n = int(120 * FS)
-    u = band_limited_random(FS, n, f_lo=2.0, f_hi=0.3 * FS, rms=20.0, seed=1)
+    u = band_limited_random(FS, n, fmin=2.0, fmax=0.3 * FS, rms=20.0, seed=1)
     return simulate(MODEL, u, FS, noise=0.02, seed=2)
 
 
@@ -34,7 +34,7 @@ def _with_nan(sig, spans):
     d = np.array(sig.data)
     for ch, a, b in spans:
         d[sig.index(ch), a:b] = np.nan
-    return Signals(d, sig.fs, sig.channels, sig.units, sig.t0, sig.meta)
+    return Signals(data=d, fs=sig.fs, channels=sig.channels, units=sig.units, t0=sig.t0, meta=sig.meta)
 
 
 def _assert_modes(freqs, tol):
@@ -84,7 +84,7 @@ def test_clipped_and_dropped_out_response_is_masked_not_analysed(demo):
     d[k, 20_000:20_500] = 0.0  # dropout
     rail = np.quantile(d[k], 0.9995)
     d[k] = np.minimum(d[k], rail)  # clipped at the top
-    sig = Signals(d, demo.fs, demo.channels, demo.units)
+    sig = Signals(data=d, fs=demo.fs, channels=demo.channels, units=demo.units)
     an = analyse_signals(sig, input=force)
     kinds = {f.kind for f in an.faults if f.channel == acc}
     assert {"dropout", "clipping"} <= kinds
@@ -102,7 +102,7 @@ def test_fatal_faults_stop_naming_the_channel(demo):
     d = np.array(demo.data)
     d[0] = 0.0
     with pytest.raises(ValueError, match=r"zero_input in /actuator/force\S*: .*without --input"):
-        analyse_signals(Signals(d, demo.fs, demo.channels, demo.units), input=force)
+        analyse_signals(Signals(data=d, fs=demo.fs, channels=demo.channels, units=demo.units), input=force)
     with pytest.raises(ValueError, match=r"fmin=50.0 Hz must not exceed fmax=10.0 Hz"):
         analyse_signals(demo, input=force, fmin=50.0, fmax=10.0)
 
@@ -128,7 +128,7 @@ def test_decimate_never_filters_across_a_gap():
     rng = np.random.default_rng(1)
     x = rng.standard_normal((1, 40_000))
     x[0, 15_003:15_100] = np.nan
-    sig = Signals(x, 1000.0, ["/a"])
+    sig = Signals(data=x, fs=1000.0, channels=["/a"])
     out = decimate(sig, 40.0)  # factor 10
     assert out.fs == 100.0 and out.n_samples == 4000
     y = out.data[0]
@@ -166,7 +166,7 @@ def test_gap_diagnosis_runs_on_the_stretches_of_a_log_with_a_gap():
     from vibroscope.gap import diagnose
 
     fs = 500.0
-    u = band_limited_random(fs, int(60 * fs), f_lo=2.0, f_hi=0.3 * fs, rms=20.0, seed=1)
+    u = band_limited_random(fs, int(60 * fs), fmin=2.0, fmax=0.3 * fs, rms=20.0, seed=1)
     sig = _with_nan(simulate(MODEL, u, fs, noise=0.02, seed=2), [("/imu/m2.linear_acceleration.x", 14_000, 14_050)])
     with pytest.warns(UserWarning, match=r"diagnosed as 2 gap-free stretches \(29950 of 30000 samples"):
         rep = diagnose(MODEL, sig, workers=1)
@@ -183,14 +183,14 @@ def test_time_series_figure_shades_the_gaps():
     x[0, 5000:6500] = np.nan
     x[0, 15_000] = np.inf
     x[1, 12_000:12_010] = np.nan
-    fig = plot_signals(Signals(x, 100.0, ["/a", "/b"], ["m/s^2", "m/s^2"]))
+    fig = plot_signals(Signals(data=x, fs=100.0, channels=["/a", "/b"], units=["m/s^2", "m/s^2"]))
     a0, a1 = fig.axes[:2]
     spans0 = [p.get_x() for p in a0.patches]
     assert len(a0.patches) == 2 and len(a1.patches) == 1
     assert spans0[0] == pytest.approx(50.0) and a0.patches[0].get_width() == pytest.approx(15.0)
     assert a0.get_legend().get_texts()[0].get_text() == "gap (no data)"
     assert "; 2 gaps without data, shaded" in fig._suptitle.get_text()  # the most in one channel
-    clean = plot_signals(Signals(x[:, :4000], 100.0, ["/a", "/b"]))
+    clean = plot_signals(Signals(data=x[:, :4000], fs=100.0, channels=["/a", "/b"]))
     assert all(len(ax.patches) == 0 for ax in clean.axes)
 
 
@@ -203,7 +203,8 @@ def test_rerun_breaks_the_series_and_logs_each_gap(tmp_path):
     x[0, 500] = np.inf
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        log_analysis(signals=Signals(x, 100.0, ["/imu.x", "/imu.y"], ["m/s^2"] * 2), rrd_path=tmp_path / "g.rrd")
+        log_analysis(signals=Signals(data=x, fs=100.0, channels=["/imu.x", "/imu.y"], units=["m/s^2"] * 2),
+                     rrd_path=tmp_path / "g.rrd")
     d = read_rrd(tmp_path / "g.rrd")
     vals = np.asarray(d["/signals/imu.x"]["Scalars:scalars"], float).ravel()
     assert vals.size == 989 and np.isfinite(vals).all()  # the 11 missing samples are not sent

@@ -33,7 +33,7 @@ INPUT = MODEL.input_channels()[0]
 
 @pytest.fixture(scope="module")
 def shaker_analysis():
-    one, _ = multisine(FS, PERIOD, f_lo=2.0, f_hi=15.0, seed=1)
+    one, _ = multisine(FS, PERIOD, fmin=2.0, fmax=15.0, seed=1)
     sig = simulate(MODEL, np.tile(one, 8), FS, noise=0.02, seed=2)
     return analyse_signals(sig, input=INPUT)
 

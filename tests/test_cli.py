@@ -272,8 +272,9 @@ def test_analyse_log_arguments_with_optional_values(tmp_path, capsys):
     from vibroscope.io import write_ros2_mcap
     from vibroscope.signals import Signals
 
-    logs = [str(write_ros2_mcap(tmp_path / f"l{k}.mcap", Signals(np.random.default_rng(k).standard_normal((1, 2000)),
-                                                                     500.0, ["/imu.linear_acceleration.x"])))
+    logs = [str(write_ros2_mcap(tmp_path / f"l{k}.mcap",
+                                Signals(data=np.random.default_rng(k).standard_normal((1, 2000)), fs=500.0,
+                                        channels=["/imu.linear_acceleration.x"])))
             for k in range(2)]
     assert main(["analyse"]) == 1
     assert "no log given" in capsys.readouterr().err
@@ -302,8 +303,9 @@ def test_analyse_of_an_imu_log_with_a_lost_stretch_writes_every_output(tmp_path,
     y = ss.lfilter(b, a, rng.standard_normal(30_000))
     x = np.vstack([y, 0.5 * y, -y]) + 0.01 * rng.standard_normal((3, 30_000))
     x[:, 12_000:12_300] = np.nan
-    log = write_ros2_mcap(tmp_path / "gap.mcap", Signals(x, 1000.0, [f"/imu.linear_acceleration.{c}" for c in "xyz"],
-                                                          ["m/s^2"] * 3, t0=1.0))
+    log = write_ros2_mcap(tmp_path / "gap.mcap", Signals(data=x, fs=1000.0,
+                                                         channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"],
+                                                          units=["m/s^2"] * 3, t0=1.0))
     assert main(["analyse", str(log), "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     f = [float(ln.split()[1]) for ln in out.splitlines() if ln.strip().startswith("1 ")]

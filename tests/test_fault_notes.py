@@ -36,10 +36,10 @@ def test_gravity_on_a_tilted_imu_is_a_note_a_larger_offset_a_fault():
     x = _vibration()
     tilt = np.radians(30.0)
     g = np.array([[0.0], [G_N * np.sin(tilt)], [G_N * np.cos(tilt)]])
-    faults = detect_faults(Signals(x + g, FS, IMU, ["m/s^2"] * 3), nperseg=1024)
+    faults = detect_faults(Signals(data=x + g, fs=FS, channels=IMU, units=["m/s^2"] * 3), nperseg=1024)
     assert _kinds(faults) == [("y", "gravity", True), ("z", "gravity", True)]
     assert "gravity" in faults[1].message and f"{G_N * np.cos(tilt):.4g}" in faults[1].message
-    faults = detect_faults(Signals(x + 2 * g, FS, IMU, ["m/s^2"] * 3), nperseg=1024)
+    faults = detect_faults(Signals(data=x + 2 * g, fs=FS, channels=IMU, units=["m/s^2"] * 3), nperseg=1024)
     assert _kinds(faults) == [("y", "dc_offset", False), ("z", "dc_offset", False)]
     assert fault_summary(faults) == "2 dc_offset"
 
@@ -55,16 +55,18 @@ def test_gravity_on_a_tilted_imu_is_a_note_a_larger_offset_a_fault():
 ])
 def test_one_axis_gravity_needs_an_acceleration_unit_and_a_mean_near_g(unit, mean, kind):
     x = _vibration()[:1] * 0.5 + mean
-    found = [f for f in detect_faults(Signals(x, FS, ["/acc"], [unit]), nperseg=1024) if f.kind != "missing_unit"]
+    found = [f for f in detect_faults(Signals(data=x, fs=FS, channels=["/acc"], units=[unit]),
+                                      nperseg=1024) if f.kind != "missing_unit"]
     assert [(f.kind, f.note) for f in found] == [(kind, kind == "gravity")]
 
 
 def test_a_constant_output_is_a_note_a_constant_input_a_fault():
     x = _vibration()
-    sig = Signals(np.vstack([x[:2], np.full((1, N), 0.25)]), FS, IMU, ["m/s^2"] * 3)
+    sig = Signals(data=np.vstack([x[:2], np.full((1, N), 0.25)]), fs=FS, channels=IMU, units=["m/s^2"] * 3)
     (c,) = detect_faults(sig, nperseg=1024)
     assert (c.kind, c.action, c.note) == ("constant", "drop", True)
-    sig = Signals(np.vstack([np.full((1, N), 3.0), x[:1]]), FS, ["/force", "/acc"], ["N", "m/s^2"])
+    sig = Signals(data=np.vstack([np.full((1, N), 3.0), x[:1]]), fs=FS, channels=["/force", "/acc"],
+                  units=["N", "m/s^2"])
     (c,) = detect_faults(sig, input="/force", nperseg=1024)
     assert (c.kind, c.action, c.note) == ("constant", "stop", False)
 
@@ -74,7 +76,7 @@ def test_fault_summary_counts_channels_per_kind_most_first():
     x[0, 5000:5100] = np.nan
     x[1, 5000:5100] = np.nan
     x[2, 9000:9400] = 0.0  # a dropout
-    faults = detect_faults(Signals(x, FS, IMU, ["m/s^2"] * 3), nperseg=1024)
+    faults = detect_faults(Signals(data=x, fs=FS, channels=IMU, units=["m/s^2"] * 3), nperseg=1024)
     assert fault_summary(faults) == "2 nan, 1 dropout"
     assert fault_summary(()) == ""
 
@@ -82,7 +84,7 @@ def test_fault_summary_counts_channels_per_kind_most_first():
 def _log(tmp_path, x, name):
     from vibroscope.io import write_ros2_mcap
 
-    return write_ros2_mcap(tmp_path / f"{name}.mcap", Signals(x, FS, IMU, ["m/s^2"] * 3, t0=1.0))
+    return write_ros2_mcap(tmp_path / f"{name}.mcap", Signals(data=x, fs=FS, channels=IMU, units=["m/s^2"] * 3, t0=1.0))
 
 
 def _fault_lines(out: str) -> list[str]:

@@ -19,7 +19,7 @@ def _noise(seed=0, n=N):
 
 def _sig(*rows, units=None, names=None):
     names = names or [f"/c{k}" for k in range(len(rows))]
-    return Signals(np.vstack(rows), FS, names, units or ["m/s^2"] * len(rows))
+    return Signals(data=np.vstack(rows), fs=FS, channels=names, units=units or ["m/s^2"] * len(rows))
 
 
 def _kinds(faults):
@@ -164,7 +164,7 @@ def test_fault_lines_one_line_per_kind():
     x = rng.standard_normal((5, 4000))
     x[:4, 1000:1010] = np.nan  # the same gap in four channels
     x[4] += 50.0  # a DC offset in one
-    sig = Signals(x, 100.0, [f"/c{k}" for k in range(5)], ["m/s^2"] * 5)
+    sig = Signals(data=x, fs=100.0, channels=[f"/c{k}" for k in range(5)], units=["m/s^2"] * 5)
     faults = detect_faults(sig, nperseg=256)
     lines = fault_lines(faults)
     assert [ln.split(" in ", 1)[0] for ln in lines] == ["nan", "dc_offset"]
@@ -185,7 +185,7 @@ def test_a_value_beyond_any_measurement_is_masked_like_inf():
     x = rng.standard_normal((2, 8000))
     x[0, 3000] = 1e300
     x[1, 5000] = -1e101
-    sig = Signals(x, 1000.0, ["a", "b"], ["m/s^2", "m/s^2"])
+    sig = Signals(data=x, fs=1000.0, channels=["a", "b"], units=["m/s^2", "m/s^2"])
     faults = [f for f in detect_faults(sig, nperseg=512)]
     over = [f for f in faults if f.kind == "overflow"]
     assert [(f.channel, f.spans, f.action) for f in over] == [("a", ((3000, 3001),), "mask"), ("b", ((5000, 5001),),

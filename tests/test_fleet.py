@@ -31,7 +31,7 @@ def _log(path, n, seed, f0):
     y = ss.lfilter(b, a, e) * 10
     x = np.vstack([y + 0.1 * rng.standard_normal(n), 0.5 * y + 0.1 * rng.standard_normal(n),
                    -y + 0.1 * rng.standard_normal(n)])
-    return write_ros2_mcap(path, Signals(x, 500.0, CHS, t0=10.0 * seed), chunk_size=60_000)
+    return write_ros2_mcap(path, Signals(data=x, fs=500.0, channels=CHS, t0=10.0 * seed), chunk_size=60_000)
 
 
 @pytest.fixture(scope="module")
@@ -69,8 +69,8 @@ def test_fleet_on_a_local_cluster_equals_in_memory(logs, client):
     assert np.max(np.abs(Gm.G - want)) <= 1e-12 * np.max(np.abs(want))
     # the table: each log's resonance, and the RMS per octave band from its PSD
     for row, f0 in zip(res.rows, (40.0, 41.0, 39.5)):
-        assert row.error == "" and len(row.frequencies_hz) >= 1
-        assert min(abs(np.array(row.frequencies_hz) - f0)) < 0.5
+        assert row.error == "" and len(row.natural_frequencies) >= 1
+        assert min(abs(np.array(row.natural_frequencies) - f0)) < 0.5
     bands = octave_bands(500.0, 500.0 / 1024)
     assert res.rows[0].bands_hz == bands
     ref0 = refs[0]
@@ -128,15 +128,16 @@ def test_a_log_of_another_rate_is_left_out_and_one_a_little_off_resampled(logs, 
     from vibroscope.fleet import analyse_fleet
 
     x = np.random.default_rng(0).standard_normal((3, 5000))
-    fast = str(write_ros2_mcap(tmp_path / "fast.mcap", Signals(x, 1000.0, CHS, t0=1.0)))
-    near = str(write_ros2_mcap(tmp_path / "near.mcap", Signals(read_mcap(logs[0]).data, 501.0, CHS, t0=2.0)))
+    fast = str(write_ros2_mcap(tmp_path / "fast.mcap", Signals(data=x, fs=1000.0, channels=CHS, t0=1.0)))
+    near = str(write_ros2_mcap(tmp_path / "near.mcap", Signals(data=read_mcap(logs[0]).data, fs=501.0, channels=CHS,
+                                                               t0=2.0)))
     res = analyse_fleet([logs[0], fast, near, logs[1]], client=client, nperseg=1024)
     assert res.settings["fs"] == 500.0
     err = res.rows[1].error
     assert "rate 1000 Hz differs from the fleet's 500 Hz" in err and "--fs" in err
     assert res.settings["excluded"] == [fast] and not res.rows[2].error
     assert any("resampled onto the fleet's 500 Hz" in w and "near.mcap (501 Hz)" in w for w in res.settings["warnings"])
-    modes = res.rows[2].frequencies_hz
+    modes = res.rows[2].natural_frequencies
     assert len(modes) and min(abs(f - 40.0 * 501 / 500) for f in modes) < 0.5
     assert res.merged.sources == (logs[0], near, logs[1])
 
@@ -237,8 +238,8 @@ def test_a_log_that_cannot_be_analysed_does_not_fail_the_fleet(logs, bad_logs, c
     assert "600 grid samples" in rows[short].error and rows[short].n_samples == 600
     assert "no segment" in rows[holey].error and rows[holey].n_samples == 6000
     for p in (garbage, short, holey):
-        assert rows[p].frequencies_hz == () and np.isnan(np.array(rows[p].rms, float)).all()
-    assert rows[logs[0]].error == "" and min(abs(np.array(rows[logs[0]].frequencies_hz) - 40.0)) < 0.5
+        assert rows[p].natural_frequencies == () and np.isnan(np.array(rows[p].rms, float)).all()
+    assert rows[logs[0]].error == "" and min(abs(np.array(rows[logs[0]].natural_frequencies) - 40.0)) < 0.5
     assert res.settings["excluded"] == [garbage, short, holey] and len(res.settings["warnings"]) == 3
     assert list(res.per_log) == [logs[0]] and res.merged.sources == (logs[0],)
     ref = csd_matrix(read_mcap(logs[0]), nperseg=1024)
@@ -267,7 +268,7 @@ def test_default_resolution_from_the_median_log_not_the_shortest(logs, bad_logs,
     rows = {r.log: r for r in res.rows}
     assert "no Welch segment" in rows[short].error and res.settings["excluded"] == [short]
     for p in logs:
-        assert rows[p].error == "" and min(abs(np.array(rows[p].frequencies_hz) - 40.0)) < 1.5
+        assert rows[p].error == "" and min(abs(np.array(rows[p].natural_frequencies) - 40.0)) < 1.5
 
 
 def test_a_failing_range_task_becomes_the_row_error(logs):
@@ -281,7 +282,7 @@ def test_a_failing_range_task_becomes_the_row_error(logs):
                  sett)
     assert isinstance(gone, _Failed) and "LogFormatError" in gone.error and ".gone" in gone.error
     sp, row = _log_row(logs[0], ((30.0, 50.0),), tuple(CHS), 500.0, {}, ok, gone)
-    assert sp is None and row.error.startswith("not analysed: LogFormatError") and row.frequencies_hz == ()
+    assert sp is None and row.error.startswith("not analysed: LogFormatError") and row.natural_frequencies == ()
     sp, row = _log_row(logs[0], ((30.0, 50.0),), tuple(CHS), 500.0, {}, ok)
     assert sp is not None and sp.samples == 4096 and np.isfinite(np.array(row.rms, float)).all()
 
@@ -322,7 +323,8 @@ def test_rows_carry_what_reading_noticed_and_the_json_is_plain(logs, bad_logs, c
     assert all(isinstance(b, list) and len(b) == 2 for b in d["settings"]["bands_hz"])
     flat = str(_log(tmp_path / "flat.mcap", 6000, 9, 40.0))
     x = read_mcap(flat)
-    still = write_ros2_mcap(tmp_path / "still.mcap", Signals(np.vstack([x.data[:2], np.zeros((1, 6000))]), 500.0, CHS,
+    still = write_ros2_mcap(tmp_path / "still.mcap", Signals(data=np.vstack([x.data[:2], np.zeros((1, 6000))]),
+                                                             fs=500.0, channels=CHS,
                                                              t0=90.0), chunk_size=60_000)
     d2 = analyse_fleet([str(still)], client=client, nperseg=256).to_dict()
     assert d2["merged"]["psd_peak_hz"][CHS[2]] is None and abs(d2["merged"]["psd_peak_hz"][CHS[0]] - 40.0) < 2.0

@@ -339,8 +339,9 @@ def test_a_log_of_a_few_samples_is_too_short(tmp_path, capsys):
     from vibroscope.io import write_ros2_mcap
     from vibroscope.signals import Signals
 
-    log = write_ros2_mcap(tmp_path / "two.mcap", Signals(np.ones((3, 2)) * [[1], [2], [3]] + [[0, 1]], 1000.0,
-                                                         [f"/imu.linear_acceleration.{a}" for a in "xyz"], t0=1.0))
+    log = write_ros2_mcap(tmp_path / "two.mcap", Signals(data=np.ones((3, 2)) * [[1], [2], [3]] + [[0, 1]], fs=1000.0,
+                                                         channels=[f"/imu.linear_acceleration.{a}" for a in "xyz"],
+                                                         t0=1.0))
     assert main(["analyse", str(log), "--out", str(tmp_path / "o")]) == 1
     err = _err_lines(capsys)
     assert len(err) == 1 and "too short to analyse: 2 samples" in err[0]
@@ -372,7 +373,7 @@ def test_recording_without_pandas_holds_the_samples_and_pandas_still_imports(tmp
             "preload(pandas={pandas}); from vibroscope.signals import Signals; "
             "from vibroscope.viewers.rerun_view import log_analysis; "
             "x = np.sin(2 * np.pi * 5.0 * np.arange(3000) / 100.0)[None] + 0.25; "
-            "log_analysis(signals=Signals(x, 100.0, ['/imu.linear_acceleration.x'], ['m/s^2']), "
+            "log_analysis(signals=Signals(data=x, fs=100.0, channels=['/imu.linear_acceleration.x'], units=['m/s^2']), "
             "rrd_path=sys.argv[1]); print('pandas' in sys.modules); import pandas; print(pandas.Series([1.5]).sum())")
     for pandas in (False, True):
         rrd = tmp_path / f"p{pandas}.rrd"

@@ -97,7 +97,8 @@ def test_every_writer_marks_its_file_and_foreign_files_are_not_taken_for_ours(tm
     fig.savefig(tmp_path / "theirs.png")  # matplotlib's own PNG (Software: Matplotlib ...)
     plt.close(fig)
     theirs.append(tmp_path / "theirs.png")
-    ours.append(write_ros2_mcap(tmp_path / "ours.mcap", Signals(np.zeros((1, 50)), 100.0, ["/a.x"], ["m"])))
+    ours.append(write_ros2_mcap(tmp_path / "ours.mcap", Signals(data=np.zeros((1, 50)), fs=100.0, channels=["/a.x"],
+                                                                units=["m"])))
     with open(tmp_path / "theirs.mcap", "wb") as fh:  # the mcap library's own writer
         w = Writer(fh)
         w.start(profile="", library="someone else")

@@ -245,7 +245,8 @@ def test_cli_help_and_info_load_no_heavy_edge(tmp_path):
     from vibroscope.signals import Signals
 
     log = tmp_path / "x.mcap"
-    write_ros2_mcap(log, Signals(np.zeros((1, 100)) + 1.0, 100.0, ["/imu.linear_acceleration.x"], ["m/s^2"]))
+    write_ros2_mcap(log, Signals(data=np.zeros((1, 100)) + 1.0, fs=100.0, channels=["/imu.linear_acceleration.x"],
+                                 units=["m/s^2"]))
     heavy = ("rerun", "matplotlib", "control", "dask", "numba")
     for argv in (["--help"], ["info", str(log)]):
         code = (

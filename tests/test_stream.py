@@ -35,7 +35,7 @@ def gappy_log(tmp_path_factory):
     e = rng.standard_normal((2, 30_000))
     x = np.vstack([e[0], 0.5 * e[0] + e[1], np.convolve(e[1], [1, 0.5, 0.25], "same")])
     d = tmp_path_factory.mktemp("stream")
-    p = write_ros2_mcap(d / "a.mcap", Signals(x, 1000.0, CHS, t0=5.0), chunk_size=50_000)
+    p = write_ros2_mcap(d / "a.mcap", Signals(data=x, fs=1000.0, channels=CHS, t0=5.0), chunk_size=50_000)
     data = bytearray(p.read_bytes())
     b = scan(p).blocks[7]
     end = b.file_offset + 9 + struct.unpack_from("<Q", data, b.file_offset + 1)[0]
@@ -192,7 +192,7 @@ def test_log_larger_than_the_address_space_limit_streams(tmp_path):
     rng = np.random.default_rng(2)
     n = 400_000
     x = np.cumsum(rng.standard_normal((3, n)), axis=1) * 1e-3 + rng.standard_normal((3, n))
-    log = write_ros2_mcap(tmp_path / "big.mcap", Signals(x, 1000.0, CHS, t0=1.0), compression="none")
+    log = write_ros2_mcap(tmp_path / "big.mcap", Signals(data=x, fs=1000.0, channels=CHS, t0=1.0), compression="none")
     assert log.stat().st_size > 140e6
     script = tmp_path / "child.py"
     script.write_text(_CHILD)
@@ -250,7 +250,7 @@ def _joint_log(path, *, gaps=False):
         for s in range(300, n, 700):
             x[:, s : s + 40] = np.nan
     names = ["/robot/joint.pos", "/robot/joint.vel", "/robot/joint.mode_value", "/robot/joint.seq", "/robot/temp.t"]
-    return write_ros2_mcap(path, Signals(x, fs, names, t0=3.0), chunk_size=40_000)
+    return write_ros2_mcap(path, Signals(data=x, fs=fs, channels=names, t0=3.0), chunk_size=40_000)
 
 
 def test_stream_without_channels_takes_the_moving_fields_of_the_busiest_topic(tmp_path, monkeypatch):
@@ -371,7 +371,8 @@ def test_refinement_for_the_damping_stops_where_segments_no_longer_fit_between_g
     for s in range(300, n, 700):
         x[:, s : s + 40] = np.nan
     chs = ["/ft.wrench.force.x", "/imu.linear_acceleration.x", "/imu.linear_acceleration.y"]
-    p = write_ros2_mcap(tmp_path / "refine.mcap", Signals(x, fs, chs, ["N", "m/s^2", "m/s^2"], t0=2.0))
+    p = write_ros2_mcap(tmp_path / "refine.mcap", Signals(data=x, fs=fs, channels=chs, units=["N", "m/s^2", "m/s^2"],
+                                                          t0=2.0))
     an = analyse_stream(p, input=chs[0], outputs=chs[1:])
     assert an.spectra.settings["nperseg"] == 512
     assert len(an.modal.natural_frequencies) == 1 and abs(an.modal.natural_frequencies[0] - 35.0) < 0.5
@@ -384,8 +385,10 @@ def test_streamed_value_beyond_any_measurement_is_missing(tmp_path):
     x = rng.standard_normal((3, 20_000))
     bad, nan = x.copy(), x.copy()
     bad[1, 7000], nan[1, 7000] = 1e300, np.nan
-    a = accumulate_log(write_ros2_mcap(tmp_path / "huge.mcap", Signals(bad, 1000.0, CHS, t0=1.0)), nperseg=1024)
-    b = accumulate_log(write_ros2_mcap(tmp_path / "nan.mcap", Signals(nan, 1000.0, CHS, t0=1.0)), nperseg=1024)
+    a = accumulate_log(write_ros2_mcap(tmp_path / "huge.mcap", Signals(data=bad, fs=1000.0, channels=CHS, t0=1.0)),
+                       nperseg=1024)
+    b = accumulate_log(write_ros2_mcap(tmp_path / "nan.mcap", Signals(data=nan, fs=1000.0, channels=CHS, t0=1.0)),
+                       nperseg=1024)
     assert np.array_equal(a.csd().G, b.csd().G) and np.array_equal(a.csd().n_averages, b.csd().n_averages)
     assert any("1 samples beyond" in w for w in a.warnings)
     analyse_stream(tmp_path / "huge.mcap")  # completes

@@ -16,7 +16,7 @@ Examples
 --------
 >>> import numpy as np
 >>> import vibroscope
->>> sig = vibroscope.Signals(np.zeros((1, 8)), fs=100.0, channels=["/imu.linear_acceleration.x"])
+>>> sig = vibroscope.Signals(data=np.zeros((1, 8)), fs=100.0, channels=["/imu.linear_acceleration.x"])
 >>> sig.fs
 100.0
 """

@@ -62,7 +62,7 @@ class ChannelError(VibroscopeError, KeyError):
     >>> import numpy as np
     >>> from vibroscope import Signals, read_mcap
     >>> from vibroscope.io import write_ros2_mcap
-    >>> sig = Signals(np.zeros((1, 100)), fs=100.0, channels=["/imu.linear_acceleration.z"])
+    >>> sig = Signals(data=np.zeros((1, 100)), fs=100.0, channels=["/imu.linear_acceleration.z"])
     >>> with tempfile.TemporaryDirectory() as d:
     ...     log = write_ros2_mcap(pathlib.Path(d) / "run.mcap", sig)
     ...     try:

@@ -105,7 +105,7 @@ DRIFT_RATIO = 0.5
 _SHOW = 3
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Fault:
     """One problem found in one channel.
 
@@ -200,8 +200,10 @@ def fault_summary(faults) -> str:
 
     Examples
     --------
-    >>> fault_summary([Fault("a", "dropout", "", "mask"), Fault("b", "clipping", "", "mask"),
-    ...                Fault("b", "dropout", "", "mask"), Fault("c", "gravity", "", "detrend", note=True)])
+    >>> def fault(channel, kind, action="mask", note=False):
+    ...     return Fault(channel=channel, kind=kind, message="", action=action, note=note)
+    >>> fault_summary([fault("a", "dropout"), fault("b", "clipping"), fault("b", "dropout"),
+    ...                fault("c", "gravity", "detrend", note=True)])
     '2 dropout, 1 clipping'
     """
     counts: dict[str, int] = {}
@@ -237,7 +239,9 @@ def _where(spans, fs: float) -> str:
 
 def _fault(ch, kind, msg, action, spans, fs, n, note=False):
     spans = tuple((int(a), int(b)) for a, b in spans)
-    return Fault(ch, kind, msg, action, spans, tuple((a / fs, b / fs) for a, b in spans), int(n), note)
+    return Fault(channel=ch, kind=kind, message=msg, action=action, spans=spans,
+                 times=tuple((a / fs, b / fs) for a, b in spans),
+                 n_samples=int(n), note=note)
 
 
 def _sensor(channel: str) -> str:
@@ -343,7 +347,7 @@ def detect_faults(signals: Signals, *, input: str | None = None, nperseg: int | 
     >>> import numpy as np
     >>> x = np.random.default_rng(0).standard_normal((1, 4096))
     >>> x[0, 100:110] = np.nan
-    >>> [f.kind for f in detect_faults(Signals(x, 100.0, ["a"], ["m/s^2"]))]
+    >>> [f.kind for f in detect_faults(Signals(data=x, fs=100.0, channels=["a"], units=["m/s^2"]))]
     ['nan']
     """
     fs, n = signals.fs, signals.n_samples
@@ -507,7 +511,8 @@ def apply_faults(signals: Signals, faults: tuple[Fault, ...] | list[Fault]) -> S
             i = signals.index(f.channel)
             for a, b in f.spans:
                 data[i, a:b] = np.nan
-        out = Signals(data, signals.fs, signals.channels, signals.units, signals.t0, signals.meta)
+        out = Signals(data=data, fs=signals.fs, channels=signals.channels, units=signals.units, t0=signals.t0,
+                      meta=signals.meta)
     if drops:
         keep = [c for c in out.channels if c not in set(drops)]
         out = out.select(keep)

@@ -98,7 +98,7 @@ def band_rms(frequencies: np.ndarray, psd: np.ndarray, bands: Sequence[tuple[flo
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FleetRow:
     """One log of the fleet table.
 
@@ -110,7 +110,7 @@ class FleetRow:
         Grid samples of the log (its Welch segments leave out less than one hop at the end).
     duration_s : float
         ``n_samples / fs``.
-    frequencies_hz, damping_ratios : tuple of float
+    natural_frequencies, damping_ratios : tuple of float
         The modes identified from the log's spectra.
     bands_hz : tuple of (float, float)
         The bands of `rms`.
@@ -129,7 +129,7 @@ class FleetRow:
     log: str
     n_samples: int
     duration_s: float
-    frequencies_hz: tuple
+    natural_frequencies: tuple
     damping_ratios: tuple
     bands_hz: tuple
     channels: tuple
@@ -149,7 +149,7 @@ class FleetRow:
 
         return {"log": self.log, "n_samples": self.n_samples, "duration_s": self.duration_s,
                 "modes": [{"frequency_hz": num(f), "damping_ratio": num(z)}
-                          for f, z in zip(self.frequencies_hz, self.damping_ratios)],
+                          for f, z in zip(self.natural_frequencies, self.damping_ratios)],
                 "rms": {c: {f"{lo:.4g}-{hi:.4g}Hz": num(v) for (lo, hi), v in zip(self.bands_hz, r)}
                         for c, r in zip(self.channels, self.rms)},
                 "error": self.error, "warnings": list(self.warnings)}
@@ -191,7 +191,7 @@ class FleetResult:
         out = []
         for r in self.rows:
             d = {"log": r.log, "n_samples": r.n_samples, "duration_s": f"{r.duration_s:.6g}",
-                 "modes_hz": ";".join(f"{f:.6g}" for f in r.frequencies_hz),
+                 "modes_hz": ";".join(f"{f:.6g}" for f in r.natural_frequencies),
                  "damping": ";".join(f"{z:.4g}" for z in r.damping_ratios)}
             rms = np.array(r.rms, float).reshape(len(r.channels), len(r.bands_hz))
             for k, (lo, hi) in enumerate(r.bands_hz):
@@ -286,7 +286,8 @@ def _task(path: str, channels: tuple, fs: float, t0_ns: int, n_samples: int, sta
 def _failed_row(path: str, n_samples: int, fs: float, bands: tuple, channels: tuple, error: str) -> FleetRow:
     """The row of a log that could not be analysed: NaN band RMS, no modes, the error."""
     nan = tuple(tuple(float("nan") for _ in bands) for _ in channels)
-    return FleetRow(path, int(n_samples), n_samples / fs, (), (), bands, tuple(channels), nan, error)
+    return FleetRow(log=path, n_samples=int(n_samples), duration_s=n_samples / fs, natural_frequencies=(),
+                    damping_ratios=(), bands_hz=bands, channels=tuple(channels), rms=nan, error=error)
 
 
 def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
@@ -313,8 +314,10 @@ def _log_row(path: str, bands: tuple, channels: tuple, fs: float, opts: dict,
         f_n, z, err = tuple(an.modal.natural_frequencies.tolist()), tuple(an.modal.damping_ratios.tolist()), ""
     except ValueError as exc:
         f_n, z, err = (), (), str(exc)
-    return sp, FleetRow(path, sp.samples, sp.samples / fs, f_n, z, bands, tuple(channels),
-                        tuple(tuple(r) for r in rms.tolist()), err, tuple(dict.fromkeys(sp.warnings)))
+    return sp, FleetRow(log=path, n_samples=sp.samples, duration_s=sp.samples / fs, natural_frequencies=f_n,
+                        damping_ratios=z, bands_hz=bands, channels=tuple(channels),
+                        rms=tuple(tuple(r) for r in rms.tolist()), error=err,
+                        warnings=tuple(dict.fromkeys(sp.warnings)))
 
 
 #: glibc's mmap threshold set in worker processes: Dask's nannies set ``MALLOC_TRIM_THRESHOLD_``

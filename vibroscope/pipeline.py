@@ -324,7 +324,7 @@ def decimate(signals: Signals, fmax: float, *, period: int | None = None) -> Sig
     if period:
         why += f", and it divides the input's period: {period} → {period // total} samples"
     meta = {**signals.meta, "decimated": {"factors": stages, "fs_in": signals.fs, "fs_out": fs, "reason": why}}
-    return Signals(data, fs, signals.channels, signals.units, signals.t0, meta)
+    return Signals(data=data, fs=fs, channels=signals.channels, units=signals.units, t0=signals.t0, meta=meta)
 
 
 def decimation_stages(fs: float, fmax: float, *, period: int | None = None) -> list:
@@ -664,7 +664,7 @@ def _common_gaps(sig: Signals, notes: list) -> tuple[Signals, bool]:
         if n_valid >= sig.n_samples // 2:
             data = np.array(sig.data)
             data[:, ~present] = np.nan
-            sig = Signals(data, sig.fs, sig.channels, sig.units, sig.t0, sig.meta)
+            sig = Signals(data=data, fs=sig.fs, channels=sig.channels, units=sig.units, t0=sig.t0, meta=sig.meta)
             notes.append(f"{sig.n_samples - n_valid} of {sig.n_samples} samples missing in at least one "
                          f"channel (longest stretch without a gap: {longest} samples, {longest / sig.fs:.4g} s); "
                          f"they are missing in every channel for the analysis")

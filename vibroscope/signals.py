@@ -76,7 +76,7 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Signals:
     """Uniformly sampled channels on one time grid.
 
@@ -109,7 +109,7 @@ class Signals:
     Examples
     --------
     >>> import numpy as np
-    >>> s = Signals(np.zeros((2, 1000)), fs=1000.0, channels=["/a.x", "/a.y"])
+    >>> s = Signals(data=np.zeros((2, 1000)), fs=1000.0, channels=["/a.x", "/a.y"])
     >>> s.n_channels, s.n_samples, s.duration
     (2, 1000, 1.0)
     """
@@ -222,17 +222,18 @@ class Signals:
         """
         idx = [self.index(c) for c in channels]
         return Signals(
-            self.data[idx],
-            self.fs,
-            [self.channels[i] for i in idx],
-            [self.units[i] for i in idx],
-            self.t0,
-            self.meta,
+            data=self.data[idx],
+            fs=self.fs,
+            channels=[self.channels[i] for i in idx],
+            units=[self.units[i] for i in idx],
+            t0=self.t0,
+            meta=self.meta,
         )
 
     def with_meta(self, **meta: Any) -> "Signals":
         """A copy with `meta` updated."""
-        return Signals(self.data, self.fs, self.channels, self.units, self.t0, {**self.meta, **meta})
+        return Signals(data=self.data, fs=self.fs, channels=self.channels, units=self.units, t0=self.t0,
+                       meta={**self.meta, **meta})
 
     @staticmethod
     def stack(parts: Sequence["Signals"]) -> "Signals":
@@ -260,12 +261,12 @@ class Signals:
             if p.fs != fs or p.n_samples != n:
                 raise ValueError(f"cannot stack {p.fs=} Hz x {p.n_samples=} with {fs=} Hz x {n=}")
         return Signals(
-            np.vstack([p.data for p in parts]),
-            fs,
-            [c for p in parts for c in p.channels],
-            [u for p in parts for u in p.units],
-            parts[0].t0,
-            {k: v for p in parts for k, v in p.meta.items()},
+            data=np.vstack([p.data for p in parts]),
+            fs=fs,
+            channels=[c for p in parts for c in p.channels],
+            units=[u for p in parts for u in p.units],
+            t0=parts[0].t0,
+            meta={k: v for p in parts for k, v in p.meta.items()},
         )
 
     def __repr__(self) -> str:

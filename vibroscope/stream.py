@@ -123,7 +123,7 @@ def stream_settings(n_samples: int, fs: float, *, nperseg: int | None = None, no
     return dict(nperseg=st.nperseg, noverlap=st.noverlap, window=window, detrend=detrend, nfft=st.nfft)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class LogSpectra:
     """The cross-spectral sums of (a range of) a log, ready to merge or to scale.
 
@@ -191,7 +191,8 @@ class LogSpectra:
             _warnings.simplefilter("ignore")
             cnt = _check_averages(acc, self.channels, cross=True)
         sd = _settings_dict(self.fs, acc.settings, int(cnt.min()), acc.n_segments)
-        return CrossSpectralMatrix(acc.frequencies(), acc.result(scaling), self.channels, self.units, scaling, sd, cnt)
+        return CrossSpectralMatrix(frequencies=acc.frequencies(), G=acc.result(scaling), channels=self.channels,
+                                   units=self.units, scaling=scaling, settings=sd, n_averages=cnt)
 
 
 def _new_accumulator(n_ch: int, fs: float, settings: dict) -> CrossSpectralAccumulator:
@@ -298,8 +299,10 @@ def accumulate_log(path: str | Path, channels: Sequence[str] | None = None, *, f
     if missing:
         notes.append(f"{g.path}: {missing} of {i1 - i0} grid samples missing in at least one channel (gaps, lost "
                      f"chunks; never interpolated): the Welch segments touching them are skipped")
-    return LogSpectra((str(g.path),), g.channels, g.units, g.fs, i1 - i0, acc, sett, tuple(notes),
-                      ((str(g.path), int(i0), int(i1)),), g.t0_ns, runs.result() if common_gaps else None)
+    return LogSpectra(sources=(str(g.path),), channels=g.channels, units=g.units, fs=g.fs, samples=i1 - i0,
+                      accumulator=acc, settings=sett, warnings=tuple(notes),
+                      ranges=((str(g.path), int(i0), int(i1)),), t0_ns=g.t0_ns,
+                      gap_free=runs.result() if common_gaps else None)
 
 
 class _GapFree:

@@ -43,8 +43,9 @@ def signals(data: Path):
 
     um, ym = load(data, "uval_multisine"), load(data, "yval_multisine")
     us, ysw = load(data, "uval_sinesweep"), load(data, "yval_sinesweep")
-    ms = Signals(np.vstack([np.tile(um, N_PERIODS), np.tile(ym, N_PERIODS)]), FS, [IN_CH, OUT_CH], ["N", "m"])
-    sw = Signals(np.vstack([us, ysw]), FS, [IN_CH, OUT_CH], ["N", "m"])
+    ms = Signals(data=np.vstack([np.tile(um, N_PERIODS), np.tile(ym, N_PERIODS)]), fs=FS, channels=[IN_CH, OUT_CH],
+                 units=["N", "m"])
+    sw = Signals(data=np.vstack([us, ysw]), fs=FS, channels=[IN_CH, OUT_CH], units=["N", "m"])
     return ms, sw
 
 

@@ -62,7 +62,7 @@ def signals(d: dict):
     units = {"qg": "m", "qm": "m", "vir": "V", "pulses": "V"}
     # the estimation log has no pulses: a zero channel, so that both logs drive one model
     rows = [d[k] if k in d else np.zeros_like(d["qg"]) for k in keys]
-    return Signals(np.vstack(rows), FS, [CH[k] for k in keys], [units[k] for k in keys])
+    return Signals(data=np.vstack(rows), fs=FS, channels=[CH[k] for k in keys], units=[units[k] for k in keys])
 
 
 def model(d: dict, *, friction: bool, pulses: bool = True):
@@ -70,7 +70,8 @@ def model(d: dict, *, friction: bool, pulses: bool = True):
     from vibroscope.models import Damper, Dof, Input, LumpedModel, Output, make_element
     from vibroscope.models.controller import Controller
 
-    ctl = Controller("position", "cascade", {"kp": d["kp"], "kv": d["kv"]}, FS, "q", drives=FORCE,
+    ctl = Controller(name="position", law="cascade", gains={"kp": d["kp"], "kv": d["kv"]}, rate_hz=FS, dof="q",
+                     drives=FORCE,
                      reference=CH["qg"], velocity_filter=(0.5, 0.5), gain=d["gtau"], saturation=10.0,
                      output_channel=CH["vir"], output_unit="V", feedforward=CH["pulses"] if pulses else None)
     els = (Damper(("q", "ground"), c=FV),)

@@ -43,7 +43,8 @@ def signals(data: Path):
     v1, v2 = load(data)
     out = []
     for sl in (EST, ARROW):
-        out.append(Signals(np.vstack([v1[sl], v2[sl]]), FS, [IN_CH, OUT_CH], ["N", "m"], t0=sl.start / FS))
+        out.append(Signals(data=np.vstack([v1[sl], v2[sl]]), fs=FS, channels=[IN_CH, OUT_CH], units=["N", "m"],
+                           t0=sl.start / FS))
     return out
 
 

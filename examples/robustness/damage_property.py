@@ -135,7 +135,7 @@ def write_synthetic_imu(path: Path, n: int = 20_000) -> Path:
 
     k = np.arange(n)
     x = 0.5 * np.sin(2 * np.pi * 37.0 * k / 1000.0) + 0.5 * np.sin(2 * np.pi * 211.0 * k / 1000.0)
-    return write_ros2_mcap(path, Signals(x[None, :], 1000.0, [LOGS["synthetic_imu"][1]], t0=1.7e9),
+    return write_ros2_mcap(path, Signals(data=x[None, :], fs=1000.0, channels=[LOGS["synthetic_imu"][1]], t0=1.7e9),
                            chunk_size=1 << 16, compression="zstd")
 
 

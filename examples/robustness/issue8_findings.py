@@ -45,7 +45,7 @@ def imu_signals(n: int, fs: float = 1000.0, seed: int = 0):
     from vibroscope.signals import Signals
 
     x = np.random.default_rng(seed).standard_normal((1, n))
-    return Signals(x, fs, ["/imu.linear_acceleration.x"], ["m/s^2"], t0=100.0)
+    return Signals(data=x, fs=fs, channels=["/imu.linear_acceleration.x"], units=["m/s^2"], t0=100.0)
 
 
 def chunk_offsets(path: Path) -> list[tuple[int, int, int]]:
@@ -186,8 +186,8 @@ def auto_outputs_exclude_input(tmp: Path) -> None:
     from vibroscope.signals import Signals
 
     rng = np.random.default_rng(3)
-    s = Signals(rng.standard_normal((3, 4000)), 1000.0, ["/ft.wrench.force.x", "/acc.a", "/acc.b"],
-                ["N", "m/s^2", "m/s^2"], t0=10.0)
+    s = Signals(data=rng.standard_normal((3, 4000)), fs=1000.0, channels=["/ft.wrench.force.x", "/acc.a", "/acc.b"],
+                units=["N", "m/s^2", "m/s^2"], t0=10.0)
     log = tmp / "noimu.mcap"
     write_ros2_mcap(log, s)
     p = cli("analyse", str(log), "--input", "/ft.wrench.force.x", "--no-rrd", cwd=tmp)
@@ -250,7 +250,10 @@ def complex_input() -> None:
     z = (np.random.default_rng(4).standard_normal((2, 4096)) * (1 + 1j))
     for fn in (welch, csd_matrix):
         try:
-            fn(Signals(z, 100.0, ["a", "b"]), nperseg=256) if fn is csd_matrix else fn(z, fs=100.0, nperseg=256)
+            if fn is csd_matrix:
+                fn(Signals(data=z, fs=100.0, channels=["a", "b"]), nperseg=256)
+            else:
+                fn(z, fs=100.0, nperseg=256)
             check(f"complex input to {fn.__name__}", False, "accepted silently")
         except (TypeError, ValueError) as exc:
             check(f"complex input to {fn.__name__}", "complex" in str(exc).lower(), str(exc)[:100])

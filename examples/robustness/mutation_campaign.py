@@ -140,7 +140,8 @@ def _campaign(args: argparse.Namespace, tmp: Path) -> int:
             originals.append(Original(f))
     for comp in ("zstd", "none"):
         x = np.random.default_rng(args.seed).standard_normal((1, 3000))
-        p = write_ros2_mcap(tmp / f"imu_{comp}.mcap", Signals(x, 1000.0, [IMU_CH], t0=10.0), chunk_size=20_000,
+        p = write_ros2_mcap(tmp / f"imu_{comp}.mcap", Signals(data=x, fs=1000.0, channels=[IMU_CH], t0=10.0),
+                            chunk_size=20_000,
                             compression=comp)
         originals.append(Original(p, imu=x[0]))
     weights = [1.0 if len(o.data) < 1 << 20 else 0.15 for o in originals]

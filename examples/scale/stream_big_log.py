@@ -36,7 +36,7 @@ def write_log(path: Path, n: int) -> Path:
     x = np.vstack([y + 0.2 * rng.standard_normal(n), 0.5 * y + 0.2 * rng.standard_normal(n),
                    -y + 0.2 * rng.standard_normal(n)])
     chans = [f"/imu/wrist.linear_acceleration.{c}" for c in "xyz"]
-    return write_ros2_mcap(path, Signals(x, 1000.0, chans), compression="none")
+    return write_ros2_mcap(path, Signals(data=x, fs=1000.0, channels=chans), compression="none")
 
 
 def run_limited(log: Path, limit_mb: int, extra: list[str]) -> tuple[int, str, float, float]:

@@ -48,7 +48,7 @@ def _log(model, r, seed):
     rng = np.random.default_rng(seed)
     y = measured_rows(model, s)
     y = y + 0.002 * np.std(y, axis=1, keepdims=True) * rng.standard_normal(y.shape)
-    return Signals(np.vstack([r[None], y]), FS, [REF, POS, CMD], ["m", "m", "V"])
+    return Signals(data=np.vstack([r[None], y]), fs=FS, channels=[REF, POS, CMD], units=["m", "m", "V"])
 
 
 def test_channels_and_rows():

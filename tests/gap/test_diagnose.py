@@ -50,8 +50,8 @@ def log_of(truth: LumpedModel, u: np.ndarray, noise: float = 0.02, seed: int = 2
     y = np.asarray(s.data[1:])
     rng = np.random.default_rng(seed)
     y = y + noise * np.std(y, axis=1, keepdims=True) * rng.standard_normal(y.shape)
-    return Signals(np.vstack([u, y]), FS, truth.input_channels() + truth.output_channels(),
-                   ["N", "m/s^2", "m/s^2"])
+    return Signals(data=np.vstack([u, y]), fs=FS, channels=truth.input_channels() + truth.output_channels(),
+                   units=["N", "m/s^2", "m/s^2"])
 
 
 @pytest.fixture(scope="module")
@@ -191,7 +191,7 @@ def test_a_log_too_gappy_to_diagnose_is_named(u20):
     x = np.array(sig.data)
     for s in range(1000, sig.n_samples, 1500):
         x[1:, s : s + 20] = np.nan
-    gappy = Signals(x, sig.fs, sig.channels, sig.units, sig.t0, {"source": "run7.mcap"})
+    gappy = Signals(data=x, fs=sig.fs, channels=sig.channels, units=sig.units, t0=sig.t0, meta={"source": "run7.mcap"})
     with pytest.raises(ValueError, match=r"^run7\.mcap: missing samples .* needs .*: give a log with fewer gaps"):
         diagnose(nominal(), [gappy])
 
@@ -210,7 +210,7 @@ def test_friction_and_a_clearance_at_one_spring_are_both_named():
     s = simulate(truth, u, FS)
     y = np.asarray(s.data[1:])
     y = y + 0.02 * np.std(y) * np.random.default_rng(6).standard_normal(y.shape)
-    log = Signals(np.vstack([u, y]), FS, base.input_channels() + base.output_channels(), ["N", "m/s^2"])
+    log = Signals(data=np.vstack([u, y]), fs=FS, channels=base.input_channels() + base.output_channels(), units=["N", "m/s^2"])
     r = diagnose(base, log, effects=["coulomb_friction", "backlash", "cubic_stiffness"])
     assert set(r.verdicts) == {"coulomb_friction", "backlash"}, r.summary()
     clear = next(c for c in r.candidates if c.effect == "backlash")

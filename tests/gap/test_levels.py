@@ -150,7 +150,7 @@ def test_logs_at_different_levels_are_each_split_and_a_softening_spring_is_found
     assert not same.fit[-1].any() and not any(v.any() for v in same.validation[:-1])
     last = make_split(us, FS, holdout="last")  # the user's choice: the last log, whatever the levels
     assert not last.fit[-1].any() and last.validation[-1].any() and not last.validation[0].any()
-    sigs = [Signals(np.vstack([u, y]), FS, ["/u.x", "/a.x"], ["N", "m/s^2"]) for u, y in zip(us, ys)]
+    sigs = [Signals(data=np.vstack([u, y]), fs=FS, channels=["/u.x", "/a.x"], units=["N", "m/s^2"]) for u, y in zip(us, ys)]
     r = diagnose(duffing(0.0), sigs, effects=["cubic_stiffness", "time_delay", "coulomb_friction"], progress=False)
     assert r.verdict == "cubic_stiffness"
     assert r.candidates[0].where["character"] == "softening"

@@ -160,8 +160,8 @@ def test_hidden_cubic_spring_between_measured_points_of_a_modal_nominal():
     s = simulate(hidden, u[None], FS)
     y = np.asarray(s.data[1:])
     y = y + 0.02 * np.std(y, axis=1, keepdims=True) * np.random.default_rng(2).standard_normal(y.shape)
-    log = Signals(np.vstack([u[None], y]), FS, truth.input_channels() + truth.output_channels(),
-                  ["N", "m/s^2", "m/s^2", "m/s^2"])
+    log = Signals(data=np.vstack([u[None], y]), fs=FS, channels=truth.input_channels() + truth.output_channels(),
+                  units=["N", "m/s^2", "m/s^2", "m/s^2"])
     nominal = loads_model(dumps_model(exact_modal(truth)), "chain_modal.toml")
     r = diagnose(nominal, log)
     assert r.verdict == "cubic_stiffness", r.summary()

@@ -124,7 +124,7 @@ def test_plots_are_lazy_and_work():
         assert len(a_mag.figure.axes) == 2 and a_mag.get_xscale() == "log"
         (line,) = a_mag.get_lines()
         assert line.get_label() == "G2"
-        np.testing.assert_array_equal(line.get_xdata(), b.frequencies_hz)
+        np.testing.assert_array_equal(line.get_xdata(), b.frequencies)
         np.testing.assert_array_equal(line.get_ydata(), b.magnitude_db)
         np.testing.assert_array_equal(a_ph.get_lines()[0].get_ydata(), b.phase_deg)
         # G2(jw) = (1 + jw) / (5 - w^2 + 2jw) at the lowest line, 0.1 Hz

@@ -35,7 +35,7 @@ def test_info_table_counts_the_messages_of_a_deleted_chunk(tmp_path, capsys):
     n, fs = 4000, 1000.0
     x = np.random.default_rng(3).standard_normal((2, n))
     p = tmp_path / "ok.mcap"
-    write_ros2_mcap(p, Signals(x, fs, ["/imu.linear_acceleration.x", "/imu.linear_acceleration.y"]),
+    write_ros2_mcap(p, Signals(data=x, fs=fs, channels=["/imu.linear_acceleration.x", "/imu.linear_acceleration.y"]),
                     chunk_size=32_000)
     data = p.read_bytes()
     assert main(["info", str(p)]) == 0

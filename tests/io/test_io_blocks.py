@@ -24,7 +24,7 @@ def imu_log(tmp_path_factory):
     """3 axes of random data at 1024 Hz (a period of 976562.5 ns: stamps rounded to ns), many chunks."""
     x = np.random.default_rng(3).standard_normal((3, 20_000))
     p = tmp_path_factory.mktemp("blocks") / "imu.mcap"
-    write_ros2_mcap(p, Signals(x, 1024.0, CHS, t0=100.0), chunk_size=40_000)
+    write_ros2_mcap(p, Signals(data=x, fs=1024.0, channels=CHS, t0=100.0), chunk_size=40_000)
     return p, x
 
 

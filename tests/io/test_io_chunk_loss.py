@@ -61,7 +61,7 @@ def _delete(data: bytes, chunk: tuple[int, int, int], with_indexes: bool) -> byt
 def synth(request, tmp_path_factory):
     x = np.random.default_rng(3).standard_normal((1, N))
     p = tmp_path_factory.mktemp("loss") / f"ok_{request.param}.mcap"
-    write_ros2_mcap(p, Signals(x, FS, [CH], t0=T0), chunk_size=32_000, compression=request.param)
+    write_ros2_mcap(p, Signals(data=x, fs=FS, channels=[CH], t0=T0), chunk_size=32_000, compression=request.param)
     data = p.read_bytes()
     chunks = _chunks(p, data)
     assert len(chunks) >= 5
@@ -212,7 +212,7 @@ def _peak_read(path: Path) -> tuple[object, float, int]:
 def zlog(tmp_path_factory):
     x = np.random.default_rng(5).standard_normal((1, N))
     p = tmp_path_factory.mktemp("bomb") / "ok.mcap"
-    write_ros2_mcap(p, Signals(x, FS, [CH], t0=T0), chunk_size=32_000, compression="zstd")
+    write_ros2_mcap(p, Signals(data=x, fs=FS, channels=[CH], t0=T0), chunk_size=32_000, compression="zstd")
     data = p.read_bytes()
     return p, data, x[0], _chunks(p, data)
 

@@ -257,10 +257,10 @@ def test_units_stored_in_every_channel_record(tmp_path):
     from vibroscope.signals import Signals
 
     rng = np.random.default_rng(1)
-    sig = Signals(rng.normal(size=(5, 40)), 100.0,
-                  ["/imu/a.linear_acceleration.x", "/imu/a.angular_velocity.z", "/ft.wrench.force.x",
+    sig = Signals(data=rng.normal(size=(5, 40)), fs=100.0,
+                  channels=["/imu/a.linear_acceleration.x", "/imu/a.angular_velocity.z", "/ft.wrench.force.x",
                    "/rig.pressure", "volt"],
-                  ["m/s^2", "", "N", "Pa", ""])
+                  units=["m/s^2", "", "N", "Pa", ""])
     out = write_ros2_mcap(tmp_path / "r.mcap", sig)
     assert _units_in_mcap(out) == {
         "/imu/a": {"linear_acceleration.x": "m/s^2", "angular_velocity.z": "rad/s"},  # rad/s: the Imu definition

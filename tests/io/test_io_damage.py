@@ -22,7 +22,7 @@ CH = "/imu.linear_acceleration.x"
 def log(request, tmp_path_factory):
     x = np.random.default_rng(7).standard_normal((1, N))
     p = tmp_path_factory.mktemp("dmg") / f"ok_{request.param}.mcap"
-    write_ros2_mcap(p, Signals(x, 1000.0, [CH], t0=50.0), chunk_size=32_000, compression=request.param)
+    write_ros2_mcap(p, Signals(data=x, fs=1000.0, channels=[CH], t0=50.0), chunk_size=32_000, compression=request.param)
     data = p.read_bytes()
     chunks = []  # (offset, end, n_messages)
     for b in scan(p).blocks:
@@ -120,7 +120,7 @@ def test_crc_damage_detected_in_uncompressed_chunk(tmp_path):
     from mcap.reader import make_reader
 
     x = np.random.default_rng(9).standard_normal((1, N))
-    p = write_ros2_mcap(tmp_path / "u.mcap", Signals(x, 1000.0, [CH], t0=50.0), chunk_size=32_000,
+    p = write_ros2_mcap(tmp_path / "u.mcap", Signals(data=x, fs=1000.0, channels=[CH], t0=50.0), chunk_size=32_000,
                         compression="none")
     data = p.read_bytes()
     blocks = scan(p).blocks

@@ -110,7 +110,7 @@ def test_lost_chunk_is_a_gap(tmp_path):
     """A chunk skipped for its CRC: its span is NaN, everything else the written samples."""
     n = 4000
     x = np.random.default_rng(7).standard_normal((1, n))
-    p = write_ros2_mcap(tmp_path / "u.mcap", Signals(x, 1000.0, [CH], t0=50.0), chunk_size=32_000,
+    p = write_ros2_mcap(tmp_path / "u.mcap", Signals(data=x, fs=1000.0, channels=[CH], t0=50.0), chunk_size=32_000,
                         compression="none")
     data = bytearray(p.read_bytes())
     blocks = scan(p).blocks

@@ -219,7 +219,8 @@ def test_data_section_crc_computed_ahead(tmp_path):
     from vibroscope.io import write_ros2_mcap
 
     rng = np.random.default_rng(16)
-    sig = Signals(rng.standard_normal((3, 3000)), 1000.0, [f"/imu.linear_acceleration.{c}" for c in "xyz"], t0=5.0)
+    sig = Signals(data=rng.standard_normal((3, 3000)), fs=1000.0,
+                  channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"], t0=5.0)
     p = write_ros2_mcap(tmp_path / "d.mcap", sig, chunk_size=20_000, compression="lz4")
     top = _wanted_topics(list(sig.channels))
     for workers in (1, 2):

@@ -26,7 +26,7 @@ T0 = 30_000_000_000
 def imu_log(tmp_path):
     rng = np.random.default_rng(11)
     chans = [f"/imu/m{k}.linear_acceleration.{a}" for k in (1, 2) for a in "xz"] + ["/ft.wrench.force.x"]
-    s = Signals(rng.standard_normal((len(chans), 4096)), 1000.0, chans, t0=30.0)
+    s = Signals(data=rng.standard_normal((len(chans), 4096)), fs=1000.0, channels=chans, t0=30.0)
     return write_ros2_mcap(tmp_path / "imu.mcap", s), s
 
 
@@ -154,8 +154,8 @@ def test_auto_channels_of_a_json_log_of_accelerometers(tmp_path):
 
     rng = np.random.default_rng(4)
     chans = ["/actuator/force.wrench.force.x"] + [f"/imu/m{k}.linear_acceleration.x" for k in (1, 2, 3)]
-    p = write_json_mcap(tmp_path / "j.mcap", Signals(rng.standard_normal((4, 3000)), 1000.0, chans,
-                                                     ["N"] + ["m/s^2"] * 3, t0=5.0))
+    p = write_json_mcap(tmp_path / "j.mcap", Signals(data=rng.standard_normal((4, 3000)), fs=1000.0, channels=chans,
+                                                     units=["N"] + ["m/s^2"] * 3, t0=5.0))
     acc = tuple(chans[1:])
     assert auto_channels(p).channels == acc
     assert auto_channels(p, exclude_topics=("/actuator/force",)).channels == acc

@@ -53,7 +53,8 @@ def synth(tmp_path_factory):
     x = np.random.default_rng(11).standard_normal((1, 2000))
     out = {}
     for comp in ("zstd", "none"):
-        p = write_ros2_mcap(d / f"imu_{comp}.mcap", Signals(x, 1000.0, [CH], t0=10.0), chunk_size=20_000,
+        p = write_ros2_mcap(d / f"imu_{comp}.mcap", Signals(data=x, fs=1000.0, channels=[CH], t0=10.0),
+                            chunk_size=20_000,
                             compression=comp)
         out[comp] = _Log(p, x[0])
     return out

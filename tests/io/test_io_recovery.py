@@ -37,7 +37,7 @@ def big(tmp_path_factory):
     """A 12 000-message Imu log in ~60 zstd chunks (chunk CRCs, summary CRC)."""
     x = np.random.default_rng(3).standard_normal((1, 12_000))
     p = tmp_path_factory.mktemp("rec") / "big.mcap"
-    write_ros2_mcap(p, Signals(x, 1000.0, [CH], t0=5.0), chunk_size=8_000)
+    write_ros2_mcap(p, Signals(data=x, fs=1000.0, channels=[CH], t0=5.0), chunk_size=8_000)
     data = p.read_bytes()
     chunks = _chunks(p, data)
     assert len(chunks) > 20

@@ -28,7 +28,7 @@ def mixed_signals():
         "/env.temperature",
         "/env.pressure.static",
     ]
-    return Signals(rng.standard_normal((len(chans), 777)), 1651.0, chans, t0=1_700_000_000.25)
+    return Signals(data=rng.standard_normal((len(chans), 777)), fs=1651.0, channels=chans, t0=1_700_000_000.25)
 
 
 def test_ros2_roundtrip_exact(tmp_path, mixed_signals):
@@ -70,7 +70,7 @@ def test_json_roundtrip_exact(tmp_path, mixed_signals):
 
 
 def test_plain_names_and_force_channels(tmp_path):
-    s = Signals(np.arange(20.0).reshape(2, 10), 100.0, ["F1", "temp"])
+    s = Signals(data=np.arange(20.0).reshape(2, 10), fs=100.0, channels=["F1", "temp"])
     p = write_ros2_mcap(tmp_path / "f.mcap", s, force_channels=["F1"])
     r = read_mcap(p, ["/F1.wrench.force.x", "/signals.temp"])
     assert np.array_equal(r.data, s.data) and r.units == ("N", "")

@@ -38,11 +38,11 @@ def close_modes_5dof() -> LumpedModel:
     return model
 
 
-def analytic_frf(model: LumpedModel, frequencies_hz=None, quantity: str = "acceleration") -> FRF:
+def analytic_frf(model: LumpedModel, frequencies=None, quantity: str = "acceleration") -> FRF:
     """Noise-free FRF of `model` (default lines ``Δf … fs/2`` of :data:`NPERSEG` at :data:`FS`)."""
-    if frequencies_hz is None:
-        frequencies_hz = np.arange(1, NPERSEG // 2 + 1) * FS / NPERSEG
-    f = np.asarray(frequencies_hz, float)
+    if frequencies is None:
+        frequencies = np.arange(1, NPERSEG // 2 + 1) * FS / NPERSEG
+    f = np.asarray(frequencies, float)
     kind = {"acceleration": "accelerance", "velocity": "mobility", "displacement": "receptance"}[quantity]
     return FRF(frequencies=f, H=model.frf(f, quantity), coherence=np.ones((len(f), len(model.outputs))),
                inputs=model.input_channels(), outputs=model.output_channels(), estimator="analytic", kind=kind)

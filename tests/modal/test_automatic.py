@@ -84,15 +84,16 @@ def test_select_at_frequencies(ambient):
 def test_selection_rejects_with_reasons():
     """Each criterion rejects with its reason; a NaN damping (not estimated) is kept."""
     shapes = np.array([[1, 0.5], [1, 0.5], [1, 1j], [1, -0.5], [1, 0.2]], complex)
-    mm = ModalModel([5.0, 20.0, 30.0, 40.0, 90.0], [0.01, 0.3, 0.01, np.nan, 0.01], shapes, ["a", "b"], "x")
+    mm = ModalModel(natural_frequencies=[5.0, 20.0, 30.0, 40.0, 90.0], damping_ratios=[0.01, 0.3, 0.01, np.nan, 0.01],
+                    shapes=shapes, points=["a", "b"], method="x")
     sel = select_modes(mm, fmin=1.0, fmax=50.0, rejected=[RejectedMode(7.0, 0.01, "upstream")])
     assert list(sel.modes.natural_frequencies) == [5.0, 40.0]
-    reasons = {r.frequency_hz: r.reason for r in sel.rejected}
+    reasons = {r.natural_frequency: r.reason for r in sel.rejected}
     assert "damping 30 %" in reasons[20.0]
     assert "MPC 0.00" in reasons[30.0]
     assert "above the band" in reasons[90.0]
     assert reasons[7.0] == "upstream"
-    assert [r.frequency_hz for r in sel.rejected] == sorted(reasons)
+    assert [r.natural_frequency for r in sel.rejected] == sorted(reasons)
     coh = (np.array([0.0, 5.0, 40.0]), np.array([1.0, 0.2, 0.9]))
     assert list(select_modes(mm, fmax=50.0, coherence=coh).modes.natural_frequencies) == [40.0]
 

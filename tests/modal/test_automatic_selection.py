@@ -18,7 +18,7 @@ FS = 1000.0
 def single_force_log(request):
     """One random force at the model's own driving point, 2 % output noise, 0.3 fs band."""
     model = demo_model() if request.param == "3dof" else demo_model_5dof()
-    u = band_limited_random(FS, 200_000, f_lo=2.0, f_hi=300.0, rms=20.0, seed=5)
+    u = band_limited_random(FS, 200_000, fmin=2.0, fmax=300.0, rms=20.0, seed=5)
     return model, simulate(model, u, FS, noise=0.02, seed=6)
 
 

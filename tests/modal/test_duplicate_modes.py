@@ -30,14 +30,14 @@ FORCE = MODEL.input_channels()[0]
 def demo_signals() -> Signals:
     """The demo's record (``vibroscope demo`` with ``--duration 20``): 20 s at 1 kHz, force first."""
     fs, n = 1000.0, 20000
-    u = band_limited_random(fs, n, f_lo=2.0, f_hi=0.3 * fs, rms=20.0, seed=1)
+    u = band_limited_random(fs, n, fmin=2.0, fmax=0.3 * fs, rms=20.0, seed=1)
     return simulate(MODEL, u, fs, t0=1.7e9, noise=0.02, seed=2)
 
 
 def _with_nan(sig: Signals, rows: slice, start: int, stop: int) -> Signals:
     data = np.array(sig.data)
     data[rows, start:stop] = np.nan
-    return Signals(data, sig.fs, sig.channels, sig.units, sig.t0, sig.meta)
+    return Signals(data=data, fs=sig.fs, channels=sig.channels, units=sig.units, t0=sig.t0, meta=sig.meta)
 
 
 def _assert_true_modes(mm, rel=0.005):
@@ -69,7 +69,7 @@ def test_split_mode_is_one_mode_the_cluster_alone_at_its_orders():
     sel = select_modes(_split_candidates(), resolution_hz=0.4883)
     assert list(sel.modes.natural_frequencies) == [18.375, 41.92]
     assert list(sel.modes.extra["cluster_size"]) == [30, 86]  # per-mode extras follow the kept modes
-    reasons = {r.frequency_hz: r.reason for r in sel.rejected}
+    reasons = {r.natural_frequency: r.reason for r in sel.rejected}
     assert sorted(reasons) == [18.056, 18.574]
     assert reasons[18.056].startswith("duplicate of 18.375 Hz: 0.319 Hz apart")
     assert "MAC 1.000" in reasons[18.574] and "only pole at 30 model orders" in reasons[18.574]
@@ -118,7 +118,7 @@ def test_coarse_resolution_gives_three_modes(demo_signals):
     an = analyse_signals(demo_signals, input=FORCE, nperseg=2048)
     _assert_true_modes(an.modal)
     dup = [r for r in an.identification.rejected if r.reason.startswith("duplicate of")]
-    assert len(dup) == 2 and all(abs(r.frequency_hz - 18.39) < 0.6 for r in dup)
+    assert len(dup) == 2 and all(abs(r.natural_frequency - 18.39) < 0.6 for r in dup)
 
 
 @pytest.mark.parametrize("rows", [slice(1, None), slice(0, 1), slice(None)], ids=["outputs", "force", "all"])
@@ -135,7 +135,8 @@ def test_a_gap_does_not_split_a_mode(demo_signals, rows):
 def test_one_infinite_sample_does_not_split_a_mode(demo_signals):
     data = np.array(demo_signals.data)
     data[1, 7000] = np.inf
-    sig = Signals(data, demo_signals.fs, demo_signals.channels, demo_signals.units, demo_signals.t0)
+    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units,
+                  t0=demo_signals.t0)
     an = analyse_signals(sig, input=FORCE)
     assert an.settings["nperseg"] == 4096
     _assert_true_modes(an.modal)
@@ -148,7 +149,8 @@ def test_refinement_with_gaps_stops_when_fewer_than_five_clean_segments_fit(demo
     data = np.array(demo_signals.data)
     for k in range(3000, 20000, 4000):
         data[1:, k:k + 50] = np.nan
-    sig = Signals(data, demo_signals.fs, demo_signals.channels, demo_signals.units, demo_signals.t0)
+    sig = Signals(data=data, fs=demo_signals.fs, channels=demo_signals.channels, units=demo_signals.units,
+                  t0=demo_signals.t0)
     assert _clean_segments(sig, 4096) < 5 <= _clean_segments(sig, 2048)
     an = analyse_signals(sig, input=FORCE)
     assert an.settings["nperseg"] <= 2048

@@ -116,7 +116,7 @@ def lumo_default(lumo_raw):
     from vibroscope.pipeline import analyse_signals
 
     acc, direction = lumo_raw
-    sig = Signals(acc, 1651.0, channels=[f"/lumo/s{i + 1:02d}.linear_acceleration.x" for i in range(18)],
+    sig = Signals(data=acc, fs=1651.0, channels=[f"/lumo/s{i + 1:02d}.linear_acceleration.x" for i in range(18)],
                   units=["m/s^2"] * 18)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -71,8 +71,8 @@ def test_modal_model_container():
     assert len(m) == 2
     modes = list(m)
     assert all(isinstance(x, Mode) for x in modes)
-    assert modes[1].frequency_hz == 5.0 and modes[1].index == 1 and modes[1].method == "fdd"
-    assert m[-1].frequency_hz == 5.0
+    assert modes[1].natural_frequency == 5.0 and modes[1].index == 1 and modes[1].method == "fdd"
+    assert m[-1].natural_frequency == 5.0
     d = m.to_dict()
     json.dumps(d)  # JSON-ready
     assert d["method"] == "fdd" and d["points"] == ["/a.x", "/b.x"]

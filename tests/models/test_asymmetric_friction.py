@@ -62,7 +62,7 @@ def test_symmetric_law_is_unchanged_bit_for_bit():
     # the symmetric row repeats force_ in place of force_neg
     m = LumpedModel.chain([1.0], [1e4], [2.0], nonlinear=[sym])
     assert flatten_model(m, 1e-4).params[0, :3].tolist() == [3.0, 2e-3, 3.0]
-    u = band_limited_random(FS, 500, f_lo=1, f_hi=100, rms=20.0, seed=2)
+    u = band_limited_random(FS, 500, fmin=1, fmax=100, rms=20.0, seed=2)
     a = simulate(m, u, FS).data
     b = simulate(m.replace(elements=m.elements[:-1] + (same,)), u, FS).data
     np.testing.assert_array_equal(a, b)

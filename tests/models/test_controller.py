@@ -51,7 +51,8 @@ def hydraulic_controller(law: str, rate: float, measures=("position", "velocity"
     else:
         g = cmp.gains_pd2
         gains, gk = {"kp": float(g["k_p"]), "kd": 0.0, "ka": float(g["k_a"])}, (float(g["k_p"]), 0.0, float(g["k_a"]))
-    c = Controller("position", law, gains, rate, "piston", drives=0, reference="/piston/reference.x",
+    c = Controller(name="position", law=law, gains=gains, rate_hz=rate, dof="piston", drives=0,
+                   reference="/piston/reference.x",
                    measures=measures, gain=ca * HN["K_q"] / HN["A"], output_channel="/valve/command.x")
     return c, gk
 
@@ -60,18 +61,18 @@ def hydraulic_controller(law: str, rate: float, measures=("position", "velocity"
 def test_laws_registry_and_validation():
     assert set(LAWS) == {"P", "PD", "PID", "PD2", "PI_PDT1", "cascade"}
     with pytest.raises(ValueError, match="needs gain 'kv'"):
-        Controller("c", "cascade", {"kp": 1.0}, 1000.0, "m1")
+        Controller(name="c", law="cascade", gains={"kp": 1.0}, rate_hz=1000.0, dof="m1")
     with pytest.raises(ValueError, match="not a gain"):
-        Controller("c", "P", {"kp": 1.0, "ki": 2.0}, 1000.0, "m1")
+        Controller(name="c", law="P", gains={"kp": 1.0, "ki": 2.0}, rate_hz=1000.0, dof="m1")
     with pytest.raises(ValueError, match="rate_hz"):
-        Controller("c", "P", {"kp": 1.0}, 0.0, "m1")
+        Controller(name="c", law="P", gains={"kp": 1.0}, rate_hz=0.0, dof="m1")
     with pytest.raises(ValueError, match="law="):
-        Controller("c", "LQR", {"kp": 1.0}, 1000.0, "m1")
+        Controller(name="c", law="LQR", gains={"kp": 1.0}, rate_hz=1000.0, dof="m1")
     m = LumpedModel.chain([1.0], [1e4], [2.0], output_quantity="displacement")
     with pytest.raises(ValueError, match="drives"):
-        m.replace(controllers=(Controller("c", "P", {"kp": 1.0}, 1000.0, "m1", drives=3),))
+        m.replace(controllers=(Controller(name="c", law="P", gains={"kp": 1.0}, rate_hz=1000.0, dof="m1", drives=3),))
     with pytest.raises(ValueError, match="unknown DOF"):
-        m.replace(controllers=(Controller("c", "P", {"kp": 1.0}, 1000.0, "m9"),))
+        m.replace(controllers=(Controller(name="c", law="P", gains={"kp": 1.0}, rate_hz=1000.0, dof="m9"),))
 
 
 def test_p_loop_on_a_mass_spring_matches_the_exact_discrete_loop():
@@ -79,7 +80,7 @@ def test_p_loop_on_a_mass_spring_matches_the_exact_discrete_loop():
     built from the ZOH-sampled plant (Åström & Wittenmark sec. 2.3), to rounding."""
     kp, T = 3e3, 1e-3
     m = LumpedModel.chain([1.0], [1e4], [20.0], output_quantity="displacement")
-    c = Controller("c", "P", {"kp": kp}, 1 / T, "m1", drives=0, reference="/r.x")
+    c = Controller(name="c", law="P", gains={"kp": kp}, rate_hz=1 / T, dof="m1", drives=0, reference="/r.x")
     mc = m.replace(controllers=(c,))
     assert [r[0] for r in loop_inputs(mc)] == ["/r.x"]
     n = 3000
@@ -108,7 +109,7 @@ def test_a_delayed_actuator_applies_the_command_delay_s_late(delay_ticks):
     kp, T = 3e3, 1e-3
     m = LumpedModel.chain([1.0], [1e4], [20.0], output_quantity="displacement")
     m = m.replace(inputs=(Input("m1", delay=delay_ticks * T),))
-    c = Controller("c", "P", {"kp": kp}, 1 / T, "m1", drives=0, reference="/r.x")
+    c = Controller(name="c", law="P", gains={"kp": kp}, rate_hz=1 / T, dof="m1", drives=0, reference="/r.x")
     mc = m.replace(controllers=(c,))
     n = 2000
     r = np.r_[np.zeros(5), np.ones(n - 5)] * 1e-3
@@ -131,7 +132,8 @@ def test_a_delayed_actuator_applies_the_command_delay_s_late(delay_ticks):
 
 
 def test_trapezoidal_path_agrees_with_exact_zoh_path():
-    c = Controller("c", "PID", {"kp": 3e4, "ki": 1e5, "kd": 100.0}, 1000.0, "m1", drives=0, reference="/r.x")
+    c = Controller(name="c", law="PID", gains={"kp": 3e4, "ki": 1e5, "kd": 100.0}, rate_hz=1000.0, dof="m1", drives=0,
+                   reference="/r.x")
     m = LumpedModel.chain([1.0], [1e4], [20.0], output_quantity="displacement").replace(controllers=(c,))
     r = np.r_[np.zeros(10), np.ones(4990)] * 1e-3
     a = simulate(m, r, 1000.0)
@@ -198,7 +200,8 @@ def test_pi_pdt1_block_schema_matches_instruments():
     ki = 0.3 1/s, t1 = 0.7 s) around a 1 kg / 25 N/m / 7 N s/m mass (gain 25 N): step
     responses at y and at the correction output c match python-control's."""
     rate = 2e4
-    c = Controller("schema", "PI_PDT1", {"kp": 0.9 * 9.9 / 3, "ki": 0.9 / 3, "t1": 0.7}, rate, "m1", drives=0,
+    c = Controller(name="schema", law="PI_PDT1", gains={"kp": 0.9 * 9.9 / 3, "ki": 0.9 / 3, "t1": 0.7}, rate_hz=rate,
+                   dof="m1", drives=0,
                    reference="/r.x", gain=25.0, output_channel="/schema/c.x")
     m = LumpedModel.chain([1.0], [25.0], [7.0], output_quantity="displacement").replace(controllers=(c,))
     t = np.arange(int(20 * rate)) / rate
@@ -212,10 +215,12 @@ def test_pi_pdt1_block_schema_matches_instruments():
 
 # ------------------------------------------------------------------------------ model file
 def test_modelfile_round_trip_with_controller():
-    c = Controller("emps", "cascade", {"kp": 160.18, "kv": 243.45}, 1000.0, "q", drives="/emps/force.x",
+    c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q",
+                   drives="/emps/force.x",
                    reference="/emps/qg.x", velocity_filter=(0.5, 0.5), gain=35.15, saturation=10.0,
                    output_channel="/emps/vir.x", output_unit="V", feedforward="/emps/pulses.x")
-    c2 = Controller("aux", "PD2", {"kp": 1.0, "ka": 0.1}, 1000.0, "q", drives=1, measures=("acceleration",))
+    c2 = Controller(name="aux", law="PD2", gains={"kp": 1.0, "ka": 0.1}, rate_hz=1000.0, dof="q", drives=1,
+                    measures=("acceleration",))
     m = LumpedModel((Dof("q", 95.11),), (Damper(("q", "ground"), c=203.5), make_element("friction", ("q", "ground"), force=20.39)),
                     (Input("q", channel="/emps/force.x", offset=3.16), Input("q", channel="/aux.x")),
                     (Output("q", "displacement", "/emps/qm.x"),), "emps", (c, c2))
@@ -229,7 +234,7 @@ def test_modelfile_controller_errors_name_the_key():
     from vibroscope.errors import ModelFileError
 
     base = LumpedModel.chain([1.0], [1e4], output_quantity="displacement").replace(
-        controllers=(Controller("c", "P", {"kp": 1.0}, 1000.0, "m1"),))
+        controllers=(Controller(name="c", law="P", gains={"kp": 1.0}, rate_hz=1000.0, dof="m1"),))
     text = dumps_model(base)
     for bad, key in ((text.replace('law = "P"', 'law = "X"'), "law"), (text.replace('dof = "m1"\ndrives', 'dof = "m7"\ndrives'), "dof"),
                      (text.replace("drives = 0", "drives = 4"), "drives"), (text.replace("gains = {kp = 1.0}", "gains = {kp = 1.0, kv = 2.0}"), "gains")):
@@ -241,7 +246,8 @@ def test_modelfile_controller_errors_name_the_key():
 def emps_model(gtau, *, friction: bool, pulses: bool = False) -> LumpedModel:
     """EMPS (Janot et al. 2019): M q'' + Fv q' [+ Fc sign(q') + offset] = gtau vir in the
     cascade loop (eq. 6) with the two-tap velocity filter, IDIM-LS values."""
-    c = Controller("emps", "cascade", {"kp": 160.18, "kv": 243.45}, 1000.0, "q", drives=0, reference="/emps/qg.x",
+    c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45}, rate_hz=1000.0, dof="q", drives=0,
+                   reference="/emps/qg.x",
                    velocity_filter=(0.5, 0.5), gain=gtau, saturation=10.0, output_channel="/emps/vir.x",
                    output_unit="V", feedforward="/emps/pulses.x" if pulses else None)
     els = (Damper(("q", "ground"), c=203.5034),)

@@ -54,7 +54,7 @@ def test_offset_is_superposed_on_the_linear_response():
     base = demo_model()
     off = base.replace(inputs=(Input("m3", channel=CH, offset=3.0),))
     assert off.is_linear
-    u = band_limited_random(FS, 3000, f_lo=1, f_hi=100, rms=10.0, seed=1)
+    u = band_limited_random(FS, 3000, fmin=1, fmax=100, rms=10.0, seed=1)
     a = simulate(off, u, FS).data
     b = simulate(base, u, FS).data
     c = simulate(off, np.zeros_like(u), FS).data

@@ -35,8 +35,8 @@ def chain(*nonlinear, quantity="acceleration", **inp):
     return m
 
 
-def record(seconds, rms=20.0, seed=0, f_hi=150.0):
-    return band_limited_random(FS, int(seconds * FS), f_lo=1, f_hi=f_hi, rms=rms, seed=seed)
+def record(seconds, rms=20.0, seed=0, fmax=150.0):
+    return band_limited_random(FS, int(seconds * FS), fmin=1, fmax=fmax, rms=rms, seed=seed)
 
 
 CASES = {
@@ -101,7 +101,7 @@ def test_saturation_clips_the_reconstructed_input_nonlinear():
 def test_saturation_clips_the_reconstructed_input_linear():
     base = demo_model()
     sat = base.replace(inputs=(Input("m3", channel=CH, saturation=5.0),))
-    u = record(3.0, rms=10.0, seed=2, f_hi=100.0)
+    u = record(3.0, rms=10.0, seed=2, fmax=100.0)
     s = simulate(sat, u, FS)
     assert s.meta["simulator"] == "foh-exact"
     # by hand: reconstruct, clip on the fine grid, FOH path
@@ -121,7 +121,7 @@ def test_saturation_clips_the_reconstructed_input_linear():
 
 
 def _tapered(seconds, seed):
-    u = record(seconds, rms=10.0, seed=seed, f_hi=100.0)
+    u = record(seconds, rms=10.0, seed=seed, fmax=100.0)
     n = u.size
     w = np.ones(n)
     ramp = np.sin(np.linspace(0, np.pi / 2, 200)) ** 2
@@ -204,7 +204,7 @@ def test_newton_failures_are_counted_and_warned_once():
 
 def test_linear_model_without_nonlinear_elements_in_the_kernel():
     model = demo_model()
-    u = record(2.0, rms=10.0, seed=9, f_hi=100.0)
+    u = record(2.0, rms=10.0, seed=9, fmax=100.0)
     a = simulate(model, u, FS, method="nonlinear")
     b = simulate(model, u, FS, method="linear")
     assert a.meta["newton_failures"] == 0

@@ -63,7 +63,7 @@ def test_sine_steady_state_matches_frf_amplitude_and_phase():
 def test_h1_from_simulation_matches_analytic_frf():
     model = demo_model()
     fs, nps = 500.0, 4096
-    u = band_limited_random(fs, 200_000, f_lo=1, f_hi=200, rms=10, seed=0)
+    u = band_limited_random(fs, 200_000, fmin=1, fmax=200, rms=10, seed=0)
     s = simulate(model, u, fs)
     f, Pxx = signal.welch(u, fs, nperseg=nps)
     _, Pxy = signal.csd(u, s.data[1:], fs, nperseg=nps)
@@ -88,7 +88,7 @@ def test_h1_from_simulation_matches_analytic_frf():
 def test_periodic_linear_equals_frf_on_multisine_lines():
     model = demo_model()
     fs, n = 500.0, 4096
-    u, k = multisine(fs, n, f_lo=2, f_hi=150, rms=5, seed=1)
+    u, k = multisine(fs, n, fmin=2, fmax=150, rms=5, seed=1)
     s = simulate_periodic(model, u, fs, n_periods=8)
     Y = np.fft.rfft(s.data[1:], axis=1)[:, k]
     U = np.fft.rfft(u)[k]
@@ -99,7 +99,7 @@ def test_periodic_linear_equals_frf_on_multisine_lines():
 def test_input_delay_and_saturation():
     base = demo_model()
     fs = 1000.0
-    u = band_limited_random(fs, 5000, f_lo=1, f_hi=100, rms=10, seed=2)
+    u = band_limited_random(fs, 5000, fmin=1, fmax=100, rms=10, seed=2)
     u[0] = 0.0  # so that the delayed input (zero before its start) is an exact shift
     delayed = base.replace(inputs=(Input("m3", channel="/actuator/force.wrench.force.x", delay=0.01),))
     # linear reconstruction: a 10-sample delay is then an exact shift
@@ -119,7 +119,7 @@ def test_input_delay_and_saturation():
 
 def test_noise_is_relative_to_rms_and_seeded():
     model = demo_model()
-    u = band_limited_random(1000.0, 20000, f_lo=1, f_hi=100, rms=10, seed=2)
+    u = band_limited_random(1000.0, 20000, fmin=1, fmax=100, rms=10, seed=2)
     clean = simulate(model, u, 1000.0)
     noisy = simulate(model, u, 1000.0, noise=0.1, seed=4)
     d = noisy.data[1:] - clean.data[1:]
@@ -139,7 +139,7 @@ def test_nonlinear_path_on_linear_model_agrees_with_exact():
     )
     m = lin.replace(elements=lin.elements + (CubicSpring(("m1", "ground"), k3=0.0),))
     fs = 1000.0
-    u = band_limited_random(fs, 4000, f_lo=1, f_hi=150, rms=10, seed=5)
+    u = band_limited_random(fs, 4000, fmin=1, fmax=150, rms=10, seed=5)
     exact = simulate(lin, u, fs, method="linear").data[1:]
     nl = simulate(m, u, fs, method="nonlinear", oversample=20).data[1:]
     inner = slice(50, -50)
@@ -273,7 +273,7 @@ def test_backlash_with_large_gap_is_linear_and_friction_dissipates():
     from vibroscope.models.elements import Backlash, Friction
 
     fs = 1000.0
-    u = band_limited_random(fs, 2000, f_lo=1, f_hi=100, rms=5, seed=8)
+    u = band_limited_random(fs, 2000, fmin=1, fmax=100, rms=5, seed=8)
     lin = simulate(LumpedModel.chain([1.0], [4e4], [8.0], output_quantity="displacement"), u, fs, upsampling="poly").data[1]
     gap = 10 * np.abs(lin).max()
     bl = simulate(_sdof_with(Backlash(("m1", "ground"), k=1e6, gap=gap)), u, fs).data[1]
@@ -288,7 +288,7 @@ def test_mr_damper_general_kernel_runs_and_damps():
     from vibroscope.models.elements import MRDamper
 
     fs = 1000.0
-    u = band_limited_random(fs, 500, f_lo=1, f_hi=100, rms=50, seed=9)
+    u = band_limited_random(fs, 500, fmin=1, fmax=100, rms=50, seed=9)
     lin = simulate(LumpedModel.chain([1.0], [4e4], [8.0], output_quantity="displacement"), u, fs).data[1]
     y0 = simulate(_sdof_with(MRDamper(("m1", "ground"), current=0.0)), u, fs).data[1]
     y1 = simulate(_sdof_with(MRDamper(("m1", "ground"), current=2.0)), u, fs).data[1]

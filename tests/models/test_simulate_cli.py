@@ -159,7 +159,7 @@ def test_an_input_log_with_a_gap_is_refused_naming_the_log_and_channel(tmp_path,
 
     u = np.sin(2 * np.pi * 5 * np.arange(4000) / 1000.0)
     u[1500:1800] = np.nan
-    log = write_ros2_mcap(tmp_path / "gap.mcap", Signals(u[None], 1000.0, CH[:1], ["N"], t0=1.0))
+    log = write_ros2_mcap(tmp_path / "gap.mcap", Signals(data=u[None], fs=1000.0, channels=CH[:1], units=["N"], t0=1.0))
     out = tmp_path / "out.mcap"
     assert main(["simulate", str(model_file), "--input", str(log), "--out", str(out)]) == 1
     err = capsys.readouterr().err.strip().splitlines()

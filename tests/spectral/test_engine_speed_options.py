@@ -89,10 +89,10 @@ def test_reference_mode_equals_the_full_matrix_columns():
                 assert np.isnan(G.G[:, i, j]).all()
     again = csd_matrix(X, FS, references=[3, 0, 3], **KW)  # repeats ignored
     np.testing.assert_array_equal(again.G, G.G)
-    by_name = csd_matrix(Signals(X, FS, list("abcde")), references="d", **KW)
+    by_name = csd_matrix(Signals(data=X, fs=FS, channels=list("abcde")), references="d", **KW)
     np.testing.assert_allclose(by_name.G[:, :, 3], REF[:, :, 3], rtol=0, atol=1e-13 * np.abs(REF).max())
     with pytest.raises(KeyError):
-        csd_matrix(Signals(X, FS, list("abcde")), references="z", **KW)
+        csd_matrix(Signals(data=X, fs=FS, channels=list("abcde")), references="z", **KW)
 
 
 def test_frf_through_reference_mode_equals_frf_of_the_full_matrix():

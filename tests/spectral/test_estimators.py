@@ -208,7 +208,7 @@ def test_two_input_h1_and_multiple_coherence():
 def test_frf_kind_and_conversion_from_units():
     fs = 1000.0
     data, *_ = _fir_system(2**14)
-    sig = Signals(data, fs, ["/f.wrench.force.x", "/imu.linear_acceleration.x"], ["N", "m/s^2"])
+    sig = Signals(data=data, fs=fs, channels=["/f.wrench.force.x", "/imu.linear_acceleration.x"], units=["N", "m/s^2"])
     h = frf(sig, "/f.wrench.force.x", nperseg=256)
     assert h.kind == "accelerance" and h.units == "m/s^2/N"
     assert h.outputs == ("/imu.linear_acceleration.x",)
@@ -230,7 +230,7 @@ def test_errors_are_clear():
     with pytest.raises(ValueError, match="both input and output"):
         frf(np.zeros((2, 1000)), 0, [0, 1])
     with pytest.raises(KeyError, match="no channel"):
-        frf(Signals(np.zeros((2, 1000)), 10.0, ["a", "b"]), "c")
+        frf(Signals(data=np.zeros((2, 1000)), fs=10.0, channels=["a", "b"]), "c")
 
 
 def test_results_are_read_only_and_unpack():
@@ -269,7 +269,7 @@ def test_merge_refuses_accumulators_of_other_settings(setting, other):
 
 
 def test_every_channel_lookup_raises_one_key_error_naming_the_channels():
-    sig = Signals(X[:2], FS, ["a", "b"])
+    sig = Signals(data=X[:2], fs=FS, channels=["a", "b"])
     s = welch(sig, nperseg=256)
     G = csd_matrix(sig, nperseg=256)
     np.testing.assert_array_equal(s["b"], s.values[1])
@@ -314,7 +314,7 @@ def test_amplitude_spectrum_keeps_the_offset_without_detrend():
 
 
 def test_coherences_are_results_that_unpack_like_tuples():
-    sig = Signals(X[:3], FS, ["a", "b", "c"])
+    sig = Signals(data=X[:3], fs=FS, channels=["a", "b", "c"])
     c = coherence(sig, nperseg=256)
     assert isinstance(c, Coherence) and c.channels == ("a", "b", "c") and c.settings["nperseg"] == 256
     f, g2 = c
@@ -329,7 +329,7 @@ def test_coherences_are_results_that_unpack_like_tuples():
 
 
 def test_results_print_a_summary_not_arrays():
-    sig = Signals(X[:3], FS, ["a", "b", "c"])
+    sig = Signals(data=X[:3], fs=FS, channels=["a", "b", "c"])
     G = csd_matrix(sig, nperseg=256)
     results = [welch(sig, nperseg=256), G, frf(G, "a"), coherence(G), multiple_coherence(G, "a"),
                spectrogram(sig, nperseg=256)]

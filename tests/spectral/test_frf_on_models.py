@@ -16,7 +16,7 @@ FS = 1000.0
 @pytest.fixture(scope="module")
 def demo_log():
     model = demo_model()
-    u = band_limited_random(FS, 1_200_000, f_lo=1.0, f_hi=300.0, rms=20.0, seed=11)
+    u = band_limited_random(FS, 1_200_000, fmin=1.0, fmax=300.0, rms=20.0, seed=11)
     return model, simulate(model, u, FS)
 
 

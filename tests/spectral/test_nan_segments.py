@@ -104,7 +104,7 @@ def test_frf_with_nan_uses_pair_counts_and_recovers_the_gain(common):
     if common:
         u[1000:1010] = np.nan
         y[7000] = np.nan
-    sig = Signals(np.vstack([u, y]), 100.0, ["f", "a"], ["N", "m/s^2"])
+    sig = Signals(data=np.vstack([u, y]), fs=100.0, channels=["f", "a"], units=["N", "m/s^2"])
     n_seg = (u.size - NPER) // (NPER // 2) + 1
     for est in ("H1", "H2", "Hv"):
         h = frf(sig, "f", "a", estimator=est, nperseg=NPER)
@@ -145,7 +145,7 @@ def test_complex_input_is_refused(fn):
     with pytest.raises(TypeError, match="x must be real"):
         frf(np.vstack([x, x]), 0, 1, fs=1.0, nperseg=128)
     with pytest.raises(TypeError, match="data must be real"):
-        Signals(x, 1.0, ["c"])
+        Signals(data=x, fs=1.0, channels=["c"])
 
 
 @pytest.mark.parametrize("kw, msg", [

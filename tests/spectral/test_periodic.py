@@ -26,7 +26,7 @@ def _sdof() -> LumpedModel:
 
 @pytest.fixture(scope="module")
 def excitation():
-    u1, lines = multisine(FS, N, f_lo=2.0, f_hi=60.0, seed=3)
+    u1, lines = multisine(FS, N, fmin=2.0, fmax=60.0, seed=3)
     return np.tile(u1, P), lines
 
 
@@ -49,7 +49,7 @@ def _add_noise(sig: Signals, levels, seed: int) -> Signals:
     data = np.array(sig.data)
     for r, lvl in enumerate(levels):
         data[r] += lvl * np.std(data[r]) * rng.standard_normal(data.shape[1])
-    return Signals(data, sig.fs, sig.channels, sig.units)
+    return Signals(data=data, fs=sig.fs, channels=sig.channels, units=sig.units)
 
 
 # -- detect_period -------------------------------------------------------------------------------
@@ -167,10 +167,10 @@ def test_frf_periodic_errors(clean, excitation):
     rng = np.random.default_rng(1)
     data = np.array(sig.data)
     data[0] = rng.standard_normal(data.shape[1])
-    rnd = Signals(data, sig.fs, sig.channels, sig.units)
+    rnd = Signals(data=data, fs=sig.fs, channels=sig.channels, units=sig.units)
     with pytest.raises(ValueError, match="'/actuator/force.wrench.force.x' is not periodic"):
         frf_periodic(rnd, 0)
-    short = Signals(sig.data[:, : 2 * N], sig.fs, sig.channels, sig.units)
+    short = Signals(data=sig.data[:, : 2 * N], fs=sig.fs, channels=sig.channels, units=sig.units)
     with pytest.raises(ValueError, match="force.wrench.force.x.*fewer than 2 segments"):
         frf_periodic(short, 0, period=N)
     with pytest.raises(ValueError, match="both input and output"):

@@ -31,7 +31,7 @@ def signals(n: int = 2000, fs: float = 100.0) -> Signals:
     t = np.arange(n) / fs
     data = np.array([np.sin(2 * np.pi * FN[0] * t) * (k + 1) + 0.1 * rng.standard_normal(n)
                      for k in range(len(POINTS))])
-    return Signals(data, fs, POINTS, ["m/s^2"] * len(POINTS), t0=12.5)
+    return Signals(data=data, fs=fs, channels=POINTS, units=["m/s^2"] * len(POINTS), t0=12.5)
 
 
 def modal() -> FakeModal:

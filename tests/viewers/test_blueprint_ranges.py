@@ -12,8 +12,9 @@ from vibroscope.viewers.rerun_view import log_analysis, read_rrd
 
 def test_time_series_and_spectra_views_span_the_whole_axis(tmp_path):
     rng = np.random.default_rng(0)
-    sig = Signals(rng.standard_normal((2, 4000)), 200.0, ["/f.wrench.force.x", "/imu/a.linear_acceleration.x"],
-                  ["N", "m/s^2"])
+    sig = Signals(data=rng.standard_normal((2, 4000)), fs=200.0, channels=["/f.wrench.force.x",
+                                                                           "/imu/a.linear_acceleration.x"],
+                  units=["N", "m/s^2"])
     G = csd_matrix(sig, nperseg=256)
     h = frf(G, "/f.wrench.force.x")
     path = log_analysis(signals=sig, csd=G.select(["/imu/a.linear_acceleration.x"]), psd=G.psd(), frf=h,

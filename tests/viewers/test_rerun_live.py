@@ -39,7 +39,7 @@ def _record(n: int = 12_000, seed: int = 1) -> Signals:
     rng = np.random.default_rng(seed)
     f = rng.standard_normal(n)
     y = [np.convolve(f, rng.standard_normal(8), mode="same") + 0.2 * rng.standard_normal(n) for _ in range(3)]
-    return Signals(np.vstack([f, *y]), FS, CHANNELS, ["N", "m/s^2", "m/s^2", "m/s^2"], t0=3.0)
+    return Signals(data=np.vstack([f, *y]), fs=FS, channels=CHANNELS, units=["N", "m/s^2", "m/s^2", "m/s^2"], t0=3.0)
 
 
 def _db(v, fac=10.0):
@@ -106,7 +106,7 @@ def test_intermediate_spectra_are_welch_of_the_record_so_far(live):
     assert [r.n_averages for r in view.refreshes] == list(counts)
     coh = data[channel_entity("live/frf/coherence", CHANNELS[2])]["BarChart:values"]
     for r, n in enumerate(n_read):
-        part = Signals(sig.data[:, :n], FS, CHANNELS, sig.units)
+        part = Signals(data=sig.data[:, :n], fs=FS, channels=CHANNELS, units=sig.units)
         G = csd_matrix(part, nperseg=NPERSEG)
         _close(np.asarray(ent["BarChart:values"][r]["buffer"]), _db(G.psd().values[1]))
         _close(np.asarray(coh[r]["buffer"]), frf(G, CHANNELS[0]).coherence[:, 1])
@@ -208,7 +208,7 @@ def test_long_record_is_logged_as_its_envelope(tmp_path):
     data = rng.standard_normal((2, n))
     data[0, 123_457] = 40.0
     data[1, 77_000:77_100] = np.nan
-    sig = Signals(data, 1000.0, ["/imu.a.x", "/imu.a.y"], ["m/s^2"] * 2)
+    sig = Signals(data=data, fs=1000.0, channels=["/imu.a.x", "/imu.a.y"], units=["m/s^2"] * 2)
     d = read_rrd(log_analysis(signals=sig, rrd_path=tmp_path / "long.rrd", max_points=10_000))
     for k, ch in enumerate(sig.channels):
         ent = d[channel_entity("signals", ch)]
@@ -250,8 +250,8 @@ def test_analyse_connect_streams_to_a_grpc_server(tmp_path):
     from vibroscope.io import write_ros2_mcap
 
     sig = _record(8000)
-    acc = Signals(sig.data[1:], FS, ["/imu.linear_acceleration.x", "/imu.linear_acceleration.y",
-                                     "/imu.linear_acceleration.z"], ["m/s^2"] * 3)
+    acc = Signals(data=sig.data[1:], fs=FS, channels=["/imu.linear_acceleration.x", "/imu.linear_acceleration.y",
+                                     "/imu.linear_acceleration.z"], units=["m/s^2"] * 3)
     log = write_ros2_mcap(tmp_path / "live.mcap", acc)
     port = _free_port()
     got = tmp_path / "received.rrd"
@@ -300,7 +300,8 @@ def test_connect_without_a_viewer_is_one_clear_error(tmp_path, capsys):
     from vibroscope.io import write_ros2_mcap
     from vibroscope.viewers.rerun_live import stream_log
 
-    sig = Signals(_record(2000).data[1:], FS, [f"/imu.linear_acceleration.{c}" for c in "xyz"], ["m/s^2"] * 3)
+    sig = Signals(data=_record(2000).data[1:], fs=FS, channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"],
+                  units=["m/s^2"] * 3)
     log = write_ros2_mcap(tmp_path / "x.mcap", sig)
     url = f"rerun+http://127.0.0.1:{_free_port()}/proxy"  # nothing listens there
     t = time.monotonic()

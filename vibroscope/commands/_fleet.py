@@ -62,7 +62,7 @@ def run_fleet(args, logs: list) -> int:
     if res.settings.get("input_choice"):  # the first log's force-like channel, the input of every log
         print(res.settings["input_choice"])
     for r in res.rows:
-        modes = ", ".join(f"{f:.3f} Hz ({percent(z)} %)" for f, z in zip(r.frequencies_hz, r.damping_ratios))
+        modes = ", ".join(f"{f:.3f} Hz ({percent(z)} %)" for f, z in zip(r.natural_frequencies, r.damping_ratios))
         print(f"{r.log}: {r.duration_s:.1f} s; modes {modes or '(none)'}" + (f"; {r.error}" if r.error else ""))
         for w in r.warnings[:3]:
             print(f"  warning: {w}")

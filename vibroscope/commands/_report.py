@@ -85,7 +85,7 @@ def report_text(an, *, source: str = "", true_modes=None, verbose: bool = False)
     if ident is not None and ident.rejected and not an.streamed:
         lines.append(f"  {len(ident.rejected)} candidates rejected (listed in the --json summary), e.g.:")
         for r in ident.rejected[:4]:
-            lines.append(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
+            lines.append(f"    {r.natural_frequency:9.3f} Hz: {r.reason}")
     if ident is not None and ident.settings.get("uncertainty") and unc:
         lines.append(f"  std: {ident.settings['uncertainty']}")
     sev = an.severity

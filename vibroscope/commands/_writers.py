@@ -87,7 +87,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
             except ValueError as exc:
                 raise VibroscopeError(f"--ods {f:g}: {exc}") from None
             ods_shapes.append(o)
-            print(f"ODS at {o.frequency_hz:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
+            print(f"ODS at {o.frequency:.4g} Hz: " + ", ".join(f"{p}: {abs(v):.3f}∠{np.degrees(np.angle(v)):.0f}°"
                                                               for p, v in list(zip(o.points, o.shape))[:6]))
     done = []
     preloaded()  # the libraries imported in the background (run): done before the figure workers fork
@@ -114,7 +114,7 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                                coords=sc.as_mapping(), true_modes=true_modes, stabilization=stab, synthesized=synth,
                                kinematics=(an.signals.select(acc), *kin) if kin else None,
                                ahead=ahead if early else None)
-            jobs += [(lambda o=o: plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png")
+            jobs += [(lambda o=o: plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency:.4g}Hz.png")
                      for o in ods_shapes]
             pending = PendingFigures(jobs)
         with pending or contextlib.nullcontext():  # an error or Ctrl-C here stops the figure workers

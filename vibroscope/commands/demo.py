@@ -68,7 +68,7 @@ def make_demo_log(path: Path, *, fs: float = 1000.0, duration: float = 120.0, se
 
     model = demo_model()
     n = int(round(duration * fs))
-    u = band_limited_random(fs, n, f_lo=2.0, f_hi=0.3 * fs, rms=20.0, seed=seed)
+    u = band_limited_random(fs, n, fmin=2.0, fmax=0.3 * fs, rms=20.0, seed=seed)
     sig = simulate(model, u, fs, t0=1_700_000_000.0, noise=noise, seed=seed + 1)
     path.parent.mkdir(parents=True, exist_ok=True)
     write_ros2_mcap(path, sig)

@@ -341,7 +341,7 @@ def _print_modes(ident, json_path=None) -> None:
         where = f"in {json_path}" if json_path else "all listed with --json FILE"
         print(f"  {len(ident.rejected)} candidates rejected ({where}), e.g.:")
         for r in ident.rejected[:4]:
-            print(f"    {r.frequency_hz:9.3f} Hz: {r.reason}")
+            print(f"    {r.natural_frequency:9.3f} Hz: {r.reason}")
 
 
 def _mark_uff(path: Path, header: str) -> None:
@@ -423,7 +423,7 @@ def _write(args, source: Path, ident, h, synth, signals, psd, csd, sv, coords=No
             for o in ods:
                 from vibroscope.viewers.figures import plot_ods
 
-                paths.append(_save(plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency_hz:.4g}Hz.png"))
+                paths.append(_save(plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency:.4g}Hz.png"))
             done.append(f"figures: {', '.join(str(tx.final(p)) for p in paths)}")
         if not args.no_rrd or args.spawn:
             from vibroscope.viewers.rerun_view import log_analysis

@@ -46,7 +46,7 @@ def add_parser(sub) -> None:
     src.add_argument(
         "--excitation",
         metavar="SPEC",
-        help='e.g. "random:f_lo=1,f_hi=200,rms=10", "multisine:f_lo=1,f_hi=200,lines=odd,rms=5", '
+        help='e.g. "random:fmin=1,fmax=200,rms=10", "multisine:fmin=1,fmax=200,lines=odd,rms=5", '
         '"sweep:f0=1,f1=200,amplitude=10", "impact:peak=100,duration=0.002", "step:amplitude=1"',
     )
     src.add_argument("--input", type=Path, metavar="LOG.mcap", help="drive the model with its input channels from this log")

@@ -219,8 +219,8 @@ def _split_at_gaps(model, sigs: list, nperseg: int | None) -> list:
                       f"gap-free stretches ({used} of {sig.n_samples} samples; stretches shorter than "
                       f"{min_len / sig.fs:.3g} s left out)", UserWarning, stacklevel=4)
         for a, b in keep:
-            out.append(Signals(sig.data[:, a:b], sig.fs, sig.channels, sig.units, sig.t0 + a / sig.fs,
-                               {**sig.meta, "stretch": [int(a), int(b)]}))
+            out.append(Signals(data=sig.data[:, a:b], fs=sig.fs, channels=sig.channels, units=sig.units, t0=sig.t0 + a / sig.fs,
+                               meta={**sig.meta, "stretch": [int(a), int(b)]}))
     return out
 
 

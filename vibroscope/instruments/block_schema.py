@@ -313,12 +313,12 @@ class BlockSchema:
         """
         return {s: step_response(g, t, amplitude=amplitude) for s, g in self.transfers(from_).items()}
 
-    def block_bode(self, frequencies_hz) -> dict[str, BodeResult]:
+    def block_bode(self, frequencies) -> dict[str, BodeResult]:
         """Bode data of each block on its own, keyed by block name.
 
         Parameters
         ----------
-        frequencies_hz : array_like
+        frequencies : array_like
             Frequencies in Hz.
 
         Returns
@@ -326,7 +326,7 @@ class BlockSchema:
         dict of str to BodeResult
             :func:`~vibroscope.instruments.lti.bode` of each block's system.
         """
-        return {b.name: bode(b.sys, frequencies_hz) for b in self.blocks}
+        return {b.name: bode(b.sys, frequencies) for b in self.blocks}
 
     def forced_response(self, t, u, from_: str | None = None) -> dict[str, np.ndarray]:
         """Responses at every named point to the input history `u` applied at `from_`.

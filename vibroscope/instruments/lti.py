@@ -96,7 +96,7 @@ class BodeResult:
 
     Attributes
     ----------
-    frequencies_hz : ndarray
+    frequencies : ndarray
         Frequencies in Hz.
     magnitude : ndarray
         |G(j 2 pi f)|, linear.
@@ -104,12 +104,12 @@ class BodeResult:
         Unwrapped phase in degrees.
     """
 
-    frequencies_hz: np.ndarray
+    frequencies: np.ndarray
     magnitude: np.ndarray
     phase_deg: np.ndarray
 
     def __iter__(self):
-        return iter((self.frequencies_hz, self.magnitude, self.phase_deg))
+        return iter((self.frequencies, self.magnitude, self.phase_deg))
 
     @property
     def magnitude_db(self) -> np.ndarray:
@@ -143,17 +143,17 @@ class NyquistResult:
 
     Attributes
     ----------
-    frequencies_hz : ndarray
+    frequencies : ndarray
         Frequencies in Hz.
     response : ndarray of complex
         Complex frequency response.
     """
 
-    frequencies_hz: np.ndarray
+    frequencies: np.ndarray
     response: np.ndarray
 
     def __iter__(self):
-        return iter((self.frequencies_hz, self.response))
+        return iter((self.frequencies, self.response))
 
     def plot(self, ax=None, label: str | None = None, mirror: bool = True, **kwargs):
         """Re/Im locus (with its mirror image for negative frequencies, dashed)
@@ -237,11 +237,11 @@ class StepResult:
 # --------------------------------------------------------------------------- functions
 
 
-def _freq_response(sys, frequencies_hz) -> np.ndarray:
-    """Complex response of a SISO system at `frequencies_hz`, by :func:`control.frequency_response`."""
-    f = np.asarray(frequencies_hz, dtype=float)
+def _freq_response(sys, frequencies) -> np.ndarray:
+    """Complex response of a SISO system at `frequencies`, by :func:`control.frequency_response`."""
+    f = np.asarray(frequencies, dtype=float)
     if f.ndim != 1 or f.size == 0 or np.any(f < 0):
-        raise ValueError(f"frequencies_hz must be a 1-D array of non-negative Hz, got shape {f.shape}")
+        raise ValueError(f"frequencies must be a 1-D array of non-negative Hz, got shape {f.shape}")
     tf = control.tf(sys)
     if tf.ninputs != 1 or tf.noutputs != 1:
         raise ValueError("only SISO systems are supported")
@@ -251,14 +251,14 @@ def _freq_response(sys, frequencies_hz) -> np.ndarray:
         return np.asarray(control.frequency_response(tf, 2.0 * np.pi * f).complex).reshape(-1)
 
 
-def bode(sys, frequencies_hz) -> BodeResult:
+def bode(sys, frequencies) -> BodeResult:
     """Bode magnitude and phase of a SISO LTI system.
 
     Parameters
     ----------
     sys : control.LTI
         SISO system (time unit s).
-    frequencies_hz : array_like
+    frequencies : array_like
         Frequencies in Hz.
 
     Returns
@@ -273,27 +273,27 @@ def bode(sys, frequencies_hz) -> BodeResult:
     >>> round(float(r.magnitude[0]), 4), round(float(r.phase_deg[0]), 1)
     (0.7071, -45.0)
     """
-    f = np.asarray(frequencies_hz, dtype=float)
+    f = np.asarray(frequencies, dtype=float)
     h = _freq_response(sys, f)
     return BodeResult(_ro(f), _ro(np.abs(h)), _ro(np.degrees(np.unwrap(np.angle(h)))))
 
 
-def nyquist(sys, frequencies_hz) -> NyquistResult:
+def nyquist(sys, frequencies) -> NyquistResult:
     """Nyquist locus (complex frequency response) of a SISO LTI system.
 
     Parameters
     ----------
     sys : control.LTI
         SISO system (time unit s).
-    frequencies_hz : array_like
+    frequencies : array_like
         Frequencies in Hz.
 
     Returns
     -------
     NyquistResult
-        The complex response at `frequencies_hz`.
+        The complex response at `frequencies`.
     """
-    f = np.asarray(frequencies_hz, dtype=float)
+    f = np.asarray(frequencies, dtype=float)
     h = _freq_response(sys, f)
     return NyquistResult(_ro(f), _ro(h))
 

@@ -455,7 +455,7 @@ def simulate_mr_damper(
     return MRDamperResult(**arrays, current=float(current), coeffs=c, step_s=1.0 / fs / nsub)
 
 
-def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequency_hz: float) -> float:
+def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequency: float) -> float:
     """Energy per cycle (J) of the model linearised for small motion (|z| << (A/(beta+gamma))^(1/n)).
 
     Then ``z' ~ A (x' - y')``, the Bouc-Wen element is a spring ``alpha A``, and the model
@@ -468,7 +468,7 @@ def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequenc
     coeffs : MRDamperCoefficients
     amplitude : float
         Displacement amplitude, m.
-    frequency_hz : float
+    frequency : float
         Frequency, Hz.
 
     Returns
@@ -477,7 +477,7 @@ def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequenc
         Energy dissipated per cycle in J.
     """
     c = coeffs
-    w = 2 * np.pi * frequency_hz
+    w = 2 * np.pi * frequency
     ka = c.alpha * c.A + c.k0
     yx = (ka + 1j * w * c.c0) / (ka + 1j * w * (c.c0 + c.c1))
     K = 1j * w * c.c1 * yx + c.k1
@@ -487,7 +487,7 @@ def linear_limit_energy(coeffs: MRDamperCoefficients, amplitude: float, frequenc
 def sine_test(
     currents: Sequence[float] = (0.0, 0.5, 1.0, 1.5, 2.0),
     amplitude: float = 0.015,
-    frequency_hz: float = 2.5,
+    frequency: float = 2.5,
     *,
     params: MRDamperParams | None = None,
     fs: float = 2000.0,
@@ -501,7 +501,7 @@ def sine_test(
         Coil currents, A.
     amplitude : float
         Displacement amplitude, m (Spencer's test: 1.5 cm).
-    frequency_hz : float
+    frequency : float
         Excitation frequency, Hz (Spencer's test: 2.5 Hz).
     params : MRDamperParams, optional
         Defaults to :meth:`MRDamperParams.spencer1997`.
@@ -513,9 +513,9 @@ def sine_test(
     Returns
     -------
     list of MRDamperResult
-        One per current; ``r.loop_energy(1 / frequency_hz)`` is the loop area of the last cycle.
+        One per current; ``r.loop_energy(1 / frequency)`` is the loop area of the last cycle.
     """
-    t = np.arange(int(cycles * fs / frequency_hz) + 1) / fs
-    w = 2 * np.pi * frequency_hz
+    t = np.arange(int(cycles * fs / frequency) + 1) / fs
+    w = 2 * np.pi * frequency
     x, xd = amplitude * np.sin(w * t), amplitude * w * np.cos(w * t)
     return [simulate_mr_damper(x, fs, i, xdot=xd, params=params) for i in currents]

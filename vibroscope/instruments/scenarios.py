@@ -41,7 +41,7 @@ class PneumaticScenario:
         Per area, the responses to the flow step of each of :data:`PNEUMATIC_OUTPUTS`
         (m, m/s, m/s²), on ``time_s``.
     bode : tuple of BodeResult
-        Per area, displacement per flow z/Q on ``frequencies_hz``.
+        Per area, displacement per flow z/Q on ``frequencies``.
     nyquist : tuple of NyquistResult
         Per area, velocity per flow ż/Q (0.01 to 100 Hz).
     """
@@ -117,7 +117,7 @@ class BlockSchemaScenario:
         The load step's height (unit of r) and time (s).
     open_loop : dict of str to StepResult
         Open loop (no feedback), unit reference step, at each point.
-    frequencies_hz : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
         Frequency axis of the Bode magnitudes, Hz.
     block_bode : dict of str to BodeResult
         Each component's Bode.
@@ -131,7 +131,7 @@ class BlockSchemaScenario:
     load_step: float
     t_load: float
     open_loop: dict
-    frequencies_hz: np.ndarray
+    frequencies: np.ndarray
     block_bode: dict
     closed_loop_bode: BodeResult
 
@@ -161,6 +161,6 @@ def block_schema_scenario(load_step: float = -0.5, t_load: float = 15.0, t_end: 
     load = cl.forced_response(t, (t >= t_load).astype(float) * load_step, from_="d")
     f = np.logspace(-3, 1, 500)
     return BlockSchemaScenario(time_s=t, reference=reference, load=load, load_step=float(load_step),
-                               t_load=float(t_load), open_loop=ol.step(t), frequencies_hz=f,
+                               t_load=float(t_load), open_loop=ol.step(t), frequencies=f,
                                block_bode=cl.block_bode(f), closed_loop_bode=bode(cl.transfer("y"), f))
 

@@ -413,7 +413,8 @@ class LogGrid:
             data[rows] = out
         meta = {"source": str(self.path), "t0_ns": self.time_of(i0), "grid_index": int(i0),
                 "warnings": notes.warnings, "skipped": notes.skipped}
-        return Signals(data, self.fs, list(self.channels), list(self.units), self.time_of(i0) * 1e-9, meta)
+        return Signals(data=data, fs=self.fs, channels=list(self.channels), units=list(self.units),
+                       t0=self.time_of(i0) * 1e-9, meta=meta)
 
     def blocks(self, block_samples: int, *, start: int = 0, stop: int | None = None) -> Iterator[Signals]:
         """Consecutive blocks of `block_samples` grid samples from `start` to `stop` (the last shorter).

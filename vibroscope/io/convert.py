@@ -241,8 +241,9 @@ def select_channels(
             )
         else:
             un = list(spec)
-    return Signals(signals.data[idx], signals.fs, [names[i] for i in idx], [normalize_unit(u) for u in un],
-                   signals.t0, {**signals.meta, "selected": [names[i] for i in idx]})
+    return Signals(data=signals.data[idx], fs=signals.fs, channels=[names[i] for i in idx],
+                   units=[normalize_unit(u) for u in un],
+                   t0=signals.t0, meta={**signals.meta, "selected": [names[i] for i in idx]})
 
 
 #: header names taken as a time column in s: ``time``, ``time_s``, ``time [s]``, ``seconds`` in any
@@ -423,7 +424,7 @@ def read_csv(
     nm = [header[c] if header and c < len(header) and header[c] else f"c{c}" for c in cols]
     if len(set(nm)) < len(nm):  # a header that repeats names: fall back to column indices
         nm = [f"c{c}" for c in cols]
-    sig = Signals(a[:, cols].T, fs, nm, None, t0, {"source": str(path), "columns": cols})
+    sig = Signals(data=a[:, cols].T, fs=fs, channels=nm, units=None, t0=t0, meta={"source": str(path), "columns": cols})
     known = [h or f"c{c}" for c, h in enumerate(header)] if header and len(set(header)) == len(header) else None
     return select_channels(sig, channels, units, source=path, known=known)
 
@@ -515,8 +516,8 @@ def read_mat(
         chans = [chans[i] for i in idx]
         if len({c.size for _, c in chans}) > 1:
             raise ValueError(f"{path}: variables differ in length: {dict((k, c.size) for k, c in chans)}")
-    sig = Signals(np.vstack([c for _, c in chans]), fs, [k for k, _ in chans], None, 0.0,
-                  {"source": str(path), "skipped_variables": skipped})
+    sig = Signals(data=np.vstack([c for _, c in chans]), fs=fs, channels=[k for k, _ in chans], units=None, t0=0.0,
+                  meta={"source": str(path), "skipped_variables": skipped})
     return select_channels(sig, channels, units, source=path, stable_order=False, known=names)
 
 
@@ -588,8 +589,8 @@ def read_uff58(
     fs_r = round(fs, 6)
     fs = fs_r if abs(fs_r - fs) < 1e-9 * fs else fs
     meta = {"source": str(path), "nodes": [(s.get("rsp_node"), s.get("rsp_dir")) for s in recs]}
-    sig = Signals(np.vstack([np.asarray(s["data"], float) for s in recs]), fs, names, file_units,
-                  float(recs[0].get("abscissa_min", 0.0)), meta)
+    sig = Signals(data=np.vstack([np.asarray(s["data"], float) for s in recs]), fs=fs, channels=names, units=file_units,
+                  t0=float(recs[0].get("abscissa_min", 0.0)), meta=meta)
     return select_channels(sig, channels, units, source=path) if (channels or units) else sig
 
 
@@ -873,7 +874,7 @@ def convert_to_mcap(
         else:
             new_names.append(f"{prefix or '/signals'}.{sanitize_name(nm)}")
             new_units.append(u)
-    written = Signals(sig.data, sig.fs, new_names, new_units, sig.t0,
-                      {**sig.meta, "original_channels": list(sig.channels)})
+    written = Signals(data=sig.data, fs=sig.fs, channels=new_names, units=new_units, t0=sig.t0,
+                      meta={**sig.meta, "original_channels": list(sig.channels)})
     path = write_ros2_mcap(out_p, written, progress=progress)
     return path, written

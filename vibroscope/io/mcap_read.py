@@ -423,7 +423,7 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
     >>> from vibroscope import Signals
     >>> from vibroscope.io import write_ros2_mcap
     >>> t = np.arange(500) / 100.0
-    >>> sig = Signals(np.sin(2 * np.pi * 5.0 * t)[None], fs=100.0,
+    >>> sig = Signals(data=np.sin(2 * np.pi * 5.0 * t)[None], fs=100.0,
     ...               channels=["/imu.linear_acceleration.z"], units=["m/s^2"])
     >>> with tempfile.TemporaryDirectory() as d:
     ...     back = read_mcap(write_ros2_mcap(pathlib.Path(d) / "run.mcap", sig))
@@ -463,4 +463,5 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
         data = np.vstack([trows[t][r] for t, r in picks])
     names = [str(parsed[i]) for i in keep]
     meta = _meta(log, notes, reports, resampled, fast_path, start, gaps, names, data)
-    return Signals(data, fs, names, [log.unit(parsed[i]) for i in keep], start * 1e-9, meta)
+    return Signals(data=data, fs=fs, channels=names, units=[log.unit(parsed[i]) for i in keep], t0=start * 1e-9,
+                   meta=meta)

@@ -71,12 +71,12 @@ def parabolic_vertex(y: np.ndarray, k: int) -> tuple[float, float]:
     return p, float(b - 0.25 * (a - c) * p)
 
 
-def parabolic_peak(f: np.ndarray, y: np.ndarray, k: int) -> float:
+def parabolic_peak(frequencies: np.ndarray, y: np.ndarray, k: int) -> float:
     """Frequency of a peak of `y` at line `k`, refined by the parabola through its neighbours.
 
     Parameters
     ----------
-    f : ndarray, shape (n,)
+    frequencies : ndarray, shape (n,)
         Frequencies in Hz.
     y : ndarray, shape (n,)
         The curve (e.g. in dB).
@@ -91,8 +91,8 @@ def parabolic_peak(f: np.ndarray, y: np.ndarray, k: int) -> float:
         non-finite value, or where the parabola does not open downwards (no maximum).
     """
     if k <= 0 or k >= len(y) - 1 or not np.all(np.isfinite(y[k - 1 : k + 2])):
-        return float(f[k])
+        return float(frequencies[k])
     if y[k - 1] - 2 * y[k] + y[k + 1] >= 0:
-        return float(f[k])
+        return float(frequencies[k])
     p, _ = parabolic_vertex(y, k)
-    return float(f[k] + p * (f[k + 1] - f[k - 1]) / 2)
+    return float(frequencies[k] + p * (frequencies[k + 1] - frequencies[k - 1]) / 2)

@@ -71,8 +71,9 @@ class Mode:
 
     Attributes
     ----------
-    frequency_hz : float
-        Natural frequency in Hz.
+    natural_frequency : float
+        Natural frequency in Hz (the `natural_frequencies` entry of its model; the JSON key is
+        ``frequency_hz``).
     damping_ratio : float
         Viscous damping ratio ζ (dimensionless, e.g. 0.01 for 1 %); NaN when not estimated.
     shape : ndarray, complex, shape (n_points,)
@@ -85,7 +86,7 @@ class Mode:
         Identification method.
     """
 
-    frequency_hz: float
+    natural_frequency: float
     damping_ratio: float
     shape: np.ndarray
     points: tuple[str, ...]
@@ -95,14 +96,14 @@ class Mode:
     def to_dict(self) -> dict:
         """JSON-ready entry ``{"frequency_hz", "damping_ratio", "shape": {point: [re, im]}, "method"}``."""
         return {
-            "frequency_hz": float(self.frequency_hz),
+            "frequency_hz": float(self.natural_frequency),
             "damping_ratio": None if not np.isfinite(self.damping_ratio) else float(self.damping_ratio),
             "shape": {p: [float(v.real), float(v.imag)] for p, v in zip(self.points, self.shape)},
             "method": self.method,
         }
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class ModalModel:
     """Identified modal parameters of a structure.
 
@@ -132,7 +133,7 @@ class ModalModel:
     --------
     >>> m = ModalModel(natural_frequencies=[10.0], damping_ratios=[0.02], shapes=[[1.0, 0.5]], points=["a", "b"],
     ...                method="peak_picking")
-    >>> len(m), m[0].frequency_hz
+    >>> len(m), m[0].natural_frequency
     (1, 10.0)
     """
 
@@ -167,7 +168,7 @@ class ModalModel:
 
     def __getitem__(self, r: int) -> Mode:
         r = range(len(self))[r]
-        return Mode(frequency_hz=float(self.natural_frequencies[r]), damping_ratio=float(self.damping_ratios[r]),
+        return Mode(natural_frequency=float(self.natural_frequencies[r]), damping_ratio=float(self.damping_ratios[r]),
                     shape=self.shapes[r], points=self.points, index=r, method=self.method)
 
     def __iter__(self) -> Iterator[Mode]:
@@ -213,14 +214,14 @@ def ods_as_modal_model(ods_result) -> ModalModel:
     Returns
     -------
     ModalModel
-        ``natural_frequencies = [frequency_hz]``, ``damping_ratios = [nan]``,
+        ``natural_frequencies = [frequency]``, ``damping_ratios = [nan]``,
         ``shapes = [shape]``, ``points``, ``method = 'ods'``; ``extra`` holds ``source``,
         ``reference``, ``requested_hz``, ``input``, ``units`` and ``values`` (shape (1, n_points)).
     """
     o = ods_result
-    extra = {"source": o.source, "reference": o.reference, "requested_hz": np.array([o.requested_hz]),
+    extra = {"source": o.source, "reference": o.reference, "requested_hz": np.array([o.requested_frequency]),
              "input": o.input, "units": o.units, "values": np.asarray(o.values)[None, :]}
-    return ModalModel(natural_frequencies=[o.frequency_hz], damping_ratios=[np.nan], shapes=[o.shape], points=o.points,
+    return ModalModel(natural_frequencies=[o.frequency], damping_ratios=[np.nan], shapes=[o.shape], points=o.points,
                       method="ods", extra=extra)
 
 

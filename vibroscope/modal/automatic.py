@@ -296,7 +296,7 @@ def auto_ssi(
     >>> b, a = scipy.signal.iirpeak(5.0, Q=25.0, fs=100.0)
     >>> x = np.outer([1.0, -0.5], scipy.signal.lfilter(b, a, rng.standard_normal(20_000)))
     >>> x += 0.05 * x.std(axis=1, keepdims=True) * rng.standard_normal(x.shape)
-    >>> ident = auto_ssi(Signals(x, 100.0, channels=["/a1.x", "/a2.x"]), f_low=5.0, uncertainty=False)
+    >>> ident = auto_ssi(Signals(data=x, fs=100.0, channels=["/a1.x", "/a2.x"]), f_low=5.0, uncertainty=False)
     >>> len(ident.modes), round(float(ident.modes.natural_frequencies[0]), 1)
     (1, 5.0)
     >>> round(float(ident.modes.damping_ratios[0]), 2), np.round(ident.modes.shapes.real, 2)
@@ -414,7 +414,7 @@ def auto_lscf(
     >>> rng = np.random.default_rng(0)
     >>> u = rng.standard_normal(100_000)
     >>> b, a = scipy.signal.iirpeak(5.0, Q=25.0, fs=100.0)
-    >>> sig = Signals(np.vstack([u, scipy.signal.lfilter(b, a, u)]), 100.0, channels=["/f.x", "/a.x"],
+    >>> sig = Signals(data=np.vstack([u, scipy.signal.lfilter(b, a, u)]), fs=100.0, channels=["/f.x", "/a.x"],
     ...               units=["N", "m/s^2"])
     >>> ident = auto_lscf(frf(sig, "/f.x", nperseg=2048))
     >>> len(ident.modes), round(float(ident.modes.natural_frequencies[0]), 2)
@@ -476,7 +476,7 @@ def auto_lscf(
                                 "random part from a record)") if len(mm) else None,
                 **{k: v for k, v in sel.criteria.items() if k != "band_hz"}}
     mm = dataclasses.replace(mm, extra={**mm.extra, "settings": settings, "stabilization": st})
-    return Identification(mm, tuple(sorted(rejected, key=lambda r: r.frequency_hz)), st, settings, res)
+    return Identification(mm, tuple(sorted(rejected, key=lambda r: r.natural_frequency)), st, settings, res)
 
 
 def positive_power_spectra(signals: Signals, *, n_lags: int, ref: Sequence[int] | None = None,
@@ -526,8 +526,10 @@ def positive_power_spectra(signals: Signals, *, n_lags: int, ref: Sequence[int] 
     Rw[0] *= 0.5
     S = np.fft.rfft(Rw, n=2 * n_lags, axis=0)  # Σ R(τ) w(τ) e^{−jωτ}: a causal response's spectrum
     f = np.fft.rfftfreq(2 * n_lags, 1 / fs)
-    h = FRF(f, S, np.full((f.size, y.shape[0]), np.nan), tuple(signals.channels[i] for i in ref),
-            tuple(signals.channels), "positive_power_spectra", None, "", {"n_lags": n_lags, "sigma": sigma})
+    h = FRF(frequencies=f, H=S, coherence=np.full((f.size, y.shape[0]), np.nan),
+            inputs=tuple(signals.channels[i] for i in ref),
+            outputs=tuple(signals.channels), estimator="positive_power_spectra", kind=None, units="",
+            settings={"n_lags": n_lags, "sigma": sigma})
     return h, float(sigma)
 
 

@@ -105,7 +105,7 @@ def _window_lag_weights(csd: CrossSpectralMatrix, n: int) -> np.ndarray | None:
 
 
 def efdd_damping(
-    f: np.ndarray,
+    frequencies: np.ndarray,
     bell: np.ndarray,
     fs: float,
     *,
@@ -126,7 +126,7 @@ def efdd_damping(
 
     Parameters
     ----------
-    f : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
         The full one-sided frequency axis in Hz (0 … fs/2).
     bell : ndarray, shape (n_f,)
         The SDOF spectral density (zero outside the mode's bell).
@@ -157,7 +157,7 @@ def efdd_damping(
     normalised window autocorrelation ``Σ w[n] w[n+m] / Σ w²``; dividing by it removes most of the
     window's damping bias for lags well inside the segment.
     """
-    n_f = len(f)
+    n_f = len(frequencies)
     nfft = 2 * (n_f - 1) if nfft is None else int(nfft)
     r = scipy.fft.irfft(bell, n=nfft)[: nfft // 2]
     if r[0] <= 0:

@@ -31,9 +31,9 @@ def fit_band(frf: FRF, fmin: float | None, fmax: float | None) -> tuple[np.ndarr
     return sel, lo, hi
 
 
-def _poles(frequencies_hz: np.ndarray, damping_ratios: np.ndarray) -> np.ndarray:
+def _poles(natural_frequencies: np.ndarray, damping_ratios: np.ndarray) -> np.ndarray:
     """``λ = −ζ ω_n + j ω_n sqrt(1 − ζ²)`` (rad/s) from natural frequencies (Hz) and damping."""
-    wn = 2 * np.pi * np.asarray(frequencies_hz, float)
+    wn = 2 * np.pi * np.asarray(natural_frequencies, float)
     z = np.asarray(damping_ratios, float)
     return -z * wn + 1j * wn * np.sqrt(1 - z**2)
 
@@ -218,12 +218,12 @@ class LSFDResult:
         """Power of jω of the FRF kind: 0 receptance (or unknown), 1 mobility, 2 accelerance."""
         return power_of_jw(self.kind)
 
-    def synthesize(self, frequencies_hz=None) -> FRF:
+    def synthesize(self, frequencies=None) -> FRF:
         """The fitted model evaluated on a frequency axis.
 
         Parameters
         ----------
-        frequencies_hz : array_like, shape (n_f,), optional
+        frequencies : array_like, shape (n_f,), optional
             Frequencies in Hz; default the lines of the fit. A 0 Hz line is NaN when the lower
             residual's power ``p − 2`` is negative.
 
@@ -232,7 +232,7 @@ class LSFDResult:
         FRF
             ``estimator='lsfd'``, the same kind and units, NaN coherence.
         """
-        f = self.frequencies if frequencies_hz is None else np.atleast_1d(np.asarray(frequencies_hz, float))
+        f = self.frequencies if frequencies is None else np.atleast_1d(np.asarray(frequencies, float))
         w = 2 * np.pi * f
         jw = 1j * w[:, None, None]
         lam = self.poles[:, None, None]
@@ -382,7 +382,7 @@ class LSFDResult:
 
 def lsfd(
     frf: FRF,
-    frequencies_hz,
+    natural_frequencies,
     damping_ratios,
     *,
     fmin: float | None = None,
@@ -421,7 +421,7 @@ def lsfd(
     ----------
     frf : FRF
         Measured FRF ``H[f, output, input]``; its ``kind`` selects ``p``.
-    frequencies_hz : array_like, shape (n_modes,)
+    natural_frequencies : array_like, shape (n_modes,)
         Natural frequencies of the poles in Hz (e.g. from :func:`vibroscope.modal.lscf`).
     damping_ratios : array_like, shape (n_modes,)
         Their damping ratios, in [0, 1).
@@ -466,7 +466,7 @@ def lsfd(
     >>> bool(res.error(h)[0] < 1e-9)
     True
     """
-    fn = np.atleast_1d(np.asarray(frequencies_hz, float))
+    fn = np.atleast_1d(np.asarray(natural_frequencies, float))
     zeta = np.atleast_1d(np.asarray(damping_ratios, float))
     if fn.ndim != 1 or fn.shape != zeta.shape:
         raise ValueError(f"{fn.shape=} natural frequencies and {zeta.shape=} damping ratios must match")

@@ -19,7 +19,7 @@ from vibroscope.spectral import FRF
 __all__ = ["peak_picking", "half_power_bandwidth", "fit_sdof"]
 
 
-def half_power_bandwidth(f: np.ndarray, power: np.ndarray, k: int) -> tuple[float, float]:
+def half_power_bandwidth(frequencies: np.ndarray, power: np.ndarray, k: int) -> tuple[float, float]:
     """Half-power (−3 dB) frequencies around the peak bin `k` of a power-like curve.
 
     Walks left and right from `k` until `power` falls below ``power[k] / 2`` and interpolates the
@@ -27,7 +27,7 @@ def half_power_bandwidth(f: np.ndarray, power: np.ndarray, k: int) -> tuple[floa
 
     Parameters
     ----------
-    f : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
         Frequencies in Hz.
     power : ndarray, shape (n_f,)
         A squared magnitude (``|H|²``, a PSD or a singular value), positive.
@@ -50,7 +50,7 @@ def half_power_bandwidth(f: np.ndarray, power: np.ndarray, k: int) -> tuple[floa
             nxt = j + step
             if power[nxt] < half:
                 t = (db[j] - hdb) / (db[j] - db[nxt])
-                return float(f[j] + t * (f[nxt] - f[j]))
+                return float(frequencies[j] + t * (frequencies[nxt] - frequencies[j]))
             if power[nxt] > power[k]:
                 return np.nan
             j = nxt
@@ -59,7 +59,8 @@ def half_power_bandwidth(f: np.ndarray, power: np.ndarray, k: int) -> tuple[floa
     return walk(-1), walk(+1)
 
 
-def fit_sdof(f: np.ndarray, H: np.ndarray, fn0: float, zeta0: float) -> tuple[float, float, np.ndarray, float]:
+def fit_sdof(frequencies: np.ndarray, H: np.ndarray, fn0: float,
+             zeta0: float) -> tuple[float, float, np.ndarray, float]:
     """Least-squares single-DOF fit of receptances around one resonance, all channels together.
 
     Each column ``k`` of `H` is modelled as ``A_k / (ωr² − ω² + 2jζωrω) + R_k + M_k / ω²`` with a
@@ -71,7 +72,7 @@ def fit_sdof(f: np.ndarray, H: np.ndarray, fn0: float, zeta0: float) -> tuple[fl
 
     Parameters
     ----------
-    f : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
         Frequencies in Hz (a band around the resonance, at least 4 bins).
     H : ndarray, complex, shape (n_f, n_channels)
         Receptance-like FRFs (displacement per force, any units).
@@ -89,7 +90,7 @@ def fit_sdof(f: np.ndarray, H: np.ndarray, fn0: float, zeta0: float) -> tuple[fl
     cost : float
         Relative residual norm ``‖H − fit‖ / ‖H‖`` of the weighted data.
     """
-    w = 2 * np.pi * np.asarray(f, dtype=float)
+    w = 2 * np.pi * np.asarray(frequencies, dtype=float)
     H = np.asarray(H, dtype=complex)
     if H.ndim == 1:
         H = H[:, None]
@@ -111,9 +112,9 @@ def fit_sdof(f: np.ndarray, H: np.ndarray, fn0: float, zeta0: float) -> tuple[fl
         r = (Hn - Phi @ coef).ravel()
         return np.concatenate([r.real, r.imag])
 
-    lo = [f[0], 1e-6]
-    hi = [f[-1], 0.5]
-    p0 = [float(np.clip(fn0, f[0] + 1e-9, f[-1] - 1e-9)), float(np.clip(zeta0, 2e-6, 0.49))]
+    lo = [frequencies[0], 1e-6]
+    hi = [frequencies[-1], 0.5]
+    p0 = [float(np.clip(fn0, frequencies[0] + 1e-9, frequencies[-1] - 1e-9)), float(np.clip(zeta0, 2e-6, 0.49))]
     sol = scipy.optimize.least_squares(resid, p0, bounds=(lo, hi), x_scale=[max(fn0, 1e-9) * 1e-3, max(zeta0, 1e-4)],
                                        method="trf")
     Phi, coef = solve(sol.x)

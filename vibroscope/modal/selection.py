@@ -72,22 +72,22 @@ class RejectedMode:
 
     Attributes
     ----------
-    frequency_hz : float
-        Its natural frequency in Hz.
+    natural_frequency : float
+        Its natural frequency in Hz (the JSON key is ``frequency_hz``).
     damping_ratio : float
         Its damping ratio (dimensionless); NaN when not estimated.
     reason : str
         Why it was rejected, with the value and the threshold.
     """
 
-    frequency_hz: float
+    natural_frequency: float
     damping_ratio: float
     reason: str
 
     def to_dict(self) -> dict:
         """``{"frequency_hz", "damping_ratio", "reason"}`` (NaN damping as None)."""
         z = self.damping_ratio
-        return {"frequency_hz": float(self.frequency_hz),
+        return {"frequency_hz": float(self.natural_frequency),
                 "damping_ratio": None if not np.isfinite(z) else float(z), "reason": self.reason}
 
 
@@ -126,8 +126,9 @@ def _subset(model: ModalModel, keep: np.ndarray) -> ModalModel:
             extra[k] = v[keep]
         else:
             extra[k] = v
-    return ModalModel(model.natural_frequencies[keep], model.damping_ratios[keep],
-                      model.shapes[keep] if n else model.shapes, model.points, model.method, extra)
+    return ModalModel(natural_frequencies=model.natural_frequencies[keep], damping_ratios=model.damping_ratios[keep],
+                      shapes=model.shapes[keep] if n else model.shapes, points=model.points, method=model.method,
+                      extra=extra)
 
 
 def excited_band(frequencies: np.ndarray, input_psd: np.ndarray, *, drop_db: float = 20.0,
@@ -213,12 +214,12 @@ def response_band(frequencies: np.ndarray, psd: np.ndarray, *, energy: float = 0
     return f_low, max(fmax, 2 * f_low)
 
 
-def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: float = 0.01, mac_min: float = 0.9,
+def cluster_poles(stabilization, *, min_count: int | None = None, tol_frequency: float = 0.01, mac_min: float = 0.9,
                   fmin: float | None = None, fmax: float | None = None) -> tuple[ModalModel, list[RejectedMode]]:
     """Modes as clusters of fully stable poles of a stabilization diagram.
 
     Fully stable poles (``stable == 3``) are taken by increasing frequency and grouped while within
-    `freq_tol` (relative) of the cluster's median frequency and with MAC ≥ `mac_min` to its first
+    `tol_frequency` (relative) of the cluster's median frequency and with MAC ≥ `mac_min` to its first
     member. A cluster with at least `min_count` poles is a mode (median frequency and damping, the
     shape of the member nearest the median frequency); smaller clusters of two or more poles are
     returned as rejected ("stable in k of N orders"). Magalhães et al. (2009) cluster the same way.
@@ -229,7 +230,7 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
         From :func:`vibroscope.modal.ssi_cov` or :func:`vibroscope.modal.lscf`.
     min_count : int, optional
         Smallest cluster; default ``max(3, n_orders // 4)``.
-    freq_tol : float, optional
+    tol_frequency : float, optional
         Relative frequency tolerance of a cluster; default 0.01.
     mac_min : float, optional
         Smallest MAC with the cluster's first pole; default 0.9.
@@ -243,7 +244,9 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
         cluster's orders, not a statistical uncertainty), ``mpc``, ``order`` (of the
         representative pole), ``cluster_orders`` (object array of frozensets: the model orders
         of each cluster's poles, which :func:`select_modes` uses to tell a split mode from the
-        mode) and ``settings``.
+        mode) and ``settings`` (the diagram's, with ``min_count``, ``cluster_tol_frequency``
+        (this `tol_frequency`; the diagram's own ``tol_frequency`` is its stability criterion)
+        and ``mac_min``).
     """
     st = stabilization
     n_orders = len(st.settings.get("orders", ())) or int(np.unique(st.order).size)
@@ -267,10 +270,10 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
             if used[b]:
                 continue
             fb = st.frequency[idx[b]]
-            if fb > f0 * (1 + 2 * freq_tol):
+            if fb > f0 * (1 + 2 * tol_frequency):
                 break
             fmed = np.median(st.frequency[idx[members]])
-            if abs(fb / fmed - 1) <= freq_tol and mac(st.shapes[idx[a]], st.shapes[idx[b]])[0, 0] >= mac_min:
+            if abs(fb / fmed - 1) <= tol_frequency and mac(st.shapes[idx[a]], st.shapes[idx[b]])[0, 0] >= mac_min:
                 members.append(b)
         p = idx[members]
         fmed = float(np.median(st.frequency[p]))
@@ -284,19 +287,22 @@ def cluster_poles(stabilization, *, min_count: int | None = None, freq_tol: floa
             used[members] = True
             rejected.append(RejectedMode(fmed, float(np.median(st.damping[p])),
                                          f"not stable across orders: {len(p)} of {n_orders} orders (< {min_count})"))
-    settings = dict(st.settings, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min)
+    settings = dict(st.settings, min_count=min_count, cluster_tol_frequency=tol_frequency, mac_min=mac_min)
     if not modes:
         empty = np.zeros(0)
-        return ModalModel(empty, empty, np.zeros((0, len(st.points))), st.points, method,
-                          {"cluster_size": np.zeros(0, int), "damping_std": empty, "frequency_std_hz": empty,
+        return ModalModel(natural_frequencies=empty, damping_ratios=empty, shapes=np.zeros((0, len(st.points))),
+                          points=st.points, method=method,
+                          extra={"cluster_size": np.zeros(0, int), "damping_std": empty, "frequency_std_hz": empty,
                            "mpc": empty, "order": np.zeros(0, int), "cluster_orders": np.empty(0, object),
                            "settings": settings}), rejected
     f, z, s, c, zs, fsd, o, co = zip(*modes)
     shapes = normalize_shapes(np.array(s))
     orders = np.empty(len(co), object)
     orders[:] = co
-    return ModalModel(np.array(f), np.array(z), shapes, st.points, method,
-                      {"cluster_size": np.array(c), "damping_std": np.array(zs), "frequency_std_hz": np.array(fsd),
+    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points,
+                      method=method,
+                      extra={"cluster_size": np.array(c), "damping_std": np.array(zs),
+                             "frequency_std_hz": np.array(fsd),
                        "mpc": mpc(shapes), "order": np.array(o), "cluster_orders": orders,
                        "settings": settings}), rejected
 
@@ -394,7 +400,7 @@ def select_modes(
         duplicate = {"resolution_hz": float(resolution_hz), "bins": duplicate_bins, "mac_min": duplicate_mac}
     kept = _subset(model, np.array(keep, dtype=int))
     kept = dataclasses.replace(kept, extra={**kept.extra, "stable": np.ones(len(kept), bool)})
-    out.sort(key=lambda x: x.frequency_hz)
+    out.sort(key=lambda x: x.natural_frequency)
     criteria = {"band_hz": [fmin, fmax], "damping_range": list(damping_range), "min_mpc": min_mpc,
                 "min_coherence": min_coherence if coherence is not None else None, "duplicates": duplicate}
     return Selection(kept, tuple(out), criteria)
@@ -455,23 +461,23 @@ def _drop_duplicates(model: ModalModel, keep: list, df: float, bins: float, mac_
     return sorted(int(idx[i]) for i in kept_local), rejected
 
 
-def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float = 0.05,
-               freq_tol: float = 0.01) -> ModalModel:
+def pick_poles(stabilization, natural_frequencies: Sequence[float], *, search: float = 0.05,
+               tol_frequency: float = 0.01) -> ModalModel:
     """Modes at chosen frequencies of a stabilization diagram (the engineer's pick).
 
     For each requested frequency the nearest pole that is stable in frequency and damping
     (``stable >= 2``, else any pole) within ±`search` (relative) is found; the poles within
-    `freq_tol` of it with the same or better stability form its cluster (median frequency and
+    `tol_frequency` of it with the same or better stability form its cluster (median frequency and
     damping, the shape of the highest-order member).
 
     Parameters
     ----------
     stabilization : Stabilization
-    frequencies_hz : sequence of float
+    natural_frequencies : sequence of float
         Requested natural frequencies in Hz.
     search : float, optional
         Relative search window; default 0.05.
-    freq_tol : float, optional
+    tol_frequency : float, optional
         Relative cluster width; default 0.01.
 
     Returns
@@ -486,13 +492,13 @@ def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float 
     """
     st = stabilization
     rows = []
-    for fr in frequencies_hz:
+    for fr in natural_frequencies:
         near = np.abs(st.frequency / fr - 1) <= search
         if not near.any():
             raise ValueError(f"no pole within {100 * search:g} % of {fr:g} Hz in the stabilization diagram")
         best = near & (st.stable >= 2) if np.any(near & (st.stable >= 2)) else near
         k = np.flatnonzero(best)[np.argmin(np.abs(st.frequency[best] - fr))]
-        memb = best & (np.abs(st.frequency / st.frequency[k] - 1) <= freq_tol)
+        memb = best & (np.abs(st.frequency / st.frequency[k] - 1) <= tol_frequency)
         p = np.flatnonzero(memb)
         rep = p[np.argmax(st.order[p])]
         rows.append((float(np.median(st.frequency[p])), float(np.median(st.damping[p])), st.shapes[rep],
@@ -500,6 +506,7 @@ def pick_poles(stabilization, frequencies_hz: Sequence[float], *, search: float 
     rows.sort(key=lambda r: r[0])
     f, z, sh, o, req, fsd, zsd = zip(*rows)
     shapes = normalize_shapes(np.array(sh))
-    return ModalModel(np.array(f), np.array(z), shapes, st.points, st.settings.get("method", "ssi_cov"),
-                      {"order": np.array(o), "requested_hz": np.array(req), "frequency_std_hz": np.array(fsd),
+    return ModalModel(natural_frequencies=np.array(f), damping_ratios=np.array(z), shapes=shapes, points=st.points,
+                      method=st.settings.get("method", "ssi_cov"),
+                      extra={"order": np.array(o), "requested_hz": np.array(req), "frequency_std_hz": np.array(fsd),
                        "damping_std": np.array(zsd), "mpc": mpc(shapes), "stable": np.ones(len(rows), bool)})

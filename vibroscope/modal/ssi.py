@@ -85,7 +85,7 @@ def center(y: np.ndarray) -> np.ndarray:
     return y - y.mean(axis=1, keepdims=True)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Stabilization:
     """Poles of SSI-COV at increasing model orders: the stabilization diagram.
 
@@ -132,11 +132,11 @@ class Stabilization:
         return (f"Stabilization({method!r}, {self.frequency.size} poles over {span}, "
                 f"{int(np.count_nonzero(self.stable == 3))} fully stable, {len(self.points)} points)")
 
-    def modal_model(self, *, min_count: int | None = None, freq_tol: float = 0.01,
+    def modal_model(self, *, min_count: int | None = None, tol_frequency: float = 0.01,
                     mac_min: float = 0.9, fmin: float | None = None, fmax: float | None = None) -> ModalModel:
         """Modes as clusters of fully stable poles (``stable == 3``).
 
-        Stable poles are taken by increasing frequency and grouped while within `freq_tol`
+        Stable poles are taken by increasing frequency and grouped while within `tol_frequency`
         (relative) of the cluster's median frequency and with MAC ≥ `mac_min` to its first member.
         A cluster with at least `min_count` poles (default a quarter of the orders) is a mode: the
         median frequency and damping, and the shape of the member nearest the median frequency.
@@ -147,7 +147,7 @@ class Stabilization:
         ----------
         min_count : int, optional
             Smallest cluster size; default ``max(3, len(orders) // 4)``.
-        freq_tol : float, optional
+        tol_frequency : float, optional
             Relative frequency tolerance of a cluster; default 0.01.
         mac_min : float, optional
             Smallest MAC accepted between a pole and the cluster's first pole; default 0.9.
@@ -160,11 +160,12 @@ class Stabilization:
             ``method`` from the settings (``'ssi_cov'``, ``'lscf'``); ``extra["cluster_size"]``,
             ``extra["damping_std"]``, ``extra["frequency_std_hz"]``, ``extra["order"]``,
             ``extra["mpc"]``, ``extra["settings"]`` (this diagram's
-            settings updated with ``min_count``, ``freq_tol`` and the clustering's ``mac_min``).
+            settings updated with ``min_count``, ``cluster_tol_frequency`` (this `tol_frequency`) and the clustering's ``mac_min``).
         """
         from vibroscope.modal.selection import cluster_poles
 
-        return cluster_poles(self, min_count=min_count, freq_tol=freq_tol, mac_min=mac_min, fmin=fmin, fmax=fmax)[0]
+        return cluster_poles(self, min_count=min_count, tol_frequency=tol_frequency, mac_min=mac_min, fmin=fmin,
+                             fmax=fmax)[0]
 
 
 def ssi_cov(
@@ -284,8 +285,8 @@ def ssi_cov(
         prev = (f, z, phi)
     order_a, f_a, z_a, phi_a, code_a = (np.concatenate(c) for c in zip(*rows))
     phi_a = phi_a.reshape(-1, n_ch)
-    return Stabilization(order_a, f_a, z_a, phi_a, code_a, tuple(points),
-                         dict(method="ssi_cov", fs=fs, n_lags=n_lags, orders=tuple(orders),
+    return Stabilization(order=order_a, frequency=f_a, damping=z_a, shapes=phi_a, stable=code_a, points=tuple(points),
+                         settings=dict(method="ssi_cov", fs=fs, n_lags=n_lags, orders=tuple(orders),
                               ref=None if ref is None else tuple(ref),
                               max_damping=max_damping, tol_frequency=tol_frequency, tol_damping=tol_damping,
                               mac_min=mac_min))

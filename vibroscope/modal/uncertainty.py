@@ -55,7 +55,7 @@ class ModalUncertainty:
 
 
 def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarray, *,
-               freq_tol: float = 0.02, mac_min: float = 0.8) -> tuple[np.ndarray, np.ndarray]:
+               tol_frequency: float = 0.02, mac_min: float = 0.8) -> tuple[np.ndarray, np.ndarray]:
     """Frequency and damping of the pole that pairs with each mode (NaN when none does).
 
     Parameters
@@ -66,7 +66,7 @@ def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarr
         Candidate poles' frequencies (Hz) and damping ratios.
     shapes : ndarray, complex, shape (n_poles, n_points)
         Their shapes at the modes' points.
-    freq_tol : float, optional
+    tol_frequency : float, optional
         Relative frequency tolerance; default 0.02.
     mac_min : float, optional
         Smallest MAC; default 0.8.
@@ -82,7 +82,7 @@ def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarr
     M = mac(modes.shapes, shapes) if len(modes) else np.zeros((0, len(f)))
     for r in range(len(modes)):
         fr = modes.natural_frequencies[r]
-        ok = (np.abs(f / fr - 1) <= freq_tol) & (M[r] >= mac_min)
+        ok = (np.abs(f / fr - 1) <= tol_frequency) & (M[r] >= mac_min)
         if ok.any():
             k = np.flatnonzero(ok)[np.argmin(np.abs(f[ok] - fr))]
             fo[r], zo[r] = f[k], z[k]

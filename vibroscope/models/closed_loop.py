@@ -328,4 +328,4 @@ def simulate_closed_loop(
         "newton_failures": fails,
         "model": model.name,
     }
-    return Signals(np.vstack([u, y]), fs, channels, units, t0, meta)
+    return Signals(data=np.vstack([u, y]), fs=fs, channels=channels, units=units, t0=t0, meta=meta)

@@ -56,7 +56,7 @@ __all__ = ["Law", "LAWS", "MEASURES", "Controller"]
 MEASURES = ("position", "velocity", "acceleration")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Law:
     """One control law of the vocabulary :data:`LAWS`.
 
@@ -89,13 +89,18 @@ _U = {"kp": "u/m", "ki": "u/(m s)", "kd": "u s/m", "ka": "u s^2/m", "td": "s", "
 LAWS: dict[str, Law] = {
     law.name: law
     for law in (
-        Law("P", 0, ("kp",), (), {"kp": _U["kp"]}, "c = kp e"),
-        Law("PD", 1, ("kp", "kd"), (), {k: _U[k] for k in ("kp", "kd")}, "c = kp e - kd v"),
-        Law("PID", 2, ("kp", "ki", "kd"), (), {k: _U[k] for k in ("kp", "ki", "kd")}, "c = kp e + ki int(e) - kd v"),
-        Law("PD2", 3, ("kp", "ka"), ("kd",), {k: _U[k] for k in ("kp", "kd", "ka")}, "c = kp e - kd v - ka a"),
-        Law("PI_PDT1", 4, ("kp", "ki", "t1"), ("td",), {k: _U[k] for k in ("kp", "ki", "td", "t1")},
-            "c = (td s + 1)/(t1 s + 1) (kp e + ki int(e))"),
-        Law("cascade", 5, ("kp", "kv"), (), {"kp": "1/s", "kv": "u s/m"}, "c = kp kv e - kv v"),
+        Law(name="P", code=0, required=("kp",), optional=(), units={"kp": _U["kp"]}, display="c = kp e"),
+        Law(name="PD", code=1, required=("kp", "kd"), optional=(), units={k: _U[k] for k in ("kp", "kd")},
+            display="c = kp e - kd v"),
+        Law(name="PID", code=2, required=("kp", "ki", "kd"), optional=(), units={k: _U[k] for k in ("kp", "ki", "kd")},
+            display="c = kp e + ki int(e) - kd v"),
+        Law(name="PD2", code=3, required=("kp", "ka"), optional=("kd",), units={k: _U[k] for k in ("kp", "kd", "ka")},
+            display="c = kp e - kd v - ka a"),
+        Law(name="PI_PDT1", code=4, required=("kp", "ki", "t1"), optional=("td",),
+            units={k: _U[k] for k in ("kp", "ki", "td", "t1")},
+            display="c = (td s + 1)/(t1 s + 1) (kp e + ki int(e))"),
+        Law(name="cascade", code=5, required=("kp", "kv"), optional=(), units={"kp": "1/s", "kv": "u s/m"},
+            display="c = kp kv e - kv v"),
     )
 }
 #: order of the gains in the kernel's parameter row

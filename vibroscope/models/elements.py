@@ -589,7 +589,7 @@ def spencer_mr_damper_rates(x, xdot, y, z, *, alpha, c0, c1, k0, gamma, beta, A,
     return ydot, zdot
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MRDamper(Element):
     """Magnetorheological damper, the phenomenological model of Spencer et al. (1997), eq. 5.
 

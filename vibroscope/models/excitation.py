@@ -44,11 +44,11 @@ def _n(fs: float, n: int | None, duration: float | None) -> int:
     return n
 
 
-def _band(fs: float, n: int, f_lo: float, f_hi: float) -> np.ndarray:
-    if not 0 <= f_lo < f_hi <= fs / 2:
-        raise ValueError(f"need 0 <= f_lo < f_hi <= fs/2, got {f_lo=}, {f_hi=}, {fs=}")
+def _band(fs: float, n: int, fmin: float, fmax: float) -> np.ndarray:
+    if not 0 <= fmin < fmax <= fs / 2:
+        raise ValueError(f"need 0 <= fmin < fmax <= fs/2, got {fmin=}, {fmax=}, {fs=}")
     f = np.fft.rfftfreq(n, 1 / fs)
-    return np.nonzero((f >= f_lo) & (f <= f_hi) & (f > 0))[0]
+    return np.nonzero((f >= fmin) & (f <= fmax) & (f > 0))[0]
 
 
 def band_limited_random(
@@ -56,12 +56,12 @@ def band_limited_random(
     n: int | None = None,
     *,
     duration: float | None = None,
-    f_lo: float = 0.0,
-    f_hi: float | None = None,
+    fmin: float = 0.0,
+    fmax: float | None = None,
     rms: float = 1.0,
     seed: int | None = None,
 ) -> np.ndarray:
-    """Gaussian noise with a flat spectrum in ``[f_lo, f_hi]`` Hz and none outside.
+    """Gaussian noise with a flat spectrum in ``[fmin, fmax]`` Hz and none outside.
 
     White Gaussian noise is filtered ideally in the frequency domain (DFT bins outside the
     band set to zero) and scaled to the RMS value `rms`.
@@ -74,9 +74,9 @@ def band_limited_random(
         Number of samples, >= 2. Give exactly one of `n` and `duration`.
     duration : float, optional
         Record length in s (``n = round(duration * fs)``), instead of `n`.
-    f_lo : float, optional
+    fmin : float, optional
         Lower band edge in Hz; default 0.
-    f_hi : float, optional
+    fmax : float, optional
         Upper band edge in Hz; default ``fs / 2``. The 0 Hz line is never excited.
     rms : float, optional
         RMS value of the result, in the unit of the excitation (N for a force); default 1.
@@ -93,10 +93,10 @@ def band_limited_random(
         If the band is empty or outside ``[0, fs/2]``, or `fs` is not positive, not exactly one of `n` and `duration` is given, or ``n < 2``.
     """
     n = _n(fs, n, duration)
-    f_hi = fs / 2 if f_hi is None else f_hi
-    idx = _band(fs, n, f_lo, f_hi)
+    fmax = fs / 2 if fmax is None else fmax
+    idx = _band(fs, n, fmin, fmax)
     if idx.size == 0:
-        raise ValueError(f"no DFT line in [{f_lo}, {f_hi}] Hz for {n=} samples at {fs=} Hz")
+        raise ValueError(f"no DFT line in [{fmin}, {fmax}] Hz for {n=} samples at {fs=} Hz")
     rng = np.random.default_rng(seed)
     X = np.fft.rfft(rng.standard_normal(n))
     mask = np.zeros(X.shape, bool)
@@ -111,8 +111,8 @@ def multisine(
     n: int | None = None,
     *,
     duration: float | None = None,
-    f_lo: float = 0.0,
-    f_hi: float | None = None,
+    fmin: float = 0.0,
+    fmax: float | None = None,
     rms: float = 1.0,
     lines: Literal["all", "odd", "random_odd"] = "all",
     group: int = 3,
@@ -131,14 +131,14 @@ def multisine(
         Number of samples, >= 2. Give exactly one of `n` and `duration`.
     duration : float, optional
         Record length in s (``n = round(duration * fs)``), instead of `n`.
-    f_lo : float, optional
+    fmin : float, optional
         Lower edge of the excited band in Hz; default 0.
-    f_hi : float, optional
+    fmax : float, optional
         Upper edge in Hz; default ``fs / 2``. The 0 Hz and Nyquist lines are never excited.
     rms : float, optional
         RMS value of the result (N for a force); default 1.
     lines : {"all", "odd", "random_odd"}
-        ``"all"``: every line in ``[f_lo, f_hi]``; ``"odd"``: odd lines only (even
+        ``"all"``: every line in ``[fmin, fmax]``; ``"odd"``: odd lines only (even
         nonlinearities fall on the even lines); ``"random_odd"``: odd lines with one line
         removed at random in each group of `group` consecutive odd lines (detection lines
         for odd nonlinear distortions).
@@ -161,8 +161,8 @@ def multisine(
         `fs` is not positive, not exactly one of `n` and `duration` is given, or ``n < 2``.
     """
     n = _n(fs, n, duration)
-    f_hi = fs / 2 if f_hi is None else f_hi
-    k = _band(fs, n, f_lo, f_hi)
+    fmax = fs / 2 if fmax is None else fmax
+    k = _band(fs, n, fmin, fmax)
     k = k[k < n / 2]  # no Nyquist line
     rng = np.random.default_rng(seed)
     if lines == "odd":
@@ -176,7 +176,7 @@ def multisine(
     elif lines != "all":
         raise ValueError(f"{lines=} must be 'all', 'odd' or 'random_odd'")
     if k.size == 0:
-        raise ValueError(f"no excited line in [{f_lo}, {f_hi}] Hz for {n=} samples at {fs=} Hz")
+        raise ValueError(f"no excited line in [{fmin}, {fmax}] Hz for {n=} samples at {fs=} Hz")
     X = np.zeros(n // 2 + 1, complex)
     X[k] = np.exp(2j * np.pi * rng.random(k.size))
     x = np.fft.irfft(X, n)
@@ -328,12 +328,17 @@ def step(
 
 
 _KINDS = {
-    "random": (band_limited_random, {"f_lo", "f_hi", "rms"}),
-    "multisine": (multisine, {"f_lo", "f_hi", "rms", "lines", "group"}),
+    "random": (band_limited_random, {"fmin", "fmax", "rms"}),
+    "multisine": (multisine, {"fmin", "fmax", "rms", "lines", "group"}),
     "sweep": (sine_sweep, {"f0", "f1", "amplitude", "kind"}),
     "impact": (impact, {"peak", "duration", "pulse", "t_start"}),
     "step": (step, {"amplitude", "t_start"}),
 }
+
+
+#: Older spec keys still read (the README's ``random:f_lo=1,f_hi=150,rms=10``): the band edges
+#: are ``fmin``/``fmax`` everywhere else (the CLI's ``--fmin``/``--fmax``, the estimators).
+_KEY_ALIASES = {"f_lo": "fmin", "f_hi": "fmax"}
 
 
 @dataclass(frozen=True)
@@ -388,7 +393,8 @@ class Excitation:
 def parse_excitation(spec: str) -> Excitation:
     """Parse a CLI excitation spec ``KIND:key=value,key=value``.
 
-    Kinds and keys: ``random`` (f_lo, f_hi, rms), ``multisine`` (f_lo, f_hi, rms,
+    Kinds and keys (``f_lo``, ``f_hi`` are read as ``fmin``, ``fmax``): ``random`` (fmin, fmax,
+    rms), ``multisine`` (fmin, fmax, rms,
     lines=all|odd|random_odd, group), ``sweep`` (f0, f1, amplitude, kind=linear|log),
     ``impact`` (peak, duration = pulse length in s, t_start), ``step`` (amplitude, t_start).
 
@@ -409,8 +415,10 @@ def parse_excitation(spec: str) -> Excitation:
 
     Examples
     --------
-    >>> parse_excitation("random:f_lo=1,f_hi=200,rms=10")
-    Excitation(kind='random', params={'f_lo': 1.0, 'f_hi': 200.0, 'rms': 10.0})
+    >>> parse_excitation("random:fmin=1,fmax=200,rms=10")
+    Excitation(kind='random', params={'fmin': 1.0, 'fmax': 200.0, 'rms': 10.0})
+    >>> parse_excitation("random:f_lo=1,f_hi=200,rms=10") == parse_excitation("random:fmin=1,fmax=200,rms=10")
+    True
     """
     kind, _, rest = spec.strip().partition(":")
     kind = kind.strip()
@@ -421,6 +429,8 @@ def parse_excitation(spec: str) -> Excitation:
     for item in filter(None, (s.strip() for s in rest.split(","))):
         key, eq, val = item.partition("=")
         key = key.strip()
+        if key not in allowed and _KEY_ALIASES.get(key) in allowed:
+            key = _KEY_ALIASES[key]
         if not eq:
             raise ValueError(f"expected key=value, got {item!r} in {spec=}")
         if key not in allowed:

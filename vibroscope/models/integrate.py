@@ -63,7 +63,7 @@ MAX_STATES = 2
 # --------------------------------------------------------------------------------------------
 # flat model
 # --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FlatModel:
     """A :class:`~vibroscope.models.lumped.LumpedModel` as the flat arrays of the kernel.
 
@@ -754,7 +754,7 @@ def closed_loop_kernel(P, Gu, Gf, Sd, Sv, Lk, codes, prm, klin, clin, soff, Cy, 
 # --------------------------------------------------------------------------------------------
 # Python interface
 # --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class IntegrationResult:
     """Result of :func:`integrate`.
 
@@ -890,4 +890,4 @@ def integrate(
         )
     if not store_states:
         Qo = Go = So = None
-    return IntegrationResult(Y, Qo, Go, So, fails, iters)
+    return IntegrationResult(y=Y, q=Qo, g=Go, s=So, newton_failures=fails, newton_iterations=iters)

@@ -507,7 +507,7 @@ class LumpedModel:
             shapes[r] /= shapes[r, np.argmax(np.abs(shapes[r]))]
         return Modes(_ro(wn / (2 * np.pi)), _ro(-lam.real / wn), _ro(shapes), self.dof_names, _ro(lam))
 
-    def frf(self, frequencies_hz, quantity: Quantity | None = "acceleration") -> np.ndarray:
+    def frf(self, frequencies, quantity: Quantity | None = "acceleration") -> np.ndarray:
         """Analytic frequency response of the linear part, outputs by inputs.
 
         ``H(w) = s(w) (K - w^2 M + j w C)^-1`` restricted to the output rows and input
@@ -516,7 +516,7 @@ class LumpedModel:
 
         Parameters
         ----------
-        frequencies_hz : array_like, shape (n_f,)
+        frequencies : array_like, shape (n_f,)
             Frequencies in Hz.
         quantity : {"acceleration", "velocity", "displacement"} or None
             Response quantity for every output; None uses each output's configured quantity.
@@ -532,7 +532,7 @@ class LumpedModel:
         """
         if quantity is not None and quantity not in QUANTITIES:
             raise ValueError(f"{quantity=} must be one of {QUANTITIES} or None")
-        f = np.atleast_1d(np.asarray(frequencies_hz, dtype=float))
+        f = np.atleast_1d(np.asarray(frequencies, dtype=float))
         w = 2 * np.pi * f
         M, K, C = self.M, self.K, self.C
         Z = K[None] - (w**2)[:, None, None] * M[None] + 1j * w[:, None, None] * C[None]

@@ -53,7 +53,7 @@ def _complex_array(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
     return a
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class PoleResidueModel:
     """A modal model in pole-residue form with lower and upper residuals.
 
@@ -179,7 +179,7 @@ class PoleResidueModel:
     @classmethod
     def from_poles_residues(
         cls,
-        frequencies_hz,
+        natural_frequencies,
         damping_ratios,
         residues,
         *,
@@ -193,7 +193,7 @@ class PoleResidueModel:
 
         Parameters
         ----------
-        frequencies_hz : array_like, shape (n_modes,)
+        natural_frequencies : array_like, shape (n_modes,)
             Undamped natural frequencies in Hz (``|lambda_r| / 2 pi``).
         damping_ratios : array_like, shape (n_modes,)
             Damping ratios (``-Re(lambda_r) / |lambda_r|``).
@@ -220,7 +220,9 @@ class PoleResidueModel:
         """
         ins = tuple(i if isinstance(i, Input) else Input("u", "force", str(i)) for i in inputs)
         outs = tuple(o if isinstance(o, Output) else Output("y", "acceleration", str(o)) for o in outputs)
-        return cls(frequencies_hz, damping_ratios, residues, ins, outs, lower, upper, name)
+        return cls(natural_frequencies=natural_frequencies, damping_ratios=damping_ratios, residues=residues,
+                   inputs=ins,
+                   outputs=outs, lower_residual=lower, upper_residual=upper, name=name)
 
     # -- the interface simulate() uses ---------------------------------------------------------
     @property
@@ -259,12 +261,12 @@ class PoleResidueModel:
         return [o.channel or f"/output{k}.x" for k, o in enumerate(self.outputs)]
 
     # -- analysis ------------------------------------------------------------------------------
-    def frf(self, frequencies_hz, *, realised: bool = False) -> np.ndarray:
+    def frf(self, frequencies, *, realised: bool = False) -> np.ndarray:
         """The model's frequency response, outputs by inputs.
 
         Parameters
         ----------
-        frequencies_hz : array_like, shape (n_f,)
+        frequencies : array_like, shape (n_f,)
             Frequencies in Hz (>= 0).
         realised : bool
             False: the full pole-residue model with both residuals. True: the FRF of the
@@ -282,9 +284,9 @@ class PoleResidueModel:
         ValueError
             If a frequency is negative or not finite.
         """
-        f = np.atleast_1d(np.asarray(frequencies_hz, dtype=float))
+        f = np.atleast_1d(np.asarray(frequencies, dtype=float))
         if f.ndim != 1 or not np.all(np.isfinite(f)) or np.any(f < 0):
-            raise ValueError("frequencies_hz must be a 1-D array of finite frequencies >= 0")
+            raise ValueError("frequencies must be a 1-D array of finite frequencies >= 0")
         s = 2j * np.pi * f
         lam = self.eigenvalues
         R = self.residues

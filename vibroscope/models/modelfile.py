@@ -187,12 +187,12 @@ class TransferFunctionModel:
 
         return control.tf(list(self.num), list(self.den))
 
-    def frf(self, frequencies_hz) -> np.ndarray:
+    def frf(self, frequencies) -> np.ndarray:
         """``H(j 2 pi f)``, shape (n_f, 1, 1), times the input delay factor.
 
         Parameters
         ----------
-        frequencies_hz : float or array_like, shape (n_f,)
+        frequencies : float or array_like, shape (n_f,)
             Frequencies in Hz.
 
         Returns
@@ -201,7 +201,7 @@ class TransferFunctionModel:
             ``num(s) / den(s) * exp(-s delay)`` at ``s = j 2 pi f``, with the input's
             ``delay`` in s; in the output unit per input unit.
         """
-        s = 2j * np.pi * np.atleast_1d(np.asarray(frequencies_hz, float))
+        s = 2j * np.pi * np.atleast_1d(np.asarray(frequencies, float))
         H = np.polyval(self.num, s) / np.polyval(self.den, s) * np.exp(-s * self.input.delay)
         return H[:, None, None]
 
@@ -402,8 +402,11 @@ def _parse_controllers(ctx, doc, names, inputs):
         chans = {k: _string(ctx, t, tbl, i, k, required=False) for k in ("reference", "output_channel", "feedforward")}
         unit = _string(ctx, t, tbl, i, "output_unit", required=False, default="1")
         try:
-            out.append(Controller(name, law, gains, rate, dof, drives, chans["reference"], tuple(meas), taps, gain, sat,
-                                  chans["output_channel"], unit, chans["feedforward"]))
+            out.append(Controller(name=name, law=law, gains=gains, rate_hz=rate, dof=dof, drives=drives,
+                                  reference=chans["reference"], measures=tuple(meas), velocity_filter=taps, gain=gain,
+                                  saturation=sat,
+                                  output_channel=chans["output_channel"], output_unit=unit,
+                                  feedforward=chans["feedforward"]))
         except ValueError as exc:
             raise ctx.error(str(exc), tbl, i, "gains") from None
     return out

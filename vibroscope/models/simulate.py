@@ -243,7 +243,8 @@ def _wrap(model, u, y, fs, t0, noise, seed, meta):
         y = y + noise * rms * rng.standard_normal(y.shape)
     data = np.vstack([u, y])
     units = ["N"] * len(model.inputs) + [UNITS[o.quantity] for o in model.outputs]
-    return Signals(data, fs, model.input_channels() + model.output_channels(), units, t0, meta)
+    return Signals(data=data, fs=fs, channels=model.input_channels() + model.output_channels(), units=units, t0=t0,
+                   meta=meta)
 
 
 def _is_linear(model: LumpedModel) -> bool:

@@ -42,11 +42,11 @@ def channel_index(channels: Sequence[str], channel: str | int) -> int:
         raise KeyError(f"no channel {channel!r}; channels are {list(channels)}") from None
 
 
-def axis_summary(f: np.ndarray) -> str:
+def axis_summary(frequencies: np.ndarray) -> str:
     """``"129 lines, 0–256 Hz"`` for a frequency axis."""
-    if f.size == 0:
+    if frequencies.size == 0:
         return "0 lines"
-    return f"{f.size} lines, {f[0]:.4g}–{f[-1]:.4g} Hz"
+    return f"{frequencies.size} lines, {frequencies[0]:.4g}–{frequencies[-1]:.4g} Hz"
 
 
 def names_summary(names: Sequence[str], k: int = 3) -> str:
@@ -184,7 +184,7 @@ class Spectrum:
         return plot_spectrum(self, ax=ax, db=db, channels=channels)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class CrossSpectralMatrix:
     """The one-sided cross-spectral matrix of several channels.
 
@@ -320,7 +320,7 @@ class CrossSpectralMatrix:
                                    n_averages=self.n_averages)
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class FRF:
     """Frequency response function estimate ``H[f, output, input]``.
 

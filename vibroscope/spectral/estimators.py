@@ -623,7 +623,7 @@ def frf(
     >>> rng = np.random.default_rng(0)
     >>> x = rng.standard_normal(100_000)
     >>> y = 2.5 * x + rng.standard_normal(100_000)
-    >>> sig = Signals(np.vstack([x, y]), fs=1000.0, channels=["/f.x", "/a.x"], units=["N", "m/s^2"])
+    >>> sig = Signals(data=np.vstack([x, y]), fs=1000.0, channels=["/f.x", "/a.x"], units=["N", "m/s^2"])
     >>> h1 = frf(sig, "/f.x", nperseg=1000)
     >>> h1.kind, h1.H.shape  # H[f, output, input]; N in, m/s² out: accelerance
     ('accelerance', (501, 1, 1))

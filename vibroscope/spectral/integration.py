@@ -71,7 +71,7 @@ def default_f_cut(fs: float, n_samples: int) -> float:
     return max(10.0 * float(fs) / max(int(n_samples), 1), 1.0)
 
 
-def highpass_gain(f, f_cut: float) -> np.ndarray:
+def highpass_gain(frequencies, f_cut: float) -> np.ndarray:
     """Magnitude of the zero-phase high-pass applied once per integration.
 
     ``W(f) = 1 / (1 + (f_cut / f)^8)``: a 4th-order Butterworth high-pass run forward and
@@ -80,20 +80,20 @@ def highpass_gain(f, f_cut: float) -> np.ndarray:
 
     Parameters
     ----------
-    f : array_like
+    frequencies : array_like
         Frequencies in Hz (≥ 0).
     f_cut : float
         Cut-off in Hz.
 
     Returns
     -------
-    ndarray, shape like `f`
+    ndarray, shape like `frequencies`
         Gains in [0, 1]; 0 at 0 Hz.
     """
-    f = np.abs(np.asarray(f, dtype=float))
-    out = np.zeros(f.shape)
-    pos = f > 0
-    out[pos] = 1.0 / (1.0 + (f_cut / f[pos]) ** (2 * BUTTER_ORDER))
+    frequencies = np.abs(np.asarray(frequencies, dtype=float))
+    out = np.zeros(frequencies.shape)
+    pos = frequencies > 0
+    out[pos] = 1.0 / (1.0 + (f_cut / frequencies[pos]) ** (2 * BUTTER_ORDER))
     return out
 
 
@@ -216,7 +216,7 @@ def integrate(signals: Signals, *, order: Literal[1, 2] = 1, f_cut: float | None
     >>> from vibroscope import Signals
     >>> fs = 1000.0
     >>> t = np.arange(20000) / fs
-    >>> acc = Signals(2.0 + np.sin(2 * np.pi * 10 * t), fs, ["/imu.z"], ["m/s^2"])
+    >>> acc = Signals(data=2.0 + np.sin(2 * np.pi * 10 * t), fs=fs, channels=["/imu.z"], units=["m/s^2"])
     >>> vel = integrate(acc)
     >>> vel.units, round(float(np.max(np.abs(vel.data[0, 2000:-2000])) * 2 * np.pi * 10), 3)
     (('m/s',), 1.0)
@@ -299,8 +299,10 @@ def _integrals(signals: Signals, order: int, f_cut, method: str) -> list[Signals
         if stretches is not None:
             info["gaps"] = (f"{stretches} stretches between missing samples integrated one by one (each detrended, "
                             f"with its own edge zones); missing samples and stretches under 4 samples are NaN")
-        out.append(Signals(x, fs, signals.channels, [_integral_unit(u, k) for u in signals.units], signals.t0,
-                           {**signals.meta, "integration": info}))
+        out.append(Signals(data=x, fs=fs, channels=signals.channels,
+                           units=[_integral_unit(u, k) for u in signals.units],
+                           t0=signals.t0,
+                           meta={**signals.meta, "integration": info}))
     return out
 
 
@@ -318,7 +320,7 @@ class Severity:
     velocity_rms_mm_s : ndarray, shape (n_channels,)
         RMS velocity in mm/s over `band_hz`.
     band_hz : tuple of float
-        ``(f_lo, f_hi)`` in Hz actually integrated over (`f_hi` is clipped to ``fs / 2``).
+        ``(fmin, fmax)`` in Hz actually integrated over (`fmax` is clipped to ``fs / 2``).
     method : str
         How it was computed.
     note : str
@@ -368,8 +370,8 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
         Accelerations, ``data`` shape (n_channels, n_samples), in m/s² (``'m/s^2'``, ``'m/s²'``;
         ``'g'`` is converted with 9.80665 m/s²; ``''`` is taken as m/s² and said so in ``note``).
     band : tuple of float, optional
-        ``(f_lo, f_hi)`` in Hz; the standard's broadband range is 10–1000 Hz (2–1000 Hz for
-        machines below 600 r/min). `f_hi` above ``fs / 2`` is clipped to ``fs / 2``, and
+        ``(fmin, fmax)`` in Hz; the standard's broadband range is 10–1000 Hz (2–1000 Hz for
+        machines below 600 r/min). `fmax` above ``fs / 2`` is clipped to ``fs / 2``, and
         ``note`` says so.
 
     Returns
@@ -386,11 +388,11 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     Notes
     -----
     The PSD is Welch's (Hann, 50 % overlap, linear detrend per segment, one-sided density)
-    with segments of ``nperseg = min(n_samples, 20 fs / f_lo)`` rounded up to a fast FFT size:
-    ``Δf <= f_lo / 20`` (0.5 Hz for the standard band) so a tone just outside the band leaks
+    with segments of ``nperseg = min(n_samples, 20 fs / fmin)`` rounded up to a fast FFT size:
+    ``Δf <= fmin / 20`` (0.5 Hz for the standard band) so a tone just outside the band leaks
     less than −80 dB into it. Then
 
-    ``v_rms² = Σ_{f_lo <= f_k <= f_hi} G_aa(f_k) / (2π f_k)² · Δf``.
+    ``v_rms² = Σ_{fmin <= f_k <= fmax} G_aa(f_k) / (2π f_k)² · Δf``.
 
     A tone of amplitude ``A`` (m/s²) at ``f`` inside the band gives ``A / (2π f √2)`` m/s.
 
@@ -408,22 +410,22 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
     >>> from vibroscope import Signals
     >>> fs = 4000.0
     >>> t = np.arange(40000) / fs
-    >>> s = Signals(10.0 * np.sin(2 * np.pi * 50 * t), fs, ["/imu.z"], ["m/s^2"])
+    >>> s = Signals(data=10.0 * np.sin(2 * np.pi * 50 * t), fs=fs, channels=["/imu.z"], units=["m/s^2"])
     >>> round(vibration_severity(s)["/imu.z"], 2)  # 10 / (2π·50·√2) m/s = 22.51 mm/s
     22.51
     """
     fs = signals.fs
     n = signals.n_samples
-    f_lo, f_hi = (float(b) for b in band)
-    if not (np.isfinite(f_lo) and np.isfinite(f_hi)) or not 0 < f_lo < f_hi:
-        raise ValueError(f"{band=} must be (f_lo, f_hi) with 0 < f_lo < f_hi in Hz")
+    fmin, fmax = (float(b) for b in band)
+    if not (np.isfinite(fmin) and np.isfinite(fmax)) or not 0 < fmin < fmax:
+        raise ValueError(f"{band=} must be (fmin, fmax) with 0 < fmin < fmax in Hz")
     notes = []
-    if f_hi > fs / 2:
-        notes.append(f"band upper edge {f_hi:g} Hz above the Nyquist frequency: integrated up to "
+    if fmax > fs / 2:
+        notes.append(f"band upper edge {fmax:g} Hz above the Nyquist frequency: integrated up to "
                      f"fs/2 = {fs / 2:g} Hz only")
-        f_hi = fs / 2
-    if f_lo >= f_hi:
-        raise ValueError(f"band lower edge {f_lo:g} Hz is not below fs/2 = {fs / 2:g} Hz")
+        fmax = fs / 2
+    if fmin >= fmax:
+        raise ValueError(f"band lower edge {fmin:g} Hz is not below fs/2 = {fs / 2:g} Hz")
     scale = np.ones(signals.n_channels)
     assumed = []
     for k, u in enumerate(signals.units):
@@ -439,7 +441,7 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
                              "accelerations in m/s^2 (or g)")
     if assumed:
         notes.append(f"no unit on {len(assumed)} channel(s), taken as m/s^2")
-    nperseg = min(n, scipy.fft.next_fast_len(int(np.ceil(20.0 * fs / f_lo))))
+    nperseg = min(n, scipy.fft.next_fast_len(int(np.ceil(20.0 * fs / fmin))))
     if nperseg < 8:
         raise ValueError(f"the record is too short for a spectrum: {n=} samples")
     noverlap = nperseg // 2
@@ -450,16 +452,16 @@ def vibration_severity(signals: Signals, *, band: tuple[float, float] = (10.0, 1
                noverlap=noverlap, detrend="linear", scaling="density")
     f, P = sp.frequencies, sp.values
     df = float(f[1] - f[0])
-    if df > f_lo / 4:
-        notes.append(f"record of {n / fs:g} s resolves only {df:.3g} Hz: the band edge at {f_lo:g} Hz is coarse")
-    sel = (f >= f_lo) & (f <= f_hi) & (f > 0)
+    if df > fmin / 4:
+        notes.append(f"record of {n / fs:g} s resolves only {df:.3g} Hz: the band edge at {fmin:g} Hz is coarse")
+    sel = (f >= fmin) & (f <= fmax) & (f > 0)
     pv = P[:, sel] / (2 * np.pi * f[sel]) ** 2
     v_rms = np.sqrt(np.sum(pv, axis=-1) * df)
     n_avg = int(sp.n_averages.min())
     settings = dict(fs=fs, nperseg=int(nperseg), noverlap=int(noverlap), window="hann", detrend="linear",
                     df_hz=df, n_averages=int(n_avg))
     method = "Welch PSD of acceleration / (2πf)², integrated over the band (Parseval)"
-    return Severity(channels=signals.channels, velocity_rms_mm_s=1000.0 * v_rms, band_hz=(f_lo, f_hi), method=method,
+    return Severity(channels=signals.channels, velocity_rms_mm_s=1000.0 * v_rms, band_hz=(fmin, fmax), method=method,
                     note="; ".join(notes), settings=settings)
 
 
@@ -472,8 +474,8 @@ class OperatingShape:
 
     Attributes
     ----------
-    frequency_hz : float
-        The spectral line used, in Hz (the nearest to `requested_hz`).
+    frequency : float
+        The spectral line used, in Hz (the nearest to `requested_frequency`).
     shape : ndarray, complex, shape (n_points,)
         Relative amplitude and phase of the points, normalised to unit maximum modulus with the
         `reference` point's entry real and positive.
@@ -489,24 +491,24 @@ class OperatingShape:
         relative to the reference).
     units : str
         Units of `values` (the FRF's; ``'u/√Hz'`` for a CSD density, ``'u'`` for a power spectrum).
-    requested_hz : float
+    requested_frequency : float
         The frequency asked for, in Hz.
     input : str or None
         The FRF's input (excitation) channel; None for a CSD.
     """
 
-    frequency_hz: float
+    frequency: float
     shape: np.ndarray
     points: tuple[str, ...]
     source: Literal["frf", "csd"]
     reference: str
     values: np.ndarray
     units: str = ""
-    requested_hz: float = float("nan")
+    requested_frequency: float = float("nan")
     input: str | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "frequency_hz", float(self.frequency_hz))
+        object.__setattr__(self, "frequency", float(self.frequency))
         object.__setattr__(self, "shape", read_only(self.shape, complex))
         object.__setattr__(self, "values", read_only(self.values, complex))
         object.__setattr__(self, "points", tuple(str(p) for p in self.points))
@@ -533,17 +535,17 @@ class OperatingShape:
         return plot_ods(self, coords, **kwargs)
 
     def __repr__(self) -> str:
-        return (f"OperatingShape({self.frequency_hz:.4g} Hz from {self.source}, {len(self.points)} points, "
+        return (f"OperatingShape({self.frequency:.4g} Hz from {self.source}, {len(self.points)} points, "
                 f"reference {self.reference!r})")
 
 
-def _line(frequencies: np.ndarray, frequency_hz: float) -> int:
+def _line(frequencies: np.ndarray, frequency: float) -> int:
     f = np.asarray(frequencies, dtype=float)
     if f.size == 0:
         raise ValueError("the frequency axis is empty")
-    fr = float(frequency_hz)
+    fr = float(frequency)
     if not np.isfinite(fr) or fr < f[0] or fr > f[-1]:
-        raise ValueError(f"{frequency_hz=} Hz is outside the frequency axis [{f[0]:g}, {f[-1]:g}] Hz")
+        raise ValueError(f"{frequency=} Hz is outside the frequency axis [{f[0]:g}, {f[-1]:g}] Hz")
     return int(np.argmin(np.abs(f - fr)))
 
 
@@ -558,7 +560,7 @@ def _index(names: tuple[str, ...], key: str | int, what: str) -> int:
         raise KeyError(f"no {what} {key!r}; {what}s are {list(names)}") from None
 
 
-def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: str | int | None = None,
+def ods(source: FRF | CrossSpectralMatrix, frequency: float, *, reference: str | int | None = None,
         input: str | int = 0) -> OperatingShape:
     """Operating deflection shape at one frequency, from an FRF or a cross-spectral matrix.
 
@@ -567,7 +569,7 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
     source : FRF or CrossSpectralMatrix
         An FRF ``H[f, output, input]`` (the shape is the outputs' column of one input) or the
         cross-spectral matrix ``G[f, i, j]`` of the response channels (output-only).
-    frequency_hz : float
+    frequency : float
         Frequency in Hz; the nearest spectral line is used.
     reference : str or int, optional
         The point (output / channel name or index) whose phase is the zero of the shape.
@@ -585,7 +587,7 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
     Raises
     ------
     ValueError
-        If `frequency_hz` is outside the source's frequency axis, or the reference
+        If `frequency` is outside the source's frequency axis, or the reference
         auto-spectrum is zero at that line.
     KeyError
         If `reference` or `input` names no channel.
@@ -609,14 +611,14 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
        4th ed., Wiley, 2010, §5.2 (cross-spectral density functions).
     """
     if isinstance(source, FRF):
-        k = _line(source.frequencies, frequency_hz)
+        k = _line(source.frequencies, frequency)
         i_in = _index(source.inputs, input, "input")
         vals = np.array(source.H[k, :, i_in], dtype=complex)
         points = source.outputs
         ref = int(np.nanargmax(np.abs(vals))) if reference is None else _index(points, reference, "output")
         units, kind, in_name = source.units, "frf", source.inputs[i_in]
     elif isinstance(source, CrossSpectralMatrix):
-        k = _line(source.frequencies, frequency_hz)
+        k = _line(source.frequencies, frequency)
         points = source.channels
         auto = np.real(np.diagonal(source.G[k]))
         ref = int(np.argmax(auto)) if reference is None else _index(points, reference, "channel")
@@ -636,6 +638,6 @@ def ods(source: FRF | CrossSpectralMatrix, frequency_hz: float, *, reference: st
     if shape[ref] != 0 and mx > 0:
         shape = shape * (np.conj(shape[ref]) / abs(shape[ref])) / mx
         shape[ref] = abs(vals[ref]) / mx  # exactly real positive
-    return OperatingShape(frequency_hz=float(source.frequencies[k]), shape=shape, points=points, source=kind,
-                          reference=points[ref], values=vals, units=units, requested_hz=float(frequency_hz),
+    return OperatingShape(frequency=float(source.frequencies[k]), shape=shape, points=points, source=kind,
+                          reference=points[ref], values=vals, units=units, requested_frequency=float(frequency),
                           input=in_name)

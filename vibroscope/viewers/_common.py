@@ -109,12 +109,12 @@ def real_shape(shape: np.ndarray) -> np.ndarray:
     return np.real(s * np.exp(-1j * np.angle(s[k])))
 
 
-def mode_label(f: float, zeta: float) -> str:
+def mode_label(natural_frequency: float, zeta: float) -> str:
     """``"f = 2.82 Hz, ζ = 1.20 %"`` (ζ shown as ``n/a`` when NaN).
 
     Parameters
     ----------
-    f : float
+    natural_frequency : float
         Natural frequency in Hz (4 significant digits).
     zeta : float
         Damping ratio, dimensionless (shown in % with 2 decimals).
@@ -124,7 +124,7 @@ def mode_label(f: float, zeta: float) -> str:
     str
     """
     z = "n/a" if not np.isfinite(zeta) else f"{100 * zeta:.2f} %"
-    return f"f = {f:.4g} Hz, ζ = {z}"
+    return f"f = {natural_frequency:.4g} Hz, ζ = {z}"
 
 
 def nearest_frequencies(f_est: np.ndarray, f_true: np.ndarray) -> np.ndarray:

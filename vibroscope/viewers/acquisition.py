@@ -196,6 +196,6 @@ def log_ods(ods_result: OperatingShape, coords: Mapping[str, Any] | None = None,
     """
     from vibroscope.viewers.rerun_view import log_analysis
 
-    name = recording_name or f"ODS at {ods_result.frequency_hz:.4g} Hz"
+    name = recording_name or f"ODS at {ods_result.frequency:.4g} Hz"
     return log_analysis(signals=signals, modal=ods_as_modal_model(ods_result), coords=coords, rrd_path=rrd_path,
                         spawn=spawn, recording_name=name)

@@ -1155,9 +1155,9 @@ def plot_ods(ods_result, coords: Mapping[str, Any] | None = None, *, fig=None, t
     ax = fig.axes[0]
     old = ax.get_title().split("\n")[1:]
     src = {"frf": f"FRF (input {short_label(str(o.input), 24)})", "csd": "CSD (output-only)"}.get(o.source, o.source)
-    asked = "" if f"{o.requested_hz:.4g}" == f"{o.frequency_hz:.4g}" else f", nearest line to {o.requested_hz:.4g} Hz"
+    asked = "" if f"{o.requested_frequency:.4g}" == f"{o.frequency:.4g}" else f", nearest line to {o.requested_frequency:.4g} Hz"
     ref = distinct_labels(o.points)[o.points.index(o.reference)] if o.reference in o.points else o.reference
-    title = f"ODS at {o.frequency_hz:.4g} Hz{asked}\nfrom {src}, phase reference {ref}"
+    title = f"ODS at {o.frequency:.4g} Hz{asked}\nfrom {src}, phase reference {ref}"
     ax.set_title("\n".join([title, *old]), fontsize=9)
     for line in ax.get_lines():
         if line.get_label() == "identified (real part)":

@@ -45,7 +45,7 @@ def plot_bode(result, axes=None, label: str | None = None, **kwargs):
     Parameters
     ----------
     result : BodeResult
-        Its ``frequencies_hz``, ``magnitude_db`` and ``phase_deg`` are drawn.
+        Its ``frequencies``, ``magnitude_db`` and ``phase_deg`` are drawn.
     axes : sequence of 2 matplotlib.axes.Axes, optional
         Magnitude and phase axes; default a new figure (shared x).
     label : str, optional
@@ -60,8 +60,8 @@ def plot_bode(result, axes=None, label: str | None = None, **kwargs):
     if axes is None:
         _, axes = pyplot().subplots(2, 1, sharex=True, figsize=(6, 5))
     a1, a2 = axes
-    a1.semilogx(result.frequencies_hz, result.magnitude_db, label=label, **kwargs)
-    a2.semilogx(result.frequencies_hz, result.phase_deg, label=label, **kwargs)
+    a1.semilogx(result.frequencies, result.magnitude_db, label=label, **kwargs)
+    a2.semilogx(result.frequencies, result.phase_deg, label=label, **kwargs)
     a1.set_ylabel("magnitude [dB]")
     a2.set_ylabel("phase [deg]")
     a2.set_xlabel("frequency [Hz]")
@@ -243,8 +243,8 @@ def figure_pneumatic(path, areas_cm2=(60.0, 70.0, 80.0), flow: float = 50e-6, **
             ax[0, k].plot(r.time_s, r.response * scale, label=lab)
             ax[0, k].set_ylabel(f"{out} [{unit}]")
             ax[0, k].set_title(f"{out} for a {flow * 1e6:g} cm³/s flow step")
-        ax[1, 0].semilogx(b.frequencies_hz, b.magnitude_db, label=lab)
-        ax[1, 1].semilogx(b.frequencies_hz, b.phase_deg, label=lab)
+        ax[1, 0].semilogx(b.frequencies, b.magnitude_db, label=lab)
+        ax[1, 1].semilogx(b.frequencies, b.phase_deg, label=lab)
         ax[1, 2].plot(ny.response.real * 1e-2, ny.response.imag * 1e-2, label=lab)
     for a in ax[0]:
         a.set_xlabel("time [s]")
@@ -320,7 +320,7 @@ def figure_block_schema(path, load_step: float = -0.5, t_load: float = 15.0, t_e
     ax[0, 1].plot(t, reference["y"], "k:", lw=1, label="plant out y, no load")
     for point in ("u", "c", "y"):
         ax[1, 0].plot(t, sc.open_loop[point].response, label=names[point])
-    f = sc.frequencies_hz
+    f = sc.frequencies
     for name, b in sc.block_bode.items():
         ax[1, 1].semilogx(f, b.magnitude_db, label=name)
     ax[1, 1].semilogx(f, sc.closed_loop_bode.magnitude_db, "k--", label="closed loop y/r")
@@ -342,7 +342,7 @@ def figure_mr_hysteresis(
     path,
     currents=(0.0, 0.5, 1.0, 1.5, 2.0),
     amplitude: float = 0.015,
-    frequency_hz: float = 2.5,
+    frequency: float = 2.5,
     params=None,
 ) -> Path:
     """Force-displacement and force-velocity loops of the MR damper for several currents
@@ -356,7 +356,7 @@ def figure_mr_hysteresis(
         Coil currents, A.
     amplitude : float
         Sinusoidal displacement amplitude, m (Spencer's test: 1.5 cm).
-    frequency_hz : float
+    frequency : float
         Excitation frequency, Hz (Spencer's test: 2.5 Hz).
     params : MRDamperParams, optional
         Damper; Spencer et al. (1997) by default.
@@ -368,13 +368,13 @@ def figure_mr_hysteresis(
     """
     from vibroscope.instruments.mr_damper import sine_test
 
-    results = sine_test(currents, amplitude, frequency_hz, params=params)
-    period = 1.0 / frequency_hz
+    results = sine_test(currents, amplitude, frequency, params=params)
+    period = 1.0 / frequency
     fig, axes = pyplot().subplots(1, 3, figsize=(14, 4.3))
     for i, r in zip(currents, results):
         plot_mr_loops(r, axes[:2], label=f"i = {i:g} A", last_s=period)
         axes[2].plot(r.time_s, r.force * 1e-3, label=f"i = {i:g} A")
-    axes[0].set_title(f"force-displacement ({amplitude * 1e3:g} mm, {frequency_hz:g} Hz)")
+    axes[0].set_title(f"force-displacement ({amplitude * 1e3:g} mm, {frequency:g} Hz)")
     axes[1].set_title("force-velocity")
     axes[2].set_title("force history")
     axes[2].set_xlabel("time [s]")
@@ -414,8 +414,8 @@ def figure_sweep(result, path, title: str = "") -> Path:
     ax_p = fig.add_subplot(2, 2, 4, sharex=ax_m)
     for s, b, lab in zip(result.steps, result.bodes, result.labels):
         ax_t.plot(s.time_s, s.response, label=lab)
-        ax_m.semilogx(b.frequencies_hz, b.magnitude_db, label=lab)
-        ax_p.semilogx(b.frequencies_hz, b.phase_deg, label=lab)
+        ax_m.semilogx(b.frequencies, b.magnitude_db, label=lab)
+        ax_p.semilogx(b.frequencies, b.phase_deg, label=lab)
     what, unit = result.model.quantity, result.model.unit
     ax_t.set_title(f"step response: {what}")
     ax_t.set_xlabel("time [s]")
@@ -460,7 +460,8 @@ def log_sweep(result, path, tag: str) -> Path | None:
         rec.send_columns(f"step/{ent}", indexes=[rr.TimeColumn("time", duration=np.asarray(s.time_s))],
                          columns=rr.Scalars.columns(scalars=np.asarray(s.response)))
         rec.log(f"bode_db/{ent}", rr.SeriesLines(names=lab), static=True)
-        rec.send_columns(f"bode_db/{ent}", indexes=[rr.TimeColumn("frequency_bin", sequence=np.arange(b.frequencies_hz.size))],
+        rec.send_columns(f"bode_db/{ent}", indexes=[rr.TimeColumn("frequency_bin",
+                                                                  sequence=np.arange(b.frequencies.size))],
                          columns=rr.Scalars.columns(scalars=np.asarray(b.magnitude_db)))
     rec.save(str(path))
     return Path(path)

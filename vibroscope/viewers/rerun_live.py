@@ -62,7 +62,7 @@ DEFAULT_URL = "rerun+http://127.0.0.1:9876/proxy"
 FLUSH_TIMEOUT_S = 30.0
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class LiveRefresh:
     """What one refresh of a :class:`LiveView` computed and logged.
 
@@ -277,14 +277,15 @@ class LiveView:
         cnt = acc.n_averages
         settings = settings_dict(self.fs, st, int(cnt.min()), acc.n_segments)
         with np.errstate(divide="ignore", invalid="ignore"):
-            csd = CrossSpectralMatrix(self.frequencies, acc.result("density"), self.channels, self.units,
-                                      "density", settings, cnt)
+            csd = CrossSpectralMatrix(frequencies=self.frequencies, G=acc.result("density"), channels=self.channels,
+                                      units=self.units,
+                                      scaling="density", settings=settings, n_averages=cnt)
             psd = csd.psd()
             frf = None
             if self.input is not None:
                 frf = frf_of(csd, [self.input], estimator=self.estimator)
         end_s = self.n_samples / self.fs
-        out = LiveRefresh(acc.n_segments, end_s, csd, psd, frf, final)
+        out = LiveRefresh(n_averages=acc.n_segments, time_s=end_s, csd=csd, psd=psd, frf=frf, final=final)
         rec = self.rec
         prev = self.last
         if final and prev is not None and prev.time_s == end_s:  # nothing read since: no second live row
@@ -474,7 +475,7 @@ def record_blocks(sig: Signals, block_size: int) -> Iterator[Signals]:
     if block_size < 1:
         raise ValueError(f"{block_size=} must be a positive number of samples")
     for a, b in block_bounds(int(block_size), sig.n_samples):
-        yield Signals(sig.data[:, a:b], sig.fs, sig.channels, sig.units, t0=sig.t0 + a / sig.fs,
+        yield Signals(data=sig.data[:, a:b], fs=sig.fs, channels=sig.channels, units=sig.units, t0=sig.t0 + a / sig.fs,
                       meta={"n_samples_total": sig.n_samples})
 
 

@@ -37,21 +37,21 @@ def channel_entity(prefix: str, channel: str) -> str:
     return "/" + "/".join([*(p for p in prefix.split("/") if p), *(_esc(p) for p in parts)])
 
 
-def mode_entity(r: int, f: float) -> str:
-    """Entity path of mode `r` (0-based) at `f` Hz: ``/modes/mode_1_2.82Hz``.
+def mode_entity(r: int, natural_frequency: float) -> str:
+    """Entity path of mode `r` (0-based) at `natural_frequency` Hz: ``/modes/mode_1_2.82Hz``.
 
     Parameters
     ----------
     r : int
         Mode index from 0 (the path numbers modes from 1).
-    f : float
+    natural_frequency : float
         Natural frequency in Hz (3 significant digits in the path).
 
     Returns
     -------
     str
     """
-    return "/modes/" + _esc(f"mode_{r + 1}_{f:.3g}Hz")
+    return "/modes/" + _esc(f"mode_{r + 1}_{natural_frequency:.3g}Hz")
 
 
 def frequency_index(frequencies: np.ndarray) -> tuple[str, np.ndarray]:
