@@ -216,3 +216,34 @@ def test_friction_and_a_clearance_at_one_spring_are_both_named():
     clear = next(c for c in r.candidates if c.effect == "backlash")
     assert clear.parameters["gap_m"] == pytest.approx(1.5e-4, rel=0.25)
     assert r.gap_after < 1.5 * r.noise_floor
+
+
+@pytest.mark.slow  # the full diagnosis of three 1-DOF logs and the forward selection, ~60-200 s wall
+def test_a_delay_beside_a_clearance_is_named_as_the_second_effect():
+    """Three logs at levels 1 : 2.5 : 6 of a mass on a spring with a clearance (a fifteenth of
+    the lowest level's RMS deflection) behind a 1.6 ms input delay: the clearance makes the BLA
+    change with the level, so a delay cannot be the verdict alone (and is not fitted alone);
+    beside the clearance it is still a second effect: the forward selection tries it, and both
+    are named, the delay with its value."""
+    out = (Output("m1", "acceleration", "/imu/m1.linear_acceleration.x"),
+           Output("m1", "displacement", "/laser/m1.displacement.x"))
+    base = LumpedModel((Dof("m1", 1.93),), (Spring(("m1", "ground"), k=13042.0), Damper(("m1", "ground"), c=9.72)),
+                       (Input("m1", channel=IN),), out, "one mass")
+    truth = replace(base, elements=(Backlash(("m1", "ground"), k=13042.0, gap=5.6e-5), base.elements[1]),
+                    inputs=(Input("m1", channel=IN, delay=0.0016),))
+    rng = np.random.default_rng(9)
+    b, a = signal.butter(4, [2 / (FS / 2), 170 / (FS / 2)], "band")
+    logs = []
+    for i, level in enumerate((1.0, 2.5, 6.0)):
+        u = signal.lfilter(b, a, rng.standard_normal(20000))
+        u = u / np.std(u) * 2.36 * level
+        y = np.asarray(simulate(truth, u, FS).data[1:])
+        y = y + 0.01 * np.std(y, axis=1, keepdims=True) * rng.standard_normal(y.shape)
+        logs.append(Signals(data=np.vstack([u, y]), fs=FS, channels=base.input_channels() + base.output_channels(),
+                            units=["N", "m/s^2", "m"]))
+    r = diagnose(base, logs, effects=["backlash", "time_delay", "coulomb_friction", "cubic_stiffness"])
+    assert r.meta["level_dependence"]["flagged"] and "time_delay" in r.meta["not_tried"], r.summary()
+    assert set(r.verdicts) == {"backlash", "time_delay"}, r.summary()
+    delay = next(c for c in r.candidates if c.effect == "time_delay")
+    assert delay.parameters["delay_s"] == pytest.approx(0.0016, rel=0.1)
+    assert r.gap_after < 0.25 * r.gap_before

@@ -869,6 +869,9 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     scales["delay0"] = float(min(max(tau, 1e-4), 0.05))
     n_reg = min(n_sc, int(20 * fs))
     scales["regress"] = _regression_starts(refit, rel, ys, y_ref, fit_log, n_reg, fs, effect_set)
+    if np.any(theta):  # the nominal's residual too: a strong nonlinearity bends the refit
+        scales["regress_nominal"] = _regression_starts(model, rels[1], ys, y_nom, fit_log, n_reg, fs,
+                                                       effect_set & {"coulomb_friction", "cubic_stiffness"})
     timings["signatures"] = time.perf_counter() - t
 
     # 4. candidates ------------------------------------------------------------------------------
@@ -1193,16 +1196,28 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # 5b. forward selection: a second (third) effect is kept when it closes significantly more -----
     t = time.perf_counter()
     shares = []
+    fs_args = dict(lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()))
     if chosen and chosen[0][3] is not None:
         chosen, shares = _forward_selection(chosen[0], per_class, sims, ys, split, held_out, key, k_before,
-                                            floor, gap_before, workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l,
-                                            also=list(lin_later.values()))
+                                            floor, gap_before, workers, **fs_args)
         if len(chosen) > 1:
             # the combination polished jointly with the linear parameters, at full accuracy
             chain = [(c[3], c[4]) for c in chosen]
             chosen[-1] = _polish(chosen[-1], chain, **polish)
             added = {c[0].effect for c in chosen[1:]}
             ordered = chosen + [c for c in ordered[1:] if c[0].effect not in added]
+    elif verdict == "unexplained" and best_i is not None and cands[best_i][3] is not None:
+        # no effect explains the gap alone; two together may (a clearance and a delay, each of
+        # which alone leaves most of it): the forward selection from the best admissible
+        # candidate, and the combination is the verdict only if it explains enough itself
+        trial, trial_shares = _forward_selection(cands[best_i], per_class, sims, ys, split, held_out, key,
+                                                 k_before, floor, gap_before, workers, **fs_args)
+        if len(trial) > 1:
+            trial[-1] = _polish(trial[-1], [(c[3], c[4]) for c in trial], **polish)
+            if trial[-1][0].score >= UNEXPLAINED_SCORE:
+                chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
+                added = {c[0].effect for c in chosen}
+                ordered = chosen + [c for c in ordered if c[0].effect not in added]
     timings["forward_selection"] = time.perf_counter() - t
     verdicts = [c[0].effect for c in chosen] if chosen else [verdict]
     last = chosen[-1] if chosen else ordered[0]
@@ -1274,6 +1289,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                                    for k, v in level.items()} | {"simulated_shifts": trend_shifts},
               "start_values": {f"{k[0]}@{k[1]}" if k[1] else k[0]: (list(v) if isinstance(v, tuple) else v)
                                for k, v in scales.get("regress", {}).items()},
+              "start_values_nominal": {f"{k[0]}@{k[1]}" if k[1] else k[0]: (list(v) if isinstance(v, tuple) else v)
+                                       for k, v in scales.get("regress_nominal", {}).items()},
               "not_tried": not_tried,
               "closed_loop": ({"inputs": log_channels(model)[0], "outputs": out_ch,
                                "excluded_effects": excluded} if closed else None),

@@ -379,6 +379,15 @@ def _mass_at(model, name) -> float:
     return float(1.0 / np.sum(v**2 / np.diag(model.M)))
 
 
+def _regressed(scales, key) -> list:
+    """The regression start values of `key`: on the refitted model's residual
+    (``scales["regress"]``), then on the nominal's (``scales["regress_nominal"]``: a strong
+    nonlinearity bends the refit, which then absorbs part of the effect, and its residual's
+    estimate falls short)."""
+    return [v for v in (scales.get("regress", {}).get(key), scales.get("regress_nominal", {}).get(key))
+            if v is not None]
+
+
 def _starts_1d(values, lo, hi):
     """Start vectors of a one-parameter effect: unique finite values clipped inside the bounds."""
     out = []
@@ -473,13 +482,13 @@ def _coulomb_friction(model, scales):
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
         f_ref = _force_ref(scales, k_loc * d_rms)  # the spring force scale at this connection
-        est = scales.get("regress", {}).get(("coulomb_friction", key))
+        ests = _regressed(scales, ("coulomb_friction", key))
 
         def build(m, p, pair=pair):
             return replace(m, elements=m.elements + (Friction(pair, force_=float(math.exp(p[0])), v_eps=FRICTION_V_EPS),))
 
         lo, hi = math.log(f_ref * 1e-4), math.log(max(f_ref, scales["u_max"]) * 3)
-        vals = [math.log(est) if est and est > 0 else None] + [math.log(f_ref * r) for r in (0.01, 0.1, 1.0)]
+        vals = [math.log(e) if e and e > 0 else None for e in ests] + [math.log(f_ref * r) for r in (0.01, 0.1, 1.0)]
         specs.append(EffectSpec(
             "coulomb_friction", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi),
             np.array([lo]), np.array([hi]),
@@ -565,7 +574,7 @@ def _cubic_stiffness(model, scales):
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
         k_loc = _force_ref(scales, k_loc * d_rms) / d_rms  # no stiffness there: the input's force scale
-        est = scales.get("regress", {}).get(("cubic_stiffness", key))
+        ests = _regressed(scales, ("cubic_stiffness", key))
 
         # k3 = q k / d_rms^2, q signed
         def build(m, p, pair=pair, k_loc=k_loc, d_rms=d_rms):
@@ -574,9 +583,9 @@ def _cubic_stiffness(model, scales):
         pos = [0.03, 0.3, 3.0, 20.0]
         neg = [-0.03, -0.15]
         grid = (neg + pos) if trend == "softening" else (pos + neg)
-        q_est = est * d_rms**2 / k_loc if est is not None else None
+        q_est = [e * d_rms**2 / k_loc for e in ests if e is not None]
         specs.append(EffectSpec(
-            "cubic_stiffness", {"between": [pair[0], pair[1]]}, 1, _starts_1d([q_est] + grid, -0.5, 300.0),
+            "cubic_stiffness", {"between": [pair[0], pair[1]]}, 1, _starts_1d(q_est + grid, -0.5, 300.0),
             np.array([-0.5]), np.array([300.0]),
             build, lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
             character=lambda p: {"character": "hardening" if p[0] >= 0 else "softening"},
