@@ -238,7 +238,7 @@ def outputs_checks(tmp: Path, shared: Path | None) -> None:
     if model.exists():
         shutil.copy(model, w / "m.toml")
         before = (w / "m.toml").read_bytes()
-        p = cli("simulate", "m.toml", "--excitation", "random:f_lo=1,f_hi=100,rms=1", "--duration", "2", "--out", "m.toml", cwd=w)
+        p = cli("simulate", "m.toml", "--excitation", "random:fmin=1,fmax=100,rms=1", "--duration", "2", "--out", "m.toml", cwd=w)
         check("`simulate M.toml --out M.toml` leaves the model intact", (w / "m.toml").read_bytes() == before
               and p.returncode == 1, f"exit {p.returncode}: {p.stderr.strip()[:120]}")
 
