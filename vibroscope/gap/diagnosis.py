@@ -1419,7 +1419,9 @@ def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_ou
     """Refine the winning candidate's effects (`chain`: ``(spec, p)`` applied in order to the
     linear model) jointly with the linear parameters on up to POLISH_S s of the fitting data at the
     full integration accuracy (Ljung 1999, output error); the held-out gap is recomputed at
-    full accuracy. The polished model is kept only when its held-out gap is not worse."""
+    full accuracy. The polished model is kept only when its held-out gap is not worse and no
+    effect's polished parameters make it vanish where they did not before (asymmetric friction
+    polished into two equal forces is no verdict; the candidate stays as it was fitted)."""
     c, m_aug, _, s_last, p_last, base = cand
     nl = len(lin)
     th = lin.theta_between(model, base)
@@ -1441,7 +1443,9 @@ def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_ou
     g, yh = held_out(m_new)
     g0, yh0 = held_out(m_aug)  # the candidate itself at full accuracy
     n_par = sum(sizes)
-    if not np.isfinite(g) or (np.isfinite(g0) and g > g0):
+    vanished_now = any(s_.vanishes(x[a_:b_]) is not None and s_.vanishes(np.asarray(p_, float)) is None
+                       for (s_, p_), a_, b_ in zip(chain, offs[:-1], offs[1:]))
+    if not np.isfinite(g) or (np.isfinite(g0) and g > g0) or vanished_now:
         if not np.isfinite(g0):
             return cand
         return (replace(c, gap_after=g0, score=1.0 - key(g0, n_par) / k_before if k_before > 0 else 0.0),
