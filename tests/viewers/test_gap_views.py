@@ -298,6 +298,10 @@ def test_helpers():
     assert where_label({"parameters": ["k1", "c1"]}) == "k1, c1"
     assert where_label({}) == ""
     assert candidate_label(Candidate("time_delay", {"side": "input"}, {}, 0.1, 0.1)) == "time_delay @ input"
+    # an effect fitted in two forms names its form beside it, short enough for the bar labels
+    joint = Candidate("joint_friction", {"between": ["m1", "ground"], "form": "iwan", "character": "softening"},
+                      {}, 0.1, 0.1)
+    assert candidate_label(joint) == "joint_friction (iwan) @ m1–ground, softening"
     assert held_out_spans(np.array([0, 1, 1, 0, 1], bool)) == [(1, 3), (4, 5)]
     assert held_out_spans(np.zeros(0, bool)) == []
 

@@ -82,7 +82,7 @@ def where_label(where: Mapping[str, Any]) -> str:
             names = [str(x) for x in v]
             bits.append(", ".join(names[:4]) + (f" +{len(names) - 4}" if len(names) > 4 else "") if names
                         else "no change")
-        elif k in ("dof", "side", "character"):
+        elif k in ("dof", "side", "character", "form"):
             bits.append(str(v))
         else:
             bits.append(f"{k}={v}")
@@ -90,7 +90,8 @@ def where_label(where: Mapping[str, Any]) -> str:
 
 
 def candidate_label(candidate) -> str:
-    """``"effect @ where"`` (just ``"effect"`` when the candidate has no location).
+    """``"effect @ where"`` (just ``"effect"`` when the candidate has no location); an
+    effect fitted in several forms names its form beside it: ``"joint_friction (iwan) @ m1–ground"``.
 
     Parameters
     ----------
@@ -101,8 +102,11 @@ def candidate_label(candidate) -> str:
     -------
     str
     """
-    w = where_label(candidate.where)
-    return f"{candidate.effect} @ {w}" if w else str(candidate.effect)
+    where = dict(candidate.where)
+    form = where.pop("form", None)
+    name = f"{candidate.effect} ({form})" if form else str(candidate.effect)
+    w = where_label(where)
+    return f"{name} @ {w}" if w else name
 
 
 def verdict_index(report) -> int | None:
@@ -622,7 +626,7 @@ def plot_gap_candidates(report, *, fig=None):
         bars[k].set_facecolor(BAR_VERDICT)
         bars[k].set_alpha(0.55)
         bars[k].set_edgecolor("k")
-    ax.set_yticks(y, [("+ " if k in added else "") + short_label(candidate_label(c), 44) for k, c in enumerate(cands)],
+    ax.set_yticks(y, [("+ " if k in added else "") + short_label(candidate_label(c), 48) for k, c in enumerate(cands)],
                   fontsize=8)
     for k, lab in enumerate(ax.get_yticklabels()):
         if k == vi:
