@@ -1196,28 +1196,30 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # 5b. forward selection: a second (third) effect is kept when it closes significantly more -----
     t = time.perf_counter()
     shares = []
-    fs_args = dict(lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()))
+
+    def select_from(first):
+        """Forward selection from `first`; a combination is polished jointly with the linear
+        parameters at full accuracy. Returns ``(chosen, shares)``."""
+        ch, sh = _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before,
+                                    workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()))
+        if len(ch) > 1:
+            ch[-1] = _polish(ch[-1], [(c[3], c[4]) for c in ch], **polish)
+        return ch, sh
+
     if chosen and chosen[0][3] is not None:
-        chosen, shares = _forward_selection(chosen[0], per_class, sims, ys, split, held_out, key, k_before,
-                                            floor, gap_before, workers, **fs_args)
+        chosen, shares = select_from(chosen[0])
         if len(chosen) > 1:
-            # the combination polished jointly with the linear parameters, at full accuracy
-            chain = [(c[3], c[4]) for c in chosen]
-            chosen[-1] = _polish(chosen[-1], chain, **polish)
             added = {c[0].effect for c in chosen[1:]}
             ordered = chosen + [c for c in ordered[1:] if c[0].effect not in added]
     elif verdict == "unexplained" and best_i is not None and cands[best_i][3] is not None:
         # no effect explains the gap alone; two together may (a clearance and a delay, each of
         # which alone leaves most of it): the forward selection from the best admissible
         # candidate, and the combination is the verdict only if it explains enough itself
-        trial, trial_shares = _forward_selection(cands[best_i], per_class, sims, ys, split, held_out, key,
-                                                 k_before, floor, gap_before, workers, **fs_args)
-        if len(trial) > 1:
-            trial[-1] = _polish(trial[-1], [(c[3], c[4]) for c in trial], **polish)
-            if trial[-1][0].score >= UNEXPLAINED_SCORE:
-                chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
-                added = {c[0].effect for c in chosen}
-                ordered = chosen + [c for c in ordered if c[0].effect not in added]
+        trial, trial_shares = select_from(cands[best_i])
+        if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE:
+            chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
+            added = {c[0].effect for c in chosen}
+            ordered = chosen + [c for c in ordered if c[0].effect not in added]
     timings["forward_selection"] = time.perf_counter() - t
     verdicts = [c[0].effect for c in chosen] if chosen else [verdict]
     last = chosen[-1] if chosen else ordered[0]

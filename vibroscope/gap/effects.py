@@ -653,7 +653,7 @@ def _joint_friction(model, scales):
     specs = []
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
-        j, spring = _spring_at(model, pair)
+        _, spring = _spring_at(model, pair)
         if spring is None:
             continue
 
@@ -663,6 +663,10 @@ def _joint_friction(model, scales):
             r = 1.0 / (1.0 + math.exp(-p[0]))
             fs_ = u_ref * math.exp(p[1])  # the slip force scaled by the input's RMS force
             return r, fs_
+
+        def desc(p, coeffs=coeffs):
+            r, fs_ = coeffs(p)
+            return {"joint_share": r, "slip_force_N": fs_}
 
         def vanish(p, coeffs=coeffs):
             r, _ = coeffs(p)
@@ -694,10 +698,6 @@ def _joint_friction(model, scales):
                     els.append(BoucWen(sp.between, alpha=alpha, beta=alpha / max(f_i, 1e-300) ** nu, gamma=0.5,
                                        delta=0.5, nu=nu))
                 return replace(m, elements=tuple(els))
-
-            def desc(p, coeffs=coeffs):
-                r, fs_ = coeffs(p)
-                return {"joint_share": r, "slip_force_N": fs_}
 
             specs.append(EffectSpec(
                 "joint_friction", {"between": [pair[0], pair[1]], "form": form}, 2, starts, lo, hi, build, desc,
