@@ -1011,6 +1011,18 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             to_refine += items[:n_ref]
             kept += items[n_ref:]
         screened = list(ex.map(refine, to_refine)) + kept
+        # a family never fits worse than a member it contains: where the member (Coulomb friction)
+        # fits a location better than the family (asymmetric friction), the family is refined again
+        # from the member's solution there
+        at = {(it[0].effect, _where_key(it[0].where)): it for it in screened}
+        lifts = []
+        for i, (s, p, g, base) in enumerate(screened):
+            mem = at.get((s.lifts_from[0], _where_key(s.where))) if s.lifts_from is not None else None
+            if mem is not None and mem[2] < g:
+                p0 = np.clip(s.lifts_from[1](mem[1]), s.lower + 1e-9, s.upper - 1e-9)
+                lifts.append((i, (s, p0, mem[2], mem[3])))
+        for (i, _), res in zip(lifts, ex.map(refine, [x[1] for x in lifts])):
+            screened[i] = res
     # best location per class, then the best classes fitted jointly with the linear parameters
     per_class: dict[str, tuple] = {}
     for s, p, g, base in screened:
@@ -1020,18 +1032,24 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     full = ranked[:n_full]
     joint_n = [min(n, max(s_, int(20 * fs))) if n else 0 for n, s_ in zip(ns_fit, sp)]
 
-    def joint(item):
+    joint_x: dict[int, np.ndarray] = {}  # id(joint result) -> its linear parameters
+
+    def joint(item, x_lin=None):
+        """`item` fitted jointly with the linear parameters (from `x_lin`, default the refit's
+        or the nominal's, as its base)."""
         s, p, _, base = item
         nl = len(lin)
 
         def build(x, s=s):
             return s.apply(lin.apply(model, x[:nl]), x[nl:])
 
-        x0 = np.concatenate([theta if base is refit else np.zeros(nl), p])
+        x0 = np.concatenate([x_lin if x_lin is not None else (theta if base is refit else np.zeros(nl)), p])
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
         x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, joint_n, fast=True, max_nfev=6)
-        return s, build(x), x[nl:], g, lin.apply(model, x[:nl])
+        res = (s, build(x), x[nl:], g, lin.apply(model, x[:nl]))
+        joint_x[id(res)] = x[:nl]
+        return res
 
     keep_ids = {id(r) for r in results}  # the linear fits
     with ThreadPoolExecutor(max(1, workers)) as ex:
@@ -1039,6 +1057,25 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             results.append(res)
             keep_ids.add(id(res))
             bar.update(1)
+        # the same after the joint fits: where the member's joint fit (effect and linear parameters)
+        # is better than the family's, or the family had none, the family is fitted jointly again
+        # from the member's joint solution
+        jfit = {(r[0].effect, _where_key(r[0].where)): r for r in results if id(r) in joint_x}
+        lifts = []
+        for (eff, wk), r in list(jfit.items()):
+            fam = next((s_ for s_, *_ in screened if s_.lifts_from is not None and s_.lifts_from[0] == eff
+                        and _where_key(s_.where) == wk), None)
+            if fam is None:
+                continue
+            own = jfit.get((fam.effect, wk))
+            if own is None or own[3] > r[3]:
+                p0 = np.clip(fam.lifts_from[1](r[2]), fam.lower + 1e-9, fam.upper - 1e-9)
+                lifts.append((own, (fam, p0, r[3], r[4]), joint_x[id(r)]))
+        for (own, item, xl), res in zip(lifts, ex.map(lambda a: joint(a[1], a[2]), lifts)):
+            if own is None or res[3] < own[3]:
+                results[:] = [r for r in results if r is not own]
+                results.append(res)
+                keep_ids.add(id(res))
     done = {r[0].effect for r in results}
     for s, p, g, base in screened:  # the other classes and locations as screened
         if s.effect not in done or s is not per_class[s.effect][0]:
@@ -1083,18 +1120,22 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     results = [r for r in results if id(r) in keep_ids or r[3] <= 1.5 * cls_best[r[0].effect]]
     with ThreadPoolExecutor(max(1, workers)) as ex:
         evaluated = list(ex.map(evaluate, results))
+    # the floor the candidates are ranked against: the data's out-of-band level is an upper bound
+    # on the noise (a nonlinearity's harmonics fall there too); the held-out residual of a good
+    # candidate, out of band, is another (noise plus that model's own error) - the lowest is kept
+    floor_rank, floor_rank_method = _ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps)
 
     def key(g, n):
         """Penalised held-out excess gap (lower is better)."""
-        return max(_excess(g, floor), 0.15 * floor) * (1 + PENALTY * n)
+        return max(_excess(g, floor_rank), 0.15 * floor_rank) * (1 + PENALTY * n)
 
     k_before = key(gap_before, 0)
     cands = []  # (Candidate, model, held-out outputs, spec, p)
     for s, m_aug, p, gfit, g, yh, contrib, base in evaluated:
         reason = s.vanishes(p)
-        if reason is None and np.isfinite(contrib) and np.isfinite(floor) and contrib < floor:
+        if reason is None and np.isfinite(contrib) and np.isfinite(floor_rank) and contrib < floor_rank:
             reason = (f"the effect changes the held-out outputs by nrmse {contrib:.3g}, within the noise floor "
-                      f"{floor:.3g}")
+                      f"{floor_rank:.3g}")
         where = dict(s.where) | s.qualifiers(p)
         if s.effect == "extra_mode":
             where["frequency_hz"] = s.describe(p).get("frequency_hz")
@@ -1200,7 +1241,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     def select_from(first):
         """Forward selection from `first`; a combination is polished jointly with the linear
         parameters at full accuracy. Returns ``(chosen, shares)``."""
-        ch, sh = _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before,
+        ch, sh = _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor_rank, gap_before,
                                     workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()))
         if len(ch) > 1:
             ch[-1] = _polish(ch[-1], [(c[3], c[4]) for c in ch], **polish)
@@ -1286,6 +1327,7 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         level_evidence=level_ev,
         meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
+              "noise_floor_ranking": {"nrmse": floor_rank, "method": floor_rank_method},
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
                                    for k, v in level.items()} | {"simulated_shifts": trend_shifts},
@@ -1299,6 +1341,34 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
               "localisation": "bands, channels and regimes of the nominal model on the last log's held-out samples "
                               "(the nominal model is fitted on nothing)"},
     )
+
+
+def _ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best: int = 3):
+    """The noise floor the candidates are ranked against, and how it was found.
+
+    The data's out-of-band output level (:func:`~vibroscope.gap.measure.noise_floor`) bounds
+    the noise from above; a nonlinearity's harmonics beyond the excited band (friction, a
+    clearance) raise it, and every candidate then looks as good as the noise. The held-out
+    residual of a candidate, measured minus simulated, holds the noise plus that model's own
+    error: its out-of-band level is another upper bound. The lowest of the data's and the
+    `n_best` best candidates' (by held-out gap) is returned; it is never above the data's.
+    Evaluated items are ``(spec, model, p, gap_fit, gap_held_out, outputs, contrib, base)``.
+    """
+    if not (np.isfinite(floor) and nf.method.startswith("out-of-band") and val_logs):
+        return floor, "the data's floor"
+    best, how = floor, "the data's floor (no candidate's held-out residual is lower out of band)"
+    good = sorted((e for e in evaluated if np.isfinite(e[4])), key=lambda e: e[4])[:n_best]
+    for e in good:
+        yh = e[5]
+        if any(yh.get(i) is None for i in val_logs):
+            continue
+        r = noise_floor([ys[i] - yh[i] for i in val_logs], [us[i] for i in val_logs],
+                        [split.validation[i] for i in val_logs], fs, nps, reference=[ys[i] for i in val_logs])
+        if r.method.startswith("out-of-band") and np.isfinite(r.nrmse) and r.nrmse < best:
+            best = r.nrmse
+            how = (f"out-of-band level of the held-out residual of {e[0].effect} @ {_where_key(e[0].where)} "
+                   f"(below the data's {floor:.3g})")
+    return float(best), how
 
 
 def _where_key(where: dict) -> str:

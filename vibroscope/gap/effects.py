@@ -272,6 +272,11 @@ class EffectSpec:
         friction): the simpler effect's name and parameters when the fitted `p` vanish into
         it (two equal sliding forces), else None. The diagnosis then evaluates the simpler
         effect at the same location instead of discarding the fit.
+    lifts_from : tuple of (str, callable p_simple -> p), optional
+        The converse: the simpler effect this one contains and the map of its parameters to
+        this effect's (Coulomb friction ``Fc`` -> asymmetric friction ``(Fc, Fc)``). Where the
+        simpler effect fits the same location better, the diagnosis refines this one again from
+        the simpler one's solution (a family never fits worse than a member it contains).
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -289,6 +294,7 @@ class EffectSpec:
     vanish: Callable | None = None
     character: Callable | None = None
     reduces_to: Callable | None = None
+    lifts_from: tuple | None = None
     meta: dict = field(default_factory=dict)
 
     def apply(self, model: LumpedModel, p) -> LumpedModel:
@@ -512,6 +518,11 @@ def _asymmetric_friction(model, scales):
         starts = []
         if est is not None and est[0] > 0 and est[1] > 0:
             starts.append(np.clip(np.log(np.asarray(est, float)), lo + 1e-6, hi - 1e-6))
+        # symmetric starts at the Coulomb estimates: the family nests Coulomb friction, and a fit
+        # started there breaks the symmetry only as far as the data ask
+        for e in _regressed(scales, ("coulomb_friction", key)):
+            if e and e > 0:
+                starts.append(np.clip(np.full(2, math.log(e)), lo + 1e-6, hi - 1e-6))
         for r in (0.03, 0.3):
             for a in (2.0, 0.5):
                 starts.append(np.clip(np.array([math.log(f_ref * r * a), math.log(f_ref * r)]), lo + 1e-6, hi - 1e-6))
@@ -531,6 +542,7 @@ def _asymmetric_friction(model, scales):
             np.array([lo, lo]), np.array([hi, hi]),
             build, lambda p: {"Fc_pos_N": float(math.exp(p[0])), "Fc_neg_N": float(math.exp(p[1])),
                               "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish, reduces_to=reduce,
+            lifts_from=("coulomb_friction", lambda q: np.array([q[0], q[0]], float)),
         ))
     return specs
 

@@ -373,7 +373,8 @@ def excited_band(u: np.ndarray, fs: float, nperseg: int) -> tuple[float, float]:
         return (0.0, fs / 2)
 
 
-def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> NoiseFloor:
+def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
+                reference: list | None = None) -> NoiseFloor:
     """The measurement-noise floor in nrmse, estimated from the data.
 
     Method: the outputs' PSD beyond the excited band of the input (above 1.15 times its
@@ -396,6 +397,10 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> Noi
         Sampling frequency in Hz.
     nperseg : int
         Welch segment length in samples (Hann, 50 % overlap; :func:`masked_csd`).
+    reference : list of ndarray, shape (n_outputs, n_samples), optional
+        The measured outputs whose energy normalises the floor when `ys` are residuals
+        (measured minus a model's simulation): the residual's out-of-band level is noise plus
+        that model's own error there, another upper bound on the noise (default: `ys`).
 
     Returns
     -------
@@ -406,7 +411,8 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> Noi
     den_c: dict = {}
     levels = []
     methods = set()
-    for y, u, m in zip(ys, us, masks):
+    refs = ys if reference is None else reference
+    for y, u, m, yr in zip(ys, us, masks, refs):
         if not m.any():
             continue
         x = np.vstack([u[:1], y])
@@ -431,7 +437,7 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int) -> Noi
                 methods.add("non-coherent output power (1 - coherence) Gyy in the excited band")
             lev.append(level)
             num_c[c] = num_c.get(c, 0.0) + var * m.sum()
-            den_c[c] = den_c.get(c, 0.0) + float(np.sum(y[c, m] ** 2))
+            den_c[c] = den_c.get(c, 0.0) + float(np.sum(yr[c, m] ** 2))
         levels.append(lev)
     ok = den_c and all(v > 0 for v in den_c.values())
     nr = float(np.sqrt(np.mean([num_c[c] / den_c[c] for c in den_c]))) if ok else float("nan")
