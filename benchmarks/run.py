@@ -192,8 +192,9 @@ def bench_closed_loop(seconds: float = 60.0) -> list[dict]:
                        velocity_filter=(0.5, 0.5), gain=35.15, saturation=10.0)
         els = (Damper(("q", "ground"), c=203.5),) + ((make_element("friction", ("q", "ground"), force=20.39),)
                                                        if friction else ())
-        return LumpedModel((Dof("q", 95.11),), els, (Input("q", offset=3.16 if friction else 0.0),),
-                           (Output("q", "displacement", "/qm.x"),), "drive", (c,))
+        return LumpedModel(dofs=(Dof("q", 95.11),), elements=els,
+                           inputs=(Input(dof="q", offset=3.16 if friction else 0.0),),
+                           outputs=(Output("q", "displacement", "/qm.x"),), name="drive", controllers=(c,))
 
     t = np.arange(int(seconds * 1000)) / 1000.0
     r = 0.1 * (1 - np.cos(2 * np.pi * 0.2 * t))

@@ -742,7 +742,9 @@ def _net_model(masses, conns, ks, cs, in_dof: str, name: str = "", outputs=None)
         els += [Spring((a, b), float(k)), Damper((a, b), float(c))]
     if outputs is None:
         outputs = tuple(Output(d.name, "acceleration", output_channel(d.name)) for d in dofs)
-    return LumpedModel(dofs, tuple(els), (Input(in_dof, "force", INPUT_CHANNEL),), tuple(outputs), name)
+    return LumpedModel(dofs=dofs, elements=tuple(els),
+                       inputs=(Input(dof=in_dof, quantity="force", channel=INPUT_CHANNEL),),
+                       outputs=tuple(outputs), name=name)
 
 
 def _chain_model(masses, ks, cs, in_dof: str, name: str = "") -> LumpedModel:
@@ -1413,7 +1415,7 @@ def exact_pole_residue(model: LumpedModel):
         R.append(A / (2j * lam.imag) * lam**p)
         lower.append(A.sum() if p == 2 else 0.0)
     R = np.array(R).T[:, :, None]
-    inp = Input(model.inputs[0].dof, "force", model.inputs[0].channel)
+    inp = Input(dof=model.inputs[0].dof, quantity="force", channel=model.inputs[0].channel)
     outs = [Output(o.dof, o.quantity, o.channel) for o in model.outputs]
     return PoleResidueModel.from_poles_residues(w / (2 * np.pi), z, R, inputs=[inp], outputs=outs,
                                                 lower=np.array(lower, complex)[:, None], name="identified modes")
@@ -1489,9 +1491,10 @@ class DriveController:
     def vibroscope(self):
         from vibroscope.models.controller import Controller
 
-        return Controller("position", "cascade", {"kp": self.kp, "kv": self.kv}, CL_RATE, self.dof,
-                          drives=CL_FORCE_CHANNEL, reference=CL_REFERENCE_CHANNEL, velocity_filter=CL_TAPS,
-                          gain=self.gain, output_channel=CL_COMMAND_CHANNEL, output_unit="V")
+        return Controller(name="position", law="cascade", gains={"kp": self.kp, "kv": self.kv},
+                          rate_hz=CL_RATE, dof=self.dof, drives=CL_FORCE_CHANNEL,
+                          reference=CL_REFERENCE_CHANNEL, velocity_filter=CL_TAPS, gain=self.gain,
+                          output_channel=CL_COMMAND_CHANNEL, output_unit="V")
 
 
 def simulate_closed_loop_truth(model, ctl: DriveController, ref: np.ndarray, n: int | None = None,
@@ -1558,8 +1561,9 @@ def random_drive(rng: np.random.Generator, two_dof: bool | None = None):
     kv = wv * m1 / gain
     kp = wv / float(rng.uniform(3.0, 6.0))
     ctl = DriveController(kp, kv, gain)
-    model = LumpedModel(tuple(dofs), tuple(els), (Input("m1", "force", CL_FORCE_CHANNEL),), tuple(outs),
-                        "drive" + (" + load" if two_dof else ""))
+    model = LumpedModel(dofs=tuple(dofs), elements=tuple(els),
+                        inputs=(Input(dof="m1", quantity="force", channel=CL_FORCE_CHANNEL),),
+                        outputs=tuple(outs), name="drive" + (" + load" if two_dof else ""))
     return model, ctl
 
 

@@ -55,11 +55,11 @@ def nominal():
     from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
 
     return LumpedModel(
-        (Dof("m", 2.0),),
-        (Spring(("m", "ground"), k=1.0e5), Damper(("m", "ground"), c=10.0)),
-        (Input("m", channel=IN_CH),),
-        (Output("m", "displacement", OUT_CH),),
-        "Bouc-Wen benchmark, linear part",
+        dofs=(Dof("m", 2.0),),
+        elements=(Spring(("m", "ground"), k=1.0e5), Damper(("m", "ground"), c=10.0)),
+        inputs=(Input(dof="m", channel=IN_CH),),
+        outputs=(Output("m", "displacement", OUT_CH),),
+        name="Bouc-Wen benchmark, linear part",
     )
 
 

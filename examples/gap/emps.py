@@ -77,9 +77,10 @@ def model(d: dict, *, friction: bool, pulses: bool = True):
     els = (Damper(("q", "ground"), c=FV),)
     if friction:
         els += (make_element("friction", ("q", "ground"), force=FC),)
-    inp = Input("q", channel=FORCE, offset=-OFFSET if friction else 0.0)
+    inp = Input(dof="q", channel=FORCE, offset=-OFFSET if friction else 0.0)
     name = "EMPS, IDIM-LS " + ("M, Fv, Fc, offset" if friction else "M, Fv")
-    return LumpedModel((Dof("q", M),), els, (inp,), (Output("q", "displacement", CH["qm"]),), name, (ctl,))
+    return LumpedModel(dofs=(Dof("q", M),), elements=els, inputs=(inp,),
+                       outputs=(Output("q", "displacement", CH["qm"]),), name=name, controllers=(ctl,))
 
 
 def relerr(y, y_sim) -> float:

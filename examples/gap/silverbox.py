@@ -66,11 +66,11 @@ def nominal(est):
     m = k / (2 * np.pi * f0) ** 2
     c = 2 * 0.05 * np.sqrt(k * m)
     start = LumpedModel(
-        (Dof("m1", m),),
-        (Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c)),
-        (Input("m1", channel=IN_CH),),
-        (Output("m1", "displacement", OUT_CH),),
-        "Silverbox linear",
+        dofs=(Dof("m1", m),),
+        elements=(Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c)),
+        inputs=(Input(dof="m1", channel=IN_CH),),
+        outputs=(Output("m1", "displacement", OUT_CH),),
+        name="Silverbox linear",
     )
     return fit_linear_model(start, est)
 

@@ -273,11 +273,11 @@ def cubic_model(m, d, a, b3):
     from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
 
     return LumpedModel(
-        (Dof("m1", m),),
-        (Spring(("m1", "ground"), k=a), Damper(("m1", "ground"), c=d), CubicSpring(("m1", "ground"), k3=b3)),
-        (Input("m1", channel=SB.IN_CH),),
-        (Output("m1", "displacement", SB.OUT_CH),),
-        "Silverbox cubic",
+        dofs=(Dof("m1", m),),
+        elements=(Spring(("m1", "ground"), k=a), Damper(("m1", "ground"), c=d), CubicSpring(("m1", "ground"), k3=b3)),
+        inputs=(Input(dof="m1", channel=SB.IN_CH),),
+        outputs=(Output("m1", "displacement", SB.OUT_CH),),
+        name="Silverbox cubic",
     )
 
 

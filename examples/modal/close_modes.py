@@ -50,7 +50,7 @@ def main() -> None:
     forced = simulate(model, u, FS, noise=0.02, seed=4)
     report("LSCF + LSFD (force, 512 s)", analyse_signals(forced, input=model.input_channels()[0]).modal, model)
 
-    amb_model = model.replace(inputs=tuple(Input(d.name, channel=f"/f/{d.name}") for d in model.dofs))
+    amb_model = model.replace(inputs=tuple(Input(dof=d.name, channel=f"/f/{d.name}") for d in model.dofs))
     w = np.random.default_rng(1).standard_normal((model.n_dofs, 2048 * int(FS)))
     ambient = simulate(amb_model, w, FS, noise=0.02, seed=2).select(amb_model.output_channels())
     report("SSI-COV (ambient, 2048 s)", analyse_signals(ambient).modal, model)

@@ -43,10 +43,10 @@ def _one_dof(delay=0.0):
     k = m * (2 * np.pi * f) ** 2
     c = 2 * zeta * np.sqrt(k * m)
     return LumpedModel(
-        (Dof("m1", m),),
-        (Spring(("m1", "ground"), k), Damper(("m1", "ground"), c)),
-        (Input("m1", "force", gen.INPUT_CHANNEL, None, delay),),
-        (Output("m1", "acceleration", gen.output_channel("m1")),),
+        dofs=(Dof("m1", m),),
+        elements=(Spring(("m1", "ground"), k), Damper(("m1", "ground"), c)),
+        inputs=(Input(dof="m1", quantity="force", channel=gen.INPUT_CHANNEL, saturation=None, delay=delay),),
+        outputs=(Output("m1", "acceleration", gen.output_channel("m1")),),
     )
 
 

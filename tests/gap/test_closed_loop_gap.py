@@ -26,13 +26,14 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "gap"
 
 def _drive(fc: float = 0.0) -> LumpedModel:
     """A 10 kg carriage on a 40 N s/m damper (and a Coulomb friction `fc`) in a cascade loop."""
-    ctl = Controller("pos", "cascade", {"kp": 40.0, "kv": 20.0}, FS, "q", drives=FORCE, reference=REF,
-                     velocity_filter=(0.5, 0.5), gain=10.0, saturation=50.0, output_channel=CMD, output_unit="V")
+    ctl = Controller(name="pos", law="cascade", gains={"kp": 40.0, "kv": 20.0}, rate_hz=FS, dof="q",
+                     drives=FORCE, reference=REF, velocity_filter=(0.5, 0.5), gain=10.0, saturation=50.0,
+                     output_channel=CMD, output_unit="V")
     els = (Damper(("q", "ground"), c=40.0),)
     if fc:
         els += (make_element("friction", ("q", "ground"), force=fc),)
-    return LumpedModel((Dof("q", 10.0),), els, (Input("q", channel=FORCE),), (Output("q", "displacement", POS),),
-                       "drive", (ctl,))
+    return LumpedModel(dofs=(Dof("q", 10.0),), elements=els, inputs=(Input(dof="q", channel=FORCE),),
+                       outputs=(Output("q", "displacement", POS),), name="drive", controllers=(ctl,))
 
 
 def _reference(n: int, seed: int) -> np.ndarray:

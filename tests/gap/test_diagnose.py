@@ -26,13 +26,13 @@ IN = "/actuator/force_cmd.wrench.force.x"
 def nominal() -> LumpedModel:
     """2-DOF chain: modes 23.8 and 52.2 Hz, 1.4 and 2.4 % damping."""
     return LumpedModel(
-        (Dof("m1", 1.0), Dof("m2", 0.5)),
-        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
-         Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
-        (Input("m1", channel=IN),),
-        (Output("m1", "acceleration", "/imu/m1.linear_acceleration.x"),
-         Output("m2", "acceleration", "/imu/m2.linear_acceleration.x")),
-        "two-mass chain",
+        dofs=(Dof("m1", 1.0), Dof("m2", 0.5)),
+        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
+                  Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
+        inputs=(Input(dof="m1", channel=IN),),
+        outputs=(Output("m1", "acceleration", "/imu/m1.linear_acceleration.x"),
+                 Output("m2", "acceleration", "/imu/m2.linear_acceleration.x")),
+        name="two-mass chain",
     )
 
 
@@ -124,13 +124,15 @@ def test_noise_floor_of_a_residual_sees_through_harmonics_beyond_the_band(u20):
 
 
 def test_transfer_function_of_second_order_becomes_one_mass():
-    tf = TransferFunctionModel((1.0,), (2.0, 10.0, 1e5), Input("u", channel="/u.x"), Output("y", "displacement", "/y.x"))
+    tf = TransferFunctionModel((1.0,), (2.0, 10.0, 1e5), Input(dof="u", channel="/u.x"),
+                               Output("y", "displacement", "/y.x"))
     m = as_lumped(tf)
     assert m.M[0, 0] == 2.0 and m.C[0, 0] == 10.0 and m.K[0, 0] == 1e5
     f = np.array([5.0, 35.0, 80.0])
     np.testing.assert_allclose(m.frf(f, quantity=None)[:, 0, 0], tf.frf(f)[:, 0, 0], rtol=1e-12)
     with pytest.raises(ValueError, match="second-order"):
-        as_lumped(TransferFunctionModel((1.0,), (1.0, 2.0, 3.0, 4.0), Input("u", channel="/u.x"), Output("y", "displacement", "/y.x")))
+        as_lumped(TransferFunctionModel((1.0,), (1.0, 2.0, 3.0, 4.0), Input(dof="u", channel="/u.x"),
+                                        Output("y", "displacement", "/y.x")))
 
 
 def test_none_when_the_model_is_right(u20):
@@ -221,9 +223,11 @@ def test_friction_and_a_clearance_at_one_spring_are_both_named():
     """Coulomb friction and a clearance in the same spring (1-DOF, 13 Hz): fitted alone, the
     friction bends the spring to mimic the clearance; the added clearance is fitted jointly with
     the linear parameters, so both are named and the gap closes to the noise floor."""
-    base = LumpedModel((Dof("m1", 1.12),), (Spring(("m1", "ground"), k=7460.0), Damper(("m1", "ground"), c=3.8)),
-                       (Input("m1", channel=IN),), (Output("m1", "acceleration", "/imu/m1.linear_acceleration.x"),),
-                       "one mass")
+    base = LumpedModel(dofs=(Dof("m1", 1.12),),
+                       elements=(Spring(("m1", "ground"), k=7460.0), Damper(("m1", "ground"), c=3.8)),
+                       inputs=(Input(dof="m1", channel=IN),),
+                       outputs=(Output("m1", "acceleration", "/imu/m1.linear_acceleration.x"),),
+                       name="one mass")
     truth = replace(base, elements=(Backlash(("m1", "ground"), k=7460.0, gap=1.5e-4), base.elements[1],
                                     Friction(("m1", "ground"), force_=1.0)))
     u = excitation(40000, seed=5) * 0.3
@@ -272,10 +276,11 @@ def test_a_delay_beside_a_clearance_is_named_as_the_second_effect():
     are named, the delay with its value."""
     out = (Output("m1", "acceleration", "/imu/m1.linear_acceleration.x"),
            Output("m1", "displacement", "/laser/m1.displacement.x"))
-    base = LumpedModel((Dof("m1", 1.93),), (Spring(("m1", "ground"), k=13042.0), Damper(("m1", "ground"), c=9.72)),
-                       (Input("m1", channel=IN),), out, "one mass")
+    base = LumpedModel(dofs=(Dof("m1", 1.93),),
+                       elements=(Spring(("m1", "ground"), k=13042.0), Damper(("m1", "ground"), c=9.72)),
+                       inputs=(Input(dof="m1", channel=IN),), outputs=out, name="one mass")
     truth = replace(base, elements=(Backlash(("m1", "ground"), k=13042.0, gap=5.6e-5), base.elements[1]),
-                    inputs=(Input("m1", channel=IN, delay=0.0016),))
+                    inputs=(Input(dof="m1", channel=IN, delay=0.0016),))
     rng = np.random.default_rng(9)
     b, a = signal.butter(4, [2 / (FS / 2), 170 / (FS / 2)], "band")
     logs = []

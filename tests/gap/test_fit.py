@@ -12,11 +12,11 @@ FS = 1000.0
 
 def _model(k3: float) -> LumpedModel:
     return LumpedModel(
-        (Dof("m1", 1.0), Dof("m2", 0.5)),
-        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
-         CubicSpring(("m2", "m1"), k=3e4, k3=k3), Damper(("m2", "m1"), c=4.0)),
-        (Input("m1", channel="f"),),
-        (Output("m1", "acceleration", "a1"), Output("m2", "acceleration", "a2")),
+        dofs=(Dof("m1", 1.0), Dof("m2", 0.5)),
+        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
+                  CubicSpring(("m2", "m1"), k=3e4, k3=k3), Damper(("m2", "m1"), c=4.0)),
+        inputs=(Input(dof="m1", channel="f"),),
+        outputs=(Output("m1", "acceleration", "a1"), Output("m2", "acceleration", "a2")),
     )
 
 
@@ -31,7 +31,7 @@ def test_two_parameters_in_two_threads_match_one_thread():
         m = _model(float(p[0]) * 1e9)
         els = list(m.elements)
         els[1] = Damper(("m1", "ground"), c=8.0 * float(p[1]))
-        return LumpedModel(m.dofs, tuple(els), m.inputs, m.outputs)
+        return LumpedModel(dofs=m.dofs, elements=tuple(els), inputs=m.inputs, outputs=m.outputs)
 
     x0, lo, hi = np.array([0.5, 1.5]), np.array([0.0, 0.1]), np.array([10.0, 10.0])
     r1 = fit_time_domain(build, x0, lo, hi, [sim], [y], [mask], [2000], max_nfev=6, jac_workers=1)

@@ -25,8 +25,8 @@ def duffing(k3: float) -> LumpedModel:
     el = [Spring(("m", "ground"), k=K), Damper(("m", "ground"), c=C)]
     if k3:
         el.append(CubicSpring(("m", "ground"), k3=k3))
-    return LumpedModel((Dof("m", 1.0),), tuple(el), (Input("m", channel="/u.x"),),
-                       (Output("m", "acceleration", "/a.x"),), "duffing")
+    return LumpedModel(dofs=(Dof("m", 1.0),), elements=tuple(el), inputs=(Input(dof="m", channel="/u.x"),),
+                       outputs=(Output("m", "acceleration", "/a.x"),), name="duffing")
 
 
 def logs(k3: float, duration_s: float, seed: int = 0):

@@ -37,7 +37,7 @@ def exact_modal(truth: LumpedModel, *, driving: bool = True) -> PoleResidueModel
     A = (V * V[2][None, :]).T[:, :, None]  # (mode, output, 1): phi_o,r phi_m3,r
     R = A / (2j * lam.imag)[:, None, None] * lam[:, None, None] ** 2
     outs = [Output(o.dof, "acceleration", o.channel) for o in truth.outputs]
-    inp = Input("m3" if driving else "shaker", channel=truth.inputs[0].channel)
+    inp = Input(dof="m3" if driving else "shaker", channel=truth.inputs[0].channel)
     return PoleResidueModel.from_poles_residues(w / (2 * np.pi), z, R, inputs=[inp], outputs=outs,
                                                 lower=A.sum(axis=0), name="chain, modal")
 
@@ -103,7 +103,7 @@ def test_fourth_order_transfer_function_is_accepted():
     ss = truth.state_space()
     tfc = control.ss2tf(ss[1, 0])  # m2 displacement per force on m2: a driving point
     num, den = np.asarray(tfc.num[0][0]), np.asarray(tfc.den[0][0])
-    tf = TransferFunctionModel(tuple(num / den[0]), tuple(den / den[0]), Input("u", channel="/u.x"),
+    tf = TransferFunctionModel(tuple(num / den[0]), tuple(den / den[0]), Input(dof="u", channel="/u.x"),
                                Output("y", "displacement", "/y.x"))
     m = as_lumped(tf)
     assert isinstance(m, ModalCoordinatesModel) and m.n_dofs == 2 and m.points == ("p1",)
@@ -112,13 +112,13 @@ def test_fourth_order_transfer_function_is_accepted():
     # a transfer FRF (m1 per force on m2): two points, still exact
     tfc = control.ss2tf(ss[0, 0])
     num, den = np.asarray(tfc.num[0][0]), np.asarray(tfc.den[0][0])
-    tf2 = TransferFunctionModel(tuple(num / den[0]), tuple(den / den[0]), Input("u", channel="/u.x"),
+    tf2 = TransferFunctionModel(tuple(num / den[0]), tuple(den / den[0]), Input(dof="u", channel="/u.x"),
                                 Output("y", "displacement", "/y.x"))
     m2 = as_lumped(tf2)
     assert m2.points == ("in", "out")
     np.testing.assert_allclose(m2.frf(f, quantity=None)[:, 0, 0], tf2.frf(f)[:, 0, 0], rtol=1e-8)
     with pytest.raises(ValueError, match="complex pole pairs"):
-        as_lumped(TransferFunctionModel((1.0,), (1.0, 3.0, 2.0, 0.5, 0.1), Input("u", channel="/u.x"),
+        as_lumped(TransferFunctionModel((1.0,), (1.0, 3.0, 2.0, 0.5, 0.1), Input(dof="u", channel="/u.x"),
                                         Output("y", "displacement", "/y.x")))
 
 

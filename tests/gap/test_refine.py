@@ -15,9 +15,10 @@ P_TRUE = np.array([5.4e-6, 2.25e-4, 1.0, 4.0])  # Silverbox-like m, d, a, b3
 
 def _model(p):
     m, d, a, b3 = p
-    return LumpedModel((Dof("m1", m),),
-                       (Spring(("m1", "ground"), k=a), Damper(("m1", "ground"), c=d), CubicSpring(("m1", "ground"), k3=b3)),
-                       (Input("m1", channel="u"),), (Output("m1", "displacement", "y"),), "t")
+    return LumpedModel(dofs=(Dof("m1", m),),
+                       elements=(Spring(("m1", "ground"), k=a), Damper(("m1", "ground"), c=d), CubicSpring(("m1", "ground"), k3=b3)),
+                       inputs=(Input(dof="m1", channel="u"),), outputs=(Output("m1", "displacement", "y"),),
+                       name="t")
 
 
 def test_refine_recovers_parameters_and_offsets():

@@ -24,12 +24,12 @@ def chain() -> LumpedModel:
     from vibroscope.models.elements import Damper
 
     return LumpedModel(
-        (Dof("m1", 1.0), Dof("m2", 0.5)),
-        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
-         Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
-        (Input("m1", channel="/u.x"),),
-        (Output("m1", "acceleration", "/y1.x"), Output("m2", "acceleration", "/y2.x")),
-        "chain",
+        dofs=(Dof("m1", 1.0), Dof("m2", 0.5)),
+        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
+                  Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
+        inputs=(Input(dof="m1", channel="/u.x"),),
+        outputs=(Output("m1", "acceleration", "/y1.x"), Output("m2", "acceleration", "/y2.x")),
+        name="chain",
     )
 
 
@@ -182,8 +182,8 @@ def test_residual_regression_recovers_a_friction_force():
 
 
 def test_candidate_json_holds_its_model_file_and_the_vanishing_reason():
-    c = Candidate("time_delay", {"side": "input"}, {"delay_s": 1e-7}, 0.1, 0.5, model_toml="x = 1\n",
-                  vanished="delay below half a sample")
+    c = Candidate(effect="time_delay", where={"side": "input"}, parameters={"delay_s": 1e-7}, gap_after=0.1,
+                  score=0.5, model_toml="x = 1\n", vanished="delay below half a sample")
     d = c.to_dict()
     assert d["model_toml"] == "x = 1\n" and d["vanished"] == "delay below half a sample"
-    assert Candidate("none", {}, {}, 0.1, 0.0).to_dict()["vanished"] is None
+    assert Candidate(effect="none", where={}, parameters={}, gap_after=0.1, score=0.0).to_dict()["vanished"] is None

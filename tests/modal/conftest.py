@@ -21,11 +21,11 @@ CASES = {
 def _one_force(model):
     """Force on the first mass: every mode of both chains is well excited there (the 5-DOF
     demo's own driving point, m5, is nearly a node of its 5th mode)."""
-    return model.replace(inputs=(Input(model.dofs[0].name, channel="/actuator/force.x"),))
+    return model.replace(inputs=(Input(dof=model.dofs[0].name, channel="/actuator/force.x"),))
 
 
 def _all_forces(model):
-    return model.replace(inputs=tuple(Input(d.name, channel=f"/actuator/{d.name}.force.x") for d in model.dofs))
+    return model.replace(inputs=tuple(Input(dof=d.name, channel=f"/actuator/{d.name}.force.x") for d in model.dofs))
 
 
 @pytest.fixture(scope="session", params=sorted(CASES))

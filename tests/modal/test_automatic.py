@@ -35,7 +35,7 @@ def _assert_matches_truth(mm, *, f_tol=1e-3, z_tol=0.05, mac_min=0.995):
 @pytest.fixture(scope="module")
 def ambient():
     """Independent white forces on every mass, 2048 s at 256 Hz, 2 % output noise (outputs only)."""
-    amb = MODEL.replace(inputs=tuple(Input(d.name, channel=f"/f/{d.name}") for d in MODEL.dofs))
+    amb = MODEL.replace(inputs=tuple(Input(dof=d.name, channel=f"/f/{d.name}") for d in MODEL.dofs))
     u = np.random.default_rng(1).standard_normal((MODEL.n_dofs, 2048 * int(FS)))
     return simulate(amb, u, FS, noise=0.02, seed=2).select(amb.output_channels())
 

@@ -122,7 +122,7 @@ def test_peak_picking_analytic_frf(kind):
     from vibroscope.spectral import FRF
 
     model = demo_model_5dof()
-    model = model.replace(inputs=(Input("m1", channel="/f"),))
+    model = model.replace(inputs=(Input(dof="m1", channel="/f"),))
     f = np.arange(0, 200.0, 0.01)
     H = model.frf(f, "acceleration")
     H[0] = 0.0

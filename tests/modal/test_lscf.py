@@ -92,7 +92,7 @@ def test_lscf_multiple_inputs(model):
     damping; tolerances ~50x)."""
     from vibroscope.models import Input
 
-    m2 = model.replace(inputs=(Input("m5", channel="/f5"), Input("m2", channel="/f2")))
+    m2 = model.replace(inputs=(Input(dof="m5", channel="/f5"), Input(dof="m2", channel="/f2")))
     h = analytic_frf(m2)
     mm = lscf(h, orders=range(1, 31)).modal_model()
     md = m2.modes()

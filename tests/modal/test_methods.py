@@ -69,7 +69,7 @@ def demo():
     model = demo_model()
     rng = np.random.default_rng(3)
     forced = simulate(model, rng.standard_normal(NPERSEG * NSEG), FS, noise=0.01, seed=4)
-    amb = model.replace(inputs=tuple(Input(d.name, channel=f"/f/{d.name}") for d in model.dofs))
+    amb = model.replace(inputs=tuple(Input(dof=d.name, channel=f"/f/{d.name}") for d in model.dofs))
     sig = simulate(amb, rng.standard_normal((model.n_dofs, NPERSEG * NSEG)), FS, noise=0.01, seed=5)
     return np.asarray(model.modes().natural_frequencies), forced, sig.select(sig.channels[model.n_dofs:])
 

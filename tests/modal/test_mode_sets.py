@@ -154,7 +154,7 @@ def test_model_files_and_modes_json_are_mode_sets(tmp_path, capsys):
     wd = 2 * np.pi * md.natural_frequencies * np.sqrt(1 - md.damping_ratios ** 2)
     R = phi[:, :, None] * phi[:, 2][:, None, None] / (2j * wd[:, None, None])  # input at DOF 3
     pr = PoleResidueModel.from_poles_residues(
-        md.natural_frequencies, md.damping_ratios, R, inputs=[Input("m3", channel="/f.x")],
+        md.natural_frequencies, md.damping_ratios, R, inputs=[Input(dof="m3", channel="/f.x")],
         outputs=[Output(d, "displacement", f"/x/{d}.x") for d in md.dofs], name="from the lumped model")
     dump_model(pr, tmp_path / "modal.toml")
     mp = read_mode_set(tmp_path / "modal.toml")

@@ -33,12 +33,11 @@ def hydraulic_lumped(controller: Controller) -> LumpedModel:
     k = m * wh**2
     ca = 1e7 * 2 * z * k / wh
     return LumpedModel(
-        (Dof("valve", 1.0), Dof("piston", m)),
-        (Damper(("valve", "ground"), c=ca), Spring(("valve", "piston"), k=k), Damper(("piston", "ground"), c=2 * z * wh * m)),
-        (Input("valve", channel="/valve/flow.x"),),
-        (Output("piston", "displacement", "/piston/position.x"),),
-        "hydraulic motor",
-        (controller,),
+        dofs=(Dof("valve", 1.0), Dof("piston", m)),
+        elements=(Damper(("valve", "ground"), c=ca), Spring(("valve", "piston"), k=k), Damper(("piston", "ground"), c=2 * z * wh * m)),
+        inputs=(Input(dof="valve", channel="/valve/flow.x"),),
+        outputs=(Output("piston", "displacement", "/piston/position.x"),), name="hydraulic motor",
+        controllers=(controller,),
     )
 
 
@@ -108,7 +107,7 @@ def test_a_delayed_actuator_applies_the_command_delay_s_late(delay_ticks):
     start); the kernel equals that discrete loop built from the ZOH-sampled plant."""
     kp, T = 3e3, 1e-3
     m = LumpedModel.chain([1.0], [1e4], [20.0], output_quantity="displacement")
-    m = m.replace(inputs=(Input("m1", delay=delay_ticks * T),))
+    m = m.replace(inputs=(Input(dof="m1", delay=delay_ticks * T),))
     c = Controller(name="c", law="P", gains={"kp": kp}, rate_hz=1 / T, dof="m1", drives=0, reference="/r.x")
     mc = m.replace(controllers=(c,))
     n = 2000
@@ -127,7 +126,7 @@ def test_a_delayed_actuator_applies_the_command_delay_s_late(delay_ticks):
     np.testing.assert_allclose(s.data[1], y, rtol=0, atol=1e-15)
     np.testing.assert_allclose(s.data[2], u, rtol=0, atol=1e-9)
     # the delay changes the loop: the undelayed loop's response differs
-    s0 = simulate(m.replace(inputs=(Input("m1"),), controllers=(c,)), r, 1 / T)
+    s0 = simulate(m.replace(inputs=(Input(dof="m1"),), controllers=(c,)), r, 1 / T)
     assert np.max(np.abs(s0.data[1] - s.data[1])) > 1e-2 * np.max(np.abs(s.data[1]))
 
 
@@ -221,9 +220,10 @@ def test_modelfile_round_trip_with_controller():
                    output_channel="/emps/vir.x", output_unit="V", feedforward="/emps/pulses.x")
     c2 = Controller(name="aux", law="PD2", gains={"kp": 1.0, "ka": 0.1}, rate_hz=1000.0, dof="q", drives=1,
                     measures=("acceleration",))
-    m = LumpedModel((Dof("q", 95.11),), (Damper(("q", "ground"), c=203.5), make_element("friction", ("q", "ground"), force=20.39)),
-                    (Input("q", channel="/emps/force.x", offset=3.16), Input("q", channel="/aux.x")),
-                    (Output("q", "displacement", "/emps/qm.x"),), "emps", (c, c2))
+    m = LumpedModel(dofs=(Dof("q", 95.11),),
+                    elements=(Damper(("q", "ground"), c=203.5), make_element("friction", ("q", "ground"), force=20.39)),
+                    inputs=(Input(dof="q", channel="/emps/force.x", offset=3.16), Input(dof="q", channel="/aux.x")),
+                    outputs=(Output("q", "displacement", "/emps/qm.x"),), name="emps", controllers=(c, c2))
     text = dumps_model(m)
     assert "[[controller]]" in text
     assert loads_model(text) == m
@@ -253,8 +253,9 @@ def emps_model(gtau, *, friction: bool, pulses: bool = False) -> LumpedModel:
     els = (Damper(("q", "ground"), c=203.5034),)
     if friction:
         els += (make_element("friction", ("q", "ground"), force=20.3935),)
-    inp = Input("q", channel="/emps/force.x", offset=3.1648 if friction else 0.0)
-    return LumpedModel((Dof("q", 95.1089),), els, (inp,), (Output("q", "displacement", "/emps/qm.x"),), "EMPS", (c,))
+    inp = Input(dof="q", channel="/emps/force.x", offset=3.1648 if friction else 0.0)
+    return LumpedModel(dofs=(Dof("q", 95.1089),), elements=els, inputs=(inp,),
+                       outputs=(Output("q", "displacement", "/emps/qm.x"),), name="EMPS", controllers=(c,))
 
 
 def _relerr(y, yh):
@@ -303,9 +304,11 @@ def test_controllers_at_two_rates_each_update_on_their_own_ticks():
     every 4th tick and holds its command in between."""
     T, every = 1e-3, 4
     m = LumpedModel.chain([1.0, 0.5], [1e4, 5e3], [20.0, 10.0], output_quantity="displacement")
-    m = m.replace(inputs=(Input("m1", channel="/f1.x"), Input("m2", channel="/f2.x")))
-    fast = Controller("fast", "PID", {"kp": 3e4, "ki": 1e5, "kd": 50.0}, 1 / T, "m1", drives=0, reference="/r1.x")
-    slow = Controller("slow", "PD", {"kp": 2e3, "kd": 20.0}, 1 / (every * T), "m2", drives=1, reference="/r2.x")
+    m = m.replace(inputs=(Input(dof="m1", channel="/f1.x"), Input(dof="m2", channel="/f2.x")))
+    fast = Controller(name="fast", law="PID", gains={"kp": 3e4, "ki": 1e5, "kd": 50.0}, rate_hz=1 / T,
+                      dof="m1", drives=0, reference="/r1.x")
+    slow = Controller(name="slow", law="PD", gains={"kp": 2e3, "kd": 20.0}, rate_hz=1 / (every * T), dof="m2",
+                      drives=1, reference="/r2.x")
     mc = m.replace(controllers=(fast, slow))
     n = 3000
     r1 = np.r_[np.zeros(7), np.ones(n - 7)] * 1e-3
@@ -339,16 +342,17 @@ def test_controllers_at_two_rates_each_update_on_their_own_ticks():
     changes = np.flatnonzero(np.diff(cmd[1]) != 0) + 1
     assert changes.size > 10 and np.all(changes % every == 0)
     # run at one rate, the slow loop would be another loop
-    one_rate = simulate(m.replace(controllers=(fast, Controller("slow", "PD", {"kp": 2e3, "kd": 20.0}, 1 / T, "m2",
-                                                                      drives=1, reference="/r2.x"))),
+    one_rate = simulate(m.replace(controllers=(fast, Controller(name="slow", law="PD",
+                                                                gains={"kp": 2e3, "kd": 20.0}, rate_hz=1 / T,
+                                                                dof="m2", drives=1, reference="/r2.x"))),
                         np.vstack([r1, r2]), 1 / T)
     assert np.max(np.abs(one_rate.data[-1] - cmd[1])) > 1e-3 * np.max(np.abs(cmd[1]))
 
 
 def test_a_controller_rate_that_does_not_divide_the_fastest_is_refused():
     m = LumpedModel.chain([1.0, 0.5], [1e4, 5e3], [20.0, 10.0], output_quantity="displacement")
-    m = m.replace(inputs=(Input("m1", channel="/f1.x"), Input("m2", channel="/f2.x")))
-    a = Controller("a", "P", {"kp": 1e3}, 1000.0, "m1", drives=0, reference="/r1.x")
-    b = Controller("b", "P", {"kp": 1e3}, 300.0, "m2", drives=1, reference="/r2.x")
+    m = m.replace(inputs=(Input(dof="m1", channel="/f1.x"), Input(dof="m2", channel="/f2.x")))
+    a = Controller(name="a", law="P", gains={"kp": 1e3}, rate_hz=1000.0, dof="m1", drives=0, reference="/r1.x")
+    b = Controller(name="b", law="P", gains={"kp": 1e3}, rate_hz=300.0, dof="m2", drives=1, reference="/r2.x")
     with pytest.raises(ValueError, match="'b'.*rate_hz=300"):
         simulate(m.replace(controllers=(a, b)), np.zeros((2, 100)), 1000.0)

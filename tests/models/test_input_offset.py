@@ -21,7 +21,7 @@ TAU = M * 2.0 / C
 
 def sdof(*nonlinear, **inp):
     m = LumpedModel.chain([M], [K], [C], output_quantity="displacement", nonlinear=nonlinear)
-    return m.replace(inputs=(Input("m1", channel=CH, **inp),))
+    return m.replace(inputs=(Input(dof="m1", channel=CH, **inp),))
 
 
 MODELS = {
@@ -52,7 +52,7 @@ def test_offset_alone_settles_to_the_static_deflection(name, F0):
 def test_offset_is_superposed_on_the_linear_response():
     """Affine: response(u, offset) = response(u) + response(0, offset), and the FRF is unchanged."""
     base = demo_model()
-    off = base.replace(inputs=(Input("m3", channel=CH, offset=3.0),))
+    off = base.replace(inputs=(Input(dof="m3", channel=CH, offset=3.0),))
     assert off.is_linear
     u = band_limited_random(FS, 3000, fmin=1, fmax=100, rms=10.0, seed=1)
     a = simulate(off, u, FS).data
@@ -93,11 +93,11 @@ def test_offset_with_delay_and_periodic():
 
 
 def test_offset_validation():
-    assert Input("m1").offset == 0.0
-    assert Input("m1", offset=-2).offset == -2.0
+    assert Input(dof="m1").offset == 0.0
+    assert Input(dof="m1", offset=-2).offset == -2.0
     for bad in (np.nan, np.inf, -np.inf):
         with pytest.raises(ValueError, match="offset="):
-            Input("m1", offset=bad)
+            Input(dof="m1", offset=bad)
 
 
 def test_offset_model_file_round_trip():
@@ -108,7 +108,7 @@ def test_offset_model_file_round_trip():
     # omitted when 0: existing files are unchanged
     plain = dumps_model(sdof())
     assert "offset" not in plain and loads_model(plain) == sdof()
-    tf = TransferFunctionModel((1.0,), (1.0, 2.0, 100.0), Input("u", channel="/cmd.x", offset=0.5),
+    tf = TransferFunctionModel((1.0,), (1.0, 2.0, 100.0), Input(dof="u", channel="/cmd.x", offset=0.5),
                                Output("y", "displacement", "/y.x"))  # fmt: skip
     assert loads_model(dumps_model(tf)) == tf
     bad = text.replace("offset = -2.5", 'offset = "a lot"')

@@ -31,7 +31,7 @@ def chain(*nonlinear, quantity="acceleration", **inp):
     m = LumpedModel.chain([1.0, 0.5], [4e4, 2e4], [8.0, 3.0], input_dof=1, output_quantity=quantity,
                           nonlinear=nonlinear)  # fmt: skip
     if inp:
-        m = m.replace(inputs=(Input("m2", channel=CH, **inp),))
+        m = m.replace(inputs=(Input(dof="m2", channel=CH, **inp),))
     return m
 
 
@@ -100,7 +100,7 @@ def test_saturation_clips_the_reconstructed_input_nonlinear():
 
 def test_saturation_clips_the_reconstructed_input_linear():
     base = demo_model()
-    sat = base.replace(inputs=(Input("m3", channel=CH, saturation=5.0),))
+    sat = base.replace(inputs=(Input(dof="m3", channel=CH, saturation=5.0),))
     u = record(3.0, rms=10.0, seed=2, fmax=100.0)
     s = simulate(sat, u, FS)
     assert s.meta["simulator"] == "foh-exact"
@@ -137,7 +137,7 @@ def test_delay_is_a_pure_shift(method):
     u = _tapered(8.0, seed=6)
     s0 = simulate(base, u, FS, method=method)
     # integer number of samples: exact shift of inputs and outputs
-    s1 = simulate(base.replace(inputs=(Input("m3", channel=CH, delay=7 / FS),)), u, FS, method=method)
+    s1 = simulate(base.replace(inputs=(Input(dof="m3", channel=CH, delay=7 / FS),)), u, FS, method=method)
     np.testing.assert_array_equal(s1.data[0, 7:], s0.data[0, :-7])
     assert np.all(s1.data[0, :7] == 0.0)
     # (away from the record's ends, where the reconstruction and decimation filters see the
@@ -147,7 +147,7 @@ def test_delay_is_a_pure_shift(method):
                                atol=1e-10 * np.abs(s0.data[1:]).max())  # fmt: skip
     # fractional: the band-limited shift of the undelayed response by tau
     tau = 7.4 / FS
-    s2 = simulate(base.replace(inputs=(Input("m3", channel=CH, delay=tau),)), u, FS, method=method)
+    s2 = simulate(base.replace(inputs=(Input(dof="m3", channel=CH, delay=tau),)), u, FS, method=method)
     f = np.fft.rfftfreq(u.size, 1 / FS)
     shifted = np.fft.irfft(np.fft.rfft(s0.data[1:], axis=1) * np.exp(-2j * np.pi * f * tau), u.size, axis=1)
     assert nrmse(s2.data[1:, inner], shifted[:, inner]) < 1e-4
@@ -169,7 +169,7 @@ def test_delay_with_nonlinear_element_matches_reference():
 
 @pytest.mark.parametrize(
     "model",
-    [demo_model().replace(inputs=(Input("m3", channel=CH, delay=0.0123, saturation=8.0),)),
+    [demo_model().replace(inputs=(Input(dof="m3", channel=CH, delay=0.0123, saturation=8.0),)),
      chain(Friction(("m2", "ground"), force_=3.0), CubicSpring(("m2", "m1"), k3=5e9), delay=0.0031, saturation=25.0)],
     ids=["linear", "nonlinear"],
 )  # fmt: skip

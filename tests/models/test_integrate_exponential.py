@@ -18,10 +18,10 @@ def _chain(k3: float | None) -> LumpedModel:
     """2-DOF chain, modes about 24 and 120 Hz; the second spring a cubic spring (None: linear)."""
     k2 = Spring(("m2", "m1"), k=6e4) if k3 is None else CubicSpring(("m2", "m1"), k=6e4, k3=k3)
     return LumpedModel(
-        (Dof("m1", 1.0), Dof("m2", 0.2)),
-        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=6.0), k2, Damper(("m2", "m1"), c=3.0)),
-        (Input("m1", channel="f"),),
-        (Output("m1", "acceleration", "a1"), Output("m2", "acceleration", "a2")),
+        dofs=(Dof("m1", 1.0), Dof("m2", 0.2)),
+        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=6.0), k2, Damper(("m2", "m1"), c=3.0)),
+        inputs=(Input(dof="m1", channel="f"),),
+        outputs=(Output("m1", "acceleration", "a1"), Output("m2", "acceleration", "a2")),
     )
 
 

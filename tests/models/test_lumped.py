@@ -87,7 +87,7 @@ def test_frf_matches_state_space_and_delay():
     Hs = ss(2j * np.pi * f)  # (n_out, n_in, n_f)
     np.testing.assert_allclose(H, np.moveaxis(Hs, -1, 0), rtol=1e-9)
     assert ss.noutputs == 3 and ss.ninputs == 1
-    delayed = model.replace(inputs=(Input("m3", channel="/a.x", delay=0.01),))
+    delayed = model.replace(inputs=(Input(dof="m3", channel="/a.x", delay=0.01),))
     np.testing.assert_allclose(delayed.frf(f), H * np.exp(-2j * np.pi * f * 0.01)[:, None, None])
 
 
@@ -116,10 +116,10 @@ def test_demo_models():
 
 def test_nonlinear_elements_linear_part():
     m = LumpedModel(
-        (Dof("m1", 2.0),),
-        (Spring(("m1", "ground"), k=5e4), Damper(("m1", "ground"), c=10.0), BoucWen(("m1", "ground"))),
-        (Input("m1"),),
-        (Output("m1", "displacement"),),
+        dofs=(Dof("m1", 2.0),),
+        elements=(Spring(("m1", "ground"), k=5e4), Damper(("m1", "ground"), c=10.0), BoucWen(("m1", "ground"))),
+        inputs=(Input(dof="m1"),),
+        outputs=(Output("m1", "displacement"),),
     )
     assert not m.is_linear
     np.testing.assert_array_equal(m.K, [[5e4]])
@@ -131,7 +131,7 @@ def test_nonlinear_elements_linear_part():
     [
         (dict(dofs=(Dof("a", 1.0), Dof("a", 1.0))), "repeat"),
         (dict(dofs=(Dof("a", 1.0),), elements=(Spring(("a", "b"), k=1.0),)), "unknown DOF 'b'"),
-        (dict(dofs=(Dof("a", 1.0),), inputs=(Input("z"),)), "unknown DOF 'z'"),
+        (dict(dofs=(Dof("a", 1.0),), inputs=(Input(dof="z"),)), "unknown DOF 'z'"),
     ],
 )
 def test_invalid_models(kwargs, msg):

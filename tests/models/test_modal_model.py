@@ -26,9 +26,10 @@ def lumped_3dof(quantities=("acceleration", "velocity", "displacement")) -> Lump
         Spring(("m2", "m1"), k=8.0e4), Damper(("m2", "m1"), c=2.0),
         Spring(("m3", "m2"), k=5.0e4), Damper(("m3", "ground"), c=9.0),
     )  # fmt: skip
-    inputs = (Input("m3", channel="/act/f3.wrench.force.x"), Input("m1", channel="/act/f1.wrench.force.x"))
+    inputs = (Input(dof="m3", channel="/act/f3.wrench.force.x"), Input(dof="m1", channel="/act/f1.wrench.force.x"))
     outputs = tuple(Output(n, q, f"/imu/{n}.{q}.x") for n, q in zip(names, quantities))
-    return LumpedModel(tuple(Dof(n, m) for n, m in zip(names, [2.0, 1.5, 1.0])), elements, inputs, outputs, "3dof")
+    return LumpedModel(dofs=tuple(Dof(n, m) for n, m in zip(names, [2.0, 1.5, 1.0])), elements=elements,
+                       inputs=inputs, outputs=outputs, name="3dof")
 
 
 def pole_residue_of(lumped: LumpedModel) -> PoleResidueModel:
@@ -261,7 +262,7 @@ def test_roundtrip_is_exact(tmp_path, build):
         m = PoleResidueModel.from_poles_residues(
             rng.uniform(1, 100, 4), rng.uniform(0, 0.2, 4),
             rng.standard_normal((4, 2, 3)) * 1e-3 + 1j * rng.standard_normal((4, 2, 3)),
-            inputs=[Input("shaker", channel=f"/in{k}") for k in range(3)],
+            inputs=[Input(dof="shaker", channel=f"/in{k}") for k in range(3)],
             outputs=[Output("y", "velocity", "/v"), Output("tip", "displacement", "/d")],
             lower=rng.standard_normal((2, 3)) * 1e-7j, upper=rng.standard_normal((2, 3)), name='q"uoted',
         )  # fmt: skip

@@ -101,12 +101,12 @@ def test_input_delay_and_saturation():
     fs = 1000.0
     u = band_limited_random(fs, 5000, fmin=1, fmax=100, rms=10, seed=2)
     u[0] = 0.0  # so that the delayed input (zero before its start) is an exact shift
-    delayed = base.replace(inputs=(Input("m3", channel="/actuator/force.wrench.force.x", delay=0.01),))
+    delayed = base.replace(inputs=(Input(dof="m3", channel="/actuator/force.wrench.force.x", delay=0.01),))
     # linear reconstruction: a 10-sample delay is then an exact shift
     s0 = simulate(base, u, fs, upsampling="linear")
     s1 = simulate(delayed, u, fs, upsampling="linear")
     np.testing.assert_allclose(s1.data[:, 10:], s0.data[:, :-10], atol=1e-9 * np.abs(s0.data).max())
-    sat = base.replace(inputs=(Input("m3", channel="/actuator/force.wrench.force.x", saturation=5.0),))
+    sat = base.replace(inputs=(Input(dof="m3", channel="/actuator/force.wrench.force.x", saturation=5.0),))
     s2 = simulate(sat, u, fs)
     assert np.abs(s2.data[0]).max() == pytest.approx(5.0)
     # the actuator clips the continuous (reconstructed) force, not the samples: close to, but not
@@ -132,10 +132,10 @@ def test_noise_is_relative_to_rms_and_seeded():
 def test_nonlinear_path_on_linear_model_agrees_with_exact():
     # a cubic spring with k3 = 0 forces the nonlinear integrator on a linear system
     lin = LumpedModel(
-        (Dof("m1", 1.0),),
-        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0)),
-        (Input("m1"),),
-        (Output("m1", "acceleration"), Output("m1", "displacement")),
+        dofs=(Dof("m1", 1.0),),
+        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0)),
+        inputs=(Input(dof="m1"),),
+        outputs=(Output("m1", "acceleration"), Output("m1", "displacement")),
     )
     m = lin.replace(elements=lin.elements + (CubicSpring(("m1", "ground"), k3=0.0),))
     fs = 1000.0
@@ -181,10 +181,9 @@ def test_trapezoidal_converges_with_second_order(integrator):
     """Error vs step size of the nonlinear integrator on a hardening Duffing oscillator with a
     smooth input: halving the step divides the error by 4 (order 2, Newmark 1959)."""
     model = LumpedModel(
-        (Dof("m1", 1.0),),
-        (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0), CubicSpring(("m1", "ground"), k3=4e9)),
-        (Input("m1"),),
-        (Output("m1", "displacement"),),
+        dofs=(Dof("m1", 1.0),),
+        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0), CubicSpring(("m1", "ground"), k3=4e9)),
+        inputs=(Input(dof="m1"),), outputs=(Output("m1", "displacement"),),
     )
     uf = lambda t: 30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 47 * t)  # noqa: E731
     T = 0.4
@@ -206,10 +205,10 @@ def test_bouc_wen_converges_and_the_integrators_agree():
     about 4x per halving, and the compiled kernel and both paths of the reference integrator
     (one element; several elements) give the same answer."""
     model = LumpedModel(
-        (Dof("m", 2.0),),
-        (Spring(("m", "ground"), k=5e4), Damper(("m", "ground"), c=10.0), BoucWen(("m", "ground"))),
-        (Input("m"),),
-        (Output("m", "displacement"),),
+        dofs=(Dof("m", 2.0),),
+        elements=(Spring(("m", "ground"), k=5e4), Damper(("m", "ground"), c=10.0), BoucWen(("m", "ground"))),
+        inputs=(Input(dof="m"),),
+        outputs=(Output("m", "displacement"),),
     )
     T = 0.5
     uf = lambda t: 60 * np.sin(2 * np.pi * 20 * t) + 40 * np.sin(2 * np.pi * 33 * t)  # noqa: E731
@@ -262,10 +261,10 @@ def test_bad_arguments():
 
 def _sdof_with(element, k=4e4, c=8.0):
     return LumpedModel(
-        (Dof("m1", 1.0),),
-        (Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c), element),
-        (Input("m1"),),
-        (Output("m1", "displacement"),),
+        dofs=(Dof("m1", 1.0),),
+        elements=(Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c), element),
+        inputs=(Input(dof="m1"),),
+        outputs=(Output("m1", "displacement"),),
     )
 
 

@@ -58,8 +58,9 @@ def make_report(**changes) -> GapReport:
     validation = np.zeros(N, bool)
     validation[600:900] = True
     validation[1400:2000] = True
-    traces = GapTraces(FS, 12.5, CHANNELS, UNITS, measured, nominal, refit, augmented, validation, u,
-                       "bench_run_3.mcap")
+    traces = GapTraces(fs=FS, t0=12.5, channels=CHANNELS, units=UNITS, measured=measured, nominal=nominal,
+                       refit=refit, augmented=augmented, validation=validation, input=u,
+                       log="bench_run_3.mcap")
 
     f = np.linspace(0.0, FS / 2, 129)
     base = 1e-8 / (1 + (f / 5.0) ** 2)
@@ -78,30 +79,39 @@ def make_report(**changes) -> GapReport:
     Ha = np.stack([h(2 * np.pi * 11.5, 0.07, 1.0), h(2 * np.pi * 11.5, 0.07, 0.6)], axis=1)
     Hm = Ha * (1 + 0.03 * rng.standard_normal((ff.size, 2)))
     coh = np.clip(0.97 - 0.3 * np.exp(-0.5 * ((ff[:, None] - 11.5) / 2) ** 2), 0, 1) * np.ones((1, 2))
-    spectrum = GapSpectrum(f, psd_meas, r_before, 0.5 * r_before, 0.05 * r_before, noise, ff, Hm, Hn, Ha, coh)
+    spectrum = GapSpectrum(frequencies=f, measured=psd_meas, residual_before=r_before,
+                           residual_refit=0.5 * r_before, residual_after=0.05 * r_before, noise=noise,
+                           frf_frequencies=ff, frf_measured=Hm, frf_nominal=Hn, frf_augmented=Ha,
+                           coherence=coh)
 
     v = np.linspace(-0.02, 0.02, 21)
     lags = np.arange(1, 51) / FS
     signatures = (
-        SignatureTest("residual_vs_velocity", 0.62, 0.1, True, ("coulomb_friction", "hysteresis"),
-                      "residual correlates with sign(v) across m1-ground: r = +0.62",
-                      v, 2e-4 * np.tanh(v / 0.002), "relative velocity m1-ground [m/s]",
-                      "residual /sim/m1.position.x [m]"),
-        SignatureTest("residual_whiteness", 0.08, 0.2, False, (),
-                      "8 % of residual autocorrelation lags 1-50 outside the 99 % band",
-                      lags, 0.9 ** np.arange(1, 51), "lag [s]", "residual autocorrelation [-]"),
-        SignatureTest("phase_slope", 1e-5, 2e-4, False, ("time_delay",), "no delay"),  # no evidence curve
+        SignatureTest(name="residual_vs_velocity", value=0.62, threshold=0.1, flagged=True,
+                      points_to=("coulomb_friction", "hysteresis"),
+                      detail="residual correlates with sign(v) across m1-ground: r = +0.62", x=v,
+                      y=2e-4 * np.tanh(v / 0.002), x_label="relative velocity m1-ground [m/s]",
+                      y_label="residual /sim/m1.position.x [m]"),
+        SignatureTest(name="residual_whiteness", value=0.08, threshold=0.2, flagged=False, points_to=(),
+                      detail="8 % of residual autocorrelation lags 1-50 outside the 99 % band",
+                      x=lags, y=0.9 ** np.arange(1, 51), x_label="lag [s]", y_label="residual autocorrelation [-]"),
+        SignatureTest(name="phase_slope", value=1e-5, threshold=2e-4, flagged=False, points_to=("time_delay",),
+                      detail="no delay"),  # no evidence curve
     )
     candidates = (
-        Candidate("coulomb_friction", {"between": ["m1", "ground"]}, {"Fc_N": 0.8}, 0.081, 0.71, 0.079, 1),
-        Candidate("hysteresis", {"between": ["m1", "m2"]}, {"alpha_N_per_m": 120.0}, 0.152, 0.42, 0.14, 3),
-        Candidate("extra_mode", {"dof": "m2", "frequency_hz": 33.0}, {"frequency_hz": 33.0}, 0.224, 0.18, 0.2, 2),
+        Candidate(effect="coulomb_friction", where={"between": ["m1", "ground"]}, parameters={"Fc_N": 0.8},
+                  gap_after=0.081, score=0.71, gap_fit=0.079, n_parameters=1),
+        Candidate(effect="hysteresis", where={"between": ["m1", "m2"]}, parameters={"alpha_N_per_m": 120.0},
+                  gap_after=0.152, score=0.42, gap_fit=0.14, n_parameters=3),
+        Candidate(effect="extra_mode", where={"dof": "m2", "frequency_hz": 33.0},
+                  parameters={"frequency_hz": 33.0}, gap_after=0.224, score=0.18, gap_fit=0.2, n_parameters=2),
     )
     report = GapReport(
         metric="nrmse", validation="held-out time split (last 30 %)", noise_floor=0.02,
         noise_floor_method="residual PSD above the excited band", gap_before=0.31, gap_refit=0.27,
         gap_after=0.081, shrink=1 - 0.081 / 0.31, bands=BANDS,
-        channels=(ChannelGap(CHANNELS[0], 0.33, 0.08), ChannelGap(CHANNELS[1], 0.27, 0.09)),
+        channels=(ChannelGap(channel=CHANNELS[0], gap=0.33, gap_after=0.08),
+                  ChannelGap(channel=CHANNELS[1], gap=0.27, gap_after=0.09)),
         regimes=(RegimeGap("regime", "near_zero_velocity", 0.5, 0.2),),
         candidates=candidates, signatures=signatures, verdict="coulomb_friction", model_name="two_mass",
         traces=traces, spectrum=spectrum, timings={"total": 1.2}, meta={"fs_hz": FS})
@@ -263,7 +273,7 @@ def test_candidates_figure_one_bar_each_verdict_highlighted(report):
 
 
 def test_verdict_bar_follows_the_verdict_not_the_position(report):
-    none = Candidate("none", {}, {}, 0.31, 0.0)
+    none = Candidate(effect="none", where={}, parameters={}, gap_after=0.31, score=0.0)
     r = make_report(candidates=(*report.candidates, none), verdict="none")
     assert verdict_index(r) == 3
     ax = gap_figures.plot_gap_candidates(r).axes[0]
@@ -297,10 +307,12 @@ def test_helpers():
     assert where_label({"side": "input"}) == "input"
     assert where_label({"parameters": ["k1", "c1"]}) == "k1, c1"
     assert where_label({}) == ""
-    assert candidate_label(Candidate("time_delay", {"side": "input"}, {}, 0.1, 0.1)) == "time_delay @ input"
+    assert candidate_label(Candidate(effect="time_delay", where={"side": "input"}, parameters={},
+                                     gap_after=0.1, score=0.1)) == "time_delay @ input"
     # an effect fitted in two forms names its form beside it, short enough for the bar labels
-    joint = Candidate("joint_friction", {"between": ["m1", "ground"], "form": "iwan", "character": "softening"},
-                      {}, 0.1, 0.1)
+    joint = Candidate(effect="joint_friction",
+                      where={"between": ["m1", "ground"], "form": "iwan", "character": "softening"},
+                      parameters={}, gap_after=0.1, score=0.1)
     assert candidate_label(joint) == "joint_friction (iwan) @ m1–ground, softening"
     assert held_out_spans(np.array([0, 1, 1, 0, 1], bool)) == [(1, 3), (4, 5)]
     assert held_out_spans(np.zeros(0, bool)) == []

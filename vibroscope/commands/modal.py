@@ -488,10 +488,10 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     outputs = tuple(Output(f"out{o + 1}", q, c) for o, c in enumerate(res.outputs))
     labels = [f"in{i + 1}" for i in range(len(res.inputs))]
     probe = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
-                                                 inputs=[Input(lb, channel=c) for lb, c in zip(labels, res.inputs)],
+                                                 inputs=[Input(dof=lb, channel=c) for lb, c in zip(labels, res.inputs)],
                                                  outputs=outputs)
     labels = _driving_labels(probe, dict(driving_points or {}))
-    inputs = tuple(Input(lb, channel=c) for lb, c in zip(labels, res.inputs))
+    inputs = tuple(Input(dof=lb, channel=c) for lb, c in zip(labels, res.inputs))
     model = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
                                                  inputs=inputs, outputs=outputs, lower=LR, upper=UR, name=name)
     path = Path(path)

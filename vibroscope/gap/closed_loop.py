@@ -173,7 +173,7 @@ def basis_model(model: LumpedModel, dofs) -> LumpedModel:
     -------
     LumpedModel
     """
-    ins = tuple(Input(d, channel=f"/basis/{d}") for d in dofs)
+    ins = tuple(Input(dof=d, channel=f"/basis/{d}") for d in dofs)
     if not is_closed_loop(model):
         return replace(model, inputs=ins)
     return replace(model, inputs=tuple(model.inputs) + ins)

@@ -441,11 +441,12 @@ def diagnose(
     >>> from vibroscope import Signals, diagnose, simulate
     >>> from vibroscope.models import Damper, Dof, Input, LumpedModel, Output, Spring
     >>> model = LumpedModel(
-    ...     (Dof("m1", 1.0), Dof("m2", 0.5)),
-    ...     (Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
-    ...      Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
-    ...     (Input("m1", channel="/f.x"),),
-    ...     (Output("m1", "acceleration", "/a1.x"), Output("m2", "acceleration", "/a2.x")), "chain")
+    ...     dofs=(Dof("m1", 1.0), Dof("m2", 0.5)),
+    ...     elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
+    ...               Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
+    ...     inputs=(Input(dof="m1", channel="/f.x"),),
+    ...     outputs=(Output("m1", "acceleration", "/a1.x"), Output("m2", "acceleration", "/a2.x")),
+    ...     name="chain")
     >>> u = 5 * np.random.default_rng(1).standard_normal(20_000)
     >>> sim = simulate(model, u, 1000.0, noise=0.02, seed=2)
     >>> report = diagnose(model, sim)  # doctest: +SKIP
@@ -1140,13 +1141,15 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         if s.effect == "extra_mode":
             where["frequency_hz"] = s.describe(p).get("frequency_hz")
         expl = 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0
-        c = Candidate(s.effect, where, s.describe(p), g, expl, gfit, s.n, _dumps(m_aug), vanished=reason or "")
+        c = Candidate(effect=s.effect, where=where, parameters=s.describe(p), gap_after=g, score=expl,
+                      gap_fit=gfit, n_parameters=s.n, model_toml=_dumps(m_aug), vanished=reason or "")
         cands.append((c, m_aug, yh, s, p, base))
     changed = lin.changed(theta)
     pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
     expl_pm = 1.0 - key(gap_refit, 0) / k_before if k_before > 0 else 0.0
-    cands.append((Candidate("parameter_mismatch", {"parameters": changed}, pm_params, gap_refit, expl_pm,
-                            g_ref_fit, 0, _dumps(refit),
+    cands.append((Candidate(effect="parameter_mismatch", where={"parameters": changed}, parameters=pm_params,
+                            gap_after=gap_refit, score=expl_pm, gap_fit=g_ref_fit, n_parameters=0,
+                            model_toml=_dumps(refit),
                             vanished="" if changed else "no linear parameter changed by more than 3 %"),
                   refit, {i: y_ref[i] for i in val_logs}, None, None, refit))
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
@@ -1218,7 +1221,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
                   held_out=held_out, key=key, k_before=k_before)
     if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:
         cands[best_i] = _polish(cands[best_i], [(cands[best_i][3], cands[best_i][4])], **polish)
-    none_c = (Candidate("none", {}, {}, gap_before, 0.0, g_nom_fit, 0, _dumps(model)), model,
+    none_c = (Candidate(effect="none", where={}, parameters={}, gap_after=gap_before, score=0.0,
+                        gap_fit=g_nom_fit, n_parameters=0, model_toml=_dumps(model)), model,
               {i: y_nom[i] for i in val_logs}, None, None, model)
     chosen = []
     if none_ok:
@@ -1277,8 +1281,10 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         return float(np.sqrt(np.mean(a[vmask] ** 2))) if vmask.any() else float("nan")
 
     channels = tuple(
-        ChannelGap(ch, nrmse(ys[tr][c:c + 1], y_nom[tr][c:c + 1], vmask), nrmse(ys[tr][c:c + 1], y_aug_full[c:c + 1], vmask),
-                   _rms(ys[tr][c] - y_nom[tr][c]), _rms(ys[tr][c] - y_aug_full[c]), units[c])
+        ChannelGap(channel=ch, gap=nrmse(ys[tr][c:c + 1], y_nom[tr][c:c + 1], vmask),
+                   gap_after=nrmse(ys[tr][c:c + 1], y_aug_full[c:c + 1], vmask),
+                   rms_error=_rms(ys[tr][c] - y_nom[tr][c]), rms_error_after=_rms(ys[tr][c] - y_aug_full[c]),
+                   unit=units[c])
         for c, ch in enumerate(out_ch))
     # bands: residual of the nominal on every (non-transient) sample of every log, normalised per channel
     fr, Gm, _ = masked_csd(np.vstack([ys[tr], ys[tr] - y_nom[tr], ys[tr] - y_ref[tr], ys[tr] - y_aug_full]),
@@ -1296,9 +1302,13 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     fdt = _frf_data([us[tr]], [ys[tr]], [all_masks[tr]], fs, nps)
     fdn = _frf_data([us[tr]], [y_nom[tr]], [all_masks[tr]], fs, nps)
     fda = _frf_data([us[tr]], [y_aug_full], [all_masks[tr]], fs, nps)
-    spectrum = GapSpectrum(fr, Pm, Pb, Pr, Pa, noise_psd, fdt[0], fdt[1], fdn[1], fda[1], fdt[2])
-    traces = GapTraces(fs, float(sigs[tr].t0), tuple(out_ch), tuple(units), ys[tr], y_nom[tr], y_ref[tr],
-                       y_aug_full, vmask, us[tr][0], str(sigs[tr].meta.get("source", "")) if sigs[tr].meta else "")
+    spectrum = GapSpectrum(frequencies=fr, measured=Pm, residual_before=Pb, residual_refit=Pr,
+                           residual_after=Pa, noise=noise_psd, frf_frequencies=fdt[0], frf_measured=fdt[1],
+                           frf_nominal=fdn[1], frf_augmented=fda[1], coherence=fdt[2])
+    traces = GapTraces(fs=fs, t0=float(sigs[tr].t0), channels=tuple(out_ch), units=tuple(units),
+                       measured=ys[tr], nominal=y_nom[tr], refit=y_ref[tr], augmented=y_aug_full,
+                       validation=vmask, input=us[tr][0],
+                       log=str(sigs[tr].meta.get("source", "")) if sigs[tr].meta else "")
     timings["report"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
     shrink = 1.0 - gap_after / gap_before if gap_before > 0 else 0.0
@@ -1477,8 +1487,9 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
             break
         n_par += s.n
         used.add(s.effect)
-        c_new = Candidate(s.effect, dict(s.where) | s.qualifiers(p), s.describe(p), g,
-                          1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0, gfit, s.n, _dumps(m_new))
+        c_new = Candidate(effect=s.effect, where=dict(s.where) | s.qualifiers(p), parameters=s.describe(p),
+                          gap_after=g, score=1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0,
+                          gap_fit=gfit, n_parameters=s.n, model_toml=_dumps(m_new))
         chosen.append((c_new, m_new, yh, s, p, base_new))
         cur_c, cur_m = c_new, m_new
         shares_g.append(g)
@@ -1524,9 +1535,10 @@ def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_ou
                 m_aug, yh0, s_last, p_last, base)
     pn = x[offs[-2]:offs[-1]]
     keep = {k: v for k, v in c.where.items() if k == "frequency_hz"}
-    c_new = Candidate(c.effect, dict(s_last.where) | s_last.qualifiers(pn) | keep, s_last.describe(pn), g,
-                      1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0, gfit, s_last.n, _dumps(m_new),
-                      vanished=s_last.vanishes(pn) or "")
+    c_new = Candidate(effect=c.effect, where=dict(s_last.where) | s_last.qualifiers(pn) | keep,
+                      parameters=s_last.describe(pn), gap_after=g,
+                      score=1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0, gap_fit=gfit,
+                      n_parameters=s_last.n, model_toml=_dumps(m_new), vanished=s_last.vanishes(pn) or "")
     return (c_new, m_new, yh, s_last, pn, lin.apply(model, x[:nl]))
 
 

@@ -240,7 +240,7 @@ class LinearParams:
         return np.array([math.log(v1[n] / v0[n]) if v0[n] > 0 and v1[n] > 0 else 0.0 for n in self.names])
 
 
-@dataclass
+@dataclass(kw_only=True)
 class EffectSpec:
     """One candidate effect at one location.
 
@@ -425,10 +425,10 @@ def _time_delay(model, scales):
 
     d0 = scales.get("delay0", 0.002)
     return [EffectSpec(
-        "time_delay", {"side": "input"}, 1,
-        [np.array([max(d0, 1e-4)]), np.array([0.002]), np.array([0.008])],
-        np.array([0.0]), np.array([0.1]),
-        build, lambda p: {"delay_s": float(max(p[0], 0.0))}, linear=True, vanish=vanish,
+        effect="time_delay", where={"side": "input"}, n=1,
+        starts=[np.array([max(d0, 1e-4)]), np.array([0.002]), np.array([0.008])],
+        lower=np.array([0.0]), upper=np.array([0.1]),
+        build=build, describe=lambda p: {"delay_s": float(max(p[0], 0.0))}, linear=True, vanish=vanish,
     )]
 
 
@@ -441,8 +441,9 @@ def _offset(model, scales):
     est = scales.get("regress", {}).get(("offset", None))
     starts = _starts_1d([est / u_rms if est is not None else None, 0.05, -0.05, 0.2, -0.2], -2.0, 2.0)
     return [EffectSpec(
-        "offset", {"side": "input"}, 1, starts, np.array([-2.0]), np.array([2.0]),
-        build, lambda p: {"offset_N": float(p[0] * u_rms)},
+        effect="offset", where={"side": "input"}, n=1, starts=starts, lower=np.array([-2.0]),
+        upper=np.array([2.0]),
+        build=build, describe=lambda p: {"offset_N": float(p[0] * u_rms)},
     )]
 
 
@@ -463,10 +464,10 @@ def _saturation(model, scales):
 
     qs = scales.get("u_quantiles", [u_max * f for f in (0.9, 0.7, 0.5, 0.35)])
     return [EffectSpec(
-        "saturation", {"side": "input"}, 1,
-        [np.array([math.log(q)]) for q in qs if q > 0],
-        np.array([math.log(0.02 * u_max)]), np.array([math.log(1.2 * u_max)]),
-        build, lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish,
+        effect="saturation", where={"side": "input"}, n=1,
+        starts=[np.array([math.log(q)]) for q in qs if q > 0],
+        lower=np.array([math.log(0.02 * u_max)]), upper=np.array([math.log(1.2 * u_max)]),
+        build=build, describe=lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish,
     )]
 
 
@@ -496,9 +497,9 @@ def _coulomb_friction(model, scales):
         lo, hi = math.log(f_ref * 1e-4), math.log(max(f_ref, scales["u_max"]) * 3)
         vals = [math.log(e) if e and e > 0 else None for e in ests] + [math.log(f_ref * r) for r in (0.01, 0.1, 1.0)]
         specs.append(EffectSpec(
-            "coulomb_friction", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi),
-            np.array([lo]), np.array([hi]),
-            build, lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": FRICTION_V_EPS},
+            effect="coulomb_friction", where={"between": [pair[0], pair[1]]}, n=1, starts=_starts_1d(vals, lo, hi),
+            lower=np.array([lo]), upper=np.array([hi]),
+            build=build, describe=lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": FRICTION_V_EPS},
         ))
     return specs
 
@@ -538,10 +539,10 @@ def _asymmetric_friction(model, scales):
             return ("coulomb_friction", np.array([math.log(0.5 * (fp + fn))])) if vanish(p) else None
 
         specs.append(EffectSpec(
-            "asymmetric_friction", {"between": [pair[0], pair[1]]}, 2, starts,
-            np.array([lo, lo]), np.array([hi, hi]),
-            build, lambda p: {"Fc_pos_N": float(math.exp(p[0])), "Fc_neg_N": float(math.exp(p[1])),
-                              "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish, reduces_to=reduce,
+            effect="asymmetric_friction", where={"between": [pair[0], pair[1]]}, n=2, starts=starts,
+            lower=np.array([lo, lo]), upper=np.array([hi, hi]),
+            build=build, describe=lambda p: {"Fc_pos_N": float(math.exp(p[0])), "Fc_neg_N": float(math.exp(p[1])),
+                                             "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish, reduces_to=reduce,
             lifts_from=("coulomb_friction", lambda q: np.array([q[0], q[0]], float)),
         ))
     return specs
@@ -573,9 +574,9 @@ def _backlash(model, scales):
         vals = ([math.log(d_rms * r) for r in (0.02, 0.1)] + [math.log(q) for q in dq if q > 0]
                 + [math.log(d_rms * 2.0)])
         specs.append(EffectSpec(
-            "backlash", {"between": [pair[0], pair[1]]}, 1, _starts_1d(vals, lo, hi)[:6],
-            np.array([lo]), np.array([hi]),
-            build, lambda p: {"gap_m": float(math.exp(p[0]))}, vanish=vanish,
+            effect="backlash", where={"between": [pair[0], pair[1]]}, n=1, starts=_starts_1d(vals, lo, hi)[:6],
+            lower=np.array([lo]), upper=np.array([hi]),
+            build=build, describe=lambda p: {"gap_m": float(math.exp(p[0]))}, vanish=vanish,
         ))
     return specs
 
@@ -597,9 +598,10 @@ def _cubic_stiffness(model, scales):
         grid = (neg + pos) if trend == "softening" else (pos + neg)
         q_est = [e * d_rms**2 / k_loc for e in ests if e is not None]
         specs.append(EffectSpec(
-            "cubic_stiffness", {"between": [pair[0], pair[1]]}, 1, _starts_1d(q_est + grid, -0.5, 300.0),
-            np.array([-0.5]), np.array([300.0]),
-            build, lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
+            effect="cubic_stiffness", where={"between": [pair[0], pair[1]]}, n=1,
+            starts=_starts_1d(q_est + grid, -0.5, 300.0), lower=np.array([-0.5]), upper=np.array([300.0]),
+            build=build,
+            describe=lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
             character=lambda p: {"character": "hardening" if p[0] >= 0 else "softening"},
         ))
     return specs
@@ -635,10 +637,10 @@ def _hysteresis(model, scales):
         f_share = u_ref / max(k_loc * d_rms, 1e-300)
         grid += [(a * f_share, 1.0, 0.0) for a in (0.1, 0.3)]
         specs.append(EffectSpec(
-            "hysteresis", {"between": [pair[0], pair[1]]}, 3,
-            [np.clip(np.array([math.log(max(a, 1e-300)), math.log(b), s]), lo_h + 1e-6, hi_h - 1e-6)
-             for a, b, s in grid],
-            lo_h, hi_h, build, desc,
+            effect="hysteresis", where={"between": [pair[0], pair[1]]}, n=3,
+            starts=[np.clip(np.array([math.log(max(a, 1e-300)), math.log(b), s]), lo_h + 1e-6, hi_h - 1e-6)
+                    for a, b, s in grid],
+            lower=lo_h, upper=hi_h, build=build, describe=desc,
         ))
     return specs
 
@@ -712,8 +714,9 @@ def _joint_friction(model, scales):
                 return replace(m, elements=tuple(els))
 
             specs.append(EffectSpec(
-                "joint_friction", {"between": [pair[0], pair[1]], "form": form}, 2, starts, lo, hi, build, desc,
-                vanish=vanish, character=lambda p: {"character": "softening"},
+                effect="joint_friction", where={"between": [pair[0], pair[1]], "form": form}, n=2,
+                starts=starts, lower=lo, upper=hi, build=build, describe=desc, vanish=vanish,
+                character=lambda p: {"character": "softening"},
             ))
     return specs
 
@@ -740,11 +743,11 @@ def _extra_mode(model, scales):
                 return {"mass_kg": md * math.exp(p[0]), "frequency_hz": math.exp(p[1]), "damping_ratio": math.exp(p[2])}
 
             specs.append(EffectSpec(
-                "extra_mode", {"dof": d_name, "frequency_hz": float(f0)}, 3,
-                [np.array([math.log(r), math.log(f0), math.log(0.02)]) for r in (0.03, 0.1)],
-                np.array([math.log(1e-3), math.log(f0 / 1.5), math.log(0.002)]),
-                np.array([math.log(1.0), math.log(f0 * 1.5), math.log(0.2)]),
-                build, desc, linear=True,
+                effect="extra_mode", where={"dof": d_name, "frequency_hz": float(f0)}, n=3,
+                starts=[np.array([math.log(r), math.log(f0), math.log(0.02)]) for r in (0.03, 0.1)],
+                lower=np.array([math.log(1e-3), math.log(f0 / 1.5), math.log(0.002)]),
+                upper=np.array([math.log(1.0), math.log(f0 * 1.5), math.log(0.2)]),
+                build=build, describe=desc, linear=True,
                 vanish=lambda p: (f"the extra mass is {100 * math.exp(p[0]):.2g} % of its DOF's" if p[0] < math.log(2e-3)
                                   else None),
             ))
@@ -754,7 +757,7 @@ def _extra_mode(model, scales):
 # ---------------------------------------------------------------------------------------------
 # the one table of the vocabulary
 # ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EffectDef:
     """One word of the gap vocabulary.
 
@@ -792,34 +795,49 @@ class EffectDef:
 
 #: every effect, once: the candidates, the signatures, the report, the CLI and the benchmark read it
 EFFECT_TABLE: dict[str, EffectDef] = {d.name: d for d in (
-    EffectDef("none", "reference", "model", (), False, "none",
-              "the nominal model is within the noise floor"),
-    EffectDef("parameter_mismatch", "reference", "model", (("m:<dof>", "kg"), ("k:<a>-<b>", "N/m"), ("c:<a>-<b>", "N s/m")),
-              False, "none", "masses, stiffnesses or dampings differ from the nominal values"),
-    EffectDef("extra_mode", "linear", "dof", (("mass_kg", "kg"), ("frequency_hz", "Hz"), ("damping_ratio", "1")),
-              False, "none", "an unmodelled mode: an extra mass on a spring and damper at a DOF", _extra_mode),
-    EffectDef("time_delay", "linear", "input", (("delay_s", "s"),), False, "none",
-              "a transport delay of the input", _time_delay),
-    EffectDef("offset", "nonlinear", "input", (("offset_N", "N"),), False, "none",
-              "a constant force bias added to the input", _offset),
-    EffectDef("saturation", "nonlinear", "input", (("limit_N", "N"),), True, "none",
-              "the actuator force is clipped at a limit", _saturation),
-    EffectDef("coulomb_friction", "nonlinear", "connection", (("Fc_N", "N"), ("v_eps_m_per_s", "m/s")), True, "either",
-              "Coulomb friction F tanh(v / v_eps) at a connection", _coulomb_friction),
-    EffectDef("asymmetric_friction", "nonlinear", "connection",
-              (("Fc_pos_N", "N"), ("Fc_neg_N", "N"), ("v_eps_m_per_s", "m/s")), True, "either",
-              "Coulomb friction with different sliding forces for positive and negative velocity",
-              _asymmetric_friction),
-    EffectDef("joint_friction", "nonlinear", "connection", (("joint_share", "1"), ("slip_force_N", "N")), True,
-              "softening", "microslip of a joint: part of a spring in series with a slider (Jenkins), softening and "
-              "more damped with amplitude", _joint_friction),
-    EffectDef("backlash", "nonlinear", "connection", (("gap_m", "m"),), True, "either",
-              "a clearance in a connection's spring", _backlash),
-    EffectDef("hysteresis", "nonlinear", "connection",
-              (("alpha_N_per_m", "N/m"), ("beta_per_m", "1/m"), ("gamma", "1"), ("delta", "1"), ("nu", "1")), True,
-              "either", "a Bouc-Wen hysteretic force added at a connection", _hysteresis),
-    EffectDef("cubic_stiffness", "nonlinear", "connection", (("k3_N_per_m3", "N/m^3"),), True, "either",
-              "a cubic spring k3 d^3 at a connection (hardening k3 > 0, softening k3 < 0)", _cubic_stiffness),
+    EffectDef(name="none", kind="reference", where="model", parameters=(), level_dependent=False, trend="none",
+              description="the nominal model is within the noise floor"),
+    EffectDef(name="parameter_mismatch", kind="reference", where="model",
+              parameters=(("m:<dof>", "kg"), ("k:<a>-<b>", "N/m"), ("c:<a>-<b>", "N s/m")),
+              level_dependent=False, trend="none",
+              description="masses, stiffnesses or dampings differ from the nominal values"),
+    EffectDef(name="extra_mode", kind="linear", where="dof",
+              parameters=(("mass_kg", "kg"), ("frequency_hz", "Hz"), ("damping_ratio", "1")),
+              level_dependent=False, trend="none",
+              description="an unmodelled mode: an extra mass on a spring and damper at a DOF",
+              factory=_extra_mode),
+    EffectDef(name="time_delay", kind="linear", where="input", parameters=(("delay_s", "s"),),
+              level_dependent=False, trend="none", description="a transport delay of the input",
+              factory=_time_delay),
+    EffectDef(name="offset", kind="nonlinear", where="input", parameters=(("offset_N", "N"),),
+              level_dependent=False, trend="none", description="a constant force bias added to the input",
+              factory=_offset),
+    EffectDef(name="saturation", kind="nonlinear", where="input", parameters=(("limit_N", "N"),),
+              level_dependent=True, trend="none", description="the actuator force is clipped at a limit",
+              factory=_saturation),
+    EffectDef(name="coulomb_friction", kind="nonlinear", where="connection",
+              parameters=(("Fc_N", "N"), ("v_eps_m_per_s", "m/s")), level_dependent=True, trend="either",
+              description="Coulomb friction F tanh(v / v_eps) at a connection", factory=_coulomb_friction),
+    EffectDef(name="asymmetric_friction", kind="nonlinear", where="connection",
+              parameters=(("Fc_pos_N", "N"), ("Fc_neg_N", "N"), ("v_eps_m_per_s", "m/s")),
+              level_dependent=True, trend="either",
+              description="Coulomb friction with different sliding forces for positive and negative velocity",
+              factory=_asymmetric_friction),
+    EffectDef(name="joint_friction", kind="nonlinear", where="connection",
+              parameters=(("joint_share", "1"), ("slip_force_N", "N")), level_dependent=True, trend="softening",
+              description="microslip of a joint: part of a spring in series with a slider (Jenkins), softening "
+                          "and more damped with amplitude", factory=_joint_friction),
+    EffectDef(name="backlash", kind="nonlinear", where="connection", parameters=(("gap_m", "m"),),
+              level_dependent=True, trend="either", description="a clearance in a connection's spring",
+              factory=_backlash),
+    EffectDef(name="hysteresis", kind="nonlinear", where="connection",
+              parameters=(("alpha_N_per_m", "N/m"), ("beta_per_m", "1/m"), ("gamma", "1"), ("delta", "1"), ("nu", "1")),
+              level_dependent=True, trend="either",
+              description="a Bouc-Wen hysteretic force added at a connection", factory=_hysteresis),
+    EffectDef(name="cubic_stiffness", kind="nonlinear", where="connection",
+              parameters=(("k3_N_per_m3", "N/m^3"),), level_dependent=True, trend="either",
+              description="a cubic spring k3 d^3 at a connection (hardening k3 > 0, softening k3 < 0)",
+              factory=_cubic_stiffness),
 )}
 
 #: verdict words that are not effects

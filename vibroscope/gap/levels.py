@@ -261,7 +261,7 @@ def _ro(a, dtype=None):
     return a
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LevelBLA:
     """The BLA (H1) at one excitation level, and its resonances.
 
@@ -302,7 +302,7 @@ class LevelBLA:
     damping_std: np.ndarray
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ModeTrend:
     """The change of one resonance of the BLA from the lowest to the highest level.
 
@@ -347,7 +347,7 @@ class ModeTrend:
     damping_rises: bool
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LevelEvidence:
     """Level dependence of the best linear approximation across logs and levels.
 
@@ -739,8 +739,10 @@ def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = 
         keep = np.sort(keep[np.argsort(props["prominences"][keep])[::-1][: int(n_modes)]])
     outs = [outs[j] for j in keep]
     nm = keep.size
-    levels = [LevelBLA(i, k, rms, n_avg, _ro(fk), _ro(H), _ro(coh), _ro(r[0, keep]), _ro(r[1, keep]), _ro(r[2, keep]),
-                       _ro(r[3, keep]))
+    levels = [LevelBLA(log=i, level=k, rms=rms, n_averages=n_avg, frequencies=_ro(fk), H=_ro(H),
+                       coherence=_ro(coh), natural_frequencies=_ro(r[0, keep]),
+                       natural_frequency_std=_ro(r[1, keep]), damping_ratios=_ro(r[2, keep]),
+                       damping_std=_ro(r[3, keep]))
               for (i, k, rms, n_avg, fk, H, coh), r in zip(raw, fits)]
 
     modes = []
@@ -770,8 +772,11 @@ def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = 
             trend = "none"
         last = ok[-1] if ok.size >= 2 else None
         pick = (lambda v: nan if last is None else float(v[last]))
-        modes.append(ModeTrend(f_ref, outs[j], pick(dfr), pick(zf), pick(dzr), pick(zz), _ro(dfr), _ro(zf), _ro(dzr),
-                               _ro(zz), bool(sig_f.any() or sig_z.any()), trend, bool(np.any(sig_z & (dzr > 0)))))
+        modes.append(ModeTrend(frequency_hz=f_ref, output=outs[j], frequency_change=pick(dfr),
+                               frequency_z=pick(zf), damping_change=pick(dzr), damping_z=pick(zz),
+                               frequency_changes=_ro(dfr), frequency_zs=_ro(zf), damping_changes=_ro(dzr),
+                               damping_zs=_ro(zz), level_dependent=bool(sig_f.any() or sig_z.any()),
+                               trend=trend, damping_rises=bool(np.any(sig_z & (dzr > 0)))))
     dep = [m for m in modes if m.level_dependent]
     trended = [m for m in modes if m.trend != "none"]
     trend = max(trended, key=lambda m: abs(m.frequency_z)).trend if trended else "none"
@@ -785,5 +790,6 @@ def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = 
                  f"zeta {100 * m.damping_change:+.1f} % (z {m.damping_z:+.1f})" for m in modes]
         desc = (f"{len(levels)} levels (input RMS {levels[0].rms:.3g} -> {levels[-1].rms:.3g} {input_unit}): "
                 + "; ".join(parts) + (f" -> level dependent, {trend}" if dep else " -> no level dependence"))
-    return LevelEvidence(tuple(levels), tuple(modes), bool(dep), trend, damping_rises, (f_lo, f_hi), fs,
-                         nperseg, window, desc)
+    return LevelEvidence(levels=tuple(levels), modes=tuple(modes), level_dependent=bool(dep), trend=trend,
+                         damping_rises=damping_rises, f_band=(f_lo, f_hi), fs=fs, nperseg=nperseg,
+                         window=window, description=desc)

@@ -122,7 +122,7 @@ def _cluster_levels(lr: np.ndarray, max_levels: int) -> np.ndarray:
     return np.zeros(n, int)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Split:
     """Which samples of which log fit, which validate.
 
@@ -208,7 +208,9 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
             desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}), each split in "
                     f"time ({' / '.join(sorted(kinds))}; {held:.1f} s held out in all), so every level is fitted "
                     f"and validated")
-            return Split(*[[p[k] for p in parts] for k in range(4)], desc, [p[4] for p in parts])
+            return Split(fit=[p[0] for p in parts], validation=[p[1] for p in parts],
+                         fit_prefix=[p[2] for p in parts], screen_prefix=[p[3] for p in parts],
+                         description=desc, levels=[p[4] for p in parts])
         fit, val, fpre, spre, nlev = [], [], [], [], []
         for i, u in enumerate(us):
             n = u.shape[1]
@@ -228,9 +230,11 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
                 spre.append(0)
         desc = (f"held-out log: the model is fitted on log(s) 1..{n_logs - 1} and every gap is measured "
                 f"on log {n_logs}")
-        return Split(fit, val, fpre, spre, desc, nlev)
+        return Split(fit=fit, validation=val, fit_prefix=fpre, screen_prefix=spre, description=desc,
+                     levels=nlev)
     m_fit, m_val, fpre, spre, nlev, desc = _one_log_split(us[0], fs, skip[0], validation_fraction, screen_s)
-    return Split([m_fit], [m_val], [fpre], [spre], desc, [nlev])
+    return Split(fit=[m_fit], validation=[m_val], fit_prefix=[fpre], screen_prefix=[spre],
+                 description=desc, levels=[nlev])
 
 
 def _one_log_split(u, fs, skip, validation_fraction, screen_s):

@@ -74,10 +74,10 @@ def as_lumped(model, *, source: str = "") -> LumpedModel:
         m, c, k = den / b
         if m > 0:
             return LumpedModel(
-                (Dof("m1", m),),
-                (Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c)),
-                (replace(model.input, dof="m1"),),
-                (replace(model.output, dof="m1"),),
-                model.name,
+                dofs=(Dof("m1", m),),
+                elements=(Spring(("m1", "ground"), k=k), Damper(("m1", "ground"), c=c)),
+                inputs=(replace(model.input, dof="m1"),),
+                outputs=(replace(model.output, dof="m1"),),
+                name=model.name,
             )
     return from_transfer_function(model)

@@ -38,7 +38,7 @@ from vibroscope.models.simulate import simulate as _sim
 __all__ = ["RefineResult", "refine_model", "simulate_with_offsets"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class RefineResult:
     """Result of :func:`refine_model`.
 

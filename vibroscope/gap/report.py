@@ -84,7 +84,7 @@ class Band:
         return {"f_lo_hz": _num(self.f_lo_hz), "f_hi_hz": _num(self.f_hi_hz), "share": _num(self.share)}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ChannelGap:
     """Gap of one output channel on the held-out samples: nrmse of the nominal model
     (`gap`) and of the verdict's model (`gap_after`), and the RMS simulation errors in the
@@ -145,7 +145,7 @@ class RegimeGap:
         return {"kind": self.kind, "name": self.name, "gap": _num(self.gap), "fraction": _num(self.fraction)}
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Candidate:
     """One candidate effect, fitted and scored on held-out data.
 
@@ -204,7 +204,7 @@ class Candidate:
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SignatureTest:
     """One signature test on the residual of the refitted linear model.
 
@@ -252,7 +252,7 @@ class SignatureTest:
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class GapTraces:
     """Time traces for the figures: measured, nominal, refitted and augmented outputs.
 
@@ -297,7 +297,7 @@ class GapTraces:
         return np.arange(self.measured.shape[1]) / self.fs
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class GapSpectrum:
     """Spectra of the gap (Welch, ``scaling='density'``), per output channel.
 
@@ -334,7 +334,7 @@ class GapSpectrum:
             object.__setattr__(self, f, _ro(getattr(self, f)))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class GapReport:
     """The sim-to-real gap diagnosis of a model against one or more logs.
 

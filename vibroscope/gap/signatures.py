@@ -94,11 +94,12 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         val = float(level_stat["stat"])
         trend = level_stat.get("trend", "none")
         tests.append(SignatureTest(
-            "level_dependence", val, 0.01, bool(level_stat.get("flagged")), _by_trend(trend),
-            f"BLA change from the lowest to the highest level (input RMS {level_rms[0]:.3g} -> {level_rms[-1]:.3g} {input_unit}): "
-            f"{100 * val:.1f} % of the lines beyond 3 standard deviations; resonance {trend} "
-            f"({100 * level_stat.get('shift', 0.0):+.2f} %)",
-            f, np.mean(ratio_db, axis=1), "frequency [Hz]", "H1 high / low level [dB]"))
+            name="level_dependence", value=val, threshold=0.01, flagged=bool(level_stat.get("flagged")),
+            points_to=_by_trend(trend),
+            detail=f"BLA change from the lowest to the highest level (input RMS {level_rms[0]:.3g} -> {level_rms[-1]:.3g} {input_unit}): "
+                   f"{100 * val:.1f} % of the lines beyond 3 standard deviations; resonance {trend} "
+                   f"({100 * level_stat.get('shift', 0.0):+.2f} %)",
+            x=f, y=np.mean(ratio_db, axis=1), x_label="frequency [Hz]", y_label="H1 high / low level [dB]"))
     elif len(H_levels) >= 2:
         lo, hi = H_levels[0], H_levels[-1]
         w = np.clip(np.mean(coh, axis=1), 0, 1)
@@ -106,16 +107,16 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         rd = np.sum(w[:, None] * np.abs(ratio_db), axis=0) / max(np.sum(w), 1e-12)
         val = float(np.max(rd))
         tests.append(SignatureTest(
-            "level_dependence", val, 0.5, val > 0.5, _NONLIN,
-            f"mean |H(level {len(H_levels)}) / H(level 1)| = {val:.2f} dB (input RMS {level_rms[0]:.3g} -> "
-            f"{level_rms[-1]:.3g} {input_unit})",
-            f, np.mean(ratio_db, axis=1), "frequency [Hz]", "H1 high / low level [dB]"))
+            name="level_dependence", value=val, threshold=0.5, flagged=val > 0.5, points_to=_NONLIN,
+            detail=f"mean |H(level {len(H_levels)}) / H(level 1)| = {val:.2f} dB (input RMS {level_rms[0]:.3g} -> "
+                   f"{level_rms[-1]:.3g} {input_unit})",
+            x=f, y=np.mean(ratio_db, axis=1), x_label="frequency [Hz]", y_label="H1 high / low level [dB]"))
     # 2. coherence drop beyond the noise
     drop = float(np.mean(np.clip(noise_coh - coh, 0, 1)))
     tests.append(SignatureTest(
-        "coherence_drop", drop, 0.02, drop > 0.02, _NONLIN,
-        f"mean coherence deficit against the noise-only expectation: {drop:.3f}",
-        f, np.mean(coh, axis=1), "frequency [Hz]", "coherence"))
+        name="coherence_drop", value=drop, threshold=0.02, flagged=drop > 0.02, points_to=_NONLIN,
+        detail=f"mean coherence deficit against the noise-only expectation: {drop:.3f}",
+        x=f, y=np.mean(coh, axis=1), x_label="frequency [Hz]", y_label="coherence"))
     # 3. phase slope of measured / refitted
     ratio = H_meas / np.where(np.abs(H_refit) > 0, H_refit, 1)
     wgt = np.mean(coh, axis=1)
@@ -127,16 +128,16 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
     else:
         tau = 0.0
     tests.append(SignatureTest(
-        "phase_slope", tau, 2e-4, tau > 2e-4, ("time_delay",),
-        f"phase of measured / refitted FRF falls like a delay of {1e3 * tau:.2f} ms",
-        f, np.degrees(ph), "frequency [Hz]", "phase(measured / refit) [deg]"))
+        name="phase_slope", value=tau, threshold=2e-4, flagged=tau > 2e-4, points_to=("time_delay",),
+        detail=f"phase of measured / refitted FRF falls like a delay of {1e3 * tau:.2f} ms",
+        x=f, y=np.degrees(ph), x_label="frequency [Hz]", y_label="phase(measured / refit) [deg]"))
     # 4. extra poles: peaks of |measured / refitted|
     mag = 20 * np.log10(np.maximum(np.mean(np.abs(ratio), axis=1), 1e-300))
     pk = float(np.max(np.abs(mag - np.median(mag)))) if mag.size else 0.0
     tests.append(SignatureTest(
-        "extra_poles", pk, 3.0, pk > 3.0, ("extra_mode",),
-        f"largest local deviation of |measured / refitted FRF|: {pk:.1f} dB",
-        f, mag, "frequency [Hz]", "|measured / refit| [dB]"))
+        name="extra_poles", value=pk, threshold=3.0, flagged=pk > 3.0, points_to=("extra_mode",),
+        detail=f"largest local deviation of |measured / refitted FRF|: {pk:.1f} dB",
+        x=f, y=mag, x_label="frequency [Hz]", y_label="|measured / refit| [dB]"))
     # 5-7. residual versus state
     r = resid[0] if resid.ndim == 2 else resid
     rel = states.get("relative", {})
@@ -146,26 +147,28 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
         c = _corr(r, np.tanh(v / (0.05 * np.std(v) + 1e-300)))
         xs, ys = _binned(v, r)
         tests.append(SignatureTest(
-            "residual_vs_velocity", abs(c), 0.1, abs(c) > 0.1, ("coulomb_friction", "hysteresis"),
-            f"residual correlates with sign(v) across {pair}: r = {c:+.2f}",
-            xs, ys, f"relative velocity {pair} [m/s]", f"residual {out_channels[0]}"))
+            name="residual_vs_velocity", value=abs(c), threshold=0.1, flagged=abs(c) > 0.1,
+            points_to=("coulomb_friction", "hysteresis"),
+            detail=f"residual correlates with sign(v) across {pair}: r = {c:+.2f}", x=xs, y=ys,
+            x_label=f"relative velocity {pair} [m/s]", y_label=f"residual {out_channels[0]}"))
         best = max(rel.items(), key=lambda kv: abs(_corr(r, kv[1][0] ** 3)))
         pair, (d, v) = best
         c3 = _corr(r, d**3)
         xs, ys = _binned(d, r)
         tests.append(SignatureTest(
-            "residual_vs_displacement", abs(c3), 0.1, abs(c3) > 0.1, ("cubic_stiffness", "backlash"),
-            f"residual correlates with d^3 across {pair}: r = {c3:+.2f}",
-            xs, ys, f"relative displacement {pair} [m]", f"residual {out_channels[0]}"))
+            name="residual_vs_displacement", value=abs(c3), threshold=0.1, flagged=abs(c3) > 0.1,
+            points_to=("cubic_stiffness", "backlash"),
+            detail=f"residual correlates with d^3 across {pair}: r = {c3:+.2f}", x=xs, y=ys,
+            x_label=f"relative displacement {pair} [m]", y_label=f"residual {out_channels[0]}"))
     ua = u - u.mean()
     q = np.quantile(np.abs(ua), 0.9)
     exc = np.sign(ua) * np.maximum(np.abs(ua) - q, 0)
     ci = _corr(r, exc)
     xs, ys = _binned(ua, r)
     tests.append(SignatureTest(
-        "residual_vs_input", abs(ci), 0.1, abs(ci) > 0.1, ("saturation",),
-        f"residual correlates with the input beyond its 90 % quantile: r = {ci:+.2f}",
-        xs, ys, f"input [{u_unit}]", f"residual {out_channels[0]}"))
+        name="residual_vs_input", value=abs(ci), threshold=0.1, flagged=abs(ci) > 0.1, points_to=("saturation",),
+        detail=f"residual correlates with the input beyond its 90 % quantile: r = {ci:+.2f}",
+        x=xs, y=ys, x_label=f"input [{u_unit}]", y_label=f"residual {out_channels[0]}"))
     # 8. whiteness (Ljung): fraction of autocorrelation lags 1..50 outside +-2.58/sqrt(N)
     n = r.size
     rr = r - r.mean()
@@ -174,9 +177,9 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
     ac = np.array([np.sum(rr[:-k] * rr[k:]) / den for k in lags])
     frac = float(np.mean(np.abs(ac) > 2.58 / np.sqrt(n)))
     tests.append(SignatureTest(
-        "residual_whiteness", frac, 0.2, frac > 0.2, (),
-        f"{100 * frac:.0f} % of residual autocorrelation lags 1-50 outside the 99 % band",
-        lags / fs, ac, "lag [s]", "residual autocorrelation"))
+        name="residual_whiteness", value=frac, threshold=0.2, flagged=frac > 0.2, points_to=(),
+        detail=f"{100 * frac:.0f} % of residual autocorrelation lags 1-50 outside the 99 % band",
+        x=lags / fs, y=ac, x_label="lag [s]", y_label="residual autocorrelation"))
     # 9. cross-correlation residual / past input (Ljung)
     uu = ua / (np.std(ua) or 1.0)
     rn = rr / (np.std(rr) or 1.0)
@@ -184,7 +187,8 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
     cc = np.array([np.mean(rn[k:] * uu[: n - k]) for k in lags2])
     fr2 = float(np.mean(np.abs(cc) > 2.58 / np.sqrt(n)))
     tests.append(SignatureTest(
-        "input_cross_correlation", fr2, 0.2, fr2 > 0.2, ("time_delay", "extra_mode", "parameter_mismatch"),
-        f"{100 * fr2:.0f} % of residual / past-input cross-correlation lags 0-50 outside the 99 % band",
-        lags2 / fs, cc, "lag [s]", "cross-correlation residual / input"))
+        name="input_cross_correlation", value=fr2, threshold=0.2, flagged=fr2 > 0.2,
+        points_to=("time_delay", "extra_mode", "parameter_mismatch"),
+        detail=f"{100 * fr2:.0f} % of residual / past-input cross-correlation lags 0-50 outside the 99 % band",
+        x=lags2 / fs, y=cc, x_label="lag [s]", y_label="cross-correlation residual / input"))
     return tuple(tests)

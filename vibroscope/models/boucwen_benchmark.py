@@ -29,15 +29,15 @@ def boucwen_benchmark_model(**params) -> LumpedModel:
     from vibroscope.models.lumped import Dof, Input, Output
 
     return LumpedModel(
-        (Dof("m", 2.0),),
-        (
+        dofs=(Dof("m", 2.0),),
+        elements=(
             Spring(("m", "ground"), k=5.0e4),
             Damper(("m", "ground"), c=10.0),
             BoucWen(("m", "ground"), **params),
         ),
-        (Input("m", channel="/actuator/force_cmd.wrench.force.x"),),
-        (Output("m", "displacement", "/sim/m.displacement.x"),),
-        "Bouc-Wen benchmark",
+        inputs=(Input(dof="m", channel="/actuator/force_cmd.wrench.force.x"),),
+        outputs=(Output("m", "displacement", "/sim/m.displacement.x"),),
+        name="Bouc-Wen benchmark",
     )
 
 

@@ -118,7 +118,7 @@ def _finite(name: str, v, *, positive: bool = False, nonneg: bool = False) -> fl
     return f
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Controller:
     """A discrete position controller closing a loop around a lumped model.
 
@@ -173,9 +173,9 @@ class Controller:
     --------
     The EMPS drive's position loop (Janot et al. 2019, eq. 6):
 
-    >>> c = Controller("emps", "cascade", {"kp": 160.18, "kv": 243.45}, 1000.0, "q",
-    ...                drives=0, reference="/emps/qg.x", velocity_filter=(0.5, 0.5),
-    ...                gain=35.15, saturation=10.0)
+    >>> c = Controller(name="emps", law="cascade", gains={"kp": 160.18, "kv": 243.45},
+    ...                rate_hz=1000.0, dof="q", drives=0, reference="/emps/qg.x",
+    ...                velocity_filter=(0.5, 0.5), gain=35.15, saturation=10.0)
     >>> c.g("kv")
     243.45
     """

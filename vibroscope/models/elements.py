@@ -456,7 +456,7 @@ class Friction(Element):
         return p
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BoucWen(Element):
     """Bouc-Wen hysteretic element: force ``z`` with
     ``zdot = alpha v - beta (gamma |v| |z|^(nu-1) z + delta v |z|^nu)``.

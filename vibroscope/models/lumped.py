@@ -65,7 +65,7 @@ class Dof:
         object.__setattr__(self, "mass", m)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Input:
     """A force input (N) acting on DOF `dof`.
 
@@ -180,7 +180,7 @@ class Modes:
         return len(self.natural_frequencies)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class LumpedModel:
     """A lumped-mass model: DOFs, elements between them, force inputs and outputs.
 
@@ -638,12 +638,13 @@ class LumpedModel:
         elements.extend(nonlinear)
         if not 0 <= input_dof < n:
             raise ValueError(f"{input_dof=} must index one of the {n} DOFs")
-        inputs = [Input(names[input_dof], channel=input_channel)]
+        inputs = [Input(dof=names[input_dof], channel=input_channel)]
         prefix = {"acceleration": "linear_acceleration", "velocity": "velocity", "displacement": "displacement"}
         outputs = [
             Output(nm, output_quantity, f"/imu/{nm}.{prefix[output_quantity]}.x") for nm in names
         ]
-        return cls(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs), name)
+        return cls(dofs=tuple(dofs), elements=tuple(elements), inputs=tuple(inputs), outputs=tuple(outputs),
+                   name=name)
 
     def replace(self, **changes) -> "LumpedModel":
         """A copy with fields replaced (``dofs``, ``elements``, ``inputs``, ``outputs``, ``name``,

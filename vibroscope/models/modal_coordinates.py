@@ -45,7 +45,7 @@ __all__ = ["ModalCoordinatesModel", "from_pole_residue", "from_transfer_function
 COMPLEXITY_WARN = 0.1
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ModalCoordinatesModel(LumpedModel):
     """A :class:`LumpedModel` whose DOFs are modal coordinates, with measured points.
 
@@ -244,8 +244,9 @@ def from_pole_residue(model: PoleResidueModel, *, source: str = "") -> ModalCoor
         o = out_labels.index(pt)
         shapes.append(tuple((A[:, o, i0] / phi_p).tolist()))
     dofs, els = _mode_dofs(model.natural_frequencies, model.damping_ratios, names)
-    return ModalCoordinatesModel(tuple(dofs), tuple(els), tuple(model.inputs), tuple(model.outputs), model.name,
-                                 points=tuple(points), shapes=tuple(shapes))
+    return ModalCoordinatesModel(dofs=tuple(dofs), elements=tuple(els), inputs=tuple(model.inputs),
+                                 outputs=tuple(model.outputs), name=model.name, points=tuple(points),
+                                 shapes=tuple(shapes))
 
 
 def from_transfer_function(model, *, rtol: float = 1e-6) -> ModalCoordinatesModel:
@@ -304,8 +305,10 @@ def from_transfer_function(model, *, rtol: float = 1e-6) -> ModalCoordinatesMode
         s = np.sqrt(np.abs(A))
         points, shapes = ("in", "out"), (tuple(s.tolist()), tuple((np.sign(A) * s).tolist()))
         io = ("in", "out")
-    out = ModalCoordinatesModel(tuple(dofs), tuple(els), (replace(model.input, dof=io[0]),),
-                                (replace(model.output, dof=io[1]),), model.name, points=points, shapes=shapes)
+    out = ModalCoordinatesModel(dofs=tuple(dofs), elements=tuple(els),
+                                inputs=(replace(model.input, dof=io[0]),),
+                                outputs=(replace(model.output, dof=io[1]),), name=model.name, points=points,
+                                shapes=shapes)
     f = np.unique(np.concatenate([wn / (2 * np.pi) * k for k in (0.3, 0.9, 1.0, 1.1, 3.0)]))
     H0 = np.polyval(num, 2j * np.pi * f) / np.polyval(den, 2j * np.pi * f)
     H1 = out.frf(f, quantity=None)[:, 0, 0]

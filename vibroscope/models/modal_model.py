@@ -218,7 +218,7 @@ class PoleResidueModel:
         ValueError
             As :class:`PoleResidueModel`.
         """
-        ins = tuple(i if isinstance(i, Input) else Input("u", "force", str(i)) for i in inputs)
+        ins = tuple(i if isinstance(i, Input) else Input(dof="u", quantity="force", channel=str(i)) for i in inputs)
         outs = tuple(o if isinstance(o, Output) else Output("y", "acceleration", str(o)) for o in outputs)
         return cls(natural_frequencies=natural_frequencies, damping_ratios=damping_ratios, residues=residues,
                    inputs=ins,

@@ -328,7 +328,7 @@ def _parse_io(ctx, doc, dof_names):
         sat = _number(ctx, t, "input", i, "saturation", positive=True, required=False)
         delay = _number(ctx, t, "input", i, "delay", nonneg=True, required=False, default=0.0)
         offset = _number(ctx, t, "input", i, "offset", required=False, default=0.0)
-        inputs.append(Input(dof, q, ch, sat, delay, offset))
+        inputs.append(Input(dof=dof, quantity=q, channel=ch, saturation=sat, delay=delay, offset=offset))
     for i, t in enumerate(_tables(ctx, doc, "output")):
         _unknown(ctx, t, "output", i, {"channel", "dof", "quantity"})
         ch = _string(ctx, t, "output", i, "channel")
@@ -620,11 +620,13 @@ def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | Po
             if points:
                 from vibroscope.models.modal_coordinates import ModalCoordinatesModel
 
-                return ModalCoordinatesModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs),
-                                             str(doc.get("name", "")), tuple(controllers), points=tuple(points),
+                return ModalCoordinatesModel(dofs=tuple(dofs), elements=tuple(elements), inputs=tuple(inputs),
+                                             outputs=tuple(outputs), name=str(doc.get("name", "")),
+                                             controllers=tuple(controllers), points=tuple(points),
                                              shapes=tuple(shapes))
-            return LumpedModel(tuple(dofs), tuple(elements), tuple(inputs), tuple(outputs), str(doc.get("name", "")),
-                               tuple(controllers))
+            return LumpedModel(dofs=tuple(dofs), elements=tuple(elements), inputs=tuple(inputs),
+                               outputs=tuple(outputs), name=str(doc.get("name", "")),
+                               controllers=tuple(controllers))
         except ValueError as exc:
             if not controllers:
                 raise
