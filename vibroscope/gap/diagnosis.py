@@ -568,8 +568,8 @@ def _mode_change(ev, f_hz: float):
     indices of those two levels; None without one."""
     if ev is None or len(ev.levels) < 2 or not ev.modes:
         return None
-    j = int(np.argmin([abs(m.frequency_hz - f_hz) for m in ev.modes]))
-    if abs(ev.modes[j].frequency_hz - f_hz) > 0.05 * f_hz:
+    j = int(np.argmin([abs(m.natural_frequency - f_hz) for m in ev.modes]))
+    if abs(ev.modes[j].natural_frequency - f_hz) > 0.05 * f_hz:
         return None
     fn = np.array([lv.natural_frequencies[j] for lv in ev.levels])
     sf = np.array([lv.natural_frequency_std[j] for lv in ev.levels])
@@ -597,19 +597,19 @@ def _modal_level_test(ev, ev_model) -> dict | None:
         return None
     best = None
     for j, md in enumerate(ev.modes):
-        ch = _mode_change(ev, md.frequency_hz)
+        ch = _mode_change(ev, md.natural_frequency)
         if ch is None:
             continue
         change, a, b = ch
         if ev.levels[b].rms < LOG_LEVEL_RATIO * ev.levels[a].rms:
             continue
         sf = float(np.hypot(ev.levels[a].natural_frequency_std[j], ev.levels[b].natural_frequency_std[j]))
-        chm = _mode_change(ev_model, md.frequency_hz)
+        chm = _mode_change(ev_model, md.natural_frequency)
         d = change - (chm[0] if chm is not None else 0.0)
         z = d * float(ev.levels[a].natural_frequencies[j]) / sf if sf > 0 else 0.0
         if abs(z) > LEVEL_MODE_Z and abs(d) > LEVEL_MODE_CHANGE and (best is None or abs(z) > abs(best["z"])):
             best = {"trend": "hardening" if d > 0 else "softening", "shift": float(d), "z": float(z),
-                    "frequency_hz": float(md.frequency_hz)}
+                    "frequency_hz": float(md.natural_frequency)}
     return best
 
 

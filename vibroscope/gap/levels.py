@@ -308,7 +308,7 @@ class ModeTrend:
 
     Attributes
     ----------
-    frequency_hz : float
+    natural_frequency : float
         Natural frequency at the lowest level where it was found (Hz).
     output : int
         The output whose FRF was fitted for this mode (0-based).
@@ -332,7 +332,7 @@ class ModeTrend:
         A significant rise of the damping ratio at some level.
     """
 
-    frequency_hz: float
+    natural_frequency: float
     output: int
     frequency_change: float
     frequency_z: float
@@ -772,7 +772,7 @@ def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = 
             trend = "none"
         last = ok[-1] if ok.size >= 2 else None
         pick = (lambda v: nan if last is None else float(v[last]))
-        modes.append(ModeTrend(frequency_hz=f_ref, output=outs[j], frequency_change=pick(dfr),
+        modes.append(ModeTrend(natural_frequency=f_ref, output=outs[j], frequency_change=pick(dfr),
                                frequency_z=pick(zf), damping_change=pick(dzr), damping_z=pick(zz),
                                frequency_changes=_ro(dfr), frequency_zs=_ro(zf), damping_changes=_ro(dzr),
                                damping_zs=_ro(zz), level_dependent=bool(sig_f.any() or sig_z.any()),
@@ -786,7 +786,7 @@ def level_blas(us, ys, masks, fs: float, nperseg: int, *, n_modes: int | None = 
     elif not modes:
         desc = f"{len(levels)} levels, no resonance found in {f_lo:.3g}-{f_hi:.3g} Hz"
     else:
-        parts = [f"{m.frequency_hz:.4g} Hz: f_n {100 * m.frequency_change:+.2f} % (z {m.frequency_z:+.1f}), "
+        parts = [f"{m.natural_frequency:.4g} Hz: f_n {100 * m.frequency_change:+.2f} % (z {m.frequency_z:+.1f}), "
                  f"zeta {100 * m.damping_change:+.1f} % (z {m.damping_z:+.1f})" for m in modes]
         desc = (f"{len(levels)} levels (input RMS {levels[0].rms:.3g} -> {levels[-1].rms:.3g} {input_unit}): "
                 + "; ".join(parts) + (f" -> level dependent, {trend}" if dep else " -> no level dependence"))

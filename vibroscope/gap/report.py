@@ -69,19 +69,19 @@ class Band:
 
     Attributes
     ----------
-    f_lo_hz, f_hi_hz : float
-        Band edges in Hz.
+    fmin, fmax : float
+        Band edges in Hz (JSON keys ``f_lo_hz``, ``f_hi_hz``).
     share : float
         Fraction (0..1) of the residual (measured - nominal) energy in the band.
     """
 
-    f_lo_hz: float
-    f_hi_hz: float
+    fmin: float
+    fmax: float
     share: float
 
     def to_dict(self) -> dict:
         """The band as a JSON-ready dict: ``f_lo_hz``, ``f_hi_hz``, ``share``; NaN and inf become None."""
-        return {"f_lo_hz": _num(self.f_lo_hz), "f_hi_hz": _num(self.f_hi_hz), "share": _num(self.share)}
+        return {"f_lo_hz": _num(self.fmin), "f_hi_hz": _num(self.fmax), "share": _num(self.share)}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -448,7 +448,7 @@ class GapReport:
             f"augmented {self.gap_after:.4f} (shrink {100 * self.shrink:.1f} %), noise floor {self.noise_floor:.4f}",
         ]
         if self.bands:
-            lines.append("bands: " + ", ".join(f"{b.f_lo_hz:.1f}-{b.f_hi_hz:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
+            lines.append("bands: " + ", ".join(f"{b.fmin:.1f}-{b.fmax:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
         n_named = len(named) if len(named) > 1 else 1
         for i, c in enumerate(self.candidates[:max(5, n_named + 2)], 1):
             where = ", ".join(f"{k}={v}" for k, v in c.where.items())

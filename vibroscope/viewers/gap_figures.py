@@ -355,10 +355,10 @@ def focus_band(report, f) -> tuple[float, float]:
     excited band, clipped to the frequencies `f` (0 to Nyquist only when nothing is known)."""
     f = np.asarray(f, dtype=float)
     f0, f1 = (float(f[1]) if f.size > 1 else 0.0), float(f[-1]) if f.size else 1.0
-    bands = [b for b in getattr(report, "bands", ()) if np.isfinite(b.f_lo_hz) and np.isfinite(b.f_hi_hz)]
+    bands = [b for b in getattr(report, "bands", ()) if np.isfinite(b.fmin) and np.isfinite(b.fmax)]
     if bands:
-        lo = min(b.f_lo_hz for b in bands)
-        hi = max(b.f_hi_hz for b in bands)
+        lo = min(b.fmin for b in bands)
+        hi = max(b.fmax for b in bands)
         lo, hi = lo / 1.6, hi * 1.6
         if hi - lo < 0.1 * hi:
             lo = max(hi * 0.9, 0.0)
@@ -413,7 +413,7 @@ def plot_gap_frf(report, *, fig=None):
         axm, axp, axc = axes[:, o]
         for b in report.bands:
             for a in (axm, axp, axc):
-                a.axvspan(b.f_lo_hz, b.f_hi_hz, color=BAND, alpha=0.12, lw=0, zorder=0)
+                a.axvspan(b.fmin, b.fmax, color=BAND, alpha=0.12, lw=0, zorder=0)
         for what, H in (("measured", Hm), ("nominal", Hn), ("augmented", Ha)):
             label = {"measured": "measured H1", "nominal": "nominal model",
                      "augmented": f"augmented ({_verdict_words(report)})"}[what]
@@ -481,10 +481,10 @@ def plot_gap_spectrum(report, *, fig=None):
               ("noise floor", sp.noise, COLORS["noise"], ":", 1.4))
     for c, ax in enumerate(axes):
         for k, b in enumerate(report.bands):
-            ax.axvspan(b.f_lo_hz, b.f_hi_hz, color=BAND, alpha=0.14, lw=0, zorder=0,
+            ax.axvspan(b.fmin, b.fmax, color=BAND, alpha=0.14, lw=0, zorder=0,
                        label="gap bands (share of the nominal residual)" if k == 0 else None)
             tr = mtransforms.blended_transform_factory(ax.transData, ax.transAxes)
-            ax.text(0.5 * (b.f_lo_hz + b.f_hi_hz), 0.985, f"{100 * b.share:.0f} %", transform=tr, ha="center",
+            ax.text(0.5 * (b.fmin + b.fmax), 0.985, f"{100 * b.share:.0f} %", transform=tr, ha="center",
                     va="top", fontsize=8, color=BAND, fontweight="bold", clip_on=True, zorder=5,
                     bbox=dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="none", alpha=0.8))
         for label, v, col, ls, lw in curves:
@@ -505,7 +505,7 @@ def plot_gap_spectrum(report, *, fig=None):
         ax.set_xlim(*focus_band(report, f))
     fig.legend(*axes[0].get_legend_handles_labels(), fontsize=8, ncol=3, loc="outside lower center", frameon=False)
     axes[-1].set_xlabel("frequency [Hz]")
-    bands = ", ".join(f"{b.f_lo_hz:.3g}–{b.f_hi_hz:.3g} Hz" for b in report.bands) or "none located"
+    bands = ", ".join(f"{b.fmin:.3g}–{b.fmax:.3g} Hz" for b in report.bands) or "none located"
     fig.suptitle(f"Where the gap lies in frequency — bands: {bands}", fontsize=10)
     return fig
 
@@ -753,7 +753,7 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
     cmap = plt.get_cmap("plasma")
     cols = [cmap(0.0 if n_l == 1 else 0.85 * i / (n_l - 1)) for i in range(n_l)]
     o = modes[0].output if modes else 0
-    f_all = [m.frequency_hz for m in modes if np.isfinite(m.frequency_hz)]
+    f_all = [m.natural_frequency for m in modes if np.isfinite(m.natural_frequency)]
     a0 = axes[0]
     for lv, c in zip(levels, cols):
         f = lv.frequencies
@@ -779,7 +779,7 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
         sf = np.array([lv.natural_frequency_std[j] for lv in levels])
         ze = np.array([lv.damping_ratios[j] for lv in levels])
         sz = np.array([lv.damping_std[j] for lv in levels])
-        lab = f"mode {j + 1} ({m.frequency_hz:.4g} Hz)" + (f": {m.trend}" if m.trend != "none" else "")
+        lab = f"mode {j + 1} ({m.natural_frequency:.4g} Hz)" + (f": {m.trend}" if m.trend != "none" else "")
         ok = np.flatnonzero(np.isfinite(fn))
         f_ref = fn[ok[0]] if ok.size else np.nan  # each mode against its lowest fitted level: a 1 % shift shows
         axes[1].errorbar(rms, 100 * (fn / f_ref - 1), yerr=100 * sf / f_ref, marker="o", capsize=3, color=f"C{j}",

@@ -110,7 +110,7 @@ def _band_table(report) -> str:
     lines = ["# Gap bands", "", "Share of the nominal model's residual energy.", "",
              "| band | f_lo [Hz] | f_hi [Hz] | share [%] |", "|---|---|---|---|"]
     for k, b in enumerate(report.bands):
-        lines.append(f"| {k + 1} | {b.f_lo_hz:.3f} | {b.f_hi_hz:.3f} | {100 * b.share:.1f} |")
+        lines.append(f"| {k + 1} | {b.fmin:.3f} | {b.fmax:.3f} | {100 * b.share:.1f} |")
     if not report.bands:
         lines.append("| - | - | - | - |")
     return "\n".join(lines)
