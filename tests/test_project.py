@@ -261,3 +261,24 @@ def test_cli_help_and_info_load_no_heavy_edge(tmp_path):
         )
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=REPO)
         assert out.stdout.strip() == "", f"vibroscope {' '.join(argv)} imported {out.stdout.strip()}"
+
+
+def test_dataclasses_of_more_than_five_fields_are_built_by_name():
+    """House rule (CONTRIBUTING.md, Names): a dataclass of more than five fields is
+    ``kw_only=True``, so no call can pass its fields in the wrong order. Checked on the source
+    (every ``@dataclass`` class of the package with more than five annotated fields)."""
+    import ast
+
+    offenders = []
+    for path in sorted((REPO / "vibroscope").rglob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if not isinstance(node, ast.ClassDef):
+                continue
+            decs = [d for d in node.decorator_list if "dataclass" in ast.unparse(d)]
+            if not decs:
+                continue
+            n_fields = sum(1 for b in node.body if isinstance(b, ast.AnnAssign) and "ClassVar" not in ast.unparse(b.annotation))
+            if n_fields > 5 and "kw_only=True" not in ast.unparse(decs[0]):
+                offenders.append(f"{path.relative_to(REPO)}:{node.lineno} {node.name} ({n_fields} fields)")
+    assert not offenders, "dataclasses of more than five fields without kw_only=True:\n" + "\n".join(offenders)
