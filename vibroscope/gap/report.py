@@ -447,6 +447,9 @@ class GapReport:
             f"gap (nrmse, {self.validation}): nominal {self.gap_before:.4f}, refit {self.gap_refit:.4f}, "
             f"augmented {self.gap_after:.4f} (shrink {100 * self.shrink:.1f} %), noise floor {self.noise_floor:.4f}",
         ]
+        rank = (self.meta or {}).get("noise_floor_ranking") or {}
+        if isinstance(rank.get("nrmse"), float) and rank["nrmse"] < 0.99 * self.noise_floor:
+            lines.append(f"candidates ranked against a floor of {rank['nrmse']:.4f}: {rank.get('method', '')}")
         if self.bands:
             lines.append("bands: " + ", ".join(f"{b.fmin:.1f}-{b.fmax:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
         n_named = len(named) if len(named) > 1 else 1
