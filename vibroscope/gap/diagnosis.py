@@ -70,7 +70,7 @@ from __future__ import annotations
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import signal as sps
@@ -676,10 +676,120 @@ def _regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
     return out
 
 
+@dataclass(kw_only=True, eq=False)
+class _Run:
+    """The working state of one :func:`_diagnose` call, filled stage by stage.
+
+    Set by :func:`_prepare_logs`: the model, the logs and their split, the simulators, the
+    FRF segment length and the effects to try; by each later stage: what it found (the
+    comments below name the stage). Mutable and private: a stage reads what the earlier
+    ones left and adds its own results; ``timings`` collects each stage's seconds."""
+
+    # the logs and their split (_prepare_logs)
+    t_start: float
+    timings: dict
+    model: LumpedModel
+    sigs: list
+    fs: float
+    us: list
+    ys: list
+    out_ch: list
+    closed: bool
+    units: list
+    in_unit: str
+    skips: list
+    split: object
+    sims: list
+    nps: int
+    nps_reason: str
+    window: str
+    effect_set: set
+    excluded: dict
+    # the nominal model and the noise floor (_simulate_nominal)
+    y_nom: list | None = None
+    gap_before: float | None = None
+    all_masks: list | None = None
+    nf: object = None
+    floor: float | None = None
+    # the FRF of the fitting data and the linear refit (_refit_linear)
+    fd: tuple | None = None
+    sel: np.ndarray | None = None
+    w: np.ndarray | None = None
+    lin: LinearParams | None = None
+    ns_fit: list | None = None
+    lo_l: np.ndarray | None = None
+    hi_l: np.ndarray | None = None
+    ns_pol: list | None = None
+    g_nom_fit: float | None = None
+    g_ref_fit: float | None = None
+    theta: np.ndarray | None = None
+    refit_note: str | None = None
+    refit: LumpedModel | None = None
+    y_ref: list | None = None
+    gap_refit: float | None = None
+    # scales, signatures and level evidence (_gather_evidence)
+    f_s: np.ndarray | None = None
+    H_s: np.ndarray | None = None
+    scales: dict | None = None
+    groups: list | None = None
+    blas: list | None = None
+    level: dict | None = None
+    level_ev: object = None
+    level_ev_ref: object = None
+    sigs_tests: tuple | None = None
+    # the candidates' fits (_fit_candidates)
+    val_logs: list | None = None
+    none_ok: bool | None = None
+    specs: list | None = None
+    not_tried: dict | None = None
+    lin_later: dict | None = None
+    results: list | None = None
+    pre_eval: dict | None = None
+    keep_ids: set | None = None
+    per_class: dict | None = None
+    # held-out evaluation and ranking (_rank_candidates)
+    floor_rank: float | None = None
+    floor_rank_method: str | None = None
+    k_before: float | None = None
+    cands: list | None = None
+    best_i: int | None = None
+    trend_shifts: dict | None = None
+    polish: dict | None = None
+    verdict: str | None = None
+    ordered: list | None = None
+    chosen: list | None = None
+    # forward selection (_select_further_effects)
+    shares: list | None = None
+
+    def held_out(self, m_, fast=False):
+        """Held-out nrmse of model `m_` (inf when not finite) and its outputs per held-out log."""
+        val_logs, sims, ys, split = self.val_logs, self.sims, self.ys, self.split
+        yh = {i: sims[i].run(m_, fast=fast) for i in val_logs}
+        g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
+        return (g if np.isfinite(g) else float("inf")), yh
+
+    def key(self, g, n):
+        """Penalised held-out excess gap (lower is better)."""
+        floor_rank = self.floor_rank
+        return max(_excess(g, floor_rank), 0.15 * floor_rank) * (1 + PENALTY * n)
+
+
 @one_blas_thread  # the fits run in a thread pool: a BLAS pool per thread only spins against it
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout) -> GapReport:
-    from tqdm.auto import tqdm
+    run = _prepare_logs(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg, holdout=holdout)
+    _simulate_nominal(run)
+    _refit_linear(run)
+    _gather_evidence(run)
+    _fit_candidates(run, workers=workers, n_full=n_full, progress=progress)
+    _rank_candidates(run, workers=workers)
+    _select_further_effects(run, workers=workers)
+    return _build_report(run)
 
+
+def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> _Run:
+    """The logs split at their gaps and into input and output rows, the transient to skip, the
+    fit / held-out split, one simulator per log, the FRF segment length (and window) and the
+    effects to try (closed loop: less those that do not apply). Returns a new :class:`_Run`."""
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     model = as_lumped(model)
@@ -722,23 +832,38 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     effect_set = set(EFFECT_TABLE) if effects is None else set(effects)
     excluded = {e: why for e, why in CLOSED_LOOP_EXCLUDED.items() if e in effect_set} if closed else {}
     effect_set -= set(excluded)
+    return _Run(t_start=t_start, timings=timings, model=model, sigs=sigs, fs=fs, us=us, ys=ys, out_ch=out_ch,
+                closed=closed, units=units, in_unit=in_unit, skips=skips, split=split, sims=sims, nps=nps,
+                nps_reason=nps_reason, window=window, effect_set=effect_set, excluded=excluded)
 
-    # 1. nominal -------------------------------------------------------------------------------
+
+def _simulate_nominal(run: _Run) -> None:
+    """Stage 1: the nominal model simulated on every log, its held-out gap, the non-transient
+    sample masks and the noise floor. Sets ``y_nom``, ``gap_before``, ``all_masks``, ``nf``,
+    ``floor``."""
+    model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
     t = time.perf_counter()
     y_nom = [sim.run(model) for sim in sims]
     gap_before = nrmse(ys, y_nom, split.validation)
     all_masks = []
-    for u, sk in zip(us, skips):
+    for u, sk in zip(us, run.skips):
         m = np.ones(u.shape[1], bool)
         m[:sk] = False
         all_masks.append(m)
     nf = noise_floor(ys, us, all_masks, fs, nps)
     floor = nf.nrmse
-    timings["nominal"] = time.perf_counter() - t
+    run.timings["nominal"] = time.perf_counter() - t
+    run.y_nom, run.gap_before, run.all_masks, run.nf, run.floor = y_nom, gap_before, all_masks, nf, floor
 
-    # 2. FRF of the fitting data and the linear refit ------------------------------------------
-    # started from the FRF fit and from the nominal; the better on the fitting data is kept, and
-    # the refit is never worse there than the nominal model itself
+
+def _refit_linear(run: _Run) -> None:
+    """Stage 2: the H1 of the fitting data and the nominal structure's linear parameters
+    re-estimated on it, then in time; started from the FRF fit and from the nominal, the better
+    on the fitting data is kept, and the refit is never worse there than the nominal model
+    itself. Sets ``fd``, ``sel``, ``w``, ``lin``, the parameter bounds and sample counts,
+    ``theta``, ``refit``, ``y_ref``, ``gap_refit`` and the fitting gaps."""
+    model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
+    closed, window = run.closed, run.window
     t = time.perf_counter()
     fd = _frf_data(us, ys, split.fit, fs, nps, window)
     if fd is None:
@@ -775,9 +900,23 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     refit = lin.apply(model, theta)
     y_ref = [sim.run(refit) for sim in sims]
     gap_refit = nrmse(ys, y_ref, split.validation)
-    timings["refit"] = time.perf_counter() - t
+    run.timings["refit"] = time.perf_counter() - t
+    run.fd, run.sel, run.w, run.lin = fd, sel, w, lin
+    run.ns_fit, run.lo_l, run.hi_l, run.ns_pol = ns_fit, lo_l, hi_l, ns_pol
+    run.g_nom_fit, run.g_ref_fit, run.theta, run.refit_note = g_nom_fit, g_ref_fit, theta, refit_note
+    run.refit, run.y_ref, run.gap_refit = refit, y_ref, gap_refit
 
-    # 3. scales, signatures, level evidence ------------------------------------------------------
+
+def _gather_evidence(run: _Run) -> None:
+    """Stage 3: the scales of the candidates' start values (motion and input distributions,
+    extra-mode start frequencies, residual regressions), the BLA's level dependence (line-wise
+    and per resonance) and the signature tests of the refit's residual. Sets ``f_s``, ``H_s``,
+    ``scales``, ``groups``, ``blas``, ``level``, ``level_ev``, ``level_ev_ref``,
+    ``sigs_tests``."""
+    model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
+    closed, window, refit, y_ref, y_nom = run.closed, run.window, run.refit, run.y_ref, run.y_nom
+    ns_fit, fd, sel, w, nf, all_masks, in_unit = run.ns_fit, run.fd, run.sel, run.w, run.nf, run.all_masks, run.in_unit
+    f, H, coh, _, _ = fd
     t = time.perf_counter()
     # the scales, start values and signatures come from the fitting log of the highest input
     # level (several logs at different levels): an effect that grows with the level shows most there
@@ -865,27 +1004,42 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     sigs_tests = run_signatures(
         f=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
         noise_coh=noise_coh, resid=resid[:, mfit0], u=u_fit[mfit0], states={"relative": rel_fit}, fs=fs,
-        out_channels=out_ch, level_stat=level, input_unit=in_unit, u_unit="N" if closed else in_unit)
+        out_channels=run.out_ch, level_stat=level, input_unit=in_unit, u_unit="N" if closed else in_unit)
     tau = next((s.value for s in sigs_tests if s.name == "phase_slope"), 0.0)
     scales["delay0"] = float(min(max(tau, 1e-4), 0.05))
     n_reg = min(n_sc, int(20 * fs))
-    scales["regress"] = _regression_starts(refit, rel, ys, y_ref, fit_log, n_reg, fs, effect_set)
-    if np.any(theta):  # the nominal's residual too: a strong nonlinearity bends the refit
+    scales["regress"] = _regression_starts(refit, rel, ys, y_ref, fit_log, n_reg, fs, run.effect_set)
+    if np.any(run.theta):  # the nominal's residual too: a strong nonlinearity bends the refit
         scales["regress_nominal"] = _regression_starts(model, rels[1], ys, y_nom, fit_log, n_reg, fs,
-                                                       effect_set & {"coulomb_friction", "cubic_stiffness"})
-    timings["signatures"] = time.perf_counter() - t
+                                                       run.effect_set & {"coulomb_friction", "cubic_stiffness"})
+    run.timings["signatures"] = time.perf_counter() - t
+    run.f_s, run.H_s, run.scales, run.groups, run.blas, run.level = f_s, H_s, scales, groups, blas, level
+    run.level_ev, run.level_ev_ref, run.sigs_tests = level_ev, level_ev_ref, sigs_tests
 
-    # 4. candidates ------------------------------------------------------------------------------
+
+def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
+    """Stage 4: the candidate effects' fits. Linear effects fitted jointly with the linear
+    parameters on the FRF, then in time; nonlinear effects probed at every location from the
+    refitted and the nominal linear parameters, the most promising locations refined, the best
+    classes fitted jointly with the linear parameters (a family refitted from its member's
+    solution where the member fits better). Sets ``val_logs``, ``none_ok``, ``specs``,
+    ``not_tried``, ``lin_later``, ``results`` (``(spec, augmented model, p, gap_fit, base)``),
+    ``pre_eval``, ``keep_ids``, ``per_class``."""
+    from tqdm.auto import tqdm
+
+    model, sims, ys, split, fs = run.model, run.sims, run.ys, run.split, run.fs
+    closed, refit, theta, lin, level = run.closed, run.refit, run.theta, run.lin, run.level
+    lo_l, hi_l, ns_fit, ns_pol, floor = run.lo_l, run.hi_l, run.ns_fit, run.ns_pol, run.floor
+    f_s, H_s, w, sel = run.f_s, run.H_s, run.w, run.sel
+    g_ref_fit, g_nom_fit, gap_refit = run.g_ref_fit, run.g_nom_fit, run.gap_refit
+    held_out = run.held_out
     t = time.perf_counter()
     val_logs = [i for i, m in enumerate(split.validation) if m.any()]
+    run.val_logs = val_logs
 
-    def held_out(m_, fast=False):
-        yh = {i: sims[i].run(m_, fast=fast) for i in val_logs}
-        g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
-        return (g if np.isfinite(g) else float("inf")), yh
-
-    none_ok = gap_before <= NONE_FACTOR * floor
-    specs = [] if none_ok else candidate_specs(refit, scales, effect_set)  # within the noise: nothing to explain
+    none_ok = run.gap_before <= NONE_FACTOR * floor
+    # within the noise: nothing to explain
+    specs = [] if none_ok else candidate_specs(refit, run.scales, run.effect_set)
     lin_specs = [s for s in specs if s.linear]
     nl_specs = [s for s in specs if not s.linear]
     not_tried: dict[str, str] = {}  # effect -> why its candidates were not fitted
@@ -1082,9 +1236,27 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         if s.effect not in done or s is not per_class[s.effect][0]:
             results.append((s, s.apply(base, p), p, g, base))
     bar.close()
-    timings["candidates"] = time.perf_counter() - t
+    run.timings["candidates"] = time.perf_counter() - t
+    run.none_ok, run.specs, run.not_tried, run.lin_later = none_ok, specs, not_tried, lin_later
+    run.results, run.pre_eval, run.keep_ids, run.per_class = results, pre_eval, keep_ids, per_class
 
-    # 5. held-out evaluation and ranking ----------------------------------------------------------
+
+def _rank_candidates(run: _Run, *, workers) -> None:
+    """Stage 5: every candidate (and the refit as ``parameter_mismatch``) evaluated on the
+    held-out data, the ranking floor, the penalised ranking, the admissible best (level
+    evidence, the margin a nonlinear effect needs, the measured trend reproduced), the winner
+    polished, and the verdict (``none``, ``unexplained`` or the winner). Sets ``floor_rank``,
+    ``floor_rank_method``, ``k_before``, ``cands``, ``best_i``, ``trend_shifts``, ``polish``
+    (the arguments of :func:`_polish`), ``verdict``, ``ordered``, ``chosen``."""
+    model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
+    refit, y_ref, y_nom, lin, theta = run.refit, run.y_ref, run.y_nom, run.lin, run.theta
+    lo_l, hi_l = run.lo_l, run.hi_l
+    nf, floor, gap_before, gap_refit = run.nf, run.floor, run.gap_before, run.gap_refit
+    g_nom_fit, g_ref_fit, all_masks, f_s = run.g_nom_fit, run.g_ref_fit, run.all_masks, run.f_s
+    groups, blas, level, level_ev, level_ev_ref = run.groups, run.blas, run.level, run.level_ev, run.level_ev_ref
+    val_logs, none_ok, specs, results = run.val_logs, run.none_ok, run.specs, run.results
+    pre_eval, keep_ids = run.pre_eval, run.keep_ids
+    held_out = run.held_out
     t = time.perf_counter()
 
     def evaluate(item):
@@ -1125,10 +1297,8 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     # on the noise (a nonlinearity's harmonics fall there too); the held-out residual of a good
     # candidate, out of band, is another (noise plus that model's own error) - the lowest is kept
     floor_rank, floor_rank_method = _ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps)
-
-    def key(g, n):
-        """Penalised held-out excess gap (lower is better)."""
-        return max(_excess(g, floor_rank), 0.15 * floor_rank) * (1 + PENALTY * n)
+    run.floor_rank = floor_rank
+    key = run.key
 
     k_before = key(gap_before, 0)
     cands = []  # (Candidate, model, held-out outputs, spec, p)
@@ -1236,9 +1406,21 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
         ordered = [first] + cands + [none_c]
         chosen = [first]
         verdict = first[0].effect
-    timings["validation"] = time.perf_counter() - t
+    run.timings["validation"] = time.perf_counter() - t
+    run.floor_rank_method, run.k_before, run.cands, run.best_i = floor_rank_method, k_before, cands, best_i
+    run.trend_shifts, run.polish, run.verdict, run.ordered, run.chosen = trend_shifts, polish, verdict, ordered, chosen
 
-    # 5b. forward selection: a second (third) effect is kept when it closes significantly more -----
+
+def _select_further_effects(run: _Run, *, workers) -> None:
+    """Stage 5b: forward selection from the verdict (or, when unexplained, from the best
+    admissible candidate): a second (third) effect is kept when it closes significantly more,
+    and a combination is polished jointly. Updates ``chosen``, ``verdict``, ``ordered``; sets
+    ``shares``."""
+    sims, ys, split, lin, model, lo_l, hi_l = run.sims, run.ys, run.split, run.lin, run.model, run.lo_l, run.hi_l
+    per_class, lin_later, polish = run.per_class, run.lin_later, run.polish
+    held_out, key, k_before, floor_rank = run.held_out, run.key, run.k_before, run.floor_rank
+    gap_before = run.gap_before
+    chosen, cands, best_i, verdict, ordered = run.chosen, run.cands, run.best_i, run.verdict, run.ordered
     t = time.perf_counter()
     shares = []
 
@@ -1265,13 +1447,30 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
             chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
             added = {c[0].effect for c in chosen}
             ordered = chosen + [c for c in ordered if c[0].effect not in added]
-    timings["forward_selection"] = time.perf_counter() - t
+    run.timings["forward_selection"] = time.perf_counter() - t
+    run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
+
+
+def _build_report(run: _Run) -> GapReport:
+    """Stage 6: the localisation (channels, bands and regimes of the nominal model on the last
+    log's held-out samples), the figures' data (spectra, FRFs, traces) and the
+    :class:`~vibroscope.gap.report.GapReport` of the whole run."""
+    model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
+    sigs, out_ch, units, nf, all_masks = run.sigs, run.out_ch, run.units, run.nf, run.all_masks
+    y_nom, y_ref = run.y_nom, run.y_ref
+    chosen, ordered, verdict, val_logs, timings = run.chosen, run.ordered, run.verdict, run.val_logs, run.timings
+    t_start, floor, gap_before, gap_refit = run.t_start, run.floor, run.gap_before, run.gap_refit
+    shares, closed = run.shares, run.closed
+    sigs_tests, level, level_ev = run.sigs_tests, run.level, run.level_ev
+    scales, trend_shifts = run.scales, run.trend_shifts
+    in_unit, nps_reason, window, skips, excluded = run.in_unit, run.nps_reason, run.window, run.skips, run.excluded
+    floor_rank, floor_rank_method, refit_note = run.floor_rank, run.floor_rank_method, run.refit_note
+    g_nom_fit, g_ref_fit, not_tried = run.g_nom_fit, run.g_ref_fit, run.not_tried
     verdicts = [c[0].effect for c in chosen] if chosen else [verdict]
     last = chosen[-1] if chosen else ordered[0]
     best_c, best_m, best_y = last[0], last[1], last[2]
     gap_after = best_c.gap_after
 
-    # 6. localisation and figures' data -----------------------------------------------------------
     t = time.perf_counter()
     tr = val_logs[-1] if val_logs else 0
     vmask = split.validation[tr]
