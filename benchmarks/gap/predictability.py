@@ -61,7 +61,8 @@ def main(argv=None) -> int:
     names = argv[1:] or sorted(p.name for p in (root / "cases").iterdir())
     for n in names:
         r = truth_gap(root, n)
-        print(f"{r['case']}  {r['effect']:<18} noise {r['noise']:.4f}  true model's gap {r['truth_gap']:.4f} "
+        eff = "+".join(r["effect"]) if isinstance(r["effect"], (list, tuple)) else str(r["effect"])
+        print(f"{r['case']}  {eff:<18} noise {r['noise']:.4f}  true model's gap {r['truth_gap']:.4f} "
               f"(2x oversampling {r['truth_gap_2R']:.4f}, apart {r['integrators_apart']:.4f})  "
               f"{'predictable' if r['predictable'] else 'UNPREDICTABLE'}")
     return 0
