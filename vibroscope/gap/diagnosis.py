@@ -1187,8 +1187,6 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
     full = ranked[:n_full]
     joint_n = [min(n, max(s_, int(20 * fs))) if n else 0 for n, s_ in zip(ns_fit, sp)]
 
-    joint_x: dict[int, np.ndarray] = {}  # id(joint result) -> its linear parameters
-
     def joint(item, x_lin=None):
         """`item` fitted jointly with the linear parameters (from `x_lin`, default the refit's
         or the nominal's, as its base)."""
@@ -1202,9 +1200,7 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
         lo = np.concatenate([lo_l, s.lower])
         hi = np.concatenate([hi_l, s.upper])
         x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, joint_n, fast=True, max_nfev=6)
-        res = (s, build(x), x[nl:], g, lin.apply(model, x[:nl]))
-        joint_x[id(res)] = x[:nl]
-        return res
+        return s, build(x), x[nl:], g, lin.apply(model, x[:nl])
 
     keep_ids = {id(r) for r in results}  # the linear fits
     with ThreadPoolExecutor(max(1, workers)) as ex:
@@ -1215,18 +1211,18 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
         # the same after the joint fits: where the member's joint fit (effect and linear parameters)
         # is better than the family's, or the family had none, the family is fitted jointly again
         # from the member's joint solution
-        jfit = {(r[0].effect, _where_key(r[0].where)): r for r in results if id(r) in joint_x}
+        jfit = {(r[0].effect, _where_key(r[0].where)): r for r in results if id(r) in keep_ids and not r[0].linear}
+        families = {(s_.lifts_from[0], _where_key(s_.where)): s_ for s_, *_ in screened if s_.lifts_from is not None}
         lifts = []
-        for (eff, wk), r in list(jfit.items()):
-            fam = next((s_ for s_, *_ in screened if s_.lifts_from is not None and s_.lifts_from[0] == eff
-                        and _where_key(s_.where) == wk), None)
+        for (eff, wk), r in jfit.items():
+            fam = families.get((eff, wk))
             if fam is None:
                 continue
             own = jfit.get((fam.effect, wk))
             if own is None or own[3] > r[3]:
                 p0 = np.clip(fam.lifts_from[1](r[2]), fam.lower + 1e-9, fam.upper - 1e-9)
-                lifts.append((own, (fam, p0, r[3], r[4]), joint_x[id(r)]))
-        for (own, item, xl), res in zip(lifts, ex.map(lambda a: joint(a[1], a[2]), lifts)):
+                lifts.append((own, (fam, p0, r[3], r[4]), lin.theta_between(model, r[4])))
+        for (own, _, _), res in zip(lifts, ex.map(lambda a: joint(a[1], a[2]), lifts)):
             if own is None or res[3] < own[3]:
                 results[:] = [r for r in results if r is not own]
                 results.append(res)
