@@ -70,7 +70,7 @@ from __future__ import annotations
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import signal as sps
@@ -747,6 +747,7 @@ class _Run:
     pre_eval: dict | None = None
     keep_ids: set | None = None
     per_class: dict | None = None
+    screened: list = field(default_factory=list)
     # held-out evaluation and ranking (_rank_candidates)
     floor_rank: float | None = None
     floor_rank_method: str | None = None
@@ -1235,6 +1236,7 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
     run.timings["candidates"] = time.perf_counter() - t
     run.none_ok, run.specs, run.not_tried, run.lin_later = none_ok, specs, not_tried, lin_later
     run.results, run.pre_eval, run.keep_ids, run.per_class = results, pre_eval, keep_ids, per_class
+    run.screened = screened
 
 
 def _rank_candidates(run: _Run, *, workers) -> None:
@@ -1424,7 +1426,8 @@ def _select_further_effects(run: _Run, *, workers) -> None:
         """Forward selection from `first`; a combination is polished jointly with the linear
         parameters at full accuracy. Returns ``(chosen, shares)``."""
         ch, sh = _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor_rank, gap_before,
-                                    workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()))
+                                    workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()),
+                                    screened=run.screened)
         if len(ch) > 1:
             ch[-1] = _polish(ch[-1], [(c[3], c[4]) for c in ch], **polish)
         return ch, sh
@@ -1584,14 +1587,17 @@ def _where_key(where: dict) -> str:
 
 
 def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers,
-                       lin=None, model=None, lo_l=None, hi_l=None, also=()):
+                       lin=None, model=None, lo_l=None, hi_l=None, also=(), screened=()):
     """Forward selection of further effects on top of the winner [Ljung 1999, sec. 16.4].
 
-    Each other effect class (its best screened location) is added to the current augmented
-    model and its own parameters are fitted (screening prefix, coarse integration), then again
-    jointly with the linear parameters of `lin` (the chosen effects kept): a first effect fitted
-    alone bends the linear parameters to mimic the second (a spring softened for a clearance),
-    and only a joint fit can undo that; the better on the fitting data is kept. The
+    Each other effect class (its best screened location, and the two best classes screened at
+    a chosen effect's connection: a joint has friction and a stiffness nonlinearity at once) is
+    added to the current augmented model and its own parameters are fitted (screening prefix,
+    coarse integration), then again jointly with the linear parameters of `lin` and the chosen
+    effects' parameters: a first effect fitted alone bends the linear parameters and its own to
+    mimic the second (a spring softened for a clearance, a friction force raised for a stiffening
+    spring), and only a joint fit can undo that; the better on the fitting data is kept (the
+    joint fit only when no chosen effect vanishes in it). The
     best addition is kept when its penalised held-out excess gap falls below
     :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
     floor explain); then the next, up to three effects. Returns the chosen candidates
@@ -1607,30 +1613,49 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
     while len(chosen) < 3:
         if _excess(cur_c.gap_after, floor) <= 0.5 * floor:
             break
-        cands = [s_ for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
-                 if eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)][:4]
-        cands += [s_ for s_ in also if s_.effect not in used]
+        def free(eff):
+            return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
+
+        cands = [(s_, p_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
+                 if free(eff)][:4]
+        # effects where a chosen one acts (a joint has friction and a stiffness nonlinearity at
+        # once): the best two classes screened at a chosen effect's connection
+        pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
+        have = {id(s_) for s_, _ in cands}
+        near: dict[str, tuple] = {}
+        for s_, p_, g_, b_ in sorted(screened, key=lambda r: r[2]):
+            if (tuple(s_.where.get("between", ())) in pairs and free(s_.effect) and s_.effect not in near
+                    and id(s_) not in have):
+                near[s_.effect] = (s_, p_)
+        cands += list(near.values())[:2]
+        cands += [(s_, None) for s_ in also if s_.effect not in used]
         if not cands:
             break
 
         nl = len(lin) if lin is not None else 0
         chain = [(c[3], c[4]) for c in chosen]
-
         def joint_fit(s, x0, nfev, chain=chain):
-            """The added effect's parameters and the linear ones fitted together (the chosen
-            effects kept): ``(p, fitting gap, model, linear base, x)``."""
+            """The added effect's parameters, the chosen effects' and the linear ones fitted
+            together: ``(p, fitting gap, model, linear base, x, chain)``."""
+            sizes = [s_c.n for s_c, _ in chain]
+            offs = np.cumsum([nl] + sizes)
+
             def build_j(x, s=s):
                 m_ = lin.apply(model, x[:nl])
-                for s_c, p_c in chain:
-                    m_ = s_c.apply(m_, p_c)
-                return s.apply(m_, x[nl:])
+                for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:]):
+                    m_ = s_c.apply(m_, x[a_:b_])
+                return s.apply(m_, x[offs[-1]:])
 
-            x, gj, _ = fit_time_domain(build_j, x0, np.concatenate([lo_l, s.lower]), np.concatenate([hi_l, s.upper]),
+            lo = np.concatenate([lo_l] + [s_c.lower for s_c, _ in chain] + [s.lower])
+            hi = np.concatenate([hi_l] + [s_c.upper for s_c, _ in chain] + [s.upper])
+            x, gj, _ = fit_time_domain(build_j, np.clip(x0, lo, hi), lo, hi,
                                        sims, ys, split.fit, sp, fast=True, max_nfev=nfev)
-            return x[nl:], gj, build_j(x), lin.apply(model, x[:nl]), x
+            ch_new = [(s_c, x[a_:b_]) for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:])]
+            return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
 
-        def add(s, cur_m=cur_m):
-            p0s = [per_class[s.effect][1]] + list(s.starts[:2]) if s.effect in per_class else list(s.starts[:3])
+        def add(item, cur_m=cur_m):
+            s, p_s = item
+            p0s = [p_s] + list(s.starts[:2]) if p_s is not None else list(s.starts[:3])
             best = None
             for p0 in p0s:
                 try:
@@ -1650,38 +1675,49 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
 
             p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
                                          max_nfev=4 + 2 * s.n)
-            m_new, base_new, x_j = build(p), chosen[-1][5], None
+            m_new, base_new, x_j, chp = build(p), chosen[-1][5], None, None
             if nl:
                 th0 = lin.theta_between(model, chosen[-1][5])
                 try:
-                    pj, gj, mj, bj, xj = joint_fit(s, np.concatenate([np.clip(th0, lo_l, hi_l), p]), 4)
+                    x0 = np.concatenate([np.clip(th0, lo_l, hi_l)] + [np.asarray(p_c, float) for _, p_c in chain] + [p])
+                    pj, gj, mj, bj, xj, chj = joint_fit(s, x0, 4)
                 except (ValueError, TypeError):
                     gj = float("inf")
-                if gj < gfit:
-                    p, gfit, m_new, base_new, x_j = pj, gj, mj, bj, xj
+                if gj < gfit and not _chain_vanishes(chain, chj):
+                    p, gfit, m_new, base_new, x_j, chp = pj, gj, mj, bj, xj, [p_c for _, p_c in chj]
             g, yh = held_out(m_new, fast=True)
-            return s, p, m_new, g, yh, gfit, base_new, x_j
+            return s, p, m_new, g, yh, gfit, base_new, x_j, chp
 
         with ThreadPoolExecutor(max(1, workers)) as ex:
             tries = [r for r in ex.map(add, cands) if r is not None]
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:
             break
-        s, p, m_new, g, yh, gfit, base_new, x_j = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
+        s, p, m_new, g, yh, gfit, base_new, x_j, chp = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
         k_cur = key(cur_c.gap_after, n_par)
         if x_j is not None and ADD_FACTOR * k_cur <= key(g, n_par + s.n) < REFINE_FACTOR * k_cur:
             # promising but not yet significant: the joint fit is carried further before deciding
             try:
-                pr, gr, mr, br, _ = joint_fit(s, x_j, 10)
-                if gr < gfit:
+                pr, gr, mr, br, _, chr_ = joint_fit(s, x_j, 10)
+                if gr < gfit and not _chain_vanishes(chain, chr_):
                     gh, yhr = held_out(mr, fast=True)
                     p, gfit, m_new, base_new, g, yh = pr, gr, mr, br, gh, yhr
+                    chp = [p_c for _, p_c in chr_]
             except (ValueError, TypeError):
                 pass
+        if chp is not None:
+            # the chosen effects were refitted with this one: the addition must beat them refitted
+            # too (without it), not only as they were (a refit alone can close a few per cent)
+            m_wo = base_new
+            for (s_c, _), p_c in zip(chain, chp):
+                m_wo = s_c.apply(m_wo, p_c)
+            k_cur = min(k_cur, key(held_out(m_wo, fast=True)[0], n_par))
         if not key(g, n_par + s.n) < ADD_FACTOR * k_cur:
             break
         n_par += s.n
         used.add(s.effect)
+        if chp is not None:  # the chosen effects as refitted jointly with this one
+            chosen = [c[:4] + (p_c,) + c[5:] for c, p_c in zip(chosen, chp)]
         c_new = Candidate(effect=s.effect, where=dict(s.where) | s.qualifiers(p), parameters=s.describe(p),
                           gap_after=g, score=1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0,
                           gap_fit=gfit, n_parameters=s.n, model_toml=_dumps(m_new))
@@ -1691,6 +1727,13 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
     total = shares_g[0] - shares_g[-1]
     shares = [float((shares_g[i] - shares_g[i + 1]) / total) if total > 0 else 0.0 for i in range(len(shares_g) - 1)]
     return chosen, shares
+
+
+def _chain_vanishes(before, after) -> bool:
+    """Whether a joint refit made a chosen effect vanish (`before`, `after`: ``(spec, p)``
+    lists) that did not before: the addition then replaces it rather than joins it."""
+    return any(s_.vanishes(np.asarray(pa, float)) is not None and s_.vanishes(np.asarray(pb, float)) is None
+               for (s_, pb), (_, pa) in zip(before, after))
 
 
 def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before):
