@@ -297,3 +297,36 @@ def test_a_delay_beside_a_clearance_is_named_as_the_second_effect():
     delay = next(c for c in r.candidates if c.effect == "time_delay")
     assert delay.parameters["delay_s"] == pytest.approx(0.0016, rel=0.1)
     assert r.gap_after < 0.25 * r.gap_before
+
+
+@pytest.mark.slow  # the full diagnosis of a 3-DOF case and the forward selection, ~60-200 s wall
+def test_friction_and_a_stiffening_spring_at_one_connection_are_both_named():
+    """Coulomb friction (8.2 N) and a hardening cubic spring (k3 3.4e9 N/m^3) in the same
+    connection of a 3-DOF chain (from the benchmark's seed 6161, case 012): the friction wins
+    alone, and the cubic spring screened alone fits best elsewhere; the forward selection also
+    tries the classes screened at the friction's connection, so both are named there, with
+    k3 within 10 %, and the gap closes to the noise floor."""
+    springs = {("m1", "m3"): (90139.0, 28.17), ("m2", "m1"): (559438.0, 46.04), ("m3", "ground"): (663771.0, 88.90)}
+    els = tuple(e for pair, (k, c) in springs.items() for e in (Spring(pair, k=k), Damper(pair, c=c)))
+    base = LumpedModel(dofs=(Dof("m1", 4.467), Dof("m2", 4.858), Dof("m3", 3.937)), elements=els,
+                       inputs=(Input(dof="m2", channel=IN),),
+                       outputs=tuple(Output(m, "acceleration", f"/imu/{m}.linear_acceleration.x") for m in ("m1", "m2", "m3")),
+                       name="three masses")
+    truth = replace(base, elements=els + (CubicSpring(("m1", "m3"), k=0.0, k3=3.436e9),
+                                          Friction(("m1", "m3"), force_=8.215)))
+    rng = np.random.default_rng(12)
+    n = 30000
+    b, a = signal.butter(4, [2 / (FS / 2), 270 / (FS / 2)], "band")
+    u = signal.lfilter(b, a, rng.standard_normal(n))
+    lev = np.array([6.0, 2.5, 1.0])[(np.arange(n) // 3500) % 3]
+    u = u / np.std(u) * lev * 60.0 / np.sqrt(np.mean(lev**2))
+    y = np.asarray(simulate(truth, u, FS).data[1:])
+    y = y + 0.023 * np.std(y, axis=1, keepdims=True) * rng.standard_normal(y.shape)
+    log = Signals(data=np.vstack([u, y]), fs=FS, channels=base.input_channels() + base.output_channels(),
+                  units=["N", "m/s^2", "m/s^2", "m/s^2"])
+    r = diagnose(base, log)
+    assert set(r.verdicts) == {"coulomb_friction", "cubic_stiffness"}, r.summary()
+    cubic = next(c for c in r.candidates if c.effect == "cubic_stiffness")
+    assert cubic.where["between"] == ["m1", "m3"], r.summary()
+    assert cubic.parameters["k3_N_per_m3"] == pytest.approx(3.436e9, rel=0.1)
+    assert r.gap_after < 1.5 * r.noise_floor, r.summary()

@@ -101,6 +101,7 @@ from vibroscope.gap.measure import (
     LOG_LEVEL_RATIO,
     make_split,
     masked_csd,
+    nested_gain,
     noise_floor,
     nrmse,
     regime_gaps,
@@ -125,6 +126,9 @@ LEVEL_FRACTION = 0.01
 #: the best admissible candidate must explain at least this share of the excess gap (its score),
 #: else the verdict is ``unexplained``
 UNEXPLAINED_SCORE = 0.3
+#: a richer candidate moves ahead of one it nests when the t statistic of its held-out gain
+#: (batch means, see :func:`~vibroscope.gap.measure.nested_gain`) exceeds this
+NESTED_T = 4.0
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
 ADD_FACTOR = 0.5
@@ -748,6 +752,7 @@ class _Run:
     keep_ids: set | None = None
     per_class: dict | None = None
     screened: list = field(default_factory=list)
+    nested_t: dict = field(default_factory=dict)
     # held-out evaluation and ranking (_rank_candidates)
     floor_rank: float | None = None
     floor_rank_method: str | None = None
@@ -1322,6 +1327,7 @@ def _rank_candidates(run: _Run, *, workers) -> None:
                   refit, {i: y_ref[i] for i in val_logs}, None, None, refit))
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
+    run.nested_t = _nested_order(cands, ys, split, val_logs, fs)
 
     group_logs = {g[0] for g in groups}
     cand_bla: dict[int, list | None] = {}
@@ -1407,6 +1413,42 @@ def _rank_candidates(run: _Run, *, workers) -> None:
     run.timings["validation"] = time.perf_counter() - t
     run.floor_rank_method, run.k_before, run.cands, run.best_i = floor_rank_method, k_before, cands, best_i
     run.trend_shifts, run.polish, run.verdict, run.ordered, run.chosen = trend_shifts, polish, verdict, ordered, chosen
+
+
+def _nests(rich, simple) -> bool:
+    """Whether candidate `rich` contains `simple` as a special case: a family and its member at
+    the same connection (``EffectSpec.lifts_from``: asymmetric friction and Coulomb friction), or
+    an extra mode and the linear refit it is built on (the mode's mass going to zero)."""
+    s_r, s_s = rich[3], simple[3]
+    if s_r is None:
+        return False
+    if s_r.lifts_from is not None and s_s is not None:
+        return simple[0].effect == s_r.lifts_from[0] and _where_key(s_s.where) == _where_key(s_r.where)
+    return rich[0].effect == "extra_mode" and simple[0].effect == "parameter_mismatch"
+
+
+def _nested_order(cands: list, ys, split, val_logs, fs) -> dict:
+    """Move a richer candidate ahead of one it nests (:func:`_nests`) that ranks before it when
+    its held-out gain is significant (:func:`~vibroscope.gap.measure.nested_gain` above
+    :data:`NESTED_T`): the complexity penalty of the ranking judges a gain by its size against
+    the signal, this test by its size against the noise [Schmeiser 1982]. `cands` is reordered
+    in place; returns ``{"rich@where over simple@where": t}`` for the report."""
+    out = {}
+    for r in list(cands):
+        if r[0].vanished:
+            continue
+        i = next(k for k, c in enumerate(cands) if c is r)  # by identity: the tuples hold arrays
+        for j in range(i):
+            s_ = cands[j]
+            if not _nests(r, s_) or not set(val_logs) <= set(r[2]) or not set(val_logs) <= set(s_[2]):
+                continue
+            t = nested_gain([ys[k] for k in val_logs], [s_[2][k] for k in val_logs], [r[2][k] for k in val_logs],
+                            [split.validation[k] for k in val_logs], fs)
+            out[f"{r[0].effect}@{_where_key(r[0].where)} over {s_[0].effect}@{_where_key(s_[0].where)}"] = t
+            if t > NESTED_T:
+                cands.insert(j, cands.pop(i))
+            break
+    return out
 
 
 def _select_further_effects(run: _Run, *, workers) -> None:
@@ -1536,6 +1578,7 @@ def _build_report(run: _Run) -> GapReport:
         meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "noise_floor_ranking": {"nrmse": floor_rank, "method": floor_rank_method},
+              "nested_tests": {"t": dict(run.nested_t), "threshold": NESTED_T},
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
                                    for k, v in level.items()} | {"simulated_shifts": trend_shifts},

@@ -11,6 +11,7 @@ References
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -19,10 +20,11 @@ from scipy import signal
 
 from vibroscope.gap.report import Band, RegimeGap
 from vibroscope.modal.selection import excited_band as _input_band
+from vibroscope.signals import true_runs
 from vibroscope.spectral.estimators import FewAveragesWarning, csd_matrix
 
-__all__ = ["nrmse", "Split", "make_split", "input_levels", "NoiseFloor", "noise_floor", "locate_bands",
-           "masked_csd", "regime_gaps"]
+__all__ = ["nrmse", "nested_gain", "Split", "make_split", "input_levels", "NoiseFloor", "noise_floor",
+           "locate_bands", "masked_csd", "regime_gaps"]
 
 
 def nrmse(measured, simulated, mask=None) -> float:
@@ -56,6 +58,55 @@ def nrmse(measured, simulated, mask=None) -> float:
             return float("nan")
         return float(np.sqrt(np.mean(num / den)))
     return nrmse([measured], [simulated], None if mask is None else [mask])
+
+
+def nested_gain(measured, simple, rich, masks, fs: float, *, batch_s: float = 0.5, min_batches: int = 8) -> float:
+    """Significance of a richer model's gain over a model it nests, on held-out samples: the
+    t statistic of the batch means of the reduction of the squared error.
+
+    Per sample the reduction ``sum_c w_c ((y_c - s_c)^2 - (y_c - r_c)^2)`` is formed, each output
+    channel weighted by its inverse energy ``w_c = 1 / sum_k y_ck^2`` (the weighting of
+    :func:`nrmse`); the samples of each held-out stretch are cut into batches of `batch_s`
+    seconds, and ``t = mean / (std / sqrt(n_batches))`` of the batch sums is returned. The
+    batches make the statistic hold for residuals correlated over a lightly damped mode's decay
+    (method of batch means: Schmeiser 1982, *Operations Research* 30(3)); a nrmse difference
+    cannot tell a real but small gain (an asymmetry of a friction force under 2 % noise, 1e4
+    samples) from chance, this can: if the richer model is right, ``t`` grows as
+    ``sqrt(n) rms(r - s) / sigma``.
+
+    Parameters
+    ----------
+    measured, simple, rich : list of ndarray, shape (n_outputs, n_samples)
+        Per log: the measured outputs and the two models' simulations.
+    masks : list of ndarray of bool, shape (n_samples,)
+        Per log: the held-out samples (contiguous runs are batched separately).
+    fs : float
+        Sampling rate, Hz.
+    batch_s : float, optional
+        Batch length, s (default 0.5).
+    min_batches : int, optional
+        Fewer batches than this give 0.0 (no evidence).
+
+    Returns
+    -------
+    float
+        ``t`` (positive: the richer model is better); 0.0 without enough batches or when the
+        two simulations are equal.
+    """
+    nb = max(int(round(batch_s * fs)), 1)
+    sums = []
+    for y, a, b, m in zip(measured, simple, rich, masks):
+        w = 1.0 / np.maximum(np.sum(y[:, m] ** 2, axis=1), 1e-300)
+        d = np.sum(w[:, None] * ((y - a) ** 2 - (y - b) ** 2), axis=0)
+        starts, stops = true_runs(m)
+        for i0, i1 in zip(starts, stops):
+            for k in range(i0, i1 - nb + 1, nb):
+                sums.append(float(np.sum(d[k:k + nb])))
+    if len(sums) < min_batches:
+        return 0.0
+    x = np.asarray(sums)
+    sd = float(np.std(x, ddof=1))
+    return float(np.mean(x) / (sd / math.sqrt(x.size))) if sd > 0 else 0.0
 
 
 def input_levels(u: np.ndarray, fs: float, *, window_s: float = 0.5, max_levels: int = 5):
