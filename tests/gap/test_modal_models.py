@@ -89,6 +89,53 @@ def test_effects_act_at_the_measured_points():
     assert np.all(np.isfinite(y))
 
 
+def test_clearance_and_joint_in_a_modal_model_reproduce_the_chain_with_them():
+    """A modal model has no spring at a connection to open a clearance in or to let slip: the
+    backlash and joint candidates take a stiffness ``k_c`` out of the modes (a SignedSpring)
+    beside the nonlinear element. With ``k_c`` = the chain's spring there, the modal model
+    reproduces the chain whose spring is a clearance (or a Jenkins joint) to the integrator's
+    precision: the truth, not a fit."""
+    import math
+
+    from vibroscope.gap.effects import EFFECT_TABLE
+    from vibroscope.models.elements import Backlash, BoucWen, SignedSpring, Spring
+
+    truth = chain()
+    m = as_lumped(exact_modal(truth))
+    u = 60 * np.random.default_rng(3).standard_normal((1, 3000))
+    scales = {"d_rms": {"m3-m2": 1e-4}, "v_rms": {}, "u_rms": 60.0, "u_max": 200.0, "fs": FS}
+    j = next(i for i, e in enumerate(truth.elements) if isinstance(e, Spring) and set(e.between) == {"m3", "m2"})
+    k, gap = truth.elements[j].k, 5e-5
+    k_loc = 1.0 / (m.element_vector(Spring(("m3", "m2"))) @ np.linalg.solve(m.K, m.element_vector(Spring(("m3", "m2")))))
+    els = list(truth.elements)
+    els[j] = Backlash(truth.elements[j].between, k=k, gap=gap)
+    y_true = simulate(truth.replace(elements=tuple(els)), u, FS).data
+    spec = next(s for s in EFFECT_TABLE["backlash"].factory(m, scales) if set(s.where["between"]) == {"m3", "m2"})
+    p = np.array([math.log(k / k_loc), math.log(gap)])
+    aug = spec.apply(m, p)
+    assert sum(isinstance(e, SignedSpring) for e in aug.elements) == 1
+    assert spec.describe(p) == pytest.approx({"gap_m": gap, "k_N_per_m": k})
+    y = simulate(aug, u, FS).data
+    assert np.max(np.abs(y - y_true)) / np.max(np.abs(y_true)) < 1e-8
+    assert np.max(np.abs(simulate(m, u, FS).data - y_true)) / np.max(np.abs(y_true)) > 1e-2  # the clearance shows
+    assert loads_model(dumps_model(aug)) == aug
+    assert "far below" in spec.vanishes([p[0], math.log(1e-9)])
+    # a joint: a share r of the spring in series with a slider (one Jenkins element)
+    r, f_s = 0.4, 30.0
+    alpha = r * k
+    els = list(truth.elements)
+    els[j] = Spring(truth.elements[j].between, k=(1 - r) * k)
+    els.append(BoucWen(truth.elements[j].between, alpha=alpha, beta=alpha / f_s, gamma=0.5, delta=0.5, nu=1.0))
+    y_true = simulate(truth.replace(elements=tuple(els)), u, FS).data
+    spec = next(s for s in EFFECT_TABLE["joint_friction"].factory(m, scales)
+                if set(s.where["between"]) == {"m3", "m2"} and s.where["form"] == "jenkins")
+    share = r * k / k_loc
+    p = np.array([math.log(share / (1 - share)), math.log(f_s / 60.0)])
+    assert spec.describe(p)["k_N_per_m"] == pytest.approx(r * k)
+    y = simulate(spec.apply(m, p), u, FS).data
+    assert np.max(np.abs(y - y_true)) / np.max(np.abs(y_true)) < 1e-6
+
+
 def test_modal_model_without_a_driving_point_says_what_is_missing():
     text = dumps_model(exact_modal(chain(), driving=False))
     with pytest.raises(ValueError, match="no driving point.*same `dof` label"):

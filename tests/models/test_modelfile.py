@@ -7,7 +7,7 @@ from vibroscope.errors import ModelFileError
 from vibroscope.models.boucwen_benchmark import boucwen_benchmark_model
 from vibroscope.models.elements import Backlash, BoucWen, CubicSpring, Friction, MRDamper
 from vibroscope.models.lumped import LumpedModel, demo_model
-from vibroscope.models.modelfile import TransferFunctionModel, dump_model, load_model, loads_model
+from vibroscope.models.modelfile import TransferFunctionModel, dump_model, dumps_model, load_model, loads_model
 from vibroscope.models.simulate import simulate
 
 GOOD = """\
@@ -127,6 +127,20 @@ def test_unknown_key_names_key_and_line(tmp_path):
     msg = _err(tmp_path, text)
     line = text.splitlines().index("stiffnes = 3.0") + 1
     assert f"model.toml:{line}:" in msg and "'stiffnes'" in msg
+
+
+def test_signed_spring_takes_a_negative_stiffness_that_a_spring_refuses(tmp_path):
+    text = GOOD.replace('type = "spring"\nbetween = ["m2", "m1"]\nk = 2.0e4',
+                        'type = "spring"\nbetween = ["m2", "m1"]\nk = 2.0e4\n[[element]]\n'
+                        'type = "signed_spring"\nbetween = ["m2", "m1"]\nk = -5.0e3')
+    m = load_model(write(tmp_path, text))
+    base = load_model(write(tmp_path, GOOD, "base.toml"))
+    # the two springs of m2-m1 add to 1.5e4 N/m: K is the base's with 5e3 N/m taken out
+    dK = m.K - base.K
+    np.testing.assert_allclose(dK, -5e3 * np.array([[1.0, -1.0], [-1.0, 1.0]]))
+    assert loads_model(dumps_model(m)) == m
+    msg = _err(tmp_path, text.replace('type = "signed_spring"', 'type = "spring"'))
+    assert "'k'" in msg and ">= 0" in msg
 
 
 def test_negative_mass_names_key_and_line(tmp_path):

@@ -57,6 +57,7 @@ from vibroscope.models.elements import (
     CubicSpring,
     Damper,
     Friction,
+    SignedSpring,
     Spring,
 )
 from vibroscope.models.lumped import Dof, LumpedModel
@@ -548,12 +549,52 @@ def _asymmetric_friction(model, scales):
     return specs
 
 
+#: shares of a modal model's connection stiffness (the static stiffness across it) where a
+#: clearance or a joint is started, and the least share that is not vanishing
+MODAL_SHARES = (0.2, 0.9)
+MODAL_SHARE_MIN = 1e-3
+
+
+def _modal_backlash(pair, key, d_rms, k_loc, scales):
+    """A clearance opened in a connection of a modal-coordinates model, which has no spring of
+    its own there: ``SignedSpring(-k_c)`` beside ``Backlash(k_c, gap)``, together the force
+    ``-k_c clip(d, -gap, gap)`` that the clearance takes out of the connection's stiffness;
+    ``k_c`` a share of the static stiffness ``k_loc`` across the connection, fitted with the
+    clearance (the modal model cannot say which part of it a clearance opens in)."""
+
+    def build(m, p, pair=pair):
+        kc, g = k_loc * math.exp(p[0]), math.exp(p[1])
+        return replace(m, elements=m.elements + (SignedSpring(pair, k=-kc), Backlash(pair, k=kc, gap=g)))
+
+    def vanish(p, d_rms=d_rms):
+        share, g = math.exp(p[0]), math.exp(p[1])
+        if g < 0.005 * d_rms:
+            return f"clearance {g:.3g} m is far below the rms deflection {d_rms:.3g} m"
+        return (f"the clearance opens in {100 * share:.2g} % of the connection's stiffness"
+                if share < 2 * MODAL_SHARE_MIN else None)
+
+    dq = scales.get("d_quantiles", {}).get(key, [])
+    lo, hi = math.log(d_rms * 1e-4), math.log(d_rms * 5)
+    gaps = [g[0] for g in _starts_1d([math.log(d_rms * 0.1)] + [math.log(q) for q in dq if q > 0]
+                                     + [math.log(d_rms * 1.0)], lo, hi)][:3]
+    lower = np.array([math.log(MODAL_SHARE_MIN), lo])
+    upper = np.array([math.log(1.5), hi])  # a truncated modal model's static stiffness is not exact
+    starts = [np.clip(np.array([math.log(r), g]), lower + 1e-6, upper - 1e-6) for r in MODAL_SHARES for g in gaps]
+    return EffectSpec(
+        effect="backlash", where={"between": [pair[0], pair[1]]}, n=2, starts=starts, lower=lower, upper=upper,
+        build=build, describe=lambda p: {"gap_m": float(math.exp(p[1])), "k_N_per_m": float(k_loc * math.exp(p[0]))},
+        vanish=vanish,
+    )
+
+
 def _backlash(model, scales):
     specs = []
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
         j, spring = _spring_at(model, pair)
         if spring is None:
+            if model.point_names() and k_loc > 0:
+                specs.append(_modal_backlash(pair, key, d_rms, k_loc, scales))
             continue
 
         def build(m, p, pair=pair):
@@ -668,7 +709,10 @@ def _joint_friction(model, scales):
     for pair in connections(model):
         key, d_rms, v_rms, k_loc = _pair_scales(model, scales, pair)
         _, spring = _spring_at(model, pair)
-        if spring is None:
+        # a modal-coordinates model has no spring at a connection: the joint takes a share of the
+        # static stiffness across it, out of the modes by a SignedSpring (see _modal_backlash)
+        modal = spring is None and bool(model.point_names()) and k_loc > 0
+        if spring is None and not modal:
             continue
 
         u_ref = max(scales.get("u_rms", 1.0), 1e-12)
@@ -678,9 +722,9 @@ def _joint_friction(model, scales):
             fs_ = u_ref * math.exp(p[1])  # the slip force scaled by the input's RMS force
             return r, fs_
 
-        def desc(p, coeffs=coeffs):
+        def desc(p, coeffs=coeffs, modal=modal, k_loc=k_loc):
             r, fs_ = coeffs(p)
-            return {"joint_share": r, "slip_force_N": fs_}
+            return {"joint_share": r, "slip_force_N": fs_} | ({"k_N_per_m": r * k_loc} if modal else {})
 
         def vanish(p, coeffs=coeffs):
             r, _ = coeffs(p)
@@ -693,23 +737,30 @@ def _joint_friction(model, scales):
         # a start that slips everywhere at the true connection can probe worse than a start at a
         # connection where the joint does little, so the range of c matters)
         f_el = k_loc * d_rms if k_loc > 0 else u_ref
-        rs = [(r, c * r * f_el / u_ref) for r, c in ((0.3, 1.0), (0.3, 0.25), (0.3, 4.0), (0.5, 1.0))]
+        rs = [(r, c * r * f_el / u_ref) for r, c in ((0.3, 1.0), (0.3, 0.25), (0.3, 4.0), (0.5, 1.0))
+              + (((0.1, 1.0),) if modal else ())]  # a modal connection's stiffness holds more than the joint's
         starts = [np.clip(np.array([math.log(r / (1 - r)), math.log(max(s, 1e-300))]), lo + 1e-6, hi - 1e-6)
                   for r, s in rs]
 
         for form, n_sl in (("jenkins", 1), ("iwan", IWAN_SLIDERS)):
-            def build(m, p, pair=pair, coeffs=coeffs, n_sl=n_sl):
-                jj, sp = _spring_at(m, pair)
-                if sp is None:  # another effect took the spring (a clearance): no joint to soften
-                    raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
+            def build(m, p, pair=pair, coeffs=coeffs, n_sl=n_sl, modal=modal, k_loc=k_loc):
                 r, fs_ = coeffs(p)
-                alpha = r * sp.k / n_sl
                 els = list(m.elements)
-                els[jj] = Spring(sp.between, k=(1.0 - r) * sp.k)
+                if modal:  # the joint's stiffness taken out of the modes' (the connection's share r)
+                    between = tuple(pair)
+                    alpha = r * k_loc / n_sl
+                    els.append(SignedSpring(between, k=-r * k_loc))
+                else:
+                    jj, sp = _spring_at(m, pair)
+                    if sp is None:  # another effect took the spring (a clearance): no joint to soften
+                        raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
+                    between = sp.between
+                    alpha = r * sp.k / n_sl
+                    els[jj] = Spring(sp.between, k=(1.0 - r) * sp.k)
                 nu = 1.0 if n_sl == 1 else IWAN_NU
                 for i in range(1, n_sl + 1):  # Jenkins i slips at the force fs_ i / n_sl
                     f_i = fs_ * i / n_sl
-                    els.append(BoucWen(sp.between, alpha=alpha, beta=alpha / max(f_i, 1e-300) ** nu, gamma=0.5,
+                    els.append(BoucWen(between, alpha=alpha, beta=alpha / max(f_i, 1e-300) ** nu, gamma=0.5,
                                        delta=0.5, nu=nu))
                 return replace(m, elements=tuple(els))
 
@@ -824,11 +875,15 @@ EFFECT_TABLE: dict[str, EffectDef] = {d.name: d for d in (
               description="Coulomb friction with different sliding forces for positive and negative velocity",
               factory=_asymmetric_friction),
     EffectDef(name="joint_friction", kind="nonlinear", where="connection",
-              parameters=(("joint_share", "1"), ("slip_force_N", "N")), level_dependent=True, trend="softening",
+              parameters=(("joint_share", "1"), ("slip_force_N", "N"), ("k_N_per_m", "N/m")),
+              level_dependent=True, trend="softening",
               description="microslip of a joint: part of a spring in series with a slider (Jenkins), softening "
-                          "and more damped with amplitude", factory=_joint_friction),
-    EffectDef(name="backlash", kind="nonlinear", where="connection", parameters=(("gap_m", "m"),),
-              level_dependent=True, trend="either", description="a clearance in a connection's spring",
+                          "and more damped with amplitude (in a modal model: a share k of the connection's "
+                          "stiffness)", factory=_joint_friction),
+    EffectDef(name="backlash", kind="nonlinear", where="connection",
+              parameters=(("gap_m", "m"), ("k_N_per_m", "N/m")), level_dependent=True, trend="either",
+              description="a clearance in a connection's spring (in a modal model: in a share k of the "
+                          "connection's stiffness)",
               factory=_backlash),
     EffectDef(name="hysteresis", kind="nonlinear", where="connection",
               parameters=(("alpha_N_per_m", "N/m"), ("beta_per_m", "1/m"), ("gamma", "1"), ("delta", "1"), ("nu", "1")),

@@ -16,6 +16,7 @@ from vibroscope.models.elements import (
     Element,
     Friction,
     MRDamper,
+    SignedSpring,
     Spring,
     make_element,
 )
@@ -36,6 +37,7 @@ __all__ = [
     "close_modes_model",
     "Element",
     "Spring",
+    "SignedSpring",
     "Damper",
     "CubicSpring",
     "Backlash",

@@ -36,6 +36,7 @@ __all__ = [
     "GROUND",
     "Element",
     "Spring",
+    "SignedSpring",
     "Damper",
     "CubicSpring",
     "Backlash",
@@ -179,6 +180,71 @@ class Spring(Element):
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "k", _nonneg("k", self.k))
+
+    @property
+    def linear_stiffness(self) -> float:
+        return self.k
+
+    def force(self, d, v, state=None):
+        """Element force (N) ``k d``.
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m).
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s).
+        state : sequence of float, optional
+            Unused (no internal state).
+
+        Returns
+        -------
+        float
+            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
+        """
+        return self.k * d
+
+
+@dataclass(frozen=True)
+class SignedSpring(Element):
+    """Linear spring of either sign ``f = k d``; `k` in N/m, may be negative.
+
+    A stiffness taken out of (``k < 0``) or added to a connection whose stiffness is already
+    in the model without a spring of its own to change: a modal-coordinates model, whose
+    connections are spread over its modes. A clearance opened in such a connection is a
+    ``SignedSpring(k=-k_c)`` beside a ``Backlash(k=k_c)`` (together ``-k_c clip(d, -gap, gap)``);
+    a joint that slips in it, a ``SignedSpring(k=-k_j)`` beside the joint's Jenkins elements
+    [1]_. Use :class:`Spring` for a physical spring: its stiffness must be positive.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF or point names, or one and ``"ground"``.
+    k : float, optional
+        Stiffness (N/m), finite, any sign; default 0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`) or `k` is not finite.
+
+    References
+    ----------
+    .. [1] G. Kerschen, K. Worden, A. F. Vakakis, J.-C. Golinval, "Past, present and future of
+       nonlinear system identification in structural dynamics", MSSP 20(3):505-592, 2006,
+       sec. 5 (an underlying linear system plus localised nonlinear forces).
+    """
+
+    k: float = 0.0
+    type: ClassVar[str] = "signed_spring"
+    is_linear: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        k = float(self.k)
+        if not np.isfinite(k):
+            raise ValueError(f"k={k} must be finite")
+        object.__setattr__(self, "k", k)
 
     @property
     def linear_stiffness(self) -> float:
@@ -762,6 +828,7 @@ class MRDamper(Element):
 #: model-file type name -> (class, {file key: attribute}, required keys)
 ELEMENT_TYPES: dict[str, tuple[type, dict[str, str], tuple[str, ...]]] = {
     "spring": (Spring, {"k": "k"}, ("k",)),
+    "signed_spring": (SignedSpring, {"k": "k"}, ("k",)),
     "damper": (Damper, {"c": "c"}, ("c",)),
     "cubic_spring": (CubicSpring, {"k": "k", "k3": "k3"}, ("k3",)),
     "backlash": (Backlash, {"k": "k", "gap": "gap"}, ("k", "gap")),
@@ -785,7 +852,7 @@ def make_element(type: str, between, **params) -> Element:
     Parameters
     ----------
     type : str
-        A key of :data:`ELEMENT_TYPES`: ``'spring'``, ``'damper'``, ``'cubic_spring'``,
+        A key of :data:`ELEMENT_TYPES`: ``'spring'``, ``'signed_spring'``, ``'damper'``, ``'cubic_spring'``,
         ``'backlash'``, ``'friction'``, ``'bouc_wen'`` or ``'mr_damper'``.
     between : tuple of (str, str)
         The two ends: two DOF names, or a DOF name and ``"ground"``.

@@ -7,7 +7,7 @@ Schema (fixed)::
     name = "m1"
     mass = 2.0                      # kg
     [[element]]
-    type = "spring"                 # spring | damper | cubic_spring | backlash | friction | bouc_wen | mr_damper
+    type = "spring"                 # spring | signed_spring | damper | cubic_spring | backlash | friction | bouc_wen | mr_damper
     between = ["m1", "ground"]      # two DOF names, or a DOF and "ground"
     k = 5.0e4                       # N/m
     [[input]]
@@ -43,7 +43,8 @@ command ``kp kv (r - q) - kv qdot``. A model with controllers is simulated in cl
 its logged rows are the references, then the feed-forwards, then the inputs no controller
 drives.
 
-Element parameters: spring ``k``; damper ``c``; cubic_spring ``k3`` (``k`` optional);
+Element parameters: spring ``k`` (>= 0); signed_spring ``k`` (any sign: a stiffness taken out of
+a connection that has no spring of its own, as in a modal-coordinates model); damper ``c``; cubic_spring ``k3`` (``k`` optional);
 backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional; ``force_neg``, the sliding
 force for negative velocity, optional, default ``force``); bouc_wen ``alpha``, ``beta``,
 ``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A) and optionally
@@ -311,6 +312,8 @@ def _tables(ctx, doc, table):
 
 
 _NONNEG = {"k", "c", "gap", "force", "force_neg", "k0", "k1"}
+#: element types whose parameters may take either sign
+_SIGNED = frozenset({"signed_spring"})
 _POSITIVE = {"v_eps", "nu", "n"}
 
 
@@ -605,7 +608,8 @@ def _parse_doc(ctx: _Ctx, doc: dict) -> LumpedModel | TransferFunctionModel | Po
             for key in keys:
                 if key in t or key in required:
                     params[key] = _number(
-                        ctx, t, "element", i, key, nonneg=key in _NONNEG, positive=key in _POSITIVE
+                        ctx, t, "element", i, key, nonneg=key in _NONNEG and etype not in _SIGNED,
+                        positive=key in _POSITIVE
                     )
             try:
                 elements.append(make_element(etype, between, **params))
