@@ -103,7 +103,7 @@ def test_clearance_and_joint_in_a_modal_model_reproduce_the_chain_with_them():
     truth = chain()
     m = as_lumped(exact_modal(truth))
     u = 60 * np.random.default_rng(3).standard_normal((1, 3000))
-    scales = {"d_rms": {"m3-m2": 1e-4}, "v_rms": {}, "u_rms": 60.0, "u_max": 200.0, "fs": FS}
+    scales = {"d_rms": {"m3-m2": 1e-4, "m2-m3": 1e-4}, "v_rms": {}, "u_rms": 60.0, "u_max": 200.0, "fs": FS}
     j = next(i for i, e in enumerate(truth.elements) if isinstance(e, Spring) and set(e.between) == {"m3", "m2"})
     k, gap = truth.elements[j].k, 5e-5
     k_loc = 1.0 / (m.element_vector(Spring(("m3", "m2"))) @ np.linalg.solve(m.K, m.element_vector(Spring(("m3", "m2")))))
@@ -120,6 +120,10 @@ def test_clearance_and_joint_in_a_modal_model_reproduce_the_chain_with_them():
     assert np.max(np.abs(simulate(m, u, FS).data - y_true)) / np.max(np.abs(y_true)) > 1e-2  # the clearance shows
     assert loads_model(dumps_model(aug)) == aug
     assert "far below" in spec.vanishes([p[0], math.log(1e-9)])
+    # a clearance that never closes is a linear loss of stiffness (the modal refit cannot take
+    # it out of one connection, so it is not a verdict either)
+    assert "never closes" in spec.vanishes([p[0], math.log(4.5e-4)])
+    assert spec.vanishes([p[0], math.log(3.5e-4)]) is None
     # a joint: a share r of the spring in series with a slider (one Jenkins element)
     r, f_s = 0.4, 30.0
     alpha = r * k
@@ -132,6 +136,10 @@ def test_clearance_and_joint_in_a_modal_model_reproduce_the_chain_with_them():
     share = r * k / k_loc
     p = np.array([math.log(share / (1 - share)), math.log(f_s / 60.0)])
     assert spec.describe(p)["k_N_per_m"] == pytest.approx(r * k)
+    assert spec.vanishes(p) is None
+    # a joint that slips through the whole record (slip force 0.1 % of its elastic force at the
+    # rms deflection, here 0.4 x 8e4 N/m x 1e-4 m) is a linear loss of stiffness
+    assert "slips through the whole record" in spec.vanishes([p[0], math.log(0.001 * 0.4 * k * 1e-4 / 60.0)])
     y = simulate(spec.apply(m, p), u, FS).data
     assert np.max(np.abs(y - y_true)) / np.max(np.abs(y_true)) < 1e-6
 

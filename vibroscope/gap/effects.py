@@ -553,6 +553,13 @@ def _asymmetric_friction(model, scales):
 #: clearance or a joint is started, and the least share that is not vanishing
 MODAL_SHARES = (0.2, 0.9)
 MODAL_SHARE_MIN = 1e-3
+#: In a modal model (whose linear refit changes each mode alone and cannot take a stiffness out
+#: of one connection) a joint whose largest slip force is below this share of its elastic force
+#: at the RMS deflection slips through the whole record: a signed spring in disguise, a linear
+#: loss of stiffness at the connection, not a joint (vanishes)
+JOINT_SLIP_MIN = 0.005
+#: ... and a clearance wider than this many RMS deflections never closes: the same (vanishes)
+CLEARANCE_OPEN_MAX = 4.0
 
 
 def _modal_backlash(pair, key, d_rms, k_loc, scales):
@@ -570,6 +577,9 @@ def _modal_backlash(pair, key, d_rms, k_loc, scales):
         share, g = math.exp(p[0]), math.exp(p[1])
         if g < 0.005 * d_rms:
             return f"clearance {g:.3g} m is far below the rms deflection {d_rms:.3g} m"
+        if g > CLEARANCE_OPEN_MAX * d_rms:
+            return (f"clearance {g:.3g} m never closes ({g / d_rms:.2g} x the rms deflection {d_rms:.3g} m): "
+                    f"a linear loss of stiffness")
         return (f"the clearance opens in {100 * share:.2g} % of the connection's stiffness"
                 if share < 2 * MODAL_SHARE_MIN else None)
 
@@ -726,9 +736,17 @@ def _joint_friction(model, scales):
             r, fs_ = coeffs(p)
             return {"joint_share": r, "slip_force_N": fs_} | ({"k_N_per_m": r * k_loc} if modal else {})
 
-        def vanish(p, coeffs=coeffs):
-            r, _ = coeffs(p)
-            return f"the joint holds {100 * r:.2g} % of the connection's stiffness" if r < 0.01 else None
+        k_joint = k_loc if modal else spring.k  # the stiffness the share r is taken of (N/m)
+
+        def vanish(p, coeffs=coeffs, k_joint=k_joint, d_rms=d_rms, modal=modal):
+            r, fs_ = coeffs(p)
+            if r < 0.01:
+                return f"the joint holds {100 * r:.2g} % of the connection's stiffness"
+            f_el = r * k_joint * d_rms  # the joint's elastic force at the RMS deflection
+            if modal and fs_ < JOINT_SLIP_MIN * f_el:
+                return (f"the joint slips at {fs_:.3g} N, {fs_ / f_el:.2g} x its elastic force {f_el:.3g} N at the "
+                        f"rms deflection: it slips through the whole record, a linear loss of stiffness")
+            return None
 
         lo = np.array([-5.0, math.log(1e-4)])
         hi = np.array([5.0, math.log(100.0)])
@@ -738,7 +756,9 @@ def _joint_friction(model, scales):
         # connection where the joint does little, so the range of c matters)
         f_el = k_loc * d_rms if k_loc > 0 else u_ref
         rs = [(r, c * r * f_el / u_ref) for r, c in ((0.3, 1.0), (0.3, 0.25), (0.3, 4.0), (0.5, 1.0))
-              + (((0.1, 1.0),) if modal else ())]  # a modal connection's stiffness holds more than the joint's
+              # a modal connection's stiffness (all of it, across the two points) holds more than the
+              # joint's, and its elastic force at the RMS deflection is that of the softened joint
+              + (((0.1, 1.0), (0.5, 0.05)) if modal else ())]
         starts = [np.clip(np.array([math.log(r / (1 - r)), math.log(max(s, 1e-300))]), lo + 1e-6, hi - 1e-6)
                   for r, s in rs]
 
