@@ -116,7 +116,7 @@ def test_clearance_and_joint_in_a_modal_model_reproduce_the_chain_with_them():
     assert sum(isinstance(e, SignedSpring) for e in aug.elements) == 1
     assert spec.describe(p) == pytest.approx({"gap_m": gap, "k_N_per_m": k})
     y = simulate(aug, u, FS).data
-    assert np.max(np.abs(y - y_true)) / np.max(np.abs(y_true)) < 1e-8
+    assert np.max(np.abs(y - y_true)) / np.max(np.abs(y_true)) < 1e-9  # 4.9e-12 measured
     assert np.max(np.abs(simulate(m, u, FS).data - y_true)) / np.max(np.abs(y_true)) > 1e-2  # the clearance shows
     assert loads_model(dumps_model(aug)) == aug
     assert "far below" in spec.vanishes([p[0], math.log(1e-9)])
@@ -141,7 +141,7 @@ def test_clearance_and_joint_in_a_modal_model_reproduce_the_chain_with_them():
     # rms deflection, here 0.4 x 8e4 N/m x 1e-4 m) is a linear loss of stiffness
     assert "slips through the whole record" in spec.vanishes([p[0], math.log(0.001 * 0.4 * k * 1e-4 / 60.0)])
     y = simulate(spec.apply(m, p), u, FS).data
-    assert np.max(np.abs(y - y_true)) / np.max(np.abs(y_true)) < 1e-6
+    assert np.max(np.abs(y - y_true)) / np.max(np.abs(y_true)) < 1e-9  # 5.5e-12 measured
 
 
 def test_modal_model_without_a_driving_point_says_what_is_missing():
