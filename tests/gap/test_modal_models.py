@@ -222,3 +222,28 @@ def test_hidden_cubic_spring_between_measured_points_of_a_modal_nominal():
     assert r.verdict == "cubic_stiffness", r.summary()
     assert set(r.candidates[0].where["between"]) == {"m3", "m2"}
     assert r.gap_after < 1.5 * r.noise_floor
+
+
+@pytest.mark.slow  # a modal identification and one full diagnosis (about 3-5 min on the 2-core box)
+def test_a_joint_behind_a_modal_test_is_named_between_its_sensors(tmp_path):
+    """The path of a ground vibration test: LSCF + LSFD identify the modes at a low level,
+    ``modal --export-model`` writes them, ``gap`` takes that model and three logs at higher
+    levels where the payload's bolted joint (an Iwan element, ``examples/gap/modal_joint.py``)
+    slips. The truth: the joint between the wing and the payload sensors, 3.0e4 N/m slipping at
+    up to 6 N."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "gap" / "modal_joint.py"
+    spec = importlib.util.spec_from_file_location("modal_joint", path)
+    mj = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mj)
+    assert mj.main(["--out", str(tmp_path)]) == 0
+    rep = json.loads((tmp_path / "gap.json").read_text())
+    c = rep["candidates"][0]
+    assert rep["verdict"] == "joint_friction", rep["verdict"]
+    assert set(c["where"]["between"]) == {"out2", "out3"}  # the wing's and the payload's sensors
+    assert c["parameters"]["k_N_per_m"] == pytest.approx(mj.SHARE * 6e4, rel=0.1)  # 2.976e4 measured
+    assert c["parameters"]["slip_force_N"] == pytest.approx(mj.F_MAX, rel=0.1)  # 5.999 measured
+    assert rep["gap_after"] < 2 * rep["noise_floor"]  # 0.0099 against 0.0105 measured
