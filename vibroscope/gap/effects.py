@@ -732,11 +732,11 @@ def _joint_friction(model, scales):
             fs_ = u_ref * math.exp(p[1])  # the slip force scaled by the input's RMS force
             return r, fs_
 
-        def desc(p, coeffs=coeffs, modal=modal, k_loc=k_loc):
-            r, fs_ = coeffs(p)
-            return {"joint_share": r, "slip_force_N": fs_} | ({"k_N_per_m": r * k_loc} if modal else {})
-
         k_joint = k_loc if modal else spring.k  # the stiffness the share r is taken of (N/m)
+
+        def desc(p, coeffs=coeffs, modal=modal, k_joint=k_joint):
+            r, fs_ = coeffs(p)
+            return {"joint_share": r, "slip_force_N": fs_} | ({"k_N_per_m": r * k_joint} if modal else {})
 
         def vanish(p, coeffs=coeffs, k_joint=k_joint, d_rms=d_rms, modal=modal):
             r, fs_ = coeffs(p)

@@ -246,28 +246,9 @@ class SignedSpring(Element):
             raise ValueError(f"k={k} must be finite")
         object.__setattr__(self, "k", k)
 
-    @property
-    def linear_stiffness(self) -> float:
-        return self.k
-
-    def force(self, d, v, state=None):
-        """Element force (N) ``k d``.
-
-        Parameters
-        ----------
-        d : float
-            Relative displacement ``x_a - x_b`` (m).
-        v : float
-            Relative velocity ``xdot_a - xdot_b`` (m/s).
-        state : sequence of float, optional
-            Unused (no internal state).
-
-        Returns
-        -------
-        float
-            The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
-        """
-        return self.k * d
+    # the same law as a spring's, k d: its linear part and its force
+    linear_stiffness = Spring.linear_stiffness
+    force = Spring.force
 
 
 @dataclass(frozen=True)
