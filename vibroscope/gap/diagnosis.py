@@ -1478,8 +1478,11 @@ def _nested_order(cands: list, ys, split, val_logs, fs) -> dict:
 def _select_further_effects(run: _Run, *, workers) -> None:
     """Stage 5b: forward selection from the verdict (or, when unexplained, from the best
     admissible candidate): a second (third) effect is kept when it closes significantly more,
-    and a combination is polished jointly. Updates ``chosen``, ``verdict``, ``ordered``; sets
-    ``shares``."""
+    and a combination is polished jointly. Where an input delay joins only later, or nothing
+    joins an unexplained gap while the phase slope measures a delay, the selection is run once
+    more from the delay fitted alone, with the nonlinear candidates screened again on it
+    (:func:`_delay_first`, :func:`_screen_on`), and the combination that explains more is kept.
+    Updates ``chosen``, ``verdict``, ``ordered``; sets ``shares``."""
     sims, ys, split, lin, model, lo_l, hi_l = run.sims, run.ys, run.split, run.lin, run.model, run.lo_l, run.hi_l
     per_class, lin_later, polish = run.per_class, run.lin_later, run.polish
     held_out, key, k_before, floor_rank = run.held_out, run.key, run.k_before, run.floor_rank
@@ -1488,32 +1491,147 @@ def _select_further_effects(run: _Run, *, workers) -> None:
     t = time.perf_counter()
     shares = []
 
-    def select_from(first):
-        """Forward selection from `first`; a combination is polished jointly with the linear
-        parameters at full accuracy. Returns ``(chosen, shares)``."""
-        ch, sh = _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor_rank, gap_before,
+    def select_from(first, screening=None):
+        """Forward selection from `first` (with the nonlinear candidates as `screening`
+        ``(per_class, screened)`` has them, default as first screened); a combination is
+        polished jointly with the linear parameters at full accuracy. Returns ``(chosen, shares)``."""
+        pc, scr = screening if screening is not None else (per_class, run.screened)
+        ch, sh = _forward_selection(first, pc, sims, ys, split, held_out, key, k_before, floor_rank, gap_before,
                                     workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()),
-                                    screened=run.screened)
+                                    screened=scr)
         if len(ch) > 1:
             ch[-1] = _polish(ch[-1], [(c[3], c[4]) for c in ch], **polish)
         return ch, sh
 
+    def or_from_delay(trial, trial_shares, alone_ok=False):
+        """`trial`, or the selection from the delay fitted alone when that explains more: tried
+        when a delay joined `trial` only later (its first effect was then screened on a linear
+        base bent by the delay) or, with `alone_ok` (no verdict yet), when `trial` found no
+        combination and the phase slope measures a delay (the delay was not fitted alone: the BLA
+        changes with the level)."""
+        d_later = [float(c[4][0]) for c in trial[1:] if c[0].effect == "time_delay"]
+        if not d_later and (len(trial) > 1 or not alone_ok):
+            return trial, trial_shares
+        d_first = _delay_first(run, workers, tau=d_later[0] if d_later else None)
+        if d_first is None:
+            return trial, trial_shares
+        trial2, shares2 = select_from(d_first, _screen_on(run, d_first[1], workers))
+        if len(trial2) > 1 and trial2[-1][0].score > trial[-1][0].score:
+            return trial2, shares2
+        return trial, trial_shares
+
     if chosen and chosen[0][3] is not None:
-        chosen, shares = select_from(chosen[0])
+        chosen, shares = or_from_delay(*select_from(chosen[0]))
         if len(chosen) > 1:
-            added = {c[0].effect for c in chosen[1:]}
-            ordered = chosen + [c for c in ordered[1:] if c[0].effect not in added]
+            verdict = chosen[0][0].effect
+            added = {c[0].effect for c in chosen}
+            ordered = chosen + [c for c in ordered if c[0].effect not in added]
     elif verdict == "unexplained" and best_i is not None and cands[best_i][3] is not None:
         # no effect explains the gap alone; two together may (a clearance and a delay, each of
         # which alone leaves most of it): the forward selection from the best admissible
         # candidate, and the combination is the verdict only if it explains enough itself
-        trial, trial_shares = select_from(cands[best_i])
+        trial, trial_shares = or_from_delay(*select_from(cands[best_i]), alone_ok=True)
         if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE:
             chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
             added = {c[0].effect for c in chosen}
             ordered = chosen + [c for c in ordered if c[0].effect not in added]
     run.timings["forward_selection"] = time.perf_counter() - t
     run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
+
+
+def _delay_first(run: _Run, workers, tau: float | None = None) -> tuple | None:
+    """The input delay fitted alone (with the linear parameters, from the refit and from the
+    nominal) as a start of the forward selection, when the phase slope of the measured FRF
+    against the refit's (:func:`~vibroscope.gap.signatures.run_signatures`) measures a delay of
+    at least half a sample and the delay was not fitted alone (``lin_later``: the BLA changes with
+    the level). `tau`: the delay to start from (s), default the phase slope's. Returns a candidate
+    tuple ``(Candidate, model, held-out outputs, spec, p, base)`` or None."""
+    s = run.lin_later.get("time_delay")
+    if tau is None:
+        tau = next((t.value for t in (run.sigs_tests or ()) if t.name == "phase_slope"), 0.0)
+    if s is None or not tau >= 0.5 / run.fs:
+        return None
+    model, lin, sims, ys, split = run.model, run.lin, run.sims, run.ys, run.split
+    nl = len(lin)
+
+    def build(x):
+        return s.apply(lin.apply(model, x[:nl]), x[nl:])
+
+    lo = np.concatenate([run.lo_l, s.lower])
+    hi = np.concatenate([run.hi_l, s.upper])
+    tau0 = float(min(max(tau, s.lower[0]), s.upper[0]))
+    starts = [np.concatenate([np.clip(th, run.lo_l, run.hi_l), [tau0]])
+              for th in ([run.theta] + ([np.zeros(nl)] if np.any(run.theta) else []))]
+
+    def fit(x0):
+        try:
+            x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, split.screen_prefix, fast=True,
+                                      max_nfev=8)
+        except (ValueError, TypeError):
+            return None
+        return x, g
+
+    with ThreadPoolExecutor(max(1, min(workers, len(starts)))) as ex:
+        fits = [r for r in ex.map(fit, starts) if r is not None and np.isfinite(r[1])]
+    if not fits:
+        return None
+    x, gfit = min(fits, key=lambda r: r[1])
+    p = x[nl:]
+    if s.vanishes(p) is not None:
+        return None
+    m_aug, base = build(x), lin.apply(model, x[:nl])
+    g, yh = run.held_out(m_aug, fast=True)
+    if not np.isfinite(g):
+        return None
+    k_before = run.k_before
+    c = Candidate(effect=s.effect, where=dict(s.where) | s.qualifiers(p), parameters=s.describe(p), gap_after=g,
+                  score=1.0 - run.key(g, s.n) / k_before if k_before > 0 else 0.0, gap_fit=gfit, n_parameters=s.n,
+                  model_toml=_dumps(m_aug))
+    return c, m_aug, yh, s, p, base
+
+
+def _screen_on(run: _Run, base, workers) -> tuple[dict, list]:
+    """The nonlinear candidates screened again on another base model (the delay fitted alone):
+    every location's best start on the screening prefix, the best location of each class
+    refined (effect parameters only). Returns ``(per_class, screened)`` as
+    :func:`_fit_candidates` makes them (``(spec, p, fitting gap, base)``)."""
+    sims, ys, split = run.sims, run.ys, run.split
+    sp = split.screen_prefix
+    nl_specs = [s for s in run.specs if not s.linear]
+
+    def gap_of(m):
+        yh = [sim.run(m, n, fast=True) if n else None for sim, n in zip(sims, sp)]
+        g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
+                  [m_[:n] for m_, n in zip(split.fit, sp) if n])
+        return g if np.isfinite(g) else 1e9
+
+    def probe(s):
+        best = None
+        for p0 in s.starts:
+            try:
+                g = gap_of(s.apply(base, p0))
+            except ValueError:
+                continue
+            if best is None or g < best[2]:
+                best = (s, np.asarray(p0, float), g, base)
+        return best
+
+    def refine(item):
+        s, p0, g0, _ = item
+        p, g, _ = fit_time_domain(lambda p, s=s: s.apply(base, p), p0, s.lower, s.upper, sims, ys, split.fit, sp,
+                                  fast=True, max_nfev=4 + 2 * s.n)
+        return (s, p, g, base) if g <= g0 else item
+
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        probed = [r for r in ex.map(probe, nl_specs) if r is not None]
+        best: dict[str, tuple] = {}
+        for r in probed:
+            if r[0].effect not in best or r[2] < best[r[0].effect][2]:
+                best[r[0].effect] = r
+        refined = dict(zip(best, ex.map(refine, best.values())))
+    screened = [refined.get(r[0].effect) if best.get(r[0].effect) is r else r for r in probed]
+    per_class = {e: r for e, r in refined.items()}
+    return per_class, screened
 
 
 def _build_report(run: _Run) -> GapReport:
