@@ -159,6 +159,12 @@ N_LOCATIONS = 2
 OTHER_BASE_FACTOR = 2.0
 #: seconds of fitting data per log on which the winner is polished at full accuracy
 POLISH_S = 30.0
+#: the polish's evaluations in fours, the share of its fitting gap every four iterations must
+#: close to go on, and the multiple of the noise floor at which it stops (the Bouc-Wen
+#: benchmark's loop shape needs about twenty evaluations)
+POLISH_ROUNDS = 5
+POLISH_GAIN = 0.02
+POLISH_FLOOR_FACTOR = 1.5
 #: function evaluations of a linear effect's FRF fit per start (its best start is then polished in
 #: time; on a 3-DOF parameter-mismatch case the median fit took 20, a few ran to the old limit of 200)
 LIN_EFFECT_NFEV = 60
@@ -1416,7 +1422,7 @@ def _rank_candidates(run: _Run, *, workers) -> None:
         if j is not None:
             best_i = j
     polish = dict(model=model, lin=lin, lo_l=lo_l, hi_l=hi_l, sims=sims, ys=ys, split=split, fs=fs,
-                  held_out=held_out, key=key, k_before=k_before)
+                  held_out=held_out, key=key, k_before=k_before, floor=floor_rank)
     if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:
         cands[best_i] = _polish(cands[best_i], [(cands[best_i][3], cands[best_i][4])], **polish)
     none_c = (Candidate(effect="none", where={}, parameters={}, gap_after=gap_before, score=0.0,
@@ -1921,13 +1927,16 @@ def _chain_vanishes(before, after) -> bool:
                for (s_, pb), (_, pa) in zip(before, after))
 
 
-def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before):
+def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before, floor=0.0):
     """Refine the winning candidate's effects (`chain`: ``(spec, p)`` applied in order to the
     linear model) jointly with the linear parameters on up to POLISH_S s of the fitting data at the
     full integration accuracy (Ljung 1999, output error); the held-out gap is recomputed at
-    full accuracy. The polished model is kept only when its held-out gap is not worse and no
-    effect's polished parameters make it vanish where they did not before (asymmetric friction
-    polished into two equal forces is no verdict; the candidate stays as it was fitted)."""
+    full accuracy. The fit takes at least four iterations and up to 4 :data:`POLISH_ROUNDS`
+    evaluations, while its fitting gap is above :data:`POLISH_FLOOR_FACTOR` times `floor` and every
+    four iterations close at least :data:`POLISH_GAIN` of it. The polished model is kept only when its held-out gap is not
+    worse and no effect's polished parameters make it vanish where they did not before
+    (asymmetric friction polished into two equal forces is no verdict; the candidate stays as it
+    was fitted)."""
     c, m_aug, _, s_last, p_last, base = cand
     nl = len(lin)
     th = lin.theta_between(model, base)
@@ -1944,7 +1953,18 @@ def _polish(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_ou
     x0 = np.concatenate([th] + [np.asarray(p_, float) for _, p_ in chain])
     lo = np.concatenate([lo_l] + [s_.lower for s_, _ in chain])
     hi = np.concatenate([hi_l] + [s_.upper for s_, _ in chain])
-    x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns, fast=False, max_nfev=4)
+    hist = []
+
+    def go_on(intermediate_result):
+        """A fit still descending (a hysteretic loop's shape, whose valley is long) is carried on
+        while it is above the noise floor and every 4 iterations close POLISH_GAIN of its gap."""
+        g_it = math.sqrt(2 * intermediate_result.cost)
+        hist.append(g_it)
+        if len(hist) >= 4 and (g_it <= POLISH_FLOOR_FACTOR * floor or g_it > (1 - POLISH_GAIN) * hist[-4]):
+            raise StopIteration
+
+    x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns, fast=False,
+                                 max_nfev=4 * POLISH_ROUNDS, callback=go_on)
     m_new = build(x)
     g, yh = held_out(m_new)
     g0, yh0 = held_out(m_aug)  # the candidate itself at full accuracy

@@ -210,7 +210,7 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
 
 
 def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, max_nfev=30, diff_step=1e-3,
-                    jac_workers=2):
+                    jac_workers=2, callback=None):
     """Least-squares fit of parameters `x` of ``build(x) -> LumpedModel`` to the outputs.
 
     Parameters
@@ -237,6 +237,9 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
         Threads evaluating the finite-difference Jacobian's columns (``least_squares``'s
         ``workers``, scipy >= 1.16); default 2. The simulation kernels release the GIL, so
         the columns run on several cores; the result does not depend on it.
+    callback : callable, optional
+        ``least_squares``'s ``callback(intermediate_result)`` (scipy >= 1.16), called after each
+        iteration; raising :class:`StopIteration` ends the fit at the current point.
 
     Returns
     -------
@@ -266,7 +269,7 @@ def fit_time_domain(build, x0, lower, upper, sims, ys, masks, ns, *, fast=True, 
     # the Jacobian's columns in parallel threads (the simulation kernels release the GIL)
     with ThreadPoolExecutor(n_thr) as ex:
         sol = least_squares(res, x0, bounds=(lower, upper), method="trf", x_scale=1.0, diff_step=diff_step,
-                            max_nfev=max_nfev, workers=ex.map if n_thr > 1 else None)
+                            max_nfev=max_nfev, workers=ex.map if n_thr > 1 else None, callback=callback)
     return sol.x, float(math.sqrt(2 * sol.cost)), len(calls)
 
 
