@@ -71,6 +71,7 @@ import math
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from scipy import signal as sps
@@ -1042,26 +1043,50 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
     ``pre_eval``, ``keep_ids``, ``per_class``."""
     from tqdm.auto import tqdm
 
-    model, sims, ys, split, fs = run.model, run.sims, run.ys, run.split, run.fs
-    closed, refit, theta, lin, level = run.closed, run.refit, run.theta, run.lin, run.level
-    lo_l, hi_l, ns_fit, ns_pol, floor = run.lo_l, run.hi_l, run.ns_fit, run.ns_pol, run.floor
-    f_s, H_s, w, sel = run.f_s, run.H_s, run.w, run.sel
-    g_ref_fit, g_nom_fit, gap_refit = run.g_ref_fit, run.g_nom_fit, run.gap_refit
-    held_out = run.held_out
     t = time.perf_counter()
-    val_logs = [i for i, m in enumerate(split.validation) if m.any()]
-    run.val_logs = val_logs
+    lin_specs, nl_specs = _candidate_specs(run)
 
-    none_ok = run.gap_before <= NONE_FACTOR * floor
+    def n_steps():
+        """Progress steps: every linear and nonlinear spec, and the joint fits of the best classes."""
+        return len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs}))
+
+    bar = tqdm(total=n_steps(), desc="gap candidates", disable=not progress, leave=False)
+    results = _fit_linear_effects(run, lin_specs, bar, workers)
+    nl_left, pre_eval = _stop_at_linear_floor(run, results, nl_specs, workers)
+    if nl_left is not nl_specs:
+        nl_specs = nl_left
+        bar.total = n_steps()
+        bar.refresh()
+    screened = _screen_nonlinear(run, nl_specs, bar, workers)
+    per_class, keep_ids = _fit_best_classes_jointly(run, screened, results, bar, workers, n_full)
+    done = {r[0].effect for r in results}
+    for s, p, g, base in screened:  # the other classes and locations as screened
+        if s.effect not in done or s is not per_class[s.effect][0]:
+            results.append((s, s.apply(base, p), p, g, base))
+    bar.close()
+    run.timings["candidates"] = time.perf_counter() - t
+    run.results, run.pre_eval, run.keep_ids, run.per_class = results, pre_eval, keep_ids, per_class
+    run.screened = screened
+
+
+def _candidate_specs(run: _Run) -> tuple[list, list]:
+    """The candidates to fit: none when the nominal's gap is within the noise, else every
+    effect's specs split into linear and nonlinear; linear effects of a linear model whose BLA
+    changes with the level are not fitted alone (left to the forward selection). Sets
+    ``val_logs``, ``none_ok``, ``specs``, ``not_tried``, ``lin_later``; returns
+    ``(linear specs, nonlinear specs)``."""
+    level, refit = run.level, run.refit
+    run.val_logs = [i for i, m in enumerate(run.split.validation) if m.any()]
+    none_ok = run.gap_before <= NONE_FACTOR * run.floor
     # within the noise: nothing to explain
     specs = [] if none_ok else candidate_specs(refit, run.scales, run.effect_set)
     lin_specs = [s for s in specs if s.linear]
     nl_specs = [s for s in specs if not s.linear]
     not_tried: dict[str, str] = {}  # effect -> why its candidates were not fitted
     lin_later: dict[str, object] = {}  # linear effects not fitted alone, tried by the forward selection
-    if lin_specs and level["flagged"] and not closed and refit.is_linear:
+    if lin_specs and level["flagged"] and not run.closed and refit.is_linear:
         # a linear effect in a linear model cannot change the BLA with the level: it would be
-        # inadmissible (see admissible() below), so it is not fitted
+        # inadmissible (see _admissible()), so it is not fitted
         for s in lin_specs:
             not_tried[s.effect] = "the BLA changes with the level, which no linear effect of a linear model does"
         # alone it cannot be the verdict, but beside a nonlinear effect it can be a second one: the
@@ -1069,123 +1094,89 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
         for s in lin_specs:
             lin_later.setdefault(s.effect, s)
         lin_specs = []
-    def n_steps():
-        """Progress steps: every linear and nonlinear spec, and the joint fits of the best classes."""
-        return len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs}))
+    run.none_ok, run.specs, run.not_tried, run.lin_later = none_ok, specs, not_tried, lin_later
+    return lin_specs, nl_specs
 
-    bar = tqdm(total=n_steps(), desc="gap candidates", disable=not progress, leave=False)
-    results = []  # (spec, augmented model, p, gap_fit, base model without the effect)
 
-    # linear effects: FRF fit jointly with the linear parameters, best per effect polished in time
+def _fit_linear_effects(run: _Run, lin_specs: list, bar, workers) -> list:
+    """The linear effects fitted on the FRF jointly with the linear parameters (closed loop: the
+    best start on the screening prefix), from the refit and, where the refit closes less than half
+    of the nominal's fitting gap, from the nominal too; the best per effect polished in time
+    (:func:`_polish_linear_effect`). Returns the results ``(spec, model, p, gap_fit, base)``."""
+    model, refit, lin, sims, ys, split = run.model, run.refit, run.lin, run.sims, run.ys, run.split
     best_lin: dict[str, tuple] = {}
     sp = split.screen_prefix
     # when the refit closes less than half of the nominal's fitting gap, the refit has bent the
     # linear parameters towards something they cannot express (a long delay): the linear effects
     # are fitted from the nominal too
-    lin_bases = [refit] + ([model] if np.any(theta) and g_ref_fit > 0.5 * g_nom_fit else [])
+    lin_bases = [refit] + ([model] if np.any(run.theta) and run.g_ref_fit > 0.5 * run.g_nom_fit else [])
     for s in lin_specs:
         for b_ in lin_bases:
-            if closed:  # no FRF of the loop to fit: the start that fits the screening prefix best
+            if run.closed:  # no FRF of the loop to fit: the start that fits the screening prefix best
                 p_s, cost = best_start(lambda p, s=s, b_=b_: s.apply(b_, p), s.starts, sims, ys, split.fit, sp)
                 th_s = np.zeros(len(lin))
             else:
-                m_s, th_s, p_s, cost = fit_linear_frf(b_, lin, f_s, H_s, w[sel], spec=s, p_starts=s.starts,
-                                                      max_nfev=LIN_EFFECT_NFEV)
+                m_s, th_s, p_s, cost = fit_linear_frf(b_, lin, run.f_s, run.H_s, run.w[run.sel], spec=s,
+                                                      p_starts=s.starts, max_nfev=LIN_EFFECT_NFEV)
             if s.effect not in best_lin or cost < best_lin[s.effect][3]:
                 best_lin[s.effect] = (s, th_s, p_s, cost, b_)
         bar.update(1)
-
-    def lin_polish(item):
-        """A linear effect's FRF fit polished in time with the linear parameters, on the same
-        (at most 20 s per log) samples as the linear refit."""
-        s, th_s, p_s, _, b_ = item
-        nl = len(lin)
-
-        def build(x, s=s):
-            return s.apply(lin.apply(b_, x[:nl]), x[nl:])
-
-        x0 = np.concatenate([th_s, p_s])
-        lo = np.concatenate([lo_l, s.lower])
-        hi = np.concatenate([hi_l, s.upper])
-        x, gfit, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, ns_pol, fast=False, max_nfev=6)
-        return s, build(x), x[nl:], gfit, lin.apply(b_, x[:nl])
-
     with ThreadPoolExecutor(max(1, workers)) as ex:
-        results += list(ex.map(lin_polish, best_lin.values()))
-    pre_eval: dict[int, tuple] = {}  # id(result) -> (held-out gap, outputs), reused in evaluate()
-    if results and nl_specs and not level["flagged"]:
-        # a linear explanation already at the noise floor, and a BLA that does not change with the
-        # level: a level-dependent nonlinear effect could not be told from the noise (the search
-        # stops, as 'none' stops it for the nominal model)
+        return list(ex.map(partial(_polish_linear_effect, run), best_lin.values()))
+
+
+def _polish_linear_effect(run: _Run, item):
+    """A linear effect's FRF fit polished in time with the linear parameters, on the same
+    (at most 20 s per log) samples as the linear refit."""
+    lin = run.lin
+    s, th_s, p_s, _, b_ = item
+    nl = len(lin)
+
+    def build(x, s=s):
+        return s.apply(lin.apply(b_, x[:nl]), x[nl:])
+
+    x0 = np.concatenate([th_s, p_s])
+    lo = np.concatenate([run.lo_l, s.lower])
+    hi = np.concatenate([run.hi_l, s.upper])
+    x, gfit, _ = fit_time_domain(build, x0, lo, hi, run.sims, run.ys, run.split.fit, run.ns_pol, fast=False,
+                                 max_nfev=6)
+    return s, build(x), x[nl:], gfit, lin.apply(b_, x[:nl])
+
+
+def _stop_at_linear_floor(run: _Run, results: list, nl_specs: list, workers) -> tuple[list, dict]:
+    """The linear fits checked on the held-out data when there are nonlinear candidates and the
+    BLA does not change with the level: a linear explanation already at the noise floor leaves a
+    level-dependent nonlinear effect nothing it could be told by (the search stops, as 'none'
+    stops it for the nominal model), so those effects are not tried (``not_tried``). Returns
+    ``(the nonlinear specs left, {id(result): (held-out gap, outputs)})``; the list is `nl_specs`
+    itself when nothing was dropped."""
+    pre_eval: dict[int, tuple] = {}  # id(result) -> (held-out gap, outputs), reused in _evaluate()
+    if results and nl_specs and not run.level["flagged"]:
         with ThreadPoolExecutor(max(1, workers)) as ex:
-            for r, ev in zip(results, ex.map(lambda r: held_out(r[1], fast=True), results)):
+            for r, ev in zip(results, ex.map(lambda r: run.held_out(r[1], fast=True), results)):
                 pre_eval[id(r)] = ev
-        g_lin = min([gap_refit] + [pre_eval[id(r)][0] for r in results if r[0].vanishes(r[2]) is None])
+        g_lin = min([run.gap_refit] + [pre_eval[id(r)][0] for r in results if r[0].vanishes(r[2]) is None])
+        floor = run.floor
         if g_lin <= NONE_FACTOR * floor:
             for s in nl_specs:
                 if EFFECT_TABLE[s.effect].level_dependent:
-                    not_tried[s.effect] = (f"a linear explanation leaves a held-out gap of {g_lin:.3g}, within "
-                                           f"{NONE_FACTOR} x the noise floor {floor:.3g}, and the BLA does not change "
-                                           f"with the level")
+                    run.not_tried[s.effect] = (f"a linear explanation leaves a held-out gap of {g_lin:.3g}, within "
+                                               f"{NONE_FACTOR} x the noise floor {floor:.3g}, and the BLA does not "
+                                               f"change with the level")
             nl_specs = [s for s in nl_specs if not EFFECT_TABLE[s.effect].level_dependent]
-            bar.total = n_steps()
-            bar.refresh()
+    return nl_specs, pre_eval
 
-    # nonlinear effects: screening at every location with the linear parameters at the refit
 
+def _screen_nonlinear(run: _Run, nl_specs: list, bar, workers) -> list:
+    """The nonlinear effects screened at every location with the linear parameters at the refit
+    (and the nominal): each location's best start (:func:`_probe`), the most promising
+    locations of each class refined (:func:`_refine_on_either_base`, the others keep their best
+    start), and a family refined again from its member's solution where the member fits a
+    location better. Returns the screened items ``(spec, p, fitting gap, base)``."""
     other_base: dict[int, tuple] = {}  # id(best start) -> the best start on the other linear base
-
-    def probe(s):
-        """The best start of `s` on the screening prefix, from the refitted and from the nominal
-        linear parameters (a nonlinearity shifts the BLA, so the refit can be the wrong base);
-        the best start on the other base is kept aside (``other_base``)."""
-        per_base = {}
-        for base in ((refit, model) if theta.any() else (refit,)):
-            for p0 in s.starts:
-                try:
-                    m0 = s.apply(base, p0)
-                except ValueError:
-                    continue
-                yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
-                g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
-                          [m[:n] for m, n in zip(split.fit, sp) if n])
-                g = g if np.isfinite(g) else 1e9
-                if id(base) not in per_base or g < per_base[id(base)][2]:
-                    per_base[id(base)] = (s, np.asarray(p0, float), g, base)
-        if not per_base:
-            return None
-        best, *alt = sorted(per_base.values(), key=lambda r: r[2])
-        if alt:
-            other_base[id(best)] = alt[0]
-        return best
-
-    def refine(item):
-        """The probed start refined on the screening prefix (effect parameters only)."""
-        s, p0, g0, base = item
-
-        def build(p, s=s, base=base):
-            return s.apply(base, p)
-
-        p, g, _ = fit_time_domain(build, p0, s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
-                                  max_nfev=4 + 2 * s.n)
-        return (s, p, g, base) if g <= g0 else item
-
-    def refine_both(item):
-        """`item` refined, and the best start on the other linear base too when it probed within
-        :data:`OTHER_BASE_FACTOR` of it: the better of the two. (A joint that slips at every level
-        of the logs softens the refit, from which the joint then seems to do nothing; from the
-        nominal its narrow valley is found, as for a modal model identified at a low level.)"""
-        res = refine(item)
-        alt = other_base.get(id(item))
-        if alt is not None and alt[2] <= OTHER_BASE_FACTOR * item[2]:
-            res2 = refine(alt)
-            if res2[2] < res[2]:
-                return res2
-        return res
-
     with ThreadPoolExecutor(max(1, workers)) as ex:
         probed = []
-        for res in ex.map(probe, nl_specs):
+        for res in ex.map(partial(_probe, run, other_base), nl_specs):
             if res is not None:
                 probed.append(res)
             bar.update(1)
@@ -1201,7 +1192,7 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
             n_ref = 1 + sum(1 for r in items[1:N_LOCATIONS] if r[2] <= 1.15 * items[0][2])
             to_refine += items[:n_ref]
             kept += items[n_ref:]
-        screened = list(ex.map(refine_both, to_refine)) + kept
+        screened = list(ex.map(partial(_refine_on_either_base, run, other_base), to_refine)) + kept
         # a family never fits worse than a member it contains: where the member (Coulomb friction)
         # fits a location better than the family (asymmetric friction), the family is refined again
         # from the member's solution there
@@ -1212,35 +1203,81 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
             if mem is not None and mem[2] < g:
                 p0 = np.clip(s.lifts_from[1](mem[1]), s.lower + 1e-9, s.upper - 1e-9)
                 lifts.append((i, (s, p0, mem[2], mem[3])))
-        for (i, _), res in zip(lifts, ex.map(refine, [x[1] for x in lifts])):
+        for (i, _), res in zip(lifts, ex.map(partial(_refine, run), [x[1] for x in lifts])):
             screened[i] = res
-    # best location per class, then the best classes fitted jointly with the linear parameters
+    return screened
+
+
+def _probe(run: _Run, other_base: dict, s):
+    """The best start of `s` on the screening prefix, from the refitted and from the nominal
+    linear parameters (a nonlinearity shifts the BLA, so the refit can be the wrong base);
+    the best start on the other base is kept aside in `other_base` (by the id of the best)."""
+    sims, ys, split = run.sims, run.ys, run.split
+    sp = split.screen_prefix
+    per_base = {}
+    for base in ((run.refit, run.model) if run.theta.any() else (run.refit,)):
+        for p0 in s.starts:
+            try:
+                m0 = s.apply(base, p0)
+            except ValueError:
+                continue
+            yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
+            g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
+                      [m[:n] for m, n in zip(split.fit, sp) if n])
+            g = g if np.isfinite(g) else 1e9
+            if id(base) not in per_base or g < per_base[id(base)][2]:
+                per_base[id(base)] = (s, np.asarray(p0, float), g, base)
+    if not per_base:
+        return None
+    best, *alt = sorted(per_base.values(), key=lambda r: r[2])
+    if alt:
+        other_base[id(best)] = alt[0]
+    return best
+
+
+def _refine(run: _Run, item):
+    """The probed start refined on the screening prefix (effect parameters only)."""
+    s, p0, g0, base = item
+
+    def build(p, s=s, base=base):
+        return s.apply(base, p)
+
+    p, g, _ = fit_time_domain(build, p0, s.lower, s.upper, run.sims, run.ys, run.split.fit, run.split.screen_prefix,
+                              fast=True, max_nfev=4 + 2 * s.n)
+    return (s, p, g, base) if g <= g0 else item
+
+
+def _refine_on_either_base(run: _Run, other_base: dict, item):
+    """`item` refined, and the best start on the other linear base too when it probed within
+    :data:`OTHER_BASE_FACTOR` of it: the better of the two. (A joint that slips at every level
+    of the logs softens the refit, from which the joint then seems to do nothing; from the
+    nominal its narrow valley is found, as for a modal model identified at a low level.)"""
+    res = _refine(run, item)
+    alt = other_base.get(id(item))
+    if alt is not None and alt[2] <= OTHER_BASE_FACTOR * item[2]:
+        res2 = _refine(run, alt)
+        if res2[2] < res[2]:
+            return res2
+    return res
+
+
+def _fit_best_classes_jointly(run: _Run, screened: list, results: list, bar, workers, n_full) -> tuple[dict, set]:
+    """The best location of each class, and the `n_full` best classes fitted jointly with the
+    linear parameters (:func:`_fit_joint`); where a member's joint fit is better than its
+    family's (or the family had none), the family is fitted jointly again from the member's
+    joint solution. Appends to `results` (and replaces a family's fit there); returns
+    ``(per_class, ids of the results to keep)``."""
+    lin, model = run.lin, run.model
     per_class: dict[str, tuple] = {}
     for s, p, g, base in screened:
         if s.effect not in per_class or g < per_class[s.effect][2]:
             per_class[s.effect] = (s, p, g, base)
     ranked = sorted(per_class.values(), key=lambda r: r[2])
     full = ranked[:n_full]
-    joint_n = [min(n, max(s_, int(20 * fs))) if n else 0 for n, s_ in zip(ns_fit, sp)]
-
-    def joint(item, x_lin=None):
-        """`item` fitted jointly with the linear parameters (from `x_lin`, default the refit's
-        or the nominal's, as its base)."""
-        s, p, _, base = item
-        nl = len(lin)
-
-        def build(x, s=s):
-            return s.apply(lin.apply(model, x[:nl]), x[nl:])
-
-        x0 = np.concatenate([x_lin if x_lin is not None else (theta if base is refit else np.zeros(nl)), p])
-        lo = np.concatenate([lo_l, s.lower])
-        hi = np.concatenate([hi_l, s.upper])
-        x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, joint_n, fast=True, max_nfev=6)
-        return s, build(x), x[nl:], g, lin.apply(model, x[:nl])
-
+    joint_n = [min(n, max(s_, int(20 * run.fs))) if n else 0 for n, s_ in zip(run.ns_fit, run.split.screen_prefix)]
     keep_ids = {id(r) for r in results}  # the linear fits
     with ThreadPoolExecutor(max(1, workers)) as ex:
-        for res in ex.map(joint, full):
+        for res in ex.map(partial(_fit_joint, run, joint_n), full):
             results.append(res)
             keep_ids.add(id(res))
             bar.update(1)
@@ -1258,20 +1295,29 @@ def _fit_candidates(run: _Run, *, workers, n_full, progress) -> None:
             if own is None or own[3] > r[3]:
                 p0 = np.clip(fam.lifts_from[1](r[2]), fam.lower + 1e-9, fam.upper - 1e-9)
                 lifts.append((own, (fam, p0, r[3], r[4]), lin.theta_between(model, r[4])))
-        for (own, _, _), res in zip(lifts, ex.map(lambda a: joint(a[1], a[2]), lifts)):
+        for (own, _, _), res in zip(lifts, ex.map(lambda a: _fit_joint(run, joint_n, a[1], a[2]), lifts)):
             if own is None or res[3] < own[3]:
                 results[:] = [r for r in results if r is not own]
                 results.append(res)
                 keep_ids.add(id(res))
-    done = {r[0].effect for r in results}
-    for s, p, g, base in screened:  # the other classes and locations as screened
-        if s.effect not in done or s is not per_class[s.effect][0]:
-            results.append((s, s.apply(base, p), p, g, base))
-    bar.close()
-    run.timings["candidates"] = time.perf_counter() - t
-    run.none_ok, run.specs, run.not_tried, run.lin_later = none_ok, specs, not_tried, lin_later
-    run.results, run.pre_eval, run.keep_ids, run.per_class = results, pre_eval, keep_ids, per_class
-    run.screened = screened
+    return per_class, keep_ids
+
+
+def _fit_joint(run: _Run, joint_n: list, item, x_lin=None):
+    """`item` fitted jointly with the linear parameters on `joint_n` samples per log (from
+    `x_lin`, default the refit's or the nominal's, as its base)."""
+    lin, model = run.lin, run.model
+    s, p, _, base = item
+    nl = len(lin)
+
+    def build(x, s=s):
+        return s.apply(lin.apply(model, x[:nl]), x[nl:])
+
+    x0 = np.concatenate([x_lin if x_lin is not None else (run.theta if base is run.refit else np.zeros(nl)), p])
+    lo = np.concatenate([run.lo_l, s.lower])
+    hi = np.concatenate([run.hi_l, s.upper])
+    x, g, _ = fit_time_domain(build, x0, lo, hi, run.sims, run.ys, run.split.fit, joint_n, fast=True, max_nfev=6)
+    return s, build(x), x[nl:], g, lin.apply(model, x[:nl])
 
 
 def _rank_candidates(run: _Run, *, workers) -> None:
@@ -1281,32 +1327,26 @@ def _rank_candidates(run: _Run, *, workers) -> None:
     polished, and the verdict (``none``, ``unexplained`` or the winner). Sets ``floor_rank``,
     ``floor_rank_method``, ``k_before``, ``cands``, ``best_i``, ``trend_shifts``, ``polish``
     (the arguments of :func:`_polish`), ``verdict``, ``ordered``, ``chosen``."""
-    model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
-    refit, y_ref, y_nom, lin, theta = run.refit, run.y_ref, run.y_nom, run.lin, run.theta
-    lo_l, hi_l = run.lo_l, run.hi_l
-    nf, floor, gap_before, gap_refit = run.nf, run.floor, run.gap_before, run.gap_refit
-    g_nom_fit, g_ref_fit, all_masks, f_s = run.g_nom_fit, run.g_ref_fit, run.all_masks, run.f_s
-    groups, blas, level, level_ev, level_ev_ref = run.groups, run.blas, run.level, run.level_ev, run.level_ev_ref
-    val_logs, none_ok, specs, results = run.val_logs, run.none_ok, run.specs, run.results
-    pre_eval, keep_ids = run.pre_eval, run.keep_ids
-    held_out = run.held_out
     t = time.perf_counter()
+    results = _results_to_evaluate(run)
+    evaluated = _evaluate_candidates(run, results, workers)
+    cands = _ranked_candidates(run, evaluated)
+    bla_cache: dict[int, list | None] = {}
+    best_i = _admissible_best(run, cands, bla_cache)
+    best_i, trend_shifts = _best_reproducing_trend(run, cands, best_i, bla_cache)
+    polish = _polish_winner(run, cands, best_i)
+    verdict, ordered, chosen = _verdict(run, cands, best_i)
+    run.timings["validation"] = time.perf_counter() - t
+    run.cands, run.best_i = cands, best_i
+    run.trend_shifts, run.polish, run.verdict, run.ordered, run.chosen = trend_shifts, polish, verdict, ordered, chosen
 
-    def evaluate(item):
-        s, m_aug, p, gfit, base = item
-        # the winner is re-run at full accuracy (_polish)
-        g, yh = pre_eval[id(item)] if id(item) in pre_eval else held_out(m_aug, fast=True)
-        # how much the effect itself changes the held-out outputs (against its own linear base)
-        if base is refit or base is model:  # already simulated
-            yb = {i: (y_ref if base is refit else y_nom)[i] for i in val_logs}
-        else:
-            yb = {i: sims[i].run(base) for i in val_logs}
-        contrib = nrmse([yh[i] for i in val_logs], [yb[i] for i in val_logs],
-                        [split.validation[i] for i in val_logs]) if np.isfinite(g) else float("nan")
-        return s, m_aug, p, gfit, g, yh, contrib, base
 
-    # a fit that vanishes into a simpler member of its family (asymmetric friction with equal
-    # forces) is evaluated as that simpler effect at the same location
+def _results_to_evaluate(run: _Run) -> list:
+    """The fits worth a held-out evaluation: a fit that vanishes into a simpler member of its
+    family (asymmetric friction with equal forces) added as that simpler effect at the same
+    location (to ``results`` and ``keep_ids``); every linear and jointly fitted result, and of the
+    screened ones those within 1.5 times their class's best fitting gap (the rest cannot win)."""
+    results, keep_ids, specs = run.results, run.keep_ids, run.specs
     for r in list(results):
         s_, m_, p_, g_, b_ = r
         red = s_.reduces_to(p_) if s_.reduces_to is not None else None
@@ -1317,23 +1357,50 @@ def _rank_candidates(run: _Run, *, workers) -> None:
             r2 = (s2, s2.apply(b_, red[1]), np.asarray(red[1], float), g_, b_)
             results.append(r2)
             keep_ids.add(id(r2))
-    # every linear and jointly fitted result is checked on held-out data, and of the screened ones
-    # those within 1.5 times their class's best fitting gap (the rest cannot win)
     cls_best: dict[str, float] = {}
     for r in results:
         if id(r) not in keep_ids:
             cls_best[r[0].effect] = min(cls_best.get(r[0].effect, np.inf), r[3])
-    results = [r for r in results if id(r) in keep_ids or r[3] <= 1.5 * cls_best[r[0].effect]]
-    with ThreadPoolExecutor(max(1, workers)) as ex:
-        evaluated = list(ex.map(evaluate, results))
-    # the floor the candidates are ranked against: the data's out-of-band level is an upper bound
-    # on the noise (a nonlinearity's harmonics fall there too); the held-out residual of a good
-    # candidate, out of band, is another (noise plus that model's own error) - the lowest is kept
-    floor_rank, floor_rank_method = _ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps)
-    run.floor_rank = floor_rank
-    key = run.key
+    return [r for r in results if id(r) in keep_ids or r[3] <= 1.5 * cls_best[r[0].effect]]
 
-    k_before = key(gap_before, 0)
+
+def _evaluate_candidates(run: _Run, results: list, workers) -> list:
+    """Each result evaluated on the held-out data (:func:`_evaluate`), then the floor the
+    candidates are ranked against (:func:`_ranking_floor`: the data's out-of-band level, or a
+    good candidate's held-out residual out of band when lower). Sets ``floor_rank``,
+    ``floor_rank_method``; returns the evaluated items."""
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        evaluated = list(ex.map(partial(_evaluate, run), results))
+    run.floor_rank, run.floor_rank_method = _ranking_floor(run.floor, run.nf, evaluated, run.ys, run.us, run.split,
+                                                           run.val_logs, run.fs, run.nps)
+    return evaluated
+
+
+def _evaluate(run: _Run, item):
+    """One result's held-out gap and outputs (fast integration; the winner is re-run at full
+    accuracy by :func:`_polish`) and how much the effect itself changes the held-out outputs
+    against its own linear base: ``(spec, model, p, gap_fit, gap, outputs, contribution, base)``."""
+    val_logs, split = run.val_logs, run.split
+    s, m_aug, p, gfit, base = item
+    g, yh = run.pre_eval[id(item)] if id(item) in run.pre_eval else run.held_out(m_aug, fast=True)
+    if base is run.refit or base is run.model:  # already simulated
+        yb = {i: (run.y_ref if base is run.refit else run.y_nom)[i] for i in val_logs}
+    else:
+        yb = {i: run.sims[i].run(base) for i in val_logs}
+    contrib = nrmse([yh[i] for i in val_logs], [yb[i] for i in val_logs],
+                    [split.validation[i] for i in val_logs]) if np.isfinite(g) else float("nan")
+    return s, m_aug, p, gfit, g, yh, contrib, base
+
+
+def _ranked_candidates(run: _Run, evaluated: list) -> list:
+    """The evaluated results as candidates (vanished when their effect changes the held-out
+    outputs less than the ranking floor), the refit as ``parameter_mismatch``, ranked by the
+    penalised held-out gap, a richer candidate moved ahead of one it nests when its gain is
+    significant (:func:`_nested_order`). Sets ``k_before``, ``nested_t``; returns the list of
+    ``(Candidate, model, held-out outputs, spec, p, base)``."""
+    key, floor_rank, lin, refit = run.key, run.floor_rank, run.lin, run.refit
+    k_before = key(run.gap_before, 0)
+    run.k_before = k_before
     cands = []  # (Candidate, model, held-out outputs, spec, p)
     for s, m_aug, p, gfit, g, yh, contrib, base in evaluated:
         reason = s.vanishes(p)
@@ -1347,89 +1414,128 @@ def _rank_candidates(run: _Run, *, workers) -> None:
         c = Candidate(effect=s.effect, where=where, parameters=s.describe(p), gap_after=g, score=expl,
                       gap_fit=gfit, n_parameters=s.n, model_toml=_dumps(m_aug), vanished=reason or "")
         cands.append((c, m_aug, yh, s, p, base))
-    changed = lin.changed(theta)
+    changed = lin.changed(run.theta)
     pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
-    expl_pm = 1.0 - key(gap_refit, 0) / k_before if k_before > 0 else 0.0
+    expl_pm = 1.0 - key(run.gap_refit, 0) / k_before if k_before > 0 else 0.0
     cands.append((Candidate(effect="parameter_mismatch", where={"parameters": changed}, parameters=pm_params,
-                            gap_after=gap_refit, score=expl_pm, gap_fit=g_ref_fit, n_parameters=0,
+                            gap_after=run.gap_refit, score=expl_pm, gap_fit=run.g_ref_fit, n_parameters=0,
                             model_toml=_dumps(refit),
                             vanished="" if changed else "no linear parameter changed by more than 3 %"),
-                  refit, {i: y_ref[i] for i in val_logs}, None, None, refit))
+                  refit, {i: run.y_ref[i] for i in run.val_logs}, None, None, refit))
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
-    run.nested_t = _nested_order(cands, ys, split, val_logs, fs)
+    run.nested_t = _nested_order(cands, run.ys, run.split, run.val_logs, run.fs)
+    return cands
 
-    group_logs = {g[0] for g in groups}
-    cand_bla: dict[int, list | None] = {}
 
-    def bla_of(c):
-        """The BLA per level of a candidate's own simulation on the measured level groups
-        (cached); None when its held-out outputs do not cover every level (multi-log)."""
-        if id(c[0]) not in cand_bla:
-            cand_bla[id(c[0])] = (_bla_levels(us, [c[2].get(i) for i in range(len(ys))], groups, fs, nps, f_s)
-                                  if group_logs <= set(c[2]) else None)
-        return cand_bla[id(c[0])]
+def _bla_of(run: _Run, cache: dict, c):
+    """The BLA per level of a candidate's own simulation on the measured level groups
+    (cached in `cache`); None when its held-out outputs do not cover every level (multi-log)."""
+    if id(c[0]) not in cache:
+        cache[id(c[0])] = (_bla_levels(run.us, [c[2].get(i) for i in range(len(run.ys))], run.groups, run.fs,
+                                       run.nps, run.f_s)
+                           if {g[0] for g in run.groups} <= set(c[2]) else None)
+    return cache[id(c[0])]
 
-    def admissible(c):
-        """Not vanished, and not a linear explanation of a BLA that changes with the level -
-        unless the candidate's own simulation changes with the level the same way (a linear
-        effect inside a nominal with nonlinear parts, such as a controller's saturation)."""
-        if c[0].vanished:
-            return False
-        kind = EFFECT_TABLE[c[0].effect].kind
-        if not (level["flagged"] and kind in ("linear", "reference")):
-            return True
-        if c[0].effect in ("parameter_mismatch", "none") or bla_of(c) is None:
-            return False
-        return not _level_test(f_s, blas, bla_of(c))["flagged"]
 
-    best_i = next((i for i, c in enumerate(cands) if admissible(c)), None)
-    if best_i is not None and not level["flagged"] and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear":
+def _admissible(run: _Run, cache: dict, c) -> bool:
+    """Not vanished, and not a linear explanation of a BLA that changes with the level -
+    unless the candidate's own simulation changes with the level the same way (a linear
+    effect inside a nominal with nonlinear parts, such as a controller's saturation)."""
+    if c[0].vanished:
+        return False
+    kind = EFFECT_TABLE[c[0].effect].kind
+    if not (run.level["flagged"] and kind in ("linear", "reference")):
+        return True
+    if c[0].effect in ("parameter_mismatch", "none") or _bla_of(run, cache, c) is None:
+        return False
+    return not _level_test(run.f_s, run.blas, _bla_of(run, cache, c))["flagged"]
+
+
+def _admissible_best(run: _Run, cands: list, cache: dict) -> int | None:
+    """The index of the first admissible candidate (:func:`_admissible`); without level evidence
+    a nonlinear effect must beat the best admissible linear explanation by :data:`NL_MARGIN`,
+    else that one is the best. None when no candidate is admissible."""
+    key = run.key
+    best_i = next((i for i, c in enumerate(cands) if _admissible(run, cache, c)), None)
+    if best_i is not None and not run.level["flagged"] and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear":
         # without level evidence a nonlinear effect must beat the best linear explanation clearly
-        j = next((i for i, c in enumerate(cands) if admissible(c)
+        j = next((i for i, c in enumerate(cands) if _admissible(run, cache, c)
                   and EFFECT_TABLE[c[0].effect].kind in ("linear", "reference")), None)
         if j is not None and (key(cands[best_i][0].gap_after, cands[best_i][0].n_parameters)
                               > NL_MARGIN * key(cands[j][0].gap_after, cands[j][0].n_parameters)):
             best_i = j
-    # the level evidence enters the ranking: a measured hardening / softening must be reproduced
-    # by the nonlinear verdict's own simulation (its BLA per level, on the same level groups)
-    trend_shifts: dict[str, float] = {}  # the report's record: effect@location -> simulated shift
+    return best_i
 
-    def reproduces_trend(c):
-        if bla_of(c) is None:  # its outputs do not cover every level (multi-log): no evidence
+
+def _reproduces_trend(run: _Run, cache: dict, trend_shifts: dict, c) -> bool:
+    """Whether candidate `c`'s own simulation moves the resonance the way the measured level
+    evidence does (the same mode's shift when the evidence is a mode's, else the line-wise BLA
+    shift), by at least :data:`TREND_SHARE` of it; the simulated shift is recorded in
+    `trend_shifts`. True without evidence (outputs not covering every level)."""
+    if _bla_of(run, cache, c) is None:  # its outputs do not cover every level (multi-log): no evidence
+        return True
+    level, level_ev = run.level, run.level_ev
+    sm = float(level["shift"])
+    md = level.get("modal")
+    if md is not None and md["trend"] == level["trend"]:
+        # the evidence is a mode's shift: the candidate's own simulation, the same mode
+        try:
+            ev_c = level_blas(run.us, [c[2].get(i) for i in range(len(run.ys))], run.all_masks, run.fs,
+                              level_ev.nperseg, f_band=level_ev.f_band, window=level_ev.window)
+        except (ValueError, np.linalg.LinAlgError):
             return True
-        sm = float(level["shift"])
-        md = level.get("modal")
-        if md is not None and md["trend"] == level["trend"]:
-            # the evidence is a mode's shift: the candidate's own simulation, the same mode
-            try:
-                ev_c = level_blas(us, [c[2].get(i) for i in range(len(ys))], all_masks, fs, level_ev.nperseg,
-                                  f_band=level_ev.f_band, window=level_ev.window)
-            except (ValueError, np.linalg.LinAlgError):
-                return True
-            ch, chm = _mode_change(ev_c, md["frequency_hz"]), _mode_change(level_ev_ref, md["frequency_hz"])
-            sc = (ch[0] - (chm[0] if chm else 0.0)) if ch else 0.0
-        else:
-            sc = float(_level_test(f_s, bla_of(c))["shift"])
-        trend_shifts[f"{c[0].effect}@{_where_key(c[0].where)}"] = sc
-        return sc * sm > 0 and abs(sc) >= TREND_SHARE * abs(sm)
+        ch, chm = _mode_change(ev_c, md["frequency_hz"]), _mode_change(run.level_ev_ref, md["frequency_hz"])
+        sc = (ch[0] - (chm[0] if chm else 0.0)) if ch else 0.0
+    else:
+        sc = float(_level_test(run.f_s, _bla_of(run, cache, c))["shift"])
+    trend_shifts[f"{c[0].effect}@{_where_key(c[0].where)}"] = sc
+    return sc * sm > 0 and abs(sc) >= TREND_SHARE * abs(sm)
 
-    if (best_i is not None and level["trend"] in ("hardening", "softening")
-            and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear" and not reproduces_trend(cands[best_i])):
+
+def _best_reproducing_trend(run: _Run, cands: list, best_i, cache: dict) -> tuple[int | None, dict]:
+    """The level evidence enters the ranking: a measured hardening / softening must be reproduced
+    by a nonlinear best's own simulation (its BLA per level, on the same level groups), else the
+    first admissible nonlinear candidate within :data:`TREND_MARGIN` of it that does is the best.
+    Returns ``(best index, the report's record effect@location -> simulated shift)``."""
+    key = run.key
+    trend_shifts: dict[str, float] = {}
+
+    def reproduces(c):
+        return _reproduces_trend(run, cache, trend_shifts, c)
+
+    if (best_i is not None and run.level["trend"] in ("hardening", "softening")
+            and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear" and not reproduces(cands[best_i])):
         kb = key(cands[best_i][0].gap_after, cands[best_i][0].n_parameters)
-        j = next((i for i, c in enumerate(cands) if admissible(c) and EFFECT_TABLE[c[0].effect].kind == "nonlinear"
-                  and key(c[0].gap_after, c[0].n_parameters) <= TREND_MARGIN * kb and reproduces_trend(c)), None)
+        j = next((i for i, c in enumerate(cands) if _admissible(run, cache, c)
+                  and EFFECT_TABLE[c[0].effect].kind == "nonlinear"
+                  and key(c[0].gap_after, c[0].n_parameters) <= TREND_MARGIN * kb and reproduces(c)), None)
         if j is not None:
             best_i = j
-    polish = dict(model=model, lin=lin, lo_l=lo_l, hi_l=hi_l, sims=sims, ys=ys, split=split, fs=fs,
-                  held_out=held_out, key=key, k_before=k_before, floor=floor_rank)
+    return best_i, trend_shifts
+
+
+def _polish_winner(run: _Run, cands: list, best_i) -> dict:
+    """A nonlinear best polished at full accuracy (:func:`_polish`), replaced in `cands`; returns
+    the polishing arguments (used again for a combination)."""
+    polish = dict(model=run.model, lin=run.lin, lo_l=run.lo_l, hi_l=run.hi_l, sims=run.sims, ys=run.ys,
+                  split=run.split, fs=run.fs, held_out=run.held_out, key=run.key, k_before=run.k_before,
+                  floor=run.floor_rank)
     if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:
         cands[best_i] = _polish(cands[best_i], [(cands[best_i][3], cands[best_i][4])], **polish)
-    none_c = (Candidate(effect="none", where={}, parameters={}, gap_after=gap_before, score=0.0,
-                        gap_fit=g_nom_fit, n_parameters=0, model_toml=_dumps(model)), model,
-              {i: y_nom[i] for i in val_logs}, None, None, model)
+    return polish
+
+
+def _verdict(run: _Run, cands: list, best_i) -> tuple[str, list, list]:
+    """``none`` (the nominal's gap within the noise), ``unexplained`` (no admissible candidate, or
+    the best's score below :data:`UNEXPLAINED_SCORE`) or the best candidate's effect (taken out of
+    `cands`): ``(verdict, every candidate in the report's order, the chosen ones)``."""
+    model = run.model
+    none_c = (Candidate(effect="none", where={}, parameters={}, gap_after=run.gap_before, score=0.0,
+                        gap_fit=run.g_nom_fit, n_parameters=0, model_toml=_dumps(model)), model,
+              {i: run.y_nom[i] for i in run.val_logs}, None, None, model)
     chosen = []
-    if none_ok:
+    if run.none_ok:
         verdict = "none"
         ordered = [none_c] + cands
     elif best_i is None or cands[best_i][0].score < UNEXPLAINED_SCORE:
@@ -1440,9 +1546,7 @@ def _rank_candidates(run: _Run, *, workers) -> None:
         ordered = [first] + cands + [none_c]
         chosen = [first]
         verdict = first[0].effect
-    run.timings["validation"] = time.perf_counter() - t
-    run.floor_rank_method, run.k_before, run.cands, run.best_i = floor_rank_method, k_before, cands, best_i
-    run.trend_shifts, run.polish, run.verdict, run.ordered, run.chosen = trend_shifts, polish, verdict, ordered, chosen
+    return verdict, ordered, chosen
 
 
 def _nests(rich, simple) -> bool:
@@ -1489,10 +1593,7 @@ def _select_further_effects(run: _Run, *, workers) -> None:
     more from the delay fitted alone, with the nonlinear candidates screened again on it
     (:func:`_delay_first`, :func:`_screen_on`), and the combination that explains more is kept.
     Updates ``chosen``, ``verdict``, ``ordered``; sets ``shares``."""
-    sims, ys, split, lin, model, lo_l, hi_l = run.sims, run.ys, run.split, run.lin, run.model, run.lo_l, run.hi_l
-    per_class, lin_later, polish = run.per_class, run.lin_later, run.polish
-    held_out, key, k_before, floor_rank = run.held_out, run.key, run.k_before, run.floor_rank
-    gap_before = run.gap_before
+    per_class, polish = run.per_class, run.polish
     chosen, cands, best_i, verdict, ordered = run.chosen, run.cands, run.best_i, run.verdict, run.ordered
     t = time.perf_counter()
     shares = []
@@ -1502,9 +1603,7 @@ def _select_further_effects(run: _Run, *, workers) -> None:
         ``(per_class, screened)`` has them, default as first screened); a combination is
         polished jointly with the linear parameters at full accuracy. Returns ``(chosen, shares)``."""
         pc, scr = screening if screening is not None else (per_class, run.screened)
-        ch, sh = _forward_selection(first, pc, sims, ys, split, held_out, key, k_before, floor_rank, gap_before,
-                                    workers, lin=lin, model=model, lo_l=lo_l, hi_l=hi_l, also=list(lin_later.values()),
-                                    screened=scr)
+        ch, sh = _forward_selection(run, first, pc, scr, workers)
         if len(ch) > 1:
             ch[-1] = _polish(ch[-1], [(c[3], c[4]) for c in ch], **polish)
         return ch, sh
@@ -1777,134 +1876,47 @@ def _where_key(where: dict) -> str:
     return str(where.get("dof") or where.get("side") or "model")
 
 
-def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_before, floor, gap_before, workers,
-                       lin=None, model=None, lo_l=None, hi_l=None, also=(), screened=()):
+def _forward_selection(run: _Run, first, per_class: dict, screened: list, workers):
     """Forward selection of further effects on top of the winner [Ljung 1999, sec. 16.4].
 
     Each other effect class (its best screened location, and the two best classes screened at
     a chosen effect's connection: a joint has friction and a stiffness nonlinearity at once) is
     added to the current augmented model and its own parameters are fitted (screening prefix,
-    coarse integration), then again jointly with the linear parameters of `lin` and the chosen
+    coarse integration), then again jointly with the linear parameters and the chosen
     effects' parameters: a first effect fitted alone bends the linear parameters and its own to
     mimic the second (a spring softened for a clearance, a friction force raised for a stiffening
     spring), and only a joint fit can undo that; the better on the fitting data is kept (the
-    joint fit only when no chosen effect vanishes in it). The
+    joint fit only when no chosen effect vanishes in it) (:func:`_try_addition`). The
     best addition is kept when its penalised held-out excess gap falls below
     :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
-    floor explain); then the next, up to three effects. Returns the chosen candidates
-    (cumulative: the last holds the combined model) and each effect's share of the shrink.
-    `also`: specs tried as additions beyond the four best screened classes (the linear effects
-    that were not fitted alone because the BLA changes with the level), from their own starts."""
+    floor explain) (:func:`_accepted_addition`); then the next, up to three effects. Returns the
+    chosen candidates (cumulative: the last holds the combined model) and each effect's share of
+    the shrink. Besides the four best screened classes of `per_class` (and those of `screened` at
+    a chosen connection), the linear effects that were not fitted alone because the BLA changes
+    with the level (``lin_later``) are tried as additions, from their own starts."""
+    key, k_before, floor = run.key, run.k_before, run.floor_rank
     chosen = [first]
     cur_c, cur_m = first[0], first[1]
     n_par = cur_c.n_parameters
     used = {cur_c.effect}
-    sp = split.screen_prefix
-    shares_g = [gap_before, cur_c.gap_after]
+    also = list(run.lin_later.values())
+    shares_g = [run.gap_before, cur_c.gap_after]
     while len(chosen) < 3:
         if _excess(cur_c.gap_after, floor) <= 0.5 * floor:
             break
-        def free(eff):
-            return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
-
-        cands = [(s_, p_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
-                 if free(eff)][:4]
-        # effects where a chosen one acts (a joint has friction and a stiffness nonlinearity at
-        # once): the best two classes screened at a chosen effect's connection
-        pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
-        have = {id(s_) for s_, _ in cands}
-        near: dict[str, tuple] = {}
-        for s_, p_, g_, b_ in sorted(screened, key=lambda r: r[2]):
-            if (tuple(s_.where.get("between", ())) in pairs and free(s_.effect) and s_.effect not in near
-                    and id(s_) not in have):
-                near[s_.effect] = (s_, p_)
-        cands += list(near.values())[:2]
-        cands += [(s_, None) for s_ in also if s_.effect not in used]
+        cands = _addition_candidates(chosen, used, per_class, screened, also)
         if not cands:
             break
-
-        nl = len(lin) if lin is not None else 0
         chain = [(c[3], c[4]) for c in chosen]
-        def joint_fit(s, x0, nfev, chain=chain):
-            """The added effect's parameters, the chosen effects' and the linear ones fitted
-            together: ``(p, fitting gap, model, linear base, x, chain)``."""
-            sizes = [s_c.n for s_c, _ in chain]
-            offs = np.cumsum([nl] + sizes)
-
-            def build_j(x, s=s):
-                m_ = lin.apply(model, x[:nl])
-                for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:]):
-                    m_ = s_c.apply(m_, x[a_:b_])
-                return s.apply(m_, x[offs[-1]:])
-
-            lo = np.concatenate([lo_l] + [s_c.lower for s_c, _ in chain] + [s.lower])
-            hi = np.concatenate([hi_l] + [s_c.upper for s_c, _ in chain] + [s.upper])
-            x, gj, _ = fit_time_domain(build_j, np.clip(x0, lo, hi), lo, hi,
-                                       sims, ys, split.fit, sp, fast=True, max_nfev=nfev)
-            ch_new = [(s_c, x[a_:b_]) for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:])]
-            return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
-
-        def add(item, cur_m=cur_m):
-            s, p_s = item
-            p0s = [p_s] + list(s.starts[:2]) if p_s is not None else list(s.starts[:3])
-            best = None
-            for p0 in p0s:
-                try:
-                    m0 = s.apply(cur_m, p0)
-                except (ValueError, TypeError):  # e.g. a second clearance where no spring is left
-                    return None
-                yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
-                g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
-                          [m[:n] for m, n in zip(split.fit, sp) if n])
-                if np.isfinite(g) and (best is None or g < best[1]):
-                    best = (p0, g)
-            if best is None:
-                return None
-
-            def build(p, s=s):
-                return s.apply(cur_m, p)
-
-            p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
-                                         max_nfev=4 + 2 * s.n)
-            m_new, base_new, x_j, chp = build(p), chosen[-1][5], None, None
-            if nl:
-                th0 = lin.theta_between(model, chosen[-1][5])
-                try:
-                    x0 = np.concatenate([np.clip(th0, lo_l, hi_l)] + [np.asarray(p_c, float) for _, p_c in chain] + [p])
-                    pj, gj, mj, bj, xj, chj = joint_fit(s, x0, 4)
-                except (ValueError, TypeError):
-                    gj = float("inf")
-                if gj < gfit and not _chain_vanishes(chain, chj):
-                    p, gfit, m_new, base_new, x_j, chp = pj, gj, mj, bj, xj, [p_c for _, p_c in chj]
-            g, yh = held_out(m_new, fast=True)
-            return s, p, m_new, g, yh, gfit, base_new, x_j, chp
-
         with ThreadPoolExecutor(max(1, workers)) as ex:
-            tries = [r for r in ex.map(add, cands) if r is not None]
+            tries = [r for r in ex.map(partial(_try_addition, run, chosen, chain, cur_m), cands) if r is not None]
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:
             break
-        s, p, m_new, g, yh, gfit, base_new, x_j, chp = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
-        k_cur = key(cur_c.gap_after, n_par)
-        if x_j is not None and ADD_FACTOR * k_cur <= key(g, n_par + s.n) < REFINE_FACTOR * k_cur:
-            # promising but not yet significant: the joint fit is carried further before deciding
-            try:
-                pr, gr, mr, br, _, chr_ = joint_fit(s, x_j, 10)
-                if gr < gfit and not _chain_vanishes(chain, chr_):
-                    gh, yhr = held_out(mr, fast=True)
-                    p, gfit, m_new, base_new, g, yh = pr, gr, mr, br, gh, yhr
-                    chp = [p_c for _, p_c in chr_]
-            except (ValueError, TypeError):
-                pass
-        if chp is not None:
-            # the chosen effects were refitted with this one: the addition must beat them refitted
-            # too (without it), not only as they were (a refit alone can close a few per cent)
-            m_wo = base_new
-            for (s_c, _), p_c in zip(chain, chp):
-                m_wo = s_c.apply(m_wo, p_c)
-            k_cur = min(k_cur, key(held_out(m_wo, fast=True)[0], n_par))
-        if not key(g, n_par + s.n) < ADD_FACTOR * k_cur:
+        step = _accepted_addition(run, tries, chain, cur_c, n_par)
+        if step is None:
             break
+        s, p, m_new, g, yh, gfit, base_new, chp = step
         n_par += s.n
         used.add(s.effect)
         if chp is not None:  # the chosen effects as refitted jointly with this one
@@ -1918,6 +1930,129 @@ def _forward_selection(first, per_class, sims, ys, split, held_out, key, k_befor
     total = shares_g[0] - shares_g[-1]
     shares = [float((shares_g[i] - shares_g[i + 1]) / total) if total > 0 else 0.0 for i in range(len(shares_g) - 1)]
     return chosen, shares
+
+
+def _addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list) -> list:
+    """The effects that may join `chosen`, as ``(spec, start p or None)``: the four best other
+    classes of `per_class` (none of a family with a chosen member), the two best classes screened
+    at a chosen effect's connection, and the specs of `also` (from their own starts)."""
+    def free(eff):
+        return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
+
+    cands = [(s_, p_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
+             if free(eff)][:4]
+    # effects where a chosen one acts (a joint has friction and a stiffness nonlinearity at
+    # once): the best two classes screened at a chosen effect's connection
+    pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
+    have = {id(s_) for s_, _ in cands}
+    near: dict[str, tuple] = {}
+    for s_, p_, g_, b_ in sorted(screened, key=lambda r: r[2]):
+        if (tuple(s_.where.get("between", ())) in pairs and free(s_.effect) and s_.effect not in near
+                and id(s_) not in have):
+            near[s_.effect] = (s_, p_)
+    cands += list(near.values())[:2]
+    cands += [(s_, None) for s_ in also if s_.effect not in used]
+    return cands
+
+
+def _joint_chain_fit(run: _Run, chain: list, s, x0, nfev):
+    """The added effect `s`'s parameters, the chosen effects' (`chain`: ``(spec, p)``) and the
+    linear ones fitted together on the screening prefix: ``(p, fitting gap, model, linear base, x,
+    chain refitted)``."""
+    lin, model, split = run.lin, run.model, run.split
+    nl = len(lin)
+    sizes = [s_c.n for s_c, _ in chain]
+    offs = np.cumsum([nl] + sizes)
+
+    def build_j(x, s=s):
+        m_ = lin.apply(model, x[:nl])
+        for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:]):
+            m_ = s_c.apply(m_, x[a_:b_])
+        return s.apply(m_, x[offs[-1]:])
+
+    lo = np.concatenate([run.lo_l] + [s_c.lower for s_c, _ in chain] + [s.lower])
+    hi = np.concatenate([run.hi_l] + [s_c.upper for s_c, _ in chain] + [s.upper])
+    x, gj, _ = fit_time_domain(build_j, np.clip(x0, lo, hi), lo, hi,
+                               run.sims, run.ys, split.fit, split.screen_prefix, fast=True, max_nfev=nfev)
+    ch_new = [(s_c, x[a_:b_]) for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:])]
+    return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
+
+
+def _try_addition(run: _Run, chosen: list, chain: list, cur_m, item):
+    """One addition `item` ``(spec, start p or None)`` to the current model `cur_m`: its best start
+    on the screening prefix, its own parameters fitted, then jointly with the chosen effects and the
+    linear parameters (:func:`_joint_chain_fit`), kept when better and no chosen effect vanishes in
+    it; evaluated on the held-out data. Returns ``(spec, p, model, held-out gap, outputs, gap_fit,
+    linear base, joint x or None, chosen effects' refitted p or None)``, or None when it cannot be
+    built."""
+    sims, ys, split, lin, model = run.sims, run.ys, run.split, run.lin, run.model
+    sp = split.screen_prefix
+    nl = len(lin)
+    s, p_s = item
+    p0s = [p_s] + list(s.starts[:2]) if p_s is not None else list(s.starts[:3])
+    best = None
+    for p0 in p0s:
+        try:
+            m0 = s.apply(cur_m, p0)
+        except (ValueError, TypeError):  # e.g. a second clearance where no spring is left
+            return None
+        yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
+        g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
+                  [m[:n] for m, n in zip(split.fit, sp) if n])
+        if np.isfinite(g) and (best is None or g < best[1]):
+            best = (p0, g)
+    if best is None:
+        return None
+
+    def build(p, s=s):
+        return s.apply(cur_m, p)
+
+    p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
+                                 max_nfev=4 + 2 * s.n)
+    m_new, base_new, x_j, chp = build(p), chosen[-1][5], None, None
+    if nl:
+        th0 = lin.theta_between(model, chosen[-1][5])
+        try:
+            x0 = np.concatenate([np.clip(th0, run.lo_l, run.hi_l)] + [np.asarray(p_c, float) for _, p_c in chain]
+                                + [p])
+            pj, gj, mj, bj, xj, chj = _joint_chain_fit(run, chain, s, x0, 4)
+        except (ValueError, TypeError):
+            gj = float("inf")
+        if gj < gfit and not _chain_vanishes(chain, chj):
+            p, gfit, m_new, base_new, x_j, chp = pj, gj, mj, bj, xj, [p_c for _, p_c in chj]
+    g, yh = run.held_out(m_new, fast=True)
+    return s, p, m_new, g, yh, gfit, base_new, x_j, chp
+
+
+def _accepted_addition(run: _Run, tries: list, chain: list, cur_c, n_par: int):
+    """The best of the `tries` (by penalised held-out gap) when it is significant: a promising
+    joint fit is carried further first (:data:`REFINE_FACTOR`), and where the chosen effects were
+    refitted with it, it must beat them refitted without it too. Returns ``(spec, p, model,
+    held-out gap, outputs, gap_fit, linear base, chosen effects' p or None)`` or None (the
+    selection stops)."""
+    key, held_out = run.key, run.held_out
+    s, p, m_new, g, yh, gfit, base_new, x_j, chp = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
+    k_cur = key(cur_c.gap_after, n_par)
+    if x_j is not None and ADD_FACTOR * k_cur <= key(g, n_par + s.n) < REFINE_FACTOR * k_cur:
+        # promising but not yet significant: the joint fit is carried further before deciding
+        try:
+            pr, gr, mr, br, _, chr_ = _joint_chain_fit(run, chain, s, x_j, 10)
+            if gr < gfit and not _chain_vanishes(chain, chr_):
+                gh, yhr = held_out(mr, fast=True)
+                p, gfit, m_new, base_new, g, yh = pr, gr, mr, br, gh, yhr
+                chp = [p_c for _, p_c in chr_]
+        except (ValueError, TypeError):
+            pass
+    if chp is not None:
+        # the chosen effects were refitted with this one: the addition must beat them refitted
+        # too (without it), not only as they were (a refit alone can close a few per cent)
+        m_wo = base_new
+        for (s_c, _), p_c in zip(chain, chp):
+            m_wo = s_c.apply(m_wo, p_c)
+        k_cur = min(k_cur, key(held_out(m_wo, fast=True)[0], n_par))
+    if not key(g, n_par + s.n) < ADD_FACTOR * k_cur:
+        return None
+    return s, p, m_new, g, yh, gfit, base_new, chp
 
 
 def _chain_vanishes(before, after) -> bool:
