@@ -637,7 +637,7 @@ def _handle_faults(signals: Signals, input, outputs: list, nperseg, notes: list)
     n_valid = int(present.all(axis=0).sum())
     # the automatic nperseg is halved to fit between gaps (_nperseg_for): only a stretch shorter than
     # what it can reach stops the analysis
-    nper_check = nperseg or _nperseg_for(sig, default_nperseg(max(n_valid, 1), sig.fs))
+    nper_check = nperseg or _auto_nperseg(sig, n=max(n_valid, 1))
     found = detect_faults(sig, input=input, nperseg=nper_check)
     faults = tuple(f for f in found if not f.note)
     expected = tuple(f for f in found if f.note)  # gravity, constant outputs: notes, not warnings
@@ -690,7 +690,7 @@ def _plan(sig: Signals, *, input, outputs, nperseg, window, fmin, fmax, estimato
                                              notes=notes)
     fmax_eff = fmax if fmax is not None else 0.4 * sig.fs
     if input:  # the excited band again at the analysed rate
-        fw, P = _quick_welch(sig[input][None], sig.fs, _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs)))
+        fw, P = _quick_welch(sig[input][None], sig.fs, _auto_nperseg(sig))
         lo_x, hi_x = excited_band(fw, P[0])
         band = (max(fmin or 0.0, lo_x), min(fmax_eff, hi_x))
     else:
@@ -704,8 +704,7 @@ def _plan(sig: Signals, *, input, outputs, nperseg, window, fmin, fmax, estimato
                      f"{per.n_periods} periods, score {per.score:.4f}); FRFs period-synchronous "
                      f"(rectangular window over whole periods, the first period dropped)")
     if nperseg is None:
-        nperseg = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs,
-                                                    fmin=fmin or (f_low / 6 if f_low else None)))
+        nperseg = _auto_nperseg(sig, fmin=fmin or (f_low / 6 if f_low else None))
     plan = AnalysisPlan(input=input, outputs=tuple(outputs), fs_in=fs_in, fs=sig.fs, factors=tuple(factors),
                         decimation_reason=reason, fmin=fmin, fmax=fmax_eff, band=tuple(band), f_low=f_low,
                         period=period, nperseg=nperseg, window=window,
@@ -720,7 +719,7 @@ def _band_from_data(sig: Signals, input, outputs, fmin, fmax, notes: list) -> tu
     excited band, without the responses' band (:mod:`vibroscope.modal.selection`)."""
     f_low, band_note = None, None
     if fmax is None or not input:
-        n0 = _nperseg_for(sig, default_nperseg(sig.n_samples, sig.fs))
+        n0 = _auto_nperseg(sig)
         fw, P = _quick_welch(sig.data, sig.fs, n0)
         if input:
             lo_x, hi_x = excited_band(fw, P[0])
@@ -830,6 +829,13 @@ def _identify_refined(sig: Signals, s: IdentifySettings, *, auto: bool, gappy: b
 
 #: units of an acceleration channel (an input in one of them makes a transmissibility)
 _ACCELERATION_UNITS = ("m/s^2", "m/s²", "m s^-2", "g")
+
+
+def _auto_nperseg(sig: Signals, *, n: int | None = None, fmin: float | None = None) -> int:
+    """The automatic segment length, one rule for every look at the data (the fault check, the
+    quick band passes, the plan): :func:`default_nperseg` of `n` samples (default the record's)
+    at the record's rate (lengthened for `fmin`), halved to fit between gaps (:func:`_nperseg_for`)."""
+    return _nperseg_for(sig, default_nperseg(sig.n_samples if n is None else n, sig.fs, fmin=fmin))
 
 
 def _nperseg_for(sig: Signals, nperseg: int) -> int:
