@@ -50,7 +50,7 @@ def test_plan_states_rate_decimation_band_period_segment_and_method(shaker_analy
     lo, hi = plan.band
     assert 1.5 < lo < 2.5 and 14.0 < hi <= plan.fmax  # the multisine's 2-15 Hz lines
     # what the analysis did is what was planned (a periodic input: no refinement of the segment)
-    assert an.settings["nperseg"] == plan.nperseg
+    assert an.settings["nperseg"] == plan.nperseg and plan.nperseg_refined is None
     assert an.settings["band_hz"] == list(plan.band) and an.settings["fmax"] == plan.fmax
     assert an.settings["decimation"] == {"factors": [8], "fs_in": FS, "fs_out": 50.0,
                                          "reason": plan.decimation_reason}
@@ -75,6 +75,23 @@ def demo_log(tmp_path_factory):
     p = tmp_path_factory.mktemp("plan") / "demo.mcap"
     model, _ = make_demo_log(p, duration=30.0)
     return p, model.modes()
+
+
+def test_the_plan_records_the_damping_refinement(demo_log):
+    """The one setting that follows the identified modes: with an input and the automatic segment,
+    the demo's lightly damped modes double nperseg; the plan records the length used and its line
+    says so. A given nperseg is never refined."""
+    from vibroscope.io import read_mcap
+
+    p, _ = demo_log
+    force = "/actuator/force.wrench.force.x"
+    sig = read_mcap(p, [force, *(f"/imu/m{i}.linear_acceleration.x" for i in (1, 2, 3))])
+    auto = analyse_signals(sig, input=force)
+    assert auto.plan.nperseg_refined == auto.settings["nperseg"] > auto.plan.nperseg
+    assert f"nperseg {auto.plan.nperseg} → {auto.plan.nperseg_refined} for the damping" in auto.plan.line()
+    assert summary_dict(auto)["plan"]["nperseg_refined"] == auto.settings["nperseg"]
+    given = analyse_signals(sig, input=force, nperseg=auto.plan.nperseg)
+    assert given.plan.nperseg_refined is None and given.settings["nperseg"] == given.plan.nperseg
 
 
 def test_whole_and_streamed_analyses_are_one_result_type(demo_log):

@@ -29,7 +29,8 @@ __all__ = ["Analysis", "AnalysisPlan", "IdentifySettings", "METHODS", "analyse_s
 @dataclass(frozen=True, kw_only=True)
 class AnalysisPlan:
     """The settings of one analysis, chosen once from the prepared record before the pass that
-    identifies the modes (:func:`analyse_signals`; printed by the report, under ``plan`` in the summary).
+    identifies the modes (:func:`analyse_signals`; printed by the report, under ``plan`` in the summary);
+    only the damping refinement of the segment, which needs the identified modes, is recorded after it.
 
     Attributes
     ----------
@@ -58,8 +59,7 @@ class AnalysisPlan:
         Period in samples (at `fs`) of a periodic input: the FRFs are period-synchronous.
     nperseg : int
         The planned Welch segment length; with an input and the automatic length the
-        identification may refine it for the damping (``Analysis.settings["nperseg"]`` is the
-        length used).
+        identification may refine it for the damping (`nperseg_refined`).
     window : str
         Welch window.
     estimator : str or None
@@ -67,6 +67,12 @@ class AnalysisPlan:
     method : str
         The identification method (the registry's result name, e.g. ``'lscf'``, ``'ssi_cov'``;
         :func:`vibroscope.modal.methods.resolve_method`).
+    nperseg_refined : int or None
+        The segment length the identification refined `nperseg` to for the damping (doubled
+        while an identified mode's half-power band spans fewer than 8 bins); None when it was not
+        refined. The one setting that follows a result of the pass (the identified modes), so it
+        is recorded after it: ``Analysis.plan`` states the length used
+        (``Analysis.settings["nperseg"]``).
     """
 
     input: str | None
@@ -84,6 +90,7 @@ class AnalysisPlan:
     window: str
     estimator: str | None
     method: str
+    nperseg_refined: int | None = None
 
     def decimation_dict(self) -> dict:
         """``Analysis.settings["decimation"]``: ``fs_in``, ``fs_out`` (Hz), ``factors``, ``reason``.
@@ -115,14 +122,17 @@ class AnalysisPlan:
         Returns
         -------
         str
-            ``"plan: 1000 → 250 Hz (factors [4]); band 2–100 Hz, modes in 2–98 Hz; nperseg 2048; ..."``.
+            ``"plan: 1000 → 250 Hz (factors [4]); band 2–100 Hz, modes in 2–98 Hz; nperseg 2048; ..."``
+            (``nperseg 2048 → 8192 for the damping`` when the identification refined it).
         """
         rate = (f"{self.fs_in:g} → {self.fs:g} Hz (factors {list(self.factors)})" if self.factors
                 else f"{self.fs:g} Hz")
         modes = (f"modes below {self.band[1]:.4g} Hz" if self.band[0] is None
                  else f"modes in {self.band[0]:.4g}–{self.band[1]:.4g} Hz")
-        parts = [f"plan: {rate}", f"band up to {self.fmax:.4g} Hz, {modes}",
-                 f"nperseg {self.nperseg}", f"method {self.method}"]
+        nps = f"nperseg {self.nperseg}"
+        if self.nperseg_refined is not None:
+            nps += f" → {self.nperseg_refined} for the damping"
+        parts = [f"plan: {rate}", f"band up to {self.fmax:.4g} Hz, {modes}", nps, f"method {self.method}"]
         if self.f_low is not None:
             parts.append(f"lowest resonance {self.f_low:.4g} Hz")
         if self.period is not None:
@@ -774,7 +784,8 @@ def _decimate_to_band(sig: Signals, fmax, per, *, wanted: bool, decimation: bool
 def _execute(plan: AnalysisPlan, sig: Signals, undecimated: Signals, *, auto_nperseg: bool, gappy: bool, n_modes,
              prominence, method, select, notes: list, faults, expected) -> Analysis:
     """The straight pass of a plan: identification (the automatic segment refined for the damping,
-    :func:`_identify_refined`), the spectra, the severity of the record before any decimation."""
+    :func:`_identify_refined`, recorded in the plan as ``nperseg_refined``), the spectra, the
+    severity of the record before any decimation."""
     from vibroscope import modal
 
     s = IdentifySettings(input=plan.input, outputs=plan.outputs, nperseg=plan.nperseg, window=plan.window,
@@ -782,6 +793,8 @@ def _execute(plan: AnalysisPlan, sig: Signals, undecimated: Signals, *, auto_npe
                          prominence=prominence, method=method, f_low=plan.f_low, band=plan.band,
                          select=None if select is None else tuple(select), period=plan.period)
     G, h, ident, nperseg = _identify_refined(sig, s, auto=auto_nperseg, gappy=gappy, notes=notes)
+    if nperseg != plan.nperseg:  # the damping refinement, recorded in the plan the report prints
+        plan = replace(plan, nperseg_refined=nperseg)
     mm = ident.modes
     psd = G.psd()
     Gout = G.select(list(plan.outputs))
