@@ -36,6 +36,11 @@ class VibroscopeError(Exception):
 class LogFormatError(VibroscopeError):
     """A log file is damaged or not in a supported format (names file and byte offset).
 
+    See Also
+    --------
+    VibroscopeError : The base of every fault the package raises.
+    ChannelError : A channel absent from a log or not decodable.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -55,6 +60,11 @@ class ChannelError(VibroscopeError, KeyError):
     """A requested channel (message path) is absent or cannot be decoded (names topic and field).
 
     Also a :class:`KeyError`, as a missing key of a mapping.
+
+    See Also
+    --------
+    VibroscopeError : The base of every fault the package raises.
+    LogFormatError : A damaged log or one in an unsupported format.
 
     Examples
     --------
@@ -80,6 +90,11 @@ class ModelFileError(VibroscopeError, ValueError):
     """A model file (TOML) is invalid: unknown key, missing DOF, non-physical value (names key and line).
 
     Also a :class:`ValueError`.
+
+    See Also
+    --------
+    VibroscopeError : The base of every fault the package raises.
+    vibroscope.load_model : Reads a model file and raises this error.
 
     Examples
     --------

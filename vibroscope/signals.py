@@ -106,6 +106,12 @@ class Signals:
         If `fs` is not positive and finite, or the number of channel names or units does not
         match the number of rows of `data`, or names repeat.
 
+    See Also
+    --------
+    vibroscope.read_mcap : Signals from an MCAP log.
+    vibroscope.simulate : Signals from a model's simulation.
+    vibroscope.welch : Power spectral densities of the channels.
+
     Examples
     --------
     >>> import numpy as np

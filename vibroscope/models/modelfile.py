@@ -678,6 +678,12 @@ def load_model(path) -> LumpedModel | TransferFunctionModel | PoleResidueModel:
         arrays whose shape is not (n_outputs, n_inputs, 2), ...); the message names
         ``file:line`` and the key.
 
+    See Also
+    --------
+    loads_model : The same from the text of a model file.
+    dumps_model : A model as the text of a model file.
+    vibroscope.simulate : The loaded model's response to an input.
+
     Examples
     --------
     One DOF of 2 kg on a 5e4 N/m spring: its natural frequency is ``sqrt(k/m) / (2 pi)`` =

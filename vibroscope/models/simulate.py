@@ -374,6 +374,11 @@ def simulate(
         Once, if the Newton iteration of the trapezoidal path failed to converge at some
         steps (count in ``meta["newton_failures"]``).
 
+    See Also
+    --------
+    vibroscope.load_model : A model from a model file.
+    vibroscope.models.closed_loop.simulate_closed_loop : The same with controllers closing a loop.
+
     Examples
     --------
     >>> import numpy as np
