@@ -100,20 +100,9 @@ def test_models_offers_every_public_name_of_its_lazy_modules():
             assert name in dir(models)
 
 
-# debt (issue 22): private names still imported from another module; make each public where it is
-# shared, then drop it here. A new one fails the test below, and so does an entry no longer imported.
-KNOWN_PRIVATE_IMPORTS = {
-    ("vibroscope.gap.refine", "vibroscope.gap.fit", "_oversample_for"),
-    ("vibroscope.io.blocks", "vibroscope.io.mcap_read", "_Notes"),
-    ("vibroscope.io.blocks", "vibroscope.io.mcap_read", "_drop_outliers"),
-    ("vibroscope.io.blocks", "vibroscope.io.mcap_read", "_read_topic"),
-    ("vibroscope.io.blocks", "vibroscope.io.mcap_read", "_usable_stamps"),
-    ("vibroscope.io.blocks", "vibroscope.io.timebase", "_snap"),
-    ("vibroscope.modal.automatic", "vibroscope.modal.selection", "_subset"),
-    ("vibroscope.models.simulate", "vibroscope.models.linear_sim", "_dlsim_modal"),
-    ("vibroscope.models.simulate", "vibroscope.models.linear_sim", "_foh"),
-    ("vibroscope.models.simulate", "vibroscope.models.linear_sim", "_triangle_hold_compensation"),
-}
+# private names imported from another module (issue 22 paid this debt: none left). A new one fails the
+# test below, and so does an entry no longer imported.
+KNOWN_PRIVATE_IMPORTS: set[tuple[str, str, str]] = set()
 
 
 def test_no_new_private_name_is_imported_from_another_module():

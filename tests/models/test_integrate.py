@@ -13,7 +13,7 @@ from vibroscope.models._reference_integrator import _Integrator, reference_simul
 from vibroscope.models.elements import Backlash, BoucWen, CubicSpring, Friction, MRDamper
 from vibroscope.models.excitation import band_limited_random
 from vibroscope.models.integrate import flatten_model, integrate
-from vibroscope.models.linear_sim import _dlsim_modal, _foh, _triangle_hold_compensation
+from vibroscope.models.linear_sim import dlsim_modal, foh_equivalent, triangle_hold_compensation
 from vibroscope.models.lumped import Input, LumpedModel, demo_model
 from vibroscope.models.simulate import default_oversample, reconstruct_input, simulate, upsample
 
@@ -108,7 +108,7 @@ def test_saturation_clips_the_reconstructed_input_linear():
     R = 8
     U = np.clip(upsample(u[None], R), -5.0, 5.0)
     A, B, C, D = base.state_matrices()
-    y = _dlsim_modal(*_foh(A, B, C, D, 1.0 / (FS * R)), _triangle_hold_compensation(U), D, U[:, ::R], R)
+    y = dlsim_modal(*foh_equivalent(A, B, C, D, 1.0 / (FS * R)), triangle_hold_compensation(U), D, U[:, ::R], R)
     np.testing.assert_allclose(s.data[1:], y, rtol=0, atol=1e-12 * np.abs(y).max())
     # the kernel on the same saturated linear model agrees (independent discretisation) on
     # the outputs without feedthrough; the driven DOF's acceleration holds D x (clipped force),

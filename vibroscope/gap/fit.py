@@ -41,7 +41,7 @@ __all__ = ["LogSimulator", "best_start", "fit_linear_frf", "fit_time_domain", "f
 SCHEME = "exponential"
 
 
-def _oversample_for(model: LumpedModel, fs: float, fast: bool) -> int:
+def oversample_for(model: LumpedModel, fs: float, fast: bool) -> int:
     """Sub-steps of the exponential scheme: ``max(10, 20 f_max / fs)``, or a coarser
     ``max(5, 8 f_max / fs)`` for screening."""
     try:
@@ -110,7 +110,7 @@ class LogSimulator:
         linear = all(e.is_linear for e in model.elements)
         kw = {}
         # linear models: the exact FOH path at 8 sub-steps; nonlinear: the compiled kernel
-        R = 8 if linear else _oversample_for(model, self.fs, fast)
+        R = 8 if linear else oversample_for(model, self.fs, fast)
         key = (R, n)
         if key not in self._fine:
             self._fine[key] = reconstruct_input(u, self.fs, R)

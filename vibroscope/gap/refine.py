@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from vibroscope.gap.fit import SCHEME, LogSimulator, _oversample_for
+from vibroscope.gap.fit import SCHEME, LogSimulator, oversample_for
 from vibroscope.models.lumped import LumpedModel
 from vibroscope.models.simulate import reconstruct_input
 from vibroscope.models.simulate import simulate as _sim
@@ -80,7 +80,7 @@ class RefineResult:
 
 def _r_for(model: LumpedModel, fs: float, fast: bool) -> int:
     # the sub-steps LogSimulator.run uses
-    return 8 if all(e.is_linear for e in model.elements) else _oversample_for(model, fs, fast)
+    return 8 if all(e.is_linear for e in model.elements) else oversample_for(model, fs, fast)
 
 
 def simulate_with_offsets(sim: LogSimulator, model: LumpedModel, n: int | None = None, *, input_offset=None,

@@ -41,7 +41,7 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 
 from vibroscope.errors import ChannelError, LogFormatError
-from vibroscope.io.timebase import _snap
+from vibroscope.io.timebase import round_rate
 from vibroscope.signals import Signals, block_bounds
 
 __all__ = ["ChunkSpan", "LogGrid", "open_grid", "iter_blocks"]
@@ -390,7 +390,7 @@ class LogGrid:
             If ``i1 <= i0``.
         """
         from vibroscope.io._grid import place_topic
-        from vibroscope.io.mcap_read import _Notes, _read_topic
+        from vibroscope.io.mcap_read import ReadNotes, read_topic
 
         if i1 <= i0:
             raise ValueError(f"{i0=} must be less than {i1=}")
@@ -399,14 +399,14 @@ class LogGrid:
         for k, mp in enumerate(self._parsed):
             by_topic.setdefault(mp.topic, []).append(k)
         log = self._index(self._spans(self.time_of(i0), self.time_of(i1 - 1), list(by_topic)), set(by_topic))
-        notes = _Notes.of_scan(log)
+        notes = ReadNotes.of_scan(log)
         data = np.full((len(self._parsed), n), np.nan)
         fast: dict[str, bool] = {}
         for topic, rows in by_topic.items():
             ids = log.by_topic.get(topic)
             if not ids or not log.count(ids[0]):
                 continue  # nothing of this topic in the block's chunks: NaN
-            got = _read_topic(log, topic, [self._parsed[k].fields for k in rows], notes, False, fast)
+            got = read_topic(log, topic, [self._parsed[k].fields for k in rows], notes, False, fast)
             if got is None:
                 continue
             out, _cov, _res = place_topic(got, self.t0_ns, n, self.fs, first=i0)
@@ -457,7 +457,7 @@ def _first_last(grid: LogGrid, topic: str, cids: set[int], *,
     time by the extraction, which returns both in file order.
     """
     from vibroscope.io._extract import extract
-    from vibroscope.io.mcap_read import _drop_outliers, _Notes, _usable_stamps
+    from vibroscope.io.mcap_read import drop_outliers, ReadNotes, usable_stamps
     from vibroscope.io.timebase import analyse_stamps, fit_stamps
 
     mine = [c for c in grid.chunks if c.channel_ids is None or c.channel_ids & cids]
@@ -469,7 +469,7 @@ def _first_last(grid: LogGrid, topic: str, cids: set[int], *,
         why = []
         for span in spans:
             log = grid._index([span], {topic})
-            notes = _Notes.of_scan(log)
+            notes = ReadNotes.of_scan(log)
             ids = log.by_topic.get(topic)
             if ids:
                 dec, reason = log.decoders.get(log.scan.channels[ids[0]], log.schema(ids[0]))
@@ -477,10 +477,10 @@ def _first_last(grid: LogGrid, topic: str, cids: set[int], *,
                     raise ChannelError(f"{grid.path}: topic {topic!r}: no chunk of it reads: "
                                        f"{log.schema_name(ids[0])}: {reason}")
                 ex = extract(log, ids[0], [mp.fields], notes.skipped, notes.warnings, False)
-                stamps, source = _usable_stamps(topic, ex.stamps, ex.source, ex.log_times, notes)
+                stamps, source = usable_stamps(topic, ex.stamps, ex.source, ex.log_times, notes)
                 # the message indices ride along as the values: the kept stamps' own log times
                 idx = np.arange(stamps.size, dtype=float)[None, :]
-                stamps, idx, n_out = _drop_outliers(topic, stamps, idx, source, ex.log_times, notes)
+                stamps, idx, n_out = drop_outliers(topic, stamps, idx, source, ex.log_times, notes)
                 if stamps.size:
                     order, rep = analyse_stamps(topic, stamps, time_source=source, outliers=n_out)
                     off = (stamps - ex.log_times[idx[0].astype(np.int64)] if source == "header.stamp"
@@ -536,7 +536,7 @@ def _refine_jittered(ta: np.ndarray, tb: np.ndarray, r: float, jit: float, *, sn
         if m <= 0 or span <= 0:
             return r
         r = m / span
-    return _snap(r, 3.0 * jit * (1.0 / rel_a.size + 1.0 / rel_b.size) ** 0.5 / span) if snap else r
+    return round_rate(r, 3.0 * jit * (1.0 / rel_a.size + 1.0 / rel_b.size) ** 0.5 / span) if snap else r
 
 
 def _end_chunks(grid: LogGrid):

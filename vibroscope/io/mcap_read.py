@@ -85,7 +85,7 @@ __all__ = [
 
 
 @dataclass
-class _Notes:
+class ReadNotes:
     """What a read left out (``meta["skipped"]``), has to say (``meta["warnings"]``), dropped
     as outlier stamps (``meta["outliers"]``)."""
 
@@ -95,7 +95,7 @@ class _Notes:
     lost: dict[str, dict]  # topic -> {"messages", "seconds"} lost in damaged or missing chunks
 
     @classmethod
-    def of_scan(cls, log: LogIndex) -> "_Notes":
+    def of_scan(cls, log: LogIndex) -> "ReadNotes":
         """The damage the scan skipped, as skipped entries and warnings."""
         skipped = [{"offset": o, "reason": r} for o, r in log.scan.skipped]
         warnings = list(log.scan.warnings)
@@ -125,7 +125,7 @@ def _index_for(path: str | Path, channels: Sequence[str] | None, progress: bool,
     return log
 
 
-def _automatic_channels(log: LogIndex, notes: _Notes) -> list[str]:
+def _automatic_channels(log: LogIndex, notes: ReadNotes) -> list[str]:
     """The acceleration channels of every readable Imu topic; unreadable Imu topics noted."""
     sel, skip = select_acceleration_channels(log.info())
     for p, r in skip:
@@ -141,7 +141,7 @@ def _automatic_channels(log: LogIndex, notes: _Notes) -> list[str]:
     return sel
 
 
-def _usable_stamps(topic: str, stamps: np.ndarray, source: str, logt: np.ndarray, notes: _Notes):
+def usable_stamps(topic: str, stamps: np.ndarray, source: str, logt: np.ndarray, notes: ReadNotes):
     """(stamps, source): the log times instead of header stamps that are mostly equal, or whose
     clock steps back by more than 10 periods while the log times go on (a clock reset or a jump:
     sorting such stamps would interleave two stretches of the record)."""
@@ -177,8 +177,8 @@ def _usable_stamps(topic: str, stamps: np.ndarray, source: str, logt: np.ndarray
     return stamps, source
 
 
-def _drop_outliers(topic: str, stamps: np.ndarray, vals: np.ndarray, source: str, logt: np.ndarray,
-                   notes: _Notes) -> tuple[np.ndarray, np.ndarray, int]:
+def drop_outliers(topic: str, stamps: np.ndarray, vals: np.ndarray, source: str, logt: np.ndarray,
+                  notes: ReadNotes) -> tuple[np.ndarray, np.ndarray, int]:
     """Stamps, values without the outlier stamps (:func:`outlier_stamps`), reported; and their count."""
     bad = outlier_stamps(stamps, logt if source == "header.stamp" else None)
     nb = int(bad.sum())
@@ -193,8 +193,8 @@ def _drop_outliers(topic: str, stamps: np.ndarray, vals: np.ndarray, source: str
     return stamps[~bad], vals[:, ~bad], nb
 
 
-def _read_topic(log: LogIndex, topic: str, fields: list[tuple[str | int, ...]], notes: _Notes, progress: bool,
-                fast_path: dict[str, bool]) -> TopicSamples | None:
+def read_topic(log: LogIndex, topic: str, fields: list[tuple[str | int, ...]], notes: ReadNotes, progress: bool,
+               fast_path: dict[str, bool]) -> TopicSamples | None:
     """The requested fields of one topic with their time base, or None (noted) when unreadable;
     ``fast_path[topic]`` says whether the numpy fast path decoded it."""
     cids = log.by_topic[topic]
@@ -208,8 +208,8 @@ def _read_topic(log: LogIndex, topic: str, fields: list[tuple[str | int, ...]], 
         notes.warnings.append(f"topic {topic!r} has {len(cids)} channels; reading channel id {cid} only")
     ex = extract(log, cid, fields, notes.skipped, notes.warnings, progress)
     fast_path[topic] = ex.fast
-    stamps, source = _usable_stamps(topic, ex.stamps, ex.source, ex.log_times, notes)
-    stamps, vals, n_out = _drop_outliers(topic, stamps, ex.values, source, ex.log_times, notes)
+    stamps, source = usable_stamps(topic, ex.stamps, ex.source, ex.log_times, notes)
+    stamps, vals, n_out = drop_outliers(topic, stamps, ex.values, source, ex.log_times, notes)
     # stamps are in file (logging) order: out-of-order counts refer to that order
     order, rep = analyse_stamps(topic, stamps, time_source=source, outliers=n_out)
     if stamps.size == 0:
@@ -225,7 +225,7 @@ def _read_topic(log: LogIndex, topic: str, fields: list[tuple[str | int, ...]], 
 
 
 def _drop_unmeasured_axes(by_topic: dict[str, list[int]], rows: dict[int, np.ndarray], parsed: list[MessagePath],
-                          notes: _Notes) -> None:
+                          notes: ReadNotes) -> None:
     """Remove from `rows` an axis that is 0 in every message of a topic whose other axes move."""
     for topic, idxs in by_topic.items():
         zero = [i for i in idxs if i in rows and not np.any(rows[i])]
@@ -236,7 +236,8 @@ def _drop_unmeasured_axes(by_topic: dict[str, list[int]], rows: dict[int, np.nda
                                       "reason": "identically zero in every message (axis not measured)"})
 
 
-def _channels_read(log: LogIndex, parsed: list[MessagePath], rows: dict[int, np.ndarray], notes: _Notes) -> list[int]:
+def _channels_read(log: LogIndex, parsed: list[MessagePath], rows: dict[int, np.ndarray],
+                   notes: ReadNotes) -> list[int]:
     """Indices of the channels read; the others noted as not read. Raises when none was."""
     keep = [i for i in range(len(parsed)) if i in rows]
     if not keep:
@@ -313,7 +314,7 @@ def _output_rate(log: LogIndex, fs: float | None, topics: list[str], reports: di
     return float(fs)
 
 
-def _as_logged(topics: list[str], samples: dict[str, TopicSamples], notes: _Notes) -> tuple[int, dict, dict]:
+def _as_logged(topics: list[str], samples: dict[str, TopicSamples], notes: ReadNotes) -> tuple[int, dict, dict]:
     """(start ns, rows per topic, resampled per topic) taken sample for sample (``resample=False``)."""
     lens = {t: samples[t].t_ns.size for t in topics}
     if len(set(lens.values())) != 1:
@@ -328,14 +329,14 @@ def _as_logged(topics: list[str], samples: dict[str, TopicSamples], notes: _Note
     return int(samples[topics[0]].t_ns[0]), {t: samples[t].values for t in topics}, {t: False for t in topics}
 
 
-def _topic_rows(log: LogIndex, by_topic: dict[str, list[int]], parsed: list[MessagePath], notes: _Notes,
+def _topic_rows(log: LogIndex, by_topic: dict[str, list[int]], parsed: list[MessagePath], notes: ReadNotes,
                 progress: bool, auto: bool):
     """(samples per topic, row per requested channel index, fast path per topic)."""
     samples: dict[str, TopicSamples] = {}
     fast_path: dict[str, bool] = {}
     rows: dict[int, np.ndarray] = {}
     for topic, idxs in by_topic.items():
-        got = _read_topic(log, topic, [parsed[i].fields for i in idxs], notes, progress, fast_path)
+        got = read_topic(log, topic, [parsed[i].fields for i in idxs], notes, progress, fast_path)
         if got is not None:
             samples[topic] = got
             rows.update({i: got.values[k] for k, i in enumerate(idxs)})
@@ -344,7 +345,7 @@ def _topic_rows(log: LogIndex, by_topic: dict[str, list[int]], parsed: list[Mess
     return samples, rows, fast_path
 
 
-def _meta(log: LogIndex, notes: _Notes, reports: dict[str, TimebaseReport], resampled: dict[str, bool],
+def _meta(log: LogIndex, notes: ReadNotes, reports: dict[str, TimebaseReport], resampled: dict[str, bool],
           fast_path: dict[str, bool], start: int, gaps: list[dict], names: list[str], data: np.ndarray) -> dict:
     """``Signals.meta`` of :func:`read_mcap` (keys in the module notes)."""
     return {
@@ -434,7 +435,7 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
     """
     check_read_args(channels, fs, max_memory)
     log = path if isinstance(path, LogIndex) else _index_for(path, channels, progress, max_memory)
-    notes = _Notes.of_scan(log)
+    notes = ReadNotes.of_scan(log)
     auto = channels is None
     parsed = [log.topic_of(c) for c in (_automatic_channels(log, notes) if auto else channels)]
     by_topic: dict[str, list[int]] = defaultdict(list)

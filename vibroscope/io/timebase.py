@@ -359,10 +359,10 @@ def fit_stamps(ts_ns: np.ndarray, dt_s: np.ndarray | None = None) -> StampFit:
         # increment outside the gaps: that mean keeps the short increments of a burst and drops the long
         # ones before it, so it grew with the share of bursty stretches (a log's first seconds read at
         # 160 Hz, the whole log at 100 Hz); the windowed median is the same wherever the log ends
-        return StampFit(fs=_snap(1.0 / tw, 1.5e-9 / max(rel[-1], 1e-300)), period_s=med, median_s=med, jitter_s=jit,
-                        regular=False, gap=isgap, missing=miss)
+        return StampFit(fs=round_rate(1.0 / tw, 1.5e-9 / max(rel[-1], 1e-300)), period_s=med, median_s=med,
+                        jitter_s=jit, regular=False, gap=isgap, missing=miss)
     snap = 3.0 * _slope_se(rel, isgap, jit) / T if np.isfinite(jit) else 0.0
-    fs = _snap(1.0 / T, max(1.5e-9 / max(rel[-1], 1e-300), snap))
+    fs = round_rate(1.0 / T, max(1.5e-9 / max(rel[-1], 1e-300), snap))
     return StampFit(fs=fs, period_s=T, median_s=med, jitter_s=jit, regular=False, gap=isgap, missing=miss)
 
 
@@ -426,7 +426,7 @@ def _slope_se(rel: np.ndarray, isgap: np.ndarray, jit: float) -> float:
     return jit / np.sqrt(sxx) if sxx > 0 else float("inf")
 
 
-def _snap(fs: float, rel_tol: float) -> float:
+def round_rate(fs: float, rel_tol: float) -> float:
     """`fs` rounded to the fewest decimals (0 to 6) within the relative tolerance `rel_tol`."""
     for d in range(0, 7):
         r = round(fs, d)

@@ -459,9 +459,9 @@ def auto_lscf(
                     rejected.append(RejectedMode(float(kept.natural_frequencies[r]), float(kept.damping_ratios[r]),
                                                  f"weak: its peak is {-rel[r]:.0f} dB below the strongest mode's "
                                                  f"(> {min_peak_db:g} dB)"))
-                from vibroscope.modal.selection import _subset
+                from vibroscope.modal.selection import subset_modes
 
-                kept = _subset(kept, np.flatnonzero(~weak))
+                kept = subset_modes(kept, np.flatnonzero(~weak))
                 res = lsfd(frf, kept.natural_frequencies, kept.damping_ratios, fmin=lo, fmax=hi,
                            driving_point=driving_point)
         mm = res.modal_model(driving_point=driving_point)

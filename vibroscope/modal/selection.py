@@ -116,7 +116,7 @@ class Selection:
         return f"Selection({self.modes!r}, {len(self.rejected)} rejected)"
 
 
-def _subset(model: ModalModel, keep: np.ndarray) -> ModalModel:
+def subset_modes(model: ModalModel, keep: np.ndarray) -> ModalModel:
     """The modes `keep` (indices) of `model`, with every per-mode ``extra`` array subset too."""
     keep = np.asarray(keep, dtype=int)
     n = len(model)
@@ -398,7 +398,7 @@ def select_modes(
         keep, dups = _drop_duplicates(model, keep, float(resolution_hz), duplicate_bins, duplicate_mac, m)
         out += dups
         duplicate = {"resolution_hz": float(resolution_hz), "bins": duplicate_bins, "mac_min": duplicate_mac}
-    kept = _subset(model, np.array(keep, dtype=int))
+    kept = subset_modes(model, np.array(keep, dtype=int))
     kept = dataclasses.replace(kept, extra={**kept.extra, "stable": np.ones(len(kept), bool)})
     out.sort(key=lambda x: x.natural_frequency)
     criteria = {"band_hz": [fmin, fmax], "damping_range": list(damping_range), "min_mpc": min_mpc,

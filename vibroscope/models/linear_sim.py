@@ -15,7 +15,7 @@ from scipy import linalg, signal
 __all__: list[str] = []
 
 
-def _foh(A, B, C, D, dt):
+def foh_equivalent(A, B, C, D, dt):
     """First-order-hold (triangle-hold) equivalent, as scipy's ``cont2discrete(method='foh')``.
 
     With ``xi = x - G2 u`` the discrete state, ``xi[k+1] = Ad xi[k] + Bd u[k]``,
@@ -32,7 +32,7 @@ def _foh(A, B, C, D, dt):
     return ad, g1 - g2 + ad @ g2, C, D + C @ g2, g2
 
 
-def _triangle_hold_compensation(U: np.ndarray) -> np.ndarray:
+def triangle_hold_compensation(U: np.ndarray) -> np.ndarray:
     """Pre-emphasis ``[-1/12, 7/6, -1/12]`` on the fine grid so that the first-order hold,
     whose response is ``sinc^2(f / F) = 1 - (pi f / F)^2 / 3 + ...``, becomes flat to
     ``O((pi f / F)^4 / 15)`` for a band-limited input (ends: edge values repeated)."""
@@ -40,7 +40,7 @@ def _triangle_hold_compensation(U: np.ndarray) -> np.ndarray:
     return (7.0 / 6.0) * U - (ext[:, :-2] + ext[:, 2:]) / 12.0
 
 
-def _dlsim_modal(Ad, Bd, Cd, Dd, G2, u, D, u_direct, step):
+def dlsim_modal(Ad, Bd, Cd, Dd, G2, u, D, u_direct, step):
     """Outputs ``C x[k step] + D u_direct[k]`` of the FOH recursion ``xi[m+1] = Ad xi[m] + Bd u[m]``
     driven by the fine-grid `u` from rest (``x(0) = 0``, so ``xi[0] = -G2 u[0]``), with
     ``x = xi + G2 u``; the feedthrough uses `u_direct` (the coarse, un-pre-emphasised input).

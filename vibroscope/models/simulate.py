@@ -39,7 +39,7 @@ import numpy as np
 from scipy import signal
 
 from vibroscope.models.integrate import integrate
-from vibroscope.models.linear_sim import _dlsim_modal, _foh, _triangle_hold_compensation
+from vibroscope.models.linear_sim import dlsim_modal, foh_equivalent, triangle_hold_compensation
 from vibroscope.models.lumped import UNITS, LumpedModel
 from vibroscope.models.resample import decimate_fir, upsample
 from vibroscope.signals import Signals
@@ -433,8 +433,8 @@ def simulate(
     u_app = _applied_samples(model, u, U_app, fs, R)
     if method == "linear":
         A, B, C, D = model.state_matrices()
-        Uc = _triangle_hold_compensation(U_app) if R > 1 and upsampling != "linear" else U_app
-        y = _dlsim_modal(*_foh(A, B, C, D, 1.0 / (fs * R)), Uc, D, U_app[:, ::R], R)
+        Uc = triangle_hold_compensation(U_app) if R > 1 and upsampling != "linear" else U_app
+        y = dlsim_modal(*foh_equivalent(A, B, C, D, 1.0 / (fs * R)), Uc, D, U_app[:, ::R], R)
         meta = {"simulator": "foh-exact", "oversample": R, "upsampling": upsampling, "model": model.name}
     else:
         res = integrate(model, U_app, 1.0 / (fs * R), warn=False, scheme=scheme)
