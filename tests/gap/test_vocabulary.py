@@ -187,3 +187,19 @@ def test_candidate_json_holds_its_model_file_and_the_vanishing_reason():
     d = c.to_dict()
     assert d["model_toml"] == "x = 1\n" and d["vanished"] == "delay below half a sample"
     assert Candidate(effect="none", where={}, parameters={}, gap_after=0.1, score=0.0).to_dict()["vanished"] is None
+
+
+@pytest.mark.parametrize("trend", ["hardening", "softening", None])
+def test_cubic_spring_starts_span_its_decades_and_both_signs(trend):
+    """The cubic spring's starts (k3 = q k / d_rms^2) span q = 0.03 ... 20 and the softening
+    -0.03, -0.15. They were made unique to 0.1 % of the range [-0.5, 300], i.e. 0.3: beside a
+    regressed estimate of 0.0086, 0.03, 0.3, -0.03 and -0.15 were dropped, and a strong
+    hardening spring whose valley is q 0.028 +- 0.005 (seed 3579's case 7) was never reached."""
+    model = chain()
+    sc = scales(model) | ({"level_trend": trend} if trend else {})
+    specs = [s for s in candidate_specs(model, sc) if s.effect == "cubic_stiffness"]
+    assert specs
+    for s in specs:
+        q = sorted(float(p[0]) for p in s.starts)
+        assert {0.03, 0.3, 3.0, 20.0, -0.03, -0.15} <= {round(v, 6) for v in q}, q
+        assert len(q) == len(set(q))

@@ -395,14 +395,18 @@ def _regressed(scales, key) -> list:
             if v is not None]
 
 
-def _starts_1d(values, lo, hi):
-    """Start vectors of a one-parameter effect: unique finite values clipped inside the bounds."""
+def _starts_1d(values, lo, hi, *, relative: bool = False):
+    """Start vectors of a one-parameter effect: unique finite values clipped inside the bounds.
+    Two values are the same start when they differ by less than 0.1 % of the range, or with
+    `relative` (a parameter whose starts span decades, such as a cubic spring's 0.03 ... 20) by
+    less than 0.1 % of their size."""
     out = []
     for v in values:
         if v is None or not np.isfinite(v):
             continue
         v = float(np.clip(v, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo)))
-        if all(abs(v - o[0]) > 1e-3 * (hi - lo) for o in out):
+        tol = (lambda o: 1e-3 * max(abs(v), abs(o))) if relative else (lambda o: 1e-3 * (hi - lo))
+        if all(abs(v - o[0]) > tol(o[0]) for o in out):
             out.append(np.array([v]))
     return out
 
@@ -650,7 +654,7 @@ def _cubic_stiffness(model, scales):
         q_est = [e * d_rms**2 / k_loc for e in ests if e is not None]
         specs.append(EffectSpec(
             effect="cubic_stiffness", where={"between": [pair[0], pair[1]]}, n=1,
-            starts=_starts_1d(q_est + grid, -0.5, 300.0), lower=np.array([-0.5]), upper=np.array([300.0]),
+            starts=_starts_1d(q_est + grid, -0.5, 300.0, relative=True), lower=np.array([-0.5]), upper=np.array([300.0]),
             build=build,
             describe=lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
             character=lambda p: {"character": "hardening" if p[0] >= 0 else "softening"},
