@@ -651,6 +651,10 @@ def _cubic_stiffness(model, scales):
         pos = [0.03, 0.3, 3.0, 20.0]
         neg = [-0.03, -0.15]
         grid = (neg + pos) if trend == "softening" else (pos + neg)
+        # then a grid of about a factor 2 (probed only: the addition of a second effect tries the
+        # first starts): a strong spring's valley is narrow (seed 8484's case 020: 0.19 at the
+        # true q = 0.136, 0.62 at 0.08, 0.85 at 0.3), so starts a decade apart miss it
+        grid += [0.015, 0.06, 0.12, 0.6, 1.2, 6.0, 10.0, 40.0, -0.004, -0.008, -0.015, -0.06]
         q_est = [e * d_rms**2 / k_loc for e in ests if e is not None]
         specs.append(EffectSpec(
             effect="cubic_stiffness", where={"between": [pair[0], pair[1]]}, n=1,
