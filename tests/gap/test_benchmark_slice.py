@@ -323,6 +323,22 @@ def test_a_clipped_input_behind_a_delay_is_found_from_the_delay_first():
     assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
 
 
+def _named_alone_at_its_link(effect: str, seed: int, integrator: str, param: str, value: float):
+    """Regenerate the first 60 s case of class `effect` of `seed` (its truth's `param` checked
+    against `value`), diagnose it, and check that `effect` alone is named at the truth's
+    connection. Returns (truth, report, the effect's best candidate)."""
+    from vibroscope.gap import diagnose
+
+    case = gen.make_case(effect, gen.case_rng(seed, effect, 0), 60.0, integrator=integrator)
+    t = case.truth
+    assert t["parameters"][param] == pytest.approx(value, rel=1e-4)
+    rep = diagnose(case.nominal, case.signals(0))
+    assert rep.verdict == effect and len(rep.verdicts) <= 1, rep.summary()
+    best = next(c for c in rep.candidates if c.effect == effect)
+    assert score._same_pair(best.where["between"], t["where"]["between"]), best.where
+    return t, rep, best
+
+
 @pytest.mark.slow  # one 60 s case generated (LSODA truth) and diagnosed, ~30-60 s
 def test_a_hysteresis_whose_starts_all_fit_worse_than_none_is_still_refined_at_its_link():
     """Seed 2468's hysteresis case (class index 0, the third case of ``--classes coulomb_friction
@@ -333,15 +349,7 @@ def test_a_hysteresis_whose_starts_all_fit_worse_than_none_is_still_refined_at_i
     than 15 % worse, so the hysteresis was never fitted where it is, and an Iwan joint there (its
     softening cousin) was named. The three best locations of each class are now refined: the
     hysteresis is named at its link, below twice the noise floor."""
-    from vibroscope.gap import diagnose
-
-    case = gen.make_case("hysteresis", gen.case_rng(2468, "hysteresis", 0), 60.0, integrator="lsoda")
-    t = case.truth
-    assert t["parameters"]["alpha_N_per_m"] == pytest.approx(10584.3, rel=1e-4)
-    rep = diagnose(case.nominal, case.signals(0))
-    assert rep.verdict == "hysteresis" and len(rep.verdicts) <= 1, rep.summary()
-    best = next(c for c in rep.candidates if c.effect == "hysteresis")
-    assert score._same_pair(best.where["between"], t["where"]["between"]), best.where
+    _, rep, _ = _named_alone_at_its_link("hysteresis", 2468, "lsoda", "alpha_N_per_m", 10584.3)
     assert rep.gap_after < 2.0 * rep.noise_floor, rep.summary()
 
 
@@ -353,15 +361,7 @@ def test_a_strong_hardening_cubic_spring_is_reached_from_its_start_values():
     0.40 at 1.4x); the start q = 0.03 lies in it, but the starts were made unique to 0.3 (0.1 %
     of q's range) and only 0.0086, 3 and 20 were kept, so a hardening Bouc-Wen element was named.
     Now the cubic spring is named with k3 within 15 %, at the noise floor."""
-    from vibroscope.gap import diagnose
-
-    case = gen.make_case("cubic_stiffness", gen.case_rng(3579, "cubic_stiffness", 0), 60.0, integrator="rk4")
-    t = case.truth
-    assert t["parameters"]["k3_N_per_m3"] == pytest.approx(6.7907e10, rel=1e-4)
-    rep = diagnose(case.nominal, case.signals(0))
-    assert rep.verdict == "cubic_stiffness" and len(rep.verdicts) <= 1, rep.summary()
-    best = next(c for c in rep.candidates if c.effect == "cubic_stiffness")
-    assert score._same_pair(best.where["between"], t["where"]["between"]), best.where
+    t, rep, best = _named_alone_at_its_link("cubic_stiffness", 3579, "rk4", "k3_N_per_m3", 6.7907e10)
     assert best.parameters["k3_N_per_m3"] == pytest.approx(t["parameters"]["k3_N_per_m3"], rel=0.15)
     assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
 
