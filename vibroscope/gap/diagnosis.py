@@ -793,6 +793,15 @@ class _Run:
 
 
 @one_blas_thread  # the fits run in a thread pool: a BLAS pool per thread only spins against it
+def _prefix_gap(run: _Run, m) -> float:
+    """nrmse of model `m` on the screening prefix of the fitting data (coarse integration):
+    the measure every start is probed by. May be non-finite."""
+    sp = run.split.screen_prefix
+    yh = [sim.run(m, n, fast=True) if n else None for sim, n in zip(run.sims, sp)]
+    return nrmse([y[:, :n] for y, n in zip(run.ys, sp) if n], [h for h in yh if h is not None],
+                 [mk[:n] for mk, n in zip(run.split.fit, sp) if n])
+
+
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout) -> GapReport:
     run = _prepare_logs(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg, holdout=holdout)
     _simulate_nominal(run)
@@ -1215,8 +1224,6 @@ def _probe(run: _Run, other_base: dict, s):
     """The best start of `s` on the screening prefix, from the refitted and from the nominal
     linear parameters (a nonlinearity shifts the BLA, so the refit can be the wrong base);
     the best start on the other base is kept aside in `other_base` (by the id of the best)."""
-    sims, ys, split = run.sims, run.ys, run.split
-    sp = split.screen_prefix
     per_base = {}
     for base in ((run.refit, run.model) if run.theta.any() else (run.refit,)):
         for p0 in s.starts:
@@ -1224,9 +1231,7 @@ def _probe(run: _Run, other_base: dict, s):
                 m0 = s.apply(base, p0)
             except ValueError:
                 continue
-            yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
-            g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
-                      [m[:n] for m, n in zip(split.fit, sp) if n])
+            g = _prefix_gap(run, m0)
             g = g if np.isfinite(g) else 1e9
             if id(base) not in per_base or g < per_base[id(base)][2]:
                 per_base[id(base)] = (s, np.asarray(p0, float), g, base)
@@ -1708,9 +1713,7 @@ def _screen_on(run: _Run, base, workers) -> tuple[dict, list]:
     nl_specs = [s for s in run.specs if not s.linear]
 
     def gap_of(m):
-        yh = [sim.run(m, n, fast=True) if n else None for sim, n in zip(sims, sp)]
-        g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
-                  [m_[:n] for m_, n in zip(split.fit, sp) if n])
+        g = _prefix_gap(run, m)
         return g if np.isfinite(g) else 1e9
 
     def probe(s):
@@ -1999,9 +2002,7 @@ def _try_addition(run: _Run, chosen: list, chain: list, cur_m, item):
             m0 = s.apply(cur_m, p0)
         except (ValueError, TypeError):  # e.g. a second clearance where no spring is left
             return None
-        yh = [sim.run(m0, n, fast=True) if n else None for sim, n in zip(sims, sp)]
-        g = nrmse([y[:, :n] for y, n in zip(ys, sp) if n], [h for h in yh if h is not None],
-                  [m[:n] for m, n in zip(split.fit, sp) if n])
+        g = _prefix_gap(run, m0)
         if np.isfinite(g) and (best is None or g < best[1]):
             best = (p0, g)
     if best is None:

@@ -405,8 +405,7 @@ def _starts_1d(values, lo, hi, *, relative: bool = False):
         if v is None or not np.isfinite(v):
             continue
         v = float(np.clip(v, lo + 1e-6 * (hi - lo), hi - 1e-6 * (hi - lo)))
-        tol = (lambda o: 1e-3 * max(abs(v), abs(o))) if relative else (lambda o: 1e-3 * (hi - lo))
-        if all(abs(v - o[0]) > tol(o[0]) for o in out):
+        if all(abs(v - o[0]) > 1e-3 * (max(abs(v), abs(o[0])) if relative else hi - lo) for o in out):
             out.append(np.array([v]))
     return out
 
