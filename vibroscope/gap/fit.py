@@ -70,6 +70,26 @@ class LogSimulator:
         self.fs = float(fs)
         self._fine: dict[tuple[int, int], np.ndarray] = {}
 
+    def fine_input(self, R: int, n: int) -> np.ndarray:
+        """The first `n` samples of the input reconstructed at `R` times the rate (cached).
+
+        Parameters
+        ----------
+        R : int
+            Oversampling factor of the integrator.
+        n : int
+            Samples of the log's input.
+
+        Returns
+        -------
+        ndarray, shape (n_inputs, R * n)
+            :func:`~vibroscope.models.simulate.reconstruct_input` of ``u[:, :n]`` (N).
+        """
+        key = (int(R), int(n))
+        if key not in self._fine:
+            self._fine[key] = reconstruct_input(self.u[:, :n], self.fs, R)
+        return self._fine[key]
+
     def run(self, model: LumpedModel, n: int | None = None, *, fast: bool = False) -> np.ndarray:
         """Outputs of `model` (n_outputs, n) for the first `n` samples of the input.
 
@@ -111,10 +131,7 @@ class LogSimulator:
         kw = {}
         # linear models: the exact FOH path at 8 sub-steps; nonlinear: the compiled kernel
         R = 8 if linear else oversample_for(model, self.fs, fast)
-        key = (R, n)
-        if key not in self._fine:
-            self._fine[key] = reconstruct_input(u, self.fs, R)
-        kw["fine_input"] = self._fine[key]
+        kw["fine_input"] = self.fine_input(R, n)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

@@ -119,12 +119,10 @@ def simulate_with_offsets(sim: LogSimulator, model: LumpedModel, n: int | None =
     else:
         R = _r_for(model, sim.fs, fast)
         key = (R, n)
-        if key not in sim._fine:
-            sim._fine[key] = reconstruct_input(sim.u[:, :n], sim.fs, R)
         ones = _ones if _ones is not None else {}
         if key not in ones:
             ones[key] = reconstruct_input(np.ones((1, n)), sim.fs, R)
-        U = sim._fine[key] - u0 * ones[key]
+        U = sim.fine_input(R, n) - u0 * ones[key]
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

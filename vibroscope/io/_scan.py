@@ -91,10 +91,7 @@ from vibroscope.io._scan_result import Block, Damage, ScanResult  # noqa: F401 -
 from vibroscope.io._summary import Summary, index_counts, read_summary
 from vibroscope.io._walk import Scanner, with_loss
 
-# io/blocks.py opens single chunks through these names of this module
-from mcap.records import Schema  # noqa: E402,F401
-from vibroscope.io._chunks import checked as _checked, read_chunk as _read_chunk  # noqa: E402,F401
-from vibroscope.io._index_kernels import index_messages as _index_messages  # noqa: E402,F401
+from mcap.records import Schema  # noqa: E402,F401 - io/blocks.py builds a ScanResult of these
 
 MODES = ("auto", "stream", "indexed")
 _MAX_WORKERS = 8

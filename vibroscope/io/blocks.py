@@ -88,6 +88,8 @@ def _open_chunk(fd: int, span: ChunkSpan):
     file, and its uncompressed size within the ratio limit and half the memory budget
     (:func:`vibroscope.io._scan.check_chunk_size`); decompression never goes beyond it."""
     from vibroscope.io import _scan
+    from vibroscope.io._chunks import checked, read_chunk
+    from vibroscope.io._index_kernels import index_messages
 
     size = os.fstat(fd).st_size
     if not (0 <= span.offset and 9 + 40 <= span.length and span.offset + span.length <= size):
@@ -96,11 +98,11 @@ def _open_chunk(fd: int, span: ChunkSpan):
     rec = _pread(fd, span.length, span.offset)
     if rec[0] != _CHUNK_OP:
         raise ValueError(f"opcode 0x{rec[0]:02x} where a chunk record was expected")
-    chunk = _scan._read_chunk(memoryview(rec), 9, len(rec))
+    chunk = read_chunk(memoryview(rec), 9, len(rec))
     _scan.check_chunk_size(chunk, _scan.memory_budget() // 2)
-    raw = _scan._checked(chunk)  # uncompressed: a view of `rec`, not a copy
+    raw = checked(chunk)  # uncompressed: a view of `rec`, not a copy
     recs: list = []
-    return raw, recs, _scan._index_messages(raw, 0, len(raw), recs, True)
+    return raw, recs, index_messages(raw, 0, len(raw), recs, True)
 
 
 def _summary_plan(path: Path, fh: Any, warnings: list[str] | None = None):

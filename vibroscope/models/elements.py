@@ -748,12 +748,20 @@ class MRDamper(Element):
             n=coeffs.n,
         )
 
-    def _coeffs(self):
+    def coefficients(self) -> tuple[float, float, float]:
+        """``(alpha, c0, c1)`` at the element's current: each ``a + b * current``.
+
+        Returns
+        -------
+        tuple of float
+            ``alpha`` (N/m), ``c0`` and ``c1`` (N s/m), the current-dependent parameters of Spencer et
+            al. (1997).
+        """
         i = self.current
         return self.alpha_a + self.alpha_b * i, self.c0_a + self.c0_b * i, self.c1_a + self.c1_b * i
 
     def _rates(self, d, v, state):
-        alpha, c0, c1 = self._coeffs()
+        alpha, c0, c1 = self.coefficients()
         return spencer_mr_damper_rates(d, v, state[1], state[0], alpha=alpha, c0=c0, c1=c1, k0=self.k0,
                                        gamma=self.gamma, beta=self.beta, A=self.A, n=self.n)
 
@@ -781,7 +789,7 @@ class MRDamper(Element):
         """
         if state is None:
             return self.k1 * d
-        _, _, c1 = self._coeffs()
+        _, _, c1 = self.coefficients()
         ydot, _ = self._rates(d, v, state)
         return c1 * ydot + self.k1 * d
 

@@ -127,7 +127,7 @@ class FlatModel:
 
 
 def _mr_damper_row(e: MRDamper) -> tuple:
-    alpha, c0, c1 = e._coeffs()
+    alpha, c0, c1 = e.coefficients()
     if c0 + c1 <= 0:
         raise ValueError(f"MR damper needs c0 + c1 > 0, got {c0=}, {c1=}")
     return alpha, c0, c1, e.k0, e.k1, e.gamma, e.beta, e.A, e.n

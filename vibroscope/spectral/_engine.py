@@ -302,6 +302,31 @@ class CrossSpectralAccumulator:
         self._tail = x[:, n_seg * step:].astype(float)  # a copy (< nperseg samples)
         return self
 
+    def reserve(self, n_seg: int) -> None:
+        """Allocate the block buffers of a pass over `n_seg` segments now (a threaded pass
+        reserves every thread's before starting them: its peak memory then does not depend on
+        how the threads overlap).
+
+        Parameters
+        ----------
+        n_seg : int
+            Segments the next :meth:`add_segments` call will add.
+        """
+        self._buffers(self._block(int(n_seg)))
+
+    def add_segments(self, buf: np.ndarray, n_seg: int) -> None:
+        """Add the `n_seg` segments that start at ``0, step, ...`` in `buf`, with no carry-over
+        to or from :meth:`update` (a contiguous range of whole segments of a record).
+
+        Parameters
+        ----------
+        buf : ndarray, shape (n_channels, n_samples)
+            ``n_samples >= (n_seg - 1) * step + nperseg``.
+        n_seg : int
+            Segments to add.
+        """
+        self._accumulate(buf, int(n_seg))
+
     def _block(self, n_seg: int) -> int:
         """Segments per block: the FFT input and output of one block within :data:`_BLOCK_BYTES`
         (at least ``n_pairs / (2 n_channels)``, at most :data:`_BLOCK` and `n_seg`)."""

@@ -131,11 +131,11 @@ def _accumulate(data, fs, st, *, cross: bool, workers: int | None, dtype: str = 
     bounds = np.linspace(0, n_seg, workers + 1).astype(int)
     accs = [CrossSpectralAccumulator(n_ch, fs, st, **kw) for _ in range(workers)]
     for k, acc in enumerate(accs):  # block buffers allocated here: a peak independent of the threads' timing
-        acc._buffers(acc._block(int(bounds[k + 1] - bounds[k])))
+        acc.reserve(int(bounds[k + 1] - bounds[k]))
 
     def part(k: int) -> None:
         s0, s1 = int(bounds[k]), int(bounds[k + 1])
-        accs[k]._accumulate(data[:, s0 * st.step : (s1 - 1) * st.step + st.nperseg], s1 - s0)
+        accs[k].add_segments(data[:, s0 * st.step : (s1 - 1) * st.step + st.nperseg], s1 - s0)
 
     with ThreadPoolExecutor(workers) as pool:
         list(pool.map(part, range(workers)))
