@@ -179,7 +179,7 @@ def test_connect_streams_and_analyses_with_the_force(short_log, tmp_path, monkey
     """``--connect``: the live view is a log read block by block, its topics known ahead: the live
     FRFs and the analysis after it take the same force as the input (the viewer is stood in for:
     the call is recorded). ``--output-only``: neither takes it."""
-    import vibroscope.viewers.rerun_live as live
+    import vibroscope.commands._live as live
 
     calls = []
     monkeypatch.setattr(live, "stream_log", lambda log, **kw: calls.append(kw))

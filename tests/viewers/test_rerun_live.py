@@ -298,7 +298,7 @@ def test_analyse_connect_streams_to_a_grpc_server(tmp_path):
 def test_connect_without_a_viewer_is_one_clear_error(tmp_path, capsys):
     from vibroscope.cli import main
     from vibroscope.io import write_ros2_mcap
-    from vibroscope.viewers.rerun_live import stream_log
+    from vibroscope.commands._live import stream_log
 
     sig = Signals(data=_record(2000).data[1:], fs=FS, channels=[f"/imu.linear_acceleration.{c}" for c in "xyz"],
                   units=["m/s^2"] * 3)

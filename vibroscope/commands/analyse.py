@@ -157,8 +157,8 @@ def run(args) -> int:
     figures = None if args.no_figures else (args.figures or default_output(args.log, "analyse", "_figures", args.out))
     check_outputs({"--json": args.json, "--rrd": rrd, "--figures": figures},  # before any work
                   {"log": args.log, "coordinates": args.coords})
-    if live:  # the live view first, read block by block (vibroscope.viewers.rerun_live), then the analysis
-        from vibroscope.viewers.rerun_live import stream_log
+    if live:  # the live view first, read block by block (vibroscope.commands._live), then the analysis
+        from vibroscope.commands._live import stream_log
 
         live_input = grid_input(args.log, args.outputs, args.fs)[0] if looks_for_input(args) else args.input
         try:  # the analysis below takes (and reports) the same force-like input
