@@ -1029,7 +1029,7 @@ def _gather_evidence(run: _Run) -> None:
     resid = ys[fit_log][:, :n_sc] - y_ref[fit_log][:, :n_sc]
     rel_fit = {k: (d[mfit0], v[mfit0]) for k, (d, v) in rel.items()}
     sigs_tests = run_signatures(
-        f=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
+        frequencies=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
         noise_coh=noise_coh, resid=resid[:, mfit0], u=u_fit[mfit0], states={"relative": rel_fit}, fs=fs,
         out_channels=run.out_ch, level_stat=level, input_unit=in_unit, u_unit="N" if closed else in_unit)
     tau = next((s.value for s in sigs_tests if s.name == "phase_slope"), 0.0)

@@ -144,14 +144,14 @@ class LogSimulator:
         return y
 
 
-def frf_residual(model: LumpedModel, f: np.ndarray, H: np.ndarray, w: np.ndarray) -> np.ndarray:
+def frf_residual(model: LumpedModel, frequencies: np.ndarray, H: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Weighted relative complex FRF error ``w (H_model - H) / |H|``, stacked [re, im].
 
     Parameters
     ----------
     model : LumpedModel
         The model; its FRF to the first input is taken in each output's own quantity.
-    f : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
         Frequencies in Hz.
     H : ndarray of complex, shape (n_f, n_outputs)
         Measured FRF to the first input.
@@ -163,12 +163,13 @@ def frf_residual(model: LumpedModel, f: np.ndarray, H: np.ndarray, w: np.ndarray
     ndarray, shape (2 n_f n_outputs,)
         Real parts, then imaginary parts, each raveled.
     """
+    f = frequencies
     Hm = model.frf(f, quantity=None)[:, :, 0]
     r = w * (Hm - H) / np.maximum(np.abs(H), 1e-300)
     return np.concatenate([r.real.ravel(), r.imag.ravel()])
 
 
-def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None, prior: float = 0.02,
+def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_starts=None, prior: float = 0.02,
                    max_nfev: int = 200):
     """Fit linear log-factors `lin` (and a linear effect `spec`'s parameters) to the FRF.
 
@@ -177,7 +178,7 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
     model : LumpedModel
         Start model (nominal).
     lin : LinearParams
-    f : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
         Hz.
     H : ndarray of complex, shape (n_f, n_outputs)
         Measured H1 to the (first) input.
@@ -198,6 +199,7 @@ def fit_linear_frf(model: LumpedModel, lin, f, H, w, *, spec=None, p_starts=None
     -------
     (model, theta, p, cost)
     """
+    f = frequencies
     nl = len(lin)
     scale = math.sqrt(max(w.size, 1))
 

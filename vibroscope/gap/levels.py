@@ -457,12 +457,12 @@ def window_kernel(window: str, nperseg: int, fs: float, *, oversample: int = 8, 
     return m * fs / nfft, wt / wt.sum()
 
 
-def fit_mode(f: np.ndarray, H: np.ndarray, sigma: np.ndarray, f_peak: float, *, kernel=None):
+def fit_mode(frequencies: np.ndarray, H: np.ndarray, sigma: np.ndarray, f_peak: float, *, kernel=None):
     """Natural frequency and damping ratio of one resonance from FRF lines around its peak.
 
     Parameters
     ----------
-    f : ndarray, shape (n_lines,)
+    frequencies : ndarray, shape (n_lines,)
         Hz (at least 5 lines).
     H : ndarray of complex, shape (n_lines,)
         The FRF (any kind: receptance, mobility, accelerance).
@@ -489,6 +489,7 @@ def fit_mode(f: np.ndarray, H: np.ndarray, sigma: np.ndarray, f_peak: float, *, 
     ``(H - model) / sigma`` by nonlinear least squares, the model smoothed by `kernel`. Covariance ``(J^T J)^-1`` scaled by the
     reduced chi-square when above 1 (model error, leakage bias).
     """
+    f = frequencies
     s = 1j * f / f_peak
     L = f.size
     deg = 2 if L >= 8 else 1

@@ -500,13 +500,13 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     return NoiseFloor(nr, "; ".join(sorted(methods)), lv, fb)
 
 
-def locate_bands(f: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray, *, energy: float = 0.8,
+def locate_bands(frequencies: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray, *, energy: float = 0.8,
                  min_share: float = 0.05, max_bands: int = 4) -> tuple[Band, ...]:
     """Frequency bands holding the gap energy above the noise.
 
     Parameters
     ----------
-    f : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
     residual_psd : ndarray, shape (n_f,)
         Pooled (normalised) PSD of measured - nominal.
     noise_psd : ndarray, shape (n_f,)
@@ -524,6 +524,7 @@ def locate_bands(f: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray,
     tuple of Band, by share, largest first: the fewest contiguous bands holding `energy` of the
     excess residual energy, each with at least `min_share`.
     """
+    f = frequencies
     ex = np.maximum(residual_psd - noise_psd, 0.0)
     ex = np.convolve(ex, np.ones(3) / 3, mode="same")
     tot = ex.sum()

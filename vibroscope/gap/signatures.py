@@ -51,14 +51,14 @@ def _corr(a, b) -> float:
     return float(np.sum(a * b) / d) if d > 0 else 0.0
 
 
-def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, resid, u, states, fs,
+def run_signatures(*, frequencies, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, resid, u, states, fs,
                    out_channels, level_stat=None, input_unit: str = "N",
                    u_unit: str = "N") -> tuple[SignatureTest, ...]:
     """The signature tests.
 
     Parameters
     ----------
-    f : ndarray, shape (n_f,)
+    frequencies : ndarray, shape (n_f,)
         Hz (excited band only).
     H_levels : list of ndarray of complex, shape (n_f, n_outputs)
         H1 per input level (lowest first); may be a single entry.
@@ -86,6 +86,7 @@ def run_signatures(*, f, H_levels, level_rms, H_meas, H_refit, coh, noise_coh, r
     u_unit : str, optional
         Unit of `u` (a closed loop's actuator force: N); default 'N'.
     """
+    f = frequencies
     tests = []
     # 1. level dependence of the BLA
     if len(H_levels) >= 2 and level_stat is not None and np.isfinite(level_stat.get("stat", np.nan)):

@@ -343,7 +343,7 @@ def observability_poles(O: np.ndarray, n_ch: int, fs: float) -> tuple[np.ndarray
     return np.abs(mu) / (2 * np.pi), -mu.real / np.abs(mu), (O[:n_ch] @ psi).T
 
 
-def stability_codes(prev, f: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_frequency: float,
+def stability_codes(prev, frequencies: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_frequency: float,
                     tol_damping: float, mac_min: float) -> np.ndarray:
     """Stability code of each pole of one order against its match among the previous order's poles.
 
@@ -359,7 +359,7 @@ def stability_codes(prev, f: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_
     ----------
     prev : (f, z, phi) or None
         Frequencies (Hz), damping ratios and shapes of the previous order's poles.
-    f, z : ndarray, shape (n_poles,)
+    frequencies, z : ndarray, shape (n_poles,)
         This order's frequencies (Hz) and damping ratios.
     phi : ndarray, complex, shape (n_poles, n_points)
         This order's shapes.
@@ -378,6 +378,7 @@ def stability_codes(prev, f: np.ndarray, z: np.ndarray, phi: np.ndarray, *, tol_
     .. [1] E. Reynders, J. Houbrechts and G. De Roeck, "Fully automated (operational) modal
        analysis", Mechanical Systems and Signal Processing 29, 228–250, 2012.
     """
+    f = frequencies
     code = np.zeros(len(f), int)
     if prev is None or not len(prev[0]) or not len(f):
         return code

@@ -54,7 +54,7 @@ class ModalUncertainty:
         return f"ModalUncertainty({np.size(self.frequency_std_hz)} modes, {self.method})"
 
 
-def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarray, *,
+def pair_poles(modes: ModalModel, frequencies: np.ndarray, z: np.ndarray, shapes: np.ndarray, *,
                tol_frequency: float = 0.02, mac_min: float = 0.8) -> tuple[np.ndarray, np.ndarray]:
     """Frequency and damping of the pole that pairs with each mode (NaN when none does).
 
@@ -62,7 +62,7 @@ def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarr
     ----------
     modes : ModalModel
         The reference modes.
-    f, z : ndarray, shape (n_poles,)
+    frequencies, z : ndarray, shape (n_poles,)
         Candidate poles' frequencies (Hz) and damping ratios.
     shapes : ndarray, complex, shape (n_poles, n_points)
         Their shapes at the modes' points.
@@ -75,6 +75,7 @@ def pair_poles(modes: ModalModel, f: np.ndarray, z: np.ndarray, shapes: np.ndarr
     -------
     (f_paired, z_paired) : ndarrays, shape (n_modes,)
     """
+    f = frequencies
     fo = np.full(len(modes), np.nan)
     zo = np.full(len(modes), np.nan)
     if not len(f):

@@ -349,11 +349,11 @@ def plot_gap_time(report, *, fig=None, zoom_s: float = 0.75, max_points: int = 4
     return fig
 
 
-def focus_band(report, f) -> tuple[float, float]:
+def focus_band(report, frequencies) -> tuple[float, float]:
     """The frequency range the gap figures show (Hz): the located bands widened by a factor
     1.6 on each side (a band of at least a tenth of the largest band edge), else the input's
-    excited band, clipped to the frequencies `f` (0 to Nyquist only when nothing is known)."""
-    f = np.asarray(f, dtype=float)
+    excited band, clipped to `frequencies` (Hz; 0 to Nyquist only when nothing is known)."""
+    f = np.asarray(frequencies, dtype=float)
     f0, f1 = (float(f[1]) if f.size > 1 else 0.0), float(f[-1]) if f.size else 1.0
     bands = [b for b in getattr(report, "bands", ()) if np.isfinite(b.fmin) and np.isfinite(b.fmax)]
     if bands:
