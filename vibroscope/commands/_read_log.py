@@ -5,8 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 __all__ = ["analyse_log", "looks_for_input", "grid_input"]
 
 
@@ -55,7 +53,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
     """
     from vibroscope.errors import VibroscopeError
     from vibroscope.io import LogIndex, read_mcap
-    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels, find_force_input
+    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels, find_force_input, moving_channels
     from vibroscope.pipeline import analyse_signals
 
     notes, fallback, source, choice = [], False, log, None
@@ -83,8 +81,7 @@ def analyse_log(log: Path, *, input=None, outputs=None, fs=None, progress=False,
         raise ValueError(f"the log is too short to analyse: {sig.n_samples} samples on the common grid "
                          f"({sig.duration:.3g} s at {sig.fs:g} Hz); at least 16 are needed")
     if fallback:  # automatic non-IMU choice: keep the fields that move, at most MAX_AUTO_CHANNELS
-        finite = {c: sig[c][np.isfinite(sig[c])] for c in outputs}  # NaN marks a gap, not a value
-        moving = [c for c in outputs if finite[c].size and finite[c].max() > finite[c].min()]
+        moving = moving_channels(outputs, [sig[c] for c in outputs])  # NaN marks a gap, not a value
         if len(moving) > MAX_AUTO_CHANNELS:
             notes.append(f"{len(moving) - MAX_AUTO_CHANNELS} varying fields beyond the first {MAX_AUTO_CHANNELS} "
                          f"not analysed (from {moving[MAX_AUTO_CHANNELS]}); choose with --outputs")

@@ -574,7 +574,7 @@ def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
     """
     from vibroscope.io._extract import extract
     from vibroscope.io.log_index import ACCELERATION_TYPES, acceleration_paths
-    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels
+    from vibroscope.io.select import MAX_AUTO_CHANNELS, auto_channels, moving_channels
 
     chans, schemas = grid._channels, grid._schemas
     imu = sorted({ch.topic for ch in chans.values() if ch.schema_id in schemas and ch.topic not in exclude_topics
@@ -589,11 +589,7 @@ def _automatic_channels(grid: LogGrid, exclude_topics: tuple) -> list[str]:
     topic = log.topic_of(sel.channels[0]).topic
     fields = [log.topic_of(c).fields for c in sel.channels]
     vals = np.concatenate([extract(log, cid, fields, [], [], False).values for cid in log.by_topic[topic]], axis=1)
-    moving = []
-    for c, v in zip(sel.channels, vals):
-        v = v[np.isfinite(v)]  # NaN marks a message without the field, not a value
-        if v.size and v.max() > v.min():
-            moving.append(c)
+    moving = moving_channels(sel.channels, vals)  # NaN marks a message without the field, not a value
     if not moving:
         raise ChannelError(f"{grid.path}: no Imu topic, and none of the {len(sel.channels)} measurement fields of "
                            f"{topic} moves in its first and last chunks; choose channels (vibroscope info lists "

@@ -125,8 +125,12 @@ def _index_for(path: str | Path, channels: Sequence[str] | None, progress: bool,
     return log
 
 
-def _automatic_channels(log: LogIndex, notes: ReadNotes) -> list[str]:
-    """The acceleration channels of every readable Imu topic; unreadable Imu topics noted."""
+def _imu_channels(log: LogIndex, notes: ReadNotes) -> list[str]:
+    """The acceleration channels of every readable Imu topic; unreadable Imu topics noted.
+
+    The first case of the commands' automatic choice (:func:`vibroscope.io.select.auto_channels`,
+    :func:`vibroscope.io.log_index.select_acceleration_channels`), the only one a read with no
+    channels makes: a log without an Imu topic is an error that lists its numeric fields."""
     sel, skip = select_acceleration_channels(log.info())
     for p, r in skip:
         if not r.startswith("not an IMU"):
@@ -437,7 +441,7 @@ def read_mcap(path: str | Path | LogIndex, channels: Sequence[str] | None = None
     log = path if isinstance(path, LogIndex) else _index_for(path, channels, progress, max_memory)
     notes = ReadNotes.of_scan(log)
     auto = channels is None
-    parsed = [log.topic_of(c) for c in (_automatic_channels(log, notes) if auto else channels)]
+    parsed = [log.topic_of(c) for c in (_imu_channels(log, notes) if auto else channels)]
     by_topic: dict[str, list[int]] = defaultdict(list)
     for i, mp in enumerate(parsed):
         by_topic[mp.topic].append(i)

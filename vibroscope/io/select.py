@@ -8,7 +8,7 @@ from pathlib import Path
 
 from vibroscope.io.log_index import LogIndex, select_acceleration_channels
 
-__all__ = ["AutoSelection", "auto_channels", "is_bookkeeping", "MAX_AUTO_CHANNELS", "FORCE_TYPES", "ForceInput",
+__all__ = ["AutoSelection", "auto_channels", "moving_channels", "is_bookkeeping", "MAX_AUTO_CHANNELS", "FORCE_TYPES", "ForceInput",
            "FieldInfo", "force_candidates", "find_force_input", "numeric_fields", "nearest_numeric_paths",
            "field_hint"]
 
@@ -32,6 +32,36 @@ _FORCE_NAME = re.compile(r"(^|[^A-Za-z])(force|forces|command|input)([^A-Za-z]|$
 
 #: units of fields that are responses or moments, never a force input
 _NOT_FORCE_UNITS = ("m/s^2", "m/s²", "rad/s", "N m", "N·m", "Nm", "rad", "m", "m/s")
+
+
+def moving_channels(channels, rows) -> list:
+    """The channels of an automatic fallback choice that are kept: those whose values move.
+
+    The second half of the automatic choice of :func:`auto_channels` (its third case returns
+    every field of a topic); the callers then keep at most :data:`MAX_AUTO_CHANNELS` of them.
+
+    Parameters
+    ----------
+    channels : sequence of str
+        Message paths.
+    rows : sequence of array_like
+        Their values, one row per channel (NaN marks a missing sample, not a value).
+
+    Returns
+    -------
+    list of str
+        The channels, in order, whose finite values are not all equal (a channel with no
+        finite value is dropped too).
+    """
+    import numpy as np
+
+    out = []
+    for c, v in zip(channels, rows):
+        v = np.asarray(v, dtype=float)
+        v = v[np.isfinite(v)]
+        if v.size and v.max() > v.min():
+            out.append(c)
+    return out
 
 
 def is_bookkeeping(path: str) -> bool:
