@@ -124,15 +124,15 @@ def test_segment_length_resolves_a_narrow_mode_or_takes_the_period():
 
 
 def test_mode_shift_evidence_less_the_models_own():
-    from vibroscope.gap.diagnosis import _modal_level_test
+    from vibroscope.gap._level_evidence import modal_level_test
 
-    assert _modal_level_test(evidence(0.0, 120.0), None) is None  # a linear system: no shift
-    soft = _modal_level_test(evidence(-2e4, 90.0), None)
+    assert modal_level_test(evidence(0.0, 120.0), None) is None  # a linear system: no shift
+    soft = modal_level_test(evidence(-2e4, 90.0), None)
     assert soft["trend"] == "softening" and soft["shift"] < -0.005 and soft["z"] < -3
     assert soft["frequency_hz"] == pytest.approx(FN, rel=0.02)
     # a model whose own simulation shifts the same way explains the shift: no evidence left
-    assert _modal_level_test(evidence(-2e4, 90.0), evidence(-2e4, 90.0)) is None
-    assert _modal_level_test(evidence(1e5, 60.0), None)["trend"] == "hardening"
+    assert modal_level_test(evidence(-2e4, 90.0), evidence(-2e4, 90.0)) is None
+    assert modal_level_test(evidence(1e5, 60.0), None)["trend"] == "hardening"
 
 
 def test_logs_at_different_levels_are_each_split_and_a_softening_spring_is_found():

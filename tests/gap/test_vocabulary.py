@@ -9,7 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from vibroscope.gap.diagnosis import LEVEL_FRACTION, _level_test, _regression_starts, _relative, _states_model
+from vibroscope.gap._evidence import regression_starts, relative, states_model
+from vibroscope.gap._level_evidence import level_test
+from vibroscope.gap.diagnosis import LEVEL_FRACTION
 from vibroscope.gap.effects import EFFECT_TABLE, VERDICT_WORDS, candidate_specs, connections
 from vibroscope.gap.fit import LogSimulator
 from vibroscope.gap.report import EFFECTS, Candidate
@@ -152,13 +154,13 @@ def test_level_test_flags_a_changing_bla_and_not_a_constant_one():
     def noisy():
         return H + sd * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape))
 
-    same = _level_test(f, [(1.0, noisy(), coh, n_avg), (6.0, noisy(), coh, n_avg)])
+    same = level_test(f, [(1.0, noisy(), coh, n_avg), (6.0, noisy(), coh, n_avg)])
     assert not same["flagged"] and same["stat"] < LEVEL_FRACTION and same["trend"] == "none"
     H_hi = 1.0 / (1 - (f / 43) ** 2 + 0.04j * f / 43)[:, None]  # the resonance 7.5 % higher at 6x the level
-    moved = _level_test(f, [(1.0, noisy(), coh, n_avg), (6.0, H_hi, coh, n_avg)])
+    moved = level_test(f, [(1.0, noisy(), coh, n_avg), (6.0, H_hi, coh, n_avg)])
     assert moved["flagged"] and moved["trend"] == "hardening" and moved["shift"] == pytest.approx(0.075, abs=0.01)
     # one level only: nothing to compare
-    assert not _level_test(f, [(1.0, H, coh, n_avg)])["flagged"]
+    assert not level_test(f, [(1.0, H, coh, n_avg)])["flagged"]
 
 
 def test_residual_regression_recovers_a_friction_force():
@@ -175,9 +177,9 @@ def test_residual_regression_recovers_a_friction_force():
     sim = LogSimulator(u, FS)
     y = sim.run(truth)
     y_lin = sim.run(model)
-    st = sim.run(_states_model(model))
-    rel = _relative(model, st[:2], st[2:])
-    est = _regression_starts(model, rel, [y], [y_lin], 0, u.shape[1], FS, {"coulomb_friction"})
+    st = sim.run(states_model(model))
+    rel = relative(model, st[:2], st[2:])
+    est = regression_starts(model, rel, [y], [y_lin], 0, u.shape[1], FS, {"coulomb_friction"})
     assert est[("coulomb_friction", "m1-ground")] == pytest.approx(3.0, rel=0.35)
 
 

@@ -1,0 +1,305 @@
+"""Stage 4 of the gap diagnosis: the candidate effects fitted.
+
+:func:`fit_candidates`: the linear effects fitted jointly with the linear parameters on the FRF,
+then in time (:func:`fit_linear_effects`); the level-dependent nonlinear effects left out when a
+linear explanation already reaches the noise floor (:func:`stop_at_linear_floor`); the nonlinear
+effects probed at every location from the refitted and the nominal linear parameters, the most
+promising locations refined (:func:`screen_nonlinear`); the best classes fitted jointly with the
+linear parameters (:func:`fit_best_classes_jointly`).
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
+
+import numpy as np
+
+from vibroscope.gap._run import LIN_EFFECT_NFEV, NONE_FACTOR, N_LOCATIONS, OTHER_BASE_FACTOR, Run, prefix_gap, where_key
+from vibroscope.gap.effects import EFFECT_TABLE, candidate_specs
+from vibroscope.gap.fit import best_start, fit_linear_frf, fit_time_domain
+
+
+def fit_candidates(run: Run, *, workers, n_full, progress) -> None:
+    """Stage 4: the candidate effects' fits. Linear effects fitted jointly with the linear
+    parameters on the FRF, then in time; nonlinear effects probed at every location from the
+    refitted and the nominal linear parameters, the most promising locations refined, the best
+    classes fitted jointly with the linear parameters (a family refitted from its member's
+    solution where the member fits better). Sets ``val_logs``, ``none_ok``, ``specs``,
+    ``not_tried``, ``lin_later``, ``results`` (``(spec, augmented model, p, gap_fit, base)``),
+    ``pre_eval``, ``keep_ids``, ``per_class``."""
+    from tqdm.auto import tqdm
+
+    t = time.perf_counter()
+    lin_specs, nl_specs = specs_to_fit(run)
+
+    def n_steps():
+        """Progress steps: every linear and nonlinear spec, and the joint fits of the best classes."""
+        return len(lin_specs) + len(nl_specs) + min(n_full, len({s.effect for s in nl_specs}))
+
+    bar = tqdm(total=n_steps(), desc="gap candidates", disable=not progress, leave=False)
+    results = fit_linear_effects(run, lin_specs, bar, workers)
+    nl_left, pre_eval = stop_at_linear_floor(run, results, nl_specs, workers)
+    if nl_left is not nl_specs:
+        nl_specs = nl_left
+        bar.total = n_steps()
+        bar.refresh()
+    screened = screen_nonlinear(run, nl_specs, bar, workers)
+    per_class, keep_ids = fit_best_classes_jointly(run, screened, results, bar, workers, n_full)
+    done = {r[0].effect for r in results}
+    for s, p, g, base in screened:  # the other classes and locations as screened
+        if s.effect not in done or s is not per_class[s.effect][0]:
+            results.append((s, s.apply(base, p), p, g, base))
+    bar.close()
+    run.timings["candidates"] = time.perf_counter() - t
+    run.results, run.pre_eval, run.keep_ids, run.per_class = results, pre_eval, keep_ids, per_class
+    run.screened = screened
+
+
+def specs_to_fit(run: Run) -> tuple[list, list]:
+    """The candidates to fit: none when the nominal's gap is within the noise, else every
+    effect's specs split into linear and nonlinear; linear effects of a linear model whose BLA
+    changes with the level are not fitted alone (left to the forward selection). Sets
+    ``val_logs``, ``none_ok``, ``specs``, ``not_tried``, ``lin_later``; returns
+    ``(linear specs, nonlinear specs)``."""
+    level, refit = run.level, run.refit
+    run.val_logs = [i for i, m in enumerate(run.split.validation) if m.any()]
+    none_ok = run.gap_before <= NONE_FACTOR * run.floor
+    # within the noise: nothing to explain
+    specs = [] if none_ok else candidate_specs(refit, run.scales, run.effect_set)
+    lin_specs = [s for s in specs if s.linear]
+    nl_specs = [s for s in specs if not s.linear]
+    not_tried: dict[str, str] = {}  # effect -> why its candidates were not fitted
+    lin_later: dict[str, object] = {}  # linear effects not fitted alone, tried by the forward selection
+    if lin_specs and level["flagged"] and not run.closed and refit.is_linear:
+        # a linear effect in a linear model cannot change the BLA with the level: it would be
+        # inadmissible (see admissible()), so it is not fitted
+        for s in lin_specs:
+            not_tried[s.effect] = "the BLA changes with the level, which no linear effect of a linear model does"
+        # alone it cannot be the verdict, but beside a nonlinear effect it can be a second one: the
+        # forward selection tries each such effect's first candidate
+        for s in lin_specs:
+            lin_later.setdefault(s.effect, s)
+        lin_specs = []
+    run.none_ok, run.specs, run.not_tried, run.lin_later = none_ok, specs, not_tried, lin_later
+    return lin_specs, nl_specs
+
+
+def fit_linear_effects(run: Run, lin_specs: list, bar, workers) -> list:
+    """The linear effects fitted on the FRF jointly with the linear parameters (closed loop: the
+    best start on the screening prefix), from the refit and, where the refit closes less than half
+    of the nominal's fitting gap, from the nominal too; the best per effect polished in time
+    (:func:`polish_linear_effect`). Returns the results ``(spec, model, p, gap_fit, base)``."""
+    model, refit, lin, sims, ys, split = run.model, run.refit, run.lin, run.sims, run.ys, run.split
+    best_lin: dict[str, tuple] = {}
+    sp = split.screen_prefix
+    # when the refit closes less than half of the nominal's fitting gap, the refit has bent the
+    # linear parameters towards something they cannot express (a long delay): the linear effects
+    # are fitted from the nominal too
+    lin_bases = [refit] + ([model] if np.any(run.theta) and run.g_ref_fit > 0.5 * run.g_nom_fit else [])
+    for s in lin_specs:
+        for b_ in lin_bases:
+            if run.closed:  # no FRF of the loop to fit: the start that fits the screening prefix best
+                p_s, cost = best_start(lambda p, s=s, b_=b_: s.apply(b_, p), s.starts, sims, ys, split.fit, sp)
+                th_s = np.zeros(len(lin))
+            else:
+                m_s, th_s, p_s, cost = fit_linear_frf(b_, lin, run.f_s, run.H_s, run.w[run.sel], spec=s,
+                                                      p_starts=s.starts, max_nfev=LIN_EFFECT_NFEV)
+            if s.effect not in best_lin or cost < best_lin[s.effect][3]:
+                best_lin[s.effect] = (s, th_s, p_s, cost, b_)
+        bar.update(1)
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        return list(ex.map(partial(polish_linear_effect, run), best_lin.values()))
+
+
+def polish_linear_effect(run: Run, item):
+    """A linear effect's FRF fit polished in time with the linear parameters, on the same
+    (at most 20 s per log) samples as the linear refit."""
+    lin = run.lin
+    s, th_s, p_s, _, b_ = item
+    nl = len(lin)
+
+    def build(x, s=s):
+        return s.apply(lin.apply(b_, x[:nl]), x[nl:])
+
+    x0 = np.concatenate([th_s, p_s])
+    lo = np.concatenate([run.lo_l, s.lower])
+    hi = np.concatenate([run.hi_l, s.upper])
+    x, gfit, _ = fit_time_domain(build, x0, lo, hi, run.sims, run.ys, run.split.fit, run.ns_pol, fast=False,
+                                 max_nfev=6)
+    return s, build(x), x[nl:], gfit, lin.apply(b_, x[:nl])
+
+
+def stop_at_linear_floor(run: Run, results: list, nl_specs: list, workers) -> tuple[list, dict]:
+    """The linear fits checked on the held-out data when there are nonlinear candidates and the
+    BLA does not change with the level: a linear explanation already at the noise floor leaves a
+    level-dependent nonlinear effect nothing it could be told by (the search stops, as 'none'
+    stops it for the nominal model), so those effects are not tried (``not_tried``). Returns
+    ``(the nonlinear specs left, {id(result): (held-out gap, outputs)})``; the list is `nl_specs`
+    itself when nothing was dropped."""
+    pre_eval: dict[int, tuple] = {}  # id(result) -> (held-out gap, outputs), reused in evaluate()
+    if results and nl_specs and not run.level["flagged"]:
+        with ThreadPoolExecutor(max(1, workers)) as ex:
+            for r, ev in zip(results, ex.map(lambda r: run.held_out(r[1], fast=True), results)):
+                pre_eval[id(r)] = ev
+        g_lin = min([run.gap_refit] + [pre_eval[id(r)][0] for r in results if r[0].vanishes(r[2]) is None])
+        floor = run.floor
+        if g_lin <= NONE_FACTOR * floor:
+            for s in nl_specs:
+                if EFFECT_TABLE[s.effect].level_dependent:
+                    run.not_tried[s.effect] = (f"a linear explanation leaves a held-out gap of {g_lin:.3g}, within "
+                                               f"{NONE_FACTOR} x the noise floor {floor:.3g}, and the BLA does not "
+                                               f"change with the level")
+            nl_specs = [s for s in nl_specs if not EFFECT_TABLE[s.effect].level_dependent]
+    return nl_specs, pre_eval
+
+
+def screen_nonlinear(run: Run, nl_specs: list, bar, workers) -> list:
+    """The nonlinear effects screened at every location with the linear parameters at the refit
+    (and the nominal): each location's best start (:func:`probe`), the :data:`N_LOCATIONS` best
+    locations of each class refined (:func:`refine_on_either_base`, the others keep their best
+    start), and a family refined again from its member's solution where the member fits a
+    location better. Returns the screened items ``(spec, p, fitting gap, base)``."""
+    other_base: dict[int, tuple] = {}  # id(best start) -> the best start on the other linear base
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        probed = []
+        for res in ex.map(partial(probe, run, other_base), nl_specs):
+            if res is not None:
+                probed.append(res)
+            bar.update(1)
+        # only the most promising locations of each class (of each form of a class: the Jenkins and
+        # the Iwan joint) are refined (the others keep their best start)
+        by_class: dict[tuple, list] = {}
+        for item in probed:
+            by_class.setdefault((item[0].effect, item[0].where.get("form")), []).append(item)
+        to_refine, kept = [], []
+        for eff, items in by_class.items():
+            items.sort(key=lambda r: r[2])
+            # the probe ranks start values, not locations: at the effect's own connection every
+            # start may still fit worse than none (its valley lies far from the starts), so the
+            # N_LOCATIONS best locations are refined whatever their probed gaps
+            to_refine += items[:N_LOCATIONS]
+            kept += items[N_LOCATIONS:]
+        screened = list(ex.map(partial(refine_on_either_base, run, other_base), to_refine)) + kept
+        # a family never fits worse than a member it contains: where the member (Coulomb friction)
+        # fits a location better than the family (asymmetric friction), the family is refined again
+        # from the member's solution there
+        at = {(it[0].effect, where_key(it[0].where)): it for it in screened}
+        lifts = []
+        for i, (s, p, g, base) in enumerate(screened):
+            mem = at.get((s.lifts_from[0], where_key(s.where))) if s.lifts_from is not None else None
+            if mem is not None and mem[2] < g:
+                p0 = np.clip(s.lifts_from[1](mem[1]), s.lower + 1e-9, s.upper - 1e-9)
+                lifts.append((i, (s, p0, mem[2], mem[3])))
+        for (i, _), res in zip(lifts, ex.map(partial(refine, run), [x[1] for x in lifts])):
+            screened[i] = res
+    return screened
+
+
+def probe(run: Run, other_base: dict, s):
+    """The best start of `s` on the screening prefix, from the refitted and from the nominal
+    linear parameters (a nonlinearity shifts the BLA, so the refit can be the wrong base);
+    the best start on the other base is kept aside in `other_base` (by the id of the best)."""
+    per_base = {}
+    for base in ((run.refit, run.model) if run.theta.any() else (run.refit,)):
+        for p0 in s.starts:
+            try:
+                m0 = s.apply(base, p0)
+            except ValueError:
+                continue
+            g = prefix_gap(run, m0)
+            g = g if np.isfinite(g) else 1e9
+            if id(base) not in per_base or g < per_base[id(base)][2]:
+                per_base[id(base)] = (s, np.asarray(p0, float), g, base)
+    if not per_base:
+        return None
+    best, *alt = sorted(per_base.values(), key=lambda r: r[2])
+    if alt:
+        other_base[id(best)] = alt[0]
+    return best
+
+
+def refine(run: Run, item):
+    """The probed start refined on the screening prefix (effect parameters only)."""
+    s, p0, g0, base = item
+
+    def build(p, s=s, base=base):
+        return s.apply(base, p)
+
+    p, g, _ = fit_time_domain(build, p0, s.lower, s.upper, run.sims, run.ys, run.split.fit, run.split.screen_prefix,
+                              fast=True, max_nfev=4 + 2 * s.n)
+    return (s, p, g, base) if g <= g0 else item
+
+
+def refine_on_either_base(run: Run, other_base: dict, item):
+    """`item` refined, and the best start on the other linear base too when it probed within
+    :data:`OTHER_BASE_FACTOR` of it: the better of the two. (A joint that slips at every level
+    of the logs softens the refit, from which the joint then seems to do nothing; from the
+    nominal its narrow valley is found, as for a modal model identified at a low level.)"""
+    res = refine(run, item)
+    alt = other_base.get(id(item))
+    if alt is not None and alt[2] <= OTHER_BASE_FACTOR * item[2]:
+        res2 = refine(run, alt)
+        if res2[2] < res[2]:
+            return res2
+    return res
+
+
+def fit_best_classes_jointly(run: Run, screened: list, results: list, bar, workers, n_full) -> tuple[dict, set]:
+    """The best location of each class, and the `n_full` best classes fitted jointly with the
+    linear parameters (:func:`fit_joint`); where a member's joint fit is better than its
+    family's (or the family had none), the family is fitted jointly again from the member's
+    joint solution. Appends to `results` (and replaces a family's fit there); returns
+    ``(per_class, ids of the results to keep)``."""
+    lin, model = run.lin, run.model
+    per_class: dict[str, tuple] = {}
+    for s, p, g, base in screened:
+        if s.effect not in per_class or g < per_class[s.effect][2]:
+            per_class[s.effect] = (s, p, g, base)
+    ranked = sorted(per_class.values(), key=lambda r: r[2])
+    full = ranked[:n_full]
+    joint_n = [min(n, max(s_, int(20 * run.fs))) if n else 0 for n, s_ in zip(run.ns_fit, run.split.screen_prefix)]
+    keep_ids = {id(r) for r in results}  # the linear fits
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        for res in ex.map(partial(fit_joint, run, joint_n), full):
+            results.append(res)
+            keep_ids.add(id(res))
+            bar.update(1)
+        # the same after the joint fits: where the member's joint fit (effect and linear parameters)
+        # is better than the family's, or the family had none, the family is fitted jointly again
+        # from the member's joint solution
+        jfit = {(r[0].effect, where_key(r[0].where)): r for r in results if id(r) in keep_ids and not r[0].linear}
+        families = {(s_.lifts_from[0], where_key(s_.where)): s_ for s_, *_ in screened if s_.lifts_from is not None}
+        lifts = []
+        for (eff, wk), r in jfit.items():
+            fam = families.get((eff, wk))
+            if fam is None:
+                continue
+            own = jfit.get((fam.effect, wk))
+            if own is None or own[3] > r[3]:
+                p0 = np.clip(fam.lifts_from[1](r[2]), fam.lower + 1e-9, fam.upper - 1e-9)
+                lifts.append((own, (fam, p0, r[3], r[4]), lin.theta_between(model, r[4])))
+        for (own, _, _), res in zip(lifts, ex.map(lambda a: fit_joint(run, joint_n, a[1], a[2]), lifts)):
+            if own is None or res[3] < own[3]:
+                results[:] = [r for r in results if r is not own]
+                results.append(res)
+                keep_ids.add(id(res))
+    return per_class, keep_ids
+
+
+def fit_joint(run: Run, joint_n: list, item, x_lin=None):
+    """`item` fitted jointly with the linear parameters on `joint_n` samples per log (from
+    `x_lin`, default the refit's or the nominal's, as its base)."""
+    lin, model = run.lin, run.model
+    s, p, _, base = item
+    nl = len(lin)
+
+    def build(x, s=s):
+        return s.apply(lin.apply(model, x[:nl]), x[nl:])
+
+    x0 = np.concatenate([x_lin if x_lin is not None else (run.theta if base is run.refit else np.zeros(nl)), p])
+    lo = np.concatenate([run.lo_l, s.lower])
+    hi = np.concatenate([run.hi_l, s.upper])
+    x, g, _ = fit_time_domain(build, x0, lo, hi, run.sims, run.ys, run.split.fit, joint_n, fast=True, max_nfev=6)
+    return s, build(x), x[nl:], g, lin.apply(model, x[:nl])

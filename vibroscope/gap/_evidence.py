@@ -1,0 +1,216 @@
+"""Stage 3 of the gap diagnosis: the evidence gathered before any candidate is fitted.
+
+:func:`gather_evidence` sets on the :class:`~vibroscope.gap._run.Run` the scales of the
+candidates' start values (the relative motion of every connection, :func:`relative` of the
+states of :func:`states_model`; the input's distribution; an extra mode's start frequencies; the
+residual regressed on each element law's force, :func:`regression_starts`), the BLA's level
+dependence (:mod:`vibroscope.gap._level_evidence`) and the signature tests of the refit's
+residual (:func:`~vibroscope.gap.signatures.run_signatures`).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+from scipy import signal as sps
+
+from vibroscope.gap._level_evidence import bla_levels, level_groups, level_test, modal_level_test
+from vibroscope.gap._run import Run, frf_data, pow2
+from vibroscope.gap.closed_loop import actuator_force, basis_model, basis_rows, is_closed_loop, measured_rows
+from vibroscope.gap.effects import FRICTION_V_EPS, connections, pair_name
+from vibroscope.gap.levels import level_blas
+from vibroscope.gap.signatures import run_signatures
+from vibroscope.models.elements import GROUND, Spring
+from vibroscope.models.lumped import LumpedModel, Output
+
+
+def states_model(model: LumpedModel) -> LumpedModel:
+    """`model` with its outputs replaced by every DOF's displacement, then every DOF's velocity."""
+    outs = tuple(Output(d.name, "displacement", f"/state/{d.name}.x") for d in model.dofs) + tuple(
+        Output(d.name, "velocity", f"/state/{d.name}.v") for d in model.dofs)
+    return replace(model, outputs=outs)
+
+
+def relative(model: LumpedModel, X: np.ndarray, V: np.ndarray) -> dict:
+    """Each connection's relative displacement and velocity from the states `X`, `V`:
+    ``{pair name: (d, v)}``."""
+    out = {}
+    for pair in connections(model):
+        lv = model.element_vector(Spring(pair, k=0.0))
+        out[pair_name(pair)] = (lv @ X, lv @ V)
+    return out
+
+
+def pair_force_model(model: LumpedModel, pair) -> LumpedModel:
+    """`model` with its inputs replaced by a force pair at the ends of `pair`: ``-f`` on the
+    first end, ``+f`` on the second (an element's force); ground ends are left out."""
+    return basis_model(model, [d for d in pair if d != GROUND])
+
+
+def regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
+    """Start values from the residual: each element law's force, computed on the refitted
+    model's relative motion, is applied to the refitted model, and the residual (measured -
+    refitted) is regressed on the responses (a linear-in-the-parameters estimate, Kerschen et
+    al. 2006, sec. 5; NARMAX-like). Returns ``{(effect, pair or None): estimate}``."""
+    from vibroscope.models.simulate import simulate
+
+    out = {}
+    # each channel weighted by its own RMS (the metric of nrmse: channels of any unit alike)
+    wc = 1.0 / np.maximum(np.sqrt(np.mean(ys[fit_log][:, :n] ** 2, axis=1)), 1e-300)[:, None]
+    r = ((ys[fit_log][:, :n] - y_ref[fit_log][:, :n]) * wc).ravel()
+    if not np.all(np.isfinite(r)) or n < 16:
+        return out
+
+    def resp(m, forces):
+        try:
+            s = simulate(m, basis_rows(m, forces), fs)
+            y = measured_rows(m, s) * wc
+            return y.ravel() if np.all(np.isfinite(y)) else None
+        except Exception:  # noqa: BLE001 - a start value only
+            return None
+
+    def ls(cols):
+        A = np.vstack(cols).T
+        sol, *_ = np.linalg.lstsq(A, r, rcond=None)
+        return sol
+
+    for pair in connections(refit):
+        key = pair_name(pair)
+        if key not in rel:
+            continue
+        d, v = rel[key]
+        d, v = d[:n], v[:n]
+        m = pair_force_model(refit, pair)
+        sgn = np.array([-1.0 if e == pair[0] else 1.0 for e in pair if e != GROUND])[:, None]
+        t = np.tanh(v / FRICTION_V_EPS)
+        cols = {}
+        for name, g in (("t", t), ("t2", t * t), ("d3", d**3)):
+            y = resp(m, sgn * g[None, :])
+            if y is not None:
+                cols[name] = y
+        if "t" in cols and ({"coulomb_friction"} & effects):
+            out[("coulomb_friction", key)] = abs(float(ls([cols["t"]])[0]))
+        if "t" in cols and "t2" in cols and ({"asymmetric_friction"} & effects):
+            fa, fd = ls([cols["t"], cols["t2"]])
+            out[("asymmetric_friction", key)] = (abs(fa + fd), abs(fa - fd))
+        if "d3" in cols and ({"cubic_stiffness"} & effects):
+            out[("cubic_stiffness", key)] = float(ls([cols["d3"]])[0])
+    if "offset" in effects and refit.inputs:
+        m = (basis_model(refit, [refit.inputs[0].dof]) if is_closed_loop(refit)
+             else replace(refit, inputs=refit.inputs[:1]))
+        y = resp(m, np.ones((1, n)))
+        if y is not None:
+            out[("offset", None)] = float(ls([y])[0])
+    return out
+
+
+def gather_evidence(run: Run) -> None:
+    """Stage 3: the scales of the candidates' start values (motion and input distributions,
+    extra-mode start frequencies, residual regressions), the BLA's level dependence (line-wise
+    and per resonance) and the signature tests of the refit's residual. Sets ``f_s``, ``H_s``,
+    ``scales``, ``groups``, ``blas``, ``level``, ``level_ev``, ``level_ev_ref``,
+    ``sigs_tests``."""
+    model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
+    closed, window, refit, y_ref, y_nom = run.closed, run.window, run.refit, run.y_ref, run.y_nom
+    ns_fit, fd, sel, w, nf, all_masks, in_unit = run.ns_fit, run.fd, run.sel, run.w, run.nf, run.all_masks, run.in_unit
+    f, H, coh, _, _ = fd
+    t = time.perf_counter()
+    # the scales, start values and signatures come from the fitting log of the highest input
+    # level (several logs at different levels): an effect that grows with the level shows most there
+    fit_logs = [i for i, n in enumerate(ns_fit) if n]
+    fit_log = max(fit_logs, key=lambda i: float(np.mean(us[i][0, split.fit[i]] ** 2)) if split.fit[i].any() else 0.0)
+    n_sc = ns_fit[fit_log]
+    scales: dict = {"fs": fs}
+    rels = []
+    for base in (refit, model):
+        st = sims[fit_log].run(states_model(base), n_sc)
+        nd = base.n_dofs
+        rels.append(relative(base, st[:nd], st[nd:2 * nd]))
+    rel = rels[0]
+    # the input-side scales are forces (closed loop: the actuator's, gain x command)
+    u_force = [actuator_force(model, u, y, fs) for u, y in zip(us, ys)]
+    u_fit = u_force[fit_log][:n_sc]
+    # the input's distribution over every fitting sample of every log (several logs at different
+    # levels: a limit is sought among all the levels the fit sees)
+    au = np.abs(np.concatenate([uf[m_[:uf.size]] for uf, m_ in zip(u_force, split.fit) if m_.any()]))
+    mfit0 = split.fit[fit_log][:n_sc]
+    scales.update({
+        "u_rms": float(np.sqrt(np.mean(u_fit**2))),
+        "u_max": float(au.max()),
+        "u_quantiles": [float(np.quantile(au, q)) for q in (0.999, 0.99, 0.95, 0.85, 0.7, 0.5)],
+        "u_abs_sorted": np.sort(np.abs(np.concatenate(u_force))),
+        # the larger of the refitted and the nominal model's motion (a strong nonlinearity makes
+        # the refit's the wrong scale)
+        "d_rms": {k: float(max(np.std(d[mfit0]), np.std(rels[1][k][0][mfit0]))) for k, (d, v) in rel.items()},
+        "v_rms": {k: float(max(np.std(v[mfit0]), np.std(rels[1][k][1][mfit0]))) for k, (d, v) in rel.items()},
+        "d_quantiles": {k: [float(np.quantile(np.abs(d[mfit0]), q)) for q in (0.5, 0.8, 0.95)] for k, (d, v) in rel.items()},
+    })
+    f_s, H_s, coh_s = f[sel], H[sel], coh[sel]
+
+    def model_frf(m_, y_m):
+        """The model's FRF to the first input: the open plant's, or (closed loop) the H1 of its
+        simulation `y_m` under the logged references on the fitting samples."""
+        if closed:
+            return frf_data(us, y_m, split.fit, fs, nps, window)[1][sel]
+        return m_.frf(f_s, quantity=None)[:, :, 0]
+
+    H_refit = model_frf(refit, y_ref)
+    # start frequencies of an extra mode: where measured / model deviates most significantly
+    # (deviation in dB times the coherence weight), against the refitted and the nominal model
+    starts: list[float] = []
+    for ref_m, y_m in ((refit, y_ref), (model, y_nom)):
+        Hr = model_frf(ref_m, y_m)
+        rt = H_s / np.where(np.abs(Hr) > 0, Hr, 1)
+        dev = np.mean(np.abs(20 * np.log10(np.maximum(np.abs(rt), 1e-300))) * w[sel], axis=1)
+        pk, props = sps.find_peaks(dev, prominence=0.05 * max(float(dev.max()), 1e-12))
+        order = np.argsort(props["prominences"])[::-1] if pk.size else []
+        for i in order[:3]:
+            fc = float(f_s[pk[i]])
+            if all(abs(fc - o) > 0.03 * o for o in starts):
+                starts.append(fc)
+    scales["f_extra"] = starts
+    # levels (within and across logs) and level-wise H1: the BLA's level dependence
+    groups = level_groups(us, all_masks, fs)
+    blas = bla_levels(us, ys, groups, fs, nps, f_s)
+    # against the refitted model's own level dependence on the same groups (noise-free)
+    level = level_test(f_s, blas, bla_levels(us, y_ref, groups, fs, nps, f_s))
+    level["evidence"] = "lines" if level["flagged"] else None
+    # the resonances per level (the report's level evidence), against the refitted model's own
+    level_ev, level_ev_ref = None, None
+    if len(groups) >= 2:
+        np_ev = pow2(min(nps, max(min(int(np.sum(g[1])) for g in groups) // 4, 256)))
+        try:
+            level_ev = level_blas(us, ys, all_masks, fs, np_ev, f_band=tuple(nf.excited_band), input_unit=in_unit)
+            level_ev_ref = level_blas(us, y_ref, all_masks, fs, np_ev, f_band=tuple(nf.excited_band),
+                                      window=level_ev.window, input_unit=in_unit)
+        except (ValueError, np.linalg.LinAlgError):  # evidence only: the diagnosis goes on without it
+            pass
+    modal_level = modal_level_test(level_ev, level_ev_ref)
+    if modal_level is not None:
+        level["modal"] = modal_level
+        if not level["flagged"] or level["trend"] == "none":
+            level.update(flagged=True, trend=modal_level["trend"], shift=modal_level["shift"],
+                         evidence=level["evidence"] or "modes")
+    scales["level_trend"] = level["trend"]
+    H_lv = [b[1] for b in blas]
+    lv_rms = [b[0] for b in blas]
+    # coherence that the noise floor alone would leave (output PSDs of the fitting data, fd[3])
+    noise_coh = np.clip(1 - nf.psd_level[None, :] / np.maximum(fd[3][sel], 1e-300), 0, 1)
+    resid = ys[fit_log][:, :n_sc] - y_ref[fit_log][:, :n_sc]
+    rel_fit = {k: (d[mfit0], v[mfit0]) for k, (d, v) in rel.items()}
+    sigs_tests = run_signatures(
+        frequencies=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
+        noise_coh=noise_coh, resid=resid[:, mfit0], u=u_fit[mfit0], states={"relative": rel_fit}, fs=fs,
+        out_channels=run.out_ch, level_stat=level, input_unit=in_unit, u_unit="N" if closed else in_unit)
+    tau = next((s.value for s in sigs_tests if s.name == "phase_slope"), 0.0)
+    scales["delay0"] = float(min(max(tau, 1e-4), 0.05))
+    n_reg = min(n_sc, int(20 * fs))
+    scales["regress"] = regression_starts(refit, rel, ys, y_ref, fit_log, n_reg, fs, run.effect_set)
+    if np.any(run.theta):  # the nominal's residual too: a strong nonlinearity bends the refit
+        scales["regress_nominal"] = regression_starts(model, rels[1], ys, y_nom, fit_log, n_reg, fs,
+                                                       run.effect_set & {"coulomb_friction", "cubic_stiffness"})
+    run.timings["signatures"] = time.perf_counter() - t
+    run.f_s, run.H_s, run.scales, run.groups, run.blas, run.level = f_s, H_s, scales, groups, blas, level
+    run.level_ev, run.level_ev_ref, run.sigs_tests = level_ev, level_ev_ref, sigs_tests

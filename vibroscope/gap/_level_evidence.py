@@ -1,0 +1,164 @@
+"""The level evidence of the gap diagnosis: does the best linear approximation (BLA) change
+with the excitation level beyond its own uncertainty and beyond what the model itself predicts?
+
+:func:`level_groups` groups the samples of the logs by excitation level, :func:`bla_levels`
+estimates the H1 of each group, :func:`level_test` tests its change from the lowest to the
+highest level line by line (Bendat & Piersol), and :func:`modal_level_test` the change of each
+resonance's natural frequency (:func:`~vibroscope.gap.levels.level_blas`, :func:`mode_change`).
+Used on the measured data (:mod:`vibroscope.gap._evidence`) and on a candidate's own simulation
+(:mod:`vibroscope.gap._ranking`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vibroscope.gap._run import LEVEL_FRACTION, LEVEL_MODE_CHANGE, LEVEL_MODE_Z, frf_data, pow2
+from vibroscope.gap.measure import LOG_LEVEL_RATIO, input_levels
+
+
+def level_groups(us, masks, fs):
+    """Excitation-level groups across logs: ``(log, sample mask, input RMS)``, lowest first.
+
+    Within a log, the levels of :func:`~vibroscope.gap.measure.input_levels`; across logs, a
+    log's groups are taken as they are (several logs at different levels are levels)."""
+    groups = []
+    for i, (u, m) in enumerate(zip(us, masks)):
+        if not m.any():
+            continue
+        labels, lv = input_levels(u, fs)
+        for k in range(len(lv)):
+            mk = m & (labels == k)
+            if mk.sum() > 0:
+                groups.append((i, mk, float(np.sqrt(np.mean(u[0, mk] ** 2)))))
+    groups.sort(key=lambda g: g[2])
+    return groups
+
+
+def bla_levels(us, ys, groups, fs, nperseg, f_sel):
+    """H1 (n_sel, n_out), coherence and averages per level group, interpolated on `f_sel`."""
+    out = []
+    for i, mk, rms in groups:
+        runs = np.diff(np.nonzero(np.diff(np.concatenate([[False], mk, [False]]).astype(int)) != 0)[0])[::2]
+        # segments of about half a typical stretch of the level: more averages, a tighter H1
+        typical = int(np.median(runs)) if runs.size else 0
+        nps = pow2(min(nperseg, max(typical // 2, 256)))
+        d = frf_data([us[i]], [ys[i]], [mk], fs, nps)
+        if d is None:
+            continue
+        f, H, coh, _, n_avg = d
+        Hi = np.array([np.interp(f_sel, f, H[:, c].real) + 1j * np.interp(f_sel, f, H[:, c].imag)
+                       for c in range(H.shape[1])]).T
+        ci = np.array([np.interp(f_sel, f, coh[:, c]) for c in range(H.shape[1])]).T
+        out.append((rms, Hi, ci, n_avg))
+    return out
+
+
+def level_test(f, blas, blas_model=None):
+    """Does the BLA change with the excitation level beyond its own uncertainty (and beyond what
+    the model itself predicts)?
+
+    Per line and output, ``z^2 = |H_hi - H_lo - (M_hi - M_lo)|^2 / (var_hi + var_lo)``, where
+    ``M`` is the BLA of the model's own simulation on the same level groups (`blas_model`; zero
+    when not given): the change a known nonlinearity of the model (a controller's saturation)
+    or the estimator's leakage at each level explains is not evidence. The H1 variance is
+    ``|H|^2 (1 - gamma^2) / (n_d gamma^2)`` (Bendat & Piersol, *Random Data*, 4th ed., eq.
+    9.90: nonlinear distortion counts as noise there, so the test is conservative); the
+    statistic is the fraction of the well-excited lines (coherence >= 0.5 at both levels)
+    with ``z > 3`` (about 1e-4 for a linear system: ``z^2`` is ``chi^2_2 / 2``). Flagged when
+    at least 5 lines and :data:`LEVEL_FRACTION` of them are. The trend compares the frequency of the
+    largest peak of ``sum |H|`` at the lowest and highest level.
+
+    Returns dict: ``stat``, ``flagged``, ``trend`` (``hardening``, ``softening``, ``none``),
+    ``shift`` (relative frequency change), ``levels_rms``."""
+    if len(blas) < 2:
+        return {"stat": float("nan"), "flagged": False, "trend": "none", "shift": 0.0,
+                "levels_rms": [b[0] for b in blas]}
+    lo, hi = blas[0], blas[-1]
+    if hi[0] < 1.5 * lo[0]:
+        return {"stat": float("nan"), "flagged": False, "trend": "none", "shift": 0.0,
+                "levels_rms": [b[0] for b in blas]}
+    (_, H0, c0, n0), (_, H1, c1, n1) = lo, hi
+    c0c = np.clip(c0, 1e-6, 1 - 1e-9)
+    c1c = np.clip(c1, 1e-6, 1 - 1e-9)
+    v0 = np.abs(H0) ** 2 * (1 - c0c) / (max(n0, 1) * c0c)
+    v1 = np.abs(H1) ** 2 * (1 - c1c) / (max(n1, 1) * c1c)
+    ok = (c0 >= 0.5) & (c1 >= 0.5)
+    dM = 0.0
+    if blas_model is not None and len(blas_model) == len(blas):
+        dM = blas_model[-1][1] - blas_model[0][1]
+        dM = np.where(np.isfinite(dM), dM, 0.0)  # an unstable model simulation predicts nothing
+    z2 = np.abs(H1 - H0 - dM) ** 2 / np.maximum(v0 + v1, 1e-300)
+    n_ok = int(ok.sum())
+    n_out = int(np.sum(z2[ok] > 9.0))
+    stat = n_out / n_ok if n_ok >= 20 else float("nan")
+    flagged = bool(np.isfinite(stat) and n_out >= max(5, LEVEL_FRACTION * n_ok))
+    a0 = np.sum(np.abs(H0), axis=1)
+    a1 = np.sum(np.abs(H1), axis=1)
+    k0, k1 = int(np.argmax(a0)), int(np.argmax(a1))
+    shift = 0.0
+    if f.size > 2:
+        f0, f1 = float(f[k0]), float(f[k1])
+        # compare near the low-level peak: the high-level peak within 30 %
+        win = np.abs(f - f0) <= 0.3 * f0
+        if win.any():
+            k1w = int(np.nonzero(win)[0][np.argmax(a1[win])])
+            f1 = float(f[k1w])
+        shift = (f1 - f0) / f0 if f0 > 0 else 0.0
+    dfl = float(np.median(np.diff(f))) if f.size > 1 else 0.0
+    trend = "none"
+    if flagged and abs(shift) * (f[k0] if f.size else 0) > 1.5 * dfl and abs(shift) > 0.005:
+        trend = "hardening" if shift > 0 else "softening"
+    return {"stat": stat, "flagged": flagged, "trend": trend, "shift": float(shift),
+            "levels_rms": [b[0] for b in blas], "lines": n_ok, "lines_beyond_3_sigma": n_out}
+
+
+def mode_change(ev, f_hz: float):
+    """Relative natural-frequency change, lowest to highest level where fitted, of the mode of
+    `ev` (:class:`~vibroscope.gap.levels.LevelEvidence`) nearest `f_hz` (within 5 %), with the
+    indices of those two levels; None without one."""
+    if ev is None or len(ev.levels) < 2 or not ev.modes:
+        return None
+    j = int(np.argmin([abs(m.natural_frequency - f_hz) for m in ev.modes]))
+    if abs(ev.modes[j].natural_frequency - f_hz) > 0.05 * f_hz:
+        return None
+    fn = np.array([lv.natural_frequencies[j] for lv in ev.levels])
+    sf = np.array([lv.natural_frequency_std[j] for lv in ev.levels])
+    ok = np.flatnonzero(np.isfinite(fn) & np.isfinite(sf))
+    if ok.size < 2:
+        return None
+    a, b = int(ok[0]), int(ok[-1])
+    return float((fn[b] - fn[a]) / fn[a]), a, b
+
+
+def modal_level_test(ev, ev_model) -> dict | None:
+    """The level dependence of the resonances (:func:`~vibroscope.gap.levels.level_blas`):
+    each mode's relative natural-frequency change from the lowest to the highest level, less
+    the change the model's own simulation shows on the same groups (`ev_model`, noise-free:
+    the estimator's bias at each level), over the measured standard deviation. A mode fits
+    many lines at once, so this sees a shift of a narrow or weakly observed resonance that
+    the line-wise test of :func:`level_test` cannot (a 1 % softening of a mode whose
+    half-power bandwidth is one or two lines). Damping changes are not used: their estimates
+    scatter more than their standard deviations say.
+
+    Returns None without a significant mode (``|z|`` above :data:`LEVEL_MODE_Z` and a change
+    above :data:`LEVEL_MODE_CHANGE`), else a dict: ``trend``, ``shift`` (relative change of
+    the mode with the largest ``|z|``), ``z``, ``frequency_hz``."""
+    if ev is None or len(ev.levels) < 2:
+        return None
+    best = None
+    for j, md in enumerate(ev.modes):
+        ch = mode_change(ev, md.natural_frequency)
+        if ch is None:
+            continue
+        change, a, b = ch
+        if ev.levels[b].rms < LOG_LEVEL_RATIO * ev.levels[a].rms:
+            continue
+        sf = float(np.hypot(ev.levels[a].natural_frequency_std[j], ev.levels[b].natural_frequency_std[j]))
+        chm = mode_change(ev_model, md.natural_frequency)
+        d = change - (chm[0] if chm is not None else 0.0)
+        z = d * float(ev.levels[a].natural_frequencies[j]) / sf if sf > 0 else 0.0
+        if abs(z) > LEVEL_MODE_Z and abs(d) > LEVEL_MODE_CHANGE and (best is None or abs(z) > abs(best["z"])):
+            best = {"trend": "hardening" if d > 0 else "softening", "shift": float(d), "z": float(z),
+                    "frequency_hz": float(md.natural_frequency)}
+    return best

@@ -1,0 +1,237 @@
+"""The working state of one gap diagnosis and what its stages share.
+
+:class:`Run` is the state that :func:`vibroscope.gap.diagnosis.diagnose` fills stage by stage
+(logs, nominal, refit, evidence, candidates, ranking, forward selection, report). Beside it: the
+tuning constants of those stages (:data:`NONE_FACTOR` to :data:`LIN_EFFECT_NFEV`, exposed by
+:mod:`vibroscope.gap.diagnosis` too) and the small measures more than one stage uses: the pooled
+H1 of several logs (:func:`frf_data`) and its segment length (:func:`pow2`), the gap on the
+screening prefix every start is probed by (:func:`prefix_gap`), the excess over the noise floor
+(:func:`excess`), a location's short key (:func:`where_key`) and a model's TOML text
+(:func:`dumps`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vibroscope.gap.effects import LinearParams
+from vibroscope.gap.measure import masked_csd, nrmse
+from vibroscope.modal.automatic import one_blas_thread
+from vibroscope.models.lumped import LumpedModel
+
+
+#: the nominal gap must exceed the noise floor by this factor before any effect is named
+NONE_FACTOR = 1.3
+#: complexity penalty: the held-out excess gap is scored as e * (1 + PENALTY * n_effect_parameters)
+PENALTY = 0.1
+#: the BLA depends on the level when more than this fraction of its well-excited lines changes by
+#: more than 3 standard deviations between the lowest and the highest level
+LEVEL_FRACTION = 0.01
+#: the best admissible candidate must explain at least this share of the excess gap (its score),
+#: else the verdict is ``unexplained``
+UNEXPLAINED_SCORE = 0.3
+#: a richer candidate moves ahead of one it nests when the t statistic of its held-out gain
+#: (batch means, see :func:`~vibroscope.gap.measure.nested_gain`) exceeds this
+NESTED_T = 4.0
+#: forward selection keeps a further effect when the penalised held-out excess gap falls below
+#: this factor times the current one
+ADD_FACTOR = 0.5
+#: an addition within REFINE_FACTOR (but not ADD_FACTOR) times the current penalised excess is
+#: fitted further (jointly with the linear parameters) before the decision
+REFINE_FACTOR = 0.8
+#: without level dependence of the BLA, a nonlinear verdict needs a penalised held-out excess gap
+#: below this factor times the best linear explanation's
+NL_MARGIN = 0.8
+#: with a measured resonance shift between the lowest and the highest level (hardening or
+#: softening), a nonlinear verdict whose own simulation does not shift the resonance the same way
+#: (by at least TREND_SHARE of the measured shift) yields to the best candidate that does, when
+#: that one's penalised held-out excess gap is within TREND_MARGIN times it
+TREND_MARGIN = 1.5
+TREND_SHARE = 0.3
+#: a resonance's natural frequency that moves from the lowest to the highest level by more than
+#: LEVEL_MODE_Z standard deviations and LEVEL_MODE_CHANGE (relative), beyond the model's own
+#: estimate on the same groups, makes the BLA level dependent (:func:`~vibroscope.gap._level_evidence.modal_level_test`)
+LEVEL_MODE_Z = 3.0
+LEVEL_MODE_CHANGE = 0.005
+#: effects of which forward selection names one member only (asymmetric friction contains Coulomb
+#: friction; a Jenkins joint is a Bouc-Wen element)
+NESTED_FAMILIES = ({"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"})
+#: locations of each nonlinear class refined after probing the start values (the best ones by
+#: their best start, whatever its gap: a hysteresis at the loaded link of a 3-DOF chain probed at
+#: 0.218 against 0.136 for a start that changes nothing elsewhere, and refined to 0.027)
+N_LOCATIONS = 3
+#: a location's best start on the other linear base (nominal or refit) is refined too when its
+#: screening gap is within this factor of the best start's
+OTHER_BASE_FACTOR = 2.0
+#: seconds of fitting data per log on which the winner is polished at full accuracy
+POLISH_S = 30.0
+#: the polish's evaluations in fours, the share of its fitting gap every four iterations must
+#: close to go on, and the multiple of the noise floor at which it stops (the Bouc-Wen
+#: benchmark's loop shape needs about twenty evaluations)
+POLISH_ROUNDS = 5
+POLISH_GAIN = 0.02
+POLISH_FLOOR_FACTOR = 1.5
+#: function evaluations of a linear effect's FRF fit per start (its best start is then polished in
+#: time; on a 3-DOF parameter-mismatch case the median fit took 20, a few ran to the old limit of 200)
+LIN_EFFECT_NFEV = 60
+
+
+def frf_data(us, ys, masks, fs, nperseg, window="hann"):
+    """H1 (n_f, n_out) and coherence from the masked samples of several logs (pooled spectra)."""
+    G = None
+    tot = 0
+    f = None
+    for u, y, m in zip(us, ys, masks):
+        if not m.any():
+            continue
+        f, g, n_avg = masked_csd(np.vstack([u[:1], y]), m, fs, nperseg, window)
+        if n_avg:
+            G = g * n_avg if G is None else G + g * n_avg
+            tot += n_avg
+    if G is None or tot == 0:
+        return None
+    G = G / tot
+    Guu = G[:, 0, 0].real
+    Guy = G[:, 0, 1:]
+    Gyy = np.real(np.einsum("fii->fi", G[:, 1:, 1:]))
+    H = Guy / np.maximum(Guu, 1e-300)[:, None]
+    coh = np.abs(Guy) ** 2 / np.maximum(Guu[:, None] * Gyy, 1e-300)
+    return f, H, np.clip(coh, 0, 1), Gyy, tot
+
+
+def pow2(x: float) -> int:
+    """The power of two at or below `x` (at least 64): a Welch segment length."""
+    return int(2 ** max(6, int(math.floor(math.log2(max(x, 64))))))
+
+
+def excess(g: float, floor: float) -> float:
+    """The excess of gap `g` over the noise floor: ``sqrt(g^2 - floor^2)``, zero within it."""
+    return math.sqrt(max(g * g - floor * floor, 0.0))
+
+
+@dataclass(kw_only=True, eq=False)
+class Run:
+    """The working state of one diagnosis (:func:`vibroscope.gap.diagnosis.diagnose`), filled
+    stage by stage.
+
+    Set by ``diagnosis._prepare_logs``: the model, the logs and their split, the simulators, the
+    FRF segment length and the effects to try; by each later stage: what it found (the
+    comments below name the stage). Mutable and private to the diagnosis: a stage reads what the
+    earlier ones left and adds its own results; ``timings`` collects each stage's seconds."""
+
+    # the logs and their split (_prepare_logs)
+    t_start: float
+    timings: dict
+    model: LumpedModel
+    sigs: list
+    fs: float
+    us: list
+    ys: list
+    out_ch: list
+    closed: bool
+    units: list
+    in_unit: str
+    skips: list
+    split: object
+    sims: list
+    nps: int
+    nps_reason: str
+    window: str
+    effect_set: set
+    excluded: dict
+    # the nominal model and the noise floor (_simulate_nominal)
+    y_nom: list | None = None
+    gap_before: float | None = None
+    all_masks: list | None = None
+    nf: object = None
+    floor: float | None = None
+    # the FRF of the fitting data and the linear refit (_refit_linear)
+    fd: tuple | None = None
+    sel: np.ndarray | None = None
+    w: np.ndarray | None = None
+    lin: LinearParams | None = None
+    ns_fit: list | None = None
+    lo_l: np.ndarray | None = None
+    hi_l: np.ndarray | None = None
+    ns_pol: list | None = None
+    g_nom_fit: float | None = None
+    g_ref_fit: float | None = None
+    theta: np.ndarray | None = None
+    refit_note: str | None = None
+    refit: LumpedModel | None = None
+    y_ref: list | None = None
+    gap_refit: float | None = None
+    # scales, signatures and level evidence (gather_evidence)
+    f_s: np.ndarray | None = None
+    H_s: np.ndarray | None = None
+    scales: dict | None = None
+    groups: list | None = None
+    blas: list | None = None
+    level: dict | None = None
+    level_ev: object = None
+    level_ev_ref: object = None
+    sigs_tests: tuple | None = None
+    # the candidates' fits (fit_candidates)
+    val_logs: list | None = None
+    none_ok: bool | None = None
+    specs: list | None = None
+    not_tried: dict | None = None
+    lin_later: dict | None = None
+    results: list | None = None
+    pre_eval: dict | None = None
+    keep_ids: set | None = None
+    per_class: dict | None = None
+    screened: list = field(default_factory=list)
+    nested_t: dict = field(default_factory=dict)
+    # held-out evaluation and ranking (rank_candidates)
+    floor_rank: float | None = None
+    floor_rank_method: str | None = None
+    k_before: float | None = None
+    cands: list | None = None
+    best_i: int | None = None
+    trend_shifts: dict | None = None
+    polish: dict | None = None
+    verdict: str | None = None
+    ordered: list | None = None
+    chosen: list | None = None
+    # forward selection (select_further_effects)
+    shares: list | None = None
+
+    def held_out(self, m_, fast=False):
+        """Held-out nrmse of model `m_` (inf when not finite) and its outputs per held-out log."""
+        val_logs, sims, ys, split = self.val_logs, self.sims, self.ys, self.split
+        yh = {i: sims[i].run(m_, fast=fast) for i in val_logs}
+        g = nrmse([ys[i] for i in val_logs], [yh[i] for i in val_logs], [split.validation[i] for i in val_logs])
+        return (g if np.isfinite(g) else float("inf")), yh
+
+    def key(self, g, n):
+        """Penalised held-out excess gap (lower is better)."""
+        floor_rank = self.floor_rank
+        return max(excess(g, floor_rank), 0.15 * floor_rank) * (1 + PENALTY * n)
+
+
+@one_blas_thread  # the fits run in a thread pool: a BLAS pool per thread only spins against it
+def prefix_gap(run: Run, m) -> float:
+    """nrmse of model `m` on the screening prefix of the fitting data (coarse integration):
+    the measure every start is probed by. May be non-finite."""
+    sp = run.split.screen_prefix
+    yh = [sim.run(m, n, fast=True) if n else None for sim, n in zip(run.sims, sp)]
+    return nrmse([y[:, :n] for y, n in zip(run.ys, sp) if n], [h for h in yh if h is not None],
+                 [mk[:n] for mk, n in zip(run.split.fit, sp) if n])
+
+
+def where_key(where: dict) -> str:
+    """A candidate's location as a short key (``m1-ground``, ``input``, ``m2``)."""
+    if "between" in where:
+        return "-".join(str(x) for x in where["between"])
+    return str(where.get("dof") or where.get("side") or "model")
+
+
+def dumps(model) -> str:
+    """`model` as the text of a TOML model file (:func:`~vibroscope.models.modelfile.dumps_model`)."""
+    from vibroscope.models.modelfile import dumps_model
+
+    return dumps_model(model)

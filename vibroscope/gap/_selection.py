@@ -1,0 +1,367 @@
+"""Stage 5b of the gap diagnosis: further effects, by forward selection.
+
+:func:`select_further_effects`: from the verdict (or from the best admissible candidate of an
+unexplained gap) each other class is tried as an addition (:func:`try_addition`) and the best is
+kept when it closes significantly more (:func:`accepted_addition`), up to three effects; a
+combination is polished jointly (:func:`~vibroscope.gap._ranking.polish_candidate`). When an input
+delay joins only later, the selection runs once more from the delay fitted alone
+(:func:`delay_first`) with the nonlinear candidates screened again on it (:func:`screen_on`).
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+from functools import partial
+
+import numpy as np
+
+from vibroscope.gap._ranking import polish_candidate
+from vibroscope.gap._run import (
+    ADD_FACTOR,
+    NESTED_FAMILIES,
+    REFINE_FACTOR,
+    Run,
+    UNEXPLAINED_SCORE,
+    dumps,
+    excess,
+    prefix_gap,
+)
+from vibroscope.gap.fit import fit_time_domain
+from vibroscope.gap.report import Candidate
+
+
+def select_further_effects(run: Run, *, workers) -> None:
+    """Stage 5b: forward selection from the verdict (or, when unexplained, from the best
+    admissible candidate): a second (third) effect is kept when it closes significantly more,
+    and a combination is polished jointly. Where an input delay joins only later, or nothing
+    joins an unexplained gap while the phase slope measures a delay, the selection is run once
+    more from the delay fitted alone, with the nonlinear candidates screened again on it
+    (:func:`delay_first`, :func:`screen_on`), and the combination that explains more is kept.
+    Updates ``chosen``, ``verdict``, ``ordered``; sets ``shares``."""
+    per_class, polish = run.per_class, run.polish
+    chosen, cands, best_i, verdict, ordered = run.chosen, run.cands, run.best_i, run.verdict, run.ordered
+    t = time.perf_counter()
+    shares = []
+
+    def select_from(first, screening=None):
+        """Forward selection from `first` (with the nonlinear candidates as `screening`
+        ``(per_class, screened)`` has them, default as first screened); a combination is
+        polished jointly with the linear parameters at full accuracy. Returns ``(chosen, shares)``."""
+        pc, scr = screening if screening is not None else (per_class, run.screened)
+        ch, sh = forward_selection(run, first, pc, scr, workers)
+        if len(ch) > 1:
+            ch[-1] = polish_candidate(ch[-1], [(c[3], c[4]) for c in ch], **polish)
+        return ch, sh
+
+    def or_from_delay(trial, trial_shares, alone_ok=False):
+        """`trial`, or the selection from the delay fitted alone when that explains more: tried
+        when a delay joined `trial` only later (its first effect was then screened on a linear
+        base bent by the delay) or, with `alone_ok` (no verdict yet), when `trial` found no
+        combination and the phase slope measures a delay (the delay was not fitted alone: the BLA
+        changes with the level)."""
+        d_later = [float(c[4][0]) for c in trial[1:] if c[0].effect == "time_delay"]
+        if not d_later and (len(trial) > 1 or not alone_ok):
+            return trial, trial_shares
+        d_first = delay_first(run, workers, tau=d_later[0] if d_later else None)
+        if d_first is None:
+            return trial, trial_shares
+        trial2, shares2 = select_from(d_first, screen_on(run, d_first[1], workers))
+        if len(trial2) > 1 and trial2[-1][0].score > trial[-1][0].score:
+            return trial2, shares2
+        return trial, trial_shares
+
+    if chosen and chosen[0][3] is not None:
+        chosen, shares = or_from_delay(*select_from(chosen[0]))
+        if len(chosen) > 1:
+            verdict = chosen[0][0].effect
+            added = {c[0].effect for c in chosen}
+            ordered = chosen + [c for c in ordered if c[0].effect not in added]
+    elif verdict == "unexplained" and best_i is not None and cands[best_i][3] is not None:
+        # no effect explains the gap alone; two together may (a clearance and a delay, each of
+        # which alone leaves most of it): the forward selection from the best admissible
+        # candidate, and the combination is the verdict only if it explains enough itself
+        trial, trial_shares = or_from_delay(*select_from(cands[best_i]), alone_ok=True)
+        if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE:
+            chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
+            added = {c[0].effect for c in chosen}
+            ordered = chosen + [c for c in ordered if c[0].effect not in added]
+    run.timings["forward_selection"] = time.perf_counter() - t
+    run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
+
+
+def delay_first(run: Run, workers, tau: float | None = None) -> tuple | None:
+    """The input delay fitted alone (with the linear parameters, from the refit and from the
+    nominal) as a start of the forward selection, when the phase slope of the measured FRF
+    against the refit's (:func:`~vibroscope.gap.signatures.run_signatures`) measures a delay of
+    at least half a sample and the delay was not fitted alone (``lin_later``: the BLA changes with
+    the level). `tau`: the delay to start from (s), default the phase slope's. Returns a candidate
+    tuple ``(Candidate, model, held-out outputs, spec, p, base)`` or None."""
+    s = run.lin_later.get("time_delay")
+    if tau is None:
+        tau = next((t.value for t in (run.sigs_tests or ()) if t.name == "phase_slope"), 0.0)
+    if s is None or not tau >= 0.5 / run.fs:
+        return None
+    model, lin, sims, ys, split = run.model, run.lin, run.sims, run.ys, run.split
+    nl = len(lin)
+
+    def build(x):
+        return s.apply(lin.apply(model, x[:nl]), x[nl:])
+
+    lo = np.concatenate([run.lo_l, s.lower])
+    hi = np.concatenate([run.hi_l, s.upper])
+    tau0 = float(min(max(tau, s.lower[0]), s.upper[0]))
+    starts = [np.concatenate([np.clip(th, run.lo_l, run.hi_l), [tau0]])
+              for th in ([run.theta] + ([np.zeros(nl)] if np.any(run.theta) else []))]
+
+    def fit(x0):
+        try:
+            x, g, _ = fit_time_domain(build, x0, lo, hi, sims, ys, split.fit, split.screen_prefix, fast=True,
+                                      max_nfev=8)
+        except (ValueError, TypeError):
+            return None
+        return x, g
+
+    with ThreadPoolExecutor(max(1, min(workers, len(starts)))) as ex:
+        fits = [r for r in ex.map(fit, starts) if r is not None and np.isfinite(r[1])]
+    if not fits:
+        return None
+    x, gfit = min(fits, key=lambda r: r[1])
+    p = x[nl:]
+    if s.vanishes(p) is not None:
+        return None
+    m_aug, base = build(x), lin.apply(model, x[:nl])
+    g, yh = run.held_out(m_aug, fast=True)
+    if not np.isfinite(g):
+        return None
+    k_before = run.k_before
+    c = Candidate(effect=s.effect, where=dict(s.where) | s.qualifiers(p), parameters=s.describe(p), gap_after=g,
+                  score=1.0 - run.key(g, s.n) / k_before if k_before > 0 else 0.0, gap_fit=gfit, n_parameters=s.n,
+                  model_toml=dumps(m_aug))
+    return c, m_aug, yh, s, p, base
+
+
+def screen_on(run: Run, base, workers) -> tuple[dict, list]:
+    """The nonlinear candidates screened again on another base model (the delay fitted alone):
+    every location's best start on the screening prefix, the best location of each class
+    refined (effect parameters only). Returns ``(per_class, screened)`` as
+    :func:`fit_candidates` makes them (``(spec, p, fitting gap, base)``)."""
+    sims, ys, split = run.sims, run.ys, run.split
+    sp = split.screen_prefix
+    nl_specs = [s for s in run.specs if not s.linear]
+
+    def gap_of(m):
+        g = prefix_gap(run, m)
+        return g if np.isfinite(g) else 1e9
+
+    def probe(s):
+        best = None
+        for p0 in s.starts:
+            try:
+                g = gap_of(s.apply(base, p0))
+            except ValueError:
+                continue
+            if best is None or g < best[2]:
+                best = (s, np.asarray(p0, float), g, base)
+        return best
+
+    def refine(item):
+        s, p0, g0, _ = item
+        p, g, _ = fit_time_domain(lambda p, s=s: s.apply(base, p), p0, s.lower, s.upper, sims, ys, split.fit, sp,
+                                  fast=True, max_nfev=4 + 2 * s.n)
+        return (s, p, g, base) if g <= g0 else item
+
+    with ThreadPoolExecutor(max(1, workers)) as ex:
+        probed = [r for r in ex.map(probe, nl_specs) if r is not None]
+        best: dict[str, tuple] = {}
+        for r in probed:
+            if r[0].effect not in best or r[2] < best[r[0].effect][2]:
+                best[r[0].effect] = r
+        refined = dict(zip(best, ex.map(refine, best.values())))
+    screened = [refined.get(r[0].effect) if best.get(r[0].effect) is r else r for r in probed]
+    per_class = {e: r for e, r in refined.items()}
+    return per_class, screened
+
+
+def forward_selection(run: Run, first, per_class: dict, screened: list, workers):
+    """Forward selection of further effects on top of the winner [Ljung 1999, sec. 16.4].
+
+    Each other effect class (its best screened location, and the two best classes screened at
+    a chosen effect's connection: a joint has friction and a stiffness nonlinearity at once) is
+    added to the current augmented model and its own parameters are fitted (screening prefix,
+    coarse integration), then again jointly with the linear parameters and the chosen
+    effects' parameters: a first effect fitted alone bends the linear parameters and its own to
+    mimic the second (a spring softened for a clearance, a friction force raised for a stiffening
+    spring), and only a joint fit can undo that; the better on the fitting data is kept (the
+    joint fit only when no chosen effect vanishes in it) (:func:`try_addition`). The
+    best addition is kept when its penalised held-out excess gap falls below
+    :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
+    floor explain) (:func:`accepted_addition`); then the next, up to three effects. Returns the
+    chosen candidates (cumulative: the last holds the combined model) and each effect's share of
+    the shrink. Besides the four best screened classes of `per_class` (and those of `screened` at
+    a chosen connection), the linear effects that were not fitted alone because the BLA changes
+    with the level (``lin_later``) are tried as additions, from their own starts."""
+    key, k_before, floor = run.key, run.k_before, run.floor_rank
+    chosen = [first]
+    cur_c, cur_m = first[0], first[1]
+    n_par = cur_c.n_parameters
+    used = {cur_c.effect}
+    also = list(run.lin_later.values())
+    shares_g = [run.gap_before, cur_c.gap_after]
+    while len(chosen) < 3:
+        if excess(cur_c.gap_after, floor) <= 0.5 * floor:
+            break
+        cands = addition_candidates(chosen, used, per_class, screened, also)
+        if not cands:
+            break
+        chain = [(c[3], c[4]) for c in chosen]
+        with ThreadPoolExecutor(max(1, workers)) as ex:
+            tries = [r for r in ex.map(partial(try_addition, run, chosen, chain, cur_m), cands) if r is not None]
+        tries = [r for r in tries if r[0].vanishes(r[1]) is None]
+        if not tries:
+            break
+        step = accepted_addition(run, tries, chain, cur_c, n_par)
+        if step is None:
+            break
+        s, p, m_new, g, yh, gfit, base_new, chp = step
+        n_par += s.n
+        used.add(s.effect)
+        if chp is not None:  # the chosen effects as refitted jointly with this one
+            chosen = [c[:4] + (p_c,) + c[5:] for c, p_c in zip(chosen, chp)]
+        c_new = Candidate(effect=s.effect, where=dict(s.where) | s.qualifiers(p), parameters=s.describe(p),
+                          gap_after=g, score=1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0,
+                          gap_fit=gfit, n_parameters=s.n, model_toml=dumps(m_new))
+        chosen.append((c_new, m_new, yh, s, p, base_new))
+        cur_c, cur_m = c_new, m_new
+        shares_g.append(g)
+    total = shares_g[0] - shares_g[-1]
+    shares = [float((shares_g[i] - shares_g[i + 1]) / total) if total > 0 else 0.0 for i in range(len(shares_g) - 1)]
+    return chosen, shares
+
+
+def addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list) -> list:
+    """The effects that may join `chosen`, as ``(spec, start p or None)``: the four best other
+    classes of `per_class` (none of a family with a chosen member), the two best classes screened
+    at a chosen effect's connection, and the specs of `also` (from their own starts)."""
+    def free(eff):
+        return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
+
+    cands = [(s_, p_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
+             if free(eff)][:4]
+    # effects where a chosen one acts (a joint has friction and a stiffness nonlinearity at
+    # once): the best two classes screened at a chosen effect's connection
+    pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
+    have = {id(s_) for s_, _ in cands}
+    near: dict[str, tuple] = {}
+    for s_, p_, g_, b_ in sorted(screened, key=lambda r: r[2]):
+        if (tuple(s_.where.get("between", ())) in pairs and free(s_.effect) and s_.effect not in near
+                and id(s_) not in have):
+            near[s_.effect] = (s_, p_)
+    cands += list(near.values())[:2]
+    cands += [(s_, None) for s_ in also if s_.effect not in used]
+    return cands
+
+
+def joint_chain_fit(run: Run, chain: list, s, x0, nfev):
+    """The added effect `s`'s parameters, the chosen effects' (`chain`: ``(spec, p)``) and the
+    linear ones fitted together on the screening prefix: ``(p, fitting gap, model, linear base, x,
+    chain refitted)``."""
+    lin, model, split = run.lin, run.model, run.split
+    nl = len(lin)
+    sizes = [s_c.n for s_c, _ in chain]
+    offs = np.cumsum([nl] + sizes)
+
+    def build_j(x, s=s):
+        m_ = lin.apply(model, x[:nl])
+        for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:]):
+            m_ = s_c.apply(m_, x[a_:b_])
+        return s.apply(m_, x[offs[-1]:])
+
+    lo = np.concatenate([run.lo_l] + [s_c.lower for s_c, _ in chain] + [s.lower])
+    hi = np.concatenate([run.hi_l] + [s_c.upper for s_c, _ in chain] + [s.upper])
+    x, gj, _ = fit_time_domain(build_j, np.clip(x0, lo, hi), lo, hi,
+                               run.sims, run.ys, split.fit, split.screen_prefix, fast=True, max_nfev=nfev)
+    ch_new = [(s_c, x[a_:b_]) for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:])]
+    return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
+
+
+def try_addition(run: Run, chosen: list, chain: list, cur_m, item):
+    """One addition `item` ``(spec, start p or None)`` to the current model `cur_m`: its best start
+    on the screening prefix, its own parameters fitted, then jointly with the chosen effects and the
+    linear parameters (:func:`joint_chain_fit`), kept when better and no chosen effect vanishes in
+    it; evaluated on the held-out data. Returns ``(spec, p, model, held-out gap, outputs, gap_fit,
+    linear base, joint x or None, chosen effects' refitted p or None)``, or None when it cannot be
+    built."""
+    sims, ys, split, lin, model = run.sims, run.ys, run.split, run.lin, run.model
+    sp = split.screen_prefix
+    nl = len(lin)
+    s, p_s = item
+    p0s = [p_s] + list(s.starts[:2]) if p_s is not None else list(s.starts[:3])
+    best = None
+    for p0 in p0s:
+        try:
+            m0 = s.apply(cur_m, p0)
+        except (ValueError, TypeError):  # e.g. a second clearance where no spring is left
+            return None
+        g = prefix_gap(run, m0)
+        if np.isfinite(g) and (best is None or g < best[1]):
+            best = (p0, g)
+    if best is None:
+        return None
+
+    def build(p, s=s):
+        return s.apply(cur_m, p)
+
+    p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
+                                 max_nfev=4 + 2 * s.n)
+    m_new, base_new, x_j, chp = build(p), chosen[-1][5], None, None
+    if nl:
+        th0 = lin.theta_between(model, chosen[-1][5])
+        try:
+            x0 = np.concatenate([np.clip(th0, run.lo_l, run.hi_l)] + [np.asarray(p_c, float) for _, p_c in chain]
+                                + [p])
+            pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, x0, 4)
+        except (ValueError, TypeError):
+            gj = float("inf")
+        if gj < gfit and not chain_vanishes(chain, chj):
+            p, gfit, m_new, base_new, x_j, chp = pj, gj, mj, bj, xj, [p_c for _, p_c in chj]
+    g, yh = run.held_out(m_new, fast=True)
+    return s, p, m_new, g, yh, gfit, base_new, x_j, chp
+
+
+def accepted_addition(run: Run, tries: list, chain: list, cur_c, n_par: int):
+    """The best of the `tries` (by penalised held-out gap) when it is significant: a promising
+    joint fit is carried further first (:data:`REFINE_FACTOR`), and where the chosen effects were
+    refitted with it, it must beat them refitted without it too. Returns ``(spec, p, model,
+    held-out gap, outputs, gap_fit, linear base, chosen effects' p or None)`` or None (the
+    selection stops)."""
+    key, held_out = run.key, run.held_out
+    s, p, m_new, g, yh, gfit, base_new, x_j, chp = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
+    k_cur = key(cur_c.gap_after, n_par)
+    if x_j is not None and ADD_FACTOR * k_cur <= key(g, n_par + s.n) < REFINE_FACTOR * k_cur:
+        # promising but not yet significant: the joint fit is carried further before deciding
+        try:
+            pr, gr, mr, br, _, chr_ = joint_chain_fit(run, chain, s, x_j, 10)
+            if gr < gfit and not chain_vanishes(chain, chr_):
+                gh, yhr = held_out(mr, fast=True)
+                p, gfit, m_new, base_new, g, yh = pr, gr, mr, br, gh, yhr
+                chp = [p_c for _, p_c in chr_]
+        except (ValueError, TypeError):
+            pass
+    if chp is not None:
+        # the chosen effects were refitted with this one: the addition must beat them refitted
+        # too (without it), not only as they were (a refit alone can close a few per cent)
+        m_wo = base_new
+        for (s_c, _), p_c in zip(chain, chp):
+            m_wo = s_c.apply(m_wo, p_c)
+        k_cur = min(k_cur, key(held_out(m_wo, fast=True)[0], n_par))
+    if not key(g, n_par + s.n) < ADD_FACTOR * k_cur:
+        return None
+    return s, p, m_new, g, yh, gfit, base_new, chp
+
+
+def chain_vanishes(before, after) -> bool:
+    """Whether a joint refit made a chosen effect vanish (`before`, `after`: ``(spec, p)``
+    lists) that did not before: the addition then replaces it rather than joins it."""
+    return any(s_.vanishes(np.asarray(pa, float)) is not None and s_.vanishes(np.asarray(pb, float)) is None
+               for (s_, pb), (_, pa) in zip(before, after))
