@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vibroscope.gap._run import LEVEL_FRACTION, LEVEL_MODE_CHANGE, LEVEL_MODE_Z, frf_data, pow2
+from vibroscope.gap._run import LEVEL_FRACTION, LEVEL_MODE_CHANGE, LEVEL_MODE_MATCH, LEVEL_MODE_Z, frf_data, pow2
 from vibroscope.gap.measure import LOG_LEVEL_RATIO, input_levels
 
 
@@ -141,13 +141,21 @@ def modal_level_test(ev, ev_model) -> dict | None:
     half-power bandwidth is one or two lines). Damping changes are not used: their estimates
     scatter more than their standard deviations say.
 
+    A measured resonance with no resonance of the model within :data:`LEVEL_MODE_MATCH`
+    (relative) is not tested when the model's evidence has resonances: the model cannot say how
+    its estimator is biased there, and such a peak (a noise peak of the lowest level's indicator
+    above the modes) is where the test raised false alarms.
+
     Returns None without a significant mode (``|z|`` above :data:`LEVEL_MODE_Z` and a change
     above :data:`LEVEL_MODE_CHANGE`), else a dict: ``trend``, ``shift`` (relative change of
     the mode with the largest ``|z|``), ``z``, ``frequency_hz``."""
     if ev is None or len(ev.levels) < 2:
         return None
+    model_f = np.array([m.natural_frequency for m in ev_model.modes]) if ev_model is not None and ev_model.modes else None
     best = None
     for j, md in enumerate(ev.modes):
+        if model_f is not None and np.min(np.abs(model_f - md.natural_frequency)) > LEVEL_MODE_MATCH * md.natural_frequency:
+            continue
         ch = mode_change(ev, md.natural_frequency)
         if ch is None:
             continue

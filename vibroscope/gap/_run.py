@@ -56,6 +56,9 @@ TREND_SHARE = 0.3
 #: estimate on the same groups, makes the BLA level dependent (:func:`~vibroscope.gap._level_evidence.modal_level_test`)
 LEVEL_MODE_Z = 3.0
 LEVEL_MODE_CHANGE = 0.005
+#: ... and lies within this relative distance of a resonance of the model's own evidence (the
+#: +-15 % window each resonance is fitted in); a peak the model does not have is not tested
+LEVEL_MODE_MATCH = 0.15
 #: effects of which forward selection names one member only (asymmetric friction contains Coulomb
 #: friction; a Jenkins joint is a Bouc-Wen element)
 NESTED_FAMILIES = ({"coulomb_friction", "asymmetric_friction"}, {"hysteresis", "joint_friction"})

@@ -89,6 +89,7 @@ from vibroscope.gap._run import (  # the tuning constants live with the run stat
     ADD_FACTOR,
     LEVEL_FRACTION,
     LEVEL_MODE_CHANGE,
+    LEVEL_MODE_MATCH,
     LEVEL_MODE_Z,
     LIN_EFFECT_NFEV,
     NESTED_FAMILIES,
