@@ -64,6 +64,43 @@ def test_modal_file_with_a_driving_point_reproduces_the_chain():
     assert loads_model(dumps_model(aug)) == aug
 
 
+def test_a_changed_physical_spring_is_a_linear_parameter_of_a_modal_model():
+    """A spring that differs from the one the modes were identified with couples the modes:
+    per-mode factors cannot reproduce it, the ``dk:`` stiffness change at its connection does
+    (exactly, with all DOFs measured and proportional damping), and its parameters invert."""
+    from dataclasses import replace
+
+    from vibroscope.gap.effects import LinearParams
+
+    truth = chain()
+    m = as_lumped(loads_model(dumps_model(exact_modal(truth)), "chain_modal.toml"))
+    lin = LinearParams(m)
+    assert [n for n in lin.names if n.startswith("dk:")] == [
+        "dk:m1-ground", "dk:m2-ground", "dk:m3-ground", "dk:m1-m2", "dk:m1-m3", "dk:m2-m3"]
+    dk = 0.35 * 8e4  # the m1-m2 spring 35 % stiffer
+    changed = truth.replace(elements=tuple(replace(e, k=e.k + dk) if i == 2 else e
+                                           for i, e in enumerate(truth.elements)))
+    assert set(changed.elements[2].between) == {"m1", "m2"}
+    theta = np.zeros(len(lin))
+    i = lin.names.index("dk:m1-m2")
+    theta[i] = 1.0
+    k_unit = lin.values(lin.apply(m, theta))["dk:m1-m2"]  # N/m per unit of theta
+    theta[i] = dk / k_unit
+    m2 = lin.apply(m, theta)
+    f = np.linspace(0.5, 150.0, 600)
+    H = changed.frf(f)
+    err = np.max(np.abs(m2.frf(f, quantity=None) - H)) / np.max(np.abs(H))
+    assert err < 1e-10  # 4e-15 measured
+    assert np.max(np.abs(m.frf(f, quantity=None) - H)) / np.max(np.abs(H)) > 0.1  # the nominal is far off
+    np.testing.assert_allclose(lin.values(m2)["dk:m1-m2"], dk, rtol=1e-12)
+    np.testing.assert_allclose(lin.theta_between(m, m2), theta, atol=1e-12)
+    assert lin.changed(theta) == ["dk:m1-m2"]
+    # a second change adds to the first, in the same block of springs
+    m3 = lin.apply(m2, theta)
+    assert len(m3.elements) == len(m2.elements) == len(m.elements) + 6
+    np.testing.assert_allclose(lin.values(m3)["dk:m1-m2"], 2 * dk, rtol=1e-12)
+
+
 def test_effects_act_at_the_measured_points():
     from vibroscope.gap.effects import LinearParams, connections, EFFECT_TABLE
 
@@ -72,8 +109,9 @@ def test_effects_act_at_the_measured_points():
     assert pairs[:3] == [("m1", "ground"), ("m2", "ground"), ("m3", "ground")]
     assert {frozenset(p) for p in pairs[3:]} == {frozenset(p) for p in (("m1", "m2"), ("m1", "m3"), ("m2", "m3"))}
     lin = LinearParams(m)
-    assert lin.names == ["m:mode1", "m:mode2", "m:mode3", "k:mode1-ground", "c:mode1-ground",
-                         "k:mode2-ground", "c:mode2-ground", "k:mode3-ground", "c:mode3-ground"]
+    assert lin.names[:9] == ["m:mode1", "m:mode2", "m:mode3", "k:mode1-ground", "c:mode1-ground",
+                             "k:mode2-ground", "c:mode2-ground", "k:mode3-ground", "c:mode3-ground"]
+    assert lin.names[9:] == [f"dk:{a}-{b}" for a, b in pairs]  # a physical stiffness change per connection
     # a log factor of 2 ln 1.1 on k:mode2 moves mode 2 up by 10 %
     th = np.zeros(len(lin))
     th[lin.names.index("k:mode2-ground")] = 2 * np.log(1.1)

@@ -67,6 +67,10 @@ __all__ = ["LinearParams", "EffectSpec", "EffectDef", "EFFECT_TABLE", "VERDICT_W
 
 #: regularisation velocity of fitted friction elements (m/s)
 FRICTION_V_EPS = 1e-3
+#: a modal-coordinates model's physical stiffness change at a connection is
+#: ``DK_SCALE * k_ref * theta`` (``k_ref`` the static stiffness across it): the linear
+#: parameters' bounds ``|theta| <= 2.5`` then allow up to 75 % of it either way
+DK_SCALE = 0.3
 #: name of the DOF an extra_mode candidate adds
 EXTRA_DOF = "extra"
 
@@ -115,6 +119,15 @@ class LinearParams:
     ``exp(theta_i)``. `which` restricts the set (``"all"``, ``"kc"`` (no masses),
     or an explicit list of names).
 
+    A model with measured points (a modal-coordinates model, whose modes are its DOFs) also
+    gets one physical stiffness change per connection (``dk:<a>-<b>``, each point to ground and
+    each pair of points): a :class:`~vibroscope.models.SignedSpring` of stiffness
+    ``DK_SCALE * k_ref * theta_i`` between the points, ``k_ref`` the static stiffness the
+    nominal has across the connection. Acting through the mode shapes, these couple the modes
+    and change the shapes, which per-mode factors cannot: a physical spring that differs from
+    the one the modes were identified with is ``Phi^T dK Phi`` in modal coordinates, not
+    diagonal [1]_.
+
     Parameters
     ----------
     model : LumpedModel
@@ -131,8 +144,13 @@ class LinearParams:
     names : list of str
         The parameter names, the order of ``theta``.
     refs : list of tuple of (str, int)
-        For each name, its kind (``"m"``, ``"k"``, ``"c"``) and the index of its DOF or
-        element in `model`.
+        For each name, its kind (``"m"``, ``"k"``, ``"c"``, ``"dk"``) and the index of its DOF
+        or element in `model` (for ``"dk"``, of its connection).
+
+    References
+    ----------
+    .. [1] D. J. Ewins, *Modal Testing: Theory, Practice and Application*, 2nd ed., Research
+       Studies Press, 2000, sec. 6.2 (structural modification through the mode shapes).
     """
 
     def __init__(self, model: LumpedModel, which="all"):
@@ -147,6 +165,14 @@ class LinearParams:
             elif isinstance(e, Damper) and e.c > 0:
                 names.append(f"c:{pair_name(e.between)}")
                 refs.append(("c", j))
+        # a model with points: a signed physical stiffness change at each connection
+        self._n_el = len(model.elements)
+        self._dk: list[tuple[tuple[str, str], float]] = []
+        if model.point_names():
+            for between in connections(model):
+                self._dk.append((tuple(between), DK_SCALE * _k_at(model, between)))
+                names.append(f"dk:{pair_name(between)}")
+                refs.append(("dk", len(self._dk) - 1))
         if which == "kc":
             keep = [i for i, n in enumerate(names) if not n.startswith("m:")]
         elif which == "all":
@@ -179,7 +205,11 @@ class LinearParams:
             return model
         dofs = list(model.dofs)
         els = list(model.elements)
+        dk = np.zeros(len(self._dk))
         for (kind, i), t in zip(self.refs, theta):
+            if kind == "dk":
+                dk[i] = self._dk[i][1] * float(t)
+                continue
             f = math.exp(float(t))
             if kind == "m":
                 dofs[i] = Dof(dofs[i].name, dofs[i].mass * f)
@@ -187,7 +217,26 @@ class LinearParams:
                 els[i] = replace(els[i], k=els[i].k * f)
             else:
                 els[i] = replace(els[i], c=els[i].c * f)
+        if np.any(dk != 0):
+            if self._has_dk_block(els):  # changes add to the ones `model` already has
+                for j, d in enumerate(dk):
+                    e = els[self._n_el + j]
+                    els[self._n_el + j] = replace(e, k=e.k + float(d))
+            else:  # the block of stiffness changes, after the nominal's own elements
+                block = [SignedSpring(between, k=float(d)) for (between, _), d in zip(self._dk, dk)]
+                els = els[: self._n_el] + block + els[self._n_el:]
         return replace(model, dofs=tuple(dofs), elements=tuple(els))
+
+    def _has_dk_block(self, els) -> bool:
+        n0, nd = self._n_el, len(self._dk)
+        return nd > 0 and len(els) >= n0 + nd and all(
+            isinstance(e, SignedSpring) and tuple(e.between) == b for e, (b, _) in zip(els[n0:n0 + nd], self._dk))
+
+    def _dk_values(self, model) -> np.ndarray:
+        els = list(model.elements)
+        if not self._has_dk_block(els):
+            return np.zeros(len(self._dk))
+        return np.array([els[self._n_el + j].k for j in range(len(self._dk))])
 
     def changed(self, theta, tol: float = 0.03) -> list[str]:
         """Names of the parameters whose factor differs from 1 by more than `tol`.
@@ -204,7 +253,8 @@ class LinearParams:
         -------
         list of str
         """
-        return [n for n, t in zip(self.names, np.asarray(theta, float)) if abs(math.expm1(t)) > tol]
+        return [n for n, (kind, _), t in zip(self.names, self.refs, np.asarray(theta, float))
+                if abs(DK_SCALE * t if kind == "dk" else math.expm1(t)) > tol]
 
     def values(self, model: LumpedModel) -> dict[str, float]:
         """Current values (kg, N/m, N s/m) of the parameters in `model`.
@@ -217,11 +267,17 @@ class LinearParams:
         Returns
         -------
         dict of str to float
-            Name -> mass (kg), stiffness (N/m) or damping coefficient (N s/m).
+            Name -> mass (kg), stiffness (N/m) or damping coefficient (N s/m); for ``dk:``
+            names the physical stiffness change (N/m) `model` has at the connection (0 when
+            it has none).
         """
         out = {}
+        dk = self._dk_values(model) if self._dk else None
         for n, (kind, i) in zip(self.names, self.refs):
-            out[n] = model.dofs[i].mass if kind == "m" else (model.elements[i].k if kind == "k" else model.elements[i].c)
+            if kind == "dk":
+                out[n] = float(dk[i])
+            else:
+                out[n] = model.dofs[i].mass if kind == "m" else (model.elements[i].k if kind == "k" else model.elements[i].c)
         return out
 
     def theta_between(self, model: LumpedModel, other: LumpedModel) -> np.ndarray:
@@ -235,10 +291,17 @@ class LinearParams:
         Returns
         -------
         ndarray, shape (len(self),)
-            ``log(other_i / model_i)``; 0 where either value is not positive.
+            ``log(other_i / model_i)``; 0 where either value is not positive; for ``dk:``
+            names the difference of the stiffness changes over ``DK_SCALE * k_ref``.
         """
         v0, v1 = self.values(model), self.values(other)
-        return np.array([math.log(v1[n] / v0[n]) if v0[n] > 0 and v1[n] > 0 else 0.0 for n in self.names])
+        out = []
+        for n, (kind, i) in zip(self.names, self.refs):
+            if kind == "dk":
+                out.append((v1[n] - v0[n]) / self._dk[i][1] if self._dk[i][1] > 0 else 0.0)
+            else:
+                out.append(math.log(v1[n] / v0[n]) if v0[n] > 0 and v1[n] > 0 else 0.0)
+        return np.array(out)
 
 
 @dataclass(kw_only=True)
