@@ -134,14 +134,16 @@ def ranked_candidates(run: Run, evaluated: list) -> list:
         c = Candidate(effect=s.effect, where=where, parameters=s.describe(p), gap_after=g, score=expl,
                       gap_fit=gfit, n_parameters=s.n, model_toml=dumps(m_aug), vanished=reason or "")
         cands.append((c, m_aug, yh, s, p, base))
-    changed = lin.changed(run.theta)
+    # the parameter mismatch: the per-mode refit, or with physical stiffness changes (run.pm)
+    lin, theta_pm, refit, y_pm, gap_pm, gfit_pm = run.pm
+    changed = lin.changed(theta_pm)
     pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
-    expl_pm = 1.0 - key(run.gap_refit, 0) / k_before if k_before > 0 else 0.0
+    expl_pm = 1.0 - key(gap_pm, 0) / k_before if k_before > 0 else 0.0
     cands.append((Candidate(effect="parameter_mismatch", where={"parameters": changed}, parameters=pm_params,
-                            gap_after=run.gap_refit, score=expl_pm, gap_fit=run.g_ref_fit, n_parameters=0,
+                            gap_after=gap_pm, score=expl_pm, gap_fit=gfit_pm, n_parameters=0,
                             model_toml=dumps(refit),
                             vanished="" if changed else "no linear parameter changed by more than 3 %"),
-                  refit, {i: run.y_ref[i] for i in run.val_logs}, None, None, refit))
+                  refit, {i: y_pm[i] for i in run.val_logs}, None, None, refit))
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
     run.nested_t = nested_order(cands, run.ys, run.split, run.val_logs, run.fs)

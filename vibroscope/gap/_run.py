@@ -156,6 +156,8 @@ class Run:
     sel: np.ndarray | None = None
     w: np.ndarray | None = None
     lin: LinearParams | None = None
+    #: the parameter-mismatch explanation: (lin, theta, model, outputs, held-out gap, fitting gap)
+    pm: tuple | None = None
     ns_fit: list | None = None
     lo_l: np.ndarray | None = None
     hi_l: np.ndarray | None = None

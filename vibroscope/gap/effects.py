@@ -119,8 +119,8 @@ class LinearParams:
     ``exp(theta_i)``. `which` restricts the set (``"all"``, ``"kc"`` (no masses),
     or an explicit list of names).
 
-    A model with measured points (a modal-coordinates model, whose modes are its DOFs) also
-    gets one physical stiffness change per connection (``dk:<a>-<b>``, each point to ground and
+    With `physical`, a model with measured points (a modal-coordinates model, whose modes are
+    its DOFs) also gets one physical stiffness change per connection (``dk:<a>-<b>``, each point to ground and
     each pair of points): a :class:`~vibroscope.models.SignedSpring` of stiffness
     ``DK_SCALE * k_ref * theta_i`` between the points, ``k_ref`` the static stiffness the
     nominal has across the connection. Acting through the mode shapes, these couple the modes
@@ -138,6 +138,9 @@ class LinearParams:
         ``"all"`` (default): every such parameter; ``"kc"``: stiffnesses and damping only;
         otherwise the names to keep (e.g. ``["k:m1-ground", "c:m1-ground"]``); unknown names
         are ignored.
+    physical : bool, optional
+        Add the ``dk:`` physical stiffness changes of a model with measured points (default
+        False: the per-mode factors only).
 
     Attributes
     ----------
@@ -153,7 +156,7 @@ class LinearParams:
        Studies Press, 2000, sec. 6.2 (structural modification through the mode shapes).
     """
 
-    def __init__(self, model: LumpedModel, which="all"):
+    def __init__(self, model: LumpedModel, which="all", *, physical: bool = False):
         names, refs = [], []
         for i, d in enumerate(model.dofs):
             names.append(f"m:{d.name}")
@@ -168,7 +171,7 @@ class LinearParams:
         # a model with points: a signed physical stiffness change at each connection
         self._n_el = len(model.elements)
         self._dk: list[tuple[tuple[str, str], float]] = []
-        if model.point_names():
+        if physical and model.point_names():
             for between in connections(model):
                 self._dk.append((tuple(between), DK_SCALE * _k_at(model, between)))
                 names.append(f"dk:{pair_name(between)}")
