@@ -282,7 +282,7 @@ def test_analyse_log_arguments_with_optional_values(tmp_path, capsys):
     assert "a fleet (--dask or several logs) has no live view" in capsys.readouterr().err
     # one log after a bare --connect is the log: it gets as far as looking for a viewer on the default port
     # (the test binds nothing there: a closed port on 127.0.0.1 answers at once)
-    import vibroscope.viewers.rerun_live as live
+    import vibroscope.commands._live as live
 
     code = main(["analyse", "--connect", logs[0], "--no-rrd", "--no-figures"])
     err = capsys.readouterr().err
