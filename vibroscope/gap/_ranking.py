@@ -118,7 +118,7 @@ def ranked_candidates(run: Run, evaluated: list) -> list:
     penalised held-out gap, a richer candidate moved ahead of one it nests when its gain is
     significant (:func:`nested_order`). Sets ``k_before``, ``nested_t``; returns the list of
     ``(Candidate, model, held-out outputs, spec, p, base)``."""
-    key, floor_rank, lin, refit = run.key, run.floor_rank, run.lin, run.refit
+    key, floor_rank = run.key, run.floor_rank
     k_before = key(run.gap_before, 0)
     run.k_before = k_before
     cands = []  # (Candidate, model, held-out outputs, spec, p)
@@ -134,16 +134,15 @@ def ranked_candidates(run: Run, evaluated: list) -> list:
         c = Candidate(effect=s.effect, where=where, parameters=s.describe(p), gap_after=g, score=expl,
                       gap_fit=gfit, n_parameters=s.n, model_toml=dumps(m_aug), vanished=reason or "")
         cands.append((c, m_aug, yh, s, p, base))
-    # the parameter mismatch: the per-mode refit, or with physical stiffness changes (run.pm)
-    lin, theta_pm, refit, y_pm, gap_pm, gfit_pm = run.pm
-    changed = lin.changed(theta_pm)
-    pm_params = {k: v for k, v in lin.values(refit).items() if k in changed}
-    expl_pm = 1.0 - key(gap_pm, 0) / k_before if k_before > 0 else 0.0
+    pm = run.mismatch()  # the per-mode refit, or with physical stiffness changes
+    changed = pm.lin.changed(pm.theta)
+    pm_params = {k: v for k, v in pm.lin.values(pm.model).items() if k in changed}
+    expl_pm = 1.0 - key(pm.gap, 0) / k_before if k_before > 0 else 0.0
     cands.append((Candidate(effect="parameter_mismatch", where={"parameters": changed}, parameters=pm_params,
-                            gap_after=gap_pm, score=expl_pm, gap_fit=gfit_pm, n_parameters=0,
-                            model_toml=dumps(refit),
+                            gap_after=pm.gap, score=expl_pm, gap_fit=pm.gap_fit, n_parameters=0,
+                            model_toml=dumps(pm.model),
                             vanished="" if changed else "no linear parameter changed by more than 3 %"),
-                  refit, {i: y_pm[i] for i in run.val_logs}, None, None, refit))
+                  pm.model, {i: pm.outputs[i] for i in run.val_logs}, None, None, pm.model))
     # rank by the penalised held-out gap (the score saturates at 1 once a gap reaches the floor)
     cands.sort(key=lambda c: (key(c[0].gap_after, c[0].n_parameters), c[0].n_parameters, c[0].gap_after))
     run.nested_t = nested_order(cands, run.ys, run.split, run.val_logs, run.fs)

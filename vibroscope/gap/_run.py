@@ -115,6 +115,19 @@ def excess(g: float, floor: float) -> float:
     return math.sqrt(max(g * g - floor * floor, 0.0))
 
 
+@dataclass(frozen=True, eq=False, kw_only=True)
+class MismatchFit:
+    """The ``parameter_mismatch`` explanation: the linear parametrisation and its log factors,
+    the refitted model, its outputs per log, and its held-out and fitting gaps (nrmse)."""
+
+    lin: LinearParams
+    theta: np.ndarray
+    model: LumpedModel
+    outputs: list
+    gap: float
+    gap_fit: float
+
+
 @dataclass(kw_only=True, eq=False)
 class Run:
     """The working state of one diagnosis (:func:`vibroscope.gap.diagnosis.diagnose`), filled
@@ -156,8 +169,8 @@ class Run:
     sel: np.ndarray | None = None
     w: np.ndarray | None = None
     lin: LinearParams | None = None
-    #: the parameter-mismatch explanation: (lin, theta, model, outputs, held-out gap, fitting gap)
-    pm: tuple | None = None
+    #: the parameter-mismatch refit with physical stiffness changes, when kept (_refit_physical)
+    pm: MismatchFit | None = None
     ns_fit: list | None = None
     lo_l: np.ndarray | None = None
     hi_l: np.ndarray | None = None
@@ -204,6 +217,23 @@ class Run:
     chosen: list | None = None
     # forward selection (select_further_effects)
     shares: list | None = None
+
+    def mismatch(self) -> MismatchFit:
+        """The ``parameter_mismatch`` explanation: the physical refit when it was kept, else
+        the per-mode refit."""
+        if self.pm is not None:
+            return self.pm
+        return MismatchFit(lin=self.lin, theta=self.theta, model=self.refit, outputs=self.y_ref, gap=self.gap_refit,
+                           gap_fit=self.g_ref_fit)
+
+    def fit_gap(self, m_) -> float:
+        """nrmse of model `m_` on the first ``ns_pol`` samples of each log's fitting data (the
+        linear refit's time-domain measure); inf when not finite."""
+        ns_pol, ys, split = self.ns_pol, self.ys, self.split
+        yh = [sim.run(m_, n) if n else None for sim, n in zip(self.sims, ns_pol)]
+        g = nrmse([y[:, :n] for y, n in zip(ys, ns_pol) if n], [h for h in yh if h is not None],
+                  [mk[:n] for mk, n in zip(split.fit, ns_pol) if n])
+        return g if np.isfinite(g) else float("inf")
 
     def held_out(self, m_, fast=False):
         """Held-out nrmse of model `m_` (inf when not finite) and its outputs per held-out log."""

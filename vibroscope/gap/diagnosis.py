@@ -84,7 +84,7 @@ from vibroscope.errors import ChannelError
 from vibroscope.gap._candidates import fit_candidates
 from vibroscope.gap._evidence import gather_evidence, states_model
 from vibroscope.gap._ranking import rank_candidates
-from vibroscope.gap._run import Run, frf_data, pow2
+from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
 from vibroscope.gap._run import (  # the tuning constants live with the run state; exposed here too
     ADD_FACTOR,
     LEVEL_FRACTION,
@@ -487,13 +487,10 @@ def _refit_linear(run: Run) -> None:
     lo_l, hi_l = np.full(len(lin), -2.5), np.full(len(lin), 2.5)
     # time-domain polish on up to 20 s of the fitting data (the FRF fit is biased by leakage)
     ns_pol = [min(n, max(s_, int(20 * fs))) if n else 0 for n, s_ in zip(ns_fit, split.screen_prefix)]
+    run.ns_pol = ns_pol
 
     def fit_gap(x):
-        m_ = lin.apply(model, x)
-        yh = [sim.run(m_, n) if n else None for sim, n in zip(sims, ns_pol)]
-        g = nrmse([y[:, :n] for y, n in zip(ys, ns_pol) if n], [h for h in yh if h is not None],
-                  [mk[:n] for mk, n in zip(split.fit, ns_pol) if n])
-        return g if np.isfinite(g) else float("inf")
+        return run.fit_gap(lin.apply(model, x))
 
     zeros = np.zeros(len(lin))
     g_nom_fit = fit_gap(zeros)
@@ -514,7 +511,6 @@ def _refit_linear(run: Run) -> None:
     run.ns_fit, run.lo_l, run.hi_l, run.ns_pol = ns_fit, lo_l, hi_l, ns_pol
     run.g_nom_fit, run.g_ref_fit, run.theta, run.refit_note = g_nom_fit, g_ref_fit, theta, refit_note
     run.refit, run.y_ref, run.gap_refit = refit, y_ref, gap_refit
-    run.pm = (lin, theta, refit, y_ref, gap_refit, g_ref_fit)
     if model.point_names() and not closed:
         _refit_physical(run, f[sel], H[sel], w[sel])
     run.timings["refit"] = time.perf_counter() - t
@@ -534,11 +530,7 @@ def _refit_physical(run: Run, f, H, w) -> None:
         return
 
     def fit_gap(x):
-        m_ = lin_p.apply(model, x)
-        yh = [sim.run(m_, n) if n else None for sim, n in zip(sims, ns_pol)]
-        g = nrmse([y[:, :n] for y, n in zip(ys, ns_pol) if n], [h for h in yh if h is not None],
-                  [mk[:n] for mk, n in zip(split.fit, ns_pol) if n])
-        return g if np.isfinite(g) else float("inf")
+        return run.fit_gap(lin_p.apply(model, x))
 
     x_ref = np.concatenate([run.theta, np.zeros(len(lin_p) - len(run.lin))])
     x_frf = fit_linear_frf(model, lin_p, f, H, w)[1]
@@ -552,7 +544,8 @@ def _refit_physical(run: Run, f, H, w) -> None:
         return
     refit_p = lin_p.apply(model, theta_p)
     y_p = [sim.run(refit_p) for sim in sims]
-    run.pm = (lin_p, theta_p, refit_p, y_p, nrmse(ys, y_p, split.validation), g_fit)
+    run.pm = MismatchFit(lin=lin_p, theta=theta_p, model=refit_p, outputs=y_p, gap=nrmse(ys, y_p, split.validation),
+                         gap_fit=g_fit)
     run.refit_note += ("; parameter_mismatch refitted with physical stiffness changes at the measured points' "
                        f"connections as well (fitting gap {g_fit:.4g})")
 
