@@ -96,10 +96,56 @@ def test_a_changed_physical_spring_is_a_linear_parameter_of_a_modal_model():
     np.testing.assert_allclose(lin.values(m2)["dk:m1-m2"], dk, rtol=1e-12)
     np.testing.assert_allclose(lin.theta_between(m, m2), theta, atol=1e-12)
     assert lin.changed(theta) == ["dk:m1-m2"]
-    # a second change adds to the first, in the same block of springs
+    # a second change adds to the first, in the same block of six springs and six dampers
     m3 = lin.apply(m2, theta)
-    assert len(m3.elements) == len(m2.elements) == len(m.elements) + 6
+    assert len(m3.elements) == len(m2.elements) == len(m.elements) + 12
     np.testing.assert_allclose(lin.values(m3)["dk:m1-m2"], 2 * dk, rtol=1e-12)
+
+
+def test_a_changed_physical_damper_is_a_linear_parameter_of_a_modal_model():
+    """A damper that differs from the one the modes were identified with makes the damping
+    non-proportional (it couples the modes): the ``dc:`` damping change at its connection
+    reproduces it exactly (all DOFs measured), per-mode factors alone do not, and its
+    parameters invert."""
+    from dataclasses import replace
+
+    from scipy.optimize import least_squares
+
+    from vibroscope.gap.effects import LinearParams
+    from vibroscope.models.elements import Damper, SignedDamper
+
+    truth = chain()
+    m = as_lumped(loads_model(dumps_model(exact_modal(truth)), "chain_modal.toml"))
+    lin = LinearParams(m, physical=True)
+    j = next(i for i, e in enumerate(truth.elements) if isinstance(e, Damper) and set(e.between) == {"m1", "m2"})
+    dc = -0.5 * truth.elements[j].c  # the m1-m2 damper halved
+    changed = truth.replace(elements=tuple(replace(e, c=e.c + dc) if i == j else e
+                                           for i, e in enumerate(truth.elements)))
+    theta = np.zeros(len(lin))
+    i = lin.names.index("dc:m1-m2")
+    theta[i] = 1.0
+    c_unit = lin.values(lin.apply(m, theta))["dc:m1-m2"]  # N s/m per unit of theta
+    theta[i] = dc / c_unit
+    m2 = lin.apply(m, theta)
+    assert sum(isinstance(e, SignedDamper) for e in m2.elements) == 6
+    f = np.linspace(0.5, 150.0, 600)
+    H = changed.frf(f)
+    err = np.max(np.abs(m2.frf(f, quantity=None) - H)) / np.max(np.abs(H))
+    assert err < 1e-10
+    np.testing.assert_allclose(lin.values(m2)["dc:m1-m2"], dc, rtol=1e-12)
+    np.testing.assert_allclose(lin.theta_between(m, m2), theta, atol=1e-12)
+    assert lin.changed(theta) == ["dc:m1-m2"]
+    # the per-mode factors alone, fitted to the changed FRF, leave a larger error: the change
+    # couples the modes
+    per_mode = LinearParams(m)
+
+    def res(x):
+        d = per_mode.apply(m, x).frf(f, quantity=None) - H
+        return np.concatenate([d.real.ravel(), d.imag.ravel()]) / np.max(np.abs(H))
+
+    best = least_squares(res, np.zeros(len(per_mode)))
+    err_pm = np.max(np.abs(per_mode.apply(m, best.x).frf(f, quantity=None) - H)) / np.max(np.abs(H))
+    assert err_pm > 100 * max(err, 1e-12)
 
 
 def test_effects_act_at_the_measured_points():
@@ -112,8 +158,10 @@ def test_effects_act_at_the_measured_points():
     lin = LinearParams(m)
     assert lin.names == ["m:mode1", "m:mode2", "m:mode3", "k:mode1-ground", "c:mode1-ground",
                          "k:mode2-ground", "c:mode2-ground", "k:mode3-ground", "c:mode3-ground"]
-    # with physical=True, a stiffness change per connection (the parameter-mismatch refit)
-    assert LinearParams(m, physical=True).names[9:] == [f"dk:{a}-{b}" for a, b in pairs]
+    # with physical=True, a stiffness change per connection, then a damping change per
+    # connection (the parameter-mismatch refit)
+    assert LinearParams(m, physical=True).names[9:] == ([f"dk:{a}-{b}" for a, b in pairs]
+                                                        + [f"dc:{a}-{b}" for a, b in pairs])
     # a log factor of 2 ln 1.1 on k:mode2 moves mode 2 up by 10 %
     th = np.zeros(len(lin))
     th[lin.names.index("k:mode2-ground")] = 2 * np.log(1.1)

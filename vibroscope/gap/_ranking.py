@@ -134,7 +134,7 @@ def ranked_candidates(run: Run, evaluated: list) -> list:
         c = Candidate(effect=s.effect, where=where, parameters=s.describe(p), gap_after=g, score=expl,
                       gap_fit=gfit, n_parameters=s.n, model_toml=dumps(m_aug), vanished=reason or "")
         cands.append((c, m_aug, yh, s, p, base))
-    pm = run.mismatch()  # the per-mode refit, or with physical stiffness changes
+    pm = run.mismatch()  # the per-mode refit, or with physical stiffness and damping changes
     changed = pm.lin.changed(pm.theta)
     pm_params = {k: v for k, v in pm.lin.values(pm.model).items() if k in changed}
     expl_pm = 1.0 - key(pm.gap, 0) / k_before if k_before > 0 else 0.0

@@ -39,6 +39,11 @@ NESTED_T = 4.0
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
 ADD_FACTOR = 0.5
+#: forward selection fits jointly with the chosen effects and the linear parameters only the
+#: additions whose own fit (its parameters alone) ranks among this many best on the fitting data
+#: (a joint fit costs as much as the rest of a try; the accepted addition's own fit ranked first
+#: or second in the 30 two-effect benchmark cases it was measured on)
+JOINT_TOP = 3
 #: an addition within REFINE_FACTOR (but not ADD_FACTOR) times the current penalised excess is
 #: fitted further (jointly with the linear parameters) before the decision
 REFINE_FACTOR = 0.8
@@ -169,7 +174,7 @@ class Run:
     sel: np.ndarray | None = None
     w: np.ndarray | None = None
     lin: LinearParams | None = None
-    #: the parameter-mismatch refit with physical stiffness changes, when kept (_refit_physical)
+    #: the parameter-mismatch refit with physical stiffness and damping changes, when kept (_refit_physical)
     pm: MismatchFit | None = None
     ns_fit: list | None = None
     lo_l: np.ndarray | None = None

@@ -19,6 +19,7 @@ import numpy as np
 from vibroscope.gap._ranking import polish_candidate
 from vibroscope.gap._run import (
     ADD_FACTOR,
+    JOINT_TOP,
     NESTED_FAMILIES,
     REFINE_FACTOR,
     Run,
@@ -193,7 +194,9 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     effects' parameters: a first effect fitted alone bends the linear parameters and its own to
     mimic the second (a spring softened for a clearance, a friction force raised for a stiffening
     spring), and only a joint fit can undo that; the better on the fitting data is kept (the
-    joint fit only when no chosen effect vanishes in it) (:func:`try_addition`). The
+    joint fit only when no chosen effect vanishes in it) (:func:`own_addition`,
+    :func:`finish_addition`). The joint fit, as costly as the rest, is made for the
+    :data:`JOINT_TOP` additions whose own fit is best on the fitting data only. The
     best addition is kept when its penalised held-out excess gap falls below
     :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
     floor explain) (:func:`accepted_addition`); then the next, up to three effects. Returns the
@@ -216,7 +219,10 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
             break
         chain = [(c[3], c[4]) for c in chosen]
         with ThreadPoolExecutor(max(1, workers)) as ex:
-            tries = [r for r in ex.map(partial(try_addition, run, chosen, chain, cur_m), cands) if r is not None]
+            own = sorted((r for r in ex.map(partial(own_addition, run, cur_m), cands) if r is not None),
+                         key=lambda r: r[2])
+            tries = list(ex.map(lambda ir: finish_addition(run, chosen, chain, ir[1], joint=ir[0] < JOINT_TOP),
+                                enumerate(own)))
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:
             break
@@ -285,16 +291,21 @@ def joint_chain_fit(run: Run, chain: list, s, x0, nfev):
     return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
 
 
-def try_addition(run: Run, chosen: list, chain: list, cur_m, item):
+def try_addition(run: Run, chosen: list, chain: list, cur_m, item, *, joint: bool = True):
     """One addition `item` ``(spec, start p or None)`` to the current model `cur_m`: its best start
-    on the screening prefix, its own parameters fitted, then jointly with the chosen effects and the
-    linear parameters (:func:`joint_chain_fit`), kept when better and no chosen effect vanishes in
-    it; evaluated on the held-out data. Returns ``(spec, p, model, held-out gap, outputs, gap_fit,
-    linear base, joint x or None, chosen effects' refitted p or None)``, or None when it cannot be
-    built."""
-    sims, ys, split, lin, model = run.sims, run.ys, run.split, run.lin, run.model
+    on the screening prefix, its own parameters fitted (:func:`own_addition`), then with `joint`
+    jointly with the chosen effects and the linear parameters (:func:`finish_addition`).
+    Returns what :func:`finish_addition` does, or None when it cannot be built."""
+    own = own_addition(run, cur_m, item)
+    return None if own is None else finish_addition(run, chosen, chain, own, joint=joint)
+
+
+def own_addition(run: Run, cur_m, item):
+    """An addition `item` ``(spec, start p or None)`` to the current model `cur_m` with only its
+    own parameters fitted (screening prefix, coarse integration) from its best start. Returns
+    ``(spec, p, fitting gap, model)``, or None when it cannot be built."""
+    sims, ys, split = run.sims, run.ys, run.split
     sp = split.screen_prefix
-    nl = len(lin)
     s, p_s = item
     p0s = [p_s] + list(s.starts[:2]) if p_s is not None else list(s.starts[:3])
     best = None
@@ -314,8 +325,20 @@ def try_addition(run: Run, chosen: list, chain: list, cur_m, item):
 
     p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
                                  max_nfev=4 + 2 * s.n)
-    m_new, base_new, x_j, chp = build(p), chosen[-1][5], None, None
-    if nl:
+    return s, p, gfit, build(p)
+
+
+def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = True):
+    """An addition fitted alone (`own`, from :func:`own_addition`), with `joint` fitted again
+    jointly with the chosen effects and the linear parameters (:func:`joint_chain_fit`), kept
+    when better and no chosen effect vanishes in it; evaluated on the held-out data. Returns
+    ``(spec, p, model, held-out gap, outputs, gap_fit, linear base, joint x or None, chosen
+    effects' refitted p or None)``."""
+    lin, model = run.lin, run.model
+    nl = len(lin)
+    s, p, gfit, m_new = own
+    base_new, x_j, chp = chosen[-1][5], None, None
+    if nl and joint:
         th0 = lin.theta_between(model, chosen[-1][5])
         try:
             x0 = np.concatenate([np.clip(th0, run.lo_l, run.hi_l)] + [np.asarray(p_c, float) for _, p_c in chain]

@@ -87,6 +87,7 @@ from vibroscope.gap._ranking import rank_candidates
 from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
 from vibroscope.gap._run import (  # the tuning constants live with the run state; exposed here too
     ADD_FACTOR,
+    JOINT_TOP,
     LEVEL_FRACTION,
     LEVEL_MODE_CHANGE,
     LEVEL_MODE_MATCH,
@@ -518,9 +519,10 @@ def _refit_linear(run: Run) -> None:
 
 def _refit_physical(run: Run, f, H, w) -> None:
     """Stage 2b, a model with measured points (modal coordinates): the ``parameter_mismatch``
-    explanation refitted with physical stiffness changes at the connections as well
+    explanation refitted with physical stiffness and damping changes at the connections as well
     (:class:`~vibroscope.gap.effects.LinearParams` with ``physical=True``: they couple the modes
-    and change their shapes, as a physical spring that differs from the identified one does),
+    and change their shapes, as a physical spring or damper that differs from the identified
+    one does),
     FRF fit then time-domain polish from the better of it and the per-mode refit; kept as
     ``run.pm`` when better on the fitting data. The nonlinear candidates stay on the per-mode
     refit: a stiffness change taken there would take the share of a joint or a clearance."""
@@ -546,7 +548,7 @@ def _refit_physical(run: Run, f, H, w) -> None:
     y_p = [sim.run(refit_p) for sim in sims]
     run.pm = MismatchFit(lin=lin_p, theta=theta_p, model=refit_p, outputs=y_p, gap=nrmse(ys, y_p, split.validation),
                          gap_fit=g_fit)
-    run.refit_note += ("; parameter_mismatch refitted with physical stiffness changes at the measured points' "
+    run.refit_note += ("; parameter_mismatch refitted with physical stiffness and damping changes at the measured points' "
                        f"connections as well (fitting gap {g_fit:.4g})")
 
 

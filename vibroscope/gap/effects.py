@@ -57,6 +57,7 @@ from vibroscope.models.elements import (
     CubicSpring,
     Damper,
     Friction,
+    SignedDamper,
     SignedSpring,
     Spring,
 )
@@ -71,6 +72,10 @@ FRICTION_V_EPS = 1e-3
 #: ``DK_SCALE * k_ref * theta`` (``k_ref`` the static stiffness across it): the linear
 #: parameters' bounds ``|theta| <= 2.5`` then allow up to 75 % of it either way
 DK_SCALE = 0.3
+#: a modal-coordinates model's physical damping change at a connection is
+#: ``DC_SCALE * c_ref * theta`` (``c_ref`` the damping the modes give across it): up to 75 %
+#: of it either way
+DC_SCALE = 0.3
 #: name of the DOF an extra_mode candidate adds
 EXTRA_DOF = "extra"
 
@@ -123,9 +128,12 @@ class LinearParams:
     its DOFs) also gets one physical stiffness change per connection (``dk:<a>-<b>``, each point to ground and
     each pair of points): a :class:`~vibroscope.models.SignedSpring` of stiffness
     ``DK_SCALE * k_ref * theta_i`` between the points, ``k_ref`` the static stiffness the
-    nominal has across the connection. Acting through the mode shapes, these couple the modes
-    and change the shapes, which per-mode factors cannot: a physical spring that differs from
-    the one the modes were identified with is ``Phi^T dK Phi`` in modal coordinates, not
+    nominal has across the connection; then one physical damping change per connection
+    (``dc:<a>-<b>``): a :class:`~vibroscope.models.SignedDamper` of coefficient
+    ``DC_SCALE * c_ref * theta_i``, ``c_ref`` the damping the nominal's modes give across it.
+    Acting through the mode shapes, these couple the modes and change the shapes, which
+    per-mode factors cannot: a physical spring or damper that differs from the one the modes
+    were identified with is ``Phi^T dK Phi`` (``Phi^T dC Phi``) in modal coordinates, not
     diagonal [1]_.
 
     Parameters
@@ -139,16 +147,16 @@ class LinearParams:
         otherwise the names to keep (e.g. ``["k:m1-ground", "c:m1-ground"]``); unknown names
         are ignored.
     physical : bool, optional
-        Add the ``dk:`` physical stiffness changes of a model with measured points (default
-        False: the per-mode factors only).
+        Add the ``dk:`` physical stiffness and ``dc:`` damping changes of a model with
+        measured points (default False: the per-mode factors only).
 
     Attributes
     ----------
     names : list of str
         The parameter names, the order of ``theta``.
     refs : list of tuple of (str, int)
-        For each name, its kind (``"m"``, ``"k"``, ``"c"``, ``"dk"``) and the index of its DOF
-        or element in `model` (for ``"dk"``, of its connection).
+        For each name, its kind (``"m"``, ``"k"``, ``"c"``, ``"dk"``, ``"dc"``) and the index of
+        its DOF or element in `model` (for ``"dk"`` and ``"dc"``, of its physical change).
 
     References
     ----------
@@ -168,14 +176,17 @@ class LinearParams:
             elif isinstance(e, Damper) and e.c > 0:
                 names.append(f"c:{pair_name(e.between)}")
                 refs.append(("c", j))
-        # a model with points: a signed physical stiffness change at each connection
+        # a model with points: a signed physical stiffness change at each connection, then a
+        # signed damping change at each
         self._n_el = len(model.elements)
-        self._dk: list[tuple[tuple[str, str], float]] = []
+        self._phys: list[tuple[str, tuple[str, str], float]] = []  # (kind, between, scale)
         if physical and model.point_names():
-            for between in connections(model):
-                self._dk.append((tuple(between), DK_SCALE * _k_at(model, between)))
-                names.append(f"dk:{pair_name(between)}")
-                refs.append(("dk", len(self._dk) - 1))
+            pairs = [tuple(b) for b in connections(model)]
+            self._phys = ([("dk", b, DK_SCALE * _k_at(model, b)) for b in pairs]
+                          + [("dc", b, DC_SCALE * _c_at(model, b)) for b in pairs])
+            for j, (kind, between, _) in enumerate(self._phys):
+                names.append(f"{kind}:{pair_name(between)}")
+                refs.append((kind, j))
         if which == "kc":
             keep = [i for i, n in enumerate(names) if not n.startswith("m:")]
         elif which == "all":
@@ -208,10 +219,10 @@ class LinearParams:
             return model
         dofs = list(model.dofs)
         els = list(model.elements)
-        dk = np.zeros(len(self._dk))
+        dk = np.zeros(len(self._phys))
         for (kind, i), t in zip(self.refs, theta):
-            if kind == "dk":
-                dk[i] = self._dk[i][1] * float(t)
+            if kind in ("dk", "dc"):
+                dk[i] = self._phys[i][2] * float(t)
                 continue
             f = math.exp(float(t))
             if kind == "m":
@@ -221,25 +232,29 @@ class LinearParams:
             else:
                 els[i] = replace(els[i], c=els[i].c * f)
         if np.any(dk != 0):
-            if self._has_dk_block(els):  # changes add to the ones `model` already has
-                for j, d in enumerate(dk):
+            if self._has_phys_block(els):  # changes add to the ones `model` already has
+                for j, ((kind, _, _), d) in enumerate(zip(self._phys, dk)):
                     e = els[self._n_el + j]
-                    els[self._n_el + j] = replace(e, k=e.k + float(d))
-            else:  # the block of stiffness changes, after the nominal's own elements
-                block = [SignedSpring(between, k=float(d)) for (between, _), d in zip(self._dk, dk)]
+                    els[self._n_el + j] = replace(e, k=e.k + float(d)) if kind == "dk" else replace(e, c=e.c + float(d))
+            else:  # the block of stiffness and damping changes, after the nominal's own elements
+                block = [SignedSpring(b, k=float(d)) if kind == "dk" else SignedDamper(b, c=float(d))
+                         for (kind, b, _), d in zip(self._phys, dk)]
                 els = els[: self._n_el] + block + els[self._n_el:]
         return replace(model, dofs=tuple(dofs), elements=tuple(els))
 
-    def _has_dk_block(self, els) -> bool:
-        n0, nd = self._n_el, len(self._dk)
+    def _has_phys_block(self, els) -> bool:
+        n0, nd = self._n_el, len(self._phys)
+        kinds = {"dk": SignedSpring, "dc": SignedDamper}
         return nd > 0 and len(els) >= n0 + nd and all(
-            isinstance(e, SignedSpring) and tuple(e.between) == b for e, (b, _) in zip(els[n0:n0 + nd], self._dk))
+            isinstance(e, kinds[kind]) and tuple(e.between) == b
+            for e, (kind, b, _) in zip(els[n0:n0 + nd], self._phys))
 
-    def _dk_values(self, model) -> np.ndarray:
+    def _phys_values(self, model) -> np.ndarray:
         els = list(model.elements)
-        if not self._has_dk_block(els):
-            return np.zeros(len(self._dk))
-        return np.array([els[self._n_el + j].k for j in range(len(self._dk))])
+        if not self._has_phys_block(els):
+            return np.zeros(len(self._phys))
+        return np.array([els[self._n_el + j].k if kind == "dk" else els[self._n_el + j].c
+                         for j, (kind, _, _) in enumerate(self._phys)])
 
     def changed(self, theta, tol: float = 0.03) -> list[str]:
         """Names of the parameters whose factor differs from 1 by more than `tol`.
@@ -257,7 +272,7 @@ class LinearParams:
         list of str
         """
         return [n for n, (kind, _), t in zip(self.names, self.refs, np.asarray(theta, float))
-                if abs(DK_SCALE * t if kind == "dk" else math.expm1(t)) > tol]
+                if abs({"dk": DK_SCALE, "dc": DC_SCALE}[kind] * t if kind in ("dk", "dc") else math.expm1(t)) > tol]
 
     def values(self, model: LumpedModel) -> dict[str, float]:
         """Current values (kg, N/m, N s/m) of the parameters in `model`.
@@ -271,13 +286,13 @@ class LinearParams:
         -------
         dict of str to float
             Name -> mass (kg), stiffness (N/m) or damping coefficient (N s/m); for ``dk:``
-            names the physical stiffness change (N/m) `model` has at the connection (0 when
-            it has none).
+            (``dc:``) names the physical stiffness (damping) change, N/m (N s/m), `model` has
+            at the connection (0 when it has none).
         """
         out = {}
-        dk = self._dk_values(model) if self._dk else None
+        dk = self._phys_values(model) if self._phys else None
         for n, (kind, i) in zip(self.names, self.refs):
-            if kind == "dk":
+            if kind in ("dk", "dc"):
                 out[n] = float(dk[i])
             else:
                 out[n] = model.dofs[i].mass if kind == "m" else (model.elements[i].k if kind == "k" else model.elements[i].c)
@@ -295,13 +310,15 @@ class LinearParams:
         -------
         ndarray, shape (len(self),)
             ``log(other_i / model_i)``; 0 where either value is not positive; for ``dk:``
-            names the difference of the stiffness changes over ``DK_SCALE * k_ref``.
+            (``dc:``) names the difference of the changes over ``DK_SCALE * k_ref``
+            (``DC_SCALE * c_ref``).
         """
         v0, v1 = self.values(model), self.values(other)
         out = []
         for n, (kind, i) in zip(self.names, self.refs):
-            if kind == "dk":
-                out.append((v1[n] - v0[n]) / self._dk[i][1] if self._dk[i][1] > 0 else 0.0)
+            if kind in ("dk", "dc"):
+                sc = self._phys[i][2]
+                out.append((v1[n] - v0[n]) / sc if sc > 0 else 0.0)
             else:
                 out.append(math.log(v1[n] / v0[n]) if v0[n] > 0 and v1[n] > 0 else 0.0)
         return np.array(out)
@@ -442,6 +459,24 @@ def _k_at(model, between) -> float:
         if flex > 0:
             return 1.0 / flex
     return float(np.max(np.diag(model.K)))
+
+
+def _c_at(model, between) -> float:
+    """The damping coefficient (N s/m) across a connection: its damper's, or for a model with
+    measured points the ``1 / (l^T C^-1 l)`` its modes give (``l`` the connection's vector in
+    the DOFs), or the largest diagonal damping."""
+    for e in model.elements:
+        if isinstance(e, Damper) and {*e.between} == {*between}:
+            return e.c
+    if model.point_names():
+        lv = model.element_vector(Spring(tuple(between), k=0.0))
+        try:
+            flex = float(lv @ np.linalg.solve(model.C, lv))
+        except np.linalg.LinAlgError:
+            flex = 0.0
+        if flex > 0:
+            return 1.0 / flex
+    return float(np.max(np.diag(model.C)))
 
 
 def _mass_at(model, name) -> float:

@@ -36,6 +36,7 @@ __all__ = [
     "GROUND",
     "Element",
     "Spring",
+    "SignedDamper",
     "SignedSpring",
     "Damper",
     "CubicSpring",
@@ -298,6 +299,52 @@ class Damper(Element):
             The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
         """
         return self.c * v
+
+
+@dataclass(frozen=True)
+class SignedDamper(Element):
+    """Linear viscous damper of either sign ``f = c v``; `c` in N s/m, may be negative.
+
+    A damping change at a connection whose damping is already in the model without a damper
+    of its own to change: a modal-coordinates model, whose damping is spread over its modes.
+    Acting through the mode shapes it couples the modes (non-proportional damping), which
+    per-mode damping factors cannot [1]_. Use :class:`Damper` for a physical damper: its
+    coefficient must be positive. The model's total damping matrix must stay positive
+    semi-definite for the model to be passive; this element does not check that.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF or point names, or one and ``"ground"``.
+    c : float, optional
+        Viscous damping coefficient (N s/m), finite, any sign; default 0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`) or `c` is not finite.
+
+    References
+    ----------
+    .. [1] D. J. Ewins, *Modal Testing: Theory, Practice and Application*, 2nd ed., Research
+       Studies Press, 2000, sec. 2.3 (non-proportional damping) and 6.2 (structural
+       modification through the mode shapes).
+    """
+
+    c: float = 0.0
+    type: ClassVar[str] = "signed_damper"
+    is_linear: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        c = float(self.c)
+        if not np.isfinite(c):
+            raise ValueError(f"c={c} must be finite")
+        object.__setattr__(self, "c", c)
+
+    # the same law as a damper's, c v: its linear part and its force
+    linear_damping = Damper.linear_damping
+    force = Damper.force
 
 
 @dataclass(frozen=True)
@@ -819,6 +866,7 @@ ELEMENT_TYPES: dict[str, tuple[type, dict[str, str], tuple[str, ...]]] = {
     "spring": (Spring, {"k": "k"}, ("k",)),
     "signed_spring": (SignedSpring, {"k": "k"}, ("k",)),
     "damper": (Damper, {"c": "c"}, ("c",)),
+    "signed_damper": (SignedDamper, {"c": "c"}, ("c",)),
     "cubic_spring": (CubicSpring, {"k": "k", "k3": "k3"}, ("k3",)),
     "backlash": (Backlash, {"k": "k", "gap": "gap"}, ("k", "gap")),
     "friction": (Friction, {"force": "force_", "v_eps": "v_eps", "force_neg": "force_neg"}, ("force",)),
