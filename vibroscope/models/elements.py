@@ -889,8 +889,8 @@ def make_element(type: str, between, **params) -> Element:
     Parameters
     ----------
     type : str
-        A key of :data:`ELEMENT_TYPES`: ``'spring'``, ``'signed_spring'``, ``'damper'``, ``'cubic_spring'``,
-        ``'backlash'``, ``'friction'``, ``'bouc_wen'`` or ``'mr_damper'``.
+        A key of :data:`ELEMENT_TYPES`: ``'spring'``, ``'signed_spring'``, ``'damper'``, ``'signed_damper'``,
+        ``'cubic_spring'``, ``'backlash'``, ``'friction'``, ``'bouc_wen'`` or ``'mr_damper'``.
     between : tuple of (str, str)
         The two ends: two DOF names, or a DOF name and ``"ground"``.
     **params : float
