@@ -1,7 +1,8 @@
 """Stage 5b of the gap diagnosis: further effects, by forward selection.
 
 :func:`select_further_effects`: from the verdict (or from the best admissible candidate of an
-unexplained gap) each other class is tried as an addition (:func:`try_addition`) and the best is
+unexplained gap) each other class is tried as an addition (:func:`own_addition`, the best
+:data:`~vibroscope.gap._run.JOINT_TOP` again jointly: :func:`finish_addition`) and the best is
 kept when it closes significantly more (:func:`accepted_addition`), up to three effects; a
 combination is polished jointly (:func:`~vibroscope.gap._ranking.polish_candidate`). When an input
 delay joins only later, the selection runs once more from the delay fitted alone
@@ -289,15 +290,6 @@ def joint_chain_fit(run: Run, chain: list, s, x0, nfev):
                                run.sims, run.ys, split.fit, split.screen_prefix, fast=True, max_nfev=nfev)
     ch_new = [(s_c, x[a_:b_]) for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:])]
     return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
-
-
-def try_addition(run: Run, chosen: list, chain: list, cur_m, item, *, joint: bool = True):
-    """One addition `item` ``(spec, start p or None)`` to the current model `cur_m`: its best start
-    on the screening prefix, its own parameters fitted (:func:`own_addition`), then with `joint`
-    jointly with the chosen effects and the linear parameters (:func:`finish_addition`).
-    Returns what :func:`finish_addition` does, or None when it cannot be built."""
-    own = own_addition(run, cur_m, item)
-    return None if own is None else finish_addition(run, chosen, chain, own, joint=joint)
 
 
 def own_addition(run: Run, cur_m, item):
