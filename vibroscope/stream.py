@@ -561,7 +561,7 @@ def _analyse_spectra(sp: LogSpectra, input, outputs, **kw):
     """(G of input + responses, FRF or None, Identification, band, responses, notes) of accumulated spectra."""
     notes = list(dict.fromkeys(sp.warnings))
     acc = sp.accumulator
-    diag = acc._auto_sums()
+    diag = acc.auto_sums()
     outs = [c for c in sp.channels if c != input] if outputs is None else list(outputs)
     count = np.diag(acc.n_averages)
     none = [c for c in outs if count[sp.channels.index(c)] == 0]
