@@ -73,6 +73,12 @@ def write_modes_uff55(
     Path
         `path`.
 
+    Raises
+    ------
+    ValueError
+        If `node_ids`/`directions` have the wrong length or two points share a node DOF, or a
+        damping ratio is not in (-1, 1).
+
     Notes
     -----
     Each mode is one record of analysis type 3 (complex eigenvalue, first order), data
@@ -83,12 +89,6 @@ def write_modes_uff55(
     node's X/Y/Z slot, negated for a negative direction; the other slots are 0. Modal A and B
     are written as 0. ID line 1 holds the model's method. All values are written with 6
     significant digits (``E13.5``).
-
-    Raises
-    ------
-    ValueError
-        If `node_ids`/`directions` have the wrong length or two points share a node DOF, or a
-        damping ratio is not in (-1, 1).
 
     References
     ----------

@@ -38,16 +38,16 @@ def write_geometry_uff15(path: str | Path, node_ids: Sequence[int], xyz: np.ndar
     Path
         `path`.
 
+    Raises
+    ------
+    ValueError
+        If the shapes disagree, `xyz` is not finite, or node ids repeat or are not positive.
+
     Notes
     -----
     Dataset 15 stores coordinates with 6 significant digits (``E13.5``); a units record
     (dataset 164, SI, length factor 1) precedes it so that :func:`read_geometry` and other
     readers know the coordinates are in metres.
-
-    Raises
-    ------
-    ValueError
-        If the shapes disagree, `xyz` is not finite, or node ids repeat or are not positive.
 
     References
     ----------
