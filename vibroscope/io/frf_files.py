@@ -216,6 +216,10 @@ def read_frf(
         If `kind` is not a known kind, `output_names` has the wrong length, or `input_name` is
         given for an FRF with several inputs.
 
+    See Also
+    --------
+    vibroscope.io.write_frf_uff58 : Write an FRF as UFF dataset 58 records.
+
     References
     ----------
     .. [1] Structural Dynamics Research Lab., "Universal File Datasets Summary", dataset 58

@@ -79,6 +79,10 @@ def write_modes_uff55(
         If `node_ids`/`directions` have the wrong length or two points share a node DOF, or a
         damping ratio is not in (-1, 1).
 
+    See Also
+    --------
+    read_modes_uff55 : Read the records back.
+
     Notes
     -----
     Each mode is one record of analysis type 3 (complex eigenvalue, first order), data
@@ -175,6 +179,11 @@ def read_modes_uff55(path: str | Path) -> ModalModel:
     LogFormatError
         If the file is unreadable or holds no mode record (names the datasets and analysis
         types found).
+
+    See Also
+    --------
+    write_modes_uff55 : Write mode shapes as UFF dataset 55 records.
+    vibroscope.io.read_mode_set : A set of modes from a UFF 55 file, a model file or a MODES.json.
 
     References
     ----------

@@ -160,6 +160,10 @@ def write_frf_uff58(frf: FRF, path: str | Path, *, binary: bool = False) -> Path
     ValueError
         If the FRF has fewer than 2 frequencies.
 
+    See Also
+    --------
+    vibroscope.io.read_frf : Read the FRF back (the conventions written here).
+
     Notes
     -----
     Each FRF record has function type 4; its response DOF comes from the output's name when it
