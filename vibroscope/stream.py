@@ -28,8 +28,7 @@ import numpy as np
 
 from vibroscope.pipeline import Analysis
 from vibroscope.signals import true_runs
-from vibroscope.spectral import CrossSpectralMatrix, frf
-from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
+from vibroscope.spectral import CrossSpectralAccumulator, CrossSpectralMatrix, frf, segment_settings
 
 __all__ = ["LogSpectra", "StreamAnalysis", "segment_ranges", "accumulate_log", "merge_spectra", "analyse_stream",
            "stream_settings", "MAX_STREAM_NPERSEG"]

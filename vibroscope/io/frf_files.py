@@ -37,7 +37,7 @@ from vibroscope.io.uff import UFF_SUFFIXES, uff_datasets
 from vibroscope.io.uff55 import read_modes_uff55, write_modes_uff55
 from vibroscope.io.uff58 import read_uff58_table, write_frf_uff58
 from vibroscope.io.uff_geometry import read_geometry, write_geometry_uff15
-from vibroscope.spectral._results import FRF, FRF_KINDS
+from vibroscope.spectral import FRF, FRF_KINDS
 
 __all__ = [
     "read_frf",

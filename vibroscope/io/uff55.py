@@ -29,7 +29,7 @@ from vibroscope.io.uff import (
     read_set,
     remove_existing,
 )
-from vibroscope.modal._results import ModalModel
+from vibroscope.modal import ModalModel
 
 __all__ = ["write_modes_uff55", "read_modes_uff55"]
 

@@ -29,7 +29,7 @@ from vibroscope.io.uff import (
     read_set,
     remove_existing,
 )
-from vibroscope.spectral._results import FRF
+from vibroscope.spectral import FRF
 
 __all__ = ["write_frf_uff58"]
 
