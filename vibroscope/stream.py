@@ -28,8 +28,7 @@ import numpy as np
 
 from vibroscope.pipeline import Analysis
 from vibroscope.signals import true_runs
-from vibroscope.spectral import CrossSpectralMatrix, frf
-from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
+from vibroscope.spectral import CrossSpectralAccumulator, CrossSpectralMatrix, frf, segment_settings
 
 __all__ = ["LogSpectra", "StreamAnalysis", "segment_ranges", "accumulate_log", "merge_spectra", "analyse_stream",
            "stream_settings", "MAX_STREAM_NPERSEG"]
@@ -561,7 +560,7 @@ def _analyse_spectra(sp: LogSpectra, input, outputs, **kw):
     """(G of input + responses, FRF or None, Identification, band, responses, notes) of accumulated spectra."""
     notes = list(dict.fromkeys(sp.warnings))
     acc = sp.accumulator
-    diag = acc._auto_sums()
+    diag = acc.auto_sums()
     outs = [c for c in sp.channels if c != input] if outputs is None else list(outputs)
     count = np.diag(acc.n_averages)
     none = [c for c in outs if count[sp.channels.index(c)] == 0]

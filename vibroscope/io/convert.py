@@ -371,6 +371,11 @@ def read_csv(
     LogFormatError
         If the file cannot be read, has no data rows or is not numeric (names file and
         line). An empty cell is a missing sample: NaN, with a warning.
+
+    See Also
+    --------
+    read_mat : Channels from a MATLAB .mat file.
+    read_uff58 : Time records from a Universal File.
     """
     path = Path(path)
     try:
@@ -467,6 +472,11 @@ def read_mat(
         selected variables differ in length.
     LogFormatError
         If the file cannot be read as a .mat file.
+
+    See Also
+    --------
+    read_csv : Channels from a numeric CSV file.
+    read_uff58 : Time records from a Universal File.
     """
     from scipy.io import loadmat
 
@@ -551,6 +561,12 @@ def read_uff58(
         If the file holds no time record, or the records differ in rate or length.
     ValueError
         If a channel name is unknown (the message lists the records).
+
+    See Also
+    --------
+    read_csv : Channels from a numeric CSV file.
+    read_mat : Channels from a MATLAB .mat file.
+    vibroscope.io.read_frf : FRF records (function type 4) of UFF 58 files.
 
     References
     ----------

@@ -37,7 +37,7 @@ from vibroscope.io.uff import UFF_SUFFIXES, uff_datasets
 from vibroscope.io.uff55 import read_modes_uff55, write_modes_uff55
 from vibroscope.io.uff58 import read_uff58_table, write_frf_uff58
 from vibroscope.io.uff_geometry import read_geometry, write_geometry_uff15
-from vibroscope.spectral._results import FRF, FRF_KINDS
+from vibroscope.spectral import FRF, FRF_KINDS
 
 __all__ = [
     "read_frf",
@@ -215,6 +215,10 @@ def read_frf(
     ValueError
         If `kind` is not a known kind, `output_names` has the wrong length, or `input_name` is
         given for an FRF with several inputs.
+
+    See Also
+    --------
+    vibroscope.io.write_frf_uff58 : Write an FRF as UFF dataset 58 records.
 
     References
     ----------

@@ -299,6 +299,11 @@ def write_ros2_mcap(
     ValueError
         If `t0` is negative, or `path` is a directory or in a directory that does not exist.
 
+    See Also
+    --------
+    write_json_mcap : The same signals as JSON-encoded messages.
+    vibroscope.io.read_mcap : Read the log back as Signals.
+
     Notes
     -----
     Header stamps are ``t0 + k / fs`` rounded to int ns; the log time and publish time
@@ -345,6 +350,11 @@ def write_json_mcap(
     Returns
     -------
     Path
+
+    See Also
+    --------
+    write_ros2_mcap : The same signals as ROS 2 (CDR) messages.
+    vibroscope.io.read_mcap : Read the log back as Signals.
 
     Notes
     -----

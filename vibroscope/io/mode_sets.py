@@ -21,7 +21,7 @@ import numpy as np
 
 from vibroscope.errors import LogFormatError, VibroscopeError
 from vibroscope.io.coords import SensorCoords
-from vibroscope.modal._results import ModalModel, normalize_shapes
+from vibroscope.modal import ModalModel, normalize_shapes
 
 __all__ = ["ModeSet", "read_mode_set", "is_mode_set", "MODE_SET_SUFFIXES"]
 

@@ -29,7 +29,7 @@ from vibroscope.io.uff import (
     read_set,
     remove_existing,
 )
-from vibroscope.modal._results import ModalModel
+from vibroscope.modal import ModalModel
 
 __all__ = ["write_modes_uff55", "read_modes_uff55"]
 
@@ -73,6 +73,16 @@ def write_modes_uff55(
     Path
         `path`.
 
+    Raises
+    ------
+    ValueError
+        If `node_ids`/`directions` have the wrong length or two points share a node DOF, or a
+        damping ratio is not in (-1, 1).
+
+    See Also
+    --------
+    read_modes_uff55 : Read the records back.
+
     Notes
     -----
     Each mode is one record of analysis type 3 (complex eigenvalue, first order), data
@@ -83,12 +93,6 @@ def write_modes_uff55(
     node's X/Y/Z slot, negated for a negative direction; the other slots are 0. Modal A and B
     are written as 0. ID line 1 holds the model's method. All values are written with 6
     significant digits (``E13.5``).
-
-    Raises
-    ------
-    ValueError
-        If `node_ids`/`directions` have the wrong length or two points share a node DOF, or a
-        damping ratio is not in (-1, 1).
 
     References
     ----------
@@ -175,6 +179,11 @@ def read_modes_uff55(path: str | Path) -> ModalModel:
     LogFormatError
         If the file is unreadable or holds no mode record (names the datasets and analysis
         types found).
+
+    See Also
+    --------
+    write_modes_uff55 : Write mode shapes as UFF dataset 55 records.
+    vibroscope.io.read_mode_set : A set of modes from a UFF 55 file, a model file or a MODES.json.
 
     References
     ----------

@@ -29,7 +29,7 @@ from vibroscope.io.uff import (
     read_set,
     remove_existing,
 )
-from vibroscope.spectral._results import FRF
+from vibroscope.spectral import FRF
 
 __all__ = ["write_frf_uff58"]
 
@@ -155,6 +155,15 @@ def write_frf_uff58(frf: FRF, path: str | Path, *, binary: bool = False) -> Path
     Path
         `path`.
 
+    Raises
+    ------
+    ValueError
+        If the FRF has fewer than 2 frequencies.
+
+    See Also
+    --------
+    vibroscope.io.read_frf : Read the FRF back (the conventions written here).
+
     Notes
     -----
     Each FRF record has function type 4; its response DOF comes from the output's name when it
@@ -173,11 +182,6 @@ def write_frf_uff58(frf: FRF, path: str | Path, *, binary: bool = False) -> Path
     Precision: ASCII data values are written with 12 significant digits (``E20.12``); the
     abscissa minimum and increment (or, unevenly spaced in ASCII, each abscissa value) with
     6 (``E13.5``), the format's own single-precision abscissa. ID lines hold 80 characters.
-
-    Raises
-    ------
-    ValueError
-        If the FRF has fewer than 2 frequencies.
 
     References
     ----------

@@ -38,16 +38,20 @@ def write_geometry_uff15(path: str | Path, node_ids: Sequence[int], xyz: np.ndar
     Path
         `path`.
 
+    Raises
+    ------
+    ValueError
+        If the shapes disagree, `xyz` is not finite, or node ids repeat or are not positive.
+
+    See Also
+    --------
+    read_geometry : Read the coordinates back.
+
     Notes
     -----
     Dataset 15 stores coordinates with 6 significant digits (``E13.5``); a units record
     (dataset 164, SI, length factor 1) precedes it so that :func:`read_geometry` and other
     readers know the coordinates are in metres.
-
-    Raises
-    ------
-    ValueError
-        If the shapes disagree, `xyz` is not finite, or node ids repeat or are not positive.
 
     References
     ----------
@@ -101,6 +105,10 @@ def read_geometry(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     LogFormatError
         If the file is unreadable, holds no node record (names the datasets found), or a node
         id occurs twice.
+
+    See Also
+    --------
+    write_geometry_uff15 : Write node coordinates as UFF dataset 15.
 
     References
     ----------

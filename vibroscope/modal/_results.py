@@ -53,6 +53,12 @@ def mpc(shapes: np.ndarray) -> np.ndarray:
     ndarray, shape (n_modes,)
         Dimensionless, in [0, 1].
 
+    See Also
+    --------
+    vibroscope.modal.mpd : Mean phase deviation, in degrees.
+    vibroscope.modal.complexity : Modal complexity, ``1 - MPC``.
+    vibroscope.modal.modal_quality : The shape quality indicators of every mode of a model.
+
     References
     ----------
     .. [1] R. S. Pappa, K. B. Elliott and A. Schenk, "Consistent-mode indicator for the eigensystem

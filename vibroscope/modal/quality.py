@@ -62,6 +62,12 @@ def mpd(shapes) -> np.ndarray:
         MPD in degrees, in [0, 90]: 0 for a real (monophase) shape, whatever its overall complex
         scale; NaN for an all-zero shape.
 
+    See Also
+    --------
+    vibroscope.modal.mpc : Modal phase collinearity.
+    complexity : Modal complexity, ``1 - MPC``.
+    modal_quality : The shape quality indicators of every mode of a model.
+
     Notes
     -----
     With the real ``n_points × 2`` matrix ``[Re φ, Im φ] = U S Vᵀ``, the first right singular
@@ -113,6 +119,12 @@ def complexity(shapes) -> np.ndarray:
     ndarray, shape (n_modes,)
         Dimensionless, in [0, 1]: 0 for a real (monophase) shape, 1 for a circularly complex one
         (e.g. ``[1, j]``); NaN for an all-zero shape.
+
+    See Also
+    --------
+    vibroscope.modal.mpc : Modal phase collinearity.
+    mpd : Mean phase deviation, in degrees.
+    modal_quality : The shape quality indicators of every mode of a model.
 
     Notes
     -----
@@ -288,6 +300,12 @@ def modal_quality(modal_model: ModalModel) -> QualityTable:
     ------
     TypeError
         If `modal_model` has no ``shapes`` (not a ModalModel-like object).
+
+    See Also
+    --------
+    vibroscope.modal.mpc : Modal phase collinearity.
+    mpd : Mean phase deviation, in degrees.
+    complexity : Modal complexity, ``1 - MPC``.
 
     References
     ----------

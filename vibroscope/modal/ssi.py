@@ -32,6 +32,10 @@ def output_covariances(y: np.ndarray, n_lags: int, ref: Sequence[int] | None = N
     ndarray, shape (n_lags, n_channels, n_refs)
         In the squared units of `y`. NaN where a pair of channels has no sample pair at a lag.
 
+    See Also
+    --------
+    ssi_cov : SSI-COV on these covariances over several model orders.
+
     Notes
     -----
     Missing samples (NaN): each entry ``R_i[a, b]`` averages ``y_a[k+i] y_b[k]`` over the sample
@@ -226,6 +230,7 @@ def ssi_cov(
     See Also
     --------
     auto_ssi : SSI-COV with automatic settings and physical-mode selection.
+    output_covariances : The output covariances the method starts from.
     fdd : Output-only modes from the cross-spectral matrix (FDD/EFDD).
     lscf : Poles from measured FRFs (input and output).
     Stabilization.modal_model : The stable modes of the diagram.

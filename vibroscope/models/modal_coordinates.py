@@ -134,10 +134,10 @@ class ModalCoordinatesModel(LumpedModel):
         return np.array(self.shapes, dtype=float).reshape(len(self.points), -1)
 
 
-def _mode_dofs(f_hz, zeta, names):
-    w = 2 * np.pi * np.asarray(f_hz, float)
+def _mode_dofs(natural_frequencies, damping_ratios, names):
+    w = 2 * np.pi * np.asarray(natural_frequencies, float)
     dofs, els = [], []
-    for nm, wr, zr in zip(names, w, zeta):
+    for nm, wr, zr in zip(names, w, damping_ratios):
         dofs.append(Dof(nm, 1.0))
         els.append(Spring((nm, GROUND), k=float(wr**2)))
         if zr > 0:

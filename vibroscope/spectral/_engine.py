@@ -415,9 +415,15 @@ class CrossSpectralAccumulator:
         """Unscaled sums as the full matrix (n_freqs, C, C) or the auto-spectra (C, n_freqs)."""
         return self._full(np.ones(self._pairs[0].size))
 
-    def _auto_sums(self) -> np.ndarray:
-        """Each channel's unscaled auto-spectrum sums added over frequency, shape (C,): 0 exactly for
-        a channel that is constant in every segment (read from the diagonal pairs, no full matrix)."""
+    def auto_sums(self) -> np.ndarray:
+        """Each channel's unscaled auto-spectrum sums added over frequency.
+
+        Returns
+        -------
+        ndarray, shape (n_channels,)
+            0 exactly for a channel that is constant in every segment (read from the diagonal
+            pairs, no full matrix).
+        """
         ii, jj = self._pairs
         d = ii == jj
         out = np.zeros(self.n_channels)

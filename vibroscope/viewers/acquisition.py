@@ -14,7 +14,7 @@ from typing import Any, Literal, Mapping
 
 import numpy as np
 
-from vibroscope.modal._results import ods_as_modal_model
+from vibroscope.modal import ods_as_modal_model
 from vibroscope.signals import true_runs
 from vibroscope.spectral.integration import OperatingShape, integrate, velocity_and_displacement
 from vibroscope.viewers._common import distinct_labels, pyplot

@@ -153,7 +153,7 @@ class LiveView:
                  every_s: float | None = 1.0, block_points: int | None = 2000,
                  clock: Callable[[], float] = time.monotonic):
         from vibroscope._checks import check_option
-        from vibroscope.spectral._engine import CrossSpectralAccumulator, segment_settings
+        from vibroscope.spectral import CrossSpectralAccumulator, segment_settings
 
         fs = float(fs)
         if not (np.isfinite(fs) and fs > 0):
@@ -259,7 +259,7 @@ class LiveView:
         """
         import rerun as rr
 
-        from vibroscope.spectral._results import CrossSpectralMatrix
+        from vibroscope.spectral import CrossSpectralMatrix
         from vibroscope.spectral.estimators import settings_dict, frf as frf_of
         from vibroscope.viewers.rerun_spectra import decibels
 
