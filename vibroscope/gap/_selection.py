@@ -196,8 +196,11 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     mimic the second (a spring softened for a clearance, a friction force raised for a stiffening
     spring), and only a joint fit can undo that; the better on the fitting data is kept (the
     joint fit only when no chosen effect vanishes in it) (:func:`own_addition`,
-    :func:`finish_addition`). The joint fit, as costly as the rest, is made for the
-    :data:`JOINT_TOP` additions whose own fit is best on the fitting data only. The
+    :func:`finish_addition`). The joint fit, as costly as the rest, is made only for the
+    :data:`JOINT_TOP` additions whose own fit is best on the fitting data and for every addition
+    at a chosen effect's connection (where that effect was bent to mimic it: a Coulomb friction
+    fitted alone to a friction and a stiffening spring in one joint leaves the spring's own fit
+    fourth of seven). The
     best addition is kept when its penalised held-out excess gap falls below
     :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
     floor explain) (:func:`accepted_addition`); then the next, up to three effects. Returns the
@@ -219,11 +222,15 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         if not cands:
             break
         chain = [(c[3], c[4]) for c in chosen]
+        pairs = {frozenset(c[0].where["between"]) for c in chosen if "between" in c[0].where}
         with ThreadPoolExecutor(max(1, workers)) as ex:
             own = sorted((r for r in ex.map(partial(own_addition, run, cur_m), cands) if r is not None),
                          key=lambda r: r[2])
-            tries = list(ex.map(lambda ir: finish_addition(run, chosen, chain, ir[1], joint=ir[0] < JOINT_TOP),
-                                enumerate(own)))
+            # jointly: the JOINT_TOP best own fits, and every addition at a chosen effect's
+            # connection (the chosen effect was fitted alone to mimic it there)
+            tries = list(ex.map(lambda ir: finish_addition(
+                run, chosen, chain, ir[1],
+                joint=ir[0] < JOINT_TOP or frozenset(ir[1][0].where.get("between", ())) in pairs), enumerate(own)))
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:
             break
