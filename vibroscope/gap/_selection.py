@@ -228,9 +228,8 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
                          key=lambda r: r[2])
             # jointly: the JOINT_TOP best own fits, and every addition at a chosen effect's
             # connection (the chosen effect was fitted alone to mimic it there)
-            tries = list(ex.map(lambda ir: finish_addition(
-                run, chosen, chain, ir[1],
-                joint=ir[0] < JOINT_TOP or frozenset(ir[1][0].where.get("between", ())) in pairs), enumerate(own)))
+            joint = [i < JOINT_TOP or frozenset(o[0].where.get("between", ())) in pairs for i, o in enumerate(own)]
+            tries = list(ex.map(lambda o, j: finish_addition(run, chosen, chain, o, joint=j), own, joint))
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:
             break

@@ -76,6 +76,8 @@ DK_SCALE = 0.3
 #: ``DC_SCALE * c_ref * theta`` (``c_ref`` the damping the modes give across it): up to 75 %
 #: of it either way
 DC_SCALE = 0.3
+#: the physical changes' kinds and their scales
+_PHYS_SCALE = {"dk": DK_SCALE, "dc": DC_SCALE}
 #: name of the DOF an extra_mode candidate adds
 EXTRA_DOF = "extra"
 
@@ -219,10 +221,10 @@ class LinearParams:
             return model
         dofs = list(model.dofs)
         els = list(model.elements)
-        dk = np.zeros(len(self._phys))
+        delta = np.zeros(len(self._phys))
         for (kind, i), t in zip(self.refs, theta):
-            if kind in ("dk", "dc"):
-                dk[i] = self._phys[i][2] * float(t)
+            if kind in _PHYS_SCALE:
+                delta[i] = self._phys[i][2] * float(t)
                 continue
             f = math.exp(float(t))
             if kind == "m":
@@ -231,14 +233,14 @@ class LinearParams:
                 els[i] = replace(els[i], k=els[i].k * f)
             else:
                 els[i] = replace(els[i], c=els[i].c * f)
-        if np.any(dk != 0):
+        if np.any(delta != 0):
             if self._has_phys_block(els):  # changes add to the ones `model` already has
-                for j, ((kind, _, _), d) in enumerate(zip(self._phys, dk)):
+                for j, ((kind, _, _), d) in enumerate(zip(self._phys, delta)):
                     e = els[self._n_el + j]
                     els[self._n_el + j] = replace(e, k=e.k + float(d)) if kind == "dk" else replace(e, c=e.c + float(d))
             else:  # the block of stiffness and damping changes, after the nominal's own elements
                 block = [SignedSpring(b, k=float(d)) if kind == "dk" else SignedDamper(b, c=float(d))
-                         for (kind, b, _), d in zip(self._phys, dk)]
+                         for (kind, b, _), d in zip(self._phys, delta)]
                 els = els[: self._n_el] + block + els[self._n_el:]
         return replace(model, dofs=tuple(dofs), elements=tuple(els))
 
@@ -272,7 +274,7 @@ class LinearParams:
         list of str
         """
         return [n for n, (kind, _), t in zip(self.names, self.refs, np.asarray(theta, float))
-                if abs({"dk": DK_SCALE, "dc": DC_SCALE}[kind] * t if kind in ("dk", "dc") else math.expm1(t)) > tol]
+                if abs(_PHYS_SCALE[kind] * t if kind in _PHYS_SCALE else math.expm1(t)) > tol]
 
     def values(self, model: LumpedModel) -> dict[str, float]:
         """Current values (kg, N/m, N s/m) of the parameters in `model`.
@@ -290,10 +292,10 @@ class LinearParams:
             at the connection (0 when it has none).
         """
         out = {}
-        dk = self._phys_values(model) if self._phys else None
+        phys = self._phys_values(model) if self._phys else None
         for n, (kind, i) in zip(self.names, self.refs):
-            if kind in ("dk", "dc"):
-                out[n] = float(dk[i])
+            if kind in _PHYS_SCALE:
+                out[n] = float(phys[i])
             else:
                 out[n] = model.dofs[i].mass if kind == "m" else (model.elements[i].k if kind == "k" else model.elements[i].c)
         return out
@@ -316,7 +318,7 @@ class LinearParams:
         v0, v1 = self.values(model), self.values(other)
         out = []
         for n, (kind, i) in zip(self.names, self.refs):
-            if kind in ("dk", "dc"):
+            if kind in _PHYS_SCALE:
                 sc = self._phys[i][2]
                 out.append((v1[n] - v0[n]) / sc if sc > 0 else 0.0)
             else:
@@ -446,37 +448,33 @@ def _spring_at(model, between):
     return None, None
 
 
-def _k_at(model, between) -> float:
-    j, e = _spring_at(model, between)
-    if e is not None:
-        return e.k
-    if model.point_names():  # the static stiffness seen across the connection
-        lv = model.element_vector(Spring(tuple(between), k=0.0))
-        try:
-            flex = float(lv @ np.linalg.solve(model.K, lv))
-        except np.linalg.LinAlgError:
-            flex = 0.0
-        if flex > 0:
-            return 1.0 / flex
-    return float(np.max(np.diag(model.K)))
-
-
-def _c_at(model, between) -> float:
-    """The damping coefficient (N s/m) across a connection: its damper's, or for a model with
-    measured points the ``1 / (l^T C^-1 l)`` its modes give (``l`` the connection's vector in
-    the DOFs), or the largest diagonal damping."""
-    for e in model.elements:
-        if isinstance(e, Damper) and {*e.between} == {*between}:
-            return e.c
+def _across(model, between, A: np.ndarray) -> float:
+    """``1 / (l^T A^-1 l)`` (``l`` the connection's vector in the DOFs): the stiffness (``A = K``)
+    or damping (``A = C``) a model with measured points has across a connection; else, or when
+    that is not positive, the largest diagonal entry of `A`."""
     if model.point_names():
         lv = model.element_vector(Spring(tuple(between), k=0.0))
         try:
-            flex = float(lv @ np.linalg.solve(model.C, lv))
+            flex = float(lv @ np.linalg.solve(A, lv))
         except np.linalg.LinAlgError:
             flex = 0.0
         if flex > 0:
             return 1.0 / flex
-    return float(np.max(np.diag(model.C)))
+    return float(np.max(np.diag(A)))
+
+
+def _k_at(model, between) -> float:
+    """The stiffness (N/m) across a connection: its spring's, else the static stiffness seen
+    across it (:func:`_across`)."""
+    j, e = _spring_at(model, between)
+    return e.k if e is not None else _across(model, between, model.K)
+
+
+def _c_at(model, between) -> float:
+    """The damping coefficient (N s/m) across a connection: its damper's, else the damping the
+    modes give across it (:func:`_across`)."""
+    e = next((e for e in model.elements if isinstance(e, Damper) and {*e.between} == {*between}), None)
+    return e.c if e is not None else _across(model, between, model.C)
 
 
 def _mass_at(model, name) -> float:

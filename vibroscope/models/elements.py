@@ -64,6 +64,13 @@ def _check_between(between) -> tuple[str, str]:
     return b
 
 
+def _finite(name: str, value: float) -> float:
+    value = float(value)
+    if not np.isfinite(value):
+        raise ValueError(f"{name}={value} must be finite")
+    return value
+
+
 def _nonneg(name: str, value: float) -> float:
     value = float(value)
     if not np.isfinite(value) or value < 0:
@@ -242,10 +249,7 @@ class SignedSpring(Element):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        k = float(self.k)
-        if not np.isfinite(k):
-            raise ValueError(f"k={k} must be finite")
-        object.__setattr__(self, "k", k)
+        object.__setattr__(self, "k", _finite("k", self.k))
 
     # the same law as a spring's, k d: its linear part and its force
     linear_stiffness = Spring.linear_stiffness
@@ -337,10 +341,7 @@ class SignedDamper(Element):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        c = float(self.c)
-        if not np.isfinite(c):
-            raise ValueError(f"c={c} must be finite")
-        object.__setattr__(self, "c", c)
+        object.__setattr__(self, "c", _finite("c", self.c))
 
     # the same law as a damper's, c v: its linear part and its force
     linear_damping = Damper.linear_damping
@@ -377,10 +378,7 @@ class CubicSpring(Element):
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "k", _nonneg("k", self.k))
-        k3 = float(self.k3)
-        if not np.isfinite(k3):
-            raise ValueError(f"k3={k3} must be finite")
-        object.__setattr__(self, "k3", k3)
+        object.__setattr__(self, "k3", _finite("k3", self.k3))
 
     @property
     def linear_stiffness(self) -> float:
