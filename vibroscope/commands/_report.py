@@ -140,23 +140,22 @@ def percent(z: float) -> str:
 
 
 def not_estimated(method: str) -> str:
-    """The report's line saying why a damping ratio reads "-".
+    """The report's line saying why a damping ratio reads "-" (the method's ``no_damping_note`` in
+    :data:`~vibroscope.modal.methods.MODAL_METHODS`).
 
     Parameters
     ----------
     method : str
-        The modal method (``ModalModel.method``).
+        The modal method (``ModalModel.method``; a name not registered gets the generic note).
 
     Returns
     -------
     str
     """
-    if method == "fdd":
-        return "   (zeta -: FDD gives no damping; --method efdd estimates it)"
-    if method == "efdd":
-        return ("   (zeta -: not estimated; EFDD found no decaying correlation in the peak's bell, the frequency "
-                "is the peak's)")
-    return "   (zeta -: not estimated)"
+    from vibroscope.modal.methods import MODAL_METHODS, ModalMethod
+
+    m = MODAL_METHODS.get(method)
+    return f"   (zeta -: {m.no_damping_note if m is not None else ModalMethod.no_damping_note})"
 
 
 def stream_summary(an, *, source: str | None = None) -> dict:

@@ -152,7 +152,7 @@ def run(args) -> int:
     """
     from vibroscope.commands._outputs import check_out_dir, check_outputs, resolve_outputs
     from vibroscope.commands._report import report_text
-    from vibroscope.modal.methods import display_name
+    from vibroscope.modal.methods import MODAL_METHODS, display_name
     from vibroscope.errors import VibroscopeError
 
     check_out_dir(args.out)
@@ -206,7 +206,8 @@ def run(args) -> int:
             raise VibroscopeError(f"{first}: {exc}") from None
         print(report_text(an, source=str(first)))
         ident, h, mm = an.identification, an.frf, an.modal
-        if an.frf is None and mm.method == "ssi_cov" and select is None:
+        m = MODAL_METHODS.get(mm.method)
+        if an.frf is None and m is not None and m.cross_check and select is None:
             _cross_check(an)
         signals, psd, csd, sv = an.signals, an.psd, an.csd, an.singular_values
     synth = ident.lsfd.synthesize() if ident.lsfd is not None and h is not None else None  # on the fitted lines

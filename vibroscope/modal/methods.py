@@ -110,6 +110,12 @@ class ModalMethod:
     with_input : str or None
         The method (`name`) that this one's names mean when an input is given (polyMAX on FRFs is
         LSCF); None: an input is refused.
+    no_damping_note : str
+        Why a damping ratio it gives reads "-" in the report (``"   (zeta -: <note>)"``); default
+        ``"not estimated"``.
+    cross_check : bool
+        ``vibroscope modal`` runs polyMAX on the output spectra beside it and prints the pairing
+        (:func:`vibroscope.commands.modal.cross_check_text`); default False.
     """
 
     name: str
@@ -121,6 +127,8 @@ class ModalMethod:
     order: str | None
     runner: Callable[[MethodCall], Identification]
     with_input: str | None = None
+    no_damping_note: str = "not estimated"
+    cross_check: bool = False
 
 
 def _selected(mm, call: MethodCall, lo, hi, axis, coherence=None) -> Identification:
@@ -171,14 +179,16 @@ MODAL_METHODS: dict[str, ModalMethod] = {m.name: m for m in (
     ModalMethod(name="lscf", key="lscf", display="LSCF/polyMAX + LSFD", needs_input=True, needs_time_series=False,
                 selects=True, order="polynomial order", runner=_run_lscf),
     ModalMethod(name="ssi_cov", key="ssi", display="SSI-COV", needs_input=False, needs_time_series=True,
-                selects=True, order="block rows", runner=_run_ssi),
+                selects=True, order="block rows", runner=_run_ssi, cross_check=True),
     ModalMethod(name="polymax_oma", key="polymax", display="polyMAX on the output spectra", needs_input=False,
                 needs_time_series=True, selects=False, order="polynomial order", runner=_run_polymax,
                 with_input="lscf"),
     ModalMethod(name="fdd", key="fdd", display="FDD", needs_input=False, needs_time_series=False, selects=False,
-                order=None, runner=_run_fdd),
+                order=None, runner=_run_fdd, no_damping_note="FDD gives no damping; --method efdd estimates it"),
     ModalMethod(name="efdd", key="efdd", display="EFDD", needs_input=False, needs_time_series=False,
-                selects=False, order=None, runner=_run_efdd),
+                selects=False, order=None, runner=_run_efdd,
+                no_damping_note="not estimated; EFDD found no decaying correlation in the peak's bell, the frequency "
+                                "is the peak's"),
     ModalMethod(name="peak_picking", key="peak", display="peak picking", needs_input=True, needs_time_series=False,
                 selects=False, order=None, runner=_run_peak),
 )}
