@@ -412,7 +412,7 @@ def _modes_from_spectra(G: CrossSpectralMatrix, input: str | None, outputs: list
                         estimator: str, prominence: float, method: str, select, notes: list):
     """(FRF or None, Identification, band) from a cross-spectral matrix."""
     from vibroscope.modal.methods import identify
-    from vibroscope.modal.selection import excited_band, response_band
+    from vibroscope.modal.selection import MIN_BAND_LINES, excited_band, response_band
 
     f = G.frequencies
     nyq = 0.4 * G.settings["fs"]
@@ -432,8 +432,6 @@ def _modes_from_spectra(G: CrossSpectralMatrix, input: str | None, outputs: list
     if fmax is None:
         notes.append(f"band from the response: lowest resonance {f_low:.4g} Hz, 95 % of the variance below "
                      f"{hi_r:.4g} Hz")
-        from vibroscope.modal._peaks import MIN_BAND_LINES
-
         lines = f[(f > 0) & (f >= (fmin or 0.0))]
         if lines.size > MIN_BAND_LINES and np.count_nonzero(lines <= hi) < 2 * MIN_BAND_LINES:
             hi = float(lines[min(2 * MIN_BAND_LINES, lines.size) - 1])  # a band of a few lines holds no peak

@@ -50,11 +50,12 @@ from typing import Sequence
 
 import numpy as np
 
+from vibroscope.modal._peaks import MIN_BAND_LINES  # public here: the fewest lines a band must hold for a peak search
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.modal.mac import mac
 
 __all__ = ["RejectedMode", "Selection", "select_modes", "cluster_poles", "pick_poles", "excited_band", "response_band",
-           "DAMPING_RANGE", "MIN_MPC", "DUPLICATE_BINS", "DUPLICATE_MAC"]
+           "DAMPING_RANGE", "MIN_MPC", "DUPLICATE_BINS", "DUPLICATE_MAC", "MIN_BAND_LINES"]
 
 #: physically plausible viscous damping ratios (dimensionless) of a structural mode
 DAMPING_RANGE = (1e-4, 0.10)
