@@ -54,7 +54,7 @@ def bla_levels(us, ys, groups, fs, nperseg, f_sel):
     return out
 
 
-def level_test(f, blas, blas_model=None):
+def level_test(frequencies, blas, blas_model=None):
     """Does the BLA change with the excitation level beyond its own uncertainty (and beyond what
     the model itself predicts)?
 
@@ -69,8 +69,10 @@ def level_test(f, blas, blas_model=None):
     at least 5 lines and :data:`LEVEL_FRACTION` of them are. The trend compares the frequency of the
     largest peak of ``sum |H|`` at the lowest and highest level.
 
-    Returns dict: ``stat``, ``flagged``, ``trend`` (``hardening``, ``softening``, ``none``),
-    ``shift`` (relative frequency change), ``levels_rms``."""
+    `frequencies` is the lines' axis in Hz of `blas` and `blas_model` (``(rms, H, coherence,
+    n_avg)`` per level, as :func:`bla_levels` gives them). Returns dict: ``stat``, ``flagged``,
+    ``trend`` (``hardening``, ``softening``, ``none``), ``shift`` (relative frequency change),
+    ``levels_rms``."""
     if len(blas) < 2:
         return {"stat": float("nan"), "flagged": False, "trend": "none", "shift": 0.0,
                 "levels_rms": [b[0] for b in blas]}
@@ -97,17 +99,17 @@ def level_test(f, blas, blas_model=None):
     a1 = np.sum(np.abs(H1), axis=1)
     k0, k1 = int(np.argmax(a0)), int(np.argmax(a1))
     shift = 0.0
-    if f.size > 2:
-        f0, f1 = float(f[k0]), float(f[k1])
+    if frequencies.size > 2:
+        f0, f1 = float(frequencies[k0]), float(frequencies[k1])
         # compare near the low-level peak: the high-level peak within 30 %
-        win = np.abs(f - f0) <= 0.3 * f0
+        win = np.abs(frequencies - f0) <= 0.3 * f0
         if win.any():
             k1w = int(np.nonzero(win)[0][np.argmax(a1[win])])
-            f1 = float(f[k1w])
+            f1 = float(frequencies[k1w])
         shift = (f1 - f0) / f0 if f0 > 0 else 0.0
-    dfl = float(np.median(np.diff(f))) if f.size > 1 else 0.0
+    dfl = float(np.median(np.diff(frequencies))) if frequencies.size > 1 else 0.0
     trend = "none"
-    if flagged and abs(shift) * (f[k0] if f.size else 0) > 1.5 * dfl and abs(shift) > 0.005:
+    if flagged and abs(shift) * (frequencies[k0] if frequencies.size else 0) > 1.5 * dfl and abs(shift) > 0.005:
         trend = "hardening" if shift > 0 else "softening"
     return {"stat": stat, "flagged": flagged, "trend": trend, "shift": float(shift),
             "levels_rms": [b[0] for b in blas], "lines": n_ok, "lines_beyond_3_sigma": n_out}
