@@ -429,7 +429,7 @@ def excited_band(u: np.ndarray, fs: float, nperseg: int) -> tuple[float, float]:
 
 
 def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
-                reference: list | None = None) -> NoiseFloor:
+                reference: list | None = None, norm_masks: list | None = None) -> NoiseFloor:
     """The measurement-noise floor in nrmse, estimated from the data.
 
     Method: the outputs' PSD beyond the excited band of the input (above 1.15 times its
@@ -456,6 +456,12 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
         The measured outputs whose energy normalises the floor when `ys` are residuals
         (measured minus a model's simulation): the residual's out-of-band level is noise plus
         that model's own error there, another upper bound on the noise (default: `ys`).
+    norm_masks : list of ndarray of bool, shape (n_samples,), optional
+        Per log, the samples whose measured energy normalises the floor (default: `masks`).
+        A gap measured on held-out samples is compared with the floor normalised on the same
+        samples: the noise variance is the same over the record, but a log whose excitation
+        level changes in blocks has another signal energy on its held-out part than overall.
+        When no log with a noise estimate has any such sample, `masks` normalise.
 
     Returns
     -------
@@ -467,7 +473,10 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     levels = []
     methods = set()
     refs = ys if reference is None else reference
-    for y, u, m, yr in zip(ys, us, masks, refs):
+    nms = masks if norm_masks is None else norm_masks
+    num_n: dict = {}
+    den_n: dict = {}
+    for y, u, m, yr, nm in zip(ys, us, masks, refs, nms):
         if not m.any():
             continue
         x = np.vstack([u[:1], y])
@@ -493,7 +502,11 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
             lev.append(level)
             num_c[c] = num_c.get(c, 0.0) + var * m.sum()
             den_c[c] = den_c.get(c, 0.0) + float(np.sum(yr[c, m] ** 2))
+            num_n[c] = num_n.get(c, 0.0) + var * nm.sum()
+            den_n[c] = den_n.get(c, 0.0) + float(np.sum(yr[c, nm] ** 2))
         levels.append(lev)
+    if den_n and all(v > 0 for v in den_n.values()):
+        num_c, den_c = num_n, den_n
     ok = den_c and all(v > 0 for v in den_c.values())
     nr = float(np.sqrt(np.mean([num_c[c] / den_c[c] for c in den_c]))) if ok else float("nan")
     lv = np.mean(np.array(levels), axis=0) if levels else np.zeros(ys[0].shape[0])
