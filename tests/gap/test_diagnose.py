@@ -103,6 +103,33 @@ def test_noise_floor_recovers_the_added_noise(u20):
         assert nf.nrmse == pytest.approx(noise, rel=0.12)
 
 
+def test_noise_floor_is_normalised_on_the_samples_a_gap_is_measured_on():
+    """Noise of one standard deviation over the whole record, a signal at level 1 on the first
+    half and 4 on the second: the floor in nrmse is sigma / RMS of the samples it is normalised
+    on, so the second half's floor is a quarter of the first half's (the held-out part of a
+    record whose level changes in blocks must be compared with its own floor)."""
+    rng = np.random.default_rng(5)
+    n = 40000
+    spec = np.fft.rfft(rng.standard_normal(n))
+    fr = np.fft.rfftfreq(n, 1 / FS)
+    spec[(fr < 2) | (fr > 150)] = 0  # an ideal band: nothing of the signal beyond it
+    u = np.fft.irfft(spec, n)
+    u *= np.where(np.arange(n) < n // 2, 1.0, 4.0) / np.std(u)
+    sigma = 0.05
+    y = (u + sigma * rng.standard_normal(n))[None]
+    allm = np.ones(n, bool)
+    first, second = allm.copy(), allm.copy()
+    first[n // 2:] = False
+    second[:n // 2] = False
+    f1 = noise_floor([y], [u[None]], [allm], FS, 2048, norm_masks=[first]).nrmse
+    f2 = noise_floor([y], [u[None]], [allm], FS, 2048, norm_masks=[second]).nrmse
+    f0 = noise_floor([y], [u[None]], [allm], FS, 2048).nrmse
+    assert f1 == pytest.approx(sigma / np.sqrt(np.mean(y[0, first] ** 2)), rel=0.12)
+    assert f2 == pytest.approx(sigma / np.sqrt(np.mean(y[0, second] ** 2)), rel=0.12)
+    assert f1 / f2 == pytest.approx(4.0, rel=0.02)  # the same noise estimate, only normalised apart
+    assert f0 == pytest.approx(sigma / np.sqrt(np.mean(y[0] ** 2)), rel=0.12)
+
+
 def test_noise_floor_of_a_residual_sees_through_harmonics_beyond_the_band(u20):
     """Distortion beyond the excited band (a nonlinearity's harmonics) raises the data's
     out-of-band floor far above the noise; the residual of a model that reproduces the
