@@ -87,6 +87,7 @@ from vibroscope.gap._ranking import rank_candidates
 from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
 from vibroscope.gap._run import (  # the tuning constants live with the run state; exposed here too
     ADD_FACTOR,
+    CONN_JOINT_GAIN,
     JOINT_TOP,
     LEVEL_FRACTION,
     LEVEL_MODE_CHANGE,

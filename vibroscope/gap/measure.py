@@ -457,7 +457,8 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
         (measured minus a model's simulation): the residual's out-of-band level is noise plus
         that model's own error there, another upper bound on the noise (default: `ys`).
     norm_masks : list of ndarray of bool, shape (n_samples,), optional
-        Per log, the samples whose measured energy normalises the floor (default: `masks`).
+        Per log, the samples whose measured energy normalises the floor (default: `masks`); the
+        method then ends with ", normalised on the held-out samples".
         A gap measured on held-out samples is compared with the floor normalised on the same
         samples: the noise variance is the same over the record, but a log whose excitation
         level changes in blocks has another signal energy on its held-out part than overall.
@@ -505,12 +506,14 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
             num_n[c] = num_n.get(c, 0.0) + var * nm.sum()
             den_n[c] = den_n.get(c, 0.0) + float(np.sum(yr[c, nm] ** 2))
         levels.append(lev)
+    normed = ""
     if den_n and all(v > 0 for v in den_n.values()):
         num_c, den_c = num_n, den_n
+        normed = ", normalised on the held-out samples" if norm_masks is not None else ""
     ok = den_c and all(v > 0 for v in den_c.values())
     nr = float(np.sqrt(np.mean([num_c[c] / den_c[c] for c in den_c]))) if ok else float("nan")
     lv = np.mean(np.array(levels), axis=0) if levels else np.zeros(ys[0].shape[0])
-    return NoiseFloor(nr, "; ".join(sorted(methods)), lv, fb)
+    return NoiseFloor(nr, "; ".join(sorted(methods)) + (normed if methods else ""), lv, fb)
 
 
 def locate_bands(frequencies: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray, *, energy: float = 0.8,
