@@ -437,7 +437,11 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     distortion there makes the estimate an upper bound); its median level, taken as white
     over the whole band, gives the noise variance per channel [2]_. When fewer than 16
     such lines exist, the noise is the non-coherent output power ``(1 - gamma^2) Gyy``
-    (noise plus nonlinear distortion, an upper bound).
+    (noise plus nonlinear distortion, an upper bound). With several logs, a log's noise
+    variance is capped at every quieter log's scaled by the ratio of the signal energies: a
+    sensor's noise grows at most like the signal (relative noise; absolute noise does not grow),
+    while a nonlinearity's distortion grows faster (a hardening spring's harmonics with the
+    cube of the level), so the excess is not counted as noise.
 
     Parameters
     ----------
@@ -475,8 +479,7 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     methods = set()
     refs = ys if reference is None else reference
     nms = masks if norm_masks is None else norm_masks
-    num_n: dict = {}
-    den_n: dict = {}
+    recs: list = []  # per log: (m, nm, yr, per-channel variances)
     for y, u, m, yr, nm in zip(ys, us, masks, refs, nms):
         if not m.any():
             continue
@@ -498,14 +501,31 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
                 coh = np.abs(G[:, 0, c + 1]) ** 2 / np.maximum(Guu * Gyy, 1e-300)
                 inb = (f >= fb[0]) & (f <= fb[1])
                 var = float(np.sum(((1 - coh) * Gyy)[inb]) * (f[1] - f[0]))
-                level = var / (fs / 2)
                 methods.add("non-coherent output power (1 - coherence) Gyy in the excited band")
-            lev.append(level)
+            lev.append(var)
+        recs.append((m, nm, yr, lev))
+    # the noise of a sensor grows at most like the signal from log to log (relative noise); the
+    # part of a log's level beyond that bound from a quieter log is a nonlinearity's distortion
+    # (a hardening spring's harmonics grow with the cube of the level), not noise
+    capped = False
+    num_n: dict = {}
+    den_n: dict = {}
+    energy = [[float(np.mean(yr[c, m] ** 2)) for c in range(len(lev))] for m, _, yr, lev in recs]
+    for (m, nm, yr, lev), e in zip(recs, energy):
+        out = []
+        for c, var in enumerate(lev):
+            bound = min(r[3][c] * max(1.0, e[c] / e_j[c]) for r, e_j in zip(recs, energy) if e_j[c] > 0)
+            if bound < var:
+                var, capped = bound, True
+            out.append(var)
             num_c[c] = num_c.get(c, 0.0) + var * m.sum()
             den_c[c] = den_c.get(c, 0.0) + float(np.sum(yr[c, m] ** 2))
             num_n[c] = num_n.get(c, 0.0) + var * nm.sum()
             den_n[c] = den_n.get(c, 0.0) + float(np.sum(yr[c, nm] ** 2))
-        levels.append(lev)
+        levels.append([v / (fs / 2) for v in out])
+    if capped:
+        methods = {x + "; a log's level capped at a quieter log's scaled with the signal energy (faster growth "
+                   "is distortion)" for x in methods}
     normed = ""
     if den_n and all(v > 0 for v in den_n.values()):
         num_c, den_c = num_n, den_n
