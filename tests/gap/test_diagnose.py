@@ -103,6 +103,72 @@ def test_noise_floor_recovers_the_added_noise(u20):
         assert nf.nrmse == pytest.approx(noise, rel=0.12)
 
 
+def test_noise_floor_is_normalised_on_the_samples_a_gap_is_measured_on():
+    """Noise of one standard deviation over the whole record, a signal at level 1 on the first
+    half and 4 on the second: the floor in nrmse is sigma / RMS of the samples it is normalised
+    on, so the second half's floor is a quarter of the first half's (the held-out part of a
+    record whose level changes in blocks must be compared with its own floor)."""
+    rng = np.random.default_rng(5)
+    n = 40000
+    spec = np.fft.rfft(rng.standard_normal(n))
+    fr = np.fft.rfftfreq(n, 1 / FS)
+    spec[(fr < 2) | (fr > 150)] = 0  # an ideal band: nothing of the signal beyond it
+    u = np.fft.irfft(spec, n)
+    u *= np.where(np.arange(n) < n // 2, 1.0, 4.0) / np.std(u)
+    sigma = 0.05
+    y = (u + sigma * rng.standard_normal(n))[None]
+    allm = np.ones(n, bool)
+    first, second = allm.copy(), allm.copy()
+    first[n // 2:] = False
+    second[:n // 2] = False
+    f1 = noise_floor([y], [u[None]], [allm], FS, 2048, norm_masks=[first]).nrmse
+    f2 = noise_floor([y], [u[None]], [allm], FS, 2048, norm_masks=[second]).nrmse
+    f0 = noise_floor([y], [u[None]], [allm], FS, 2048).nrmse
+    assert f1 == pytest.approx(sigma / np.sqrt(np.mean(y[0, first] ** 2)), rel=0.12)
+    assert f2 == pytest.approx(sigma / np.sqrt(np.mean(y[0, second] ** 2)), rel=0.12)
+    assert f1 / f2 == pytest.approx(4.0, rel=0.02)  # the same noise estimate, only normalised apart
+    assert f0 == pytest.approx(sigma / np.sqrt(np.mean(y[0] ** 2)), rel=0.12)
+
+
+def test_noise_floor_of_several_logs_does_not_count_distortion_that_grows_faster_than_the_signal():
+    """Two logs at levels 1 and 4 with the same sensor noise: the floor is the noise's. Out-of-band
+    distortion growing with the cube of the level (a hardening spring's harmonics) added to both
+    would make the loud log's out-of-band level 64 times the quiet log's distortion: capped at the
+    quiet log's level scaled with the signal energy, the floor stays within 25 % of the noise's
+    instead of several times it. Relative noise (3 % of each log) is not capped."""
+    rng = np.random.default_rng(8)
+    n = 30000
+    fr = np.fft.rfftfreq(n, 1 / FS)
+
+    def band(lo, hi):
+        spec = np.fft.rfft(rng.standard_normal(n))
+        spec[(fr < lo) | (fr > hi)] = 0
+        x = np.fft.irfft(spec, n)
+        return x / np.std(x)
+
+    us, clean, dist = [], [], []
+    for level in (1.0, 4.0):
+        u = band(2, 150) * level
+        us.append(u[None])
+        clean.append(u[None].copy())
+        dist.append(0.05 * level ** 3 * band(250, 450)[None])  # 5 % of the quiet log's signal
+    masks = [np.ones(n, bool)] * 2
+    sigma = 0.02
+    noisy = [y + sigma * rng.standard_normal(y.shape) for y in clean]
+    pooled = sigma / np.sqrt(np.mean(np.concatenate([y[0] for y in noisy]) ** 2))
+    assert noise_floor(noisy, us, masks, FS, 1024).nrmse == pytest.approx(pooled, rel=0.1)
+    distorted = [y + d for y, d in zip(noisy, dist)]
+    raw = np.sqrt((0.05 ** 2 + 3.2 ** 2) / (1 + 16))  # the distortion's share of the signal energy
+    nf = noise_floor(distorted, us, masks, FS, 1024)
+    assert nf.nrmse < 0.1 * raw and "capped" in nf.method
+    # the quiet log's own distortion (5 %, over 200 of the 500 Hz taken as white) stays counted,
+    # the loud log's is capped at it scaled with the signal energy
+    assert nf.nrmse == pytest.approx(np.sqrt(0.05 ** 2 * 500 / 200 + sigma ** 2), rel=0.25)
+    relative = [y + 0.03 * np.std(y) * rng.standard_normal(y.shape) for y in clean]
+    nr = noise_floor(relative, us, masks, FS, 1024)
+    assert nr.nrmse == pytest.approx(0.03, rel=0.1) and "capped" not in nr.method
+
+
 def test_noise_floor_of_a_residual_sees_through_harmonics_beyond_the_band(u20):
     """Distortion beyond the excited band (a nonlinearity's harmonics) raises the data's
     out-of-band floor far above the noise; the residual of a model that reproduces the

@@ -20,6 +20,7 @@ import numpy as np
 from vibroscope.gap._ranking import polish_candidate
 from vibroscope.gap._run import (
     ADD_FACTOR,
+    CONN_JOINT_GAIN,
     JOINT_TOP,
     NESTED_FAMILIES,
     REFINE_FACTOR,
@@ -197,10 +198,11 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     spring), and only a joint fit can undo that; the better on the fitting data is kept (the
     joint fit only when no chosen effect vanishes in it) (:func:`own_addition`,
     :func:`finish_addition`). The joint fit, as costly as the rest, is made only for the
-    :data:`JOINT_TOP` additions whose own fit is best on the fitting data and for every addition
+    :data:`JOINT_TOP` additions whose own fit is best on the fitting data and for an addition
     at a chosen effect's connection (where that effect was bent to mimic it: a Coulomb friction
     fitted alone to a friction and a stiffening spring in one joint leaves the spring's own fit
-    fourth of seven). The
+    fourth of seven) whose own fit closes at least :data:`CONN_JOINT_GAIN` of the current
+    model's gap on the same footing (one that changes nothing alone was not mimicked). The
     best addition is kept when its penalised held-out excess gap falls below
     :data:`ADD_FACTOR` times the current one (beyond what the extra parameters and the noise
     floor explain) (:func:`accepted_addition`); then the next, up to three effects. Returns the
@@ -226,9 +228,13 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         with ThreadPoolExecutor(max(1, workers)) as ex:
             own = sorted((r for r in ex.map(partial(own_addition, run, cur_m), cands) if r is not None),
                          key=lambda r: r[2])
-            # jointly: the JOINT_TOP best own fits, and every addition at a chosen effect's
-            # connection (the chosen effect was fitted alone to mimic it there)
-            joint = [i < JOINT_TOP or frozenset(o[0].where.get("between", ())) in pairs for i, o in enumerate(own)]
+            # jointly: the JOINT_TOP best own fits, and an addition at a chosen effect's
+            # connection (the chosen effect was fitted alone to mimic it there) whose own fit
+            # closes CONN_JOINT_GAIN of the current model's gap on the same footing
+            g_cur = prefix_gap(run, cur_m)
+            g_cur = g_cur if np.isfinite(g_cur) else np.inf
+            joint = [i < JOINT_TOP or (frozenset(o[0].where.get("between", ())) in pairs
+                                       and o[2] < (1 - CONN_JOINT_GAIN) * g_cur) for i, o in enumerate(own)]
             tries = list(ex.map(lambda o, j: finish_addition(run, chosen, chain, o, joint=j), own, joint))
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:

@@ -87,6 +87,7 @@ from vibroscope.gap._ranking import rank_candidates
 from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
 from vibroscope.gap._run import (  # the tuning constants live with the run state; exposed here too
     ADD_FACTOR,
+    CONN_JOINT_GAIN,
     JOINT_TOP,
     LEVEL_FRACTION,
     LEVEL_MODE_CHANGE,
@@ -461,7 +462,8 @@ def _simulate_nominal(run: Run) -> None:
         m = np.ones(u.shape[1], bool)
         m[:sk] = False
         all_masks.append(m)
-    nf = noise_floor(ys, us, all_masks, fs, nps)
+    # normalised on the held-out samples, where the gaps it is compared with are measured
+    nf = noise_floor(ys, us, all_masks, fs, nps, norm_masks=split.validation)
     floor = nf.nrmse
     run.timings["nominal"] = time.perf_counter() - t
     run.y_nom, run.gap_before, run.all_masks, run.nf, run.floor = y_nom, gap_before, all_masks, nf, floor

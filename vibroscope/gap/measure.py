@@ -429,7 +429,7 @@ def excited_band(u: np.ndarray, fs: float, nperseg: int) -> tuple[float, float]:
 
 
 def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
-                reference: list | None = None) -> NoiseFloor:
+                reference: list | None = None, norm_masks: list | None = None) -> NoiseFloor:
     """The measurement-noise floor in nrmse, estimated from the data.
 
     Method: the outputs' PSD beyond the excited band of the input (above 1.15 times its
@@ -437,7 +437,11 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     distortion there makes the estimate an upper bound); its median level, taken as white
     over the whole band, gives the noise variance per channel [2]_. When fewer than 16
     such lines exist, the noise is the non-coherent output power ``(1 - gamma^2) Gyy``
-    (noise plus nonlinear distortion, an upper bound).
+    (noise plus nonlinear distortion, an upper bound). With several logs, a log's noise
+    variance is capped at every quieter log's scaled by the ratio of the signal energies: a
+    sensor's noise grows at most like the signal (relative noise; absolute noise does not grow),
+    while a nonlinearity's distortion grows faster (a hardening spring's harmonics with the
+    cube of the level), so the excess is not counted as noise.
 
     Parameters
     ----------
@@ -456,6 +460,13 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
         The measured outputs whose energy normalises the floor when `ys` are residuals
         (measured minus a model's simulation): the residual's out-of-band level is noise plus
         that model's own error there, another upper bound on the noise (default: `ys`).
+    norm_masks : list of ndarray of bool, shape (n_samples,), optional
+        Per log, the samples whose measured energy normalises the floor (default: `masks`); the
+        method then ends with ", normalised on the held-out samples".
+        A gap measured on held-out samples is compared with the floor normalised on the same
+        samples: the noise variance is the same over the record, but a log whose excitation
+        level changes in blocks has another signal energy on its held-out part than overall.
+        When no log with a noise estimate has any such sample, `masks` normalise.
 
     Returns
     -------
@@ -467,7 +478,9 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     levels = []
     methods = set()
     refs = ys if reference is None else reference
-    for y, u, m, yr in zip(ys, us, masks, refs):
+    nms = masks if norm_masks is None else norm_masks
+    recs: list = []  # per log: (m, nm, yr, per-channel variances)
+    for y, u, m, yr, nm in zip(ys, us, masks, refs, nms):
         if not m.any():
             continue
         x = np.vstack([u[:1], y])
@@ -488,16 +501,39 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
                 coh = np.abs(G[:, 0, c + 1]) ** 2 / np.maximum(Guu * Gyy, 1e-300)
                 inb = (f >= fb[0]) & (f <= fb[1])
                 var = float(np.sum(((1 - coh) * Gyy)[inb]) * (f[1] - f[0]))
-                level = var / (fs / 2)
                 methods.add("non-coherent output power (1 - coherence) Gyy in the excited band")
-            lev.append(level)
+            lev.append(var)
+        recs.append((m, nm, yr, lev))
+    # the noise of a sensor grows at most like the signal from log to log (relative noise); the
+    # part of a log's level beyond that bound from a quieter log is a nonlinearity's distortion
+    # (a hardening spring's harmonics grow with the cube of the level), not noise
+    capped = False
+    num_n: dict = {}
+    den_n: dict = {}
+    energy = [[float(np.mean(yr[c, m] ** 2)) for c in range(len(lev))] for m, _, yr, lev in recs]
+    for (m, nm, yr, lev), e in zip(recs, energy):
+        out = []
+        for c, var in enumerate(lev):
+            bound = min(r[3][c] * max(1.0, e[c] / e_j[c]) for r, e_j in zip(recs, energy) if e_j[c] > 0)
+            if bound < var:
+                var, capped = bound, True
+            out.append(var)
             num_c[c] = num_c.get(c, 0.0) + var * m.sum()
             den_c[c] = den_c.get(c, 0.0) + float(np.sum(yr[c, m] ** 2))
-        levels.append(lev)
+            num_n[c] = num_n.get(c, 0.0) + var * nm.sum()
+            den_n[c] = den_n.get(c, 0.0) + float(np.sum(yr[c, nm] ** 2))
+        levels.append([v / (fs / 2) for v in out])
+    if capped:
+        methods = {x + "; a log's level capped at a quieter log's scaled with the signal energy (faster growth "
+                   "is distortion)" for x in methods}
+    normed = ""
+    if den_n and all(v > 0 for v in den_n.values()):
+        num_c, den_c = num_n, den_n
+        normed = ", normalised on the held-out samples" if norm_masks is not None else ""
     ok = den_c and all(v > 0 for v in den_c.values())
     nr = float(np.sqrt(np.mean([num_c[c] / den_c[c] for c in den_c]))) if ok else float("nan")
     lv = np.mean(np.array(levels), axis=0) if levels else np.zeros(ys[0].shape[0])
-    return NoiseFloor(nr, "; ".join(sorted(methods)), lv, fb)
+    return NoiseFloor(nr, "; ".join(sorted(methods)) + (normed if methods else ""), lv, fb)
 
 
 def locate_bands(frequencies: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray, *, energy: float = 0.8,
