@@ -507,23 +507,25 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     # the noise of a sensor grows at most like the signal from log to log (relative noise); the
     # part of a log's level beyond that bound from a quieter log is a nonlinearity's distortion
     # (a hardening spring's harmonics grow with the cube of the level), not noise
-    capped = False
+    raw_c: dict = {}  # the uncapped numerator, to say whether the cap moved the floor
     num_n: dict = {}
     den_n: dict = {}
     energy = [[float(np.mean(yr[c, m] ** 2)) for c in range(len(lev))] for m, _, yr, lev in recs]
     for (m, nm, yr, lev), e in zip(recs, energy):
         out = []
         for c, var in enumerate(lev):
-            bound = min(r[3][c] * max(1.0, e[c] / e_j[c]) for r, e_j in zip(recs, energy) if e_j[c] > 0)
-            if bound < var:
-                var, capped = bound, True
+            bound = min((r[3][c] * max(1.0, e[c] / e_j[c]) for r, e_j in zip(recs, energy) if e_j[c] > 0),
+                        default=np.inf)  # a silent channel: nothing to scale from
+            raw_c[c] = raw_c.get(c, 0.0) + var * m.sum()
+            var = min(var, bound)
             out.append(var)
             num_c[c] = num_c.get(c, 0.0) + var * m.sum()
             den_c[c] = den_c.get(c, 0.0) + float(np.sum(yr[c, m] ** 2))
             num_n[c] = num_n.get(c, 0.0) + var * nm.sum()
             den_n[c] = den_n.get(c, 0.0) + float(np.sum(yr[c, nm] ** 2))
         levels.append([v / (fs / 2) for v in out])
-    if capped:
+    # said when the cap lowers the floor by more than 5 % (two logs' estimates always differ a little)
+    if any(num_c[c] < 0.95 ** 2 * raw_c[c] for c in raw_c):
         methods = {x + "; a log's level capped at a quieter log's scaled with the signal energy (faster growth "
                    "is distortion)" for x in methods}
     normed = ""
