@@ -231,10 +231,12 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
             # jointly: the JOINT_TOP best own fits, and an addition at a chosen effect's
             # connection (the chosen effect was fitted alone to mimic it there) whose own fit
             # closes CONN_JOINT_GAIN of the current model's gap on the same footing
-            g_cur = prefix_gap(run, cur_m)
+            at_conn = [i >= JOINT_TOP and frozenset(o[0].where.get("between", ())) in pairs
+                       for i, o in enumerate(own)]
+            g_cur = prefix_gap(run, cur_m) if any(at_conn) else np.inf  # simulated only when asked
             g_cur = g_cur if np.isfinite(g_cur) else np.inf
-            joint = [i < JOINT_TOP or (frozenset(o[0].where.get("between", ())) in pairs
-                                       and o[2] < (1 - CONN_JOINT_GAIN) * g_cur) for i, o in enumerate(own)]
+            joint = [i < JOINT_TOP or (a and o[2] < (1 - CONN_JOINT_GAIN) * g_cur)
+                     for i, (o, a) in enumerate(zip(own, at_conn))]
             tries = list(ex.map(lambda o, j: finish_addition(run, chosen, chain, o, joint=j), own, joint))
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
         if not tries:

@@ -473,13 +473,10 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
     NoiseFloor
     """
     fb = excited_band(np.concatenate([u for u in us], axis=1), fs, nperseg)
-    num_c: dict = {}
-    den_c: dict = {}
-    levels = []
     methods = set()
     refs = ys if reference is None else reference
     nms = masks if norm_masks is None else norm_masks
-    recs: list = []  # per log: (m, nm, yr, per-channel variances)
+    var, n_m, den_m, n_nm, den_nm = [], [], [], [], []  # per log with an estimate, per channel
     for y, u, m, yr, nm in zip(ys, us, masks, refs, nms):
         if not m.any():
             continue
@@ -492,49 +489,42 @@ def noise_floor(ys: list, us: list, masks: list, fs: float, nperseg: int, *,
         for c in range(y.shape[0]):
             Gyy = G[:, c + 1, c + 1].real
             if sel.sum() >= 16:
-                level = float(np.median(Gyy[sel]))
                 methods.add(f"out-of-band residual ({f[sel][0]:.0f}-{f[sel][-1]:.0f} Hz, beyond the excited "
                             f"band {fb[0]:.1f}-{fb[1]:.1f} Hz), white noise assumed")
-                var = level * fs / 2
+                lev.append(float(np.median(Gyy[sel])) * fs / 2)
             else:
                 Guu = G[:, 0, 0].real
                 coh = np.abs(G[:, 0, c + 1]) ** 2 / np.maximum(Guu * Gyy, 1e-300)
                 inb = (f >= fb[0]) & (f <= fb[1])
-                var = float(np.sum(((1 - coh) * Gyy)[inb]) * (f[1] - f[0]))
+                lev.append(float(np.sum(((1 - coh) * Gyy)[inb]) * (f[1] - f[0])))
                 methods.add("non-coherent output power (1 - coherence) Gyy in the excited band")
-            lev.append(var)
-        recs.append((m, nm, yr, lev))
+        var.append(lev)
+        n_m.append(m.sum())
+        den_m.append(np.sum(yr[:, m] ** 2, axis=1))
+        n_nm.append(nm.sum())
+        den_nm.append(np.sum(yr[:, nm] ** 2, axis=1))
+    if not var:
+        return NoiseFloor(float("nan"), "", np.zeros(ys[0].shape[0]), fb)
+    var, den_m, den_nm = np.array(var), np.array(den_m), np.array(den_nm)
+    n_m, n_nm = np.array(n_m, float)[:, None], np.array(n_nm, float)[:, None]
     # the noise of a sensor grows at most like the signal from log to log (relative noise); the
-    # part of a log's level beyond that bound from a quieter log is a nonlinearity's distortion
+    # part of a log's level beyond that bound from a quieter log j is a nonlinearity's distortion
     # (a hardening spring's harmonics grow with the cube of the level), not noise
-    raw_c: dict = {}  # the uncapped numerator, to say whether the cap moved the floor
-    num_n: dict = {}
-    den_n: dict = {}
-    energy = [[float(np.mean(yr[c, m] ** 2)) for c in range(len(lev))] for m, _, yr, lev in recs]
-    for (m, nm, yr, lev), e in zip(recs, energy):
-        out = []
-        for c, var in enumerate(lev):
-            bound = min((r[3][c] * max(1.0, e[c] / e_j[c]) for r, e_j in zip(recs, energy) if e_j[c] > 0),
-                        default=np.inf)  # a silent channel: nothing to scale from
-            raw_c[c] = raw_c.get(c, 0.0) + var * m.sum()
-            var = min(var, bound)
-            out.append(var)
-            num_c[c] = num_c.get(c, 0.0) + var * m.sum()
-            den_c[c] = den_c.get(c, 0.0) + float(np.sum(yr[c, m] ** 2))
-            num_n[c] = num_n.get(c, 0.0) + var * nm.sum()
-            den_n[c] = den_n.get(c, 0.0) + float(np.sum(yr[c, nm] ** 2))
-        levels.append([v / (fs / 2) for v in out])
-    # said when the cap lowers the floor by more than 5 % (two logs' estimates always differ a little)
-    if any(num_c[c] < 0.95 ** 2 * raw_c[c] for c in raw_c):
+    energy = den_m / n_m  # (log, channel) mean square
+    with np.errstate(divide="ignore", invalid="ignore"):  # a silent channel j: nothing to scale from
+        bound = np.where(energy[None] > 0, var[None] * np.maximum(1.0, energy[:, None] / energy[None]), np.inf)
+    capped = np.minimum(var, np.min(bound, axis=1))  # bound[k, j, c]: log k's from log j
+    if np.any(np.sum(capped * n_m, axis=0) < 0.95 ** 2 * np.sum(var * n_m, axis=0)):
+        # said when the cap lowers a channel's floor by more than 5 % (estimates differ a little)
         methods = {x + "; a log's level capped at a quieter log's scaled with the signal energy (faster growth "
                    "is distortion)" for x in methods}
-    normed = ""
-    if den_n and all(v > 0 for v in den_n.values()):
-        num_c, den_c = num_n, den_n
+    num, den, normed = np.sum(capped * n_nm, axis=0), np.sum(den_nm, axis=0), ""
+    if np.all(den > 0):
         normed = ", normalised on the held-out samples" if norm_masks is not None else ""
-    ok = den_c and all(v > 0 for v in den_c.values())
-    nr = float(np.sqrt(np.mean([num_c[c] / den_c[c] for c in den_c]))) if ok else float("nan")
-    lv = np.mean(np.array(levels), axis=0) if levels else np.zeros(ys[0].shape[0])
+    else:  # no held-out sample in any log with an estimate: normalised on `masks`
+        num, den = np.sum(capped * n_m, axis=0), np.sum(den_m, axis=0)
+    nr = float(np.sqrt(np.mean(num / den))) if np.all(den > 0) else float("nan")
+    lv = np.mean(capped, axis=0) / (fs / 2)
     return NoiseFloor(nr, "; ".join(sorted(methods)) + (normed if methods else ""), lv, fb)
 
 
