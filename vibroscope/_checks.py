@@ -8,6 +8,8 @@
 - :func:`jsonable`: numpy values and containers as plain JSON values (NaN/Inf as null).
 - :class:`LazyChoices`: allowed values read from a registry on first use (``argparse`` choices
   that do not import the room that holds the registry until they are checked or shown).
+- :class:`UnpacksAsTuple`, :func:`axis_summary`, :func:`names_summary`: what the result types of
+  the spectral and modal rooms share (tuple behaviour, the pieces of their ``repr``).
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ from typing import Any, Iterator, Sequence
 
 import numpy as np
 
-__all__ = ["check_option", "read_only", "atomic_file", "jsonable", "LazyChoices"]
+__all__ = ["check_option", "read_only", "atomic_file", "jsonable", "LazyChoices", "UnpacksAsTuple", "axis_summary",
+           "names_summary"]
 
 
 class LazyChoices(Sequence):
@@ -165,3 +168,32 @@ def jsonable(v: Any) -> Any:
     if isinstance(v, float) and not np.isfinite(v):
         return None
     return v
+
+
+def axis_summary(frequencies: np.ndarray) -> str:
+    """``"129 lines, 0–256 Hz"`` for a frequency axis."""
+    if frequencies.size == 0:
+        return "0 lines"
+    return f"{frequencies.size} lines, {frequencies[0]:.4g}–{frequencies[-1]:.4g} Hz"
+
+
+def names_summary(names: Sequence[str], k: int = 3) -> str:
+    """At most `k` names, then the count of the others."""
+    head = ", ".join(repr(n) for n in names[:k])
+    return f"[{head}{f', … +{len(names) - k}' if len(names) > k else ''}]"
+
+
+class UnpacksAsTuple:
+    """Tuple behaviour of a result: it unpacks, has a length and indexes like the tuple of its
+    ``_tuple_fields`` (what the function returned before it returned a result object)."""
+
+    _tuple_fields = ()
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter(tuple(getattr(self, name) for name in self._tuple_fields))
+
+    def __len__(self) -> int:
+        return len(self._tuple_fields)
+
+    def __getitem__(self, i):
+        return tuple(self)[i]

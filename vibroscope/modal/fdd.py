@@ -9,12 +9,11 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
-from vibroscope._checks import read_only
+from vibroscope._checks import UnpacksAsTuple, axis_summary, names_summary, read_only
 from vibroscope.modal._peaks import band_indices, parabolic_peak, parabolic_vertex
 from vibroscope.modal._results import ModalModel, mpc, normalize_shapes
 from vibroscope.modal.mac import mac
 from vibroscope.spectral import CrossSpectralMatrix
-from vibroscope.spectral._results import UnpacksAsTuple, axis_summary, names_summary
 
 __all__ = ["fdd", "singular_values", "efdd_damping", "SingularValues"]
 

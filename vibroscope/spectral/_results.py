@@ -4,11 +4,11 @@ their settings, unpack as tuples, and plot lazily."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Iterator, Literal, Sequence
+from typing import Iterator, Literal, Sequence
 
 import numpy as np
 
-from vibroscope._checks import check_option, read_only
+from vibroscope._checks import UnpacksAsTuple, axis_summary, check_option, names_summary, read_only
 from vibroscope.spectral.kinds import FRF_KIND_TABLE, FRF_KINDS
 
 __all__ = ["Spectrum", "CrossSpectralMatrix", "FRF", "Spectrogram", "Coherence", "MultipleCoherence", "FRF_KINDS"]
@@ -40,35 +40,6 @@ def channel_index(channels: Sequence[str], channel: str | int) -> int:
         return list(channels).index(channel)
     except ValueError:
         raise KeyError(f"no channel {channel!r}; channels are {list(channels)}") from None
-
-
-def axis_summary(frequencies: np.ndarray) -> str:
-    """``"129 lines, 0–256 Hz"`` for a frequency axis."""
-    if frequencies.size == 0:
-        return "0 lines"
-    return f"{frequencies.size} lines, {frequencies[0]:.4g}–{frequencies[-1]:.4g} Hz"
-
-
-def names_summary(names: Sequence[str], k: int = 3) -> str:
-    """At most `k` names, then the count of the others."""
-    head = ", ".join(repr(n) for n in names[:k])
-    return f"[{head}{f', … +{len(names) - k}' if len(names) > k else ''}]"
-
-
-class UnpacksAsTuple:
-    """Tuple behaviour of a result: it unpacks, has a length and indexes like the tuple of its
-    ``_tuple_fields`` (what the function returned before it returned a result object)."""
-
-    _tuple_fields = ()
-
-    def __iter__(self) -> Iterator[Any]:
-        return iter(tuple(getattr(self, name) for name in self._tuple_fields))
-
-    def __len__(self) -> int:
-        return len(self._tuple_fields)
-
-    def __getitem__(self, i):
-        return tuple(self)[i]
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
