@@ -937,14 +937,14 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             return (replace(base, model=truth), {"dof": attach, "frequency_hz": f}, params,
                     {"mass_ratio": mu, "extra_dof": "extra"})
 
-        return build, (0.03, 0.4), _always
+        return build, (0.005, 0.4), _always
 
     if effect == "time_delay":
 
         def build(tau, base):
             return _with_input(base, delay=tau), {"side": "input"}, {"delay_s": tau}, {}
 
-        return build, (1e-3, 25e-3), _always
+        return build, (0.6e-3, 25e-3), _always
 
     if effect == "saturation":
         a = np.abs(np.concatenate([uu.fine for uu in ref["u"]]))
