@@ -903,7 +903,7 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             for nm, sg, j in zip(chosen, signs, jitter):
                 kind, key = nm.split(":")
                 table = {"m": masses, "k": kk, "c": cc}[kind]
-                r = 1.0 + sg * max(s * j, 0.15)
+                r = 1.0 + sg * s * j
                 nominal_vals[nm] = table[key]
                 table[key] = table[key] * r
                 true_vals[nm] = table[key]
@@ -914,7 +914,7 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             return (replace(base, model=truth), {"parameters": list(chosen)}, true_vals,
                     {"nominal": nominal_vals, "ratio": ratios})
 
-        return build, (0.15, 0.5), _always
+        return build, (0.003, 0.5), _always
 
     if effect == "extra_mode":
         attach = nominal.dof_names[int(rng.integers(n))]
@@ -937,14 +937,14 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             return (replace(base, model=truth), {"dof": attach, "frequency_hz": f}, params,
                     {"mass_ratio": mu, "extra_dof": "extra"})
 
-        return build, (0.03, 0.4), _always
+        return build, (0.005, 0.4), _always
 
     if effect == "time_delay":
 
         def build(tau, base):
             return _with_input(base, delay=tau), {"side": "input"}, {"delay_s": tau}, {}
 
-        return build, (1e-3, 25e-3), _always
+        return build, (0.6e-3, 25e-3), _always
 
     if effect == "saturation":
         a = np.abs(np.concatenate([uu.fine for uu in ref["u"]]))

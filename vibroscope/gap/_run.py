@@ -23,6 +23,10 @@ from vibroscope.modal.automatic import one_blas_thread
 from vibroscope.models.lumped import LumpedModel
 
 
+#: a parameter_mismatch names the linear parameters changed by more than 3 %, or when none is,
+#: those changed by more than this (0.2 %); whether it vanishes is decided on the outputs
+PM_NAME_TOL = 0.002
+
 #: the nominal gap must exceed the noise floor by this factor before any effect is named
 NONE_FACTOR = 1.3
 #: complexity penalty: the held-out excess gap is scored as e * (1 + PENALTY * n_effect_parameters)

@@ -48,7 +48,9 @@ Procedure
    ``max(e(gap_after), 0.15 floor) (1 + 0.1 n)`` with ``n`` the number of effect parameters
    and ``score = 1 - that / e(gap_before)``. A candidate whose fitted parameters make the
    effect vanish (:meth:`~vibroscope.gap.effects.EffectSpec.vanishes`, or an effect that
-   changes the held-out outputs by less than the noise floor) is never the verdict; nor is a
+   changes the held-out outputs by less than the noise floor; the linear refit as
+   ``parameter_mismatch`` by the same output test, whatever the size of its changes) is never
+   the verdict; nor is a
    linear explanation (parameter mismatch, delay, extra mode) when the BLA depends on the
    level; without that evidence a nonlinear effect must beat the best linear explanation by
    :data:`NL_MARGIN`. The verdict is ``none`` when the nominal gap is within
