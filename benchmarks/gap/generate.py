@@ -903,7 +903,7 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             for nm, sg, j in zip(chosen, signs, jitter):
                 kind, key = nm.split(":")
                 table = {"m": masses, "k": kk, "c": cc}[kind]
-                r = 1.0 + sg * s * j
+                r = 1.0 + sg * max(s * j, min(s, 0.15))  # below 15 % (the weak end): every parameter at s
                 nominal_vals[nm] = table[key]
                 table[key] = table[key] * r
                 true_vals[nm] = table[key]
@@ -914,7 +914,7 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             return (replace(base, model=truth), {"parameters": list(chosen)}, true_vals,
                     {"nominal": nominal_vals, "ratio": ratios})
 
-        return build, (0.003, 0.5), _always
+        return build, (0.003, 0.15, 0.5), _always
 
     if effect == "extra_mode":
         attach = nominal.dof_names[int(rng.integers(n))]
@@ -937,14 +937,14 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             return (replace(base, model=truth), {"dof": attach, "frequency_hz": f}, params,
                     {"mass_ratio": mu, "extra_dof": "extra"})
 
-        return build, (0.005, 0.4), _always
+        return build, (0.005, 0.03, 0.4), _always
 
     if effect == "time_delay":
 
         def build(tau, base):
             return _with_input(base, delay=tau), {"side": "input"}, {"delay_s": tau}, {}
 
-        return build, (0.6e-3, 25e-3), _always
+        return build, (0.6e-3, 1e-3, 25e-3), _always
 
     if effect == "saturation":
         a = np.abs(np.concatenate([uu.fine for uu in ref["u"]]))
@@ -1056,15 +1056,19 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
                     return False
             return True
 
-        return build, (1e-4 * hi, hi), stable
+        return build, (1e-4 * hi, 1e-3 * hi, hi), stable
 
     raise ValueError(f"unknown effect {effect!r}")
 
 
 def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
     """Strength s in bounds (geometric) whose calibration-window gap is close to `target`
-    (gap assumed increasing in s). ``gap_of(build(s)[0]) -> (gap, runs)``. Returns (s, gap),
-    (s_hi, gap) when even s_hi falls short, or (s_lo, gap) when s_lo overshoots."""
+    (gap assumed increasing in s). ``gap_of(build(s)[0]) -> (gap, runs)``. `bounds` is
+    ``(lo, hi)`` or ``(floor, lo, hi)``: with a floor, ``(lo, hi)`` is searched as before and
+    only when even `lo` overshoots the target is ``(floor, lo)`` searched (the weak end added
+    in session 39, which leaves every case whose target ``(lo, hi)`` reaches as it was).
+    Returns (s, gap), (s_hi, gap) when even s_hi falls short, or (s_lo, gap) when the lowest
+    strength overshoots."""
 
     def gap_at(s):
         g, runs = gap_of(build(s)[0])
@@ -1072,7 +1076,7 @@ def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
             return math.inf
         return g
 
-    lo, hi = bounds
+    floor, (lo, hi) = (bounds[0], bounds[1:]) if len(bounds) == 3 else (None, bounds)
     g_hi = gap_at(hi)
     while not math.isfinite(g_hi) and hi > lo * 1.01:  # unstable at the top: shrink
         hi = math.sqrt(hi * lo) if hi / lo > 4 else lo
@@ -1081,11 +1085,20 @@ def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
         return hi, g_hi
     g_lo = gap_at(lo)
     if g_lo >= target:
-        return lo, g_lo
-    s, g = hi, g_hi
+        if floor is None or not floor < lo:
+            return lo, g_lo
+        g_f = gap_at(floor)
+        if not math.isfinite(g_f) or g_f >= target:
+            return (floor, g_f) if math.isfinite(g_f) else (lo, g_lo)
+        return _log_search(gap_at, floor, lo, g_f, g_lo, target, max_iter, (lo, g_lo))
+    return _log_search(gap_at, lo, hi, g_lo, g_hi, target, max_iter, (hi, g_hi))
+
+
+def _log_search(gap_at, lo, hi, g_lo, g_hi, target, max_iter, best):
+    """The strength in (lo, hi) whose gap is closest to `target` (log-log interpolation guarded
+    towards bisection, at most `max_iter` evaluations), starting from `best` ``(s, gap)``."""
     llo, lhi, glo, ghi = math.log(lo), math.log(hi), math.log(max(g_lo, 1e-12)), math.log(g_hi)
     lt = math.log(target)
-    best = (hi, g_hi)
     for _ in range(max_iter):
         # interpolate in log-log, guarded towards bisection
         w = (lt - glo) / (ghi - glo) if ghi > glo else 0.5

@@ -190,15 +190,35 @@ def test_every_effect_has_a_gap_and_a_consistent_truth_model(effect):
         fn = case.nominal.modes().natural_frequencies
         assert np.all(np.abs(w["frequency_hz"] - fn) >= 0.1 * fn - 1e-9)
     elif effect == "time_delay":
-        assert 1e-3 <= tm.inputs[0].delay <= 25e-3 and w == {"side": "input"}
+        assert 0.6e-3 <= tm.inputs[0].delay <= 25e-3 and w == {"side": "input"}
     elif effect == "saturation":
         assert tm.inputs[0].saturation == pytest.approx(t["parameters"]["limit_N"])
     elif effect == "parameter_mismatch":
         assert 1 <= len(w["parameters"]) <= 2
         for name, r in t["details"]["ratio"].items():
-            assert 0.15 - 1e-9 <= abs(r - 1) <= 0.50 + 1e-9
+            assert 0.003 - 1e-9 <= abs(r - 1) <= 0.50 + 1e-9
     # the nominal model file is the truth without the effect
     assert t["truth_model"] != gen.dumps_model(case.nominal)
+
+
+def test_calibration_floor_only_searches_below_when_the_old_lower_bound_overshoots():
+    """A strength range with a floor ``(floor, lo, hi)`` gives what ``(lo, hi)`` gave whenever
+    the target lies above the gap at `lo` (the cases of earlier seeds stay as they were), and
+    reaches a target below it, which ``(lo, hi)`` overshot (gap = 2 s: a target of 0.1 needs s = 0.05)."""
+    def gap_of(s):
+        return 2.0 * s, ["run"]
+
+    def build(s):
+        return s, None
+
+    always = lambda runs, s: True  # noqa: E731
+    for target in (0.4, 0.7, 0.95):
+        assert (gen._calibrate(build, (0.01, 0.15, 0.5), always, target, gap_of)
+                == gen._calibrate(build, (0.15, 0.5), always, target, gap_of))
+    s_old, g_old = gen._calibrate(build, (0.15, 0.5), always, 0.1, gap_of)
+    assert s_old == 0.15 and g_old == pytest.approx(0.3)  # overshoots 3x
+    s_new, g_new = gen._calibrate(build, (0.01, 0.15, 0.5), always, 0.1, gap_of)
+    assert abs(np.log(g_new / 0.1)) < 0.1 and s_new == pytest.approx(0.05, rel=0.1)
 
 
 def test_generate_is_deterministic_and_keeps_truth_apart(tmp_path):
