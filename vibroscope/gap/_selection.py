@@ -72,11 +72,16 @@ def select_further_effects(run: Run, *, workers) -> None:
         trial2, shares2 = select_from(d_first, screen_on(run, d_first[1], workers))
         if len(trial2) > 1 and trial2[-1][0].score > trial[-1][0].score:
             return trial2, shares2
+        if len(trial2) == 1 and len(trial) > 1 and not_beyond_delay(trial[-1][0], d_first[0]):
+            # nothing joins the delay, and what `trial` adds to it is not significant (the test
+            # an addition to the delay would have failed): the delay alone, polished
+            return [polish_candidate(d_first, [(d_first[3], d_first[4])], **polish)], [1.0]
         return trial, trial_shares
 
     if chosen and chosen[0][3] is not None:
+        first0 = chosen[0]
         chosen, shares = or_from_delay(*select_from(chosen[0]))
-        if len(chosen) > 1:
+        if len(chosen) > 1 or chosen[0][0] is not first0[0]:
             verdict = chosen[0][0].effect
             added = {c[0].effect for c in chosen}
             ordered = chosen + [c for c in ordered if c[0].effect not in added]
@@ -85,12 +90,21 @@ def select_further_effects(run: Run, *, workers) -> None:
         # which alone leaves most of it): the forward selection from the best admissible
         # candidate, and the combination is the verdict only if it explains enough itself
         trial, trial_shares = or_from_delay(*select_from(cands[best_i]), alone_ok=True)
-        if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE:
+        if ((len(trial) > 1 or trial[0][0] is not cands[best_i][0])  # a combination, or the delay alone
+                and trial[-1][0].score >= UNEXPLAINED_SCORE):
             chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
             added = {c[0].effect for c in chosen}
             ordered = chosen + [c for c in ordered if c[0].effect not in added]
     run.timings["forward_selection"] = time.perf_counter() - t
     run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
+
+
+def not_beyond_delay(combined, delay) -> bool:
+    """Whether the combination `combined` (a Candidate whose score counts every chosen effect's
+    parameters) is not significantly better than the input delay fitted alone, `delay`: its
+    penalised held-out excess is not below :data:`ADD_FACTOR` times the delay's (both read from
+    the scores, ``1 - key / k_before``), the test a further effect on top of the delay must pass."""
+    return (1.0 - combined.score) >= ADD_FACTOR * (1.0 - delay.score)
 
 
 def delay_first(run: Run, workers, tau: float | None = None) -> tuple | None:
