@@ -343,6 +343,29 @@ def test_a_clipped_input_behind_a_delay_is_found_from_the_delay_first():
     assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
 
 
+@pytest.mark.slow  # one 60 s case generated (RK4 truth) and diagnosed, two forward selections, ~100-180 s
+def test_a_delay_alone_is_not_named_with_a_nonlinear_effect_that_adds_nothing_to_it():
+    """Seed 7979's second time_delay case (RK4 truth, one log): a 3.52 ms input delay on a linear
+    3-DOF chain. The level test of the BLA flags a change with the level (a per-level modal fit
+    biased by the delay), so a linear explanation was not admissible alone; a softening cubic
+    spring that changes nothing (held-out 0.5187 against the refit's 0.5218) was the best
+    admissible candidate, the delay joined it (0.0301, floor 0.0249) and the verdict was
+    ``cubic_stiffness + time_delay`` (the code before 493ee2a still gives it). The
+    selection from the delay fitted alone adds nothing, and the pair is not significantly better
+    than the delay alone (the test an addition to the delay must pass): the delay alone."""
+    from vibroscope.gap import diagnose
+
+    case = gen.make_case("time_delay", gen.case_rng(7979, "time_delay", 1), 60.0, integrator="rk4")
+    t = case.truth
+    assert t["parameters"]["delay_s"] == pytest.approx(3.5156e-3, rel=1e-3)
+    rep = diagnose(case.nominal, case.signals(0))
+    assert rep.verdict == "time_delay" and len(rep.verdicts) <= 1, rep.summary()
+    delay = rep.candidates[0]
+    assert delay.effect == "time_delay"
+    assert delay.parameters["delay_s"] == pytest.approx(t["parameters"]["delay_s"], rel=0.05)
+    assert rep.gap_after < 1.3 * rep.noise_floor, rep.summary()
+
+
 def _named_alone_at_its_link(effect: str, seed: int, integrator: str, param: str, value: float):
     """Regenerate the first 60 s case of class `effect` of `seed` (its truth's `param` checked
     against `value`), diagnose it, and check that `effect` alone is named at the truth's
