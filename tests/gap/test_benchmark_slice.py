@@ -346,8 +346,8 @@ def test_a_clipped_input_behind_a_delay_is_found_from_the_delay_first():
 @pytest.mark.slow  # one 60 s case generated (RK4 truth) and diagnosed, two forward selections, ~100-180 s
 def test_a_delay_alone_is_not_named_with_a_nonlinear_effect_that_adds_nothing_to_it():
     """Seed 7979's second time_delay case (RK4 truth, one log): a 3.52 ms input delay on a linear
-    3-DOF chain. The level test of the BLA flags a change with the level (a per-level modal fit
-    biased by the delay), so a linear explanation was not admissible alone; a softening cubic
+    3-DOF chain. The level test of the BLA flags a change with the level (the delay is fitted
+    only as an addition, ``lin_later``), so a linear explanation was not admissible alone; a softening cubic
     spring that changes nothing (held-out 0.5187 against the refit's 0.5218) was the best
     admissible candidate, the delay joined it (0.0301, floor 0.0249) and the verdict was
     ``cubic_stiffness + time_delay`` (the code before 493ee2a still gives it). The
