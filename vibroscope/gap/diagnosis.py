@@ -61,7 +61,10 @@ Procedure
    parameters fitted, then jointly with the linear ones; a promising addition is fitted
    further before the decision); the best is kept when the penalised excess falls below
    :data:`ADD_FACTOR` times the current one, up to three effects, then the combination is
-   polished jointly; each effect's share of the shrink is reported.
+   polished jointly; each effect's share of the shrink is reported. An input delay that
+   joined only later is fitted first too (:func:`~vibroscope.gap._selection.delay_first`);
+   when nothing joins it and the combination is not significantly better than the delay
+   alone by the same test, the delay alone is the verdict.
 
 References
 ----------
