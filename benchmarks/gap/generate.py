@@ -1056,7 +1056,7 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
                     return False
             return True
 
-        return build, (1e-4 * hi, 1e-3 * hi, hi), stable
+        return build, (1e-3 * hi, hi), stable
 
     raise ValueError(f"unknown effect {effect!r}")
 
