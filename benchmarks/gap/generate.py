@@ -1061,6 +1061,11 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
     raise ValueError(f"unknown effect {effect!r}")
 
 
+#: whether the weak ends added in session 39 are searched (:func:`_calibrate`); False
+#: (``--without-weak-end``) regenerates the cases of the seeds run before it exactly
+WEAK_END = True
+
+
 def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
     """Strength s in bounds (geometric) whose calibration-window gap is close to `target`
     (gap assumed increasing in s). ``gap_of(build(s)[0]) -> (gap, runs)``. `bounds` is
@@ -1077,6 +1082,8 @@ def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
         return g
 
     floor, (lo, hi) = (bounds[0], bounds[1:]) if len(bounds) == 3 else (None, bounds)
+    if not WEAK_END:  # the ranges before session 39 (`--without-weak-end`)
+        floor = None
     g_hi = gap_at(hi)
     while not math.isfinite(g_hi) and hi > lo * 1.01:  # unstable at the top: shrink
         hi = math.sqrt(hi * lo) if hi / lo > 4 else lo
@@ -1790,9 +1797,14 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 
 def _one(job):
-    out, name, effect, seed, index, duration, integrator, multi = job
+    global WEAK_END
+    out, name, effect, seed, index, duration, integrator, multi, weak_end = job
     tic = time.perf_counter()
-    case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi)
+    WEAK_END, before = weak_end, WEAK_END
+    try:
+        case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi)
+    finally:
+        WEAK_END = before
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1803,11 +1815,13 @@ def _line(r) -> str:
 
 
 def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration: float = 60.0, jobs: int = 1,
-             verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0) -> list[tuple]:
+             verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0,
+             weak_end: bool = True) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
-    from (seed, class, index)). Returns (name, class, gap, s, integrator, multi-log)."""
+    from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
+    before session 39 (:data:`WEAK_END`). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
@@ -1816,14 +1830,14 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
     out.mkdir(parents=True, exist_ok=True)
     (out / "generate.json").write_text(json.dumps({"per_class": per_class, "classes": classes, "seed": seed,
                                                    "duration": duration, "integrator": integrator,
-                                                   "multi_log": multi_log}, indent=2) + "\n")
+                                                   "multi_log": multi_log, "weak_end": weak_end}, indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
         for c in classes:
             k = len(jobs_list)
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
             multi = bool(np.random.default_rng([int(seed), ALL_CLASSES.index(c), j, 1]).random() < multi_log)
-            jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi))
+            jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -1863,10 +1877,13 @@ def main(argv=None) -> int:
                    help="truth integrator (default: alternate lsoda / rk4 per case)")
     p.add_argument("--multi-log", type=float, default=0.25, metavar="SHARE",
                    help="share of cases written as three single-level logs (default 0.25)")
+    p.add_argument("--without-weak-end", action="store_true",
+                   help="the strength ranges before session 39 (a parameter mismatch from 15 %%, an extra mode "
+                   "from 3 %% of the attached mass, a delay from 1 ms): regenerates the earlier seeds' cases")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
-                   multi_log=a.multi_log)
+                   multi_log=a.multi_log, weak_end=not a.without_weak_end)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")
