@@ -171,14 +171,48 @@ def jsonable(v: Any) -> Any:
 
 
 def axis_summary(frequencies: np.ndarray) -> str:
-    """``"129 lines, 0–256 Hz"`` for a frequency axis."""
+    """``"129 lines, 0–256 Hz"`` for a frequency axis (the piece of a result's ``repr``).
+
+    Parameters
+    ----------
+    frequencies : ndarray, shape (n_freqs,)
+        Frequency axis in Hz, ascending.
+
+    Returns
+    -------
+    str
+        ``"0 lines"`` for an empty axis.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> axis_summary(np.linspace(0.0, 256.0, 129))
+    '129 lines, 0–256 Hz'
+    """
     if frequencies.size == 0:
         return "0 lines"
     return f"{frequencies.size} lines, {frequencies[0]:.4g}–{frequencies[-1]:.4g} Hz"
 
 
 def names_summary(names: Sequence[str], k: int = 3) -> str:
-    """At most `k` names, then the count of the others."""
+    """At most `k` names, then the count of the others (the piece of a result's ``repr``).
+
+    Parameters
+    ----------
+    names : sequence of str
+        Channel (or input/output) names.
+    k : int, optional
+        Most names written out; default 3.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> names_summary(["/imu/a.x", "/imu/b.x", "/imu/c.x", "/imu/d.x"], k=2)
+    "['/imu/a.x', '/imu/b.x', … +2]"
+    """
     head = ", ".join(repr(n) for n in names[:k])
     return f"[{head}{f', … +{len(names) - k}' if len(names) > k else ''}]"
 
