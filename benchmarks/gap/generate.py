@@ -1061,18 +1061,13 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
     raise ValueError(f"unknown effect {effect!r}")
 
 
-#: whether the weak ends added in session 39 are searched (:func:`_calibrate`); False
-#: (``--without-weak-end``) regenerates the cases of the seeds run before it exactly
-WEAK_END = True
-
-
-def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
+def _calibrate(build, bounds, stable, target, gap_of, max_iter=8, *, weak_end=True):
     """Strength s in bounds (geometric) whose calibration-window gap is close to `target`
     (gap assumed increasing in s). ``gap_of(build(s)[0]) -> (gap, runs)``. `bounds` is
     ``(lo, hi)`` or ``(floor, lo, hi)``: with a floor, ``(lo, hi)`` is searched as before and
     only when even `lo` overshoots the target is ``(floor, lo)`` searched (the weak end added
-    in session 39, which leaves every case whose target ``(lo, hi)`` reaches as it was).
-    Returns (s, gap), (s_hi, gap) when even s_hi falls short, or (s_lo, gap) when the lowest
+    in session 39, which leaves every case whose target ``(lo, hi)`` reaches as it was);
+    `weak_end` False ignores the floor (``--without-weak-end``: the seeds run before). Returns (s, gap), (s_hi, gap) when even s_hi falls short, or (s_lo, gap) when the lowest
     strength overshoots."""
 
     def gap_at(s):
@@ -1081,9 +1076,7 @@ def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
             return math.inf
         return g
 
-    floor, (lo, hi) = (bounds[0], bounds[1:]) if len(bounds) == 3 else (None, bounds)
-    if not WEAK_END:  # the ranges before session 39 (`--without-weak-end`)
-        floor = None
+    floor, (lo, hi) = (bounds[0], bounds[1:]) if len(bounds) == 3 and weak_end else (None, bounds[-2:])
     g_hi = gap_at(hi)
     while not math.isfinite(g_hi) and hi > lo * 1.01:  # unstable at the top: shrink
         hi = math.sqrt(hi * lo) if hi / lo > 4 else lo
@@ -1095,8 +1088,10 @@ def _calibrate(build, bounds, stable, target, gap_of, max_iter=8):
         if floor is None or not floor < lo:
             return lo, g_lo
         g_f = gap_at(floor)
-        if not math.isfinite(g_f) or g_f >= target:
-            return (floor, g_f) if math.isfinite(g_f) else (lo, g_lo)
+        if not math.isfinite(g_f):
+            return lo, g_lo
+        if g_f >= target:
+            return floor, g_f
         return _log_search(gap_at, floor, lo, g_f, g_lo, target, max_iter, (lo, g_lo))
     return _log_search(gap_at, lo, hi, g_lo, g_hi, target, max_iter, (hi, g_hi))
 
@@ -1190,12 +1185,12 @@ def _log_uniform(rng, lo, hi) -> float:
 
 
 def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, integrator: str = "lsoda",
-              multi_log: bool = False) -> Case:
+              multi_log: bool = False, weak_end: bool = True) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
     duration / 3 each, at one excitation level each (1, 2.5, 6), instead of one log cycling
-    the levels.
+    the levels. `weak_end` False: the strength ranges before session 39 (:func:`_calibrate`).
     """
     cls = effect
     if effect.startswith("closed_loop_"):
@@ -1273,7 +1268,7 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
             targets = [target * math.sqrt(w), target * math.sqrt(1.0 - w)]
         strengths, alone = [], []
         for (build, bounds, stable), tg in zip(builders, targets):
-            s, g = _calibrate(lambda s, b=build: b(s, base0), bounds, stable, tg, gap_of)
+            s, g = _calibrate(lambda s, b=build: b(s, base0), bounds, stable, tg, gap_of, weak_end=weak_end)
             strengths.append(s)
             alone.append(g)
 
@@ -1797,14 +1792,10 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 
 def _one(job):
-    global WEAK_END
     out, name, effect, seed, index, duration, integrator, multi, weak_end = job
     tic = time.perf_counter()
-    WEAK_END, before = weak_end, WEAK_END
-    try:
-        case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi)
-    finally:
-        WEAK_END = before
+    case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
+                     weak_end=weak_end)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1821,7 +1812,7 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
-    before session 39 (:data:`WEAK_END`). Returns (name, class, gap, s, integrator, multi-log)."""
+    before session 39 (:func:`_calibrate`). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:

@@ -220,12 +220,7 @@ def test_calibration_floor_only_searches_below_when_the_old_lower_bound_overshoo
     s_new, g_new = gen._calibrate(build, (0.01, 0.15, 0.5), always, 0.1, gap_of)
     assert abs(np.log(g_new / 0.1)) < 0.1 and s_new == pytest.approx(0.05, rel=0.1)
     # --without-weak-end: the old range only, for the seeds run before
-    monkey = pytest.MonkeyPatch()
-    monkey.setattr(gen, "WEAK_END", False)
-    try:
-        assert gen._calibrate(build, (0.01, 0.15, 0.5), always, 0.1, gap_of) == (s_old, g_old)
-    finally:
-        monkey.undo()
+    assert gen._calibrate(build, (0.01, 0.15, 0.5), always, 0.1, gap_of, weak_end=False) == (s_old, g_old)
 
 
 def test_generate_is_deterministic_and_keeps_truth_apart(tmp_path):

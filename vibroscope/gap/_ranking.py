@@ -113,6 +113,14 @@ def evaluate(run: Run, item):
     return s, m_aug, p, gfit, g, yh, contrib, base
 
 
+def within_floor(contrib: float, floor: float, what: str) -> str | None:
+    """Why a candidate vanishes when it changes the held-out outputs (nrmse `contrib` against
+    its own base) by less than the ranking `floor`, else None; `what` names it in the reason."""
+    if np.isfinite(contrib) and np.isfinite(floor) and contrib < floor:
+        return f"{what} changes the held-out outputs by nrmse {contrib:.3g}, within the noise floor {floor:.3g}"
+    return None
+
+
 def ranked_candidates(run: Run, evaluated: list) -> list:
     """The evaluated results as candidates (vanished when their effect changes the held-out
     outputs less than the ranking floor), the refit as ``parameter_mismatch``, ranked by the
@@ -124,10 +132,7 @@ def ranked_candidates(run: Run, evaluated: list) -> list:
     run.k_before = k_before
     cands = []  # (Candidate, model, held-out outputs, spec, p)
     for s, m_aug, p, gfit, g, yh, contrib, base in evaluated:
-        reason = s.vanishes(p)
-        if reason is None and np.isfinite(contrib) and np.isfinite(floor_rank) and contrib < floor_rank:
-            reason = (f"the effect changes the held-out outputs by nrmse {contrib:.3g}, within the noise floor "
-                      f"{floor_rank:.3g}")
+        reason = s.vanishes(p) or within_floor(contrib, floor_rank, "the effect")
         where = dict(s.where) | s.qualifiers(p)
         if s.effect == "extra_mode":
             where["frequency_hz"] = s.describe(p).get("frequency_hz")
@@ -139,17 +144,15 @@ def ranked_candidates(run: Run, evaluated: list) -> list:
     # vanishing is an output test, as for every effect: a lightly damped mode 1 % off in
     # frequency is a gap of 0.5 nrmse, so the size of a parameter change says nothing by itself
     val_logs = run.val_logs
-    contrib_pm = nrmse([pm.outputs[i] for i in val_logs], [run.y_nom[i] for i in val_logs],
-                       [run.split.validation[i] for i in val_logs])
     changed = pm.lin.changed(pm.theta) or pm.lin.changed(pm.theta, tol=PM_NAME_TOL)
     pm_params = {k: v for k, v in pm.lin.values(pm.model).items() if k in changed}
     expl_pm = 1.0 - key(pm.gap, 0) / k_before if k_before > 0 else 0.0
-    pm_vanished = ""
-    if not changed:
+    if changed:
+        contrib_pm = nrmse([pm.outputs[i] for i in val_logs], [run.y_nom[i] for i in val_logs],
+                           [run.split.validation[i] for i in val_logs])
+        pm_vanished = within_floor(contrib_pm, floor_rank, "the refit") or ""
+    else:
         pm_vanished = f"no linear parameter changed by more than {100 * PM_NAME_TOL:g} %"
-    elif np.isfinite(contrib_pm) and np.isfinite(floor_rank) and contrib_pm < floor_rank:
-        pm_vanished = (f"the refit changes the held-out outputs by nrmse {contrib_pm:.3g}, within the noise floor "
-                       f"{floor_rank:.3g}")
     cands.append((Candidate(effect="parameter_mismatch", where={"parameters": changed}, parameters=pm_params,
                             gap_after=pm.gap, score=expl_pm, gap_fit=pm.gap_fit, n_parameters=0,
                             model_toml=dumps(pm.model), vanished=pm_vanished),

@@ -168,21 +168,26 @@ def pyplot():
     return plt
 
 
-def short_label(name: str, n: int = 38) -> str:
-    """`name` cut to its last `n` characters behind an ellipsis when longer.
+def short_label(name: str, n: int = 38, *, keep: str = "end") -> str:
+    """`name` cut to `n` characters with an ellipsis when longer: its last ones (a channel's
+    field and axis), or with ``keep="start"`` its first ones (a candidate's effect).
 
     Parameters
     ----------
     name : str
-        A channel or file name.
+        A channel or file name, or a label.
     n : int, optional
         Most characters kept (default 38).
+    keep : {'end', 'start'}, optional
+        Which end of `name` is kept (default ``'end'``).
 
     Returns
     -------
     str
     """
-    return name if len(name) <= n else "…" + name[-(n - 1):]
+    if len(name) <= n:
+        return name
+    return name[: n - 1] + "…" if keep == "start" else "…" + name[-(n - 1):]
 
 
 def distinct_labels(names: Sequence[str], n: int = 16) -> list[str]:

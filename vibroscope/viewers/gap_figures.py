@@ -575,12 +575,6 @@ def plot_gap_evidence(report, *, fig=None):
     return fig
 
 
-def _head(label: str, n: int) -> str:
-    """`label` cut to its first `n` characters before an ellipsis when longer (a candidate's
-    label starts with the effect, which must stay readable; the end is its location)."""
-    return label if len(label) <= n else label[: n - 1] + "…"
-
-
 def plot_gap_candidates(report, *, fig=None):
     """Held-out gap (nrmse) of every candidate effect as horizontal bars, best first.
 
@@ -632,7 +626,7 @@ def plot_gap_candidates(report, *, fig=None):
         bars[k].set_facecolor(BAR_VERDICT)
         bars[k].set_alpha(0.55)
         bars[k].set_edgecolor("k")
-    ax.set_yticks(y, [("+ " if k in added else "") + _head(candidate_label(c), 48) for k, c in enumerate(cands)],
+    ax.set_yticks(y, [("+ " if k in added else "") + short_label(candidate_label(c), 48, keep="start") for k, c in enumerate(cands)],
                   fontsize=8)
     for k, lab in enumerate(ax.get_yticklabels()):
         if k == vi:
