@@ -87,6 +87,9 @@ N_LOCATIONS = 3
 #: a location's best start on the other linear base (nominal or refit) is refined too when its
 #: screening gap is within this factor of the best start's
 OTHER_BASE_FACTOR = 2.0
+#: screening simulations of the bracketed search of a one-parameter effect between its starts
+#: (:func:`~vibroscope.gap._candidates.bracketed_search`)
+BRACKET_EVALS = 8
 #: seconds of fitting data per log on which the winner is polished at full accuracy
 POLISH_S = 30.0
 #: the polish's evaluations in fours, the share of its fitting gap every four iterations must
