@@ -43,6 +43,11 @@ NESTED_T = 4.0
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
 ADD_FACTOR = 0.5
+#: a ``parameter_mismatch`` verdict (the linear refit, which no effect joins) whose held-out gap
+#: exceeds this multiple of the noise floor is tested against a combination of effects from the
+#: best nonlinear candidate (true mismatches of the benchmark end at 1.0-1.16x the floor; the two
+#: two-effect cases named ``parameter_mismatch`` at 3.3x and 5.6x)
+PM_FURTHER = 2.0
 #: forward selection fits jointly with the chosen effects and the linear parameters only the
 #: additions whose own fit (its parameters alone) ranks among this many best on the fitting data,
 #: and every addition at a chosen effect's connection (a joint fit costs as much as the rest of a

@@ -23,6 +23,7 @@ from vibroscope.gap._run import (
     CONN_JOINT_GAIN,
     JOINT_TOP,
     NESTED_FAMILIES,
+    PM_FURTHER,
     REFINE_FACTOR,
     Run,
     UNEXPLAINED_SCORE,
@@ -30,6 +31,7 @@ from vibroscope.gap._run import (
     excess,
     prefix_gap,
 )
+from vibroscope.gap.effects import EFFECT_TABLE
 from vibroscope.gap.fit import fit_time_domain
 from vibroscope.gap.report import Candidate
 
@@ -95,8 +97,31 @@ def select_further_effects(run: Run, *, workers) -> None:
             chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
             added = {c[0].effect for c in chosen}
             ordered = chosen + [c for c in ordered if c[0].effect not in added]
+    elif (verdict == "parameter_mismatch" and chosen and chosen[0][3] is None
+          and chosen[0][0].gap_after > PM_FURTHER * run.floor):
+        # the linear refit, which no effect joins, leaves a gap well beyond the noise: two effects
+        # may explain it where each alone did not beat the refit by NL_MARGIN (an offset and a
+        # hysteresis, each leaving most of the gap); the combination from the best nonlinear
+        # candidate replaces the refit when it passes the test any addition to the refit would
+        pm = chosen[0]
+        nl = next((c for c in cands if c[3] is not None and not c[0].vanished
+                   and EFFECT_TABLE[c[0].effect].kind == "nonlinear"), None)
+        if nl is not None:
+            trial, trial_shares = select_from(nl)
+            if (len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE
+                    and beyond(trial[-1][0], pm[0])):
+                chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
+                added = {c[0].effect for c in chosen}
+                ordered = chosen + [c for c in ordered if c[0].effect not in added]
     run.timings["forward_selection"] = time.perf_counter() - t
     run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
+
+
+def beyond(combined, base) -> bool:
+    """Whether candidate `combined` is significantly better than `base`: its penalised held-out
+    excess (read from its score, ``1 - key / k_before``) is below :data:`ADD_FACTOR` times
+    `base`'s, the test an addition to `base` must pass."""
+    return (1.0 - combined.score) < ADD_FACTOR * (1.0 - base.score)
 
 
 def not_beyond_delay(combined, delay) -> bool:
@@ -104,7 +129,7 @@ def not_beyond_delay(combined, delay) -> bool:
     parameters) is not significantly better than the input delay fitted alone, `delay`: its
     penalised held-out excess is not below :data:`ADD_FACTOR` times the delay's (both read from
     the scores, ``1 - key / k_before``), the test a further effect on top of the delay must pass."""
-    return (1.0 - combined.score) >= ADD_FACTOR * (1.0 - delay.score)
+    return not beyond(combined, delay)
 
 
 def delay_first(run: Run, workers, tau: float | None = None) -> tuple | None:
