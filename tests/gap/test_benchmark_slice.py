@@ -426,6 +426,34 @@ def test_a_clearance_in_a_narrow_valley_between_its_starts_is_found_at_its_link(
     assert rep.gap_after < 2.0 * rep.noise_floor, rep.summary()
 
 
+@pytest.mark.slow  # one 60 s case generated (RK4 truth) and diagnosed, three forward selections, ~90-150 s
+def test_a_clearance_replaced_by_a_stiffening_spring_is_swapped_back_when_its_partner_closes_the_gap():
+    """Seed 6262's tenth two-effect case (case 129, ``weak_end`` False): a clearance of
+    1.66e-5 m at m2-ground and a Coulomb friction of 0.369 N at m1-m2 of a 2-DOF chain. On the
+    linear refit, which has absorbed it, the clearance fits best at 2.3e-6 m (vanishing); on the
+    nominal it fits at 1.63e-5 m, worse alone. A hardening cubic spring at m2-ground was the
+    verdict, and the friction on top of it closed 0.075 -> 0.056 (floor 0.019), short of the
+    addition test: ``cubic_stiffness`` alone. Now the non-vanishing fit is kept as a candidate of
+    its own, and a selection that leaves more than ``PM_FURTHER`` times the floor is run again from
+    the best other class at the first effect's connection: backlash + Coulomb friction, each
+    within 5 % and at its link, at the noise floor."""
+    from vibroscope.gap import diagnose
+
+    case = gen.make_case("two_effects", gen.case_rng(6262, "two_effects", 9), 60.0, integrator="rk4",
+                         weak_end=False)
+    t = case.truth
+    p_true = dict(zip(t["effect"], t["parameters"]))
+    w_true = dict(zip(t["effect"], t["where"]))
+    assert p_true["backlash"]["gap_m"] == pytest.approx(1.66374e-5, rel=1e-4)
+    rep = diagnose(case.nominal, case.signals(0))
+    assert set(rep.verdicts) == {"backlash", "coulomb_friction"}, rep.summary()
+    for eff, par in (("backlash", "gap_m"), ("coulomb_friction", "Fc_N")):
+        c = next(c for c in rep.candidates if c.effect == eff)
+        assert c.parameters[par] == pytest.approx(p_true[eff][par], rel=0.05), (eff, c.parameters)
+        assert score._same_pair(c.where["between"], w_true[eff]["between"]), (eff, c.where)
+    assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
+
+
 # ---------------------------------------------------------------------------------------------
 # closed-loop and modal kinds
 # ---------------------------------------------------------------------------------------------

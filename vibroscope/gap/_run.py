@@ -229,6 +229,7 @@ class Run:
     keep_ids: set | None = None
     per_class: dict | None = None
     screened: list = field(default_factory=list)
+    screened_alt: list = field(default_factory=list)
     nested_t: dict = field(default_factory=dict)
     # held-out evaluation and ranking (rank_candidates)
     floor_rank: float | None = None

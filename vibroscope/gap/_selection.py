@@ -113,6 +113,21 @@ def select_further_effects(run: Run, *, workers) -> None:
                 chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
                 added = {c[0].effect for c in chosen}
                 ordered = chosen + [c for c in ordered if c[0].effect not in added]
+    if chosen and chosen[-1][0].gap_after > PM_FURTHER * run.floor and "between" in chosen[0][0].where:
+        # the selection leaves a gap well beyond the noise: the first effect may be another
+        # class's stand-in at its connection (a hardening cubic spring for a clearance, which the
+        # clearance's partner then cannot complete); the selection from the best other nonlinear
+        # class there is kept when it is significantly better
+        pair = frozenset(chosen[0][0].where["between"])
+        alt = next((c for c in cands if c[3] is not None and not c[0].vanished
+                    and EFFECT_TABLE[c[0].effect].kind == "nonlinear" and c[0].effect != chosen[0][0].effect
+                    and frozenset(c[0].where.get("between", ())) == pair), None)
+        if alt is not None:
+            trial, trial_shares = select_from(alt)
+            if trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[-1][0]):
+                chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
+                added = {c[0].effect for c in chosen}
+                ordered = chosen + [c for c in ordered if c[0].effect not in added]
     run.timings["forward_selection"] = time.perf_counter() - t
     run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
 
