@@ -229,6 +229,8 @@ class Run:
     keep_ids: set | None = None
     per_class: dict | None = None
     screened: list = field(default_factory=list)
+    # a location's non-vanishing fit on the other linear base where the better one vanishes
+    # (refine_on_either_base), evaluated as a candidate of its own
     screened_alt: list = field(default_factory=list)
     nested_t: dict = field(default_factory=dict)
     # held-out evaluation and ranking (rank_candidates)
