@@ -454,6 +454,31 @@ def test_a_clearance_replaced_by_a_stiffening_spring_is_swapped_back_when_its_pa
     assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
 
 
+@pytest.mark.slow  # one 60 s case generated (LSODA truth) and diagnosed, two forward selections, ~60-120 s
+def test_a_refit_far_above_the_floor_gives_way_to_two_effects_that_close_it():
+    """Seed 6262's ninth two-effect case (case 116, generated before session 39: ``weak_end``
+    False): an input offset of -0.866 N and a Bouc-Wen hysteresis at m1-ground. The BLA does not
+    change with the level, so a nonlinear effect alone must beat the linear refit by
+    ``NL_MARGIN``; the hysteresis alone (held-out 0.079) did not, the refit (0.124, 5.6x the
+    noise floor) was the verdict, and no effect was tried on top of it. Now a refit verdict above
+    ``PM_FURTHER`` times the floor is tested against the selection from the best nonlinear
+    candidate: hysteresis + offset, at the noise floor, the offset within 5 %."""
+    from vibroscope.gap import diagnose
+
+    case = gen.make_case("two_effects", gen.case_rng(6262, "two_effects", 8), 60.0, integrator="lsoda",
+                         weak_end=False)
+    t = case.truth
+    p_true = dict(zip(t["effect"], t["parameters"]))
+    assert p_true["offset"]["offset_N"] == pytest.approx(-0.86596, rel=1e-4)
+    rep = diagnose(case.nominal, case.signals(0))
+    assert set(rep.verdicts) == {"hysteresis", "offset"}, rep.summary()
+    off = next(c for c in rep.candidates if c.effect == "offset")
+    assert off.parameters["offset_N"] == pytest.approx(p_true["offset"]["offset_N"], rel=0.05)
+    hyst = next(c for c in rep.candidates if c.effect == "hysteresis")
+    assert score._same_pair(hyst.where["between"], t["where"][1]["between"]), hyst.where
+    assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
+
+
 # ---------------------------------------------------------------------------------------------
 # closed-loop and modal kinds
 # ---------------------------------------------------------------------------------------------
