@@ -451,6 +451,8 @@ def test_a_clearance_replaced_by_a_stiffening_spring_is_swapped_back_when_its_pa
         c = next(c for c in rep.candidates if c.effect == eff)
         assert c.parameters[par] == pytest.approx(p_true[eff][par], rel=0.05), (eff, c.parameters)
         assert score._same_pair(c.where["between"], w_true[eff]["between"]), (eff, c.where)
+    # the clearance is the fit kept on the other linear base, and its label says so
+    assert next(c for c in rep.candidates if c.effect == "backlash").where.get("linear_base") == "nominal"
     assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
 
 

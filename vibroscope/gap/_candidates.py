@@ -53,7 +53,9 @@ def fit_candidates(run: Run, *, workers, n_full, progress) -> None:
         if s.effect not in done or s is not per_class[s.effect][0]:
             results.append((s, s.apply(base, p), p, g, base))
     for s, p, g, base in run.screened_alt:  # where the better base's fit vanishes, the other's
-        results.append((s, s.apply(base, p), p, g, base))
+        m_alt = s.apply(base, p)
+        run.alt_models[id(m_alt)] = "nominal" if base is run.model else "refit"
+        results.append((s, m_alt, p, g, base))
     bar.close()
     run.timings["candidates"] = time.perf_counter() - t
     run.results, run.pre_eval, run.keep_ids, run.per_class = results, pre_eval, keep_ids, per_class
@@ -165,7 +167,7 @@ def screen_nonlinear(run: Run, nl_specs: list, bar, workers) -> list:
     start), and a family refined again from its member's solution where the member fits a
     location better. Returns the screened items ``(spec, p, fitting gap, base)``."""
     other_base: dict[int, tuple] = {}  # id(best start) -> the best start on the other linear base
-    run.screened_alt = []
+    run.screened_alt, run.alt_models = [], {}
     with ThreadPoolExecutor(max(1, workers)) as ex:
         probed = []
         for res in ex.map(partial(probe, run, other_base), nl_specs):

@@ -155,7 +155,10 @@ class Candidate:
         One of :data:`EFFECTS`.
     where : dict
         ``{"between": [a, b]}``, ``{"dof": name, "frequency_hz": f}``, ``{"side": "input"}``
-        or ``{"parameters": [...]}``.
+        or ``{"parameters": [...]}``; qualifiers such as ``"character"`` (hardening, softening),
+        ``"form"`` (jenkins, iwan) and ``"linear_base"`` (``"nominal"`` or ``"refit"``: a second
+        fit of the effect at this location, kept on the other linear base because the better
+        fit made the effect vanish).
     parameters : dict
         Fitted effect parameters in SI units (``delay_s``, ``limit_N``, ``Fc_N``, ``gap_m``,
         ``k3_N_per_m3``, ``alpha_N_per_m`` ...).
