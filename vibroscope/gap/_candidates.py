@@ -54,7 +54,7 @@ def fit_candidates(run: Run, *, workers, n_full, progress) -> None:
             results.append((s, s.apply(base, p), p, g, base))
     for s, p, g, base in run.screened_alt:  # where the better base's fit vanishes, the other's
         m_alt = s.apply(base, p)
-        run.alt_models[id(m_alt)] = "nominal" if base is run.model else "refit"
+        run.alt_models.add(id(m_alt))
         results.append((s, m_alt, p, g, base))
     bar.close()
     run.timings["candidates"] = time.perf_counter() - t
@@ -167,7 +167,6 @@ def screen_nonlinear(run: Run, nl_specs: list, bar, workers) -> list:
     start), and a family refined again from its member's solution where the member fits a
     location better. Returns the screened items ``(spec, p, fitting gap, base)``."""
     other_base: dict[int, tuple] = {}  # id(best start) -> the best start on the other linear base
-    run.screened_alt, run.alt_models = [], {}
     with ThreadPoolExecutor(max(1, workers)) as ex:
         probed = []
         for res in ex.map(partial(probe, run, other_base), nl_specs):

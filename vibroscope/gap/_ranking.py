@@ -135,7 +135,7 @@ def ranked_candidates(run: Run, evaluated: list) -> list:
         reason = s.vanishes(p) or within_floor(contrib, floor_rank, "the effect")
         where = dict(s.where) | s.qualifiers(p)
         if id(m_aug) in run.alt_models:  # a second fit of this effect here, on the other linear base
-            where["linear_base"] = run.alt_models[id(m_aug)]
+            where["linear_base"] = "nominal" if base is run.model else "refit"
         if s.effect == "extra_mode":
             where["frequency_hz"] = s.describe(p).get("frequency_hz")
         expl = 1.0 - key(g, s.n) / k_before if k_before > 0 else 0.0

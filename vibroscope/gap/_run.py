@@ -232,8 +232,8 @@ class Run:
     # a location's non-vanishing fit on the other linear base where the better one vanishes
     # (refine_on_either_base), evaluated as a candidate of its own
     screened_alt: list = field(default_factory=list)
-    # id of such a candidate's model -> the linear base it was fitted on, named in its `where`
-    alt_models: dict = field(default_factory=dict)
+    # ids of those candidates' models (their `where` names the linear base they were fitted on)
+    alt_models: set = field(default_factory=set)
     nested_t: dict = field(default_factory=dict)
     # held-out evaluation and ranking (rank_candidates)
     floor_rank: float | None = None

@@ -74,7 +74,7 @@ def select_further_effects(run: Run, *, workers) -> None:
         trial2, shares2 = select_from(d_first, screen_on(run, d_first[1], workers))
         if len(trial2) > 1 and trial2[-1][0].score > trial[-1][0].score:
             return trial2, shares2
-        if len(trial2) == 1 and len(trial) > 1 and not_beyond_delay(trial[-1][0], d_first[0]):
+        if len(trial2) == 1 and len(trial) > 1 and not beyond(trial[-1][0], d_first[0]):
             # nothing joins the delay, and what `trial` adds to it is not significant (the test
             # an addition to the delay would have failed): the delay alone, polished
             return [polish_candidate(d_first, [(d_first[3], d_first[4])], **polish)], [1.0]
@@ -84,9 +84,7 @@ def select_further_effects(run: Run, *, workers) -> None:
         first0 = chosen[0]
         chosen, shares = or_from_delay(*select_from(chosen[0]))
         if len(chosen) > 1 or chosen[0][0] is not first0[0]:
-            verdict = chosen[0][0].effect
-            added = {c[0].effect for c in chosen}
-            ordered = chosen + [c for c in ordered if c[0].effect not in added]
+            chosen, shares, verdict, ordered = adopted(chosen, shares, ordered)
     elif verdict == "unexplained" and best_i is not None and cands[best_i][3] is not None:
         # no effect explains the gap alone; two together may (a clearance and a delay, each of
         # which alone leaves most of it): the forward selection from the best admissible
@@ -94,57 +92,55 @@ def select_further_effects(run: Run, *, workers) -> None:
         trial, trial_shares = or_from_delay(*select_from(cands[best_i]), alone_ok=True)
         if ((len(trial) > 1 or trial[0][0] is not cands[best_i][0])  # a combination, or the delay alone
                 and trial[-1][0].score >= UNEXPLAINED_SCORE):
-            chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
-            added = {c[0].effect for c in chosen}
-            ordered = chosen + [c for c in ordered if c[0].effect not in added]
+            chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
     elif (verdict == "parameter_mismatch" and chosen and chosen[0][3] is None
           and chosen[0][0].gap_after > PM_FURTHER * run.floor):
         # the linear refit, which no effect joins, leaves a gap well beyond the noise: two effects
         # may explain it where each alone did not beat the refit by NL_MARGIN (an offset and a
         # hysteresis, each leaving most of the gap); the combination from the best nonlinear
         # candidate replaces the refit when it passes the test any addition to the refit would
-        pm = chosen[0]
-        nl = next((c for c in cands if c[3] is not None and not c[0].vanished
-                   and EFFECT_TABLE[c[0].effect].kind == "nonlinear"), None)
+        nl = best_nonlinear(cands)
         if nl is not None:
             trial, trial_shares = select_from(nl)
-            if (len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE
-                    and beyond(trial[-1][0], pm[0])):
-                chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
-                added = {c[0].effect for c in chosen}
-                ordered = chosen + [c for c in ordered if c[0].effect not in added]
+            if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[0][0]):
+                chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
     if chosen and chosen[-1][0].gap_after > PM_FURTHER * run.floor and "between" in chosen[0][0].where:
         # the selection leaves a gap well beyond the noise: the first effect may be another
         # class's stand-in at its connection (a hardening cubic spring for a clearance, which the
         # clearance's partner then cannot complete); the selection from the best other nonlinear
         # class there is kept when it is significantly better
-        pair = frozenset(chosen[0][0].where["between"])
-        alt = next((c for c in cands if c[3] is not None and not c[0].vanished
-                    and EFFECT_TABLE[c[0].effect].kind == "nonlinear" and c[0].effect != chosen[0][0].effect
-                    and frozenset(c[0].where.get("between", ())) == pair), None)
+        alt = best_nonlinear(cands, at=chosen[0][0].where["between"], other_than=chosen[0][0].effect)
         if alt is not None:
             trial, trial_shares = select_from(alt)
             if trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[-1][0]):
-                chosen, shares, verdict = trial, trial_shares, trial[0][0].effect
-                added = {c[0].effect for c in chosen}
-                ordered = chosen + [c for c in ordered if c[0].effect not in added]
+                chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
     run.timings["forward_selection"] = time.perf_counter() - t
     run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
+
+
+def adopted(trial: list, trial_shares: list, ordered: list) -> tuple[list, list, str, list]:
+    """`trial` (chosen candidates, cumulative) as the verdict: ``(chosen, shares, verdict, the
+    report's order)``, its effects first, then the other candidates of other effects."""
+    added = {c[0].effect for c in trial}
+    return trial, trial_shares, trial[0][0].effect, trial + [c for c in ordered if c[0].effect not in added]
+
+
+def best_nonlinear(cands: list, at=None, other_than: str | None = None):
+    """The first (best ranked) candidate of `cands` that is a fitted nonlinear effect and does not
+    vanish; with `at` (a connection ``[a, b]``) only one acting there, with `other_than` not of
+    that effect. None when there is none."""
+    pair = frozenset(at) if at is not None else None
+    return next((c for c in cands if c[3] is not None and not c[0].vanished
+                 and EFFECT_TABLE[c[0].effect].kind == "nonlinear" and c[0].effect != other_than
+                 and (pair is None or frozenset(c[0].where.get("between", ())) == pair)), None)
 
 
 def beyond(combined, base) -> bool:
     """Whether candidate `combined` is significantly better than `base`: its penalised held-out
     excess (read from its score, ``1 - key / k_before``) is below :data:`ADD_FACTOR` times
-    `base`'s, the test an addition to `base` must pass."""
+    `base`'s, the test an addition to `base` must pass (and what a combination must pass to be
+    preferred to an input delay fitted alone)."""
     return (1.0 - combined.score) < ADD_FACTOR * (1.0 - base.score)
-
-
-def not_beyond_delay(combined, delay) -> bool:
-    """Whether the combination `combined` (a Candidate whose score counts every chosen effect's
-    parameters) is not significantly better than the input delay fitted alone, `delay`: its
-    penalised held-out excess is not below :data:`ADD_FACTOR` times the delay's (both read from
-    the scores, ``1 - key / k_before``), the test a further effect on top of the delay must pass."""
-    return not beyond(combined, delay)
 
 
 def delay_first(run: Run, workers, tau: float | None = None) -> tuple | None:
