@@ -311,36 +311,36 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
 
 
 def addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list) -> list:
-    """The effects that may join `chosen`, as ``(spec, start p or None)``: the four best other
-    classes of `per_class` (none of a family with a chosen member), the two best classes screened
-    at a chosen effect's connection, and the specs of `also` (from their own starts)."""
+    """The effects that may join `chosen`, as ``(spec, start p or None, screening base or None)``:
+    the four best other classes of `per_class` (none of a family with a chosen member), the two
+    best classes screened at a chosen effect's connection (each with the linear base it was
+    screened on), and the specs of `also` (from their own starts)."""
     def free(eff):
         return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
 
-    cands = [(s_, p_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
+    cands = [(s_, p_, b_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
              if free(eff)][:4]
     # effects where a chosen one acts (a joint has friction and a stiffness nonlinearity at
     # once): the best two classes screened at a chosen effect's connection
     pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
-    have = {id(s_) for s_, _ in cands}
+    have = {id(c[0]) for c in cands}
     near: dict[str, tuple] = {}
     for s_, p_, g_, b_ in sorted(screened, key=lambda r: r[2]):
         if (tuple(s_.where.get("between", ())) in pairs and free(s_.effect) and s_.effect not in near
                 and id(s_) not in have):
-            near[s_.effect] = (s_, p_)
+            near[s_.effect] = (s_, p_, b_)
     cands += list(near.values())[:2]
-    cands += [(s_, None) for s_ in also if s_.effect not in used]
+    cands += [(s_, None, None) for s_ in also if s_.effect not in used]
     return cands
 
 
-def joint_chain_fit(run: Run, chain: list, s, x0, nfev):
-    """The added effect `s`'s parameters, the chosen effects' (`chain`: ``(spec, p)``) and the
-    linear ones fitted together on the screening prefix: ``(p, fitting gap, model, linear base, x,
-    chain refitted)``."""
-    lin, model, split = run.lin, run.model, run.split
+def joint_builder(run: Run, chain: list, s):
+    """The model of the linear parameters, the chosen effects' (`chain`: ``(spec, p)``) and the
+    added effect `s`'s, stacked in that order in one vector: ``(build, lower, upper, offsets)``
+    (`offsets`: where each chosen effect's parameters start, and then `s`'s)."""
+    lin, model = run.lin, run.model
     nl = len(lin)
-    sizes = [s_c.n for s_c, _ in chain]
-    offs = np.cumsum([nl] + sizes)
+    offs = np.cumsum([nl] + [s_c.n for s_c, _ in chain])
 
     def build_j(x, s=s):
         m_ = lin.apply(model, x[:nl])
@@ -350,19 +350,63 @@ def joint_chain_fit(run: Run, chain: list, s, x0, nfev):
 
     lo = np.concatenate([run.lo_l] + [s_c.lower for s_c, _ in chain] + [s.lower])
     hi = np.concatenate([run.hi_l] + [s_c.upper for s_c, _ in chain] + [s.upper])
+    return build_j, lo, hi, offs
+
+
+def joint_chain_fit(run: Run, chain: list, s, x0, nfev):
+    """The added effect `s`'s parameters, the chosen effects' (`chain`: ``(spec, p)``) and the
+    linear ones fitted together on the screening prefix: ``(p, fitting gap, model, linear base, x,
+    chain refitted)``."""
+    lin, model, split = run.lin, run.model, run.split
+    nl = len(lin)
+    build_j, lo, hi, offs = joint_builder(run, chain, s)
     x, gj, _ = fit_time_domain(build_j, np.clip(x0, lo, hi), lo, hi,
                                run.sims, run.ys, split.fit, split.screen_prefix, fast=True, max_nfev=nfev)
     ch_new = [(s_c, x[a_:b_]) for (s_c, _), a_, b_ in zip(chain, offs[:-1], offs[1:])]
     return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
 
 
+def joint_start(run: Run, chosen: list, chain: list, own) -> np.ndarray:
+    """The start of an addition's joint fit: of the linear parameters of the current model's
+    base, of the nominal model's and of the base the addition was screened on, with the
+    addition's own fit or its screened start (and the chosen effects as fitted), the one
+    closest to the data on the screening prefix. A first effect fitted alone bends the linear
+    parameters to mimic the second (an input delay fitted alone raises the damping a friction
+    supplies), so its own base is a poor start for the pair, and the addition's own fit on it
+    is bent with it; the nominal or the screening base may hold neither bend."""
+    lin, model = run.lin, run.model
+    s, p, _, _, p_s, base_s = own
+    thetas = [lin.theta_between(model, chosen[-1][5]), np.zeros(len(lin))]
+    if base_s is not None:
+        thetas.append(lin.theta_between(model, base_s))
+    ps = [np.asarray(p, float)] + ([np.asarray(p_s, float)] if p_s is not None else [])
+    build_j, lo, hi, _ = joint_builder(run, chain, s)
+    mid = [np.asarray(p_c, float) for _, p_c in chain]
+    best = None
+    for i, th in enumerate(thetas):
+        if any(np.array_equal(th, t) for t in thetas[:i]):
+            continue
+        for p0 in ps:
+            x0 = np.clip(np.concatenate([th] + mid + [p0]), lo, hi)
+            try:
+                g = prefix_gap(run, build_j(x0))
+            except (ValueError, TypeError):
+                continue
+            if np.isfinite(g) and (best is None or g < best[1]):
+                best = (x0, g)
+    if best is None:
+        raise ValueError("no joint start can be simulated")
+    return best[0]
+
+
 def own_addition(run: Run, cur_m, item):
-    """An addition `item` ``(spec, start p or None)`` to the current model `cur_m` with only its
-    own parameters fitted (screening prefix, coarse integration) from its best start. Returns
-    ``(spec, p, fitting gap, model)``, or None when it cannot be built."""
+    """An addition `item` ``(spec, start p or None, screening base or None)`` to the current model
+    `cur_m` with only its own parameters fitted (screening prefix, coarse integration) from its
+    best start. Returns ``(spec, p, fitting gap, model, start p, screening base)``, or None when it
+    cannot be built."""
     sims, ys, split = run.sims, run.ys, run.split
     sp = split.screen_prefix
-    s, p_s = item
+    s, p_s, base_s = item
     p0s = [p_s] + list(s.starts[:2]) if p_s is not None else list(s.starts[:3])
     best = None
     for p0 in p0s:
@@ -381,25 +425,23 @@ def own_addition(run: Run, cur_m, item):
 
     p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
                                  max_nfev=4 + 2 * s.n)
-    return s, p, gfit, build(p)
+    return s, p, gfit, build(p), p_s, base_s
 
 
 def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = True):
     """An addition fitted alone (`own`, from :func:`own_addition`), with `joint` fitted again
-    jointly with the chosen effects and the linear parameters (:func:`joint_chain_fit`), kept
-    when better and no chosen effect vanishes in it; evaluated on the held-out data. Returns
+    jointly with the chosen effects and the linear parameters (:func:`joint_chain_fit`, from
+    :func:`joint_start`), kept when better and no chosen effect vanishes in it; evaluated on the
+    held-out data. Returns
     ``(spec, p, model, held-out gap, outputs, gap_fit, linear base, joint x or None, chosen
     effects' refitted p or None)``."""
     lin, model = run.lin, run.model
     nl = len(lin)
-    s, p, gfit, m_new = own
+    s, p, gfit, m_new = own[:4]
     base_new, x_j, chp = chosen[-1][5], None, None
     if nl and joint:
-        th0 = lin.theta_between(model, chosen[-1][5])
         try:
-            x0 = np.concatenate([np.clip(th0, run.lo_l, run.hi_l)] + [np.asarray(p_c, float) for _, p_c in chain]
-                                + [p])
-            pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, x0, 4)
+            pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, joint_start(run, chosen, chain, own), 4)
         except (ValueError, TypeError):
             gj = float("inf")
         if gj < gfit and not chain_vanishes(chain, chj):
