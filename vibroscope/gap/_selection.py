@@ -23,6 +23,7 @@ from vibroscope.gap._run import (
     CONN_JOINT_GAIN,
     JOINT_TOP,
     NESTED_FAMILIES,
+    NESTED_T,
     PM_FURTHER,
     REFINE_FACTOR,
     Run,
@@ -30,9 +31,11 @@ from vibroscope.gap._run import (
     dumps,
     excess,
     prefix_gap,
+    where_key,
 )
 from vibroscope.gap.effects import EFFECT_TABLE
 from vibroscope.gap.fit import fit_time_domain
+from vibroscope.gap.measure import nested_gain
 from vibroscope.gap.report import Candidate
 
 
@@ -305,9 +308,86 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         chosen.append((c_new, m_new, yh, s, p, base_new))
         cur_c, cur_m = c_new, m_new
         shares_g.append(g)
+    chosen = family_member(run, chosen)
+    shares_g = [run.gap_before] + [c[0].gap_after for c in chosen]
     total = shares_g[0] - shares_g[-1]
     shares = [float((shares_g[i] - shares_g[i + 1]) / total) if total > 0 else 0.0 for i in range(len(shares_g) - 1)]
     return chosen, shares
+
+
+def family_member(run: Run, chosen: list) -> list:
+    """The member of a family (``EffectSpec.lifts_from``: Coulomb and asymmetric friction) that a
+    combination of effects holds, chosen again with the other effects present: each such effect
+    is replaced by the other member at its place (the richer one lifted from it, or the simpler
+    one projected from it: Coulomb friction at the mean of the two sliding forces), the
+    combination is fitted jointly from there (:func:`joint_chain_fit`), and the richer member is
+    kept only when its held-out gain over the simpler is significant
+    (:func:`~vibroscope.gap.measure.nested_gain` above :data:`NESTED_T`, the test of
+    :func:`~vibroscope.gap._ranking.nested_order`). A member fitted alone cannot tell an asymmetry
+    the other effect hides or mimics: a Coulomb friction with an input delay, which the delay's
+    phase made look symmetric (seed 3737 case 004), or an asymmetric friction whose unequal forces
+    are a constant force, invisible in acceleration, beside a softening spring (case 000).
+    Returns `chosen`, with the cumulative candidates from the swapped member on re-evaluated on
+    the held-out data with the joint parameters."""
+    if len(chosen) < 2 or not run.val_logs or not len(run.lin):
+        return chosen
+    val_logs, ys, split = run.val_logs, run.ys, run.split
+    for i in range(len(chosen)):
+        chain = [(c[3], c[4]) for c in chosen]
+        s, p = chain[i]
+        if s.lifts_from is not None:  # the richer member: its projection on the simpler
+            s2 = next((x for x in run.specs if x.effect == s.lifts_from[0] and where_key(x.where) == where_key(s.where)),
+                      None)
+            p2, rich_now = (s.lifts_from[2](np.asarray(p, float)) if s2 is not None else None), True
+        else:  # the simpler member: the richer lifted from it
+            s2 = next((x for x in run.specs if x.lifts_from is not None and x.lifts_from[0] == s.effect
+                       and where_key(x.where) == where_key(s.where)), None)
+            p2, rich_now = (s2.lifts_from[1](np.asarray(p, float)) if s2 is not None else None), False
+        if s2 is None:
+            continue
+        chain2 = chain[:i] + [(s2, np.clip(p2, s2.lower + 1e-9, s2.upper - 1e-9))] + chain[i + 1:]
+        x0 = np.concatenate([run.lin.theta_between(run.model, chosen[-1][5])] + [np.asarray(q, float) for _, q in chain2])
+        try:
+            _, gf2, m2, b2, x2, _ = joint_chain_fit(run, chain2[:-1], chain2[-1][0], x0, 4)
+        except (ValueError, TypeError):
+            continue
+        offs = np.cumsum([len(run.lin)] + [s_.n for s_, _ in chain2])
+        chain2 = [(s_, x2[a:b]) for (s_, _), a, b in zip(chain2, offs[:-1], offs[1:])]
+        if any(s_.vanishes(q) is not None for s_, q in chain2):
+            continue
+        g2, yh2 = run.held_out(m2, fast=True)
+        if not np.isfinite(g2):
+            continue
+        yh1 = chosen[-1][2]
+        simple, rich = (yh2, yh1) if rich_now else (yh1, yh2)
+        t = nested_gain([ys[k] for k in val_logs], [simple[k] for k in val_logs], [rich[k] for k in val_logs],
+                        [split.validation[k] for k in val_logs], run.fs)
+        if (t > NESTED_T) == rich_now:
+            continue
+        chosen = cumulative(run, chain2, b2, chosen, i, (m2, g2, yh2, gf2))
+    return chosen
+
+
+def cumulative(run: Run, chain: list, base, chosen: list, i: int, last: tuple) -> list:
+    """`chosen` with its candidates from position `i` on rebuilt from `chain` (``(spec, p)``, the
+    whole combination on the linear `base`): each the combination up to it, evaluated on the
+    held-out data (`last`: the whole one's ``(model, gap, outputs, fitting gap)``, already
+    evaluated; the others' fitting gaps are not known)."""
+    key, k_before = run.key, run.k_before
+    out = list(chosen[:i])
+    m, n_par = base, sum(s_.n for s_, _ in chain[:i])
+    for k, (s_, q) in enumerate(chain):
+        m = s_.apply(m, q)
+        if k < i:
+            continue
+        n_par += s_.n
+        whole = k == len(chain) - 1
+        g, yh = (last[1], last[2]) if whole else run.held_out(m, fast=True)
+        c = Candidate(effect=s_.effect, where=dict(s_.where) | s_.qualifiers(q), parameters=s_.describe(q),
+                      gap_after=g, score=1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0,
+                      gap_fit=last[3] if whole else float("nan"), n_parameters=s_.n, model_toml=dumps(m))
+        out.append((c, m, yh, s_, q, base))
+    return out
 
 
 def addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list) -> list:

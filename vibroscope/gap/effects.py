@@ -358,11 +358,14 @@ class EffectSpec:
         friction): the simpler effect's name and parameters when the fitted `p` vanish into
         it (two equal sliding forces), else None. The diagnosis then evaluates the simpler
         effect at the same location instead of discarding the fit.
-    lifts_from : tuple of (str, callable p_simple -> p), optional
-        The converse: the simpler effect this one contains and the map of its parameters to
-        this effect's (Coulomb friction ``Fc`` -> asymmetric friction ``(Fc, Fc)``). Where the
-        simpler effect fits the same location better, the diagnosis refines this one again from
-        the simpler one's solution (a family never fits worse than a member it contains).
+    lifts_from : tuple of (str, callable p_simple -> p, callable p -> p_simple), optional
+        The converse: the simpler effect this one contains, the map of its parameters to
+        this effect's (Coulomb friction ``Fc`` -> asymmetric friction ``(Fc, Fc)``) and the
+        projection back, whatever `p` (asymmetric friction ``(Fp, Fn)`` -> Coulomb friction at
+        the mean ``(Fp + Fn) / 2``). Where the simpler effect fits the same location better, the
+        diagnosis refines this one again from the simpler one's solution (a family never fits
+        worse than a member it contains); in a combination of effects the member of the family
+        is chosen by the significance of the richer one's gain.
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -646,7 +649,8 @@ def _asymmetric_friction(model, scales):
             lower=np.array([lo, lo]), upper=np.array([hi, hi]),
             build=build, describe=lambda p: {"Fc_pos_N": float(math.exp(p[0])), "Fc_neg_N": float(math.exp(p[1])),
                                              "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish, reduces_to=reduce,
-            lifts_from=("coulomb_friction", lambda q: np.array([q[0], q[0]], float)),
+            lifts_from=("coulomb_friction", lambda q: np.array([q[0], q[0]], float),
+                        lambda p: np.array([math.log(0.5 * (math.exp(p[0]) + math.exp(p[1])))])),
         ))
     return specs
 
