@@ -40,6 +40,9 @@ UNEXPLAINED_SCORE = 0.3
 #: a richer candidate moves ahead of one it nests when the t statistic of its held-out gain
 #: (batch means, see :func:`~vibroscope.gap.measure.nested_gain`) exceeds this
 NESTED_T = 4.0
+#: a family member lifted in a combination (Coulomb to asymmetric friction) whose held-out gain is
+#: positive but not significant is fitted jointly again with at most this many evaluations
+FAMILY_REFINE_NFEV = 10
 #: forward selection keeps a further effect when the penalised held-out excess gap falls below
 #: this factor times the current one
 ADD_FACTOR = 0.5
