@@ -274,22 +274,24 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     while len(chosen) < 3:
         if excess(cur_c.gap_after, floor) <= 0.5 * floor:
             break
-        cands = addition_candidates(chosen, used, per_class, screened, also)
+        cands = addition_candidates(chosen, used, per_class, screened, also, run.screened_alt)
         if not cands:
             break
         chain = [(c[3], c[4]) for c in chosen]
         pairs = {frozenset(c[0].where["between"]) for c in chosen if "between" in c[0].where}
         with ThreadPoolExecutor(max(1, workers)) as ex:
-            own = sorted((r for r in ex.map(partial(own_addition, run, cur_m), cands) if r is not None),
-                         key=lambda r: r[2])
-            # jointly: the JOINT_TOP best own fits, and an addition at a chosen effect's
-            # connection (the chosen effect was fitted alone to mimic it there) whose own fit
-            # closes CONN_JOINT_GAIN of the current model's gap on the same footing
+            # ranked by the better of the own fit and the joint fit's start (the addition as
+            # screened, with the chosen effects, on a base that did not absorb it)
+            own = sorted((r for r in ex.map(partial(own_addition, run, chosen, chain, cur_m), cands) if r is not None),
+                         key=lambda r: min(r[2], r[5]))
+            # jointly: the JOINT_TOP best, and an addition at a chosen effect's connection (the
+            # chosen effect was fitted alone to mimic it there) that closes CONN_JOINT_GAIN of the
+            # current model's gap on the same footing
             at_conn = [i >= JOINT_TOP and frozenset(o[0].where.get("between", ())) in pairs
                        for i, o in enumerate(own)]
             g_cur = prefix_gap(run, cur_m) if any(at_conn) else np.inf  # simulated only when asked
             g_cur = g_cur if np.isfinite(g_cur) else np.inf
-            joint = [i < JOINT_TOP or (a and o[2] < (1 - CONN_JOINT_GAIN) * g_cur)
+            joint = [i < JOINT_TOP or (a and min(o[2], o[5]) < (1 - CONN_JOINT_GAIN) * g_cur)
                      for i, (o, a) in enumerate(zip(own, at_conn))]
             tries = list(ex.map(lambda o, j: finish_addition(run, chosen, chain, o, joint=j), own, joint))
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
@@ -409,11 +411,13 @@ def cumulative(run: Run, chain: list, base, chosen: list, i: int, last: tuple) -
     return out
 
 
-def addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list) -> list:
+def addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list,
+                        screened_alt: list = ()) -> list:
     """The effects that may join `chosen`, as ``(spec, start p or None, screening base or None)``:
     the four best other classes of `per_class` (none of a family with a chosen member), the two
     best classes screened at a chosen effect's connection (each with the linear base it was
-    screened on), and the specs of `also` (from their own starts)."""
+    screened on), the fits of `screened_alt` (kept on the other linear base where the better
+    base's fit vanished) and the specs of `also` (from their own starts)."""
     def free(eff):
         return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
 
@@ -429,6 +433,10 @@ def addition_candidates(chosen: list, used: set, per_class: dict, screened: list
                 and id(s_) not in have):
             near[s_.effect] = (s_, p_, b_)
     cands += list(near.values())[:2]
+    # a class whose fit on the better linear base vanished into it, fitted on the other base (a
+    # clearance the refit absorbed by softening its spring): from there
+    have = {(id(c[0]), id(c[2])) for c in cands}
+    cands += [(s_, p_, b_) for s_, p_, g_, b_ in screened_alt if free(s_.effect) and (id(s_), id(b_)) not in have]
     cands += [(s_, None, None) for s_ in also if s_.effect not in used]
     return cands
 
@@ -465,16 +473,16 @@ def joint_chain_fit(run: Run, chain: list, s, x0, nfev):
     return x[offs[-1]:], gj, build_j(x), lin.apply(model, x[:nl]), x, ch_new
 
 
-def joint_start(run: Run, chosen: list, chain: list, own) -> np.ndarray:
+def joint_start(run: Run, chosen: list, chain: list, s, p, p_s, base_s) -> tuple:
     """The start of an addition's joint fit: of the linear parameters of the current model's
     base, of the nominal model's and of the base the addition was screened on, with the
     addition's own fit or its screened start (and the chosen effects as fitted), the one
     closest to the data on the screening prefix. A first effect fitted alone bends the linear
     parameters to mimic the second (an input delay fitted alone raises the damping a friction
     supplies), so its own base is a poor start for the pair, and the addition's own fit on it
-    is bent with it; the nominal or the screening base may hold neither bend."""
+    is bent with it; the nominal or the screening base may hold neither bend. Returns ``(x0,
+    its fitting gap on the screening prefix)``, ``(None, inf)`` when none can be simulated."""
     lin, model = run.lin, run.model
-    s, p, _, _, p_s, base_s = own
     thetas = [lin.theta_between(model, chosen[-1][5]), np.zeros(len(lin))]
     if base_s is not None:
         thetas.append(lin.theta_between(model, base_s))
@@ -493,16 +501,15 @@ def joint_start(run: Run, chosen: list, chain: list, own) -> np.ndarray:
                 continue
             if np.isfinite(g) and (best is None or g < best[1]):
                 best = (x0, g)
-    if best is None:
-        raise ValueError("no joint start can be simulated")
-    return best[0]
+    return best if best is not None else (None, np.inf)
 
 
-def own_addition(run: Run, cur_m, item):
+def own_addition(run: Run, chosen: list, chain: list, cur_m, item):
     """An addition `item` ``(spec, start p or None, screening base or None)`` to the current model
-    `cur_m` with only its own parameters fitted (screening prefix, coarse integration) from its
-    best start. Returns ``(spec, p, fitting gap, model, start p, screening base)``, or None when it
-    cannot be built."""
+    `cur_m` (the combination `chosen`, its effects `chain`) with only its own parameters fitted
+    (screening prefix, coarse integration) from its best start, and the start of its joint fit
+    (:func:`joint_start`). Returns ``(spec, p, fitting gap, model, joint start x or None, the
+    joint start's fitting gap)``, or None when it cannot be built."""
     sims, ys, split = run.sims, run.ys, run.split
     sp = split.screen_prefix
     s, p_s, base_s = item
@@ -524,23 +531,24 @@ def own_addition(run: Run, cur_m, item):
 
     p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
                                  max_nfev=4 + 2 * s.n)
-    return s, p, gfit, build(p), p_s, base_s
+    x0, g0 = joint_start(run, chosen, chain, s, p, p_s, base_s) if len(run.lin) else (None, np.inf)
+    return s, p, gfit, build(p), x0, g0
 
 
 def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = True):
     """An addition fitted alone (`own`, from :func:`own_addition`), with `joint` fitted again
     jointly with the chosen effects and the linear parameters (:func:`joint_chain_fit`, from
-    :func:`joint_start`), kept when better and no chosen effect vanishes in it; evaluated on the
+    the start :func:`joint_start` chose), kept when better and no chosen effect vanishes in it; evaluated on the
     held-out data. Returns
     ``(spec, p, model, held-out gap, outputs, gap_fit, linear base, joint x or None, chosen
     effects' refitted p or None)``."""
     lin, model = run.lin, run.model
     nl = len(lin)
-    s, p, gfit, m_new = own[:4]
+    s, p, gfit, m_new, x0 = own[:5]
     base_new, x_j, chp = chosen[-1][5], None, None
-    if nl and joint:
+    if nl and joint and x0 is not None:
         try:
-            pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, joint_start(run, chosen, chain, own), 4)
+            pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, x0, 4)
         except (ValueError, TypeError):
             gj = float("inf")
         if gj < gfit and not chain_vanishes(chain, chj):
