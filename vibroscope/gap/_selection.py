@@ -89,12 +89,23 @@ def select_further_effects(run: Run, *, workers) -> None:
         chosen, shares = or_from_delay(*select_from(chosen[0]))
         if len(chosen) > 1 or chosen[0][0] is not first0[0]:
             chosen, shares, verdict, ordered = adopted(chosen, shares, ordered)
-    elif verdict == "unexplained" and best_i is not None and cands[best_i][3] is not None:
+    elif verdict == "unexplained":
         # no effect explains the gap alone; two together may (a clearance and a delay, each of
         # which alone leaves most of it): the forward selection from the best admissible
-        # candidate, and the combination is the verdict only if it explains enough itself
-        trial, trial_shares = or_from_delay(*select_from(cands[best_i]), alone_ok=True)
-        if ((len(trial) > 1 or trial[0][0] is not cands[best_i][0])  # a combination, or the delay alone
+        # candidate (or, when that is linear, from the delay the phase slope measures), and the
+        # combination is the verdict only if it explains enough itself
+        trial, first = None, None
+        if best_i is not None and cands[best_i][3] is not None:
+            first = cands[best_i][0]
+            trial, trial_shares = or_from_delay(*select_from(cands[best_i]), alone_ok=True)
+        else:
+            # the best is the linear refit (seed 3737 case 007: an input delay of 25 ms, measured
+            # by the phase slope to 25.04 ms, and a clearance; the level dependence kept the
+            # delay from being fitted alone)
+            d_first = delay_first(run, workers)
+            if d_first is not None:
+                trial, trial_shares = select_from(d_first, screen_on(run, d_first[1], workers))
+        if (trial is not None and (len(trial) > 1 or trial[0][0] is not first)  # a combination, or the delay alone
                 and trial[-1][0].score >= UNEXPLAINED_SCORE):
             chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
     elif (verdict == "parameter_mismatch" and chosen and chosen[0][3] is None
