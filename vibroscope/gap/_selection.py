@@ -425,7 +425,8 @@ def cumulative(run: Run, chain: list, base, chosen: list, i: int, last: tuple) -
 def addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list,
                         screened_alt: list = ()) -> list:
     """The effects that may join `chosen`, as ``(spec, start p or None, screening base or None)``:
-    the four best other classes of `per_class` (none of a family with a chosen member), the two
+    the four best other classes of `per_class` (none of a family with a chosen member; of one
+    that is best at a chosen effect's connection, its best other location too), the two
     best classes screened at a chosen effect's connection (each with the linear base it was
     screened on), the fits of `screened_alt` (kept on the other linear base where the better
     base's fit vanished) and the specs of `also` (from their own starts)."""
@@ -434,9 +435,19 @@ def addition_candidates(chosen: list, used: set, per_class: dict, screened: list
 
     cands = [(s_, p_, b_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
              if free(eff)][:4]
+    pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
+    # a class that fitted best at a chosen effect's connection, alone, may have mimicked that
+    # effect there: its best location elsewhere too (seed 3737 case 001: a hysteresis at m1-ground
+    # beside a Coulomb friction at m2-m1 screened best at m2-m1)
+    at_chosen = {frozenset(pr) for pr in pairs}
+    by_gap = sorted(screened, key=lambda r: r[2])
+    for s_, _, _ in list(cands):
+        if frozenset(s_.where.get("between", ())) in at_chosen:
+            cands += [(s2, p2, b2) for s2, p2, _, b2 in by_gap
+                      if s2.effect == s_.effect and s2.where.get("form") == s_.where.get("form")
+                      and "between" in s2.where and frozenset(s2.where["between"]) not in at_chosen][:1]
     # effects where a chosen one acts (a joint has friction and a stiffness nonlinearity at
     # once): the best two classes screened at a chosen effect's connection
-    pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
     have = {id(c[0]) for c in cands}
     near: dict[str, tuple] = {}
     for s_, p_, g_, b_ in sorted(screened, key=lambda r: r[2]):
