@@ -344,7 +344,8 @@ def family_member(run: Run, chosen: list) -> list:
     alone cannot tell an asymmetry the other effect hides or mimics: a Coulomb friction with an
     input delay, which the delay's phase made look symmetric (case 004), or an asymmetric friction
     whose unequal forces are a constant force, invisible in acceleration, beside a softening
-    spring (case 000). Returns `chosen`, with the cumulative candidates from the swapped member on
+    spring (case 000). Each test's ``t`` is added to ``run.nested_t`` (the report's
+    ``nested_tests``). Returns `chosen`, with the cumulative candidates from the swapped member on
     re-evaluated on the held-out data with the joint parameters."""
     if len(chosen) < 2 or not run.val_logs or not len(run.lin):
         return chosen
@@ -391,6 +392,9 @@ def family_member(run: Run, chosen: list) -> list:
                                  FAMILY_REFINE_NFEV)
             if further is not None and further[1] < rich[1]:
                 rich, t = further, t_of(simple[5], further[5])
+        others = " + ".join(f"{s_.effect}@{where_key(s_.where)}" for k, (s_, _) in enumerate(chain) if k != i)
+        run.nested_t[f"{rich_s.effect}@{where_key(s.where)} over {simple_s.effect}@{where_key(s.where)} "
+                     f"with {others}"] = float(t)
         keep = rich if t > NESTED_T else simple
         if keep is not now:
             chosen = cumulative(run, keep[0], keep[3], chosen, i, (keep[2], keep[4], keep[5], keep[1]))
