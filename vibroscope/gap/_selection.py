@@ -281,7 +281,6 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     n_par = cur_c.n_parameters
     used = {cur_c.effect}
     also = list(run.lin_later.values())
-    shares_g = [run.gap_before, cur_c.gap_after]
     while len(chosen) < 3:
         if excess(cur_c.gap_after, floor) <= 0.5 * floor:
             break
@@ -320,9 +319,13 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
                           gap_after=g, score=1.0 - key(g, n_par) / k_before if k_before > 0 else 0.0,
                           gap_fit=gfit, n_parameters=s.n, model_toml=dumps(m_new))
         chosen.append((c_new, m_new, yh, s, p, base_new))
-        cur_c, cur_m = c_new, m_new
-        shares_g.append(g)
-    chosen = family_member(run, chosen)
+        # the family member (Coulomb or asymmetric friction) chosen again with the new effect
+        # present, before the next addition: an offset added to a Coulomb friction that should
+        # have been asymmetric (the asymmetry's mean force while sliding) is then not needed
+        chosen = family_member(run, chosen)
+        cur_c, cur_m = chosen[-1][0], chosen[-1][1]
+        n_par = sum(c[3].n for c in chosen)
+        used = {c[0].effect for c in chosen}
     shares_g = [run.gap_before] + [c[0].gap_after for c in chosen]
     total = shares_g[0] - shares_g[-1]
     shares = [float((shares_g[i] - shares_g[i + 1]) / total) if total > 0 else 0.0 for i in range(len(shares_g) - 1)]
