@@ -1,12 +1,16 @@
 """Stage 5b of the gap diagnosis: further effects, by forward selection.
 
 :func:`select_further_effects`: from the verdict (or from the best admissible candidate of an
-unexplained gap) each other class is tried as an addition (:func:`own_addition`, the best
+unexplained gap, or from the delay the phase slope measures) each other class is tried as an
+addition (:func:`own_addition`, from its own fit and from the start of its joint fit,
+:func:`joint_start`: on the nominal, the current or its screening base; the best
 :data:`~vibroscope.gap._run.JOINT_TOP` again jointly: :func:`finish_addition`) and the best is
-kept when it closes significantly more (:func:`accepted_addition`), up to three effects; a
-combination is polished jointly (:func:`~vibroscope.gap._ranking.polish_candidate`). When an input
-delay joins only later, the selection runs once more from the delay fitted alone
-(:func:`delay_first`) with the nonlinear candidates screened again on it (:func:`screen_on`).
+kept when it closes significantly more (:func:`accepted_addition`), up to three effects; after each
+addition the family member (Coulomb or asymmetric friction) is chosen again by the nested test
+(:func:`family_member`); a combination is polished jointly
+(:func:`~vibroscope.gap._ranking.polish_candidate`). When an input delay joins only later, the
+selection runs once more from the delay fitted alone (:func:`delay_first`) with the nonlinear
+candidates screened again on it (:func:`screen_on`).
 """
 
 from __future__ import annotations
@@ -584,12 +588,10 @@ def own_addition(run: Run, chosen: list, chain: list, cur_m, item):
 def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = True):
     """An addition fitted alone (`own`, from :func:`own_addition`), with `joint` fitted again
     jointly with the chosen effects and the linear parameters (:func:`joint_chain_fit`, from
-    the start :func:`joint_start` chose), kept when better and no chosen effect vanishes in it; evaluated on the
-    held-out data. Returns
-    ``(spec, p, model, held-out gap, outputs, gap_fit, linear base, joint x or None, chosen
-    effects' refitted p or None)``."""
-    lin, model = run.lin, run.model
-    nl = len(lin)
+    the start :func:`joint_start` chose), kept when better and no chosen effect vanishes in it;
+    evaluated on the held-out data. Returns ``(spec, p, model, held-out gap, outputs, gap_fit,
+    linear base, joint x or None, chosen effects' refitted p or None)``."""
+    nl = len(run.lin)
     s, p, gfit, m_new, x0 = own[:5]
     base_new, x_j, chp = chosen[-1][5], None, None
     if nl and joint and x0 is not None:
