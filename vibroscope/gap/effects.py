@@ -366,6 +366,12 @@ class EffectSpec:
         diagnosis refines this one again from the simpler one's solution (a family never fits
         worse than a member it contains); in a combination of effects the member of the family
         is chosen by the significance of the richer one's gain.
+    tends_to : tuple of (str, callable p -> p_simple or None), optional
+        A simpler effect this one tends to in a limit of its parameters, and the projection of
+        `p` on it (a Bouc-Wen element of high initial stiffness is a Coulomb slider of force
+        ``alpha / (beta (gamma + delta))``; None where it has no such limit). In a combination of
+        effects the diagnosis keeps this effect only when its held-out gain over the simpler one
+        is significant.
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -384,6 +390,7 @@ class EffectSpec:
     character: Callable | None = None
     reduces_to: Callable | None = None
     lifts_from: tuple | None = None
+    tends_to: tuple | None = None
     meta: dict = field(default_factory=dict)
 
     def apply(self, model: LumpedModel, p) -> LumpedModel:
@@ -790,6 +797,12 @@ def _hysteresis(model, scales):
             alpha, beta, gamma, delta = bw_coeffs(p)
             return {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": 1.0}
 
+        def slip_limit(p, bw_coeffs=bw_coeffs):
+            # z tends to alpha / (beta (gamma + delta)) while v keeps its sign: a Coulomb slider's
+            # force (the Dahl limit); no bounded limit where gamma + delta is not positive
+            alpha, beta, gamma, delta = bw_coeffs(p)
+            return np.array([math.log(alpha / (beta * (gamma + delta)))]) if gamma + delta > 0.05 else None
+
         lo_h = np.array([math.log(1e-4), math.log(1e-3), -1.45])
         hi_h = np.array([math.log(10.0), math.log(1e3), 1.45])
         # starts: alpha a share of the connection's stiffness, then (last) the hysteretic force a
@@ -801,7 +814,7 @@ def _hysteresis(model, scales):
             effect="hysteresis", where={"between": [pair[0], pair[1]]}, n=3,
             starts=[np.clip(np.array([math.log(max(a, 1e-300)), math.log(b), s]), lo_h + 1e-6, hi_h - 1e-6)
                     for a, b, s in grid],
-            lower=lo_h, upper=hi_h, build=build, describe=desc,
+            lower=lo_h, upper=hi_h, build=build, describe=desc, tends_to=("coulomb_friction", slip_limit),
         ))
     return specs
 
