@@ -361,18 +361,12 @@ def family_member(run: Run, chosen: list) -> list:
     """
     if len(chosen) < 2 or not run.val_logs or not len(run.lin):
         return chosen
-    val_logs, ys, split = run.val_logs, run.ys, run.split
-
-    def t_of(simple, rich):
-        return nested_gain([ys[k] for k in val_logs], [simple[k] for k in val_logs], [rich[k] for k in val_logs],
-                           [split.validation[k] for k in val_logs], run.fs)
-
     for i in range(len(chosen)):
         for _ in range(2):  # a hysteresis projected to Coulomb friction is then tested against asymmetric
             rel = family_of(run, chosen[i][3])
             if rel is None:
                 break
-            swapped = member_test(run, chosen, i, rel, t_of)
+            swapped = member_test(run, chosen, i, rel)
             if swapped is None:
                 break
             chosen = swapped
@@ -398,7 +392,15 @@ def family_of(run: Run, s):
     return (rich, s, rich.lifts_from[1], rich.lifts_from[2]) if rich is not None else None
 
 
-def member_test(run: Run, chosen: list, i: int, rel: tuple, t_of) -> list | None:
+def held_out_t(run: Run, simple: dict, rich: dict) -> float:
+    """The nested test's t of `rich` over `simple` (held-out outputs per log) on the held-out
+    samples (:func:`~vibroscope.gap.measure.nested_gain`)."""
+    vl = run.val_logs
+    return nested_gain([run.ys[k] for k in vl], [simple[k] for k in vl], [rich[k] for k in vl],
+                       [run.split.validation[k] for k in vl], run.fs)
+
+
+def member_test(run: Run, chosen: list, i: int, rel: tuple) -> list | None:
     """One family test of :func:`family_member` on the `i`-th effect of `chosen` (`rel` from
     :func:`family_of`): `chosen` with the other member in its place (and the cumulative candidates
     from there re-evaluated), or None when the member stays."""
@@ -416,13 +418,13 @@ def member_test(run: Run, chosen: list, i: int, rel: tuple, t_of) -> list | None
     else:
         simple = now
         rich = member_fit(run, theta, chain, i, rich_s, lift(np.asarray(p, float)), 4)
-    if lift is not None and (rich is not None and rich[4] > simple[4] or rich is None and simple is not now):
+    if lift is not None and ((rich is not None and rich[4] > simple[4]) or (rich is None and simple is not now)):
         # the richer fits worse than the simpler it contains: again from the simpler's solution
         th_s = run.lin.theta_between(run.model, simple[3])
         rich = member_fit(run, th_s, simple[0], i, rich_s, lift(simple[0][i][1]), FAMILY_REFINE_NFEV)
     if rich is None:
         return None
-    t = t_of(simple[5], rich[5])
+    t = held_out_t(run, simple[5], rich[5])
     if rich is not now and 0.0 < t <= NESTED_T:
         # gains, not yet significantly: carried further (as an addition within REFINE_FACTOR
         # is); four evaluations from the symmetric start left an asymmetry of 3:1 at 2.3:1
@@ -430,7 +432,7 @@ def member_test(run: Run, chosen: list, i: int, rel: tuple, t_of) -> list | None
         further = member_fit(run, run.lin.theta_between(run.model, rich[3]), rich[0], i, rich_s, rich[0][i][1],
                              FAMILY_REFINE_NFEV)
         if further is not None and further[1] < rich[1]:
-            rich, t = further, t_of(simple[5], further[5])
+            rich, t = further, held_out_t(run, simple[5], further[5])
     others = " + ".join(f"{s_.effect}@{where_key(s_.where)}" for k, (s_, _) in enumerate(chain) if k != i)
     run.nested_t[f"{rich_s.effect}@{where_key(s.where)} over {simple_s.effect}@{where_key(s.where)} "
                  f"with {others}"] = float(t)
@@ -456,11 +458,10 @@ def member_fit(run: Run, theta, chain: list, i: int, s_new, p_new, nfev: int):
     chain2 = chain[:i] + [(s_new, np.clip(p_new, s_new.lower + 1e-9, s_new.upper - 1e-9))] + chain[i + 1:]
     x0 = np.concatenate([theta] + [np.asarray(q, float) for _, q in chain2])
     try:
-        _, gf, m, base, x, _ = joint_chain_fit(run, chain2[:-1], chain2[-1][0], x0, nfev)
+        p_last, gf, m, base, _, head = joint_chain_fit(run, chain2[:-1], chain2[-1][0], x0, nfev)
     except (ValueError, TypeError):
         return None
-    offs = np.cumsum([len(run.lin)] + [s_.n for s_, _ in chain2])
-    chain2 = [(s_, x[a:b]) for (s_, _), a, b in zip(chain2, offs[:-1], offs[1:])]
+    chain2 = head + [(chain2[-1][0], p_last)]
     if any(s_.vanishes(q) is not None for s_, q in chain2):
         return None
     g, yh = run.held_out(m, fast=True)
