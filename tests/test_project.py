@@ -32,7 +32,7 @@ def test_numerical_core_imports_no_edge_library():
     ("instruments", ("signals", "models", "instruments", "errors", "_checks")),
 ])
 def test_rooms_import_only_what_the_guide_allows(room, allowed):
-    """Module-level imports only: a result's ``.plot()`` imports the viewers lazily, by design."""
+    """Module-level imports (the import-linter contracts below also see those inside functions)."""
     for f in (REPO / "vibroscope" / room).glob("*.py"):
         for m in re.findall(r"^(?:from|import) vibroscope\.(\w+)", f.read_text(), re.M):
             assert m in allowed, f"{room}/{f.name} imports vibroscope.{m}"
@@ -48,6 +48,49 @@ def test_import_linter_contracts_hold():
                          env=env)
     assert out.returncode == 0, out.stdout[-4000:] + out.stderr[-2000:]
     assert "0 broken" in out.stdout
+
+
+def test_results_name_only_figures_the_plotting_backend_offers():
+    """Every ``draw("NAME", ...)`` in the package names a callable of the default backend, and no
+    computing room imports ``vibroscope.viewers`` at all (inside functions included)."""
+    import vibroscope.viewers.plotting as backend
+
+    names = set()
+    for f in (REPO / "vibroscope").rglob("*.py"):
+        src = f.read_text()
+        names |= set(re.findall(r'\bdraw\("(\w+)"', src))
+        if f.parent.name in ("spectral", "modal", "gap", "instruments", "models", "io"):
+            assert not re.search(r"^\s*(?:from|import) vibroscope\.viewers", src, re.M), f
+    assert len(names) >= 12, sorted(names)
+    for name in sorted(names):
+        assert callable(getattr(backend, name)), name
+
+
+def test_plotting_backend_is_chosen_by_name(monkeypatch):
+    """set_backend() sends a result's .plot() to another module; a figure the backend lacks is an
+    AttributeError naming the backend and the figure; an unimportable backend fails when chosen."""
+    import types
+
+    from vibroscope import _plotting
+    from vibroscope.spectral import welch
+
+    calls = []
+    fake = types.ModuleType("fake_vibro_backend")
+    fake.plot_spectrum = lambda result, **kw: calls.append((type(result).__name__, kw)) or "drawn"
+    monkeypatch.setitem(sys.modules, "fake_vibro_backend", fake)
+    spec = welch(np.random.default_rng(0).standard_normal(1024), fs=100.0, nperseg=128)
+    try:
+        _plotting.set_backend("fake_vibro_backend")
+        assert spec.plot(db=True) == "drawn"
+        assert calls == [("Spectrum", {"ax": None, "db": True, "channels": None})]
+        with pytest.raises(AttributeError, match="fake_vibro_backend.*plot_frf"):
+            _plotting.draw("plot_frf", spec)
+    finally:
+        _plotting.set_backend(None)
+    assert _plotting.get_backend().__name__ == _plotting.DEFAULT_BACKEND
+    with pytest.raises(ModuleNotFoundError):
+        _plotting.set_backend("no_such_backend_module_xyz")
+    assert _plotting.get_backend().__name__ == _plotting.DEFAULT_BACKEND
 
 
 def test_import_graph_sees_imports_inside_functions():

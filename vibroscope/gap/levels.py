@@ -401,9 +401,9 @@ class LevelEvidence:
         -------
         matplotlib.figure.Figure
         """
-        from vibroscope.viewers.gap_figures import plot_level_evidence
+        from vibroscope._plotting import draw
 
-        return plot_level_evidence(self, ax=ax, out_path=out_path)
+        return draw("plot_level_evidence", self, ax=ax, out_path=out_path)
 
 
 # --------------------------------------------------------------------------------------------

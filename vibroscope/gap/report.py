@@ -481,6 +481,6 @@ class GapReport:
             Name -> matplotlib Figure (see
             :func:`~vibroscope.viewers.gap_figures.plot_gap_report`).
         """
-        from vibroscope.viewers.gap_figures import plot_gap_report
+        from vibroscope._plotting import draw
 
-        return plot_gap_report(self, out_dir=out_dir)
+        return draw("plot_gap_report", self, out_dir=out_dir)

@@ -212,9 +212,9 @@ class HydraulicComparison:
         -------
         (Axes, Axes)
         """
-        from vibroscope.viewers.instruments import plot_hydraulic_comparison
+        from vibroscope._plotting import draw
 
-        return plot_hydraulic_comparison(self, axes)
+        return draw("plot_hydraulic_comparison", self, axes)
 
 
 def step_velocity(r: StepResult) -> np.ndarray:

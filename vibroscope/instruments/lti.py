@@ -132,9 +132,9 @@ class BodeResult:
         -------
         (Axes, Axes)
         """
-        from vibroscope.viewers.instruments import plot_bode
+        from vibroscope._plotting import draw
 
-        return plot_bode(self, axes, label=label, **kwargs)
+        return draw("plot_bode", self, axes, label=label, **kwargs)
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,9 +174,9 @@ class NyquistResult:
         -------
         matplotlib.axes.Axes
         """
-        from vibroscope.viewers.instruments import plot_nyquist
+        from vibroscope._plotting import draw
 
-        return plot_nyquist(self, ax, label=label, mirror=mirror, **kwargs)
+        return draw("plot_nyquist", self, ax, label=label, mirror=mirror, **kwargs)
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -229,9 +229,9 @@ class StepResult:
         -------
         matplotlib.axes.Axes
         """
-        from vibroscope.viewers.instruments import plot_step
+        from vibroscope._plotting import draw
 
-        return plot_step(self, ax, label=label, **kwargs)
+        return draw("plot_step", self, ax, label=label, **kwargs)
 
 
 # --------------------------------------------------------------------------- functions

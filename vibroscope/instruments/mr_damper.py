@@ -353,9 +353,9 @@ class MRDamperResult:
         -------
         (Axes, Axes)
         """
-        from vibroscope.viewers.instruments import plot_mr_loops
+        from vibroscope._plotting import draw
 
-        return plot_mr_loops(self, axes, label=label, last_s=last_s, **kwargs)
+        return draw("plot_mr_loops", self, axes, label=label, last_s=last_s, **kwargs)
 
 
 def _rk4_scalar(x, xd, h_sample, nsub, c: MRDamperCoefficients, y0, z0):

@@ -195,9 +195,9 @@ class ModalModel:
     def plot(self, *args: Any, **kwargs: Any):
         """Plot the mode shapes; imports matplotlib lazily through
         :func:`vibroscope.viewers.figures.plot_mode_shapes` (arguments passed on)."""
-        from vibroscope.viewers.figures import plot_mode_shapes
+        from vibroscope._plotting import draw
 
-        return plot_mode_shapes(self, *args, **kwargs)
+        return draw("plot_mode_shapes", self, *args, **kwargs)
 
     def __repr__(self) -> str:
         fs = ", ".join(f"{f:.4g}" for f in self.natural_frequencies[:6])

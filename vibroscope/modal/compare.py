@@ -211,9 +211,9 @@ class ModeSetComparison:
         -------
         matplotlib.figure.Figure
         """
-        from vibroscope.viewers.figures import plot_mode_set_comparison
+        from vibroscope._plotting import draw
 
-        return plot_mode_set_comparison(self, fig=fig)
+        return draw("plot_mode_set_comparison", self, fig=fig)
 
 
 def _common_points(a, b) -> tuple[list[int], list[int], str]:

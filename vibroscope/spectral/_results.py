@@ -150,9 +150,9 @@ class Spectrum:
         matplotlib.axes.Axes
             See :func:`vibroscope.viewers.figures.plot_spectrum`.
         """
-        from vibroscope.viewers.figures import plot_spectrum
+        from vibroscope._plotting import draw
 
-        return plot_spectrum(self, ax=ax, db=db, channels=channels)
+        return draw("plot_spectrum", self, ax=ax, db=db, channels=channels)
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -402,9 +402,9 @@ class FRF:
         matplotlib.figure.Figure
             See :func:`vibroscope.viewers.figures.plot_frf`.
         """
-        from vibroscope.viewers.figures import plot_frf
+        from vibroscope._plotting import draw
 
-        return plot_frf(self, output=output, input=input, fig=fig)
+        return draw("plot_frf", self, output=output, input=input, fig=fig)
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)

@@ -530,9 +530,9 @@ class OperatingShape:
         -------
         matplotlib.figure.Figure
         """
-        from vibroscope.viewers.figures import plot_ods
+        from vibroscope._plotting import draw
 
-        return plot_ods(self, coords, **kwargs)
+        return draw("plot_ods", self, coords, **kwargs)
 
     def __repr__(self) -> str:
         return (f"OperatingShape({self.frequency:.4g} Hz from {self.source}, {len(self.points)} points, "
