@@ -46,7 +46,18 @@ def set_backend(name: str | None) -> None:
 
 
 def get_backend() -> ModuleType:
-    """The plotting backend module now in use (imported on this call)."""
+    """The plotting backend module now in use (imported on this call).
+
+    Returns
+    -------
+    module
+        The backend module (default :data:`DEFAULT_BACKEND`).
+
+    Raises
+    ------
+    ModuleNotFoundError
+        If the chosen backend cannot be imported (the message says how to go back to the default).
+    """
     try:
         return import_module(_backend)
     except ModuleNotFoundError as exc:
@@ -67,6 +78,11 @@ def draw(figure: str, result: Any, *args: Any, **kwargs: Any) -> Any:
         The result to draw, passed first.
     *args, **kwargs
         Passed on to the figure function.
+
+    Returns
+    -------
+    object
+        What the backend's figure function returns (an Axes, a Figure or a list of paths).
 
     Raises
     ------

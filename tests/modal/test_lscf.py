@@ -104,13 +104,13 @@ def test_lscf_multiple_inputs(model):
 
 
 def test_lsfd_synthesis_and_residuals(model):
-    """Exact poles: the synthesis reproduces the noise-free FRF (measured 1.4e-13; the issue's
-    machine 5e-14); out-of-band modes need the residuals (band-limited fit: measured error 0.0088
+    """Exact poles: the synthesis reproduces the noise-free FRF (measured 5.3e-14 here, 1.4e-13 on
+    another machine; the bound 5e-12 is within 100x of both); out-of-band modes need the residuals (band-limited fit: measured error 0.0088
     with them, >= 13.6x that without, in-band residues within 3.6e-4 of the largest residue)."""
     md = model.modes()
     h = analytic_frf(model)
     full = lsfd(h, md.natural_frequencies, md.damping_ratios)
-    assert np.all(full.error(h) < 1e-11)
+    assert np.all(full.error(h) < 5e-12)
     syn = full.synthesize()
     assert syn.estimator == "lsfd" and syn.kind == "accelerance" and np.all(np.isnan(syn.coherence))
     np.testing.assert_allclose(syn.frequencies, h.frequencies)

@@ -115,14 +115,15 @@ def level_test(frequencies, blas, blas_model=None):
             "levels_rms": [b[0] for b in blas], "lines": n_ok, "lines_beyond_3_sigma": n_out}
 
 
-def mode_change(ev, f_hz: float):
+def mode_change(ev, natural_frequency: float):
     """Relative natural-frequency change, lowest to highest level where fitted, of the mode of
-    `ev` (:class:`~vibroscope.gap.levels.LevelEvidence`) nearest `f_hz` (within 5 %), with the
+    `ev` (:class:`~vibroscope.gap.levels.LevelEvidence`) nearest `natural_frequency` (Hz, within
+    5 %), with the
     indices of those two levels; None without one."""
     if ev is None or len(ev.levels) < 2 or not ev.modes:
         return None
-    j = int(np.argmin([abs(m.natural_frequency - f_hz) for m in ev.modes]))
-    if abs(ev.modes[j].natural_frequency - f_hz) > 0.05 * f_hz:
+    j = int(np.argmin([abs(m.natural_frequency - natural_frequency) for m in ev.modes]))
+    if abs(ev.modes[j].natural_frequency - natural_frequency) > 0.05 * natural_frequency:
         return None
     fn = np.array([lv.natural_frequencies[j] for lv in ev.levels])
     sf = np.array([lv.natural_frequency_std[j] for lv in ev.levels])

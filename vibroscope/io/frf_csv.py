@@ -172,5 +172,5 @@ def read_text_table(path: Path, delimiter: str | None, df: float) -> FrfTable:
     H = np.stack(cols, axis=1)[:, :, None]
     coh = np.full((f.size, len(cols)), np.nan)
     fmt = "text" if (header is None and ncol == 1) else "csv"
-    return FrfTable(path, f, H, coh, ["input"], names, named, None, "", fmt,
-                  {"frequency_axis": axis, "delimiter": delim})
+    return FrfTable(path=path, frequencies=f, H=H, coh=coh, inputs=["input"], outputs=names, named=named,
+                    kind=None, units="", fmt=fmt, extra={"frequency_axis": axis, "delimiter": delim})

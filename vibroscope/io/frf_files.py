@@ -102,10 +102,11 @@ def _combine(tables: list[FrfTable]) -> FrfTable:
         return tables[0]
     t0 = tables[0]
     for t in tables[1:]:
-        if t.f.shape != t0.f.shape or not np.allclose(t.f, t0.f, rtol=1e-6, atol=1e-12):
-            raise LogFormatError(f"{t.path}: frequency axis ({t.f.size} points, {t.f[0]:g}..{t.f[-1]:g} Hz) "
-                                 f"differs from that of {t0.path} ({t0.f.size} points, "
-                                 f"{t0.f[0]:g}..{t0.f[-1]:g} Hz)")
+        f, f0 = t.frequencies, t0.frequencies
+        if f.shape != f0.shape or not np.allclose(f, f0, rtol=1e-6, atol=1e-12):
+            raise LogFormatError(f"{t.path}: frequency axis ({f.size} points, {f[0]:g}..{f[-1]:g} Hz) "
+                                 f"differs from that of {t0.path} ({f0.size} points, "
+                                 f"{f0[0]:g}..{f0[-1]:g} Hz)")
         if t.inputs != t0.inputs:
             raise LogFormatError(f"{t.path}: inputs {t.inputs} differ from those of {t0.path} {t0.inputs}")
     outputs: list[str] = []
@@ -125,10 +126,11 @@ def _combine(tables: list[FrfTable]) -> FrfTable:
     kinds = {t.kind for t in tables}
     units = {t.units for t in tables}
     fmts = {t.fmt for t in tables}
-    return FrfTable(t0.path, t0.f, np.concatenate([t.H for t in tables], axis=1),
-                  np.concatenate([t.coh for t in tables], axis=1), t0.inputs, outputs, True,
-                  kinds.pop() if len(kinds) == 1 else None, units.pop() if len(units) == 1 else "",
-                  "+".join(sorted(fmts)), {k: v for k, v in t0.extra.items() if k != "records"})
+    return FrfTable(path=t0.path, frequencies=t0.frequencies, H=np.concatenate([t.H for t in tables], axis=1),
+                    coh=np.concatenate([t.coh for t in tables], axis=1), inputs=t0.inputs, outputs=outputs,
+                    named=True, kind=kinds.pop() if len(kinds) == 1 else None,
+                    units=units.pop() if len(units) == 1 else "", fmt="+".join(sorted(fmts)),
+                    extra={k: v for k, v in t0.extra.items() if k != "records"})
 
 
 def read_frf(
@@ -251,14 +253,14 @@ def read_frf(
     units = KIND_UNITS[k] if k is not None else t.units
     settings = {"source": [str(p) for p in paths] if len(paths) > 1 else str(paths[0]), "format": t.fmt,
                 **t.extra}
-    notes = _non_finite_notes(t.f, t.H, outputs, inputs)
+    notes = _non_finite_notes(t.frequencies, t.H, outputs, inputs)
     if notes:
         import warnings
 
         settings["warnings"] = notes
         for line in notes:
             warnings.warn(f"{settings['source']}: {line}", stacklevel=2)
-    return FRF(frequencies=t.f, H=t.H, coherence=t.coh, inputs=inputs, outputs=outputs, estimator="unknown", kind=k,
+    return FRF(frequencies=t.frequencies, H=t.H, coherence=t.coh, inputs=inputs, outputs=outputs, estimator="unknown", kind=k,
                units=units, settings=settings)
 
 

@@ -17,12 +17,12 @@ KIND_UNITS = {k.name: k.unit for k in FRF_KIND_TABLE.values()}
 
 
 class FrfTable:
-    """One file's FRFs before names, kind overrides and concatenation: `f` (n_freqs,) Hz, `H`
+    """One file's FRFs before names, kind overrides and concatenation: `frequencies` (n_freqs,) Hz, `H`
     complex (n_freqs, n_outputs, n_inputs), `coh` (n_freqs, n_outputs), the input and output
     names (`named`: the file named its outputs), `kind` or None, `units`, the format name and
     extra settings."""
 
-    def __init__(self, path, f, H, coh, inputs, outputs, named, kind, units, fmt, extra=None):
-        self.path, self.f, self.H, self.coh = path, f, H, coh
+    def __init__(self, *, path, frequencies, H, coh, inputs, outputs, named, kind, units, fmt, extra=None):
+        self.path, self.frequencies, self.H, self.coh = path, frequencies, H, coh
         self.inputs, self.outputs, self.named = list(inputs), list(outputs), named
         self.kind, self.units, self.fmt, self.extra = kind, units, fmt, dict(extra or {})

@@ -135,7 +135,8 @@ def read_uff58_table(path: Path, input_name: str | None) -> FrfTable:
     binary = sorted({int(recs[i].get("binary", 0) or 0) for i in frf_idx})
     extra = {"records": [i + 1 for i in frf_idx], "coherence_records": {o: i + 1 for o, i in coh_from.items()},
              "binary": binary, "id2": read_label(recs[i0].get("id2"))}
-    return FrfTable(path, f, H, coh, inputs, outputs, True, kind, units, "uff58", extra)
+    return FrfTable(path=path, frequencies=f, H=H, coh=coh, inputs=inputs, outputs=outputs, named=True,
+                    kind=kind, units=units, fmt="uff58", extra=extra)
 
 
 def write_frf_uff58(frf: FRF, path: str | Path, *, binary: bool = False) -> Path:
