@@ -603,35 +603,24 @@ def own_addition(run: Run, chosen: list, chain: list, cur_m, item):
     sims, ys, split = run.sims, run.ys, run.split
     sp = split.screen_prefix
     s, p_s, base_s = item
-    p0s = list(s.starts[:3]) if p_s is None else [p_s] + list(s.starts[:2] if s.n < 3 else s.starts)
-    tried = []
-    for i, p0 in enumerate(p0s):
+    p0s = [p_s] + list(s.starts[:2]) if p_s is not None else list(s.starts[:3])
+    best = None
+    for p0 in p0s:
         try:
             m0 = s.apply(cur_m, p0)
         except (ValueError, TypeError):  # e.g. a second clearance where no spring is left
             return None
         g = prefix_gap(run, m0)
-        if np.isfinite(g):
-            tried.append((g, i, p0))
-    if not tried:
+        if np.isfinite(g) and (best is None or g < best[1]):
+            best = (p0, g)
+    if best is None:
         return None
 
     def build(p, s=s):
         return s.apply(cur_m, p)
 
-    # the screened fit was made without the chosen effects and may sit in another basin (seed 5858
-    # case 001: a hysteresis screened alone at phi = 1.45, its true phi 0.37 beside a friction): an
-    # effect of three or more parameters is fitted from its best generic start as well
-    tried.sort(key=lambda r: (r[0], r[1]))
-    firsts = [tried[0]]
-    if p_s is not None and s.n >= 3:
-        firsts += [r for r in tried if r[1] != tried[0][1] and (r[1] == 0) != (tried[0][1] == 0)][:1]
-    p, gfit = None, np.inf
-    for _, _, p0 in firsts:
-        p_i, g_i, _ = fit_time_domain(build, p0, s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
-                                      max_nfev=4 + 2 * s.n)
-        if p is None or g_i < gfit:
-            p, gfit = p_i, g_i
+    p, gfit, _ = fit_time_domain(build, best[0], s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
+                                 max_nfev=4 + 2 * s.n)
     x0, g0 = joint_start(run, chosen, chain, s, p, p_s, base_s) if len(run.lin) else (None, np.inf)
     return s, p, gfit, build(p), x0, g0
 
