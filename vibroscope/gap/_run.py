@@ -65,6 +65,9 @@ JOINT_TOP = 3
 #: such joint fits came from own fits closing under 3 % (none accepted); the stiffening spring of
 #: the friction + spring test closes 9.4 % alone and needs its joint fit
 CONN_JOINT_GAIN = 0.05
+#: evaluations of an addition's second joint fit, from its first generic start, made when its
+#: fit ends on a bound of its box (``_selection.on_bound``)
+GENERIC_JOINT_NFEV = 10
 #: an addition within REFINE_FACTOR (but not ADD_FACTOR) times the current penalised excess is
 #: fitted further (jointly with the linear parameters) before the decision
 REFINE_FACTOR = 0.8
