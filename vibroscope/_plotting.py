@@ -3,7 +3,7 @@
 A result object (a spectrum, an FRF, a mode set, a gap report, an instrument's response) does not
 import the figures that draw it: its ``.plot()`` calls :func:`draw` with the name of a figure, and
 :func:`draw` finds that function in the plotting backend, a module named by string and imported on
-first use. The default backend is :mod:`vibroscope.viewers.plotting` (matplotlib); another one (a
+first use. The default backend is :mod:`vibroscope.viewers` (matplotlib); another one (a
 module offering functions of the same names and signatures) is chosen with :func:`set_backend` or
 the environment variable ``VIBROSCOPE_PLOTTING_BACKEND``. This is the pattern of pandas'
 ``DataFrame.plot`` (``pandas.options.plotting.backend``, pandas 0.25): the computing layers stay
@@ -20,7 +20,7 @@ from typing import Any
 __all__ = ["DEFAULT_BACKEND", "draw", "get_backend", "set_backend"]
 
 #: The module that draws results unless another is chosen.
-DEFAULT_BACKEND = "vibroscope.viewers.plotting"
+DEFAULT_BACKEND = "vibroscope.viewers"
 
 _backend: str = os.environ.get("VIBROSCOPE_PLOTTING_BACKEND") or DEFAULT_BACKEND
 
@@ -32,7 +32,7 @@ def set_backend(name: str | None) -> None:
     ----------
     name : str or None
         An importable module offering the figure functions :func:`draw` asks for
-        (``plot_spectrum``, ``plot_frf``, …, see :mod:`vibroscope.viewers.plotting`).
+        (``plot_spectrum``, ``plot_frf``, …, see :mod:`vibroscope.viewers`).
 
     Raises
     ------

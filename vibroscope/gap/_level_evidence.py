@@ -118,8 +118,7 @@ def level_test(frequencies, blas, blas_model=None):
 def mode_change(ev, natural_frequency: float):
     """Relative natural-frequency change, lowest to highest level where fitted, of the mode of
     `ev` (:class:`~vibroscope.gap.levels.LevelEvidence`) nearest `natural_frequency` (Hz, within
-    5 %), with the
-    indices of those two levels; None without one."""
+    5 %), with the indices of those two levels; None without one."""
     if ev is None or len(ev.levels) < 2 or not ev.modes:
         return None
     j = int(np.argmin([abs(m.natural_frequency - natural_frequency) for m in ev.modes]))

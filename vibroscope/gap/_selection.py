@@ -632,29 +632,29 @@ def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = T
     the start :func:`joint_start` chose), kept when better and no chosen effect vanishes in it;
     evaluated on the held-out data. Returns ``(spec, p, model, held-out gap, outputs, gap_fit,
     linear base, joint x or None, chosen effects' refitted p or None)``."""
-    nl = len(run.lin)
     s, p, gfit, m_new, x0 = own[:5]
-    base_new, x_j, chp = chosen[-1][5], None, None
-    if nl and joint and x0 is not None:
+    best = (p, gfit, m_new, chosen[-1][5], None, None)  # (p, gap_fit, model, base, joint x, chain p)
+
+    def joint_from(x_start, nfev):
         try:
-            pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, x0, 4)
+            pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, x_start, nfev)
         except (ValueError, TypeError):
-            gj = float("inf")
-        if gj < gfit and not chain_vanishes(chain, chj):
-            p, gfit, m_new, base_new, x_j, chp = pj, gj, mj, bj, xj, [p_c for _, p_c in chj]
-        if on_bound(s, p):
+            return best
+        if gj < best[1] and not chain_vanishes(chain, chj):
+            return pj, gj, mj, bj, xj, [p_c for _, p_c in chj]
+        return best
+
+    if len(run.lin) and joint and x0 is not None:
+        best = joint_from(x0, 4)
+        if on_bound(s, best[0]):
             # a fit that ends on a bound of its box sits in a corner basin the screening (made
             # without the chosen effects) led it to: the joint fit from the effect's first generic
             # start too, carried further (seed 5858 case 001: a hysteresis beside a friction at
             # phi = 1.45, held-out 0.094; from phi = 0 it reaches the truth, 0.0198 at the floor)
             x1, _ = joint_start(run, chosen, chain, s, s.starts[0], None, None)
             if x1 is not None:
-                try:
-                    pj, gj, mj, bj, xj, chj = joint_chain_fit(run, chain, s, x1, GENERIC_JOINT_NFEV)
-                except (ValueError, TypeError):
-                    gj = float("inf")
-                if gj < gfit and not chain_vanishes(chain, chj):
-                    p, gfit, m_new, base_new, x_j, chp = pj, gj, mj, bj, xj, [p_c for _, p_c in chj]
+                best = joint_from(x1, GENERIC_JOINT_NFEV)
+    p, gfit, m_new, base_new, x_j, chp = best
     g, yh = run.held_out(m_new, fast=True)
     return s, p, m_new, g, yh, gfit, base_new, x_j, chp
 

@@ -15,6 +15,12 @@ functions below load their modules (and those libraries) on first use.
   gap diagnosis, :class:`vibroscope.gap.report.GapReport`).
 - :mod:`vibroscope.viewers.rerun_gap`: :func:`log_gap_report` (a gap diagnosis as one ``.rrd``
   recording with a blueprint).
+- :mod:`vibroscope.viewers.instruments`: :func:`plot_bode`, :func:`plot_nyquist`,
+  :func:`plot_step`, :func:`plot_mr_loops`, :func:`plot_hydraulic_comparison` (the founding
+  paper's instruments).
+
+This package is also the default plotting backend of the results' ``.plot()``
+(:mod:`vibroscope._plotting`): every figure a result draws of itself is one of the names below.
 """
 
 from __future__ import annotations
@@ -28,7 +34,10 @@ _LAZY = {
     "plot_gap_report": "gap_figures", "log_gap_report": "rerun_gap",
     "plot_stabilization": "figures", "plot_frf_synthesis": "figures",
     "plot_kinematics": "acquisition", "plot_ods": "figures", "ods_as_modal_model": "acquisition",
-    "log_ods": "acquisition",
+    "log_ods": "acquisition", "plot_mode_set_comparison": "figures",
+    "plot_level_evidence": "gap_figures", "plot_hydraulic_comparison": "instruments",
+    "plot_bode": "instruments", "plot_nyquist": "instruments", "plot_step": "instruments",
+    "plot_mr_loops": "instruments",
 }
 
 __all__ = sorted(_LAZY)
