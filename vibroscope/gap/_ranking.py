@@ -350,7 +350,8 @@ def ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best
     return float(best), how
 
 
-def polish_candidate(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before, floor=0.0):
+def polish_candidate(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs, held_out, key, k_before, floor=0.0,
+                     chain_out: list | None = None):
     """Refine the winning candidate's effects (`chain`: ``(spec, p)`` applied in order to the
     linear model) jointly with the linear parameters on up to POLISH_S s of the fitting data at the
     full integration accuracy (Ljung 1999, output error); the held-out gap is recomputed at
@@ -359,7 +360,8 @@ def polish_candidate(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs
     four iterations close at least :data:`POLISH_GAIN` of it. The polished model is kept only when its held-out gap is not
     worse and no effect's polished parameters make it vanish where they did not before
     (asymmetric friction polished into two equal forces is no verdict; the candidate stays as it
-    was fitted)."""
+    was fitted). `chain_out`, when given, receives each effect's parameters in the kept model
+    (`chain`'s order): the polished ones, or `chain`'s own when the polish is not kept."""
     c, m_aug, _, s_last, p_last, base = cand
     nl = len(lin)
     th = lin.theta_between(model, base)
@@ -395,11 +397,15 @@ def polish_candidate(cand, chain, *, model, lin, lo_l, hi_l, sims, ys, split, fs
     vanished_now = any(s_.vanishes(x[a_:b_]) is not None and s_.vanishes(np.asarray(p_, float)) is None
                        for (s_, p_), a_, b_ in zip(chain, offs[:-1], offs[1:]))
     if not np.isfinite(g) or (np.isfinite(g0) and g > g0) or vanished_now:
+        if chain_out is not None:
+            chain_out[:] = [np.asarray(p_, float) for _, p_ in chain]
         if not np.isfinite(g0):
             return cand
         return (replace(c, gap_after=g0, score=1.0 - key(g0, n_par) / k_before if k_before > 0 else 0.0),
                 m_aug, yh0, s_last, p_last, base)
     pn = x[offs[-2]:offs[-1]]
+    if chain_out is not None:
+        chain_out[:] = [x[a_:b_] for a_, b_ in zip(offs[:-1], offs[1:])]
     keep = {k: v for k, v in c.where.items() if k == "frequency_hz"}
     c_new = Candidate(effect=c.effect, where=dict(s_last.where) | s_last.qualifiers(pn) | keep,
                       parameters=s_last.describe(pn), gap_after=g,

@@ -65,9 +65,13 @@ JOINT_TOP = 3
 #: such joint fits came from own fits closing under 3 % (none accepted); the stiffening spring of
 #: the friction + spring test closes 9.4 % alone and needs its joint fit
 CONN_JOINT_GAIN = 0.05
-#: evaluations of an addition's second joint fit, from its first generic start, made when its
-#: fit ends on a bound of its box (``_selection.on_bound``)
+#: evaluations of the second joint fit of an addition with three or more parameters (hysteresis,
+#: extra mode), from its first generic start (:func:`~vibroscope.gap._selection.finish_addition`)
 GENERIC_JOINT_NFEV = 10
+#: evaluations of the short fit (own parameters, screening prefix) that places each offered
+#: nonlinear class again at every connection of the current model before an addition
+#: (:func:`~vibroscope.gap._selection.relocated`)
+RELOCATE_NFEV = 3
 #: an addition within REFINE_FACTOR (but not ADD_FACTOR) times the current penalised excess is
 #: fitted further (jointly with the linear parameters) before the decision
 REFINE_FACTOR = 0.8
