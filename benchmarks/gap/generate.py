@@ -166,6 +166,12 @@ RK4_HZ = 10000.0  # the fixed-step integrator's base step rate
 CAL_SECONDS = 14.0  # strength calibration runs on this first part of the record (split over logs)
 GAP_MIN = 0.05  # every non-none case has at least this noise-free gap
 TARGET = (0.1, 1.0)  # noise-free nominal gap targets, drawn log-uniform
+#: the largest input offset, as a share of the input's RMS force. Up to session 42 it was 0.2
+#: (:data:`OFFSET_MAX_BEFORE_43`), which left every offset case's noise-free gap at 0.056-0.096,
+#: below TARGET: the shrink `1 - gap_after / gap_before` of a fit at the noise floor could not
+#: exceed 0.54-0.88 (seed 9494: median 68 % with every offset found within 0.1 %)
+OFFSET_MAX = 1.0
+OFFSET_MAX_BEFORE_43 = 0.2
 AIM_FACTOR = 1.6  # calibrated gaps off the target by more than this factor are redrawn (first 3 tries)
 PAIR_SHARE = 0.3  # in a two-effect case each effect alone gives >= this share of the pair's gap
 DISPLACEMENT_SHARE = 0.3  # share of cases with a displacement sensor (offset cases always)
@@ -965,7 +971,7 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             f0 = sign * s * u_rms
             return replace(base, offset=f0), {"side": "input"}, {"offset_N": f0}, {"offset_over_input_rms": sign * s}
 
-        return build, (0.02, 0.2), _always
+        return build, (0.02, ref.get("offset_max", OFFSET_MAX)), _always
 
     if effect == "coulomb_friction":
 
@@ -1185,12 +1191,14 @@ def _log_uniform(rng, lo, hi) -> float:
 
 
 def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, integrator: str = "lsoda",
-              multi_log: bool = False, weak_end: bool = True) -> Case:
+              multi_log: bool = False, weak_end: bool = True, offset_max: float = OFFSET_MAX) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
     duration / 3 each, at one excitation level each (1, 2.5, 6), instead of one log cycling
     the levels. `weak_end` False: the strength ranges before session 39 (:func:`_calibrate`).
+    `offset_max`: the largest input offset as a share of the input's RMS force
+    (:data:`OFFSET_MAX`; :data:`OFFSET_MAX_BEFORE_43` regenerates the seeds run before).
     """
     cls = effect
     if effect.startswith("closed_loop_"):
@@ -1242,7 +1250,7 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         nom_cal = [r.outputs[:, :n_cal] for r in nom]
         u_all = np.concatenate([uu.coarse for uu in us])
         ref = {"states": np.vstack([r.states[:n_cal] for r in nom]), "u": us,
-               "u_rms": float(np.sqrt(np.mean(u_all**2)))}
+               "u_rms": float(np.sqrt(np.mean(u_all**2))), "offset_max": offset_max}
         base0 = TruthModel(nominal)
 
         def gap_of(tm):
@@ -1792,10 +1800,10 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 
 def _one(job):
-    out, name, effect, seed, index, duration, integrator, multi, weak_end = job
+    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max = job
     tic = time.perf_counter()
     case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
-                     weak_end=weak_end)
+                     weak_end=weak_end, offset_max=offset_max)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1807,12 +1815,13 @@ def _line(r) -> str:
 
 def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration: float = 60.0, jobs: int = 1,
              verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0,
-             weak_end: bool = True) -> list[tuple]:
+             weak_end: bool = True, offset_max: float = OFFSET_MAX) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
-    before session 39 (:func:`_calibrate`). Returns (name, class, gap, s, integrator, multi-log)."""
+    before session 39 (:func:`_calibrate`); `offset_max` is the largest input offset as a share of
+    the input's RMS force (:data:`OFFSET_MAX`). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
@@ -1821,14 +1830,15 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
     out.mkdir(parents=True, exist_ok=True)
     (out / "generate.json").write_text(json.dumps({"per_class": per_class, "classes": classes, "seed": seed,
                                                    "duration": duration, "integrator": integrator,
-                                                   "multi_log": multi_log, "weak_end": weak_end}, indent=2) + "\n")
+                                                   "multi_log": multi_log, "weak_end": weak_end,
+                                                   "offset_max": offset_max}, indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
         for c in classes:
             k = len(jobs_list)
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
             multi = bool(np.random.default_rng([int(seed), ALL_CLASSES.index(c), j, 1]).random() < multi_log)
-            jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end))
+            jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -1871,10 +1881,13 @@ def main(argv=None) -> int:
     p.add_argument("--without-weak-end", action="store_true",
                    help="the strength ranges before session 39 (a parameter mismatch from 15 %%, an extra mode "
                    "from 3 %% of the attached mass, a delay from 1 ms): regenerates the earlier seeds' cases")
+    p.add_argument("--offset-max", type=float, default=OFFSET_MAX, metavar="SHARE",
+                   help=f"largest input offset as a share of the input's RMS force (default {OFFSET_MAX}; "
+                   f"{OFFSET_MAX_BEFORE_43} regenerates the offset cases of the seeds run before session 43)")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
-                   multi_log=a.multi_log, weak_end=not a.without_weak_end)
+                   multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")
