@@ -29,6 +29,7 @@ from vibroscope.gap._run import (
     JOINT_TOP,
     NESTED_FAMILIES,
     FAMILY_REFINE_NFEV,
+    GENERIC_JOINT_ABOVE,
     GENERIC_JOINT_NFEV,
     NESTED_T,
     PM_FURTHER,
@@ -301,8 +302,8 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     floor explain) (:func:`accepted_addition`); then the next, up to three effects. Returns the
     chosen candidates (cumulative: the last holds the combined model) and each effect's share of
     the shrink. Besides the four best screened classes of `per_class` (and those of `screened` at
-    a chosen connection), each offered nonlinear class placed again on the current model
-    (:func:`relocated`) and the linear effects that were not fitted alone because the BLA changes
+    a chosen connection), before the second effect each offered nonlinear class placed again on
+    the current model (:func:`relocated`) and the linear effects that were not fitted alone because the BLA changes
     with the level (``lin_later``) are tried as additions, from their own starts."""
     key, k_before, floor = run.key, run.k_before, run.floor_rank
     chosen = [first]
@@ -316,7 +317,8 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         cands = addition_candidates(chosen, used, per_class, screened, also, run.screened_alt)
         if not cands:
             break
-        cands += relocated(run, cands, cur_m, workers)
+        if len(chosen) == 1:  # the second effect (a third is rare, and its classes were placed here)
+            cands += relocated(run, cands, cur_m, workers)
         chain = [(c[3], c[4]) for c in chosen]
         pairs = {frozenset(c[0].where["between"]) for c in chosen if "between" in c[0].where}
         with ThreadPoolExecutor(max(1, workers)) as ex:
@@ -718,14 +720,15 @@ def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = T
 
     if len(run.lin) and joint and x0 is not None:
         best = joint_from(x0, 4)
-        if s.n >= 3:
+        if s.n >= 3 and best[1] > GENERIC_JOINT_ABOVE * run.floor_rank:
             # an effect with a shape as well as a size (hysteresis, extra mode): the screening,
             # made without the chosen effects, can lead its joint fit into a corner basin (a
             # Bouc-Wen shape at or near phi = 1.45, gamma 0.12, delta 0.99): the joint fit from
             # the effect's first generic start too, carried further, and the better kept (seed
             # 5858 case 001: phi = 1.45, held-out 0.094, from phi = 0 the truth, 0.0198 at the
             # floor; 1414 case 004: phi = 1.444, held-out 0.038, from phi = 0 0.0153 at a floor
-            # of 0.0142; 5858 case 003: phi = 1.19, from phi = 0 0.0190 at a floor of 0.0178)
+            # of 0.0142; 5858 case 003: phi = 1.19, from phi = 0 0.0190 at a floor of 0.0178);
+            # not where the first joint fit already reaches the noise floor
             x1, _ = joint_start(run, chosen, chain, s, s.starts[0], None, None)
             if x1 is not None:
                 best = joint_from(x1, GENERIC_JOINT_NFEV)
