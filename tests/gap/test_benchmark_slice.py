@@ -286,7 +286,8 @@ def test_benchmark_slice(tmp_path):
     from vibroscope.gap import diagnose
 
     out = tmp_path / "bench"
-    gen.generate(out, per_class=1, classes=[e for e in gen.EFFECTS if e in gen.CLASSES], seed=0, duration=30.0)
+    gen.generate(out, per_class=1, classes=[e for e in gen.EFFECTS if e in gen.CLASSES], seed=0, duration=30.0,
+                 offset_max=gen.OFFSET_MAX_BEFORE_43)
     cases = out / "cases"
     assert not any(p.suffix == ".json" for p in cases.rglob("*"))
     assert not (cases / "truth").exists() and (out / "truth").is_dir()
@@ -332,7 +333,8 @@ def test_a_clipped_input_behind_a_delay_is_found_from_the_delay_first():
     forward selection finds the limit; both are named with their values."""
     from vibroscope.gap import diagnose
 
-    case = gen.make_case("two_effects", gen.case_rng(8484, "two_effects", 5), 30.0, integrator="rk4")
+    case = gen.make_case("two_effects", gen.case_rng(8484, "two_effects", 5), 30.0, integrator="rk4",
+                         offset_max=gen.OFFSET_MAX_BEFORE_43)
     t = case.truth
     assert sorted(t["effect"]) == ["saturation", "time_delay"]
     rep = diagnose(case.nominal, case.signals(0))
@@ -375,7 +377,8 @@ def _named_alone_at_its_link(effect: str, seed: int, integrator: str, param: str
     connection. Returns (truth, report, the effect's best candidate)."""
     from vibroscope.gap import diagnose
 
-    case = gen.make_case(effect, gen.case_rng(seed, effect, 0), duration, integrator=integrator)
+    case = gen.make_case(effect, gen.case_rng(seed, effect, 0), duration, integrator=integrator,
+                         offset_max=gen.OFFSET_MAX_BEFORE_43)
     t = case.truth
     assert t["parameters"][param] == pytest.approx(value, rel=1e-4)
     rep = diagnose(case.nominal, case.signals(0))
@@ -579,7 +582,8 @@ def test_a_fresh_seeds_two_effects_are_named_at_their_links(seed, index, effects
     share = opts.get("multi_share", 0.25)
     multi = bool(np.random.default_rng([seed, gen.ALL_CLASSES.index("two_effects"), index, 1]).random() < share)
     case = gen.make_case("two_effects", gen.case_rng(seed, "two_effects", index), opts.get("duration", 30.0),
-                         integrator=opts.get("integrator", gen.INTEGRATORS[index % 2]), multi_log=multi)
+                         integrator=opts.get("integrator", gen.INTEGRATORS[index % 2]), multi_log=multi,
+                         offset_max=gen.OFFSET_MAX_BEFORE_43)
     t = case.truth
     assert set(t["effect"]) == effects
     p_true = dict(zip(t["effect"], t["parameters"]))
