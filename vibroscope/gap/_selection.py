@@ -303,8 +303,9 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     chosen candidates (cumulative: the last holds the combined model) and each effect's share of
     the shrink. Besides the four best screened classes of `per_class` (and those of `screened` at
     a chosen connection), before the second effect each offered nonlinear class placed again on
-    the current model (:func:`relocated`) and the linear effects that were not fitted alone because the BLA changes
-    with the level (``lin_later``) are tried as additions, from their own starts."""
+    the current model (:func:`relocated`) and the linear effects that were not fitted alone
+    because the BLA changes with the level (``lin_later``) are tried as additions, from their own
+    starts."""
     key, k_before, floor = run.key, run.k_before, run.floor_rank
     chosen = [first]
     cur_c, cur_m = first[0], first[1]
