@@ -145,7 +145,8 @@ def select_further_effects(run: Run, *, workers) -> None:
 
 def restated(chosen: list, ps: list) -> list:
     """`chosen` (candidate tuples) with each effect's parameters `ps` as refitted jointly with the
-    effects after it: the tuple's ``p``, and its candidate's parameters and location qualifiers,
+    effects after it: the tuple's ``p``, and its candidate's parameters and location qualifiers
+    (its other location keys kept: the linear base it was fitted on),
     so that the report states every chosen effect as it is in the combined model (not as first
     fitted alone: seed 3737 case 005, an asymmetric friction reported at Fc+ 0.697 N fitted alone
     and 0.821 N in the combination, true 0.823 N)."""
@@ -156,8 +157,7 @@ def restated(chosen: list, ps: list) -> list:
             out.append(c)
             continue
         p = np.asarray(p, float)
-        keep = {k: v for k, v in c[0].where.items() if k == "frequency_hz"}
-        c0 = replace(c[0], where=dict(s.where) | s.qualifiers(p) | keep, parameters=s.describe(p))
+        c0 = replace(c[0], where=dict(c[0].where) | s.qualifiers(p), parameters=s.describe(p))
         out.append((c0,) + tuple(c[1:4]) + (p,) + tuple(c[5:]))
     return out
 
