@@ -971,7 +971,7 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
             f0 = sign * s * u_rms
             return replace(base, offset=f0), {"side": "input"}, {"offset_N": f0}, {"offset_over_input_rms": sign * s}
 
-        return build, (0.02, ref.get("offset_max", OFFSET_MAX)), _always
+        return build, (0.02, ref["offset_max"]), _always
 
     if effect == "coulomb_friction":
 

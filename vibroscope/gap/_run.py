@@ -68,8 +68,8 @@ CONN_JOINT_GAIN = 0.05
 #: evaluations of the second joint fit of an addition with three or more parameters (hysteresis,
 #: extra mode), from its first generic start (:func:`~vibroscope.gap._selection.finish_addition`)
 GENERIC_JOINT_NFEV = 10
-#: ... made only when the first joint fit's fitting gap exceeds this multiple of the ranking noise
-#: floor (a fit at the floor has no better basin to find)
+#: that second joint fit is made only when the first one's fitting gap exceeds this multiple of
+#: the ranking noise floor (a fit at the floor has no better basin to find)
 GENERIC_JOINT_ABOVE = 1.3
 #: evaluations of the short fit (own parameters, screening prefix) that places each offered
 #: nonlinear class again at every connection of the current model before an addition

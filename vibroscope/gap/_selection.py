@@ -43,7 +43,7 @@ from vibroscope.gap._run import (
     where_key,
 )
 from vibroscope.gap.effects import EFFECT_TABLE
-from vibroscope.gap.fit import fit_time_domain
+from vibroscope.gap.fit import best_start, fit_time_domain
 from vibroscope.gap.measure import nested_gain
 from vibroscope.gap.report import Candidate
 
@@ -574,32 +574,25 @@ def relocated(run: Run, cands: list, cur_m, workers) -> list:
     offered = {(c[0].effect, where_key(c[0].where)) for c in cands}
     classes = {c[0].effect for c in cands if "between" in c[0].where}
     specs = [s for s in run.specs if not s.linear and s.effect in classes and "between" in s.where]
-
-    def probe(s):
-        best = None
-        for p0 in s.starts:
-            try:
-                g = prefix_gap(run, s.apply(cur_m, p0))
-            except (ValueError, TypeError):
-                return None
-            if np.isfinite(g) and (best is None or g < best[2]):
-                best = (s, np.asarray(p0, float), g)
-        return best
-
     sims, ys, split = run.sims, run.ys, run.split
+    sp = split.screen_prefix
 
-    def short_fit(r):
-        s, p0, g0 = r
+    def placed(s):
+        def build(p):
+            return s.apply(cur_m, p)
+
+        p0, g0 = best_start(build, s.starts, sims, ys, split.fit, sp)
+        if not np.isfinite(g0):  # no start simulates (e.g. a second clearance where no spring is left)
+            return s, p0, g0
         try:
-            p, g, _ = fit_time_domain(lambda p, s=s: s.apply(cur_m, p), p0, s.lower, s.upper, sims, ys, split.fit,
-                                      split.screen_prefix, fast=True, max_nfev=RELOCATE_NFEV, jac_workers=1)
+            p, g, _ = fit_time_domain(build, p0, s.lower, s.upper, sims, ys, split.fit, sp, fast=True,
+                                      max_nfev=RELOCATE_NFEV, jac_workers=1)
         except (ValueError, TypeError):
-            return r
-        return (s, p, g) if g < g0 else r
+            return s, p0, g0
+        return (s, p, g) if g < g0 else (s, p0, g0)
 
     with ThreadPoolExecutor(max(1, workers)) as ex:
-        probed = [r for r in ex.map(probe, specs) if r is not None]
-        fitted = [r for r in ex.map(short_fit, probed)]
+        fitted = list(ex.map(placed, specs))
     g_cur = prefix_gap(run, cur_m)
     out: dict[str, tuple] = {}
     for r in sorted(fitted, key=lambda r: r[2]):
