@@ -71,6 +71,18 @@ GENERIC_JOINT_NFEV = 10
 #: that second joint fit is made only when the first one's fitting gap exceeds this multiple of
 #: the ranking noise floor (a fit at the floor has no better basin to find)
 GENERIC_JOINT_ABOVE = 1.3
+#: evaluations of the joint fit of the other chosen effects without one, in backward elimination
+#: (:func:`~vibroscope.gap._selection.eliminated`)
+ELIMINATE_NFEV = 4
+#: evaluations of the fit of the chosen effects' and an addition's parameters on the nominal
+#: linear base, the linear parameters held: a further joint start where the first joint fit stays
+#: above ``GENERIC_JOINT_ABOVE`` times the floor (:func:`~vibroscope.gap._selection.nominal_effects_start`)
+EFFECTS_NFEV = 8
+#: that fit first scans each parameter with narrow valleys (a clearance's logarithm,
+#: :attr:`~vibroscope.gap.effects.EffectSpec.narrow`) on a grid of this step (0.05: 5 %) ...
+SCAN_STEP = 0.05
+#: ... over this half-width around its value (0.7: a factor of two either way)
+SCAN_HALF_WIDTH = 0.7
 #: evaluations of the short fit (own parameters, screening prefix) that places each offered
 #: nonlinear class again at every connection of the current model before an addition
 #: (:func:`~vibroscope.gap._selection.relocated`)

@@ -30,10 +30,14 @@ from vibroscope.gap._run import (
     NESTED_FAMILIES,
     FAMILY_REFINE_NFEV,
     GENERIC_JOINT_ABOVE,
+    EFFECTS_NFEV,
+    ELIMINATE_NFEV,
     GENERIC_JOINT_NFEV,
     NESTED_T,
     PM_FURTHER,
     RELOCATE_NFEV,
+    SCAN_HALF_WIDTH,
+    SCAN_STEP,
     REFINE_FACTOR,
     Run,
     UNEXPLAINED_SCORE,
@@ -359,10 +363,54 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         cur_c, cur_m = chosen[-1][0], chosen[-1][1]
         n_par = sum(c[3].n for c in chosen)
         used = {c[0].effect for c in chosen}
+    chosen = eliminated(run, chosen)
     shares_g = [run.gap_before] + [c[0].gap_after for c in chosen]
     total = shares_g[0] - shares_g[-1]
     shares = [float((shares_g[i] - shares_g[i + 1]) / total) if total > 0 else 0.0 for i in range(len(shares_g) - 1)]
     return chosen, shares
+
+
+def eliminated(run: Run, chosen: list) -> list:
+    """Backward elimination after forward selection [Draper & Smith, "Applied Regression
+    Analysis", 3rd ed. 1998, sec. 15.2]: an effect chosen before the last is dropped when the
+    others, fitted jointly without it (with the linear parameters, :data:`ELIMINATE_NFEV`
+    evaluations from the combination's solution), explain as much: when the combination's
+    penalised held-out excess gap is not below :data:`ADD_FACTOR` times theirs, the test it would
+    have failed as an addition to them. The first effect is chosen alone, before the others are
+    known, and can be a stand-in for them (seed 6363 case 004: a weak hysteresis at a clearance's
+    connection, its partners a clearance and a hardening spring, the three at the noise floor).
+    The least significant is dropped first, then the test is made again. The last effect already
+    passed this test against the others refitted. Returns `chosen`, rebuilt from the remaining
+    combination where one was dropped."""
+    while len(chosen) >= 2:
+        chain = [(c[3], c[4]) for c in chosen]
+        n_all = sum(s_.n for s_, _ in chain)
+        k_all = run.key(chosen[-1][0].gap_after, n_all)
+        theta = run.lin.theta_between(run.model, chosen[-1][5])
+        drop = None
+        for i in range(len(chain) - 1):
+            rest = chain[:i] + chain[i + 1:]
+            try:
+                p_last, gf, m, base, _, head = joint_chain_fit(
+                    run, rest[:-1], rest[-1][0], np.concatenate([theta] + [np.asarray(q, float) for _, q in rest]),
+                    ELIMINATE_NFEV)
+            except (ValueError, TypeError):
+                continue
+            rest = head + [(rest[-1][0], p_last)]
+            if any(s_.vanishes(q) is not None for s_, q in rest):
+                continue
+            g, yh = run.held_out(m, fast=True)
+            k_wo = run.key(g, n_all - chain[i][0].n)
+            if k_all >= ADD_FACTOR * k_wo and (drop is None or k_wo < drop[0]):
+                drop = (k_wo, rest, base, (m, g, yh, gf))
+        if drop is None:
+            break
+        # the remaining effects in the order of what each explains alone on their linear base
+        # (the shares are then of a sensible sequence, not of the order they were added in)
+        rest, base = drop[1], drop[2]
+        rest = sorted(rest, key=lambda sq: run.held_out(sq[0].apply(base, sq[1]), fast=True)[0])
+        chosen = cumulative(run, rest, base, [], 0, drop[3])
+    return chosen
 
 
 def family_member(run: Run, chosen: list) -> list:
@@ -444,6 +492,10 @@ def member_test(run: Run, chosen: list, i: int, rel: tuple) -> list | None:
         simple = member_fit(run, theta, chain, i, simple_s, p_s, 4) if p_s is not None else None
         if simple is None:
             return None
+        if s.reduces_to is not None and s.reduces_to(np.asarray(p, float)) is not None:
+            # the richer member became the simpler one in the joint fit (:func:`chain_vanishes`
+            # let it): the simpler one, without a test
+            return cumulative(run, simple[0], simple[3], chosen, i, (simple[2], simple[4], simple[5], simple[1]))
     else:
         simple = now
         rich = member_fit(run, theta, chain, i, rich_s, lift(np.asarray(p, float)), 4)
@@ -663,6 +715,51 @@ def joint_start(run: Run, chosen: list, chain: list, s, p, p_s, base_s) -> tuple
     return best if best is not None else (None, np.inf)
 
 
+def nominal_effects_start(run: Run, chain: list, s, p):
+    """A joint start on the nominal model's linear parameters: the chosen effects' parameters
+    (`chain`: ``(spec, p)``) and the addition `s`'s (from `p`) fitted together with the linear
+    ones held (:data:`EFFECTS_NFEV` evaluations, screening prefix). Returns the joint vector, or
+    None when it cannot be simulated."""
+    build_j, lo, hi, offs = joint_builder(run, chain, s)
+    th = np.zeros(offs[0])
+    q0 = np.concatenate([np.asarray(p_c, float) for _, p_c in chain] + [np.asarray(p, float)])
+
+    def build(q):
+        return build_j(np.concatenate([th, q]))
+
+    # a parameter with narrow valleys (a clearance) scanned first, the others held
+    narrow = [o - offs[0] + i for (s_c, _), o in zip(chain + [(s, p)], offs) for i in s_c.narrow]
+    for i in narrow:
+        q0 = scanned(run, build, q0, i, lo[offs[0] + i], hi[offs[0] + i])
+    try:
+        q, g, _ = fit_time_domain(build, np.clip(q0, lo[offs[0]:], hi[offs[0]:]), lo[offs[0]:], hi[offs[0]:],
+                                  run.sims, run.ys, run.split.fit, run.split.screen_prefix, fast=True,
+                                  max_nfev=EFFECTS_NFEV)
+    except (ValueError, TypeError):
+        return None
+    return np.concatenate([th, q]) if np.isfinite(g) else None
+
+
+def scanned(run: Run, build, q, i, lo, hi):
+    """`q` with its `i`-th parameter (a logarithm, bounds `lo`, `hi`) moved to the best of a
+    fine grid (:data:`SCAN_STEP`, :data:`SCAN_HALF_WIDTH`) around its value, on the screening
+    prefix; `q` unchanged when no grid point simulates better."""
+    q = np.asarray(q, float)
+    best = (prefix_gap(run, build(q)), q)
+    for v in q[i] + np.arange(-SCAN_HALF_WIDTH, SCAN_HALF_WIDTH + SCAN_STEP / 2, SCAN_STEP):
+        if not lo <= v <= hi:
+            continue
+        qq = q.copy()
+        qq[i] = v
+        try:
+            g = prefix_gap(run, build(qq))
+        except (ValueError, TypeError):
+            continue
+        if np.isfinite(g) and not g >= best[0]:
+            best = (g, qq)
+    return best[1]
+
+
 def own_addition(run: Run, chosen: list, chain: list, cur_m, item):
     """An addition `item` ``(spec, start p or None, screening base or None)`` to the current model
     `cur_m` (the combination `chosen`, its effects `chain`) with only its own parameters fitted
@@ -726,6 +823,17 @@ def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = T
             x1, _ = joint_start(run, chosen, chain, s, s.starts[0], None, None)
             if x1 is not None:
                 best = joint_from(x1, GENERIC_JOINT_NFEV)
+        if best[1] > GENERIC_JOINT_ABOVE * run.floor_rank:
+            # the joint fit starts from the linear base that fits best with the effects as they
+            # were fitted alone, and that is mostly the first effect's own, bent to mimic the
+            # second; a clearance then sits beside its narrow valley, where no joint step leads
+            # (seed 5858 case 000: a backlash fitted alone at 2.3e-6 m on masses raised 23 %;
+            # with the saturation jointly 0.144, on the nominal base with the clearance and the
+            # limit fitted first 0.0215, the truth's 0.0217): the effects fitted on the nominal
+            # base with the linear parameters held, then all jointly, and the better kept
+            x2 = nominal_effects_start(run, chain, s, p)
+            if x2 is not None:
+                best = joint_from(x2, 4)
     p, gfit, m_new, base_new, x_j, chp = best
     g, yh = run.held_out(m_new, fast=True)
     return s, p, m_new, g, yh, gfit, base_new, x_j, chp
@@ -764,6 +872,16 @@ def accepted_addition(run: Run, tries: list, chain: list, cur_c, n_par: int):
 
 def chain_vanishes(before, after) -> bool:
     """Whether a joint refit made a chosen effect vanish (`before`, `after`: ``(spec, p)``
-    lists) that did not before: the addition then replaces it rather than joins it."""
-    return any(s_.vanishes(np.asarray(pa, float)) is not None and s_.vanishes(np.asarray(pb, float)) is None
-               for (s_, pb), (_, pa) in zip(before, after))
+    lists) that did not before: the addition then replaces it rather than joins it. A chosen
+    effect that only becomes the simpler member of its family (``EffectSpec.reduces_to``: an
+    asymmetric friction whose two forces come within 10 % of each other is a Coulomb friction)
+    has not vanished: the member is chosen again after the addition
+    (:func:`family_member`). Seed 6363 case 007: an asymmetric friction of 4.3/14.6 N, fitted
+    alone for a Coulomb friction of 10.7 N beside a hysteresis at the same connection, became
+    10.3/11.1 N jointly with the hysteresis (held-out 0.0142 at a floor of 0.0137), and that
+    joint fit was refused."""
+    def gone(s_, p_):
+        p_ = np.asarray(p_, float)
+        return s_.vanishes(p_) is not None and (s_.reduces_to is None or s_.reduces_to(p_) is None)
+
+    return any(gone(s_, pa) and not gone(s_, pb) for (s_, pb), (_, pa) in zip(before, after))
