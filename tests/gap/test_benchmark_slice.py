@@ -427,7 +427,8 @@ def test_a_strong_hardening_cubic_spring_is_reached_from_its_start_values():
     "machine-dependent (session 43): on that session's machine session 42's code (836ef12) and this "
     "code both name a softening cubic spring first and the clearance second, both at m1-ground, the "
     "clearance at 6.083e-6 m (true 6.066e-6) and held-out 0.0188 at the floor 0.0194: a single effect "
-    "named with a spurious partner; it passed on the machine of session 42's CI"))
+    "named with a spurious partner; it passed on the machine of session 42's CI. Session 44's backward "
+    "elimination drops such a partner: it passed (XPASS) in session 44's CI rehearsal"))
 def test_a_clearance_in_a_narrow_valley_between_its_starts_is_found_at_its_link():
     """Seed 9494's first backlash case (``--per-class 2 --duration 40 --integrator rk4``, case
     005): a clearance of 6.06e-6 m (0.065 of the rms deflection) at m1-ground of a 2-DOF chain.
