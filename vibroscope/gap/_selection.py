@@ -722,6 +722,7 @@ def nominal_effects_start(run: Run, chain: list, s, p):
     None when it cannot be simulated."""
     build_j, lo, hi, offs = joint_builder(run, chain, s)
     th = np.zeros(offs[0])
+    lo_q, hi_q = lo[offs[0]:], hi[offs[0]:]
     q0 = np.concatenate([np.asarray(p_c, float) for _, p_c in chain] + [np.asarray(p, float)])
 
     def build(q):
@@ -729,12 +730,11 @@ def nominal_effects_start(run: Run, chain: list, s, p):
 
     # a parameter with narrow valleys (a clearance) scanned first, the others held
     narrow = [o - offs[0] + i for (s_c, _), o in zip(chain + [(s, p)], offs) for i in s_c.narrow]
-    for i in narrow:
-        q0 = scanned(run, build, q0, i, lo[offs[0] + i], hi[offs[0] + i])
     try:
-        q, g, _ = fit_time_domain(build, np.clip(q0, lo[offs[0]:], hi[offs[0]:]), lo[offs[0]:], hi[offs[0]:],
-                                  run.sims, run.ys, run.split.fit, run.split.screen_prefix, fast=True,
-                                  max_nfev=EFFECTS_NFEV)
+        for i in narrow:
+            q0 = scanned(run, build, q0, i, lo_q[i], hi_q[i])
+        q, g, _ = fit_time_domain(build, np.clip(q0, lo_q, hi_q), lo_q, hi_q, run.sims, run.ys, run.split.fit,
+                                  run.split.screen_prefix, fast=True, max_nfev=EFFECTS_NFEV)
     except (ValueError, TypeError):
         return None
     return np.concatenate([th, q]) if np.isfinite(g) else None
@@ -746,8 +746,9 @@ def scanned(run: Run, build, q, i, lo, hi):
     prefix; `q` unchanged when no grid point simulates better."""
     q = np.asarray(q, float)
     best = (prefix_gap(run, build(q)), q)
-    for v in q[i] + np.arange(-SCAN_HALF_WIDTH, SCAN_HALF_WIDTH + SCAN_STEP / 2, SCAN_STEP):
-        if not lo <= v <= hi:
+    for d in np.arange(-SCAN_HALF_WIDTH, SCAN_HALF_WIDTH + SCAN_STEP / 2, SCAN_STEP):
+        v = q[i] + d
+        if abs(d) < SCAN_STEP / 2 or not lo <= v <= hi:  # `q` itself is evaluated above
             continue
         qq = q.copy()
         qq[i] = v
