@@ -596,11 +596,25 @@ _FRESH_TWO_EFFECTS = [
     pytest.param(6363, 7, {"coulomb_friction", "hysteresis"},
                  [("coulomb_friction", "Fc_N", 0.1), ("hysteresis", "alpha_N_per_m", 0.1)],
                  id="6363-007-asymmetric-friction-made-symmetric-jointly-is-coulomb"),
+    # a weak hysteresis (alpha / k = 0.09, yielding at a quarter of the RMS deflection) beside an
+    # asymmetric friction at another link: reached from its weak generic start (30 s, one log)
+    pytest.param(7272, 0, {"hysteresis", "asymmetric_friction"},
+                 [("hysteresis", "alpha_N_per_m", 0.1), ("asymmetric_friction", "Fc_pos_N", 0.1),
+                  ("asymmetric_friction", "Fc_neg_N", 0.1)],
+                 id="7272-000-a-weak-hysteresis-from-its-weak-start"),
+    # the same beside an asymmetric friction fitted alone to 2.01/0.058 N (true 1.72/0.55 N): the
+    # hysteresis's own fit on that model changes nothing and ranked last; the two fitted together
+    # on the nominal base rank it first (30 s, lsoda, the stronger ranges of session 38)
+    pytest.param(9393, 3, {"hysteresis", "asymmetric_friction"},
+                 [("hysteresis", "alpha_N_per_m", 0.1), ("asymmetric_friction", "Fc_neg_N", 0.1)],
+                 id="9393-003-a-hysteresis-ranked-by-the-pair-on-the-nominal-base"),
 ]
 #: cases generated with other settings than the default here (30 s, lsoda/RK4 by case number, a
 #: quarter multi-log, offsets up to 0.2 of the input's RMS force)
 _FRESH_SETTINGS = {5858: dict(duration=40.0, integrator="rk4", multi_share=0.5),
-                   6363: dict(duration=40.0, integrator="rk4", multi_share=0.6, offset_max=0.5)}
+                   6363: dict(duration=40.0, integrator="rk4", multi_share=0.6, offset_max=0.5),
+                   7272: dict(offset_max=gen.OFFSET_MAX),
+                   9393: dict(integrator="lsoda", offset_max=gen.OFFSET_MAX, weak_end=False)}
 
 
 @pytest.mark.slow  # one 30 s case generated and diagnosed (1-3 DOF, 1 or 3 logs), ~20-180 s each
@@ -615,7 +629,8 @@ def test_a_fresh_seeds_two_effects_are_named_at_their_links(seed, index, effects
     multi = bool(np.random.default_rng([seed, gen.ALL_CLASSES.index("two_effects"), index, 1]).random() < share)
     case = gen.make_case("two_effects", gen.case_rng(seed, "two_effects", index), opts.get("duration", 30.0),
                          integrator=opts.get("integrator", gen.INTEGRATORS[index % 2]), multi_log=multi,
-                         offset_max=opts.get("offset_max", gen.OFFSET_MAX_BEFORE_43))
+                         offset_max=opts.get("offset_max", gen.OFFSET_MAX_BEFORE_43),
+                         weak_end=opts.get("weak_end", True))
     t = case.truth
     assert set(t["effect"]) == effects
     p_true = dict(zip(t["effect"], t["parameters"]))
