@@ -608,11 +608,23 @@ _FRESH_TWO_EFFECTS = [
     pytest.param(9393, 3, {"hysteresis", "asymmetric_friction"},
                  [("hysteresis", "alpha_N_per_m", 0.1), ("asymmetric_friction", "Fc_neg_N", 0.1)],
                  id="9393-003-a-hysteresis-ranked-by-the-pair-on-the-nominal-base"),
+    # a Coulomb friction and a hysteresis at one link, fitted as an asymmetric friction of
+    # 0.40/0.59 N: its Coulomb projection leaves the smaller held-out gap, and refitted as
+    # asymmetric from there it stays symmetric, so the Coulomb friction is taken
+    pytest.param(9393, 2, {"coulomb_friction", "hysteresis"},
+                 [("coulomb_friction", "Fc_N", 0.05), ("hysteresis", "alpha_N_per_m", 0.1)],
+                 id="9393-002-an-asymmetric-friction-that-stays-symmetric-from-coulomb"),
+    # an input offset of 7.4 N and an input delay of 0.6 ms (3 logs): the offset was chosen first
+    # and the delay, fitted alone to 0.5999 ms, was never offered as an addition
+    pytest.param(4545, 4, {"offset", "time_delay"},
+                 [("offset", "offset_N", 0.02), ("time_delay", "delay_s", 0.05)],
+                 id="4545-004-a-delay-fitted-alone-joins-an-offset"),
 ]
 #: cases generated with other settings than the default here (30 s, lsoda/RK4 by case number, a
 #: quarter multi-log, offsets up to 0.2 of the input's RMS force)
 _FRESH_SETTINGS = {5858: dict(duration=40.0, integrator="rk4", multi_share=0.5),
                    6363: dict(duration=40.0, integrator="rk4", multi_share=0.6, offset_max=0.5),
+                   4545: dict(multi_share=0.4, offset_max=gen.OFFSET_MAX),
                    7272: dict(offset_max=gen.OFFSET_MAX),
                    9393: dict(integrator="lsoda", offset_max=gen.OFFSET_MAX, weak_end=False)}
 
