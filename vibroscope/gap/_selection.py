@@ -320,9 +320,9 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     # offset of 7.4 N, the delay fitted alone to 0.5999 ms: seed 4545 case 004)
     also = [(s_, None, None) for s_ in run.lin_later.values()]
     lin_alone: dict[str, tuple] = {}
-    for s_, _, p_, g_, b_ in sorted((r for r in (run.results or []) if r[0].linear), key=lambda r: r[3]):
-        if s_.effect not in run.lin_later:
-            lin_alone.setdefault(s_.effect, (s_, p_, b_))
+    for s_, _, p_, _, b_ in sorted((r for r in run.results or [] if r[0].linear and r[0].effect not in run.lin_later),
+                                   key=lambda r: r[3]):
+        lin_alone.setdefault(s_.effect, (s_, p_, b_))
     also += list(lin_alone.values())
     while len(chosen) < 3:
         if excess(cur_c.gap_after, floor) <= 0.5 * floor:
@@ -740,13 +740,6 @@ def nominal_effects_start(run: Run, chain: list, s, p):
     def build(q):
         return build_j(np.concatenate([th, q]))
 
-    def g_of(q):
-        try:
-            g = prefix_gap(run, build(q))
-        except (ValueError, TypeError):
-            return np.inf
-        return g if np.isfinite(g) else np.inf
-
     # a parameter with narrow valleys (a clearance) scanned first, the others held
     narrow = [o - offs[0] + i for (s_c, _), o in zip(chain + [(s, p)], offs) for i in s_c.narrow]
     try:
@@ -756,7 +749,7 @@ def nominal_effects_start(run: Run, chain: list, s, p):
         # truth on the nominal base; that fit is not yet made for every addition: ranking the
         # additions by it lost seed 3737 case 005)
         q0s = [np.clip(np.concatenate(head + [np.asarray(p0, float)]), lo_q, hi_q) for p0 in [p] + list(s.starts)]
-        q0 = min(q0s, key=g_of)
+        q0 = best_start(build, q0s, run.sims, run.ys, run.split.fit, run.split.screen_prefix)[0]
         for i in narrow:
             q0 = scanned(run, build, q0, i, lo_q[i], hi_q[i])
         q, g, _ = fit_time_domain(build, np.clip(q0, lo_q, hi_q), lo_q, hi_q, run.sims, run.ys, run.split.fit,

@@ -812,9 +812,9 @@ def _hysteresis(model, scales):
 
         lo_h = np.array([math.log(1e-4), math.log(1e-3), -1.45])
         hi_h = np.array([math.log(10.0), math.log(1e3), 1.45])
-        # starts: alpha a share of the connection's stiffness, then (last) the hysteretic force a
-        # share of the input's RMS force (on a stiff link the first scale is 10x too strong)
-        # then weak ones (alpha a tenth of the stiffness, yielding at or below the RMS deflection): from
+        # starts: alpha a share of the connection's stiffness, weak ones among them (alpha a tenth of
+        # the stiffness, yielding at or below the RMS deflection), then (last) the hysteretic force a
+        # share of the input's RMS force (on a stiff link the first scale is 10x too strong); from
         # the strong starts a weak hysteresis beside another effect is not reached (seed 7272 case 000:
         # alpha / k = 0.09 yielding at a quarter of the RMS deflection, beside an asymmetric friction;
         # from (0.1, 3.0, 0) a fit of the two effects' parameters ends at the truth)
