@@ -602,6 +602,12 @@ _FRESH_TWO_EFFECTS = [
                  [("hysteresis", "alpha_N_per_m", 0.1), ("asymmetric_friction", "Fc_pos_N", 0.1),
                   ("asymmetric_friction", "Fc_neg_N", 0.1)],
                  id="7272-000-a-weak-hysteresis-from-its-weak-start"),
+    # a Coulomb friction and a hysteresis at one link, fitted as an asymmetric friction of
+    # 0.40/0.59 N: its Coulomb projection leaves the smaller held-out gap, and refitted as
+    # asymmetric from there it stays symmetric, so the Coulomb friction is taken (30 s, lsoda)
+    pytest.param(9393, 2, {"coulomb_friction", "hysteresis"},
+                 [("coulomb_friction", "Fc_N", 0.05), ("hysteresis", "alpha_N_per_m", 0.1)],
+                 id="9393-002-an-asymmetric-friction-that-stays-symmetric-from-coulomb"),
     # an input offset of 7.4 N and an input delay of 0.6 ms (3 logs): the offset was chosen first
     # and the delay, fitted alone to 0.5999 ms, was never offered as an addition
     pytest.param(4545, 4, {"offset", "time_delay"},
@@ -613,7 +619,8 @@ _FRESH_TWO_EFFECTS = [
 _FRESH_SETTINGS = {5858: dict(duration=40.0, integrator="rk4", multi_share=0.5),
                    6363: dict(duration=40.0, integrator="rk4", multi_share=0.6, offset_max=0.5),
                    4545: dict(multi_share=0.4, offset_max=gen.OFFSET_MAX),
-                   7272: dict(offset_max=gen.OFFSET_MAX)}
+                   7272: dict(offset_max=gen.OFFSET_MAX),
+                   9393: dict(integrator="lsoda", offset_max=gen.OFFSET_MAX, weak_end=False)}
 
 
 @pytest.mark.slow  # one 30 s case generated and diagnosed (1-3 DOF, 1 or 3 logs), ~20-180 s each
