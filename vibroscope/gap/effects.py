@@ -68,6 +68,9 @@ __all__ = ["LinearParams", "EffectSpec", "EffectDef", "EFFECT_TABLE", "VERDICT_W
 
 #: regularisation velocity of fitted friction elements (m/s)
 FRICTION_V_EPS = 1e-3
+#: the logarithmic step by which :attr:`EffectSpec.lift_splits` moves an asymmetric friction's
+#: two sliding forces apart from the Coulomb level (0.405: a factor 1.5 each way, 2.25 between them)
+LIFT_SPLIT = math.log(1.5)
 #: a modal-coordinates model's physical stiffness change at a connection is
 #: ``DK_SCALE * k_ref * theta`` (``k_ref`` the static stiffness across it): the linear
 #: parameters' bounds ``|theta| <= 2.5`` then allow up to 75 % of it either way
@@ -366,6 +369,12 @@ class EffectSpec:
         diagnosis refines this one again from the simpler one's solution (a family never fits
         worse than a member it contains); in a combination of effects the member of the family
         is chosen by the significance of the richer one's gain.
+    lift_splits : callable p_simple -> list of p, optional
+        Starts of this effect that break the symmetry of the lifted simpler one (asymmetric
+        friction: one sliding force :data:`LIFT_SPLIT` above the Coulomb level in logarithm,
+        the other as far below, either way). A fit started exactly at the lifted point can stay
+        there and vanish into the simpler member although the data are asymmetric; in a
+        combination the richer member is then fitted from these.
     tends_to : tuple of (str, callable p -> p_simple or None), optional
         A simpler effect this one tends to in a limit of its parameters, and the projection of
         `p` on it (a Bouc-Wen element of high initial stiffness is a Coulomb slider of force
@@ -396,6 +405,7 @@ class EffectSpec:
     character: Callable | None = None
     reduces_to: Callable | None = None
     lifts_from: tuple | None = None
+    lift_splits: Callable | None = None
     tends_to: tuple | None = None
     narrow: tuple = ()
     meta: dict = field(default_factory=dict)
@@ -665,6 +675,9 @@ def _asymmetric_friction(model, scales):
                                              "v_eps_m_per_s": FRICTION_V_EPS}, vanish=vanish, reduces_to=reduce,
             lifts_from=("coulomb_friction", lambda q: np.array([q[0], q[0]], float),
                         lambda p: np.array([math.log(0.5 * (math.exp(p[0]) + math.exp(p[1])))])),
+            # one force 1.5 times the Coulomb level and the other divided by 1.5, either way
+            lift_splits=lambda q: [np.array([q[0] + LIFT_SPLIT, q[0] - LIFT_SPLIT]),
+                                   np.array([q[0] - LIFT_SPLIT, q[0] + LIFT_SPLIT])],
         ))
     return specs
 
