@@ -99,6 +99,15 @@ def test_vanishing_parameters_are_named():
     name, p = by["asymmetric_friction"].reduces_to([0.0, math.log(1.06)])
     assert name == "coulomb_friction" and math.exp(p[0]) == pytest.approx(1.03)
     assert by["asymmetric_friction"].reduces_to([0.0, math.log(3.0)]) is None
+    # the lifted Coulomb friction is symmetric (it vanishes into Coulomb); the starts that break
+    # the symmetry do not, and lie either way of the Coulomb level
+    af = by["asymmetric_friction"]
+    q = np.array([math.log(2.0)])
+    assert af.vanishes(af.lifts_from[1](q)) is not None
+    splits = af.lift_splits(q)
+    assert len(splits) == 2 and all(af.vanishes(p_) is None for p_ in splits)
+    assert {np.sign(p_[0] - p_[1]) for p_ in splits} == {-1.0, 1.0}
+    assert all(math.exp(p_[0]) * math.exp(p_[1]) == pytest.approx(4.0) for p_ in splits)
     assert by["cubic_stiffness"].qualifiers([-0.1]) == {"character": "softening"}
     assert by["cubic_stiffness"].qualifiers([0.1]) == {"character": "hardening"}
 

@@ -75,8 +75,9 @@ GENERIC_JOINT_ABOVE = 1.3
 #: (:func:`~vibroscope.gap._selection.eliminated`)
 ELIMINATE_NFEV = 4
 #: evaluations of the fit of the chosen effects' and an addition's parameters on the nominal
-#: linear base, the linear parameters held: a further joint start where the first joint fit stays
-#: above ``GENERIC_JOINT_ABOVE`` times the floor (:func:`~vibroscope.gap._selection.nominal_effects_start`)
+#: linear base, the linear parameters held: made for every addition while the current model is
+#: above ``GENERIC_JOINT_ABOVE`` times the floor, a measure by which the additions are ranked for
+#: their joint fits and a second joint start (:func:`~vibroscope.gap._selection.nominal_effects_start`)
 EFFECTS_NFEV = 8
 #: that fit first scans each parameter with narrow valleys (a clearance's logarithm,
 #: :attr:`~vibroscope.gap.effects.EffectSpec.narrow`) on a grid of this step (0.05: 5 %) ...

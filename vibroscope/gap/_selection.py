@@ -3,7 +3,8 @@
 :func:`select_further_effects`: from the verdict (or from the best admissible candidate of an
 unexplained gap, or from the delay the phase slope measures) each other class is tried as an
 addition (:func:`own_addition`, from its own fit and from the start of its joint fit,
-:func:`joint_start`: on the nominal, the current or its screening base; the best
+:func:`joint_start`: on the nominal, the current or its screening base, and from the effects
+fitted together on the nominal base, :func:`nominal_effects_start`; the best
 :data:`~vibroscope.gap._run.JOINT_TOP` again jointly: :func:`finish_addition`) and the best is
 kept when it closes significantly more (:func:`accepted_addition`), up to three effects; after each
 addition the family member (Coulomb or asymmetric friction) is chosen again by the nested test
@@ -335,8 +336,9 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         chain = [(c[3], c[4]) for c in chosen]
         pairs = {frozenset(c[0].where["between"]) for c in chosen if "between" in c[0].where}
         with ThreadPoolExecutor(max(1, workers)) as ex:
-            # ranked by the better of the own fit and the joint fit's start (the addition as
-            # screened, with the chosen effects, on a base that did not absorb it)
+            # ranked by the best of the own fit, the joint fit's start (the addition as screened,
+            # with the chosen effects, on a base that did not absorb it) and the effects fitted
+            # together on the nominal base
             own = sorted((r for r in ex.map(partial(own_addition, run, chosen, chain, cur_m), cands) if r is not None),
                          key=lambda r: min(r[2], r[5], r[7]))
             # jointly: the JOINT_TOP best, and an addition at a chosen effect's connection (the
@@ -761,8 +763,7 @@ def nominal_effects_start(run: Run, chain: list, s, p):
         # the addition from its own fit or, on this base, from the best of its generic starts: its
         # own fit was made on the first effect's base, bent to mimic it (seed 9393 case 003: a
         # weak hysteresis beside an asymmetric friction, fitted there to nothing, reaches the
-        # truth on the nominal base; that fit is not yet made for every addition: ranking the
-        # additions by it lost seed 3737 case 005)
+        # truth on the nominal base)
         q0s = [np.clip(np.concatenate(head + [np.asarray(p0, float)]), lo_q, hi_q) for p0 in [p] + list(s.starts)]
         q0 = best_start(build, q0s, run.sims, run.ys, run.split.fit, run.split.screen_prefix)[0]
         for i in narrow:
