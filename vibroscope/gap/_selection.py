@@ -340,7 +340,7 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
             # with the chosen effects, on a base that did not absorb it) and the effects fitted
             # together on the nominal base
             own = sorted((r for r in ex.map(partial(own_addition, run, chosen, chain, cur_m), cands) if r is not None),
-                         key=lambda r: min(r[2], r[5], r[7]))
+                         key=own_rank)
             # jointly: the JOINT_TOP best, and an addition at a chosen effect's connection (the
             # chosen effect was fitted alone to mimic it there) that closes CONN_JOINT_GAIN of the
             # current model's gap on the same footing
@@ -348,7 +348,7 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
                        for i, o in enumerate(own)]
             g_cur = prefix_gap(run, cur_m) if any(at_conn) else np.inf  # simulated only when asked
             g_cur = g_cur if np.isfinite(g_cur) else np.inf
-            joint = [i < JOINT_TOP or (a and min(o[2], o[5], o[7]) < (1 - CONN_JOINT_GAIN) * g_cur)
+            joint = [i < JOINT_TOP or (a and own_rank(o) < (1 - CONN_JOINT_GAIN) * g_cur)
                      for i, (o, a) in enumerate(zip(own, at_conn))]
             tries = list(ex.map(lambda o, j: finish_addition(run, chosen, chain, o, joint=j), own, joint))
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
@@ -747,8 +747,8 @@ def joint_start(run: Run, chosen: list, chain: list, s, p, p_s, base_s) -> tuple
 def nominal_effects_start(run: Run, chain: list, s, p):
     """A joint start on the nominal model's linear parameters: the chosen effects' parameters
     (`chain`: ``(spec, p)``) and the addition `s`'s (from `p`) fitted together with the linear
-    ones held (:data:`EFFECTS_NFEV` evaluations, screening prefix). Returns the joint vector, or
-    None when it cannot be simulated."""
+    ones held (:data:`EFFECTS_NFEV` evaluations, screening prefix). Returns ``(joint vector,
+    its fitting gap on the screening prefix)``, or ``(None, inf)`` when it cannot be simulated."""
     build_j, lo, hi, offs = joint_builder(run, chain, s)
     th = np.zeros(offs[0])
     lo_q, hi_q = lo[offs[0]:], hi[offs[0]:]
@@ -771,8 +771,8 @@ def nominal_effects_start(run: Run, chain: list, s, p):
         q, g, _ = fit_time_domain(build, np.clip(q0, lo_q, hi_q), lo_q, hi_q, run.sims, run.ys, run.split.fit,
                                   run.split.screen_prefix, fast=True, max_nfev=EFFECTS_NFEV)
     except (ValueError, TypeError):
-        return None
-    return np.concatenate([th, q]) if np.isfinite(g) else None
+        return None, np.inf
+    return (np.concatenate([th, q]), g) if np.isfinite(g) else (None, np.inf)
 
 
 def scanned(run: Run, build, q, i, lo, hi):
@@ -837,16 +837,15 @@ def own_addition(run: Run, chosen: list, chain: list, cur_m, item):
     # replacement of the first: used instead, it led seed 3737 case 005's asymmetric friction to
     # a symmetric one (not where the current model is already within GENERIC_JOINT_ABOVE of the
     # floor: nothing mimicked is left to undo)
-    x_n, g_n = None, np.inf
-    if chosen[-1][0].gap_after > GENERIC_JOINT_ABOVE * run.floor_rank:
-        x_n = nominal_effects_start(run, chain, s, p)
-        if x_n is not None:
-            try:
-                g_n = prefix_gap(run, joint_builder(run, chain, s)[0](x_n))
-            except (ValueError, TypeError):
-                x_n = None
-            g_n = g_n if x_n is not None and np.isfinite(g_n) else np.inf
+    x_n, g_n = (nominal_effects_start(run, chain, s, p)
+                if chosen[-1][0].gap_after > GENERIC_JOINT_ABOVE * run.floor_rank else (None, np.inf))
     return s, p, gfit, build(p), x0, g0, x_n, g_n
+
+
+def own_rank(own) -> float:
+    """The measure an addition (`own`, from :func:`own_addition`) is ranked by for its joint fit:
+    the best fitting gap of its own fit, of its joint start and of the nominal-base start."""
+    return min(own[2], own[5], own[7])
 
 
 def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = True):
@@ -894,8 +893,8 @@ def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = T
             # with the saturation jointly 0.144, on the nominal base with the clearance and the
             # limit fitted first 0.0215, the truth's 0.0217): the effects fitted on the nominal
             # base with the linear parameters held, then all jointly, and the better kept
-            x2 = None if tried_n else x_n if x_n is not None else nominal_effects_start(run, chain, s, p)
-            if x2 is not None:
+            x2 = x_n if x_n is not None else nominal_effects_start(run, chain, s, p)[0]
+            if x2 is not None and not tried_n:  # (the joint fit from own_addition's is made above)
                 best = joint_from(x2, 4)
     p, gfit, m_new, base_new, x_j, chp = best
     g, yh = run.held_out(m_new, fast=True)
