@@ -50,6 +50,10 @@ def add_parser(sub) -> None:
     p.add_argument("--holdout", choices=("auto", "last"), default="auto",
                    help="several logs: 'auto' holds out the last log when all are at one input level, else the "
                         "end of each log (every level fitted and validated); 'last' always holds out the last log")
+    p.add_argument("--output-sampling", choices=("auto", "filtered", "point"), default="auto",
+                   help="how nonlinear simulations meet the log's rate: 'filtered' (anti-aliased, decimated), "
+                        "'point' (taken at the sample instants: a sensor without an anti-aliasing filter) or "
+                        "'auto' (default: the one that fits the best screened candidate better)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -96,7 +100,7 @@ def run(args) -> int:
         if args.nperseg is not None and args.nperseg < 16:
             raise ValueError(f"--nperseg {args.nperseg} must be at least 16 samples")
         report = diagnose(model, sigs, effects=effects, transient_s=args.transient, nperseg=args.nperseg,
-                          holdout=args.holdout,
+                          holdout=args.holdout, output_sampling=args.output_sampling,
                           workers=max(1, args.workers), progress=not args.no_progress)
     except ValueError as exc:
         raise ModelFileError(f"{args.model}: cannot diagnose: {exc}") from None

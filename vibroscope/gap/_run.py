@@ -210,6 +210,10 @@ class Run:
     window: str
     effect_set: set
     excluded: dict
+    #: the output sampling asked for ('auto', 'filtered' or 'point') and, once chosen
+    #: (:func:`~vibroscope.gap._candidates.choose_output_sampling`), what was chosen and why
+    output_sampling: str = "auto"
+    sampling_choice: dict | None = None
     # the nominal model and the noise floor (_simulate_nominal)
     y_nom: list | None = None
     gap_before: float | None = None

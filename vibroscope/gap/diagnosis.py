@@ -295,6 +295,7 @@ def diagnose(
     n_full: int = 2,
     progress: bool = False,
     holdout: str = "auto",
+    output_sampling: str = "auto",
 ) -> GapReport:
     """Diagnose the gap between `model` and the logged behaviour.
 
@@ -330,6 +331,14 @@ def diagnose(
         Several logs: ``'auto'`` (default) holds out the last log when every log is at one
         input level, else the end of each log; ``'last'`` always holds out the last log (a
         validation log the user has chosen, such as a benchmark's test part).
+    output_sampling : {'auto', 'filtered', 'point'}, optional
+        How the nonlinear simulations bring their outputs to the log's rate
+        (:func:`~vibroscope.models.simulate.simulate`): low-passed and decimated ('filtered': a
+        sensor with an anti-aliasing filter) or taken at the sample instants ('point': a sampling
+        ADC without one, where a nonlinearity's harmonics above ``fs / 2`` alias). ``'auto'``
+        (default) chooses the one that fits the best screened nonlinear candidate better
+        (:func:`~vibroscope.gap._candidates.choose_output_sampling`); the report's
+        ``meta["output_sampling"]`` says which and why.
 
     Returns
     -------
@@ -340,7 +349,8 @@ def diagnose(
     ChannelError
         If a model channel is missing from a log.
     ValueError
-        If the logs have different sampling rates, ±Inf samples, too little left between
+        If `output_sampling` is not one of its three values, the logs have different sampling
+        rates, ±Inf samples, too little left between
         missing samples, or the model cannot be diagnosed (see :func:`as_lumped`).
 
     Warns
@@ -389,11 +399,16 @@ def diagnose(
         # optimiser rejects that step by itself
         warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"scipy\.optimize")
         return _diagnose(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg,
-                         workers=workers, n_full=n_full, progress=progress, holdout=holdout)
+                         workers=workers, n_full=n_full, progress=progress, holdout=holdout,
+                         output_sampling=output_sampling)
 
 
-def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout) -> GapReport:
+def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout,
+              output_sampling="auto") -> GapReport:
+    if output_sampling not in ("auto", "filtered", "point"):
+        raise ValueError(f"{output_sampling=} must be 'auto', 'filtered' or 'point'")
     run = _prepare_logs(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg, holdout=holdout)
+    run.output_sampling = output_sampling
     _simulate_nominal(run)
     _refit_linear(run)
     gather_evidence(run)
@@ -642,7 +657,7 @@ def _build_report(run: Run) -> GapReport:
         spectrum=spectrum,
         timings=timings,
         level_evidence=level_ev,
-        meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
+        meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "output_sampling": run.sampling_choice, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "noise_floor_ranking": {"nrmse": floor_rank, "method": floor_rank_method},
               "nested_tests": {"t": dict(run.nested_t), "threshold": NESTED_T},

@@ -63,11 +63,16 @@ class LogSimulator:
         :func:`~vibroscope.models.closed_loop.loop_inputs` (references first).
     fs : float
         Hz.
+    output_sampling : {'filtered', 'point'}, optional
+        How nonlinear simulations are brought back to `fs`
+        (:func:`~vibroscope.models.simulate.simulate`); the diagnosis chooses it from the data
+        (:func:`~vibroscope.gap._candidates.choose_output_sampling`). Default 'filtered'.
     """
 
-    def __init__(self, u: np.ndarray, fs: float):
+    def __init__(self, u: np.ndarray, fs: float, output_sampling: str = "filtered"):
         self.u = np.ascontiguousarray(u, float)
         self.fs = float(fs)
+        self.output_sampling = output_sampling
         self._fine: dict[tuple[int, int], np.ndarray] = {}
 
     def fine_input(self, R: int, n: int) -> np.ndarray:
@@ -135,7 +140,7 @@ class LogSimulator:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = _sim(model, u, self.fs, scheme=SCHEME, **kw)
+                s = _sim(model, u, self.fs, scheme=SCHEME, output_sampling=self.output_sampling, **kw)
             y = np.asarray(s.data[len(model.inputs):])
         except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
             y = np.full((len(model.outputs), n), np.nan)

@@ -126,7 +126,8 @@ def simulate_with_offsets(sim: LogSimulator, model: LumpedModel, n: int | None =
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = _sim(model, sim.u[:, :n] - u0, sim.fs, fine_input=U, scheme=SCHEME)
+                s = _sim(model, sim.u[:, :n] - u0, sim.fs, fine_input=U, scheme=SCHEME,
+                         output_sampling=sim.output_sampling)
             y = np.asarray(s.data[len(model.inputs):])
         except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
             y = np.full((len(model.outputs), n), np.nan)

@@ -267,6 +267,7 @@ def simulate(
     seed: int | None = None,
     fine_input=None,
     scheme: Literal["trapezoid", "exponential"] = "trapezoid",
+    output_sampling: Literal["filtered", "point"] = "filtered",
 ) -> Signals:
     """Simulate `model` driven by the sampled inputs `u`, from rest.
 
@@ -347,6 +348,15 @@ def simulate(
         (:func:`vibroscope.models.integrate.flatten_model`): 'trapezoid' (default) or
         'exponential' (exact linear free response: no frequency warping, so fewer sub-steps
         reach the same accuracy). Not used on the linear path or in closed loop.
+    output_sampling : {'filtered', 'point'}, optional
+        How the nonlinear path brings its fine-grid outputs back to `fs`: 'filtered'
+        (default) low-passes and decimates them (:func:`decimate_fir`), as a sensor with an
+        anti-aliasing filter (or a digitally decimated record, such as the Bouc-Wen
+        benchmark's) would; 'point' takes them at the sample instants, as a sampling ADC with
+        no anti-aliasing filter (and a reference integrator sampled at the log's times)
+        would, so a nonlinearity's harmonics above ``fs / 2`` alias into the band as they do
+        there. The linear path always samples at the instants (its outputs have no content
+        above ``fs / 2`` but for a clipped input's harmonics). Not used in closed loop.
 
     Returns
     -------
@@ -366,7 +376,8 @@ def simulate(
         If `u` has the wrong shape or non-finite values, `fs` is not positive,
         ``method="linear"`` is asked for a nonlinear model, ``method="nonlinear"`` for a
         model that is not a :class:`LumpedModel`, `oversample` < 1, or
-        `fine_input` has the wrong shape, non-finite values or disagrees with `oversample`.
+        `fine_input` has the wrong shape, non-finite values or disagrees with `oversample`,
+        or `output_sampling` is not 'filtered' or 'point'.
 
     Warns
     -----
@@ -391,6 +402,8 @@ def simulate(
     fs = float(fs)
     if not np.isfinite(fs) or fs <= 0:
         raise ValueError(f"{fs=} must be positive")
+    if output_sampling not in ("filtered", "point"):
+        raise ValueError(f"{output_sampling=} must be 'filtered' or 'point'")
     if getattr(model, "controllers", ()):
         if fine_input is not None:
             raise ValueError("fine_input is not used in a closed-loop simulation (the model has controllers)")
@@ -439,10 +452,16 @@ def simulate(
     else:
         res = integrate(model, U_app, 1.0 / (fs * R), warn=False, scheme=scheme)
         _warn_newton(res.newton_failures, U_app.shape[1] - 1)
-        y = decimate_fir(res.y, R) if R > 1 else res.y
+        if R == 1:
+            y = res.y
+        elif output_sampling == "point":
+            y = np.ascontiguousarray(res.y[:, ::R][:, :n])
+        else:
+            y = decimate_fir(res.y, R)
         meta = {
             "simulator": "trapezoidal" if scheme == "trapezoid" else "exponential-trapezoidal",
             "oversample": R,
+            "output_sampling": output_sampling,
             "upsampling": upsampling,
             "model": model.name,
             "newton_failures": res.newton_failures,
