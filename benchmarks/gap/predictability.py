@@ -4,8 +4,10 @@ Strong backlash or cubic stiffness on a light, weakly sprung mass can make a cha
 neutrally stable) system whose response no simulator reproduces over tens of seconds: two
 correct integrators drift apart. Such a case does not test the diagnoser. This check
 simulates the case's true model (read from ``truth/``, which the diagnoser never sees) with
-vibroscope's simulator at its default and at twice its default oversampling, and reports the
-nrmse of each against the log and against each other.
+vibroscope's simulator at its default and at twice its default oversampling, its outputs taken
+at the sample instants as the truth integrators take them (``output_sampling="point"``; the
+default low-pass would leave a friction's or a clipped force's aliased harmonics as a gap of its
+own), and reports the nrmse of each against the log and against each other.
 
     python benchmarks/gap/predictability.py DIR [case_NNN ...]
 
@@ -44,8 +46,8 @@ def truth_gap(root: Path, name: str) -> dict:
     sig = read_mcap(root / "cases" / name / log, nominal.input_channels() + nominal.output_channels())
     u, y = np.asarray(sig.data[:1]), np.asarray(sig.data[1:])
     R = default_oversample(true_model, sig.fs)
-    ya = np.asarray(simulate(true_model, u, sig.fs, oversample=R).data[1:])
-    yb = np.asarray(simulate(true_model, u, sig.fs, oversample=2 * R).data[1:])
+    ya = np.asarray(simulate(true_model, u, sig.fs, oversample=R, output_sampling="point").data[1:])
+    yb = np.asarray(simulate(true_model, u, sig.fs, oversample=2 * R, output_sampling="point").data[1:])
 
     def nr(a, b):
         return float(np.sqrt(np.sum((a - b) ** 2) / np.sum(a**2)))
