@@ -86,7 +86,7 @@ import time
 import numpy as np
 
 from vibroscope.errors import ChannelError
-from vibroscope.gap._candidates import fit_candidates
+from vibroscope.gap._candidates import fit_candidates, recheck_output_sampling
 from vibroscope.gap._evidence import gather_evidence, states_model
 from vibroscope.gap._ranking import rank_candidates
 from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
@@ -413,7 +413,13 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     _refit_linear(run)
     gather_evidence(run)
     fit_candidates(run, workers=workers, n_full=n_full, progress=progress)
+    results, keep_ids = list(run.results), set(run.keep_ids)
     rank_candidates(run, workers=workers)
+    if recheck_output_sampling(run):
+        # the winner says the other output sampling: every candidate is evaluated and ranked again
+        # under it (from the fits as they were before ranking)
+        run.results, run.keep_ids = results, keep_ids
+        rank_candidates(run, workers=workers)
     select_further_effects(run, workers=workers)
     return _build_report(run)
 
