@@ -241,7 +241,7 @@ def choose_output_sampling(run: Run, screened: list) -> None:
         s, p, g, base = min(screened, key=lambda r: r[2])
         gaps = gaps_by_sampling(run, s.apply(base, p))
         if gaps is not None:
-            choice = {"chosen": sampling_of(gaps), "by": f"{s.effect} @ {where_key(s.where)}",
+            choice = {"chosen": sampling_of(gaps), "by": _label(s),
                       "gap_fit_filtered": gaps["filtered"], "gap_fit_point": gaps["point"]}
     run.sampling_choice = choice
     for sim in run.sims:
@@ -268,11 +268,16 @@ def recheck_output_sampling(run: Run) -> bool:
     chosen = sampling_of(gaps)
     old = run.sampling_choice["chosen"]
     run.sampling_choice = dict(run.sampling_choice, chosen=chosen) | {"recheck": {
-        "by": f"{c[3].effect} @ {where_key(c[3].where)}", "gap_fit_filtered": gaps["filtered"],
+        "by": _label(c[3]), "gap_fit_filtered": gaps["filtered"],
         "gap_fit_point": gaps["point"], "changed": chosen != old}}
     for sim in run.sims:
         sim.output_sampling = chosen
     return chosen != old
+
+
+def _label(s) -> str:
+    """A candidate's effect and location, as the output-sampling choice names it."""
+    return f"{s.effect} @ {where_key(s.where)}"
 
 
 def sampling_of(gaps: dict) -> str:

@@ -65,9 +65,10 @@ def rank_candidates(run: Run, *, workers) -> None:
 def results_to_evaluate(run: Run) -> list:
     """The fits worth a held-out evaluation: a fit that vanishes into a simpler member of its
     family (asymmetric friction with equal forces) added as that simpler effect at the same
-    location (to ``results`` and ``keep_ids``); every linear and jointly fitted result, and of the
-    screened ones those within 1.5 times their class's best fitting gap (the rest cannot win)."""
-    results, keep_ids, specs = run.results, run.keep_ids, run.specs
+    location; every linear and jointly fitted result, and of the screened ones those within 1.5
+    times their class's best fitting gap (the rest cannot win). Leaves ``run.results`` and
+    ``run.keep_ids`` as they are, so the ranking can be made again (another output sampling)."""
+    results, keep_ids, specs = list(run.results), set(run.keep_ids), run.specs
     for r in list(results):
         s_, m_, p_, g_, b_ = r
         red = s_.reduces_to(p_) if s_.reduces_to is not None else None

@@ -404,7 +404,7 @@ def diagnose(
 
 
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout,
-              output_sampling="auto") -> GapReport:
+              output_sampling) -> GapReport:
     if output_sampling not in ("auto", "filtered", "point"):
         raise ValueError(f"{output_sampling=} must be 'auto', 'filtered' or 'point'")
     run = _prepare_logs(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg, holdout=holdout)
@@ -413,12 +413,9 @@ def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full,
     _refit_linear(run)
     gather_evidence(run)
     fit_candidates(run, workers=workers, n_full=n_full, progress=progress)
-    results, keep_ids = list(run.results), set(run.keep_ids)
     rank_candidates(run, workers=workers)
     if recheck_output_sampling(run):
-        # the winner says the other output sampling: every candidate is evaluated and ranked again
-        # under it (from the fits as they were before ranking)
-        run.results, run.keep_ids = results, keep_ids
+        # the winner says the other output sampling: every candidate is evaluated and ranked again under it
         rank_candidates(run, workers=workers)
     select_further_effects(run, workers=workers)
     return _build_report(run)
