@@ -235,9 +235,11 @@ def choose_output_sampling(run: Run, screened: list) -> None:
     Sets ``sampling_choice`` (``chosen``, ``by`` and the two fitting gaps) and each simulator's
     ``output_sampling``. ``output_sampling`` given as 'filtered' or 'point' is used as given."""
     choice = {"chosen": "filtered", "by": "default (no nonlinear candidate simulated)"}
-    if run.output_sampling in ("filtered", "point"):
+    if run.closed:
+        choice["by"] = "not used: a closed loop's outputs are taken at the controllers' ticks"
+    elif run.output_sampling in ("filtered", "point"):
         choice = {"chosen": run.output_sampling, "by": "given"}
-    elif screened and not run.closed:
+    elif screened:
         s, p, g, base = min(screened, key=lambda r: r[2])
         gaps = gaps_by_sampling(run, s.apply(base, p))
         if gaps is not None:
