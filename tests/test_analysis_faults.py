@@ -212,3 +212,21 @@ def test_rerun_breaks_the_series_and_logs_each_gap(tmp_path):
     assert d["/signals/gaps"]["TextLog:text"] == ["gap (no data) in /imu.x: 1–1.1 s (10 samples)",
                                                   "gap (no data) in /imu.x: 5–5.01 s (1 samples)"]
     assert np.asarray(d["/signals/imu.y"]["Scalars:scalars"]).size == 1000
+
+
+@pytest.mark.parametrize("n, n_lags, ref", [(150_001, 169, None), (70_000, 300, [2, 0]), (1000, 1000, [1]),
+                                            (5000, 31, None), (257, 40, [0])])
+def test_output_covariances_by_fft_equal_the_direct_sums(n, n_lags, ref):
+    """The sectioned FFT (blocks, a record that is not a whole number of them, every lag up to the
+    record's length, a reference subset in another order) against ``Σ_k y[k+i] y_ref[k] / (n − i)``."""
+    rng = np.random.default_rng(n)
+    y = rng.standard_normal((3, n)) + np.array([[0.5], [0.0], [-2.0]])
+    yr = y if ref is None else y[ref]
+    R = output_covariances(y, n_lags, ref)
+    assert R.shape == (n_lags, 3, yr.shape[0])
+    scale = np.abs(R[0]).max()
+    for i in (0, 1, n_lags // 2, n_lags - 1):
+        direct = y[:, i:] @ yr[:, : n - i].T / (n - i)
+        np.testing.assert_allclose(R[i], direct, rtol=0, atol=1e-13 * scale)
+    with pytest.raises(ValueError, match="n_lags=0 must be between 1 and the record length n=257"):
+        output_covariances(y[:, :257], 0)
