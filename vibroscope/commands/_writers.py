@@ -4,6 +4,7 @@ written atomically."""
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import shlex
 from pathlib import Path
@@ -14,7 +15,7 @@ __all__ = ["write_outputs"]
 
 
 def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figures=None, spawn=False,
-                  true_modes=None, ods=None, ahead=None) -> dict:
+                  true_modes=None, ods=None, ahead=None, server=None) -> dict:
     """Write the summary JSON, the rerun recording and the figures of an analysis, atomically.
 
     With `ods` (frequencies in Hz) the operating deflection shapes at those frequencies (from the
@@ -50,6 +51,11 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
     ahead : TimeSeriesAhead, optional
         The integrals and time-series figures made while the modes were identified
         (:class:`vibroscope.viewers.ahead.TimeSeriesAhead`), taken instead of computing them again.
+    server : multiprocessing context, optional
+        A running drawing server (:func:`vibroscope.viewers.drawing_server.context`): the figure
+        workers are forked from it (:class:`vibroscope.viewers.figures.PendingFigures`), and so is
+        the one that writes the recording (unless `spawn`), so that this process imports neither
+        matplotlib nor rerun.
 
     Returns
     -------
@@ -114,9 +120,9 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                                coords=sc.as_mapping(), true_modes=true_modes, stabilization=stab, synthesized=synth,
                                kinematics=(an.signals.select(acc), *kin) if kin else None,
                                ahead=ahead if early else None)
-            jobs += [(lambda o=o: plot_ods(o, sc.as_mapping()), tmp / f"ods_{o.frequency:.4g}Hz.png")
+            jobs += [(functools.partial(plot_ods, o, sc.as_mapping()), tmp / f"ods_{o.frequency:.4g}Hz.png")
                      for o in ods_shapes]
-            pending = PendingFigures(jobs)
+            pending = PendingFigures(jobs, server=server)
         with pending or contextlib.nullcontext():  # an error or Ctrl-C here stops the figure workers
             if rrd or spawn:
                 from vibroscope.modal import ods_as_modal_model, with_operating_shapes as _with_ods
@@ -125,11 +131,16 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
                 modal = _with_ods(an.modal, [ods_as_modal_model(o) for o in ods_shapes]) if ods_shapes else an.modal
                 if early and acc:
                     kin = ahead.kinematics()
-                path = log_analysis(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
-                                    coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
-                                    spawn=spawn and not rrd,  # a recording under its final name is opened below
-                                    recording_name=Path(log).stem, stabilization=stab, synthesized=synth,
-                                    singular_values=getattr(an, "singular_values", None))
+                record = dict(kinematics=kin, signals=sig, psd=an.psd, csd=an.csd, frf=an.frf, modal=modal,
+                              coords=sc.as_mapping(), rrd_path=tx.file(rrd) if rrd else None,
+                              spawn=spawn and not rrd,  # a recording under its final name is opened below
+                              recording_name=Path(log).stem, stabilization=stab, synthesized=synth,
+                              singular_values=getattr(an, "singular_values", None))
+                if server is not None and rrd and not spawn:  # written by a worker of the drawing server,
+                    # where rerun is loaded, beside the figure workers: this process never imports rerun
+                    path = _in_worker(server, log_analysis, record)
+                else:
+                    path = log_analysis(**record)
                 written["rrd"] = tx.final(path) if path is not None else None
                 if rrd:
                     done.append(f"rerun recording: {rrd}  (open with: rerun {shlex.quote(str(rrd))})")
@@ -145,3 +156,16 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
 
         show_recording(rrd)
     return written
+
+
+def _in_worker(server, func, kwargs: dict):
+    """``func(**kwargs)`` run in one worker forked from the drawing server `server` (its arguments
+    pickled to it, its result back); the worker is stopped on an error or Ctrl-C."""
+    from vibroscope.viewers.figures import quiet_worker
+
+    pool = server.Pool(1, initializer=quiet_worker)
+    try:
+        return pool.apply_async(func, (), kwargs).get()
+    finally:
+        pool.terminate()
+        pool.join()

@@ -166,7 +166,15 @@ def run(args) -> int:
                        nperseg=args.nperseg, estimator=args.estimator)
         except (ValueError, ConnectionError) as exc:
             raise VibroscopeError(f"{args.log}: {exc}") from None
-    preload_outputs(rrd=bool(rrd) or args.spawn, figures=bool(figures))  # imported while the analysis runs
+    # the figures and the recording are made in workers forked from a drawing server that imports
+    # matplotlib and rerun now, on the other core, while this process imports its numerics and reads
+    # the log (a viewer to spawn is this process's: rerun is then imported here, in the background)
+    server = None
+    if figures or (rrd and not args.spawn):
+        from vibroscope.viewers import drawing_server
+
+        server = drawing_server.context() if drawing_server.start() else None
+    preload_outputs(rrd=args.spawn or (bool(rrd) and server is None), figures=bool(figures) and server is None)
     budget = memory_budget(args.max_memory)
     need = whole_read_bytes(args.log)
     if args.stream or need > budget:
@@ -179,7 +187,7 @@ def run(args) -> int:
     # what needs only the time series (integrals, signals and kinematics figures) is made in a worker
     # process while the modes are identified on the other core (the background imports joined first:
     # no worker inherits a held import lock)
-    ahead = TimeSeriesAhead(figures=bool(figures), kinematics=bool(rrd) or args.spawn)
+    ahead = TimeSeriesAhead(figures=bool(figures), kinematics=bool(rrd) or args.spawn, server=server)
 
     def on_signals(sig, outputs) -> None:
         preloaded()
@@ -205,5 +213,5 @@ def run(args) -> int:
             read_coords(args.coords, an.settings["outputs"])
         print(report_text(an, source=str(args.log), verbose=getattr(args, "verbose", False)))
         write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
-                      spawn=args.spawn, ods=args.ods, ahead=ahead)
+                      spawn=args.spawn, ods=args.ods, ahead=ahead, server=server)
     return 0

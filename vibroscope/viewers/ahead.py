@@ -5,8 +5,10 @@ The identification (SSI-COV and its bootstrap, LSCF, ...) runs on one core: on t
 2-core machine the other core waits for it. :class:`TimeSeriesAhead` puts it to work: called with
 the record the modes are identified from (the ``on_signals`` hook of
 :func:`vibroscope.pipeline.analyse_signals`), it forks one worker process that integrates the
-accelerations (velocity and displacement, for ``kinematics.png`` and the recording) and draws
-``kinematics.png`` and ``signals.png`` into memory while the analysis goes on. The outputs then
+accelerations (velocity and displacement, for ``kinematics.png`` and the recording: a task of its
+own, first, so that the recording need not wait for the figures) and draws ``kinematics.png`` and
+``signals.png`` into memory while the analysis goes on. With a drawing server
+(:mod:`vibroscope.viewers.drawing_server`) the worker is forked from it, matplotlib already loaded. The outputs then
 take what it made instead of computing it again (:meth:`TimeSeriesAhead.kinematics`, and
 :func:`vibroscope.viewers.figures.figure_jobs` with ``ahead=``): the same calls on the same data,
 so the same integrals and the same PNG bytes.
@@ -17,7 +19,6 @@ rerun.
 
 from __future__ import annotations
 
-import functools
 import io
 import sys
 
@@ -33,14 +34,9 @@ ACCELERATION_UNITS = ("m/s^2", "m/s²")
 #: record near the memory budget is left to the outputs, which integrate it in place
 MAX_BYTES = 256 * 2**20
 
-#: the tasks of the running :class:`TimeSeriesAhead`, read by its forked worker (inherited with the
-#: parent's memory: nothing is pickled but an index and the results)
-_TASKS: list = []
-
-
-def _run(k: int):
-    """Worker: run task `k` of :data:`_TASKS`."""
-    return _TASKS[k]()
+#: the integrals of the worker's last integration task, kept in the worker for the kinematics
+#: figure that follows it (one worker runs the tasks in order)
+_STASH: dict = {}
 
 
 def _png(fig) -> bytes:
@@ -52,16 +48,21 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
-def _kinematics(acc, figure: bool):
-    """Worker: (velocity, displacement, PNG bytes of ``kinematics.png`` or None) of `acc`."""
+def _integrate(acc):
+    """Worker: (velocity, displacement) of the accelerations `acc`, kept for :func:`_kinematics_png`."""
     from vibroscope.spectral.integration import velocity_and_displacement
 
     vel, disp = velocity_and_displacement(acc)
-    if not figure:
-        return vel, disp, None
+    _STASH["kinematics"] = (acc, vel, disp)
+    return vel, disp
+
+
+def _kinematics_png() -> bytes:
+    """Worker: the PNG bytes of ``kinematics.png`` of the integration task run before it."""
     from vibroscope.viewers.acquisition import plot_kinematics
 
-    return vel, disp, _png(plot_kinematics(acc, integrals=(vel, disp)))
+    acc, vel, disp = _STASH.pop("kinematics")
+    return _png(plot_kinematics(acc, integrals=(vel, disp)))
 
 
 def _signals(sig) -> bytes:
@@ -91,15 +92,21 @@ class TimeSeriesAhead(OwnsWorkerPool):
     max_bytes : int, optional
         Largest record (bytes of its samples) worked on ahead; default :data:`MAX_BYTES`
         (256 MiB). A larger one is left to the outputs.
+    server : multiprocessing context, optional
+        A running drawing server's context (:func:`vibroscope.viewers.drawing_server.context`):
+        the worker is forked from it, with matplotlib loaded there; default None, forked from
+        this process. Either way the record is pickled to the worker and the integrals back.
     """
 
-    def __init__(self, *, figures: bool, kinematics: bool, max_bytes: int = MAX_BYTES):
+    def __init__(self, *, figures: bool, kinematics: bool, max_bytes: int = MAX_BYTES, server=None):
+        self._server = server
         self._figures, self._kin = bool(figures), bool(kinematics)
         self._max_bytes = int(max_bytes)
         self._pool = None
         self._results: dict = {}
         self._signals = None
         self._acc: list[str] = []
+        self._starting = self._error = None
 
     def start(self, signals, outputs) -> None:
         """Fork the worker and hand it the record (the ``on_signals`` hook).
@@ -114,29 +121,56 @@ class TimeSeriesAhead(OwnsWorkerPool):
         outputs : sequence of str
             The response channels; those in m/s² are integrated.
         """
-        global _TASKS
-        if (self._pool is not None or not (self._figures or self._kin) or not sys.platform.startswith("linux")
+        if (self._signals is not None or not (self._figures or self._kin) or not sys.platform.startswith("linux")
                 or signals.data.nbytes > self._max_bytes):
             return
         acc = [c for c, u in zip(signals.channels, signals.units) if c in outputs and u in ACCELERATION_UNITS]
-        tasks = {}
+        tasks = []  # run in this order by the one worker: the integrals first, for the recording
         if acc:
-            tasks["kinematics"] = functools.partial(_kinematics, signals.select(acc), self._figures)
-        if self._figures:
-            tasks["signals"] = functools.partial(_signals, signals)
+            tasks.append(("kinematics", _integrate, (signals.select(acc),)))
+            if self._figures:
+                tasks.append(("kinematics_png", _kinematics_png, ()))
+        if self._figures and self._server is None:  # with a drawing server, the figure pool draws it
+            # after the analysis, beside the others: this worker's kinematics figure is the longest
+            tasks.append(("signals", _signals, (signals,)))
         if not tasks:
             return
         import multiprocessing
 
         from vibroscope.viewers.figures import quiet_worker
 
-        _TASKS = list(tasks.values())
-        try:
-            self._pool = multiprocessing.get_context("fork").Pool(1, initializer=quiet_worker)
-            self._results = {name: self._pool.apply_async(_run, (k,)) for k, name in enumerate(tasks)}
-        finally:
-            _TASKS = []  # the worker holds its copy
         self._signals, self._acc = signals, acc
+        if self._server is None:
+            self._pool = multiprocessing.get_context("fork").Pool(1, initializer=quiet_worker)
+            self._results = {name: self._pool.apply_async(fn, args) for name, fn, args in tasks}
+            return
+        # a worker of the drawing server: asked for in a thread, so that this process goes on with the
+        # analysis while the server, which may still be importing, forks it (nothing of this process
+        # is forked: its threads are no hazard)
+        import threading
+
+        self._starting = threading.Thread(target=self._submit, args=(tasks,), name="vibroscope-ahead", daemon=True)
+        self._starting.start()
+
+    def _submit(self, tasks) -> None:
+        """Thread: start the server's worker and hand it the tasks (errors kept for :meth:`_started`)."""
+        from vibroscope.viewers.figures import quiet_worker
+
+        try:
+            self._pool = self._server.Pool(1, initializer=quiet_worker)
+            self._results = {name: self._pool.apply_async(fn, args) for name, fn, args in tasks}
+        except BaseException as exc:  # noqa: BLE001 - re-raised where the results are asked for
+            self._error = exc
+
+    def _started(self) -> None:
+        """Wait for :meth:`_submit`, if it runs; raise its error."""
+        if self._starting is not None:
+            self._starting.join()
+            self._starting = None
+        err = self._error
+        if err is not None:
+            self._error = None
+            raise err
 
     def holds(self, signals, acc) -> bool:
         """Whether the work was started for this record and these acceleration channels.
@@ -152,7 +186,7 @@ class TimeSeriesAhead(OwnsWorkerPool):
         -------
         bool
         """
-        return self._pool is not None and signals is self._signals and list(acc) == self._acc
+        return self._signals is not None and signals is self._signals and list(acc) == self._acc
 
     def kinematics(self):
         """The velocity and displacement of the accelerations, once integrated (waits for them).
@@ -168,10 +202,11 @@ class TimeSeriesAhead(OwnsWorkerPool):
         Exception
             The worker's error, as raised there.
         """
+        self._started()
         res = self._results.get("kinematics")
         if res is None:
             return None
-        vel, disp, _ = res.get()
+        vel, disp = res.get()
         return vel, disp
 
     def drawn(self, signals) -> dict:
@@ -189,11 +224,19 @@ class TimeSeriesAhead(OwnsWorkerPool):
         """
         from vibroscope.viewers.figures import DrawnFigure
 
-        if self._pool is None or signals is not self._signals or not self._figures:
+        if self._signals is None or signals is not self._signals or not self._figures:
             return {}
+        self._started()
         out = {}
-        if "kinematics" in self._results:
-            out["kinematics"] = DrawnFigure(lambda: self._results["kinematics"].get()[2])
-        out["signals"] = DrawnFigure(self._results["signals"].get)
+        if "kinematics_png" in self._results:
+            out["kinematics"] = DrawnFigure(self._results["kinematics_png"].get)
+        if "signals" in self._results:
+            out["signals"] = DrawnFigure(self._results["signals"].get)
         return out
 
+    def close(self) -> None:
+        """Stop the worker (the thread that starts it waited for first)."""
+        if self._starting is not None:
+            self._starting.join()
+            self._starting = None
+        super().close()

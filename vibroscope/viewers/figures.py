@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import sys
+from functools import partial
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -864,7 +865,12 @@ _JOBS: list = []
 
 def _render(k: int) -> str:
     """Worker: draw and save job `k` of :data:`_JOBS`; returns the path written."""
-    draw, path = _JOBS[k]
+    return _render_job(_JOBS[k])
+
+
+def _render_job(job) -> str:
+    """Worker: draw and save one ``(draw, path)`` job; returns the path written."""
+    draw, path = job
     fig = draw()
     return str(save_figure(getattr(fig, "figure", fig), path))
 
@@ -956,9 +962,16 @@ class PendingFigures(OwnsWorkerPool):
         in place of `draw` is written by :meth:`wait`, in this process.
     workers : int, optional
         Worker processes; default the CPU cores this process may use, at most one per job.
+    server : multiprocessing context, optional
+        The context of a running drawing server
+        (:func:`vibroscope.viewers.drawing_server.context`): the workers are forked from it, with
+        matplotlib already loaded there, and the jobs are pickled to them (so each ``draw`` must
+        pickle: a module-level function or a ``functools.partial`` of one, as
+        :func:`figure_jobs` makes them); this process then never imports matplotlib, even for
+        one job. Default None: forked from this process as above.
     """
 
-    def __init__(self, jobs, *, workers: int | None = None):
+    def __init__(self, jobs, *, workers: int | None = None, server=None):
         global _JOBS
         jobs = list(jobs)
         self._paths = [p for _, p in jobs]
@@ -966,7 +979,11 @@ class PendingFigures(OwnsWorkerPool):
         self._jobs = [(d, p) for d, p in jobs if not isinstance(d, DrawnFigure)]
         self._pool = self._result = None
         n = min(len(self._jobs), workers or _workers())
-        if n > 1 and sys.platform.startswith("linux") and not _JOBS:
+        if server is not None and n >= 1:
+            self._pool = server.Pool(n, initializer=quiet_worker)
+            # the slowest first (listed first by the caller), one job at a time to whichever is free
+            self._result = self._pool.map_async(_render_job, self._jobs, chunksize=1)
+        elif n > 1 and sys.platform.startswith("linux") and not _JOBS:
             import multiprocessing
 
             import PIL.Image  # noqa: F401 - imported once, here, not in each worker
@@ -1041,24 +1058,24 @@ def figure_jobs(out_dir: str | Path, *, signals=None, psd=None, frf=None, modal=
         from vibroscope.viewers.acquisition import plot_kinematics
 
         acc, vel, disp = kinematics
-        jobs.append((lambda: plot_kinematics(acc, integrals=(vel, disp)), out / "kinematics.png"))
+        jobs.append((partial(plot_kinematics, acc, integrals=(vel, disp)), out / "kinematics.png"))
     if sv is not None and len(sv) == 2:
         ft = None if true_modes is None else true_modes.natural_frequencies
-        jobs.append((lambda: plot_singular_values(sv[0], sv[1], modal, true_frequencies=ft), out / "singular_values.png"))
+        jobs.append((partial(plot_singular_values, sv[0], sv[1], modal, true_frequencies=ft), out / "singular_values.png"))
     if "signals" in drawn:
         jobs.append((drawn["signals"], out / "signals.png"))
     elif signals is not None:
-        jobs.append((lambda: plot_signals(signals), out / "signals.png"))
+        jobs.append((partial(plot_signals, signals), out / "signals.png"))
     if synthesized is not None and frf is not None:
-        jobs.append((lambda: plot_frf_synthesis(frf, synthesized, modal), out / "frf_synthesis.png"))
+        jobs.append((partial(plot_frf_synthesis, frf, synthesized, modal), out / "frf_synthesis.png"))
     if frf is not None:
-        jobs.append((lambda: plot_frf(frf), out / "frf.png"))
+        jobs.append((partial(plot_frf, frf), out / "frf.png"))
     if modal is not None and len(np.atleast_1d(modal.natural_frequencies)):
-        jobs.append((lambda: plot_mode_shapes(modal, coords, true_modes=true_modes), out / "modes.png"))
+        jobs.append((partial(plot_mode_shapes, modal, coords, true_modes=true_modes), out / "modes.png"))
     if stabilization is not None:
-        jobs.append((lambda: plot_stabilization(stabilization, sv, modal), out / "stabilization.png"))
+        jobs.append((partial(plot_stabilization, stabilization, sv, modal), out / "stabilization.png"))
     if psd is not None:
-        jobs.append((lambda: plot_spectrum(psd), out / "psd.png"))
+        jobs.append((partial(plot_spectrum, psd), out / "psd.png"))
     return jobs
 
 
