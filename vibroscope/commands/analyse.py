@@ -128,11 +128,8 @@ def run(args) -> int:
     VibroscopeError
         When an output is an input file (``--json LOG``), or the analysis fails (the log named).
     """
-    from vibroscope.commands._options import select_frequencies as _select_freqs
-    from vibroscope.commands._outputs import (check_out_dir, check_outputs, default_output, preload_outputs,
-                                              preloaded, resolve_outputs)
+    from vibroscope.commands._outputs import check_out_dir, check_outputs, default_output, resolve_outputs
     from vibroscope.errors import VibroscopeError
-    from vibroscope.viewers.ahead import TimeSeriesAhead
 
     check_out_dir(args.out)
     resolve_outputs(args, ("json", "rrd", "figures"), args.out)  # `--out res --json s.json`: res/s.json
@@ -174,6 +171,23 @@ def run(args) -> int:
         from vibroscope.viewers import drawing_server
 
         server = drawing_server.context() if drawing_server.start() else None
+    done = False
+    try:
+        status = _run_one(args, rrd, figures, server)
+        done = True
+        return status
+    finally:
+        if server is not None:
+            drawing_server.stop(wait=done)
+
+
+def _run_one(args, rrd, figures, server) -> int:
+    """:func:`run` for one log read whole (or streamed), with the drawing server `server` (or None)."""
+    from vibroscope.commands._options import select_frequencies as _select_freqs
+    from vibroscope.commands._outputs import preload_outputs, preloaded
+    from vibroscope.errors import VibroscopeError
+    from vibroscope.viewers.ahead import TimeSeriesAhead
+
     preload_outputs(rrd=args.spawn or (bool(rrd) and server is None), figures=bool(figures) and server is None)
     budget = memory_budget(args.max_memory)
     need = whole_read_bytes(args.log)

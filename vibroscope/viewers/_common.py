@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["sensor_geometry", "real_shape", "mode_label", "nearest_frequencies", "pyplot", "short_label", "distinct_labels"]
+__all__ = ["sensor_geometry", "real_shape", "mode_label", "nearest_frequencies", "pyplot", "short_label", "distinct_labels",
+           "sigint_held"]
 
 _AXES = {"1": (1.0, 0.0, 0.0), "2": (0.0, 1.0, 0.0), "3": (0.0, 0.0, 1.0),
          "x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
@@ -219,3 +221,38 @@ def distinct_labels(names: Sequence[str], n: int = 16) -> list[str]:
     if len(set(out)) < len(out) or not all(out):
         out = names
     return [short_label(x, n) for x in out]
+
+
+@contextlib.contextmanager
+def sigint_held():
+    """Hold back Ctrl-C (SIGINT) in this block; one that came meanwhile is handed to the handler that
+    was in place (``KeyboardInterrupt`` by default) as the block ends.
+
+    A ``KeyboardInterrupt`` inside ``Pool()`` would leave a started worker that nobody terminates
+    (``Pool`` cleans up after an ``Exception`` only), and a worker forked from the drawing server
+    (:mod:`vibroscope.viewers.drawing_server`) holds the server's lifeline: neither would ever end.
+    The Python-level handler is swapped for one that records the signal (a mask would not do: the signal may be delivered to any thread,
+    and Python raises it in the main thread all the same). Only the main thread may set handlers:
+    elsewhere this does nothing.
+
+    Yields
+    ------
+    None
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda s, f: got.append(s))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+        if got:
+            if callable(old):
+                old(signal.SIGINT, None)
+            elif old != signal.SIG_IGN:
+                raise KeyboardInterrupt

@@ -106,7 +106,6 @@ class TimeSeriesAhead(OwnsWorkerPool):
         self._results: dict = {}
         self._signals = None
         self._acc: list[str] = []
-        self._starting = self._error = None
 
     def start(self, signals, outputs) -> None:
         """Fork the worker and hand it the record (the ``on_signals`` hook).
@@ -142,35 +141,12 @@ class TimeSeriesAhead(OwnsWorkerPool):
         self._signals, self._acc = signals, acc
         if self._server is None:
             self._pool = multiprocessing.get_context("fork").Pool(1, initializer=quiet_worker)
-            self._results = {name: self._pool.apply_async(fn, args) for name, fn, args in tasks}
-            return
-        # a worker of the drawing server: asked for in a thread, so that this process goes on with the
-        # analysis while the server, which may still be importing, forks it (nothing of this process
-        # is forked: its threads are no hazard)
-        import threading
+        else:  # forked by the drawing server (waits for it if it is still importing)
+            from vibroscope.viewers.drawing_server import pool, sigint_held
 
-        self._starting = threading.Thread(target=self._submit, args=(tasks,), name="vibroscope-ahead", daemon=True)
-        self._starting.start()
-
-    def _submit(self, tasks) -> None:
-        """Thread: start the server's worker and hand it the tasks (errors kept for :meth:`_started`)."""
-        from vibroscope.viewers.figures import quiet_worker
-
-        try:
-            self._pool = self._server.Pool(1, initializer=quiet_worker)
-            self._results = {name: self._pool.apply_async(fn, args) for name, fn, args in tasks}
-        except BaseException as exc:  # noqa: BLE001 - re-raised where the results are asked for
-            self._error = exc
-
-    def _started(self) -> None:
-        """Wait for :meth:`_submit`, if it runs; raise its error."""
-        if self._starting is not None:
-            self._starting.join()
-            self._starting = None
-        err = self._error
-        if err is not None:
-            self._error = None
-            raise err
+            with sigint_held():  # a Ctrl-C meanwhile is raised at its end, the pool stored: closed by close()
+                self._pool = pool(self._server, 1)
+        self._results = {name: self._pool.apply_async(fn, args) for name, fn, args in tasks}
 
     def holds(self, signals, acc) -> bool:
         """Whether the work was started for this record and these acceleration channels.
@@ -202,7 +178,6 @@ class TimeSeriesAhead(OwnsWorkerPool):
         Exception
             The worker's error, as raised there.
         """
-        self._started()
         res = self._results.get("kinematics")
         if res is None:
             return None
@@ -226,17 +201,9 @@ class TimeSeriesAhead(OwnsWorkerPool):
 
         if self._signals is None or signals is not self._signals or not self._figures:
             return {}
-        self._started()
         out = {}
         if "kinematics_png" in self._results:
             out["kinematics"] = DrawnFigure(self._results["kinematics_png"].get)
         if "signals" in self._results:
             out["signals"] = DrawnFigure(self._results["signals"].get)
         return out
-
-    def close(self) -> None:
-        """Stop the worker (the thread that starts it waited for first)."""
-        if self._starting is not None:
-            self._starting.join()
-            self._starting = None
-        super().close()

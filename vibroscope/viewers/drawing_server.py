@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["start", "context", "warm_up", "main_is_importable", "PRELOAD"]
+from vibroscope.viewers._common import sigint_held
+
+__all__ = ["start", "stop", "context", "pool", "sigint_held", "warm_up", "main_is_importable", "PRELOAD"]
 
 #: the module the server imports before it forks any worker
 PRELOAD = "vibroscope.viewers.drawing_preload"
@@ -105,8 +107,65 @@ def main_is_importable() -> bool:
         g in head for g in ("if __name__ == '__main__':", 'if __name__ == "__main__":'))
 
 
+def pool(server, processes: int):
+    """A ``multiprocessing`` pool of `processes` workers forked from the drawing server `server`.
+
+    Call it inside :func:`sigint_held`, with the pool stored where the code that terminates it
+    (``try``/``finally``, ``with``, a ``close`` method) will find it when a held-back Ctrl-C is
+    raised at the end of that block.
+
+    Parameters
+    ----------
+    server : multiprocessing context
+        :func:`context`.
+    processes : int
+        Number of workers.
+
+    Returns
+    -------
+    multiprocessing.pool.Pool
+    """
+    from vibroscope.viewers.figures import quiet_worker
+
+    return server.Pool(processes, initializer=quiet_worker)
+
+
+def stop(*, wait: bool = True) -> None:
+    """Stop the drawing server, if :func:`start` started it.
+
+    The server ends by itself when this process ends (and its workers with their pools); with
+    `wait`, its lifeline is closed now and this process waits for it: no process is left behind
+    the command, and the CPU time of the server and its workers becomes part of this process's
+    children's (``getrusage(RUSAGE_CHILDREN)``, as ``benchmarks/analyse_outputs.py`` reads it).
+
+    Parameters
+    ----------
+    wait : bool, optional
+        Default True. Give False after an error or Ctrl-C: a worker still running would hold the
+        server's lifeline open, and the wait would last until it ends.
+    """
+    if not _CONTEXT:
+        return
+    _CONTEXT.clear()
+    if not wait:
+        return
+    import contextlib
+    from multiprocessing import forkserver
+
+    # the stdlib's own stop (closes the server's lifeline and waits for it; used by its tests)
+    halt = getattr(getattr(forkserver, "_forkserver", None), "_stop", None)
+    if halt is not None:
+        with contextlib.suppress(Exception):
+            halt()
+
+
 def context():
-    """The ``forkserver`` context of the running drawing server, or None when :func:`start` was not
-    called (or failed) in this process."""
+    """The ``forkserver`` context of the running drawing server.
+
+    Returns
+    -------
+    multiprocessing.context.ForkServerContext or None
+        None when :func:`start` was not called (or failed) in this process, or after :func:`stop`.
+    """
     return _CONTEXT[0] if _CONTEXT else None
 

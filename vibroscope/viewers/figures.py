@@ -980,9 +980,16 @@ class PendingFigures(OwnsWorkerPool):
         self._pool = self._result = None
         n = min(len(self._jobs), workers or _workers())
         if server is not None and n >= 1:
-            self._pool = server.Pool(n, initializer=quiet_worker)
-            # the slowest first (listed first by the caller), one job at a time to whichever is free
-            self._result = self._pool.map_async(_render_job, self._jobs, chunksize=1)
+            from vibroscope.viewers._common import sigint_held
+
+            try:
+                with sigint_held():  # a Ctrl-C meanwhile is raised at its end, the pool stored: closed below
+                    self._pool = server.Pool(n, initializer=quiet_worker)
+                    # the slowest first (listed first by the caller), one job at a time to whichever is free
+                    self._result = self._pool.map_async(_render_job, self._jobs, chunksize=1)
+            except BaseException:
+                self.close()
+                raise
         elif n > 1 and sys.platform.startswith("linux") and not _JOBS:
             import multiprocessing
 
