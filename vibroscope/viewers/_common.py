@@ -231,9 +231,9 @@ def sigint_held():
     A ``KeyboardInterrupt`` inside ``Pool()`` would leave a started worker that nobody terminates
     (``Pool`` cleans up after an ``Exception`` only), and a worker forked from the drawing server
     (:mod:`vibroscope.viewers.drawing_server`) holds the server's lifeline: neither would ever end.
-    The Python-level handler is swapped for one that records the signal (a mask would not do: the signal may be delivered to any thread,
-    and Python raises it in the main thread all the same). Only the main thread may set handlers:
-    elsewhere this does nothing.
+    The Python-level handler is swapped for one that records the signal (a mask would not do: the
+    signal may be delivered to any thread, and Python raises it in the main thread all the same).
+    Only the main thread may set handlers: elsewhere this does nothing.
 
     Yields
     ------
