@@ -161,15 +161,11 @@ def write_outputs(an, log: Path, *, coords=None, json_path=None, rrd=None, figur
 def _in_worker(server, func, kwargs: dict):
     """``func(**kwargs)`` run in one worker forked from the drawing server `server` (its arguments
     pickled to it, its result back); the worker is stopped on an error or Ctrl-C."""
-    from vibroscope.viewers.drawing_server import pool as server_pool
-    from vibroscope.viewers.drawing_server import sigint_held
+    from vibroscope.viewers.figures import server_pool
 
-    workers = []
+    workers = server_pool(server, 1)
     try:
-        with sigint_held():  # a Ctrl-C while the worker starts is raised here, the pool in hand
-            workers.append(server_pool(server, 1))
-        return workers[0].apply_async(func, (), kwargs).get()
+        return workers.apply_async(func, (), kwargs).get()
     finally:
-        for p in workers:
-            p.terminate()
-            p.join()
+        workers.terminate()
+        workers.join()

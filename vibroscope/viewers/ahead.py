@@ -142,10 +142,9 @@ class TimeSeriesAhead(OwnsWorkerPool):
         if self._server is None:
             self._pool = multiprocessing.get_context("fork").Pool(1, initializer=quiet_worker)
         else:  # forked by the drawing server (waits for it if it is still importing)
-            from vibroscope.viewers.drawing_server import pool, sigint_held
+            from vibroscope.viewers.figures import server_pool
 
-            with sigint_held():  # a Ctrl-C meanwhile is raised at its end, the pool stored: closed by close()
-                self._pool = pool(self._server, 1)
+            self._pool = server_pool(self._server, 1)
         self._results = {name: self._pool.apply_async(fn, args) for name, fn, args in tasks}
 
     def holds(self, signals, acc) -> bool:

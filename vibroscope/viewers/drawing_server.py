@@ -12,7 +12,8 @@ record of 3 × 5e5 samples pickles in ~10 ms).
 
 This is Python's own ``forkserver`` start method (:mod:`multiprocessing`, Linux):
 :mod:`vibroscope.viewers.drawing_preload` is its preload, imported once in the server;
-:func:`start` starts it, :func:`context` gives the context whose pools fork from it. Importing
+:func:`start` starts it, :func:`context` gives the context whose pools fork from it
+(:func:`vibroscope.viewers.figures.server_pool`). Importing
 this module imports neither matplotlib nor rerun.
 """
 
@@ -20,9 +21,7 @@ from __future__ import annotations
 
 import sys
 
-from vibroscope.viewers._common import sigint_held
-
-__all__ = ["start", "stop", "context", "pool", "sigint_held", "warm_up", "main_is_importable", "PRELOAD"]
+__all__ = ["start", "stop", "context", "warm_up", "main_is_importable", "PRELOAD"]
 
 #: the module the server imports before it forks any worker
 PRELOAD = "vibroscope.viewers.drawing_preload"
@@ -105,29 +104,6 @@ def main_is_importable() -> bool:
         return False
     return "from vibroscope.cli import main" in head and any(
         g in head for g in ("if __name__ == '__main__':", 'if __name__ == "__main__":'))
-
-
-def pool(server, processes: int):
-    """A ``multiprocessing`` pool of `processes` workers forked from the drawing server `server`.
-
-    Call it inside :func:`sigint_held`, with the pool stored where the code that terminates it
-    (``try``/``finally``, ``with``, a ``close`` method) will find it when a held-back Ctrl-C is
-    raised at the end of that block.
-
-    Parameters
-    ----------
-    server : multiprocessing context
-        :func:`context`.
-    processes : int
-        Number of workers.
-
-    Returns
-    -------
-    multiprocessing.pool.Pool
-    """
-    from vibroscope.viewers.figures import quiet_worker
-
-    return server.Pool(processes, initializer=quiet_worker)
 
 
 def stop(*, wait: bool = True) -> None:

@@ -21,7 +21,7 @@ from vibroscope.viewers._common import (distinct_labels, mode_label, nearest_fre
 
 __all__ = ["OwnsWorkerPool", "plot_spectrum", "plot_frf", "plot_mode_shapes", "plot_singular_values", "plot_signals",
            "plot_stabilization", "plot_frf_synthesis", "plot_mode_set_comparison", "plot_mode_shapes_3d",
-           "summary_figures", "figure_jobs", "PendingFigures", "DrawnFigure", "quiet_worker", "in_figure_order", "FIGURE_ORDER", "preload",
+           "summary_figures", "figure_jobs", "PendingFigures", "DrawnFigure", "quiet_worker", "server_pool", "in_figure_order", "FIGURE_ORDER", "preload",
            "plot_ods"]
 
 #: resolution of the written PNGs (dots per inch)
@@ -886,6 +886,40 @@ def quiet_worker() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
+def server_pool(server, processes: int):
+    """A ``multiprocessing`` pool of `processes` workers forked from a drawing server
+    (:mod:`vibroscope.viewers.drawing_server`), each started with :func:`quiet_worker`.
+
+    Ctrl-C is held back while the pool starts its workers
+    (:func:`vibroscope.viewers._common.sigint_held`); one that came meanwhile terminates the new
+    pool here and is then raised, so no worker is left without an owner (one would hold the
+    server's lifeline, and neither would ever end). The caller terminates the pool it gets.
+
+    Parameters
+    ----------
+    server : multiprocessing context
+        :func:`vibroscope.viewers.drawing_server.context`.
+    processes : int
+        Number of workers.
+
+    Returns
+    -------
+    multiprocessing.pool.Pool
+    """
+    from vibroscope.viewers._common import sigint_held
+
+    started = []
+    try:
+        with sigint_held():
+            started.append(server.Pool(processes, initializer=quiet_worker))
+    except BaseException:
+        for p in started:
+            p.terminate()
+            p.join()
+        raise
+    return started[0]
+
+
 def _workers() -> int:
     """CPU cores this process may run on."""
     try:
@@ -980,13 +1014,9 @@ class PendingFigures(OwnsWorkerPool):
         self._pool = self._result = None
         n = min(len(self._jobs), workers or _workers())
         if server is not None and n >= 1:
-            from vibroscope.viewers._common import sigint_held
-
-            try:
-                with sigint_held():  # a Ctrl-C meanwhile is raised at its end, the pool stored: closed below
-                    self._pool = server.Pool(n, initializer=quiet_worker)
-                    # the slowest first (listed first by the caller), one job at a time to whichever is free
-                    self._result = self._pool.map_async(_render_job, self._jobs, chunksize=1)
+            self._pool = server_pool(server, n)
+            try:  # the slowest first (listed first by the caller), one job at a time to whichever is free
+                self._result = self._pool.map_async(_render_job, self._jobs, chunksize=1)
             except BaseException:
                 self.close()
                 raise
