@@ -43,7 +43,7 @@ def stream_kw(args) -> dict:
                 method="auto" if needs_time_series(args) else args.method, select=None)
 
 
-def run_stream(args) -> int:
+def run_stream(args, server=None) -> int:
     """``vibroscope analyse --stream LOG``: the log read block by block (:func:`vibroscope.stream.analyse_stream`);
     prints the report and writes the ``--json`` summary, the figures and the rerun recording of the
     spectra, FRFs and modes (:func:`vibroscope.commands._writers.write_outputs`; no time-series figure or entity: a streamed
@@ -53,6 +53,9 @@ def run_stream(args) -> int:
     ----------
     args : argparse.Namespace
         The parsed command line.
+    server : multiprocessing context, optional
+        The drawing server `analyse` started (:func:`vibroscope.viewers.drawing_server.context`):
+        the figures and the recording are made in its workers, as for a whole read.
 
     Returns
     -------
@@ -96,5 +99,5 @@ def run_stream(args) -> int:
     # for a whole read (no signals.png, kinematics.png or /signals entities); the summary goes with
     # them, so that all outputs appear together or none
     write_outputs(an, args.log, coords=args.coords, json_path=args.json, rrd=rrd, figures=figures,
-                  spawn=args.spawn, ods=args.ods)
+                  spawn=args.spawn, ods=args.ods, server=server)
     return 0

@@ -196,7 +196,7 @@ def _run_one(args, rrd, figures, server) -> int:
                f"reading it whole needs about {need / 2**20:.0f} MiB, more than the memory budget "
                f"{budget / 2**20:.0f} MiB (--max-memory)")
         print(f"streaming {args.log} block by block: {why}")
-        return run_stream(args)
+        return run_stream(args, server)
     select = _select_freqs(args.select)
     # what needs only the time series (integrals, signals and kinematics figures) is made in a worker
     # process while the modes are identified on the other core (the background imports joined first:
