@@ -107,16 +107,26 @@ def _check_f_cut(f_cut, fs: float, n: int) -> float:
 
 
 def _integrate_frequency(x: np.ndarray, fs: float, f_cut: float) -> np.ndarray:
-    """One integration of the rows of `x` by FFT on the antisymmetric extension."""
+    """One integration of the rows of `x` (length ``n``) as the FFT on the antisymmetric extension
+    ``[x, −x reversed]`` (length ``2n``) defines it, computed by the pair of length-``n`` real
+    trigonometric transforms that this FFT reduces to (half the work, the same numbers to ~1e-14
+    of the RMS).
+
+    With ``S = DST-II(x)`` (scipy's unnormalised convention), the extension's DFT is
+    ``X[j] = −i e^{iπj/2n} S[j-1]`` for ``j = 1..n`` (``X[0] = 0``); multiplied by the purely
+    imaginary ``H[j] = W(f_j) / (i 2π f_j)``, ``f_j = j fs / 2n``, the inverse DFT is even about
+    the record's end and its first half is ``−DCT-III(c) / 2n`` with ``c[0] = 0``,
+    ``c[j] = S[j-1] W(f_j) / (2π f_j)`` for ``j = 1..n−1`` (the Nyquist bin ``j = n`` zero)
+    [Britanak, Yip & Rao, *Discrete Cosine and Sine Transforms*, Academic Press, 2007, ch. 2].
+    """
     n = x.shape[-1]
-    xe = np.concatenate([x, -x[:, ::-1]], axis=-1)  # period 2n, mean exactly 0
-    m = xe.shape[-1]
-    f = scipy.fft.rfftfreq(m, 1.0 / fs)
-    H = np.zeros(f.shape, dtype=complex)
-    H[1:] = highpass_gain(f[1:], f_cut) / (2j * np.pi * f[1:])
-    H[-1] = 0.0  # Nyquist bin (m is even): 1/(jω) there is not a real operator
-    X = scipy.fft.rfft(xe, axis=-1, workers=-1)
-    return scipy.fft.irfft(X * H, m, axis=-1, workers=-1)[:, :n]
+    f = np.arange(1, n + 1) * (fs / (2 * n))
+    g = highpass_gain(f, f_cut) / (2 * np.pi * f)
+    S = scipy.fft.dst(x, type=2, axis=-1, workers=-1)
+    c = np.empty_like(S)
+    c[:, 0] = 0.0
+    np.multiply(S[:, :-1], g[:-1], out=c[:, 1:])
+    return scipy.fft.dct(c, type=3, axis=-1, workers=-1, overwrite_x=True) * (-1.0 / (2 * n))
 
 
 def _integrate_highpass(x: np.ndarray, fs: float, f_cut: float) -> np.ndarray:
