@@ -601,6 +601,12 @@ def cumulative(run: Run, chain: list, base, chosen: list, i: int, last: tuple) -
     return out
 
 
+def is_free(eff: str, used: set) -> bool:
+    """Whether effect `eff` may join the chosen effects `used`: not chosen, and no member of its
+    nested family (:data:`~vibroscope.gap._run.NESTED_FAMILIES`) chosen."""
+    return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
+
+
 def addition_candidates(chosen: list, used: set, per_class: dict, screened: list, also: list,
                         screened_alt: list = ()) -> list:
     """The effects that may join `chosen`, as ``(spec, start p or None, screening base or None)``:
@@ -610,9 +616,7 @@ def addition_candidates(chosen: list, used: set, per_class: dict, screened: list
     screened on), the fits of `screened_alt` (kept on the other linear base where the better
     base's fit vanished) and the linear effects of `also` (``(spec, start p or None, base or
     None)``: from their own starts, or from their fits alone)."""
-    def free(eff):
-        return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
-
+    free = partial(is_free, used=used)
     cands = [(s_, p_, b_) for eff, (s_, p_, g_, b_) in sorted(per_class.items(), key=lambda kv: kv[1][2])
              if free(eff)][:4]
     pairs = [tuple(c[0].where["between"]) for c in chosen if "between" in c[0].where]
@@ -656,9 +660,7 @@ def masked_classes(screened: list, used: set, cands: list) -> list:
     floor; fitted as an addition from that vanished value the clearance returns to 1.74 µm and
     the pair is named at 0.028 held-out against a floor of 0.052 (seed 5003 case 001). Each
     addition still has to pass :func:`accepted_addition`."""
-    def free(eff):
-        return eff not in used and not any(eff in fam and used & fam for fam in NESTED_FAMILIES)
-
+    free = partial(is_free, used=used)
     offered = {(c[0].effect, where_key(c[0].where)) for c in cands}
     by_class: dict[str, list] = {}
     for s_, p_, g_, b_ in sorted(screened, key=lambda r: r[2]):
