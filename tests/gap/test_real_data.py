@@ -47,8 +47,12 @@ def test_silverbox_names_cubic_stiffness(shared_data):
 def test_boucwen_names_hysteresis(shared_data):
     bw = _example("boucwen")
     ms, sw = bw.signals(shared_data / "boucwen")
-    # the benchmark's protocol: fitted on the multisine, validated on the (stronger) sine sweep
-    r = diagnose(bw.nominal(), [ms, sw], transient_s=bw.PERIOD_S, holdout="last")
+    # the benchmark's protocol: fitted on the multisine, validated on the (stronger) sine sweep;
+    # the README's --transient 10.92 s, two samples short of the period (bw.PERIOD_S): with it the
+    # hysteresis alone polished to 0.0168 and a hardening spring + hysteresis won at 0.0037 until
+    # the backward elimination was made again after the combination's polish (the spring was then
+    # 5 % of its first fit); with bw.PERIOD_S the same verdict and parameters
+    r = diagnose(bw.nominal(), [ms, sw], transient_s=10.92, holdout="last")
     print(r.summary())
     assert list(r.verdicts) == ["hysteresis"], r.summary()  # one effect: no second one making up for a poor fit
     assert r.shrink > 0.95
