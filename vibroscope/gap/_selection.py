@@ -56,7 +56,8 @@ from vibroscope.gap.report import Candidate
 def select_further_effects(run: Run, *, workers) -> None:
     """Stage 5b: forward selection from the verdict (or, when unexplained, from the best
     admissible candidate): a second (third) effect is kept when it closes significantly more,
-    and a combination is polished jointly. Where an input delay joins only later, or nothing
+    and a combination is polished jointly, then tested again by backward elimination from the
+    polished parameters (:func:`eliminated`; what remains is polished again). Where an input delay joins only later, or nothing
     joins an unexplained gap while the phase slope measures a delay, the selection is run once
     more from the delay fitted alone, with the nonlinear candidates screened again on it
     (:func:`delay_first`, :func:`screen_on`), and the combination that explains more is kept.
