@@ -96,6 +96,16 @@ def select_further_effects(run: Run, *, workers) -> None:
         combination and the phase slope measures a delay (the delay was not fitted alone: the BLA
         changes with the level)."""
         d_later = [float(c[4][0]) for c in trial[1:] if c[0].effect == "time_delay"]
+        if (len(trial) == 1 and trial[0][0].effect == "time_delay" and trial[0][3] is not None
+                and trial[0][0].gap_after > PM_FURTHER * run.floor):
+            # the delay alone, well beyond the floor, and nothing joined it: the nonlinear classes
+            # were screened on a linear base without the delay, which bent them (fresh seed 7411
+            # case 004: a hysteresis beside a 1 ms delay, the delay alone at 17x the floor);
+            # screened again on the delay, the selection from it
+            trial2, shares2 = select_from(trial[0], screen_on(run, trial[0][1], workers))
+            if len(trial2) > 1 and beyond(trial2[-1][0], trial[0][0]):
+                return trial2, shares2
+            return trial, trial_shares
         if not d_later and (len(trial) > 1 or not alone_ok):
             return trial, trial_shares
         d_first = delay_first(run, workers, tau=d_later[0] if d_later else None)
