@@ -675,6 +675,12 @@ _FRESH_TWO_EFFECTS = [
     # twice the floor
     pytest.param(5003, 1, {"backlash", "saturation"}, [("backlash", "gap_m", 0.1), ("saturation", "limit_N", 0.05)],
                  id="5003-001-a-clearance-masked-by-a-saturation"),
+    # a strong hysteresis (alpha / k = 0.16) beside a 1 ms input delay (40 s, lsoda, one log): the
+    # delay alone at 17x the floor, the hysteresis screened on a linear base without the delay
+    # never joined it; screened again on the delay it does
+    pytest.param(7411, 4, {"hysteresis", "time_delay"},
+                 [("hysteresis", "alpha_N_per_m", 0.1), ("time_delay", "delay_s", 0.05)],
+                 id="7411-004-a-hysteresis-screened-again-on-the-delay"),
 ]
 #: cases generated with other settings than the default here (30 s, lsoda/RK4 by case number, a
 #: quarter multi-log, offsets up to 0.2 of the input's RMS force)
@@ -682,6 +688,7 @@ _FRESH_SETTINGS = {5858: dict(duration=40.0, integrator="rk4", multi_share=0.5),
                    6363: dict(duration=40.0, integrator="rk4", multi_share=0.6, offset_max=0.5),
                    4545: dict(multi_share=0.4, offset_max=gen.OFFSET_MAX),
                    5003: dict(multi_share=0.4, offset_max=gen.OFFSET_MAX),
+                   7411: dict(duration=40.0, multi_share=0.5, offset_max=gen.OFFSET_MAX),
                    7272: dict(offset_max=gen.OFFSET_MAX),
                    9393: dict(integrator="lsoda", offset_max=gen.OFFSET_MAX, weak_end=False)}
 
