@@ -94,7 +94,9 @@ def select_further_effects(run: Run, *, workers) -> None:
         when a delay joined `trial` only later (its first effect was then screened on a linear
         base bent by the delay) or, with `alone_ok` (no verdict yet), when `trial` found no
         combination and the phase slope measures a delay (the delay was not fitted alone: the BLA
-        changes with the level)."""
+        changes with the level). A delay chosen alone that leaves more than
+        :data:`PM_FURTHER` times the floor, with nothing joining it, is the start of a selection
+        with the nonlinear candidates screened again on it; kept when significantly better."""
         d_later = [float(c[4][0]) for c in trial[1:] if c[0].effect == "time_delay"]
         if (len(trial) == 1 and trial[0][0].effect == "time_delay" and trial[0][3] is not None
                 and trial[0][0].gap_after > PM_FURTHER * run.floor):
