@@ -120,12 +120,14 @@ def fit_linear_effects(run: Run, lin_specs: list, bar, workers) -> list:
     for s in lin_specs:
         for b_ in lin_bases:
             if run.closed:  # no FRF of the loop to fit: the start that fits the screening prefix best
-                p_s, cost = best_start(lambda p, s=s, b_=b_: s.apply(b_, p), s.starts, sims, ys, split.fit, sp)
+                def build(p, s=s, b_=b_):
+                    return s.apply(b_, p)
+
+                p_s, cost = best_start(build, s.starts, sims, ys, split.fit, sp)
                 if s.n == 1 and np.isfinite(cost):
                     # and a one-parameter effect searched between the starts next to it (an actuator
                     # delay in a loop has a valley narrower than the starts' spacing)
-                    p_s, cost = bracketed_search(run, lambda p, s=s, b_=b_: s.apply(b_, p), s,
-                                                 float(np.asarray(p_s).ravel()[0]), cost)
+                    p_s, cost = bracketed_search(run, build, s, float(np.asarray(p_s).ravel()[0]), cost)
                 th_s = np.zeros(len(lin))
             else:
                 m_s, th_s, p_s, cost = fit_linear_frf(b_, lin, run.f_s, run.H_s, run.w[run.sel], spec=s,

@@ -57,8 +57,8 @@ def select_further_effects(run: Run, *, workers) -> None:
     """Stage 5b: forward selection from the verdict (or, when unexplained, from the best
     admissible candidate): a second (third) effect is kept when it closes significantly more,
     and a combination is polished jointly, then tested again by backward elimination from the
-    polished parameters (:func:`eliminated`; what remains is polished again). Where an input delay joins only later, or nothing
-    joins an unexplained gap while the phase slope measures a delay, the selection is run once
+    polished parameters (:func:`eliminated`; what remains is polished again). Where an input
+    delay joins only later, or nothing joins an unexplained gap while the phase slope measures a delay, the selection is run once
     more from the delay fitted alone, with the nonlinear candidates screened again on it
     (:func:`delay_first`, :func:`screen_on`), and the combination that explains more is kept.
     Updates ``chosen``, ``verdict``, ``ordered``; sets ``shares``."""
@@ -74,20 +74,23 @@ def select_further_effects(run: Run, *, workers) -> None:
         pc, scr = screening if screening is not None else (per_class, run.screened)
         ch, sh = forward_selection(run, first, pc, scr, workers)
         if len(ch) > 1:
-            ps: list = []
-            ch[-1] = polish_candidate(ch[-1], [(c[3], c[4]) for c in ch], chain_out=ps, **polish)
-            ch = restated(ch[:-1], ps[:-1]) + [ch[-1]]
+            ch = polished(ch)
             # the polish can carry the combination to where an effect chosen before it adds
             # nothing (the Bouc-Wen benchmark: a hardening spring chosen first, a hysteresis added,
             # and the polished spring 5 % of its first fit, the hysteresis alone as good): the
             # backward elimination again, from the polished parameters, and what remains polished
             kept = eliminated(run, ch)
             if len(kept) < len(ch):
-                ps = []
-                kept[-1] = polish_candidate(kept[-1], [(c[3], c[4]) for c in kept], chain_out=ps, **polish)
-                ch = restated(kept[:-1], ps[:-1]) + [kept[-1]]
+                ch = polished(kept)
                 sh = shares_of(run, ch)
         return ch, sh
+
+    def polished(ch):
+        """The combination `ch` (cumulative) with its last candidate polished jointly, every
+        effect stated with its polished parameters."""
+        ps: list = []
+        last = polish_candidate(ch[-1], [(c[3], c[4]) for c in ch], chain_out=ps, **polish)
+        return restated(ch[:-1], ps[:-1]) + [last]
 
     def or_from_delay(trial, trial_shares, alone_ok=False):
         """`trial`, or the selection from the delay fitted alone when that explains more: tried

@@ -61,6 +61,7 @@ from vibroscope.models.elements import (
     SignedSpring,
     Spring,
 )
+from vibroscope.gap.closed_loop import is_closed_loop
 from vibroscope.models.lumped import Dof, LumpedModel
 
 __all__ = ["LinearParams", "EffectSpec", "EffectDef", "EFFECT_TABLE", "VERDICT_WORDS", "connections",
@@ -555,7 +556,7 @@ def _time_delay(model, scales):
 
     d0 = scales.get("delay0", 0.002)
     grid = [0.002, 0.008]
-    if getattr(model, "controllers", ()):
+    if is_closed_loop(model):
         # a loop has no FRF fit to move a delay far from its start: starts an octave apart, between
         # which the start search brackets (fresh closed-loop seed 3307 case 003: a 5.8 ms actuator
         # delay fitted 3.2 ms from the 2 ms start, and the bracket 8-100 ms above the 8 ms one was
