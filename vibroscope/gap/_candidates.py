@@ -394,7 +394,11 @@ def bracketed_search(run: Run, build, s, x0: float, g0: float) -> tuple[np.ndarr
     -----
     :func:`scipy.optimize.minimize_scalar` with ``method='bounded'`` (Brent's golden-section and
     parabolic search, R. P. Brent, "Algorithms for Minimization without Derivatives", 1973,
-    ch. 5), at most :data:`~vibroscope.gap._run.BRACKET_EVALS` simulations.
+    ch. 5), at most :data:`~vibroscope.gap._run.BRACKET_EVALS` simulations, to a tolerance of
+    1e-3 of the bracket (not of the parameter's whole range: a strong cubic spring's valley is
+    about 1 % of k3 wide, and a tolerance of 1e-3 of q's range -0.5..300 was wider than the
+    bracket 0.011..0.03 that held it, so the search stopped after one or two steps: fresh seed
+    6619's case 007).
     """
     from scipy.optimize import minimize_scalar
 
@@ -418,7 +422,7 @@ def bracketed_search(run: Run, build, s, x0: float, g0: float) -> tuple[np.ndarr
 
     if b - a > 1e-9:
         minimize_scalar(f, bounds=(a, b), method="bounded",
-                        options={"maxiter": BRACKET_EVALS, "xatol": 1e-3 * (hi - lo)})
+                        options={"maxiter": BRACKET_EVALS, "xatol": 1e-3 * (b - a)})
     return best[0], float(best[1])
 
 
