@@ -1809,6 +1809,13 @@ def _one(job):
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
 
 
+def multi_log_drawn(seed: int, effect: str, index: int, share: float) -> bool:
+    """Whether case `index` of class `effect` of `seed` has three single-level logs, drawn with
+    probability `share` from (seed, class, index) alone (``--multi-log share``), so that a case
+    can be regenerated on its own."""
+    return bool(np.random.default_rng([int(seed), ALL_CLASSES.index(effect), index, 1]).random() < share)
+
+
 def _line(r) -> str:
     return (f"{r[0]}  {r[1]:<20s} gap {r[2]:.3f}  {r[4]:<5s} {'3 logs' if r[5] else '1 log '}  {r[3]:.1f} s")
 
@@ -1837,7 +1844,7 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
         for c in classes:
             k = len(jobs_list)
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
-            multi = bool(np.random.default_rng([int(seed), ALL_CLASSES.index(c), j, 1]).random() < multi_log)
+            multi = multi_log_drawn(seed, c, j, multi_log)
             jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max))
     results = []
     if jobs > 1:

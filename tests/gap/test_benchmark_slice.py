@@ -413,7 +413,7 @@ def _named_alone_at_its_link(effect: str, seed: int, integrator: str, param: str
     (truth, report, the effect's best candidate)."""
     from vibroscope.gap import diagnose
 
-    multi = bool(np.random.default_rng([seed, gen.ALL_CLASSES.index(effect), 0, 1]).random() < multi_share)
+    multi = gen.multi_log_drawn(seed, effect, 0, multi_share)
     case = gen.make_case(effect, gen.case_rng(seed, effect, 0), duration, integrator=integrator,
                          multi_log=multi, offset_max=offset_max)
     t = case.truth
@@ -723,7 +723,7 @@ def test_a_fresh_seeds_two_effects_are_named_at_their_links(seed, index, effects
 
     opts = _FRESH_SETTINGS.get(seed, {})
     share = opts.get("multi_share", 0.25)
-    multi = bool(np.random.default_rng([seed, gen.ALL_CLASSES.index("two_effects"), index, 1]).random() < share)
+    multi = gen.multi_log_drawn(seed, "two_effects", index, share)
     case = gen.make_case("two_effects", gen.case_rng(seed, "two_effects", index), opts.get("duration", 30.0),
                          integrator=opts.get("integrator", gen.INTEGRATORS[index % 2]), multi_log=multi,
                          offset_max=opts.get("offset_max", gen.OFFSET_MAX_BEFORE_43),

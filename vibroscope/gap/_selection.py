@@ -58,8 +58,9 @@ def select_further_effects(run: Run, *, workers) -> None:
     admissible candidate): a second (third) effect is kept when it closes significantly more,
     and a combination is polished jointly, then tested again by backward elimination from the
     polished parameters (:func:`eliminated`; what remains is polished again). Where an input
-    delay joins only later, or nothing joins an unexplained gap while the phase slope measures a delay, the selection is run once
-    more from the delay fitted alone, with the nonlinear candidates screened again on it
+    delay joins only later, or nothing joins an unexplained gap while the phase slope measures a
+    delay, the selection is run once more from the delay fitted alone, with the nonlinear
+    candidates screened again on it
     (:func:`delay_first`, :func:`screen_on`), and the combination that explains more is kept.
     Updates ``chosen``, ``verdict``, ``ordered``; sets ``shares``."""
     per_class, polish = run.per_class, run.polish

@@ -51,6 +51,7 @@ from typing import Callable
 
 import numpy as np
 
+from vibroscope.gap.closed_loop import is_closed_loop
 from vibroscope.models.elements import (
     Backlash,
     BoucWen,
@@ -61,7 +62,6 @@ from vibroscope.models.elements import (
     SignedSpring,
     Spring,
 )
-from vibroscope.gap.closed_loop import is_closed_loop
 from vibroscope.models.lumped import Dof, LumpedModel
 
 __all__ = ["LinearParams", "EffectSpec", "EffectDef", "EFFECT_TABLE", "VERDICT_WORDS", "connections",
