@@ -332,6 +332,6 @@ def test_a_joint_behind_a_modal_test_is_named_between_its_sensors(tmp_path):
     c = rep["candidates"][0]
     assert rep["verdict"] == "joint_friction", rep["verdict"]
     assert set(c["where"]["between"]) == {"out2", "out3"}  # the wing's and the payload's sensors
-    assert c["parameters"]["k_N_per_m"] == pytest.approx(mj.SHARE * 6e4, rel=0.1)  # 2.976e4 measured
-    assert c["parameters"]["slip_force_N"] == pytest.approx(mj.F_MAX, rel=0.1)  # 5.999 measured
-    assert rep["gap_after"] < 2 * rep["noise_floor"]  # 0.0099 against 0.0105 measured
+    assert c["parameters"]["k_N_per_m"] == pytest.approx(mj.SHARE * 6e4, rel=0.1)  # 2.935e4 measured (IWAN_NU 2: 2.976e4)
+    assert c["parameters"]["slip_force_N"] == pytest.approx(mj.F_MAX, rel=0.1)  # 5.735 measured (5.999 with IWAN_NU 2)
+    assert rep["gap_after"] < 2 * rep["noise_floor"]  # 0.0146 against 0.0098 measured (0.0099 with IWAN_NU 2)

@@ -199,8 +199,8 @@ def stop_at_level_free_floor(run: Run, screened: list, rest: list, workers) -> l
     does not change with the level (an offset, fitted on its linear base) leaves a held-out gap
     whose excess over the noise floor is at most half the floor (where the forward selection stops
     too; the floor as :func:`~vibroscope.gap._ranking.ranking_floor` measures it, capped by the
-    fit's own held-out residual out of band) and the BLA does not change with the level: as :func:`stop_at_linear_floor` for the
-    linear effects. Sets ``not_tried``; returns the specs left (`rest` itself when none dropped).
+    fit's own held-out residual out of band) and the BLA does not change with the level: as
+    :func:`stop_at_linear_floor` for the linear effects. Sets ``not_tried``; returns the specs left (`rest` itself when none dropped).
 
     Why: an offset alone at the floor (seeds 2611, 5172 and 6619, case 011: held-out 1.00, 1.02
     and 1.03 times the floor) was followed by the screening and joint fits of every
