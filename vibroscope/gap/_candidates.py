@@ -62,7 +62,7 @@ def fit_candidates(run: Run, *, workers, n_full, progress) -> None:
         # the effects that do not change with the level (an offset) first: one at the floor leaves
         # the level-dependent ones nothing to be told by
         screened = screen_nonlinear(run, first, bar, workers)
-        left = stop_at_level_free_floor(run, screened, rest, workers)
+        left = stop_at_level_free_floor(run, screened, rest)
         if left is not rest:
             bar.total = bar.total - len(rest) + len(left)
             bar.refresh()
@@ -194,13 +194,14 @@ def stop_at_linear_floor(run: Run, results: list, nl_specs: list, workers) -> tu
     return nl_specs, pre_eval
 
 
-def stop_at_level_free_floor(run: Run, screened: list, rest: list, workers) -> list:
+def stop_at_level_free_floor(run: Run, screened: list, rest: list) -> list:
     """The level-dependent nonlinear effects (`rest`) are not tried when a screened effect that
     does not change with the level (an offset, fitted on its linear base) leaves a held-out gap
     whose excess over the noise floor is at most half the floor (where the forward selection stops
     too; the floor as :func:`~vibroscope.gap._ranking.ranking_floor` measures it, capped by the
     fit's own held-out residual out of band) and the BLA does not change with the level: as
-    :func:`stop_at_linear_floor` for the linear effects. Sets ``not_tried``; returns the specs left (`rest` itself when none dropped).
+    :func:`stop_at_linear_floor` for the linear effects. Sets ``not_tried``; returns the specs
+    left (`rest` itself when none were dropped).
 
     Why: an offset alone at the floor (seeds 2611, 5172 and 6619, case 011: held-out 1.00, 1.02
     and 1.03 times the floor) was followed by the screening and joint fits of every

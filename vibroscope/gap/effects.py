@@ -856,8 +856,8 @@ IWAN_SLIDERS = 4
 #: Bouc-Wen exponent of each Iwan slider: dz/dx = k (1 - (z/F)^6) on loading, near an ideal
 #: Jenkins slider's stick-then-slip (Iwan 1966), where nu = 1 approaches the slip force
 #: exponentially and nu = 2 as F tanh(k x / F) (the one Jenkins keeps nu = 1). Measured on the
-#: benchmark's joint cases (README, session 51-52): held-out gap 1.3-1.5x the floor instead of
-#: 1.7-2.8x, and forward selection no longer run for most of them.
+#: benchmark's joint cases (README, sessions 51-52): held-out gap 1.2-1.6x the floor instead of
+#: 1.6-3.2x (ranking floor), and 2 to 5 times faster, their forward selections shorter.
 IWAN_NU = 6.0
 
 
