@@ -93,12 +93,14 @@ def select_further_effects(run: Run, *, workers) -> None:
         last = polish_candidate(ch[-1], [(c[3], c[4]) for c in ch], chain_out=ps, **polish)
         return restated(ch[:-1], ps[:-1]) + [last]
 
-    def or_from_delay(trial, trial_shares, alone_ok=False):
+    def or_from_delay(trial, trial_shares, alone_ok=False, significant=False):
         """`trial`, or the selection from the delay fitted alone when that explains more: tried
         when a delay joined `trial` only later (its first effect was then screened on a linear
-        base bent by the delay) or, with `alone_ok` (no verdict yet), when `trial` found no
-        combination and the phase slope measures a delay (the delay was not fitted alone: the BLA
-        changes with the level). A delay chosen alone that leaves more than
+        base bent by the delay) or, with `alone_ok` (no verdict yet, or a verdict that nothing
+        joined and that leaves more than :data:`PM_FURTHER` times the floor), when `trial` found
+        no combination and the phase slope measures a delay (the delay was not fitted alone: the
+        BLA changes with the level); with `significant`, the combination from the delay must be
+        significantly better than `trial` (:func:`beyond`), not only score higher. A delay chosen alone that leaves more than
         :data:`PM_FURTHER` times the floor, with nothing joining it, is the start of a selection
         with the nonlinear candidates screened again on it; kept when significantly better."""
         d_later = [float(c[4][0]) for c in trial[1:] if c[0].effect == "time_delay"]
@@ -118,7 +120,8 @@ def select_further_effects(run: Run, *, workers) -> None:
         if d_first is None:
             return trial, trial_shares
         trial2, shares2 = select_from(d_first, screen_on(run, d_first[1], workers))
-        if len(trial2) > 1 and trial2[-1][0].score > trial[-1][0].score:
+        if (len(trial2) > 1 and trial2[-1][0].score > trial[-1][0].score
+                and (not significant or beyond(trial2[-1][0], trial[-1][0]))):
             return trial2, shares2
         if len(trial2) == 1 and len(trial) > 1 and not beyond(trial[-1][0], d_first[0]):
             # nothing joins the delay, and what `trial` adds to it is not significant (the test
@@ -128,7 +131,15 @@ def select_further_effects(run: Run, *, workers) -> None:
 
     if chosen and chosen[0][3] is not None:
         first0 = chosen[0]
-        chosen, shares = or_from_delay(*select_from(chosen[0]))
+        trial, trial_shares = select_from(chosen[0])
+        # a nonlinear verdict that nothing joined, far above the floor, while the phase slope
+        # measures a delay that was not fitted alone (the BLA changes with the level): the
+        # nonlinear candidates were screened on a base without the delay (fresh two-effect seed
+        # 5201 case 006: a 0.63 ms input delay and a 23 N Coulomb friction, the friction fitted
+        # at 6.3 N, a Jenkins joint named at 11.7x the floor); the selection from the delay too
+        alone = (len(trial) == 1 and trial[0][0].effect != "time_delay"
+                 and trial[0][0].gap_after > PM_FURTHER * run.floor)
+        chosen, shares = or_from_delay(trial, trial_shares, alone_ok=alone, significant=alone)
         if len(chosen) > 1 or chosen[0][0] is not first0[0]:
             chosen, shares, verdict, ordered = adopted(chosen, shares, ordered)
     elif verdict == "unexplained":
