@@ -730,6 +730,14 @@ _FRESH_TWO_EFFECTS = [
     pytest.param(7411, 4, {"hysteresis", "time_delay"},
                  [("hysteresis", "alpha_N_per_m", 0.1), ("time_delay", "delay_s", 0.05)],
                  id="7411-004-a-hysteresis-screened-again-on-the-delay"),
+    # a 0.63 ms input delay and a 23 N Coulomb friction (60 s, lsoda, one log): the BLA changes
+    # with the level, so the delay was not fitted alone; the friction, screened on a base without
+    # the delay, fitted at 6.3 N, and a Jenkins joint was named at 11.7x the floor with nothing
+    # joining it. A verdict far above the floor is now tried against the selection from the delay
+    # the phase slope measures (3 min)
+    pytest.param(5201, 6, {"time_delay", "coulomb_friction"},
+                 [("time_delay", "delay_s", 0.05), ("coulomb_friction", "Fc_N", 0.05)],
+                 id="5201-006-a-verdict-far-above-the-floor-tried-from-the-delay"),
 ]
 #: cases generated with other settings than the default here (30 s, lsoda/RK4 by case number, a
 #: quarter multi-log, offsets up to 0.2 of the input's RMS force)
@@ -739,6 +747,7 @@ _FRESH_SETTINGS = {5858: dict(duration=40.0, integrator="rk4", multi_share=0.5),
                    5003: dict(multi_share=0.4, offset_max=gen.OFFSET_MAX),
                    7411: dict(duration=40.0, multi_share=0.5, offset_max=gen.OFFSET_MAX),
                    7272: dict(offset_max=gen.OFFSET_MAX),
+                   5201: dict(duration=60.0, offset_max=gen.OFFSET_MAX),
                    9393: dict(integrator="lsoda", offset_max=gen.OFFSET_MAX, weak_end=False)}
 
 
