@@ -428,6 +428,59 @@ def _named_alone_at_its_link(effect: str, seed: int, integrator: str, param: str
 
 
 @pytest.mark.slow  # one 60 s case generated (LSODA truth) and diagnosed, ~30-60 s
+def test_a_chaotic_clearance_model_is_not_searched_for_further_effects():
+    """Fresh seed 5301's second backlash case (case 014 of the nine classes, 3 per class): a
+    clearance of 0.113 mm replacing the grounded spring of a 2-DOF chain's light mass. The true
+    model is chaotic: two correct integrations of it drift apart (LSODA against RK4: 0.113 and
+    0.058 nrmse against the log at a noise of 0.018), so the named clearance, fitted to within
+    1 % of the truth, leaves 4.2 times the floor, and forward selection spent 98 s of the case's
+    138 s looking for a further effect. The chosen model's own held-out outputs at twice its
+    sub-steps now differ by more than that gap: it is reported as not predictable and nothing
+    is searched for beyond it."""
+    from vibroscope.gap import diagnose
+
+    case = gen.make_case("backlash", gen.case_rng(5301, "backlash", 1), 60.0, integrator="lsoda",
+                         offset_max=gen.OFFSET_MAX)
+    t = case.truth
+    assert t["parameters"]["gap_m"] == pytest.approx(1.1304748e-4, rel=TRUTH_REL)
+    rep = diagnose(case.nominal, case.signals(0))
+    assert rep.verdicts == ("backlash",), rep.summary()
+    best = rep.candidates[0]
+    assert score._same_pair(best.where["between"], t["where"]["between"]), best.where
+    assert best.parameters["gap_m"] == pytest.approx(t["parameters"]["gap_m"], rel=0.05)
+    pr = rep.meta["predictability"]["models"]["backlash@" + "-".join(best.where["between"])]
+    assert pr["unpredictable"] and pr["self_disagreement"] > 3 * rep.noise_floor, pr
+    assert "not predictable" in rep.summary()
+    assert rep.timings["forward_selection"] < 0.2 * rep.timings["total"], rep.timings
+
+
+def test_a_predictable_model_agrees_with_itself_at_twice_the_substeps():
+    """The predictability check's measure on models that are not chaotic: 0 for a linear model
+    (the exact linear path), and far below a 1 % noise floor for a weak hardening spring on a
+    well-damped 1-DOF oscillator under a random force (a unique, attracting steady state)."""
+    from types import SimpleNamespace
+
+    from vibroscope.gap._selection import self_disagreement
+    from vibroscope.gap.fit import LogSimulator
+    from vibroscope.models.elements import CubicSpring
+
+    fs, n = 1000.0, 20000
+    u = np.random.default_rng(3).standard_normal((1, n)) * 20.0
+    lin = _one_dof()
+    k = lin.elements[0].k
+    duff = LumpedModel(dofs=lin.dofs, elements=(CubicSpring(("m1", "ground"), k3=k * 2.0e5, k=k), lin.elements[1]),
+                       inputs=lin.inputs, outputs=lin.outputs)
+    val = np.zeros(n, bool)
+    val[n // 2:] = True
+    run = SimpleNamespace(fs=fs, val_logs=[0], sims=[LogSimulator(u, fs)], split=SimpleNamespace(validation=[val]))
+    assert self_disagreement(run, lin) == 0.0
+    y = run.sims[0].run(lin)
+    assert np.all(np.isfinite(y)) and np.std(y[0, val]) > 0
+    d = self_disagreement(run, duff)
+    assert 0.0 < d < 1e-3, d
+
+
+@pytest.mark.slow  # one 60 s case generated (LSODA truth) and diagnosed, ~30-60 s
 def test_a_hysteresis_whose_starts_all_fit_worse_than_none_is_still_refined_at_its_link():
     """Seed 2468's hysteresis case (class index 0, the third case of ``--classes coulomb_friction
     backlash hysteresis ...``): a Bouc-Wen element of 23 % of the loaded link's stiffness in a

@@ -36,6 +36,7 @@ from vibroscope.gap._run import (
     GENERIC_JOINT_NFEV,
     NESTED_T,
     PM_FURTHER,
+    PREDICT_SHARE,
     RELOCATE_NFEV,
     SCAN_HALF_WIDTH,
     SCAN_STEP,
@@ -49,7 +50,7 @@ from vibroscope.gap._run import (
 )
 from vibroscope.gap.effects import EFFECT_TABLE
 from vibroscope.gap.fit import best_start, fit_time_domain
-from vibroscope.gap.measure import nested_gain
+from vibroscope.gap.measure import nested_gain, nrmse
 from vibroscope.gap.report import Candidate
 
 
@@ -172,7 +173,8 @@ def select_further_effects(run: Run, *, workers) -> None:
             trial, trial_shares = select_from(nl)
             if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[0][0]):
                 chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
-    if chosen and chosen[-1][0].gap_after > PM_FURTHER * run.floor and "between" in chosen[0][0].where:
+    if (chosen and chosen[-1][0].gap_after > PM_FURTHER * run.floor and "between" in chosen[0][0].where
+            and not unpredictable(run, chosen[-1])):
         # the selection leaves a gap well beyond the noise: the first effect may be another
         # class's stand-in at its connection (a hardening cubic spring for a clearance, which the
         # clearance's partner then cannot complete); the selection from the best other nonlinear
@@ -351,6 +353,8 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     starts, and those fitted alone from that fit."""
     key, k_before, floor = run.key, run.k_before, run.floor_rank
     chosen = [first]
+    if excess(first[0].gap_after, floor) > 0.5 * floor and unpredictable(run, first):
+        return chosen, [1.0]
     cur_c, cur_m = first[0], first[1]
     n_par = cur_c.n_parameters
     used = {cur_c.effect}
@@ -415,6 +419,42 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         used = {c[0].effect for c in chosen}
     chosen = eliminated(run, chosen)
     return chosen, shares_of(run, chosen)
+
+
+def self_disagreement(run: Run, m) -> float:
+    """Held-out nrmse between model `m`'s outputs at its default integration sub-steps and at
+    twice as many: how far its own prediction is reproducible (inf when either is not finite).
+
+    A nonsmooth or strongly nonlinear model can be chaotic: two correct integrations of it drift
+    apart over a long record, and no measured gap below that drift can be explained by adding
+    effects [Parker & Chua, *Practical Numerical Algorithms for Chaotic Systems*, 1989, ch. 1].
+    Linear and closed-loop models are predictable (0.0)."""
+    from vibroscope.gap.fit import oversample_for
+    from vibroscope.gap.closed_loop import is_closed_loop
+
+    if is_closed_loop(m) or all(e.is_linear for e in m.elements):
+        return 0.0
+    R = oversample_for(m, run.fs, False)
+    vl = run.val_logs
+    a = [run.sims[i].run(m, oversample=R) for i in vl]
+    b = [run.sims[i].run(m, oversample=2 * R) for i in vl]
+    g = nrmse(a, b, [run.split.validation[i] for i in vl])
+    return float(g) if np.isfinite(g) else float("inf")
+
+
+def unpredictable(run: Run, item) -> bool:
+    """Whether the model of `item` (a chosen candidate tuple) is too unpredictable for forward
+    selection: its :func:`self_disagreement` exceeds the noise floor and :data:`PREDICT_SHARE`
+    of its excess gap. Checked once per model; recorded in ``run.predictability`` (the report's
+    ``meta["predictability"]``)."""
+    c, m = item[0], item[1]
+    label = f"{c.effect}@{where_key(c.where)}"
+    if label not in run.predictability:
+        d = self_disagreement(run, m)
+        bad = d > run.floor and d > PREDICT_SHARE * excess(c.gap_after, run.floor)
+        run.predictability[label] = {"self_disagreement": d if np.isfinite(d) else None, "gap_after": c.gap_after, "noise_floor": run.floor,
+                                     "unpredictable": bool(bad)}
+    return run.predictability[label]["unpredictable"]
 
 
 def shares_of(run: Run, chosen: list) -> list[float]:

@@ -110,6 +110,7 @@ from vibroscope.gap._run import (  # the tuning constants live with the run stat
     POLISH_GAIN,
     POLISH_ROUNDS,
     POLISH_S,
+    PREDICT_SHARE,
     REFINE_FACTOR,
     TREND_MARGIN,
     TREND_SHARE,
@@ -664,6 +665,11 @@ def _build_report(run: Run) -> GapReport:
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "noise_floor_ranking": {"nrmse": floor_rank, "method": floor_rank_method},
               "nested_tests": {"t": dict(run.nested_t), "threshold": NESTED_T},
+              "predictability": {
+                  "method": "held-out nrmse between the model's outputs at its default and at twice its "
+                            "integration sub-steps; forward selection does not start from a model where it "
+                            f"exceeds the noise floor and {PREDICT_SHARE} of the model's excess gap",
+                  "models": dict(run.predictability)},
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
                                    for k, v in level.items()} | {"simulated_shifts": trend_shifts},

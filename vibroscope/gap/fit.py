@@ -95,7 +95,8 @@ class LogSimulator:
             self._fine[key] = reconstruct_input(self.u[:, :n], self.fs, R)
         return self._fine[key]
 
-    def run(self, model: LumpedModel, n: int | None = None, *, fast: bool = False) -> np.ndarray:
+    def run(self, model: LumpedModel, n: int | None = None, *, fast: bool = False,
+            oversample: int | None = None) -> np.ndarray:
         """Outputs of `model` (n_outputs, n) for the first `n` samples of the input.
 
         Non-finite results (an unstable candidate) are returned as NaN rows.
@@ -111,6 +112,10 @@ class LogSimulator:
             ``max(5, ceil(8 f_max / fs))`` instead of ``max(10, ceil(20 f_max / fs))``
             (both with the exponential scheme, :data:`SCHEME`); default False. Linear models
             always take the exact linear path at 8 sub-steps.
+        oversample : int, optional
+            For nonlinear open-loop models, this many sub-steps instead of the default (the
+            predictability check integrates at twice the default,
+            :func:`~vibroscope.gap._selection.self_disagreement`); default None.
 
         Returns
         -------
@@ -135,7 +140,7 @@ class LogSimulator:
         linear = all(e.is_linear for e in model.elements)
         kw = {}
         # linear models: the exact FOH path at 8 sub-steps; nonlinear: the compiled kernel
-        R = 8 if linear else oversample_for(model, self.fs, fast)
+        R = 8 if linear else (int(oversample) if oversample else oversample_for(model, self.fs, fast))
         kw["fine_input"] = self.fine_input(R, n)
         try:
             with warnings.catch_warnings():

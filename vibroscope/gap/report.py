@@ -453,6 +453,13 @@ class GapReport:
         rank = (self.meta or {}).get("noise_floor_ranking") or {}
         if isinstance(rank.get("nrmse"), float) and rank["nrmse"] < 0.99 * self.noise_floor:
             lines.append(f"candidates ranked against a floor of {rank['nrmse']:.4f}: {rank.get('method', '')}")
+        for label, pr in ((self.meta or {}).get("predictability") or {}).get("models", {}).items():
+            if pr.get("unpredictable"):
+                d = pr.get("self_disagreement")
+                by = f"differ by nrmse {d:.4f}" if d is not None else "are not both finite"
+                lines.append(f"{label} is not predictable: its own outputs at twice the integration sub-steps {by} "
+                             f"(noise floor {pr['noise_floor']:.4f}); the gap it leaves is not searched for further "
+                             "effects")
         if self.bands:
             lines.append("bands: " + ", ".join(f"{b.fmin:.1f}-{b.fmax:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
         n_named = len(named) if len(named) > 1 else 1
