@@ -449,12 +449,14 @@ def unpredictable(run: Run, item) -> bool:
     ``meta["predictability"]``)."""
     c, m = item[0], item[1]
     label = f"{c.effect}@{where_key(c.where)}"
-    if label not in run.predictability:
+    entry = run.predictability.get(label)
+    if entry is None or entry["_model"] is not m:  # another fit at the same place is checked again
         d = self_disagreement(run, m)
         bad = d > run.floor and d > PREDICT_SHARE * excess(c.gap_after, run.floor)
-        run.predictability[label] = {"self_disagreement": d if np.isfinite(d) else None, "gap_after": c.gap_after, "noise_floor": run.floor,
-                                     "unpredictable": bool(bad)}
-    return run.predictability[label]["unpredictable"]
+        entry = {"self_disagreement": d if np.isfinite(d) else None, "gap_after": c.gap_after,
+                 "noise_floor": run.floor, "unpredictable": bool(bad), "_model": m}
+        run.predictability[label] = entry
+    return entry["unpredictable"]
 
 
 def shares_of(run: Run, chosen: list) -> list[float]:

@@ -669,7 +669,8 @@ def _build_report(run: Run) -> GapReport:
                   "method": "held-out nrmse between the model's outputs at its default and at twice its "
                             "integration sub-steps; forward selection does not start from a model where it "
                             f"exceeds the noise floor and {PREDICT_SHARE} of the model's excess gap",
-                  "models": dict(run.predictability)},
+                  "models": {k: {a: b for a, b in v.items() if not a.startswith("_")}
+                             for k, v in run.predictability.items()}},
               "refit": {"method": refit_note, "gap_fit_nominal": g_nom_fit, "gap_fit_refit": g_ref_fit},
               "level_dependence": {k: (v if not isinstance(v, float) or np.isfinite(v) else None)
                                    for k, v in level.items()} | {"simulated_shifts": trend_shifts},
