@@ -49,7 +49,8 @@ from vibroscope.gap._run import (
     where_key,
 )
 from vibroscope.gap.effects import EFFECT_TABLE
-from vibroscope.gap.fit import best_start, fit_time_domain
+from vibroscope.gap.closed_loop import is_closed_loop
+from vibroscope.gap.fit import best_start, fit_time_domain, oversample_for
 from vibroscope.gap.measure import nested_gain, nrmse
 from vibroscope.gap.report import Candidate
 
@@ -429,9 +430,6 @@ def self_disagreement(run: Run, m) -> float:
     apart over a long record, and no measured gap below that drift can be explained by adding
     effects [Parker & Chua, *Practical Numerical Algorithms for Chaotic Systems*, 1989, ch. 1].
     Linear and closed-loop models are predictable (0.0)."""
-    from vibroscope.gap.fit import oversample_for
-    from vibroscope.gap.closed_loop import is_closed_loop
-
     if is_closed_loop(m) or all(e.is_linear for e in m.elements):
         return 0.0
     R = oversample_for(m, run.fs, False)
