@@ -41,3 +41,64 @@ def test_two_parameters_in_two_threads_match_one_thread():
     g0 = float(np.sqrt(np.mean((sim.run(build(x0), fast=True) - y) ** 2, axis=1).sum()
                        / np.sum(np.mean(y**2, axis=1)) / 2) * np.sqrt(2))
     assert r1[1] < 0.5 * g0  # and it moved towards the truth (2, 1)
+
+
+def _fd_jacobian(fun, x, h=1e-6):
+    """Central differences of `fun` (the oracle of the analytic Jacobian)."""
+    f0 = fun(x)
+    J = np.empty((f0.size, x.size))
+    for i in range(x.size):
+        step = h * max(1.0, abs(x[i]))
+        xp, xm = x.copy(), x.copy()
+        xp[i] += step
+        xm[i] -= step
+        J[:, i] = (fun(xp) - fun(xm)) / (2 * step)
+    return J
+
+
+def test_the_frf_fit_jacobian_agrees_with_central_differences():
+    """The analytic Jacobian of the FRF fit (through the model's matrices) against central
+    differences of the residual, for the linear log-factors with an input delay, with an extra
+    mode (its mass follows the DOF's), and for a modal-coordinates model's physical stiffness and
+    damping changes (which move the mode shapes' coupling)."""
+    from vibroscope.gap.effects import LinearParams, candidate_specs
+    from vibroscope.gap.fit import frf_residual, frf_residual_jacobian
+    from vibroscope.gap.physical import as_lumped
+    from vibroscope.models.modelfile import dumps_model, loads_model
+
+    rng = np.random.default_rng(7)
+    base = LumpedModel.chain([2.0, 1.5, 1.0], [1e5, 8e4, 5e4], [20.0, 10.0, 5.0], input_dof=0)
+    base = base.replace(outputs=(Output("m1", "acceleration", "a1"), Output("m2", "velocity", "v2"),
+                                 Output("m3", "displacement", "x3")))
+    f = np.linspace(2.0, 150.0, 120)
+    H = base.frf(f, quantity=None)[:, :, 0] * (1 + 0.05 * rng.standard_normal((f.size, 3)))
+    w = rng.uniform(0.5, 1.0, (f.size, 3))
+    lin = LinearParams(base)
+    specs = [s for s in candidate_specs(base, {"fs": FS, "f_extra": [40.0]}, ["time_delay", "extra_mode"])
+             if s.effect == "time_delay" or s.where.get("dof") == "m2"]
+    cases = []
+    for s in specs:
+        def build(x, s=s):
+            return s.apply(lin.apply(base, x[:len(lin)]), x[len(lin):])
+        x = np.concatenate([0.3 * rng.standard_normal(len(lin)), np.asarray(s.starts[0], float)])
+        if s.effect == "time_delay":
+            x[-1] = 0.003
+        cases.append((s.effect, build, x))
+    # a modal-coordinates model with the physical changes (dk:, dc:)
+    from tests.gap.test_modal_models import chain, exact_modal  # noqa: E402 - the same truth
+
+    mm = as_lumped(loads_model(dumps_model(exact_modal(chain())), "chain_modal.toml"))
+    lp = LinearParams(mm, physical=True)
+    Hm = mm.frf(f, quantity=None)[:, :, 0] * (1 + 0.05 * rng.standard_normal((f.size, len(mm.outputs))))
+    wm = np.ones((f.size, len(mm.outputs)))
+    cases.append(("modal", lambda x: lp.apply(mm, x), 0.2 * rng.standard_normal(len(lp))))
+    seen = set()
+    for name, build, x in cases:
+        HH, ww = (Hm, wm) if name == "modal" else (H, w)
+        Ja = frf_residual_jacobian(build, x, f, HH, ww)
+        Jn = _fd_jacobian(lambda z: frf_residual(build(z), f, HH, ww), x)
+        err = np.max(np.abs(Ja - Jn), axis=0) / np.maximum(np.max(np.abs(Jn), axis=0), 1e-12)
+        assert np.all(err < 1e-4), (name, err)
+        assert np.all(np.max(np.abs(Jn), axis=0) > 0), name  # every column moves the FRF
+        seen.add(name)
+    assert seen == {"time_delay", "extra_mode", "modal"}

@@ -214,3 +214,41 @@ def test_cubic_spring_starts_span_its_decades_and_both_signs(trend):
         q = sorted(float(p[0]) for p in s.starts)
         assert {0.03, 0.3, 3.0, 20.0, -0.03, -0.15} <= {round(v, 6) for v in q}, q
         assert len(q) == len(set(q))
+
+
+def test_a_hysteresis_yielding_far_below_the_rms_deflection_is_at_its_coulomb_limit():
+    """``at_limit``: a Bouc-Wen element that yields at 0.5 % of the rms deflection across it
+    responds as the Coulomb friction it projects to (the selection then also starts from that
+    friction, fresh seed 5302 case 004); one that yields at 30 % of it (the benchmark's true
+    hysteresis yields at 20-100 %) does not, and is not at the limit."""
+    from vibroscope.gap.measure import nrmse
+
+    model = chain()
+    rng = np.random.default_rng(3)
+    u = 10 * rng.standard_normal((1, 6000))
+    sim = LogSimulator(u, FS)
+    y_lin = sim.run(model)
+    x = LumpedModel(dofs=model.dofs, elements=model.elements, inputs=model.inputs,
+                    outputs=(Output("m1", "displacement", "/x1.x"),))
+    d_rms = float(np.sqrt(np.mean(LogSimulator(u, FS).run(x) ** 2)))
+    sc = scales(model)
+    sc["d_rms"] = dict(sc["d_rms"], **{"m1-ground": d_rms})
+    s = next(s for s in candidate_specs(model, sc) if s.effect == "hysteresis"
+             and s.where["between"] == ["m1", "ground"])
+    coulomb = next(c for c in candidate_specs(model, sc) if c.effect == "coulomb_friction"
+                   and c.where["between"] == ["m1", "ground"])
+    f_slip = 4.0  # N, the Bouc-Wen's force while it slides, alpha x_yield
+    err = {}
+    for share in (0.005, 0.3):
+        p = np.array([math.log(f_slip / (4e4 * share * d_rms)), math.log(1.0 / share), 0.0])
+        bw = s.apply(model, p).elements[-1]
+        assert bw.alpha / (bw.beta * (bw.gamma + bw.delta)) == pytest.approx(f_slip)  # slip force
+        assert 1.0 / (bw.beta * (bw.gamma + bw.delta)) == pytest.approx(share * d_rms)  # yield
+        p_c = s.tends_to[1](p)
+        fc = coulomb.apply(model, p_c)
+        assert fc.elements[-1].force_ == pytest.approx(f_slip)
+        y_bw, y_c = sim.run(s.apply(model, p)), sim.run(fc)
+        # how much of the hysteresis's own effect the Coulomb friction leaves
+        err[share] = nrmse(y_bw, y_c) / nrmse(y_bw, y_lin)
+        assert s.at_limit(p) is (share < 0.05)
+    assert err[0.005] < 0.1 < err[0.3]  # 0.068 and 0.47 measured

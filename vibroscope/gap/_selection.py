@@ -35,6 +35,7 @@ from vibroscope.gap._run import (
     ELIMINATE_NFEV,
     GENERIC_JOINT_NFEV,
     NESTED_T,
+    NONE_FACTOR,
     PM_FURTHER,
     PREDICT_SHARE,
     RELOCATE_NFEV,
@@ -174,13 +175,24 @@ def select_further_effects(run: Run, *, workers) -> None:
             trial, trial_shares = select_from(nl)
             if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[0][0]):
                 chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
-    if (chosen and chosen[-1][0].gap_after > PM_FURTHER * run.floor and "between" in chosen[0][0].where
-            and not unpredictable(run, chosen[-1])):
+    s0 = chosen[0][3] if chosen else None
+    # the first effect at the limit where it does what a simpler one does (a Bouc-Wen element
+    # yielding at 0.005 times the rms deflection: a Coulomb slider) stands in for that one, and an
+    # effect of its own kind may be missing: the retry below from the simpler effect starts at
+    # any gap beyond the floor (fresh two-effect seed 5302 case 004: a hysteresis and a 0.8 N
+    # Coulomb friction at one link, named a rigid-plastic hysteresis alone at 1.96x the floor)
+    at_limit = bool(s0 is not None and s0.at_limit is not None and s0.tends_to is not None
+                    and s0.at_limit(np.asarray(chosen[0][4], float)))
+    further = bool(chosen) and chosen[-1][0].gap_after > PM_FURTHER * run.floor
+    if (chosen and (further or (at_limit and chosen[-1][0].gap_after > NONE_FACTOR * run.floor))
+            and "between" in chosen[0][0].where and not unpredictable(run, chosen[-1])):
         # the selection leaves a gap well beyond the noise: the first effect may be another
         # class's stand-in at its connection (a hardening cubic spring for a clearance, which the
         # clearance's partner then cannot complete); the selection from the best other nonlinear
-        # class there is kept when it is significantly better
-        alt = best_nonlinear(cands, at=chosen[0][0].where["between"], other_than=chosen[0][0].effect)
+        # class there (below PM_FURTHER times the floor, at the limit: the simpler class it tends
+        # to) is kept when it is significantly better
+        alt = best_nonlinear(cands, at=chosen[0][0].where["between"], other_than=chosen[0][0].effect,
+                             only=None if further else s0.tends_to[0])
         if alt is not None:
             trial, trial_shares = select_from(alt)
             if trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[-1][0]):
@@ -215,13 +227,14 @@ def adopted(trial: list, trial_shares: list, ordered: list) -> tuple[list, list,
     return trial, trial_shares, trial[0][0].effect, trial + [c for c in ordered if c[0].effect not in added]
 
 
-def best_nonlinear(cands: list, at=None, other_than: str | None = None):
+def best_nonlinear(cands: list, at=None, other_than: str | None = None, only: str | None = None):
     """The first (best ranked) candidate of `cands` that is a fitted nonlinear effect and does not
     vanish; with `at` (a connection ``[a, b]``) only one acting there, with `other_than` not of
-    that effect. None when there is none."""
+    that effect, with `only` of that effect alone. None when there is none."""
     pair = frozenset(at) if at is not None else None
     return next((c for c in cands if c[3] is not None and not c[0].vanished
                  and EFFECT_TABLE[c[0].effect].kind == "nonlinear" and c[0].effect != other_than
+                 and (only is None or c[0].effect == only)
                  and (pair is None or frozenset(c[0].where.get("between", ())) == pair)), None)
 
 

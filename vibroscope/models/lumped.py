@@ -302,9 +302,13 @@ class LumpedModel:
         KeyError
             If there is no such DOF.
         """
+        pos = self.__dict__.get("_dof_pos")
+        if pos is None:  # built once per (immutable) model: the matrices ask for every element's ends
+            pos = {d.name: i for i, d in enumerate(self.dofs)}
+            object.__setattr__(self, "_dof_pos", pos)
         try:
-            return self.dof_names.index(name)
-        except ValueError:
+            return pos[name]
+        except KeyError:
             raise KeyError(f"no DOF {name!r}; DOFs are {list(self.dof_names)}") from None
 
     def point_names(self) -> tuple[str, ...]:
