@@ -275,7 +275,7 @@ def frf_residual_jacobian(build, x, frequencies, H, w, lower=None, upper=None, r
 
 
 def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_starts=None, prior: float = 0.02,
-                   max_nfev: int = 200):
+                   max_nfev: int = 200, jacobian: str = "analytic"):
     """Fit linear log-factors `lin` (and a linear effect `spec`'s parameters) to the FRF.
 
     Parameters
@@ -299,6 +299,9 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
         parameters at their nominal values).
     max_nfev : int, optional
         Function evaluations per start (:func:`scipy.optimize.least_squares`); default 200.
+    jacobian : {"analytic", "2-point"}, optional
+        ``"analytic"`` (default): :func:`frf_residual_jacobian`; ``"2-point"``: scipy's forward
+        differences of the whole residual (the baseline of ``benchmarks/gap/frf_fit.py``).
 
     Returns
     -------
@@ -330,6 +333,8 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
         pr[:, :nl] = prior * scale * np.eye(nl)
         return np.vstack([J, pr])
 
+    if jacobian not in ("analytic", "2-point"):
+        raise ValueError(f"jacobian={jacobian!r} must be 'analytic' or '2-point'")
     starts = p_starts if p_starts is not None else ([spec.starts[0]] if spec is not None else [np.zeros(0)])
     best = None
     for p0 in starts:
@@ -337,7 +342,7 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
         lo = np.concatenate([np.full(nl, -2.5), spec.lower if spec is not None else []])
         hi = np.concatenate([np.full(nl, 2.5), spec.upper if spec is not None else []])
         x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-        sol = least_squares(res, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev)
+        sol = least_squares(res, x0, jac=jac if jacobian == "analytic" else "2-point", bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
     x = best.x
