@@ -216,11 +216,13 @@ def test_cubic_spring_starts_span_its_decades_and_both_signs(trend):
         assert len(q) == len(set(q))
 
 
-def test_a_hysteresis_yielding_far_below_the_rms_deflection_is_at_its_coulomb_limit():
-    """``at_limit``: a Bouc-Wen element that yields at 0.5 % of the rms deflection across it
-    responds as the Coulomb friction it projects to (the selection then also starts from that
-    friction, fresh seed 5302 case 004); one that yields at 30 % of it (the benchmark's true
-    hysteresis yields at 20-100 %) does not, and is not at the limit."""
+def test_a_hysteresis_yielding_far_below_the_rms_deflection_responds_as_its_coulomb_projection():
+    """``tends_to``: a Bouc-Wen element that yields at 0.5 % of the rms deflection across it
+    responds as the Coulomb friction it projects to (slip force ``alpha / (beta (gamma +
+    delta))``), so a hysteresis chosen first can stand in for a friction at its link (the
+    selection is then also started from that friction: fresh seeds 5302 case 004 and 5403 case
+    025); one that yields at 30 % of it (the benchmark's true hysteresis yields at 20-100 %)
+    responds otherwise."""
     from vibroscope.gap.measure import nrmse
 
     model = chain()
@@ -250,5 +252,4 @@ def test_a_hysteresis_yielding_far_below_the_rms_deflection_is_at_its_coulomb_li
         y_bw, y_c = sim.run(s.apply(model, p)), sim.run(fc)
         # how much of the hysteresis's own effect the Coulomb friction leaves
         err[share] = nrmse(y_bw, y_c) / nrmse(y_bw, y_lin)
-        assert s.at_limit(p) is (share < 0.05)
     assert err[0.005] < 0.1 < err[0.3]  # 0.068 and 0.47 measured

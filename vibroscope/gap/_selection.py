@@ -176,21 +176,24 @@ def select_further_effects(run: Run, *, workers) -> None:
             if len(trial) > 1 and trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[0][0]):
                 chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
     s0 = chosen[0][3] if chosen else None
-    # the first effect at the limit where it does what a simpler one does (a Bouc-Wen element
-    # yielding at 0.005 times the rms deflection: a Coulomb slider) stands in for that one, and an
-    # effect of its own kind may be missing: the retry below from the simpler effect starts at
-    # any gap beyond the floor (fresh two-effect seed 5302 case 004: a hysteresis and a 0.8 N
-    # Coulomb friction at one link, named a rigid-plastic hysteresis alone at 1.96x the floor)
-    at_limit = bool(s0 is not None and s0.at_limit is not None and s0.tends_to is not None
-                    and s0.at_limit(np.asarray(chosen[0][4], float)))
+    # a first effect that tends to a simpler one in a limit of its parameters (a Bouc-Wen
+    # hysteresis: a Coulomb slider as its initial stiffness grows) can hold that one and stand in
+    # for the pair, the simpler effect and one of its own kind at the same link: the retry below
+    # from the simpler effect starts at any gap beyond the floor, not only beyond PM_FURTHER times
+    # it. Fresh two-effect seed 5302 case 004 (a hysteresis and a 0.8 N Coulomb friction at one
+    # link): a rigid-plastic hysteresis (yield at 0.005 x the rms deflection) alone at 1.96x the
+    # floor; fresh modal seed 5403 case 025 (0.19 N friction + hysteresis): a hysteresis yielding
+    # at 0.14 x the rms deflection alone at 1.42x the floor. From the friction, both were named
+    # (Fc 0.801 and 0.194 N, true 0.800 and 0.194 N), at the floor
+    stands_in = bool(s0 is not None and s0.tends_to is not None)
     further = bool(chosen) and chosen[-1][0].gap_after > PM_FURTHER * run.floor
-    if (chosen and (further or (at_limit and chosen[-1][0].gap_after > NONE_FACTOR * run.floor))
+    if (chosen and (further or (stands_in and chosen[-1][0].gap_after > NONE_FACTOR * run.floor))
             and "between" in chosen[0][0].where and not unpredictable(run, chosen[-1])):
         # the selection leaves a gap well beyond the noise: the first effect may be another
         # class's stand-in at its connection (a hardening cubic spring for a clearance, which the
         # clearance's partner then cannot complete); the selection from the best other nonlinear
-        # class there (below PM_FURTHER times the floor, at the limit: the simpler class it tends
-        # to) is kept when it is significantly better
+        # class there (below PM_FURTHER times the floor: the simpler class the first tends to) is
+        # kept when it is significantly better
         alt = best_nonlinear(cands, at=chosen[0][0].where["between"], other_than=chosen[0][0].effect,
                              only=None if further else s0.tends_to[0])
         if alt is not None:

@@ -382,12 +382,6 @@ class EffectSpec:
         ``alpha / (beta (gamma + delta))``; None where it has no such limit). In a combination of
         effects the diagnosis keeps this effect only when its held-out gain over the simpler one
         is significant.
-    at_limit : callable p -> bool, optional
-        Whether the fitted `p` lie at the limit of :attr:`tends_to`, where this effect does what
-        the simpler one does (a Bouc-Wen element that yields within :data:`LIMIT_YIELD_SHARE` of
-        the rms deflection across it: a Coulomb slider with a negligible pre-slip). Chosen first
-        at such a limit, it may stand in for the simpler effect while a second effect of its
-        own kind is missing; the diagnosis then starts a selection from the simpler effect too.
     narrow : tuple of int, optional
         Indices of parameters (each a logarithm) whose time-domain error has valleys far
         narrower than the spacing of :attr:`starts`, so that no fit step reaches them from a
@@ -414,7 +408,6 @@ class EffectSpec:
     lifts_from: tuple | None = None
     lift_splits: Callable | None = None
     tends_to: tuple | None = None
-    at_limit: Callable | None = None
     narrow: tuple = ()
     meta: dict = field(default_factory=dict)
 
@@ -838,12 +831,6 @@ def _hysteresis(model, scales):
             alpha, beta, gamma, delta = bw_coeffs(p)
             return np.array([math.log(alpha / (beta * (gamma + delta)))]) if gamma + delta > 0.05 else None
 
-        def at_limit(p, bw_coeffs=bw_coeffs):
-            # the yield displacement 1 / (beta (gamma + delta)) over the rms deflection (beta is
-            # exp(p[1]) / d_rms)
-            _, _, gamma, delta = bw_coeffs(p)
-            return gamma + delta > 0.05 and 1.0 / (math.exp(p[1]) * (gamma + delta)) < LIMIT_YIELD_SHARE
-
         lo_h = np.array([math.log(1e-4), math.log(1e-3), -1.45])
         hi_h = np.array([math.log(10.0), math.log(1e3), 1.45])
         # starts: alpha a share of the connection's stiffness, weak ones among them (alpha a tenth of
@@ -860,17 +847,9 @@ def _hysteresis(model, scales):
             starts=[np.clip(np.array([math.log(max(a, 1e-300)), math.log(b), s]), lo_h + 1e-6, hi_h - 1e-6)
                     for a, b, s in grid],
             lower=lo_h, upper=hi_h, build=build, describe=desc, tends_to=("coulomb_friction", slip_limit),
-            at_limit=at_limit,
         ))
     return specs
 
-
-#: a Bouc-Wen hysteresis whose yield displacement is below this share of the rms deflection
-#: across it is at its Coulomb-slider limit (:attr:`EffectSpec.at_limit`): the benchmark's true
-#: hysteresis yields at 0.2 to 1 times the rms deflection; fitted alone beside a 0.8 N Coulomb
-#: friction at its link (fresh two-effect seed 5302 case 004), one yielded at 0.005 times it and
-#: stood in for the friction
-LIMIT_YIELD_SHARE = 0.05
 
 #: sliders of the Iwan form of a joint (slip forces uniform on (0, F_max], Iwan 1966)
 IWAN_SLIDERS = 4
