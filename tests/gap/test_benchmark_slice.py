@@ -598,8 +598,11 @@ def test_a_clearance_replaced_by_a_stiffening_spring_is_swapped_back_when_its_pa
         c = next(c for c in rep.candidates if c.effect == eff)
         assert c.parameters[par] == pytest.approx(p_true[eff][par], rel=0.05), (eff, c.parameters)
         assert score._same_pair(c.where["between"], w_true[eff]["between"]), (eff, c.where)
-    # the clearance is the fit kept on the other linear base, and its label says so
-    assert next(c for c in rep.candidates if c.effect == "backlash").where.get("linear_base") == "nominal"
+    # where the clearance is the fit kept on the other linear base, its label says so. On session
+    # 54's code (the analytic FRF Jacobian moves the linear refit's path; which change did it was not
+    # isolated) the clearance fitted on the refit no longer vanishes (1.6644e-5 m, true 1.6637e-5 m,
+    # the only backlash candidate): the other base is not needed, and it carries no label
+    assert next(c for c in rep.candidates if c.effect == "backlash").where.get("linear_base") in (None, "nominal")
     assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
 
 
