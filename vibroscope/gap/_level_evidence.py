@@ -118,7 +118,8 @@ def level_test(frequencies, blas, blas_model=None):
 def mode_change(ev, natural_frequency: float):
     """Relative natural-frequency change, lowest to highest level where fitted, of the mode of
     `ev` (:class:`~vibroscope.gap.levels.LevelEvidence`) nearest `natural_frequency` (Hz, within
-    5 %), with the indices of those two levels; None without one."""
+    5 %), with the indices of those two levels and of the mode: ``(change, a, b, j)``; None
+    without one."""
     if ev is None or len(ev.levels) < 2 or not ev.modes:
         return None
     j = int(np.argmin([abs(m.natural_frequency - natural_frequency) for m in ev.modes]))
@@ -130,7 +131,7 @@ def mode_change(ev, natural_frequency: float):
     if ok.size < 2:
         return None
     a, b = int(ok[0]), int(ok[-1])
-    return float((fn[b] - fn[a]) / fn[a]), a, b
+    return float((fn[b] - fn[a]) / fn[a]), a, b, j
 
 
 def modal_level_test(ev, ev_model) -> dict | None:
@@ -162,7 +163,7 @@ def modal_level_test(ev, ev_model) -> dict | None:
         ch = mode_change(ev, md.natural_frequency)
         if ch is None:
             continue
-        change, a, b = ch
+        change, a, b, _ = ch
         if ev.levels[b].rms < LOG_LEVEL_RATIO * ev.levels[a].rms:
             continue
         sf = float(np.hypot(ev.levels[a].natural_frequency_std[j], ev.levels[b].natural_frequency_std[j]))
@@ -174,8 +175,7 @@ def modal_level_test(ev, ev_model) -> dict | None:
             # mode at 25.6 +- 0.77 Hz at the lowest level and 26.3 +- 1.18 Hz at the highest, a
             # change of +2.7 % subtracted as exact from the measured -0.04 % gave z = -3.3 and a
             # level dependence that barred every linear explanation)
-            jm = int(np.argmin([abs(m.natural_frequency - md.natural_frequency) for m in ev_model.modes]))
-            _, am, bm = chm
+            _, am, bm, jm = chm
             sfm = np.array([ev_model.levels[am].natural_frequency_std[jm], ev_model.levels[bm].natural_frequency_std[jm]])
             # relative to its own frequency, restated at the measured one's
             fm = float(ev_model.levels[am].natural_frequencies[jm])

@@ -189,7 +189,7 @@ def _frf_parts(model: LumpedModel):
             tuple(o.quantity for o in model.outputs))
 
 
-def frf_residual_jacobian(build, x, frequencies, H, w, lower=None, upper=None, rel_step: float = 1e-7):
+def frf_residual_jacobian(build, x, frequencies, H, w, upper=None, rel_step: float = 1e-7):
     """Jacobian of :func:`frf_residual` of ``build(x)`` with respect to `x`, shape (2 w.size, x.size).
 
     The model's matrices are differenced along each parameter (one model build and assembly per
@@ -216,8 +216,8 @@ def frf_residual_jacobian(build, x, frequencies, H, w, lower=None, upper=None, r
         Measured FRF to the first input.
     w : ndarray, shape (n_f, n_outputs)
         Weights.
-    lower, upper : ndarray, shape (n_x,), optional
-        Bounds: a step that would leave them is taken backwards.
+    upper : ndarray, shape (n_x,), optional
+        Upper bounds: a (forward) step that would leave them is taken backwards.
     rel_step : float, optional
         Relative step of the matrices' difference quotient, times ``max(1, |x_i|)``.
 
@@ -255,7 +255,7 @@ def frf_residual_jacobian(build, x, frequencies, H, w, lower=None, upper=None, r
             h = -h
         xi = x.copy()
         xi[i] += h
-        M2, K2, C2, b2, R2, tau2, q2 = _frf_parts(build(xi))
+        M2, K2, C2, b2, R2, tau2, _ = _frf_parts(build(xi))
         if M2.shape != M.shape or R2.shape != R.shape:
             raise ValueError(f"parameter {i} changes the model's size ({M.shape} -> {M2.shape})")
         dZ = ((K2 - K)[None] - (om**2)[:, None, None] * (M2 - M)[None]
@@ -322,6 +322,10 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
             return np.full(2 * w.size + nl, 1e3)
         return np.concatenate([r, prior * scale * x[:nl]])
 
+    n_x = nl + (spec.n if spec is not None else 0)
+    prior_rows = np.zeros((nl, n_x))  # the pull towards 0: constant rows of the Jacobian
+    prior_rows[:, :nl] = prior * scale * np.eye(nl)
+
     def jac(x):
         # analytic through the model's matrices (one build per parameter, two solves), not one
         # whole-model FRF per parameter
@@ -329,9 +333,7 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
             J = frf_residual_jacobian(build, x, f, H, w, upper=hi)
         except (ValueError, np.linalg.LinAlgError):
             J = np.zeros((2 * w.size, x.size))
-        pr = np.zeros((nl, x.size))
-        pr[:, :nl] = prior * scale * np.eye(nl)
-        return np.vstack([J, pr])
+        return np.vstack([J, prior_rows])
 
     if jacobian not in ("analytic", "2-point"):
         raise ValueError(f"jacobian={jacobian!r} must be 'analytic' or '2-point'")
@@ -342,7 +344,8 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
         lo = np.concatenate([np.full(nl, -2.5), spec.lower if spec is not None else []])
         hi = np.concatenate([np.full(nl, 2.5), spec.upper if spec is not None else []])
         x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-        sol = least_squares(res, x0, jac=jac if jacobian == "analytic" else "2-point", bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev)
+        sol = least_squares(res, x0, jac=jac if jacobian == "analytic" else "2-point", bounds=(lo, hi),
+                            method="trf", x_scale="jac", max_nfev=max_nfev)
         if best is None or sol.cost < best.cost:
             best = sol
     x = best.x
