@@ -180,13 +180,11 @@ def frf_residual(model: LumpedModel, frequencies: np.ndarray, H: np.ndarray, w: 
 
 
 def _frf_parts(model: LumpedModel):
-    """What :meth:`LumpedModel.frf` to the first input is made of: ``(M, K, C, b, rows, tau, q)``,
+    """What :meth:`LumpedModel.frf` to the first input is made of: ``(M, K, C, b, rows, tau)``,
     ``b`` the first input's force distribution (n_dofs,), ``rows`` the outputs' point vectors
-    (n_outputs, n_dofs), ``tau`` the first input's delay (s) and ``q`` the outputs' quantities."""
-    b = model.point_vector(model.inputs[0].dof)
-    rows = np.array([model.point_vector(o.dof) for o in model.outputs]).reshape(len(model.outputs), model.n_dofs)
-    return (np.asarray(model.M), np.asarray(model.K), np.asarray(model.C), b, rows, float(model.inputs[0].delay),
-            tuple(o.quantity for o in model.outputs))
+    (n_outputs, n_dofs) and ``tau`` the first input's delay (s)."""
+    return (np.asarray(model.M), np.asarray(model.K), np.asarray(model.C), model.point_vector(model.inputs[0].dof),
+            model.output_rows(), float(model.inputs[0].delay))
 
 
 def frf_residual_jacobian(build, x, frequencies, H, w, upper=None, rel_step: float = 1e-7):
@@ -234,17 +232,13 @@ def frf_residual_jacobian(build, x, frequencies, H, w, upper=None, rel_step: flo
     x = np.asarray(x, float)
     f = np.asarray(frequencies, float)
     om = 2 * np.pi * f
-    M, K, C, b, R, tau, q = _frf_parts(build(x))
-    Z = K[None] - (om**2)[:, None, None] * M[None] + 1j * om[:, None, None] * C[None]
+    m0 = build(x)
+    M, K, C, b, R, tau = _frf_parts(m0)
+    Z = m0.dynamic_stiffness(f)
     G = np.linalg.solve(Z, np.broadcast_to(b[:, None], (len(f),) + b[:, None].shape))[..., 0]  # (n_f, n_d)
     Lt = np.linalg.solve(np.swapaxes(Z, 1, 2), np.broadcast_to(R.T, (len(f),) + R.T.shape))  # (n_f, n_d, n_o)
     L = np.swapaxes(Lt, 1, 2)  # (n_f, n_o, n_d)
-    S = np.ones((len(f), len(q)), complex)
-    for r, qq in enumerate(q):
-        if qq == "acceleration":
-            S[:, r] = -(om**2)
-        elif qq == "velocity":
-            S[:, r] = 1j * om
+    S = m0.output_factors(f)
     e = np.exp(-1j * om * tau)
     RG = np.einsum("od,fd->fo", R, G)
     scale = w / np.maximum(np.abs(H), 1e-300)
@@ -255,7 +249,7 @@ def frf_residual_jacobian(build, x, frequencies, H, w, upper=None, rel_step: flo
             h = -h
         xi = x.copy()
         xi[i] += h
-        M2, K2, C2, b2, R2, tau2, _ = _frf_parts(build(xi))
+        M2, K2, C2, b2, R2, tau2 = _frf_parts(build(xi))
         if M2.shape != M.shape or R2.shape != R.shape:
             raise ValueError(f"parameter {i} changes the model's size ({M.shape} -> {M2.shape})")
         dZ = ((K2 - K)[None] - (om**2)[:, None, None] * (M2 - M)[None]

@@ -534,26 +534,74 @@ class LumpedModel:
         ValueError
             If `quantity` is not one of the allowed values.
         """
-        if quantity is not None and quantity not in QUANTITIES:
-            raise ValueError(f"{quantity=} must be one of {QUANTITIES} or None")
         f = np.atleast_1d(np.asarray(frequencies, dtype=float))
         w = 2 * np.pi * f
-        M, K, C = self.M, self.K, self.C
-        Z = K[None] - (w**2)[:, None, None] * M[None] + 1j * w[:, None, None] * C[None]
+        S = self.output_factors(f, quantity)
         B = self.B
-        G = np.linalg.solve(Z, np.broadcast_to(B, (len(f),) + B.shape))  # (n_f, n_dofs, n_in)
-        rows = np.array([self.point_vector(o.dof) for o in self.outputs]).reshape(len(self.outputs), self.n_dofs)
-        H = np.einsum("od,fdi->foi", rows, G)
-        for r, o in enumerate(self.outputs):
-            q = quantity or o.quantity
-            if q == "acceleration":
-                H[:, r, :] *= -(w**2)[:, None]
-            elif q == "velocity":
-                H[:, r, :] *= 1j * w[:, None]
+        G = np.linalg.solve(self.dynamic_stiffness(f), np.broadcast_to(B, (len(f),) + B.shape))  # (n_f, n_dofs, n_in)
+        H = np.einsum("od,fdi->foi", self.output_rows(), G) * S[:, :, None]
         delays = np.array([i.delay for i in self.inputs])
         if np.any(delays):
             H *= np.exp(-1j * w[:, None] * delays[None, :])[:, None, :]
         return H
+
+    def dynamic_stiffness(self, frequencies) -> np.ndarray:
+        """The dynamic stiffness ``Z(w) = K - w^2 M + j w C`` of the linear part.
+
+        Parameters
+        ----------
+        frequencies : array_like, shape (n_f,)
+            Frequencies in Hz.
+
+        Returns
+        -------
+        Z : ndarray of complex, shape (n_f, n_dofs, n_dofs)
+            N/m (N/rad for rotational DOFs).
+        """
+        w = 2 * np.pi * np.atleast_1d(np.asarray(frequencies, dtype=float))
+        return self.K[None] - (w**2)[:, None, None] * self.M[None] + 1j * w[:, None, None] * self.C[None]
+
+    def output_rows(self) -> np.ndarray:
+        """The outputs' point vectors: the rows that map the DOFs' motion to each output.
+
+        Returns
+        -------
+        rows : ndarray, shape (n_outputs, n_dofs)
+            Dimensionless (a point's share of each DOF's motion).
+        """
+        return np.array([self.point_vector(o.dof) for o in self.outputs]).reshape(len(self.outputs), self.n_dofs)
+
+    def output_factors(self, frequencies, quantity: Quantity | None = None) -> np.ndarray:
+        """Each output's factor from receptance to its quantity: ``-w^2`` (acceleration), ``j w``
+        (velocity) or 1 (displacement).
+
+        Parameters
+        ----------
+        frequencies : array_like, shape (n_f,)
+            Frequencies in Hz.
+        quantity : {"acceleration", "velocity", "displacement"} or None
+            Quantity for every output; None uses each output's configured quantity.
+
+        Returns
+        -------
+        S : ndarray of complex, shape (n_f, n_outputs)
+
+        Raises
+        ------
+        ValueError
+            If `quantity` is not one of the allowed values.
+        """
+        if quantity is not None and quantity not in QUANTITIES:
+            raise ValueError(f"{quantity=} must be one of {QUANTITIES} or None")
+        w = 2 * np.pi * np.atleast_1d(np.asarray(frequencies, dtype=float))
+        S = np.ones((w.size, len(self.outputs)), complex)
+        for r, o in enumerate(self.outputs):
+            q = quantity or o.quantity
+            if q == "acceleration":
+                S[:, r] = -(w**2)
+            elif q == "velocity":
+                S[:, r] = 1j * w
+        return S
 
     def state_space(self):
         """The linear part as a :class:`control.StateSpace` (state ``[x, xdot]``).
