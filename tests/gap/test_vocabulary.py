@@ -253,3 +253,30 @@ def test_a_hysteresis_yielding_far_below_the_rms_deflection_responds_as_its_coul
         # how much of the hysteresis's own effect the Coulomb friction leaves
         err[share] = nrmse(y_bw, y_c) / nrmse(y_bw, y_lin)
     assert err[0.005] < 0.1 < err[0.3]  # 0.068 and 0.47 measured
+
+
+def test_the_retry_from_a_stand_ins_simpler_effect_takes_one_that_lifts_from_it():
+    """A hysteresis chosen first stands in for a Coulomb friction at its link; the retry from the
+    friction takes the best ranked candidate there of that class or of one lifting from it (an
+    asymmetric friction: fresh seed 5501 case 002, a 0.10 / 0.41 N friction under a hysteresis),
+    never one at another link, of another class, or vanishing."""
+    from types import SimpleNamespace
+
+    from vibroscope.gap._selection import best_nonlinear
+
+    model = chain()
+    specs = {(s.effect, tuple(s.where.get("between", ()))): s for s in candidate_specs(model, scales(model))}
+
+    def cand(effect, between, vanished=False):
+        c0 = SimpleNamespace(effect=effect, where={"between": list(between)}, vanished=vanished)
+        return (c0, model, None, specs[(effect, between)], None)
+
+    here = ("m1", "ground")
+    other = next(k[1] for k in specs if k[0] == "asymmetric_friction" and k[1] != here)
+    ranked = [cand("hysteresis", here), cand("asymmetric_friction", other), cand("cubic_stiffness", here),
+              cand("asymmetric_friction", here, vanished=True), cand("asymmetric_friction", here),
+              cand("coulomb_friction", here)]
+    got = best_nonlinear(ranked, at=list(here), other_than="hysteresis", only="coulomb_friction")
+    assert got is ranked[4]
+    assert best_nonlinear(ranked[5:], at=list(here), other_than="hysteresis", only="coulomb_friction") is ranked[5]
+    assert best_nonlinear(ranked[:4], at=list(here), other_than="hysteresis", only="coulomb_friction") is None
