@@ -143,14 +143,14 @@ def residual_peaks(resid: np.ndarray, mask: np.ndarray, fs: float, nperseg: int,
     at and around its frequency (Ewins, *Modal Testing*, 2000, §4.3 on residual FRF
     comparison), where a dB comparison of FRFs weighs a line of small response alike.
     """
-    _, G, n_avg = masked_csd(np.asarray(resid, float), mask, fs, nperseg, window)
+    f, G, n_avg = masked_csd(np.asarray(resid, float), mask, fs, nperseg, window)
     if n_avg == 0:
         return []
     P = np.real(np.einsum("fii->fi", G))[sel] / np.maximum(np.asarray(noise_psd, float), 1e-300)[None, :]
     s = np.sum(P, axis=1)
     if not np.all(np.isfinite(s)) or s.size < 3:
         return []
-    f = np.fft.rfftfreq(nperseg, 1 / fs)[sel]
+    f = f[sel]
     pk, props = sps.find_peaks(s, prominence=max(0.05 * float(s.max()), 3.0 * P.shape[1]))
     order = np.argsort(props["prominences"])[::-1][:n_peaks]
     return [float(f[pk[i]]) for i in order]
@@ -213,8 +213,8 @@ def gather_evidence(run: Run) -> None:
     # then where measured / model deviates most significantly (deviation in dB times the
     # coherence weight), against the refitted and the nominal model; the dB measure alone is led
     # by lines of small response (a displacement at 200 Hz) where its noise is largest
-    starts: list[float] = list(residual_peaks(ys[fit_log][:, :n_sc] - y_ref[fit_log][:, :n_sc], mfit0, fs, nps,
-                                              window, sel, nf.psd_level))
+    resid = ys[fit_log][:, :n_sc] - y_ref[fit_log][:, :n_sc]  # the refit's residual (also the signatures')
+    starts: list[float] = residual_peaks(resid, mfit0, fs, nps, window, sel, nf.psd_level)
     for ref_m, y_m in ((refit, y_ref), (model, y_nom)):
         Hr = model_frf(ref_m, y_m)
         rt = H_s / np.where(np.abs(Hr) > 0, Hr, 1)
@@ -253,7 +253,6 @@ def gather_evidence(run: Run) -> None:
     lv_rms = [b[0] for b in blas]
     # coherence that the noise floor alone would leave (output PSDs of the fitting data, fd[3])
     noise_coh = np.clip(1 - nf.psd_level[None, :] / np.maximum(fd[3][sel], 1e-300), 0, 1)
-    resid = ys[fit_log][:, :n_sc] - y_ref[fit_log][:, :n_sc]
     rel_fit = {k: (d[mfit0], v[mfit0]) for k, (d, v) in rel.items()}
     sigs_tests = run_signatures(
         frequencies=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
