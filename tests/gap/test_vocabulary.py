@@ -112,6 +112,28 @@ def test_vanishing_parameters_are_named():
     assert by["cubic_stiffness"].qualifiers([0.1]) == {"character": "hardening"}
 
 
+def test_an_extra_mode_resonating_outside_the_excited_band_vanishes():
+    """Within the band, a mode far above it moves with its DOF (a mass) and one far below it
+    stands still (a spring): a parameter change, not an extra mode (fresh modal seed 5603 case
+    001: a 1.6 % heavier mass taken by a mode at 226.9 Hz, the band ending at 170.8 Hz). A mode
+    whose half-power band reaches into the excited band is seen, and kept."""
+    model = chain()
+    sc = dict(scales(model), f_band=(2.0, 170.8))
+    em = next(s for s in candidate_specs(model, sc, ["extra_mode"]))
+
+    def p(f, zeta=0.02, mass_share=0.03):
+        return [math.log(mass_share), math.log(f), math.log(zeta)]
+
+    assert "acts as a mass" in em.vanishes(p(226.9, 0.002))
+    assert "acts as a spring" in em.vanishes(p(1.5))
+    for f in (2.5, 80.0, 170.0, 172.0):  # 172 Hz at 2 %: its half-power band reaches 168.6 Hz
+        assert em.vanishes(p(f)) is None, f
+    assert "0.1 %" in em.vanishes(p(80.0, mass_share=1e-3))
+    # no band given (a closed loop, or a caller's own scales): only the mass rule
+    em_free = next(s for s in candidate_specs(model, scales(model), ["extra_mode"]))
+    assert em_free.vanishes(p(226.9, 0.002)) is None
+
+
 def test_joint_friction_softens_a_connection_and_keeps_its_small_amplitude_stiffness():
     """The Jenkins joint replaces a share r of the spring: stiffness k at small amplitude (the
     slider sticks), (1 - r) k once it slips."""

@@ -18,8 +18,8 @@ from functools import partial
 import numpy as np
 
 from vibroscope.gap._ranking import ranking_floor
-from vibroscope.gap._run import (BRACKET_EVALS, LIN_EFFECT_NFEV, NONE_FACTOR, N_LOCATIONS, OTHER_BASE_FACTOR, Run,
-                                 excess, prefix_gap, where_key)
+from vibroscope.gap._run import (BRACKET_EVALS, LIN_EFFECT_NFEV, LINEAR_STOP_FACTOR, NONE_FACTOR, N_LOCATIONS,
+                                 OTHER_BASE_FACTOR, Run, excess, prefix_gap, where_key)
 from vibroscope.gap.effects import EFFECT_TABLE, candidate_specs
 from vibroscope.gap.fit import SCHEME, best_start, fit_linear_frf, fit_time_domain, oversample_for
 from vibroscope.gap.measure import nrmse
@@ -184,11 +184,11 @@ def stop_at_linear_floor(run: Run, results: list, nl_specs: list, workers) -> tu
                 pre_eval[id(r)] = ev
         g_lin = min([run.gap_refit] + [pre_eval[id(r)][0] for r in results if r[0].vanishes(r[2]) is None])
         floor = run.floor
-        if g_lin <= NONE_FACTOR * floor:
+        if g_lin <= LINEAR_STOP_FACTOR * floor:
             for s in nl_specs:
                 if EFFECT_TABLE[s.effect].level_dependent:
                     run.not_tried[s.effect] = (f"a linear explanation leaves a held-out gap of {g_lin:.3g}, within "
-                                               f"{NONE_FACTOR} x the noise floor {floor:.3g}, and the BLA does not "
+                                               f"{LINEAR_STOP_FACTOR} x the noise floor {floor:.3g}, and the BLA does not "
                                                f"change with the level")
             nl_specs = [s for s in nl_specs if not EFFECT_TABLE[s.effect].level_dependent]
     return nl_specs, pre_eval

@@ -226,6 +226,8 @@ def gather_evidence(run: Run) -> None:
             if all(abs(fc - o) > 0.03 * o for o in starts):
                 starts.append(fc)
     scales["f_extra"] = starts
+    if not closed:  # where an extra mode can be seen (in a loop the plant's input is not the reference)
+        scales["f_band"] = tuple(float(x) for x in nf.excited_band)
     # levels (within and across logs) and level-wise H1: the BLA's level dependence
     groups = level_groups(us, all_masks, fs)
     blas = bla_levels(us, ys, groups, fs, nps, f_s)
