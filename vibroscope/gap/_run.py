@@ -32,8 +32,8 @@ NONE_FACTOR = 1.3
 #: the level-dependent nonlinear effects are not tried when a linear explanation leaves at most
 #: this multiple of the noise floor on held-out data and the BLA does not change with the level
 #: (:func:`~vibroscope.gap._candidates.stop_at_linear_floor`): above what right linear verdicts
-#: leave (94 right linear verdicts of seeds 5401-5603, open-loop and modal: at most 1.045x; two
-#: closed-loop delays 1.21x and 1.37x), below the 1.14x of a mostly stuck Coulomb friction
+#: leave (61 distinct right linear verdicts of seeds 5301-5603: the 52 open-loop and modal ones at
+#: most 1.045x; closed-loop delays up to 1.37x), below the 1.14x of a mostly stuck Coulomb friction
 #: (Fc twice the connection's RMS force) that a linear refit pinning its mass nearly explains
 #: (fresh seed 5602 case 004, named ``extra_mode`` at 1.3x, right and at the floor at 1.1x)
 LINEAR_STOP_FACTOR = 1.1
