@@ -962,7 +962,8 @@ def _extra_mode(model, scales):
         170.8 Hz)."""
         if p[0] < math.log(2e-3):
             return f"the extra mass is {100 * math.exp(p[0]):.2g} % of its DOF's"
-        f, half = math.exp(p[1]), 2.0 * math.exp(p[2]) * math.exp(p[1])
+        f = math.exp(p[1])
+        half = 2.0 * math.exp(p[2]) * f  # the half-power bandwidth, Hz
         if f - half > f_hi or f + half < f_lo:
             return (f"its natural frequency {f:.4g} Hz lies outside the excited band {f_lo:.3g}-{f_hi:.4g} Hz: "
                     f"within the band it acts as a {'mass' if f > f_hi else 'spring'} at its DOF (a parameter change)")
