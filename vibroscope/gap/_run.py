@@ -104,6 +104,11 @@ SCAN_HALF_WIDTH = 0.7
 #: nonlinear class again at every connection of the current model before an addition
 #: (:func:`~vibroscope.gap._selection.relocated`)
 RELOCATE_NFEV = 3
+#: evaluations of the fit of a friction-held clearance (a Coulomb friction and a clearance at one
+#: connection, fitted together from the product of their starts,
+#: :func:`~vibroscope.gap._selection.held_clearances`): each alone can vanish where only the pair
+#: explains the gap (the friction holds the clearance's DOF; free, the clearance would float)
+HELD_CLEARANCE_NFEV = 20
 #: an addition within REFINE_FACTOR (but not ADD_FACTOR) times the current penalised excess is
 #: fitted further (jointly with the linear parameters) before the decision
 REFINE_FACTOR = 0.8

@@ -93,6 +93,7 @@ from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
 from vibroscope.gap._run import (  # the tuning constants live with the run state; exposed here too
     ADD_FACTOR,
     CONN_JOINT_GAIN,
+    HELD_CLEARANCE_NFEV,
     JOINT_TOP,
     LEVEL_FRACTION,
     LEVEL_MODE_CHANGE,

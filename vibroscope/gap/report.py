@@ -378,7 +378,7 @@ class GapReport:
     traces : GapTraces or None
     spectrum : GapSpectrum or None
     timings : dict
-        Seconds per stage.
+        Seconds per stage (``held_clearance``, where made, is part of ``forward_selection``).
     meta : dict
         Settings and provenance.
     level_evidence : LevelEvidence or None
