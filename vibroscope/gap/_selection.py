@@ -11,7 +11,8 @@ addition the family member (Coulomb or asymmetric friction) is chosen again by t
 (:func:`family_member`); a combination is polished jointly
 (:func:`~vibroscope.gap._ranking.polish_candidate`). When an input delay joins only later, the
 selection runs once more from the delay fitted alone (:func:`delay_first`) with the nonlinear
-candidates screened again on it (:func:`screen_on`).
+candidates screened again on it (:func:`screen_on`). A Coulomb friction and a clearance at one
+connection, each of which alone can vanish, are fitted as a pair (:func:`held_clearances`).
 """
 
 from __future__ import annotations
@@ -66,6 +67,9 @@ def select_further_effects(run: Run, *, workers) -> None:
     delay, the selection is run once more from the delay fitted alone, with the nonlinear
     candidates screened again on it
     (:func:`delay_first`, :func:`screen_on`), and the combination that explains more is kept.
+    A selection (or an unexplained gap) still above :data:`~vibroscope.gap._run.PM_FURTHER` times
+    the floor is tested against a friction-held clearance (:func:`held_clearance_trial`), kept
+    when significantly better (:func:`beyond`).
     Updates ``chosen``, ``verdict``, ``ordered``; sets ``shares``."""
     per_class, polish = run.per_class, run.polish
     chosen, cands, best_i, verdict, ordered = run.chosen, run.cands, run.best_i, run.verdict, run.ordered
