@@ -213,11 +213,11 @@ def select_further_effects(run: Run, *, workers) -> None:
             trial, trial_shares = select_from(alt)
             if trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[-1][0]):
                 chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
+    named = {c[0].effect for c in chosen}
     if (run.val_logs and len(run.lin) and not run.closed
             and (not chosen or chosen[-1][0].gap_after > PM_FURTHER * run.floor)
             and not (chosen and unpredictable(run, chosen[-1]))
-            and not ({c[0].effect for c in chosen} & {"coulomb_friction", "asymmetric_friction"}
-                     and "backlash" in {c[0].effect for c in chosen})):
+            and not (named & {"coulomb_friction", "asymmetric_friction"} and "backlash" in named)):
         # a Coulomb friction and a clearance at one connection, each of which alone can vanish (the
         # friction holds the clearance's DOF; without it the DOF would float in the clearance, and
         # without the clearance the stiff spring leaves the friction nothing to do): fitted as a
@@ -248,9 +248,8 @@ def held_clearances(run: Run, workers) -> list:
     for s in run.specs:
         if s.effect in ("coulomb_friction", "backlash") and "between" in s.where:
             by_pair.setdefault(where_key(s.where), {})[s.effect] = s
-    jobs = [(d["coulomb_friction"], d["backlash"], base)
-            for d in by_pair.values() if len(d) == 2
-            for i, base in enumerate((run.model, run.refit)) if i == 0 or run.refit is not run.model]
+    bases = [run.model] + ([run.refit] if run.refit is not run.model else [])
+    jobs = [(d["coulomb_friction"], d["backlash"], base) for d in by_pair.values() if len(d) == 2 for base in bases]
     sims, ys, split = run.sims, run.ys, run.split
 
     def fit_pair(job):
