@@ -109,6 +109,14 @@ RELOCATE_NFEV = 3
 #: :func:`~vibroscope.gap._selection.held_clearances`): each alone can vanish where only the pair
 #: explains the gap (the friction holds the clearance's DOF; free, the clearance would float)
 HELD_CLEARANCE_NFEV = 20
+#: ... from at most this many of the best of the product of their starts: the next one while a fit
+#: stalls, closing less than HELD_CLEARANCE_STALL of its start's gap
+HELD_CLEARANCE_STARTS = 3
+HELD_CLEARANCE_STALL = 0.1
+#: the effect classes fitted with a clearance as a pair (:data:`HELD_CLEARANCE_NFEV`): each holds
+#: the clearance's DOF, a Coulomb friction by its force, a Bouc-Wen hysteresis by its initial
+#: stiffness and its yield force
+CLEARANCE_HOLDERS = ("coulomb_friction", "hysteresis")
 #: an addition within REFINE_FACTOR (but not ADD_FACTOR) times the current penalised excess is
 #: fitted further (jointly with the linear parameters) before the decision
 REFINE_FACTOR = 0.8

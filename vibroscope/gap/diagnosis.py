@@ -92,8 +92,11 @@ from vibroscope.gap._ranking import rank_candidates
 from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
 from vibroscope.gap._run import (  # the tuning constants live with the run state; exposed here too
     ADD_FACTOR,
+    CLEARANCE_HOLDERS,
     CONN_JOINT_GAIN,
     HELD_CLEARANCE_NFEV,
+    HELD_CLEARANCE_STALL,
+    HELD_CLEARANCE_STARTS,
     JOINT_TOP,
     LEVEL_FRACTION,
     LEVEL_MODE_CHANGE,

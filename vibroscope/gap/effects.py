@@ -803,6 +803,15 @@ def _cubic_stiffness(model, scales):
     return specs
 
 
+#: a Bouc-Wen hysteresis tends to a Coulomb slider of force ``alpha / (beta (gamma + delta))``
+#: where ``gamma + delta`` exceeds this: any positive sum (at or below zero it never slides at a
+#: bounded force). It was 0.05 before session 58: fresh two-effect seed 5801 case 003, a
+#: hysteresis and a 0.65 N Coulomb friction at one link, was a hysteresis alone of gamma + delta
+#: = 0.038 (a slider of 1.5 N) at 1.39x the floor, never retried from the friction; retried, both
+#: were named (Fc 0.650 N, alpha 1.079e5 N/m; true 0.648 N, 1.077e5 N/m) at the truth's own gap
+SLIP_LIMIT_MIN = 0.0
+
+
 def _hysteresis(model, scales):
     specs = []
     u_ref = max(scales.get("u_rms", 1.0), 1e-12)
@@ -829,7 +838,7 @@ def _hysteresis(model, scales):
             # z tends to alpha / (beta (gamma + delta)) while v keeps its sign: a Coulomb slider's
             # force (the Dahl limit); no bounded limit where gamma + delta is not positive
             alpha, beta, gamma, delta = bw_coeffs(p)
-            return np.array([math.log(alpha / (beta * (gamma + delta)))]) if gamma + delta > 0.05 else None
+            return np.array([math.log(alpha / (beta * (gamma + delta)))]) if gamma + delta > SLIP_LIMIT_MIN else None
 
         lo_h = np.array([math.log(1e-4), math.log(1e-3), -1.45])
         hi_h = np.array([math.log(10.0), math.log(1e3), 1.45])
