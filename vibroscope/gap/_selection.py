@@ -11,8 +11,9 @@ addition the family member (Coulomb or asymmetric friction) is chosen again by t
 (:func:`family_member`); a combination is polished jointly
 (:func:`~vibroscope.gap._ranking.polish_candidate`). When an input delay joins only later, the
 selection runs once more from the delay fitted alone (:func:`delay_first`) with the nonlinear
-candidates screened again on it (:func:`screen_on`). A Coulomb friction and a clearance at one
-connection, each of which alone can vanish, are fitted as a pair (:func:`held_clearances`).
+candidates screened again on it (:func:`screen_on`). A clearance and a Coulomb friction or a
+hysteresis at one connection, each of which alone can vanish, are fitted as a pair
+(:func:`held_clearances`).
 """
 
 from __future__ import annotations
@@ -315,9 +316,9 @@ def held_clearance_trial(run: Run, workers, polish, holders: tuple = CLEARANCE_H
     """The best held clearance (:func:`held_clearances`, of `holders`) as a combination: both effects
     must stay (neither vanishes, and the backward elimination, :func:`eliminated`, keeps both),
     polished jointly with the linear parameters by `polish` (the combination's polish of
-    :func:`select_further_effects`); the family member (Coulomb or asymmetric friction) chosen
-    again (:func:`family_member`). Returns the chosen candidates (cumulative, the effect that
-    explains more alone first), or None."""
+    :func:`select_further_effects`); the family member (Coulomb or asymmetric friction; a
+    hysteresis or the Coulomb friction it tends to) chosen again (:func:`family_member`). Returns
+    the chosen candidates (cumulative, the effect that explains more alone first), or None."""
     fits = held_clearances(run, workers, holders)
     if not fits:
         return None
