@@ -277,6 +277,44 @@ def test_a_hysteresis_yielding_far_below_the_rms_deflection_responds_as_its_coul
     assert err[0.005] < 0.1 < err[0.3]  # 0.068 and 0.47 measured
 
 
+def test_a_hysteresis_slides_at_a_bounded_force_for_any_positive_gamma_plus_delta():
+    """``tends_to`` projects a Bouc-Wen element to a Coulomb friction of force ``alpha / (beta
+    (gamma + delta))`` wherever ``gamma + delta`` is positive, however small (fresh seed 5801
+    case 003: a hysteresis fitted with gamma + delta = 0.038, a 1.5 N slider standing in for a
+    0.65 N friction beside it, was not retried from the friction while the limit needed 0.05),
+    and never where the sum is zero or negative (the real Bouc-Wen benchmark's: it never slides)."""
+    model = chain()
+    s = next(s for s in candidate_specs(model, scales(model)) if s.effect == "hysteresis")
+    for phi in (-1.2, -0.7854, -0.76, 0.0, 0.6):  # gamma + delta = cos(phi) + sin(phi): -0.57 ... 1.39
+        p = np.array([math.log(0.2), math.log(2.0), phi])
+        bw = s.apply(model, p).elements[-1]
+        limit = s.tends_to[1](p)
+        if bw.gamma + bw.delta > 0:
+            assert limit is not None, phi
+            assert math.exp(limit[0]) == pytest.approx(bw.alpha / (bw.beta * (bw.gamma + bw.delta)))
+        else:
+            assert limit is None, phi
+    p_small = np.array([0.0, 0.0, -0.766])  # gamma + delta = 0.027: a limit the old 0.05 refused
+    assert s.tends_to[1](p_small) is not None
+
+
+def test_a_clearance_is_paired_with_each_holder_not_already_named_beside_it():
+    """The held-clearance step pairs a clearance with a Coulomb friction and with a hysteresis
+    (each holds the clearance's DOF), except a holder whose family is already named with a
+    clearance."""
+    from vibroscope.gap._run import CLEARANCE_HOLDERS
+    from vibroscope.gap._selection import held_holders
+
+    assert CLEARANCE_HOLDERS == ("coulomb_friction", "hysteresis")
+    assert held_holders({"cubic_stiffness"}) == CLEARANCE_HOLDERS
+    assert held_holders({"backlash"}) == CLEARANCE_HOLDERS
+    assert held_holders({"backlash", "coulomb_friction"}) == ("hysteresis",)
+    assert held_holders({"backlash", "asymmetric_friction"}) == ("hysteresis",)
+    assert held_holders({"backlash", "hysteresis"}) == ("coulomb_friction",)
+    assert held_holders({"backlash", "joint_friction"}) == ("coulomb_friction",)
+    assert held_holders({"backlash", "coulomb_friction", "hysteresis"}) == ()
+
+
 def test_the_retry_from_a_stand_ins_simpler_effect_takes_one_that_lifts_from_it():
     """A hysteresis chosen first stands in for a Coulomb friction at its link; the retry from the
     friction takes the best ranked candidate there of that class or of one lifting from it (an
