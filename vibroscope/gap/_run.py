@@ -112,6 +112,8 @@ HELD_CLEARANCE_NFEV = 20
 #: ... from at most this many of the best of the product of their starts: the next one while a fit
 #: stalls, closing less than HELD_CLEARANCE_STALL of its start's gap
 HELD_CLEARANCE_STARTS = 3
+#: ... a fit that closes less than this share of its start's gap has stalled (the clearance's narrow
+#: valley stops it where it starts)
 HELD_CLEARANCE_STALL = 0.1
 #: the effect classes fitted with a clearance as a pair (:data:`HELD_CLEARANCE_NFEV`): each holds
 #: the clearance's DOF, a Coulomb friction by its force, a Bouc-Wen hysteresis by its initial
