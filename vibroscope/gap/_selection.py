@@ -217,11 +217,11 @@ def select_further_effects(run: Run, *, workers) -> None:
             trial, trial_shares = select_from(alt)
             if trial[-1][0].score >= UNEXPLAINED_SCORE and beyond(trial[-1][0], chosen[-1][0]):
                 chosen, shares, verdict, ordered = adopted(trial, trial_shares, ordered)
-    named = {c[0].effect for c in chosen}
+    holders = held_holders({c[0].effect for c in chosen})
     if (run.val_logs and len(run.lin) and not run.closed
             and (not chosen or chosen[-1][0].gap_after > PM_FURTHER * run.floor)
             and not (chosen and unpredictable(run, chosen[-1]))
-            and held_holders(named)):
+            and holders):
         # a Coulomb friction and a clearance at one connection, each of which alone can vanish (the
         # friction holds the clearance's DOF; without it the DOF would float in the clearance, and
         # without the clearance the stiff spring leaves the friction nothing to do): fitted as a
@@ -232,7 +232,7 @@ def select_further_effects(run: Run, *, workers) -> None:
         # one link, was the clearance alone at 2.4x the floor; added to it, the hysteresis was fitted
         # jointly into a basin of 50 % more linear damping (2x the floor), from every start
         t_pair = time.perf_counter()
-        pair = held_clearance_trial(run, workers, polished, held_holders(named))
+        pair = held_clearance_trial(run, workers, polished, holders)
         run.timings["held_clearance"] = time.perf_counter() - t_pair
         ref = chosen[-1][0] if chosen else None
         if (pair is not None and pair[-1][0].score >= UNEXPLAINED_SCORE
