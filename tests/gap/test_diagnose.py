@@ -322,6 +322,11 @@ def test_friction_and_a_clearance_at_one_spring_are_both_named():
     clear = next(c for c in r.candidates if c.effect == "backlash")
     assert clear.parameters["gap_m"] == pytest.approx(1.5e-4, rel=0.25)
     assert r.gap_after < 1.5 * r.noise_floor
+    # the selection's trace says which addition was kept, and why: below the threshold
+    kept = [e for e in r.meta["selection"]["rounds"] if e.get("kept") and "tries" in e]
+    assert [e["kept"] for e in kept][:1] == [f"{r.verdicts[1]}@m1-ground"], r.meta["selection"]
+    assert kept[0]["best_penalised"] < kept[0]["threshold"] == pytest.approx(0.5 * kept[0]["current_penalised"])
+    assert kept[0]["tries"][0]["effect"] == kept[0]["kept"]
 
 
 @pytest.mark.slow  # the full diagnosis, ~40-90 s wall

@@ -337,6 +337,11 @@ class Run:
     #: the predictability checks of the models selection started from
     #: (:func:`~vibroscope.gap._selection.unpredictable`), by effect and location
     predictability: dict = field(default_factory=dict)
+    #: the forward selection's trace (report ``meta["selection"]``): one entry per round of
+    #: :func:`~vibroscope.gap._selection.forward_selection` (the model it started from, the
+    #: additions tried with their held-out and penalised gaps, the threshold and what was kept)
+    #: and one per held-clearance trial
+    selection: list = field(default_factory=list)
 
     def mismatch(self) -> MismatchFit:
         """The ``parameter_mismatch`` explanation: the physical refit when it was kept, else

@@ -235,8 +235,16 @@ def select_further_effects(run: Run, *, workers) -> None:
         pair = held_clearance_trial(run, workers, polished, holders)
         run.timings["held_clearance"] = time.perf_counter() - t_pair
         ref = chosen[-1][0] if chosen else None
-        if (pair is not None and pair[-1][0].score >= UNEXPLAINED_SCORE
-                and (ref is None or beyond(pair[-1][0], ref))):
+        take = bool(pair is not None and pair[-1][0].score >= UNEXPLAINED_SCORE
+                    and (ref is None or beyond(pair[-1][0], ref)))
+        run.selection.append({"start": "held clearance (" + ", ".join(holders) + ")",
+                              "current": " + ".join(_label(c[0].effect, c[0].where) for c in chosen) or verdict,
+                              "current_gap": ref.gap_after if ref is not None else None,
+                              "pair": (" + ".join(_label(c[0].effect, c[0].where) for c in pair)
+                                       if pair is not None else None),
+                              "pair_gap": pair[-1][0].gap_after if pair is not None else None,
+                              "kept": take})
+        if take:
             chosen, shares, verdict, ordered = adopted(pair, shares_of(run, pair), ordered)
     run.timings["forward_selection"] = time.perf_counter() - t
     run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
@@ -505,7 +513,9 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
     starts, and those fitted alone from that fit."""
     key, k_before, floor = run.key, run.k_before, run.floor_rank
     chosen = [first]
+    start = _label(first[0].effect, first[0].where)
     if excess(first[0].gap_after, floor) > 0.5 * floor and unpredictable(run, first):
+        run.selection.append({"start": start, "stopped": "the model is unpredictable (meta.predictability)"})
         return chosen, [1.0]
     cur_c, cur_m = first[0], first[1]
     n_par = cur_c.n_parameters
@@ -547,10 +557,17 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
             joint = [i < JOINT_TOP or (a and own_rank(o) < (1 - CONN_JOINT_GAIN) * g_cur)
                      for i, (o, a) in enumerate(zip(own, at_conn))]
             tries = list(ex.map(lambda o, j: finish_addition(run, chosen, chain, o, joint=j), own, joint))
+        entry = {"start": start, "current": " + ".join(_label(c[0].effect, c[0].where) for c in chosen),
+                 "current_gap": cur_c.gap_after,
+                 "vanished": [_label(r[0].effect, r[0].where) for r in tries if r[0].vanishes(r[1]) is not None]}
         tries = [r for r in tries if r[0].vanishes(r[1]) is None]
+        entry["tries"] = [{"effect": _label(r[0].effect, r[0].where), "gap": r[3], "penalised": key(r[3], n_par + r[0].n),
+                           "joint": r[7] is not None}
+                          for r in sorted(tries, key=lambda r: key(r[3], n_par + r[0].n))]
+        run.selection.append(entry)
         if not tries:
             break
-        step = accepted_addition(run, tries, chain, cur_c, n_par)
+        step = accepted_addition(run, tries, chain, cur_c, n_par, trace=entry)
         if step is None:
             break
         s, p, m_new, g, yh, gfit, base_new, chp = step
@@ -1167,12 +1184,14 @@ def finish_addition(run: Run, chosen: list, chain: list, own, *, joint: bool = T
     return s, p, m_new, g, yh, gfit, base_new, x_j, chp
 
 
-def accepted_addition(run: Run, tries: list, chain: list, cur_c, n_par: int):
+def accepted_addition(run: Run, tries: list, chain: list, cur_c, n_par: int, trace: dict | None = None):
     """The best of the `tries` (by penalised held-out gap) when it is significant: a promising
     joint fit is carried further first (:data:`REFINE_FACTOR`), and where the chosen effects were
     refitted with it, it must beat them refitted without it too. Returns ``(spec, p, model,
     held-out gap, outputs, gap_fit, linear base, chosen effects' p or None)`` or None (the
-    selection stops)."""
+    selection stops). `trace`, when given, receives the decision: the current model's penalised
+    excess it was measured against, the threshold, the best addition's gap after a further joint
+    fit and what was kept."""
     key, held_out = run.key, run.held_out
     s, p, m_new, g, yh, gfit, base_new, x_j, chp = min(tries, key=lambda r: key(r[3], n_par + r[0].n))
     k_cur = key(cur_c.gap_after, n_par)
@@ -1193,9 +1212,18 @@ def accepted_addition(run: Run, tries: list, chain: list, cur_c, n_par: int):
         for (s_c, _), p_c in zip(chain, chp):
             m_wo = s_c.apply(m_wo, p_c)
         k_cur = min(k_cur, key(held_out(m_wo, fast=True)[0], n_par))
-    if not key(g, n_par + s.n) < ADD_FACTOR * k_cur:
+    kept = key(g, n_par + s.n) < ADD_FACTOR * k_cur
+    if trace is not None:
+        trace.update({"current_penalised": k_cur, "threshold": ADD_FACTOR * k_cur, "best_gap": g,
+                      "best_penalised": key(g, n_par + s.n), "kept": _label(s.effect, s.where) if kept else None})
+    if not kept:
         return None
     return s, p, m_new, g, yh, gfit, base_new, chp
+
+
+def _label(effect: str, where: dict) -> str:
+    """``effect@location`` (the report's ``meta["selection"]`` and ``meta["nested_tests"]`` form)."""
+    return f"{effect}@{where_key(where)}"
 
 
 def chain_vanishes(before, after) -> bool:

@@ -671,6 +671,11 @@ def _build_report(run: Run) -> GapReport:
               "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "noise_floor_ranking": {"nrmse": floor_rank, "method": floor_rank_method},
               "nested_tests": {"t": dict(run.nested_t), "threshold": NESTED_T},
+              "selection": {"method": "forward selection, one entry per round: the additions tried on the current "
+                                      "model (held-out gap, penalised excess gap), kept when the best one's "
+                                      f"penalised excess is below {ADD_FACTOR} of the current one's (the threshold); "
+                                      "a held-clearance trial, kept when significantly better",
+                            "rounds": list(run.selection)},
               "predictability": {
                   "method": "held-out nrmse between the model's outputs at its default and at twice its "
                             "integration sub-steps; forward selection does not start from a model where it "
