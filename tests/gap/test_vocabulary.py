@@ -340,3 +340,33 @@ def test_the_retry_from_a_stand_ins_simpler_effect_takes_one_that_lifts_from_it(
     assert got is ranked[4]
     assert best_nonlinear(ranked[5:], at=list(here), other_than="hysteresis", only="coulomb_friction") is ranked[5]
     assert best_nonlinear(ranked[:4], at=list(here), other_than="hysteresis", only="coulomb_friction") is None
+
+
+def test_a_held_clearance_is_fitted_at_the_chosen_connections_and_the_best_screened_others():
+    """The pair step fits a clearance with its holder at each connection where a chosen effect
+    acts and at the HELD_CLEARANCE_CONNECTIONS others whose clearance or holder screened best
+    alone, not at every connection (six in a three-point modal model)."""
+    from types import SimpleNamespace
+
+    from vibroscope.gap._run import HELD_CLEARANCE_CONNECTIONS
+    from vibroscope.gap._selection import held_clearances
+    from vibroscope.models.elements import Damper
+
+    conns = [("m1", "ground"), ("m2", "m1"), ("m3", "m2"), ("m3", "ground")]
+    model = LumpedModel(dofs=(Dof("m1", 1.0), Dof("m2", 0.5), Dof("m3", 0.4)),
+                        elements=tuple(e for c in conns for e in (Spring(c, k=4e4), Damper(c, c=5.0))),
+                        inputs=(Input(dof="m1", channel="/u.x"),),
+                        outputs=(Output("m1", "acceleration", "/y1.x"),), name="three")
+    sc = scales(model) | {"d_rms": {"-".join(c): 1e-4 for c in conns}, "v_rms": {"-".join(c): 0.02 for c in conns}}
+    specs = [s for s in candidate_specs(model, sc) if s.effect == "backlash"]
+    assert len(specs) == 4
+    gaps = {("m1", "ground"): 0.3, ("m2", "m1"): 0.1, ("m3", "m2"): 0.2, ("m3", "ground"): 0.4}
+    screened = [(s, s.starts[0], gaps[tuple(s.where["between"])], model) for s in specs]
+    run = SimpleNamespace(specs=specs, screened=screened, model=model, refit=model, sims=[], ys=[], split=None)
+    trace: dict = {}
+    # holders=() fits nothing (no pair is complete); the trace names the connections it would fit
+    assert held_clearances(run, 1, holders=(), at=(("ground", "m3"),), trace=trace) == []
+    assert HELD_CLEARANCE_CONNECTIONS == 2
+    assert trace["connections"] == ["ground-m3", "m1-m2", "m2-m3"]
+    held_clearances(run, 1, holders=(), trace=trace)
+    assert trace["connections"] == ["m1-m2", "m2-m3"]

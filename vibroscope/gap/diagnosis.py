@@ -94,6 +94,7 @@ from vibroscope.gap._run import (  # the tuning constants live with the run stat
     ADD_FACTOR,
     CLEARANCE_HOLDERS,
     CONN_JOINT_GAIN,
+    HELD_CLEARANCE_CONNECTIONS,
     HELD_CLEARANCE_NFEV,
     HELD_CLEARANCE_STALL,
     HELD_CLEARANCE_STARTS,
