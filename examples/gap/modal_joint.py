@@ -20,13 +20,17 @@ Then it runs the two commands an engineer would, and prints the verdict:
     vibroscope modal OUT/low.mcap --input /actuator/force.wrench.force.x --export-model OUT/modal.toml
     vibroscope gap OUT/modal.toml OUT/levels_1.mcap OUT/levels_2.mcap OUT/levels_3.mcap --json OUT/gap.json
 
+With ``--clearance GAP`` the joint also has free play: a contact spring of the joint's slipping
+stiffness acts beyond +-GAP m (a bolt in a clearance hole: it slips, then bears), so the joint
+is a friction and a clearance together, as the aircraft's wing-payload joint of issue #18.
+
 The nominal is the identified modal model, not an exact one: three modes, their residues, and
 the driving point found from them. A modal model has no spring at the joint to let slip; the
 diagnosis takes a fitted share of the static stiffness across the two measured points out of
 the modes (``signed_spring``) and puts the Jenkins or Iwan joint in its place
 (:mod:`vibroscope.gap.effects`).
 
-    python examples/gap/modal_joint.py [--out modal_joint] [--no-run]
+    python examples/gap/modal_joint.py [--out modal_joint] [--clearance GAP] [--no-run]
 """
 
 from __future__ import annotations
@@ -44,11 +48,13 @@ JOINT = ("m3", "m2")
 SHARE, F_MAX, N_SLIDERS = 0.5, 6.0, 4
 
 
-def truth_model():
-    """The chain with the Iwan joint between the wing and the payload, and without it."""
+def truth_model(clearance: float = 0.0):
+    """The chain with the Iwan joint between the wing and the payload (and, with `clearance` > 0
+    in m, a contact spring of the joint's slipping stiffness beyond that clearance), and without
+    them."""
     from dataclasses import replace
 
-    from vibroscope.models import BoucWen, LumpedModel, Spring
+    from vibroscope.models import Backlash, BoucWen, LumpedModel, Spring
 
     k = [4e5, 1.5e5, 6e4]
     linear = LumpedModel.chain([8.0, 3.0, 1.5], k, [1e-4 * x for x in k], input_dof=1, name="wing + payload")
@@ -60,16 +66,18 @@ def truth_model():
     for i in range(1, N_SLIDERS + 1):  # slider i slips at F_MAX i / N (nu = 2: z = F tanh(k x / F))
         els.append(BoucWen(linear.elements[j].between, alpha=alpha, beta=alpha / (F_MAX * i / N_SLIDERS) ** 2,
                            gamma=0.5, delta=0.5, nu=2.0))
+    if clearance > 0:
+        els.append(Backlash(linear.elements[j].between, k=SHARE * kj, gap=clearance))
     return replace(linear, elements=tuple(els), name="wing + payload, bolted joint"), linear
 
 
-def write_logs(out: Path, seed: int = 7) -> dict:
+def write_logs(out: Path, seed: int = 7, clearance: float = 0.0) -> dict:
     """Simulate the truth (20 sub-steps per sample, 1 % noise) and write the four logs."""
     from vibroscope.io import write_ros2_mcap
     from vibroscope.models.excitation import band_limited_random
     from vibroscope.models.simulate import simulate
 
-    truth, linear = truth_model()
+    truth, linear = truth_model(clearance)
     out.mkdir(parents=True, exist_ok=True)
     runs = {"low": (60.0, 2.0)} | {f"levels_{i + 1}": (20.0, 25.0 * lv) for i, lv in enumerate((1.0, 2.5, 6.0))}
     for i, (name, (dur, rms)) in enumerate(runs.items()):
@@ -78,6 +86,7 @@ def write_logs(out: Path, seed: int = 7) -> dict:
         write_ros2_mcap(out / f"{name}.mcap", sig)
     info = {"effect": "joint_friction", "between": list(JOINT), "joint_share": SHARE,
             "joint_stiffness_N_per_m": SHARE * 6e4, "slip_force_max_N": F_MAX, "sliders": N_SLIDERS,
+            "clearance_m": clearance, "contact_stiffness_N_per_m": SHARE * 6e4 if clearance > 0 else 0.0,
             "modes_hz (linear, joint stuck)": [float(f) for f in linear.modes().natural_frequencies]}
     (out / "truth.json").write_text(json.dumps(info, indent=2))
     return info
@@ -86,9 +95,11 @@ def write_logs(out: Path, seed: int = 7) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("modal_joint"))
+    ap.add_argument("--clearance", type=float, default=0.0,
+                    help="free play of the joint in m, beyond which a contact spring bears (default 0: none)")
     ap.add_argument("--no-run", action="store_true", help="write the logs only")
     args = ap.parse_args(argv)
-    info = write_logs(args.out)
+    info = write_logs(args.out, clearance=args.clearance)
     print("truth:", json.dumps(info))
     if args.no_run:
         return 0
