@@ -327,6 +327,9 @@ def test_friction_and_a_clearance_at_one_spring_are_both_named():
     assert [e["kept"] for e in kept][:1] == [f"{r.verdicts[1]}@m1-ground"], r.meta["selection"]
     assert kept[0]["best_penalised"] < kept[0]["threshold"] == pytest.approx(0.5 * kept[0]["current_penalised"])
     assert kept[0]["tries"][0]["effect"] == kept[0]["kept"]
+    # and why it ended: the two effects leave the noise floor, so a third is not tried
+    stops = [e for e in r.meta["selection"]["rounds"] if "stopped" in e]
+    assert any(e["stopped"].startswith("within the noise floor") and " + " in e["current"] for e in stops), stops
 
 
 @pytest.mark.slow  # the full diagnosis, ~40-90 s wall

@@ -552,13 +552,22 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
                                    key=lambda r: r[3]):
         lin_alone.setdefault(s_.effect, (s_, p_, b_))
     also += list(lin_alone.values())
-    while len(chosen) < 3:
+    def stop(reason):
+        run.selection.append({"start": start, "current": " + ".join(_label(c[0].effect, c[0].where) for c in chosen),
+                              "current_gap": cur_c.gap_after, "stopped": reason})
+
+    while True:
+        if len(chosen) >= 3:
+            stop("three effects: no fourth is tried")
+            break
         if excess(cur_c.gap_after, floor) <= 0.5 * floor:
+            stop(f"within the noise floor: the held-out excess gap is at most half the ranking floor ({floor:.4g})")
             break
         cands = addition_candidates(chosen, used, per_class, screened, also, run.screened_alt)
         if len(chosen) == 1 and cur_c.gap_after > PM_FURTHER * run.floor:
             cands += masked_classes(screened, used, cands)
         if not cands:
+            stop("no class left to add")
             break
         if len(chosen) == 1:  # the second effect (a third is rare, and its classes were placed here)
             cands += relocated(run, cands, cur_m, workers)

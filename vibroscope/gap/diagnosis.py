@@ -675,7 +675,9 @@ def _build_report(run: Run) -> GapReport:
               "selection": {"method": "forward selection, one entry per round: the additions tried on the current "
                                       "model (held-out gap, penalised excess gap), kept when the best one's "
                                       f"penalised excess is below {ADD_FACTOR} of the current one's (the threshold); "
-                                      "a held-clearance trial, kept when significantly better",
+                                      "an entry with 'stopped' says why a selection ended without trying "
+                                      "(within the noise floor, three effects, no class left, an "
+                                      "unpredictable model); a held-clearance trial, kept when significantly better",
                             "rounds": list(run.selection)},
               "predictability": {
                   "method": "held-out nrmse between the model's outputs at its default and at twice its "
