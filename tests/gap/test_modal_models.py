@@ -283,6 +283,35 @@ def test_modal_export_feeds_gap_without_editing(tmp_path):
     assert np.max(np.abs(Hm - H)) / np.max(np.abs(H)) < 0.1  # residual terms aside
 
 
+def test_a_driving_point_told_from_an_in_phase_point_by_its_residual():
+    """Two modes in the band in which the body (m1) and the wing (m2) move in phase: both have
+    positive modal constants, so they alone cannot tell which is the driving point. The third
+    mode, above the band, is the upper residual: positive at the driving point m2 (its
+    ``phi_2^2 / omega_3^2``), negative at m1 and m3. Exact modal constants of a 3-DOF chain
+    (ground truth); a noise-sized negative residual is not counted."""
+    from vibroscope.commands.modal import RESIDUAL_SIGN_MIN, _driving_labels
+
+    k = [4e5 * 0.124, 1.5e5 * 0.124, 6e4 * 0.124]
+    truth = LumpedModel.chain([8.0, 3.0, 1.5], k, [BETA * x for x in k], input_dof=1, name="wing")
+    w2, V = sl.eigh(truth.K, truth.M)
+    w = np.sqrt(w2)
+    z = BETA * w / 2
+    lam = -z * w + 1j * w * np.sqrt(1 - z**2)
+    A = (V * V[1][None, :]).T  # (mode, output): phi_o,r phi_m2,r
+    assert np.all(A[:2, :2] > 0) and np.any(A[:2, 2] < 0)  # m1 and m2 in phase in modes 1-2
+    R = (A / (2j * lam.imag)[:, None])[:2, :, None]  # receptance residues of the in-band modes
+    outs = [Output(f"out{o + 1}", "displacement", f"/y{o}.x") for o in range(3)]
+    upper = (A[2] / w2[2])[:, None].astype(complex)  # the third mode as a compliance
+    pr = PoleResidueModel.from_poles_residues(w[:2] / (2 * np.pi), z[:2], R, inputs=[Input(dof="in1", channel="/u.x")],
+                                              outputs=outs, upper=upper)
+    assert _driving_labels(pr, {}) == ["in1"]  # the modal constants alone: two candidates
+    assert _driving_labels(pr, {}, pr.lower_residual, pr.upper_residual) == ["out2"]
+    # residuals of noise size, of the wrong sign, say nothing: both remain, no label is guessed
+    scale = np.sum(np.abs(A[:2, :]) / w2[:2, None], axis=0)
+    noisy = (-0.5 * RESIDUAL_SIGN_MIN * scale)[:, None].astype(complex)
+    assert _driving_labels(pr, {}, pr.lower_residual, noisy) == ["in1"]
+
+
 def excitation(n: int, seed: int = 1) -> np.ndarray:
     from scipy import signal
 

@@ -465,7 +465,8 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
         Input channel -> the output channel at the same point. Inputs not named are matched
         automatically: the one output whose receptance modal constants
         (:func:`~vibroscope.models.modal_coordinates.modal_constants`) are all positive and
-        nearly real, if exactly one is. A matched input gets its output's ``dof`` label
+        nearly real, if exactly one is (or, of several such, the one whose residual terms are
+        positive too, :func:`_driving_labels`). A matched input gets its output's ``dof`` label
         (``out<k>``), the mark of a driving point that ``vibroscope gap`` needs.
 
     Returns
@@ -491,7 +492,7 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     probe = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
                                                  inputs=[Input(dof=lb, channel=c) for lb, c in zip(labels, res.inputs)],
                                                  outputs=outputs)
-    labels = _driving_labels(probe, dict(driving_points or {}))
+    labels = _driving_labels(probe, dict(driving_points or {}), LR, UR)
     inputs = tuple(Input(dof=lb, channel=c) for lb, c in zip(labels, res.inputs))
     model = PoleResidueModel.from_poles_residues(res.natural_frequencies, res.damping_ratios, R,
                                                  inputs=inputs, outputs=outputs, lower=LR, upper=UR, name=name)
@@ -502,9 +503,25 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     return path
 
 
-def _driving_labels(model, given: dict) -> list[str]:
+#: a residual term smaller than this share of the in-band modes' own compliance (upper) or mass
+#: line (lower) has no sign that tells a driving point from a transfer point
+RESIDUAL_SIGN_MIN = 0.05
+
+
+def _driving_labels(model, given: dict, lower=None, upper=None) -> list[str]:
     """Input labels: the ``dof`` label of the output at each input's point (given by channel,
-    or the single output with positive, nearly real modal constants), else ``in<k>``."""
+    or the single output with positive, nearly real modal constants), else ``in<k>``.
+
+    With few modes in the band several outputs can have positive constants (two modes in which
+    two points move in phase); then the one whose residual terms are those of a driving point
+    as well is taken, if exactly one is: a driving point's upper residual (the receptance
+    compliance of the modes above the band, ``sum phi^2 / omega^2``) and lower residual (the
+    mass line of the modes below it, ``sum phi^2``) are both positive, a transfer point's can
+    be of either sign [Ewins, *Modal Testing*, 2000, sec. 4.4]; a residual below
+    :data:`RESIDUAL_SIGN_MIN` of the in-band modes' scale is not counted. `lower`, `upper`: the residual
+    arrays (n_outputs, n_inputs) in the model file's convention
+    (:class:`~vibroscope.models.modal_model.PoleResidueModel`), where ``UR`` is a receptance
+    compliance and ``LR`` a receptance ``-LR/omega^2`` whatever the output's quantity."""
     from vibroscope.models.modal_coordinates import COMPLEXITY_WARN, modal_constants
 
     A = modal_constants(model)
@@ -517,5 +534,14 @@ def _driving_labels(model, given: dict) -> list[str]:
         a = A[:, :, i]
         ok = np.all((a.real > 0) & (np.abs(a.imag) <= COMPLEXITY_WARN * np.abs(a)), axis=0)
         hits = np.nonzero(ok)[0]
+        if hits.size > 1 and upper is not None and lower is not None:
+            # each residual against the in-band modes' own scale at that end of the band: their
+            # static compliance (sum |A| / omega^2) and their mass line (sum |A|); a residual is
+            # counted only when it is at least RESIDUAL_SIGN_MIN of that (a noise-sized residual
+            # of either sign says nothing)
+            w2 = (2 * np.pi * np.asarray(model.natural_frequencies, float)) ** 2
+            ur = np.real(np.asarray(upper)[hits, i]) / np.maximum(np.sum(np.abs(a[:, hits]) / w2[:, None], axis=0), 1e-300)
+            lr = np.real(np.asarray(lower)[hits, i]) / np.maximum(np.sum(np.abs(a[:, hits]), axis=0), 1e-300)
+            hits = hits[(ur > -RESIDUAL_SIGN_MIN) & (lr > -RESIDUAL_SIGN_MIN)]
         labels.append(model.outputs[int(hits[0])].dof if hits.size == 1 else inp.dof)
     return labels
