@@ -289,7 +289,8 @@ def test_a_driving_point_told_from_an_in_phase_point_by_its_residual():
     mode, above the band, is the upper residual: positive at the driving point m2 (its
     ``phi_2^2 / omega_3^2``), negative at m1 and m3. Exact modal constants of a 3-DOF chain
     (ground truth); a noise-sized negative residual is not counted."""
-    from vibroscope.commands.modal import RESIDUAL_SIGN_MIN, _driving_labels
+    from vibroscope.commands.modal import _driving_labels
+    from vibroscope.models.modal_coordinates import RESIDUAL_SIGN_MIN
 
     k = [4e5 * 0.124, 1.5e5 * 0.124, 6e4 * 0.124]
     truth = LumpedModel.chain([8.0, 3.0, 1.5], k, [BETA * x for x in k], input_dof=1, name="wing")
@@ -310,6 +311,47 @@ def test_a_driving_point_told_from_an_in_phase_point_by_its_residual():
     scale = np.sum(np.abs(A[:2, :]) / w2[:2, None], axis=0)
     noisy = (-0.5 * RESIDUAL_SIGN_MIN * scale)[:, None].astype(complex)
     assert _driving_labels(pr, {}, pr.lower_residual, noisy) == ["in1"]
+
+
+def test_an_upper_residual_is_carried_as_a_pseudo_mode():
+    """A modal test whose band ends below the third mode of a 3-DOF chain: the two identified
+    modes and the third as an upper residual (``phi_o phi_2 / omega_3^2``, of either sign off
+    the driving point). Realised in modal coordinates with the residual as a pseudo-mode, the
+    FRF is the pole-residue model's (the file's own, residual included) to within 7 % over the
+    band; dropped (a residual of noise size), the realisation is more than twice as far off.
+    Ground truth: the pole-residue sum."""
+    from vibroscope.models.modal_coordinates import UPPER_PSEUDO_NAME
+
+    k = [4e5 * 0.124, 1.5e5 * 0.124, 6e4 * 0.124]
+    truth = LumpedModel.chain([8.0, 3.0, 1.5], k, [BETA * x for x in k], input_dof=1, name="wing")
+    w2, V = sl.eigh(truth.K, truth.M)
+    w = np.sqrt(w2)
+    z = BETA * w / 2
+    lam = -z * w + 1j * w * np.sqrt(1 - z**2)
+    A = (V * V[1][None, :]).T
+    R = (A / (2j * lam.imag)[:, None] * lam[:, None] ** 2)[:2, :, None]  # accelerance residues of modes 1-2
+    outs = [Output(f"out{o + 1}", "acceleration", f"/y{o}.x") for o in range(3)]
+    upper = (A[2] / w2[2])[:, None].astype(complex)
+    lower = np.sum(A[:2], axis=0)[:, None].astype(complex)  # the accelerance feedthrough of modes 1-2
+    f = np.linspace(2.0, 15.0, 400)  # the band: modes at 7.3 and 13.2 Hz, the third at 18.3 Hz
+
+    def realised(upper_):
+        pr = PoleResidueModel.from_poles_residues(w[:2] / (2 * np.pi), z[:2], R, inputs=[Input(dof="out2", channel="/u.x")],
+                                                  outputs=outs, lower=lower, upper=upper_)
+        return pr, as_lumped(pr)
+
+    def err(pr, m):
+        H, Hm = pr.frf(f)[:, :, 0], m.frf(f, quantity=None)[:, :, 0]
+        return np.sqrt(np.sum(np.abs(Hm - H) ** 2, axis=0) / np.sum(np.abs(H) ** 2, axis=0))
+
+    pr, m = realised(upper)
+    assert [d.name for d in m.dofs][-1] == UPPER_PSEUDO_NAME
+    e = err(pr, m)
+    assert np.max(e) < 0.01, e
+    pr0, m0 = realised(upper * 1e-3)
+    assert UPPER_PSEUDO_NAME not in [d.name for d in m0.dofs]
+    e0 = err(pr, m0)  # the same residual, dropped
+    assert np.all(e0 > 5 * e), (e0, e)
 
 
 def excitation(n: int, seed: int = 1) -> np.ndarray:

@@ -503,11 +503,6 @@ def export_modal_model(res, path: Path, *, name: str = "", frf=None, driving_poi
     return path
 
 
-#: a residual term smaller than this share of the in-band modes' own compliance (upper) or mass
-#: line (lower) has no sign that tells a driving point from a transfer point
-RESIDUAL_SIGN_MIN = 0.05
-
-
 def _driving_labels(model, given: dict, lower=None, upper=None) -> list[str]:
     """Input labels: the ``dof`` label of the output at each input's point (given by channel,
     or the single output with positive, nearly real modal constants), else ``in<k>``.
@@ -518,11 +513,11 @@ def _driving_labels(model, given: dict, lower=None, upper=None) -> list[str]:
     compliance of the modes above the band, ``sum phi^2 / omega^2``) and lower residual (the
     mass line of the modes below it, ``sum phi^2``) are both positive, a transfer point's can
     be of either sign [Ewins, *Modal Testing*, 2000, sec. 4.4]; a residual below
-    :data:`RESIDUAL_SIGN_MIN` of the in-band modes' scale is not counted. `lower`, `upper`: the residual
+    :data:`~vibroscope.models.modal_coordinates.RESIDUAL_SIGN_MIN` of the in-band modes' scale is not counted. `lower`, `upper`: the residual
     arrays (n_outputs, n_inputs) in the model file's convention
     (:class:`~vibroscope.models.modal_model.PoleResidueModel`), where ``UR`` is a receptance
     compliance and ``LR`` a receptance ``-LR/omega^2`` whatever the output's quantity."""
-    from vibroscope.models.modal_coordinates import COMPLEXITY_WARN, modal_constants
+    from vibroscope.models.modal_coordinates import COMPLEXITY_WARN, RESIDUAL_SIGN_MIN, modal_constants
 
     A = modal_constants(model)
     out_ch = [o.channel for o in model.outputs]

@@ -44,6 +44,17 @@ __all__ = ["ModalCoordinatesModel", "from_pole_residue", "from_transfer_function
 #: (non-proportional damping, identification noise) is warned about: the real part is kept
 COMPLEXITY_WARN = 0.1
 
+#: a residual term smaller than this share of the in-band modes' own scale at the driving point
+#: (their static compliance ``sum A / omega^2`` for the upper residual, their mass line
+#: ``sum A`` for the lower) has no sign that can be read: noise of either sign
+RESIDUAL_SIGN_MIN = 0.05
+#: the frequency of the pseudo-mode that carries a positive upper residual, as a multiple of the
+#: highest identified mode's (its in-band FRF is the residual's to within ``(f/f_u)^2``, 6 %
+#: at the highest mode's frequency)
+UPPER_PSEUDO_FACTOR = 4.0
+#: the DOF name of that pseudo-mode
+UPPER_PSEUDO_NAME = "upper_residual"
+
 
 @dataclass(frozen=True, kw_only=True)
 class ModalCoordinatesModel(LumpedModel):
@@ -181,7 +192,8 @@ def from_pole_residue(model: PoleResidueModel, *, source: str = "") -> ModalCoor
     -------
     ModalCoordinatesModel
         DOFs ``mode1`` ... ``moden`` (unit modal mass, spring ``omega_r^2`` and damper
-        ``2 zeta_r omega_r`` to ground); points = the outputs' ``dof`` labels, shapes from the
+        ``2 zeta_r omega_r`` to ground), and ``upper_residual`` where the upper residual is
+        carried (Notes); points = the outputs' ``dof`` labels, shapes from the
         driving-point column; the inputs and outputs of `model` on those points.
 
     Raises
@@ -200,10 +212,19 @@ def from_pole_residue(model: PoleResidueModel, *, source: str = "") -> ModalCoor
 
     Notes
     -----
-    The lower and upper residuals are not carried (they stand for modes outside the band);
-    for an acceleration output the realisation has its own high-frequency limit
-    ``sum_r phi_o,r phi_i,r``. With real modal constants the realisation's FRF equals the
-    pole-residue sum exactly.
+    The upper residual (the compliance of the modes above the band) is carried as a pseudo-mode
+    (DOF :data:`UPPER_PSEUDO_NAME`) at :data:`UPPER_PSEUDO_FACTOR` times the highest mode's
+    frequency, with modal constants ``UR_o omega_u^2`` (its static compliance is the residual's)
+    and the median damping ratio, when it is positive at the driving point beyond
+    :data:`RESIDUAL_SIGN_MIN` of the in-band modes' static compliance (a driving point's upper
+    residual is ``sum phi_p^2 / omega^2 > 0``; a smaller one, or one of the wrong sign, is
+    noise and dropped) [Ewins, *Modal Testing*, 2000, sec. 4.4: residual terms, and the
+    pseudo-mode that stands for the modes out of range]. An identified model whose band ends
+    below a mode it did not fit (a ground vibration test's band) needs it: dropped, a residual of
+    half the in-band compliance leaves a 10 % FRF error. The lower residual is not carried
+    (modes below the band); for an acceleration output the realisation has its own
+    high-frequency limit ``sum_r phi_o,r phi_i,r``. With real modal constants and no upper
+    residual the realisation's FRF equals the pole-residue sum exactly.
     """
     where = f"{source}: " if source else ""
     out_labels = [o.dof for o in model.outputs]
@@ -220,7 +241,7 @@ def from_pole_residue(model: PoleResidueModel, *, source: str = "") -> ModalCoor
             raise ValueError(f"{where}input {inp.channel!r} acts at {inp.dof!r}, which no output measures; "
                              f"points are {points}")
     names = [f"mode{r + 1}" for r in range(model.n_modes)]
-    bad = set(points) & (set(names) | {GROUND})
+    bad = set(points) & (set(names) | {GROUND, UPPER_PSEUDO_NAME})
     if bad:
         raise ValueError(f"{where}output labels {sorted(bad)} are reserved (modal DOF names or ground)")
     A = modal_constants(model)
@@ -238,12 +259,25 @@ def from_pole_residue(model: PoleResidueModel, *, source: str = "") -> ModalCoor
             f"{where}driving-point modal constant A={a_pp[r]:.4g} 1/kg of mode {r + 1} "
             f"({model.natural_frequencies[r]:.4g} Hz) at {points[points.index(out_labels[o0])]!r} must be > 0: "
             f"the output {model.outputs[o0].channel!r} is not at the input's point")
+    fr, zr = list(model.natural_frequencies), list(model.damping_ratios)
+    # the upper residual (the receptance compliance of the modes above the band, whatever the
+    # output's quantity) as a pseudo-mode well above the band, when it is positive at the
+    # driving point beyond noise: A_o = UR_o omega_u^2
+    ur = np.real(np.asarray(model.upper_residual)[:, i0])
+    w2 = (2 * np.pi * np.asarray(model.natural_frequencies, float)) ** 2
+    if ur[o0] > RESIDUAL_SIGN_MIN * float(np.sum(a_pp / w2)):
+        fu = UPPER_PSEUDO_FACTOR * float(np.max(model.natural_frequencies))
+        A = np.concatenate([A, (ur * (2 * np.pi * fu) ** 2)[None, :, None] * np.eye(A.shape[2])[i0][None, None, :]])
+        a_pp = A[:, o0, i0]
+        fr.append(fu)
+        zr.append(float(np.median(model.damping_ratios)))
+        names.append(UPPER_PSEUDO_NAME)
     phi_p = np.sqrt(a_pp)
     shapes = []
     for pt in points:
         o = out_labels.index(pt)
         shapes.append(tuple((A[:, o, i0] / phi_p).tolist()))
-    dofs, els = _mode_dofs(model.natural_frequencies, model.damping_ratios, names)
+    dofs, els = _mode_dofs(fr, zr, names)
     return ModalCoordinatesModel(dofs=tuple(dofs), elements=tuple(els), inputs=tuple(model.inputs),
                                  outputs=tuple(model.outputs), name=model.name, points=tuple(points),
                                  shapes=tuple(shapes))
