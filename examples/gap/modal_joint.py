@@ -48,16 +48,18 @@ JOINT = ("m3", "m2")
 SHARE, F_MAX, N_SLIDERS = 0.5, 6.0, 4
 
 
-def truth_model(clearance: float = 0.0):
+def truth_model(clearance: float = 0.0, stiffness_scale: float = 1.0, damping: float = 1e-4,
+                name: str = "wing + payload"):
     """The chain with the Iwan joint between the wing and the payload (and, with `clearance` > 0
     in m, a contact spring of the joint's slipping stiffness beyond that clearance), and without
-    them."""
+    them. `stiffness_scale` multiplies every spring (the modes by its square root), `damping`
+    is the stiffness-proportional damping factor in s (``c = damping k``)."""
     from dataclasses import replace
 
     from vibroscope.models import Backlash, BoucWen, LumpedModel, Spring
 
-    k = [4e5, 1.5e5, 6e4]
-    linear = LumpedModel.chain([8.0, 3.0, 1.5], k, [1e-4 * x for x in k], input_dof=1, name="wing + payload")
+    k = [x * stiffness_scale for x in (4e5, 1.5e5, 6e4)]
+    linear = LumpedModel.chain([8.0, 3.0, 1.5], k, [damping * x for x in k], input_dof=1, name=name)
     els = list(linear.elements)
     j = next(i for i, e in enumerate(els) if isinstance(e, Spring) and set(e.between) == set(JOINT))
     kj = els[j].k
@@ -68,7 +70,7 @@ def truth_model(clearance: float = 0.0):
                            gamma=0.5, delta=0.5, nu=2.0))
     if clearance > 0:
         els.append(Backlash(linear.elements[j].between, k=SHARE * kj, gap=clearance))
-    return replace(linear, elements=tuple(els), name="wing + payload, bolted joint"), linear
+    return replace(linear, elements=tuple(els), name=f"{name}, bolted joint"), linear
 
 
 def write_logs(out: Path, seed: int = 7, clearance: float = 0.0) -> dict:

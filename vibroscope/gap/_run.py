@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vibroscope.gap.effects import LinearParams
-from vibroscope.gap.measure import masked_csd, nrmse
+from vibroscope.gap.measure import UNEXCITED, masked_csd, nrmse  # noqa: F401 (UNEXCITED: exposed here too)
 from vibroscope.modal.automatic import one_blas_thread
 from vibroscope.models.lumped import LumpedModel
 
@@ -179,9 +179,6 @@ LIN_EFFECT_NFEV = 60
 PREDICT_SHARE = 0.5
 
 
-#: Input autospectrum, relative to its strongest line, below which a line counts as not excited
-#: (30 dB: the excited band's law, :func:`vibroscope.gap.measure.excited_band`)
-UNEXCITED = 1e-3
 
 
 def frf_data(us, ys, masks, fs, nperseg, window="hann"):

@@ -635,6 +635,10 @@ def _build_report(run: Run) -> GapReport:
     fdt = frf_data([us[tr]], [ys[tr]], [all_masks[tr]], fs, nps)
     fdn = frf_data([us[tr]], [y_nom[tr]], [all_masks[tr]], fs, nps)
     fda = frf_data([us[tr]], [y_aug_full], [all_masks[tr]], fs, nps)
+    # the lines that carry no input (frf_data gives them no coherence) have no FRF to show: their
+    # H1 is a ratio of residues (+250 dB beyond a multisine's band edge)
+    dead = ~np.any(fdt[2] > 0, axis=1)
+    fdt, fdn, fda = ((d[0], np.where(dead[:, None], np.nan, d[1])) + tuple(d[2:]) for d in (fdt, fdn, fda))
     spectrum = GapSpectrum(frequencies=fr, measured=Pm, residual_before=Pb, residual_refit=Pr,
                            residual_after=Pa, noise=noise_psd, frf_frequencies=fdt[0], frf_measured=fdt[1],
                            frf_nominal=fdn[1], frf_augmented=fda[1], coherence=fdt[2])

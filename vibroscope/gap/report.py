@@ -316,7 +316,8 @@ class GapSpectrum:
         Estimated noise-floor PSD.
     frf_frequencies : ndarray, shape (n_ff,)
     frf_measured, frf_nominal, frf_augmented : ndarray of complex, shape (n_ff, n_outputs)
-        H1 estimate from the log and the models' simulated H1 (first input).
+        H1 estimate from the log and the models' simulated H1 (first input); NaN at the lines
+        that carry no input (more than 30 dB below the input's strongest line).
     coherence : ndarray, shape (n_ff, n_outputs)
     """
 
