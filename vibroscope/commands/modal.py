@@ -511,8 +511,9 @@ def _driving_labels(model, given: dict, lower=None, upper=None) -> list[str]:
     two points move in phase); then the one whose residual terms are those of a driving point
     as well is taken, if exactly one is: a driving point's upper residual (the receptance
     compliance of the modes above the band, ``sum phi^2 / omega^2``) and lower residual (the
-    mass line of the modes below it, ``sum phi^2``) are both positive, a transfer point's can
-    be of either sign [Ewins, *Modal Testing*, 2000, sec. 4.4]; a residual below
+    mass line of the modes below it, ``sum phi^2``; for an acceleration output it also holds the
+    in-band modes' own high-frequency limit, likewise ``sum phi^2``) are both positive, a
+    transfer point's can be of either sign [Ewins, *Modal Testing*, 2000, sec. 4.4]; a residual below
     :data:`~vibroscope.models.modal_coordinates.RESIDUAL_SIGN_MIN` of the in-band modes' scale is not counted. `lower`, `upper`: the residual
     arrays (n_outputs, n_inputs) in the model file's convention
     (:class:`~vibroscope.models.modal_model.PoleResidueModel`), where ``UR`` is a receptance

@@ -179,8 +179,6 @@ LIN_EFFECT_NFEV = 60
 PREDICT_SHARE = 0.5
 
 
-
-
 def frf_data(us, ys, masks, fs, nperseg, window="hann"):
     """H1 (n_f, n_out) and coherence from the masked samples of several logs (pooled spectra).
 

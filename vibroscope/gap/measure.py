@@ -31,6 +31,7 @@ __all__ = ["nrmse", "nested_gain", "Split", "make_split", "input_levels", "Noise
 #: (30 dB: the excited band's law, :func:`excited_band`)
 UNEXCITED = 1e-3
 
+
 def nrmse(measured, simulated, mask=None) -> float:
     """Normalised RMS error, each output channel normalised by its own energy:
     ``sqrt(mean_c (sum_k (y_ck - yhat_ck)^2 / sum_k y_ck^2))``.
