@@ -267,7 +267,8 @@ def from_pole_residue(model: PoleResidueModel, *, source: str = "") -> ModalCoor
     w2 = (2 * np.pi * np.asarray(model.natural_frequencies, float)) ** 2
     if ur[o0] > RESIDUAL_SIGN_MIN * float(np.sum(a_pp / w2)):
         fu = UPPER_PSEUDO_FACTOR * float(np.max(model.natural_frequencies))
-        A = np.concatenate([A, (ur * (2 * np.pi * fu) ** 2)[None, :, None] * np.eye(A.shape[2])[i0][None, None, :]])
+        A = np.concatenate([A[:, :, i0:i0 + 1], (ur * (2 * np.pi * fu) ** 2)[None, :, None]])  # shapes: column i0 only
+        i0 = 0
         a_pp = A[:, o0, i0]
         fr.append(fu)
         zr.append(float(np.median(model.damping_ratios)))
