@@ -712,6 +712,10 @@ def test_modal_nominal_is_the_exact_pole_residue_model():
     assert set(m.points) == set(truth.dof_names)
 
 
+#: a fresh-seed case CI does not run (its 90-minute limit on 2 cores); `python -m pytest -m extended`
+#: runs them (measured on 2ac7f64: the 7 cases left in CI take 280 s, these 15 take 1510 s)
+_EXTENDED = pytest.mark.extended
+
 # two-effect cases of fresh seeds (``--classes two_effects --duration 30 --multi-log 0.25``, the
 # default integrators; on seed 3737 session 40's code named both effects in 2 of 10). Each row is
 # one mechanism of the forward selection: (seed, case index, the effects, (effect, parameter,
@@ -731,15 +735,15 @@ _FRESH_TWO_EFFECTS = [
     # projection's solution, it wins the nested test
     pytest.param(3737, 2, {"asymmetric_friction", "saturation"},
                  [("asymmetric_friction", "Fc_pos_N", 0.05), ("asymmetric_friction", "Fc_neg_N", 0.05),
-                  ("saturation", "limit_N", 0.05)], id="3737-002-asymmetry-refitted-from-coulomb"),
+                  ("saturation", "limit_N", 0.05)], id="3737-002-asymmetry-refitted-from-coulomb", marks=_EXTENDED),
     # a clearance the refit absorbed (its spring softened to 1600 N/m): the nominal-base fit,
     # kept aside, joins the friction
     pytest.param(3737, 5, {"asymmetric_friction", "backlash"},
                  [("backlash", "gap_m", 0.05), ("asymmetric_friction", "Fc_pos_N", 0.1)],
-                 id="3737-005-clearance-from-the-other-base"),
+                 id="3737-005-clearance-from-the-other-base", marks=_EXTENDED),
     # a hysteresis that screened best where the friction acts is tried at its best other link
     pytest.param(3737, 1, {"coulomb_friction", "hysteresis"}, [("hysteresis", "alpha_N_per_m", 0.2)],
-                 id="3737-001-hysteresis-at-its-other-link"),
+                 id="3737-001-hysteresis-at-its-other-link", marks=_EXTENDED),
     # a Bouc-Wen element of alpha 1.9e7 N/m fitted beside a saturation for a Coulomb friction: its
     # projection to the Coulomb friction it tends to (the Dahl limit) wins the nested test
     pytest.param(4848, 5, {"saturation", "coulomb_friction"},
@@ -749,17 +753,17 @@ _FRESH_TWO_EFFECTS = [
     # 4.2x the floor: the joint fit from its generic start reaches the truth (40 s, RK4, one log)
     pytest.param(5858, 1, {"asymmetric_friction", "hysteresis"},
                  [("hysteresis", "alpha_N_per_m", 0.1)],
-                 id="5858-001-hysteresis-from-its-generic-start"),
+                 id="5858-001-hysteresis-from-its-generic-start", marks=_EXTENDED),
     # the same beside a Coulomb friction, its joint fit ended at phi = 1.19 (not on the bound),
     # held-out 1.7x the floor: from the generic start too, both are named
     pytest.param(5858, 3, {"coulomb_friction", "hysteresis"},
                  [("coulomb_friction", "Fc_N", 0.1), ("hysteresis", "alpha_N_per_m", 0.1)],
-                 id="5858-003-hysteresis-beside-coulomb-from-its-generic-start"),
+                 id="5858-003-hysteresis-beside-coulomb-from-its-generic-start", marks=_EXTENDED),
     # a hysteresis at m3-ground beside a backlash at m2-m1 screened best at m1-ground (on a linear
     # base without the backlash), where beside the backlash it changes nothing: placed again on
     # the model with the backlash, m3-ground is its best connection (3 logs)
     pytest.param(1414, 4, {"backlash", "hysteresis"}, [("hysteresis", "alpha_N_per_m", 0.1)],
-                 id="1414-004-hysteresis-placed-again-beside-the-backlash"),
+                 id="1414-004-hysteresis-placed-again-beside-the-backlash", marks=_EXTENDED),
     # a clearance of 3.5 um beside an input saturation (3 logs): fitted alone the clearance bent
     # the masses up 23 % and sat at 2.3 um, from where the pair's joint fit stopped at 0.144
     # (the clearance's valley is +-10 % wide); the pair fitted on the nominal base, the clearance
@@ -770,25 +774,25 @@ _FRESH_TWO_EFFECTS = [
     # connections, the three at the noise floor: backward elimination drops it (40 s, RK4, 3 logs)
     pytest.param(6363, 4, {"backlash", "cubic_stiffness"},
                  [("backlash", "gap_m", 0.1), ("cubic_stiffness", "k3_N_per_m3", 0.1)],
-                 id="6363-004-a-spurious-first-effect-eliminated"),
+                 id="6363-004-a-spurious-first-effect-eliminated", marks=_EXTENDED),
     # a Coulomb friction and a hysteresis at one link: the asymmetric friction fitted alone
     # (4.3/14.6 N) became symmetric jointly with the hysteresis, at the floor; that is a Coulomb
     # friction, not a vanished effect (40 s, RK4, 3 logs)
     pytest.param(6363, 7, {"coulomb_friction", "hysteresis"},
                  [("coulomb_friction", "Fc_N", 0.1), ("hysteresis", "alpha_N_per_m", 0.1)],
-                 id="6363-007-asymmetric-friction-made-symmetric-jointly-is-coulomb"),
+                 id="6363-007-asymmetric-friction-made-symmetric-jointly-is-coulomb", marks=_EXTENDED),
     # a weak hysteresis (alpha / k = 0.09, yielding at a quarter of the RMS deflection) beside an
     # asymmetric friction at another link: reached from its weak generic start (30 s, one log)
     pytest.param(7272, 0, {"hysteresis", "asymmetric_friction"},
                  [("hysteresis", "alpha_N_per_m", 0.1), ("asymmetric_friction", "Fc_pos_N", 0.1),
                   ("asymmetric_friction", "Fc_neg_N", 0.1)],
-                 id="7272-000-a-weak-hysteresis-from-its-weak-start"),
+                 id="7272-000-a-weak-hysteresis-from-its-weak-start", marks=_EXTENDED),
     # a weak hysteresis beside an asymmetric friction fitted alone to 2.01/0.058 N (true 1.72/0.55
     # N): the hysteresis's own fit on that model changes nothing and ranked last; the two fitted
     # together on the nominal base rank it first and start its joint fit (30 s, lsoda)
     pytest.param(9393, 3, {"hysteresis", "asymmetric_friction"},
                  [("hysteresis", "alpha_N_per_m", 0.1), ("asymmetric_friction", "Fc_neg_N", 0.1)],
-                 id="9393-003-a-hysteresis-ranked-by-the-pair-on-the-nominal-base"),
+                 id="9393-003-a-hysteresis-ranked-by-the-pair-on-the-nominal-base", marks=_EXTENDED),
     # a Coulomb friction and a hysteresis at one link, fitted as an asymmetric friction of
     # 0.40/0.59 N: its Coulomb projection leaves the smaller held-out gap, and refitted as
     # asymmetric from there it stays symmetric, so the Coulomb friction is taken (30 s, lsoda)
@@ -799,7 +803,7 @@ _FRESH_TWO_EFFECTS = [
     # and the delay, fitted alone to 0.5999 ms, was never offered as an addition
     pytest.param(4545, 4, {"offset", "time_delay"},
                  [("offset", "offset_N", 0.02), ("time_delay", "delay_s", 0.05)],
-                 id="4545-004-a-delay-fitted-alone-joins-an-offset"),
+                 id="4545-004-a-delay-fitted-alone-joins-an-offset", marks=_EXTENDED),
     # a clearance of 1.7 um (3 % of the RMS deflection) in a 1.1e6 N/m link beside an input
     # saturation clipping 15 % of the peaks (30 s, RK4, one log): screened without the
     # saturation the clearance vanished at both connections and was never offered; a class that
@@ -812,7 +816,7 @@ _FRESH_TWO_EFFECTS = [
     # never joined it; screened again on the delay it does
     pytest.param(7411, 4, {"hysteresis", "time_delay"},
                  [("hysteresis", "alpha_N_per_m", 0.1), ("time_delay", "delay_s", 0.05)],
-                 id="7411-004-a-hysteresis-screened-again-on-the-delay"),
+                 id="7411-004-a-hysteresis-screened-again-on-the-delay", marks=_EXTENDED),
     # a 0.63 ms input delay and a 23 N Coulomb friction (60 s, lsoda, one log): the BLA changes
     # with the level, so the delay was not fitted alone; the friction, screened on a base without
     # the delay, fitted at 6.3 N, and a Jenkins joint was named at 11.7x the floor with nothing
@@ -828,22 +832,25 @@ _FRESH_TWO_EFFECTS = [
     # connection (~100 s)
     pytest.param(5701, 7, {"coulomb_friction", "backlash"},
                  [("coulomb_friction", "Fc_N", 0.05), ("backlash", "gap_m", 0.05)],
-                 id="5701-007-a-friction-held-clearance-fitted-as-a-pair"),
+                 id="5701-007-a-friction-held-clearance-fitted-as-a-pair", marks=_EXTENDED),
     # a 5.8 um clearance (0.13 of the RMS deflection) and a hysteresis (alpha / k = 0.15) in one
     # 6.7e5 N/m link to ground (30 s, lsoda, three logs): the clearance alone at 2.4x the floor;
     # the hysteresis, added to it, was fitted jointly into a basin of 50 % more linear damping
     # from every start. A hysteresis holds a clearance's DOF as a friction does: the pair is now
     # fitted on the nominal base too (~200 s; the hysteresis's alpha comes out at 0.7 of the
-    # truth's, so only the clearance is checked)
+    # truth's, so only the clearance is checked). Sensitive to the machine: it passed in CI on 2ac7f64
+    # (session 58 measured 0.0471 held-out), but on a 2-core AMD EPYC (session 62) the pair's joint
+    # fit ended at 0.0529 (1.15x the data's floor; the clearance alone 0.1099) and was not taken by
+    # the significance test: the backlash alone was named (an open miss)
     pytest.param(5706, 1, {"backlash", "hysteresis"}, [("backlash", "gap_m", 0.1)],
-                 id="5706-001-a-hysteresis-held-clearance-fitted-as-a-pair"),
+                 id="5706-001-a-hysteresis-held-clearance-fitted-as-a-pair", marks=_EXTENDED),
     # a hysteresis (alpha / k = 0.24) and a 0.65 N Coulomb friction (3.5 % of the RMS connection
     # force) at one link (60 s, RK4, three logs): the hysteresis alone, gamma + delta = 0.038 (a
     # slider of 1.5 N), at 1.39x the floor was not retried from the friction (the retry needed
     # gamma + delta > 0.05); it now is, for any positive sum (~110 s)
     pytest.param(5801, 3, {"hysteresis", "coulomb_friction"},
                  [("coulomb_friction", "Fc_N", 0.05), ("hysteresis", "alpha_N_per_m", 0.05)],
-                 id="5801-003-a-near-slider-hysteresis-retried-from-the-friction"),
+                 id="5801-003-a-near-slider-hysteresis-retried-from-the-friction", marks=_EXTENDED),
 ]
 #: cases generated with other settings than the default here (30 s, lsoda/RK4 by case number, a
 #: quarter multi-log, offsets up to 0.2 of the input's RMS force)
