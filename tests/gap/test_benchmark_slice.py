@@ -713,7 +713,7 @@ def test_modal_nominal_is_the_exact_pole_residue_model():
 
 
 #: a fresh-seed case CI does not run (its 90-minute limit on 2 cores); `python -m pytest -m extended`
-#: runs them (measured on 2ac7f64: the 7 cases left in CI take 280 s, these 15 take 1510 s)
+#: runs them (session 62, 2-core machine: the 7 cases left in CI took 279 s, these 15 1509-2031 s)
 _EXTENDED = pytest.mark.extended
 
 # two-effect cases of fresh seeds (``--classes two_effects --duration 30 --multi-log 0.25``, the
