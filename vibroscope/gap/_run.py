@@ -273,6 +273,8 @@ class Run:
     y_nom: list | None = None
     gap_before: float | None = None
     all_masks: list | None = None
+    #: a modal model's upper-residual pseudo-mode placed from the data (diagnosis._place_upper_residual)
+    upper_placement: dict | None = None
     nf: object = None
     floor: float | None = None
     # the FRF of the fitting data and the linear refit (_refit_linear)
