@@ -224,7 +224,10 @@ def from_pole_residue(model: PoleResidueModel, *, source: str = "") -> ModalCoor
     half the in-band compliance leaves a 10 % FRF error. The lower residual is not carried
     (modes below the band); for an acceleration output the realisation has its own
     high-frequency limit ``sum_r phi_o,r phi_i,r``. With real modal constants and no upper
-    residual the realisation's FRF equals the pole-residue sum exactly.
+    residual the realisation's FRF equals the pole-residue sum exactly. The gap diagnosis places
+    the pseudo-mode from its logs (``vibroscope.gap.diagnosis._place_upper_residual``): a
+    constant residual identified over a band is the modes above it as amplified inside the band,
+    so as a static compliance it is too large when such a mode lies close above the band.
     """
     where = f"{source}: " if source else ""
     out_labels = [o.dof for o in model.outputs]
