@@ -67,6 +67,14 @@ ADD_FACTOR = 0.5
 #: best nonlinear candidate (true mismatches of the benchmark end at 1.0-1.16x the floor; the two
 #: two-effect cases named ``parameter_mismatch`` at 3.3x and 5.6x)
 PM_FURTHER = 2.0
+#: a held-clearance pair that beyond(...) misses is kept when it brings the held-out gap from beyond
+#: PM_FURTHER times the noise floor to within this multiple of it, with a held-out gain
+#: significant against the noise (:func:`~vibroscope.gap._selection.reaches_floor`)
+FLOOR_REACH = 1.25
+#: ... and the t statistic of that gain above this: Student's t one-sided 1 % level at 20 batches
+#: (2.54; NESTED_T's 4 orders two candidates in the ranking, this accepts a gain that reaches the
+#: floor: seed 5706 case 001's pair, 0.110 -> 0.053 against a floor of 0.046, had t 2.96 on 10 s)
+FLOOR_REACH_T = 2.5
 #: forward selection fits jointly with the chosen effects and the linear parameters only the
 #: additions whose own fit (its parameters alone) ranks among this many best on the fitting data,
 #: and every addition at a chosen effect's connection (a joint fit costs as much as the rest of a
