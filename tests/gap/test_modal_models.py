@@ -426,6 +426,18 @@ def test_hidden_cubic_spring_between_measured_points_of_a_modal_nominal():
     assert r.gap_after < 1.5 * r.noise_floor
 
 
+def gap_example(stem: str):
+    """``examples/gap/<stem>.py`` as a module."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "gap" / f"{stem}.py"
+    spec = importlib.util.spec_from_file_location(stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 @pytest.mark.slow  # a modal identification and one full diagnosis (about 3-5 min on the 2-core box)
 def test_a_joint_behind_a_modal_test_is_named_between_its_sensors(tmp_path):
     """The path of a ground vibration test: LSCF + LSFD identify the modes at a low level,
@@ -433,14 +445,9 @@ def test_a_joint_behind_a_modal_test_is_named_between_its_sensors(tmp_path):
     levels where the payload's bolted joint (an Iwan element, ``examples/gap/modal_joint.py``)
     slips. The truth: the joint between the wing and the payload sensors, 3.0e4 N/m slipping at
     up to 6 N."""
-    import importlib.util
     import json
-    from pathlib import Path
 
-    path = Path(__file__).resolve().parents[2] / "examples" / "gap" / "modal_joint.py"
-    spec = importlib.util.spec_from_file_location("modal_joint", path)
-    mj = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mj)
+    mj = gap_example("modal_joint")
     assert mj.main(["--out", str(tmp_path)]) == 0
     rep = json.loads((tmp_path / "gap.json").read_text())
     c = rep["candidates"][0]
@@ -463,16 +470,11 @@ def test_a_joint_behind_an_f16_shaped_ground_vibration_test_is_named_between_its
     against a floor of 0.0094; the pseudo-mode at 18.48 Hz; the control run ``unexplained``
     (0.0138 against 0.0095, every candidate within the noise). Before the placement: a
     softening cubic spring at 0.0541."""
-    import importlib.util
     import json
-    from pathlib import Path
 
     from vibroscope.gap.effects import EFFECT_TABLE
 
-    path = Path(__file__).resolve().parents[2] / "examples" / "gap" / "gvt_joint.py"
-    spec = importlib.util.spec_from_file_location("gvt_joint", path)
-    gv = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(gv)
+    gv = gap_example("gvt_joint")
     assert gv.main(["--out", str(tmp_path)]) == 0
     rep = json.loads((tmp_path / "gap.json").read_text())
     c = rep["candidates"][0]
