@@ -23,7 +23,10 @@ Then runs what an engineer would, and prints the verdicts::
     vibroscope gap OUT/modal.toml OUT/ms_1.mcap OUT/ms_2.mcap OUT/ms_3.mcap --json OUT/gap.json --figures OUT/figures
     vibroscope gap OUT/modal.toml OUT/ms_1.mcap OUT/sw_1.mcap --json OUT/control.json
 
-``python examples/gap/gvt_joint.py [--out gvt_joint] [--no-run] [--no-control]``
+``python examples/gap/gvt_joint.py [--out gvt_joint] [--no-run] [--no-control]`` and variants the
+example does not make by default: ``--clearance M`` (a clearance at the joint), ``--slip-force N``,
+``--levels N N N``, ``--seed S`` (the multisine's), ``--noise-seed S``, ``--random`` (band-limited
+random input, not periodic)
 """
 
 from __future__ import annotations
@@ -54,27 +57,40 @@ def _modal_joint():
     return mod
 
 
-def truth_model():
+def truth_model(clearance: float = 0.0, slip_force: float = F_MAX):
     """The chain with the Iwan joint between the wing and the payload, and without it (stuck):
-    ``modal_joint.py``'s, its springs scaled by :data:`SCALE`, damping ``c = 2e-4 k``."""
-    return _modal_joint().truth_model(stiffness_scale=SCALE, damping=2e-4, name="wing + payload (GVT)")
+    ``modal_joint.py``'s, its springs scaled by :data:`SCALE`, damping ``c = 2e-4 k``; with
+    `clearance` > 0 (m) a contact spring of the joint's slipping stiffness beyond it, the
+    sliders slipping at up to `slip_force` (N)."""
+    mj = _modal_joint()
+    mj.F_MAX = slip_force
+    return mj.truth_model(clearance=clearance, stiffness_scale=SCALE, damping=2e-4, name="wing + payload (GVT)")
 
 
-def write_logs(out: Path, periods: int = 4) -> dict:
-    """Simulate the truth (40 sub-steps per sample, 1 % noise) and write the four logs."""
+def write_logs(out: Path, periods: int = 4, *, clearance: float = 0.0, slip_force: float = F_MAX,
+               levels=LEVELS_N, seed: int = 1, noise_seed: int = 100, random: bool = False) -> dict:
+    """Simulate the truth (40 sub-steps per sample, 1 % noise of seed ``noise_seed + i`` in log
+    i) and write the logs: the multisine (of `seed`; `random`: band-limited random noise of seed
+    ``seed + i`` instead, not periodic) at each of `levels` (N RMS), and the sweep at the first."""
     from vibroscope.io import write_ros2_mcap
-    from vibroscope.models.excitation import multisine, sine_sweep
+    from vibroscope.models.excitation import band_limited_random, multisine, sine_sweep
     from vibroscope.models.simulate import simulate
 
-    truth, linear = truth_model()
+    truth, linear = truth_model(clearance, slip_force)
     out.mkdir(parents=True, exist_ok=True)
-    ms = multisine(FS, PERIOD, fmin=2.0, fmax=15.0, rms=1.0, seed=1)[0]
-    runs = {f"ms_{i + 1}": np.tile(ms, periods) * lv for i, lv in enumerate(LEVELS_N)}
-    runs["sw_1"] = sine_sweep(FS, duration=120.0, f0=2.0, f1=15.0, amplitude=LEVELS_N[0] * np.sqrt(2))
+    if random:
+        runs = {f"ms_{i + 1}": band_limited_random(FS, periods * PERIOD, fmin=2.0, fmax=15.0, rms=lv, seed=seed + i)
+                for i, lv in enumerate(levels)}
+    else:
+        ms = multisine(FS, PERIOD, fmin=2.0, fmax=15.0, rms=1.0, seed=seed)[0]
+        runs = {f"ms_{i + 1}": np.tile(ms, periods) * lv for i, lv in enumerate(levels)}
+    runs["sw_1"] = sine_sweep(FS, duration=120.0, f0=2.0, f1=15.0, amplitude=levels[0] * np.sqrt(2))
     for i, (name, u) in enumerate(runs.items()):
-        write_ros2_mcap(out / f"{name}.mcap", simulate(truth, u, FS, t0=T0, oversample=40, noise=0.01, seed=100 + i))
+        write_ros2_mcap(out / f"{name}.mcap",
+                        simulate(truth, u, FS, t0=T0, oversample=40, noise=0.01, seed=noise_seed + i))
     info = {"effect": "joint_friction", "between": list(JOINT), "joint_stiffness_N_per_m": SHARE * 6e4 * SCALE,
-            "slip_force_max_N": F_MAX, "sliders": N_SLIDERS, "levels_N_rms": list(LEVELS_N),
+            "slip_force_max_N": slip_force, "sliders": N_SLIDERS, "levels_N_rms": list(levels),
+            "clearance_m": clearance, "excitation": "band-limited random" if random else "periodic multisine",
             "modes_hz (linear, joint stuck)": [float(f) for f in linear.modes().natural_frequencies]}
     (out / "truth.json").write_text(json.dumps(info, indent=2))
     return info
@@ -85,9 +101,16 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=Path("gvt_joint"))
     ap.add_argument("--no-run", action="store_true", help="write the logs only")
     ap.add_argument("--no-control", action="store_true", help="skip the low-level control run")
+    ap.add_argument("--clearance", type=float, default=0.0, help="a clearance at the joint, m (default none)")
+    ap.add_argument("--slip-force", type=float, default=F_MAX, help=f"the sliders' top slip force, N (default {F_MAX:g})")
+    ap.add_argument("--levels", type=float, nargs="+", default=list(LEVELS_N), help="input levels, N RMS")
+    ap.add_argument("--seed", type=int, default=1, help="the multisine's (or random input's) seed")
+    ap.add_argument("--noise-seed", type=int, default=100, help="the noise's seed of the first log")
+    ap.add_argument("--random", action="store_true", help="band-limited random input instead of the multisine")
     args = ap.parse_args(argv)
     o = args.out
-    print("truth:", json.dumps(write_logs(o)))
+    print("truth:", json.dumps(write_logs(o, clearance=args.clearance, slip_force=args.slip_force, levels=args.levels,
+                                          seed=args.seed, noise_seed=args.noise_seed, random=args.random)))
     if args.no_run:
         return 0
     from vibroscope.cli import main as cli
@@ -96,7 +119,7 @@ def main(argv=None) -> int:
               "--export-model", str(o / "modal.toml"), "--no-rrd", "--no-figures"])
     if rc:
         return rc
-    runs = [("gap", [f"ms_{i}.mcap" for i in (1, 2, 3)], ["--figures", str(o / "figures")])]
+    runs = [("gap", [f"ms_{i + 1}.mcap" for i in range(len(args.levels))], ["--figures", str(o / "figures")])]
     if not args.no_control:
         runs.append(("control", ["ms_1.mcap", "sw_1.mcap"], []))
     for name, logs, extra in runs:
