@@ -512,15 +512,12 @@ def _place_upper_residual(run: Run) -> None:
 
     model = run.model
     names = [d.name for d in model.dofs]
-    run.upper_placement = None
     if run.closed or UPPER_PSEUDO_NAME not in names or not model.point_names():
         return
     lin = LinearParams(model, which=[f"m:{UPPER_PSEUDO_NAME}", f"k:{UPPER_PSEUDO_NAME}-ground",
                                      f"c:{UPPER_PSEUDO_NAME}-ground"])
     if len(lin) < 2 or lin.names[0] != f"m:{UPPER_PSEUDO_NAME}":
         return
-    md = model.modes()
-    f_modes = np.asarray(md.natural_frequencies, float)
     i_u = names.index(UPPER_PSEUDO_NAME)
     f_u0 = float(np.sqrt(model.K[i_u, i_u] / model.M[i_u, i_u]) / (2 * np.pi))
     f_top = float(f_u0 / UPPER_PSEUDO_FACTOR)
