@@ -26,7 +26,9 @@ Then runs what an engineer would, and prints the verdicts::
 ``python examples/gap/gvt_joint.py [--out gvt_joint] [--no-run] [--no-control]`` and variants the
 example does not make by default: ``--clearance M`` (a clearance at the joint), ``--slip-force N``,
 ``--levels N N N``, ``--seed S`` (the multisine's), ``--noise-seed S``, ``--random`` (band-limited
-random input, not periodic)
+random input, not periodic), ``--sweeps`` (the sweep written at every level, ``sw_2.mcap`` ..., and
+``gap`` run on the sweeps instead of the multisines; the modal model is still identified from
+``ms_1.mcap``, the lowest-level multisine)
 """
 
 from __future__ import annotations
@@ -68,10 +70,12 @@ def truth_model(clearance: float = 0.0, slip_force: float = F_MAX):
 
 
 def write_logs(out: Path, periods: int = 4, *, clearance: float = 0.0, slip_force: float = F_MAX,
-               levels=LEVELS_N, seed: int = 1, noise_seed: int = 100, random: bool = False) -> dict:
+               levels=LEVELS_N, seed: int = 1, noise_seed: int = 100, random: bool = False,
+               sweeps: bool = False) -> dict:
     """Simulate the truth (40 sub-steps per sample, 1 % noise of seed ``noise_seed + i`` in log
     i) and write the logs: the multisine (of `seed`; `random`: band-limited random noise of seed
-    ``seed + i`` instead, not periodic) at each of `levels` (N RMS), and the sweep at the first."""
+    ``seed + i`` instead, not periodic) at each of `levels` (N RMS), and the sweep at the first
+    (`sweeps`: at every level, ``sw_2`` ... written after the others, so that they keep their noise)."""
     from vibroscope.io import write_ros2_mcap
     from vibroscope.models.excitation import band_limited_random, multisine, sine_sweep
     from vibroscope.models.simulate import simulate
@@ -84,7 +88,8 @@ def write_logs(out: Path, periods: int = 4, *, clearance: float = 0.0, slip_forc
     else:
         ms = multisine(FS, PERIOD, fmin=2.0, fmax=15.0, rms=1.0, seed=seed)[0]
         runs = {f"ms_{i + 1}": np.tile(ms, periods) * lv for i, lv in enumerate(levels)}
-    runs["sw_1"] = sine_sweep(FS, duration=120.0, f0=2.0, f1=15.0, amplitude=levels[0] * np.sqrt(2))
+    for i, lv in enumerate(levels[: len(levels) if sweeps else 1]):
+        runs[f"sw_{i + 1}"] = sine_sweep(FS, duration=120.0, f0=2.0, f1=15.0, amplitude=lv * np.sqrt(2))
     for i, (name, u) in enumerate(runs.items()):
         write_ros2_mcap(out / f"{name}.mcap",
                         simulate(truth, u, FS, t0=T0, oversample=40, noise=0.01, seed=noise_seed + i))
@@ -107,10 +112,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1, help="the multisine's (or random input's) seed")
     ap.add_argument("--noise-seed", type=int, default=100, help="the noise's seed of the first log")
     ap.add_argument("--random", action="store_true", help="band-limited random input instead of the multisine")
+    ap.add_argument("--sweeps", action="store_true",
+                    help="the sine sweep at every level, and gap run on the sweeps (the modal model still from ms_1)")
     args = ap.parse_args(argv)
     o = args.out
     print("truth:", json.dumps(write_logs(o, clearance=args.clearance, slip_force=args.slip_force, levels=args.levels,
-                                          seed=args.seed, noise_seed=args.noise_seed, random=args.random)))
+                                          seed=args.seed, noise_seed=args.noise_seed, random=args.random,
+                                          sweeps=args.sweeps)))
     if args.no_run:
         return 0
     from vibroscope.cli import main as cli
@@ -119,7 +127,8 @@ def main(argv=None) -> int:
               "--export-model", str(o / "modal.toml"), "--no-rrd", "--no-figures"])
     if rc:
         return rc
-    runs = [("gap", [f"ms_{i + 1}.mcap" for i in range(len(args.levels))], ["--figures", str(o / "figures")])]
+    stem = "sw" if args.sweeps else "ms"
+    runs = [("gap", [f"{stem}_{i + 1}.mcap" for i in range(len(args.levels))], ["--figures", str(o / "figures")])]
     if not args.no_control:
         runs.append(("control", ["ms_1.mcap", "sw_1.mcap"], []))
     for name, logs, extra in runs:

@@ -45,6 +45,7 @@ from vibroscope.gap._run import (
     HELD_CLEARANCE_STARTS,
     NESTED_T,
     PM_FURTHER,
+    PM_UNEXPLAINED,
     PREDICT_SHARE,
     RELOCATE_NFEV,
     SCAN_HALF_WIDTH,
@@ -251,6 +252,13 @@ def select_further_effects(run: Run, *, workers) -> None:
         run.selection.append(entry)
         if take:
             chosen, shares, verdict, ordered = adopted(pair, shares_of(run, pair), ordered)
+    if (verdict == "parameter_mismatch" and len(chosen) == 1 and chosen[0][3] is None
+            and chosen[0][0].gap_after > PM_UNEXPLAINED * run.floor):
+        # the linear refit, which nothing joined, far above the noise: not a mismatch (PM_UNEXPLAINED)
+        run.selection.append({"start": "parameter_mismatch", "stopped": (
+            f"the linear refit leaves {chosen[0][0].gap_after / run.floor:.3g} x the noise floor (more than "
+            f"{PM_UNEXPLAINED:g} x): an effect it lacks, not a mismatch; the verdict is unexplained")})
+        chosen, shares, verdict = [], [], "unexplained"
     run.timings["forward_selection"] = time.perf_counter() - t
     run.chosen, run.shares, run.verdict, run.ordered = chosen, shares, verdict, ordered
 

@@ -64,7 +64,10 @@ Procedure
    polished jointly; each effect's share of the shrink is reported. An input delay that
    joined only later is fitted first too (:func:`~vibroscope.gap._selection.delay_first`);
    when nothing joins it and the combination is not significantly better than the delay
-   alone by the same test, the delay alone is the verdict.
+   alone by the same test, the delay alone is the verdict. A ``parameter_mismatch`` verdict
+   that nothing joined and that still leaves more than :data:`PM_UNEXPLAINED` times the noise
+   floor becomes ``unexplained`` (a refit of every linear parameter reaches the noise where the
+   truth is linear; the refit stays first among the candidates).
 
 References
 ----------
@@ -112,6 +115,7 @@ from vibroscope.gap._run import (  # the tuning constants live with the run stat
     N_LOCATIONS,
     OTHER_BASE_FACTOR,
     PENALTY,
+    PM_UNEXPLAINED,
     POLISH_FLOOR_FACTOR,
     POLISH_GAIN,
     POLISH_ROUNDS,
@@ -783,7 +787,8 @@ def _build_report(run: Run) -> GapReport:
                                       f"penalised excess is below {ADD_FACTOR} of the current one's (the threshold); "
                                       "an entry with 'stopped' says why a selection ended without trying "
                                       "(within the noise floor, three effects, no class left, an "
-                                      "unpredictable model); a held-clearance trial, kept when significantly better",
+                                      "unpredictable model, a linear refit far above the floor: unexplained); "
+                                      "a held-clearance trial, kept when significantly better",
                             "rounds": list(run.selection)},
               "predictability": {
                   "method": "held-out nrmse between the model's outputs at its default and at twice its "
