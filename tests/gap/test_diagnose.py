@@ -94,6 +94,35 @@ def test_split_interleaves_when_levels_are_contiguous():
         assert np.any(labels[sp.fit[0]] == k) and np.any(labels[sp.validation[0]] == k)
 
 
+def test_split_of_a_sine_sweep_holds_out_every_band_not_its_end(u20):
+    """A linear sine sweep 2-150 Hz over 60 s: the last third held out would be 101-150 Hz, a band
+    the fit never saw (a test of extrapolation in frequency). The split interleaves 2 s blocks
+    instead, so that the held-out and the fitting input energy both spread over the whole band,
+    and the screening prefix reaches far enough into the sweep to cover most of it. A
+    stationary random input keeps its time split and its 8 s prefix."""
+    from vibroscope.gap.measure import BAND_UNCOVERED
+    from vibroscope.models.excitation import sine_sweep
+
+    u = np.asarray(sine_sweep(FS, duration=60.0, f0=2.0, f1=150.0, amplitude=1.0), float).ravel()
+    n = u.size
+    sp = make_split([u[None]], FS)
+    assert sp.description.startswith("interleaved") and "sweep" in sp.description, sp.description
+
+    def shares(mask):  # the input energy of the masked samples in six bands of 2-150 Hz
+        f, p = signal.welch(np.where(mask, u, 0.0), FS, nperseg=2048)
+        e = np.array([p[(f >= lo) & (f < lo + 24.7)].sum() for lo in np.linspace(2, 125.3, 6)])
+        return e / e.sum()
+
+    assert shares(sp.fit[0]).min() > 0.1 and shares(sp.validation[0]).min() > 0.1
+    late = np.zeros(n, bool)
+    late[int(2 / 3 * n):] = True
+    assert shares(late)[:3].max() < 0.01  # what the time split would have held out
+    assert sp.screen_prefix[0] >= (1 - BAND_UNCOVERED) * n - 2 * FS
+    stationary = make_split([u20[None]], FS)
+    assert stationary.description.startswith("time split")
+    assert stationary.screen_prefix[0] == 8 * FS  # as before: its first 8 s cover its spectrum
+
+
 def test_noise_floor_recovers_the_added_noise(u20):
     for noise in (0.01, 0.03):
         sig = log_of(nominal(), u20, noise=noise)

@@ -477,6 +477,10 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
         if nps_reason.startswith("one period"):
             window = "boxcar"
         nps = min(nps, max(n_min // 2, 64))
+        # Welch segments lie wholly inside a fitting stretch (an interleaved split's are blocks)
+        run_max = max((int(np.max(b - a)) for m in split.fit for a, b in [true_runs(m)] if len(a)), default=nps)
+        if nps > run_max >= 64:
+            nps, nps_reason = run_max, nps_reason + f"; capped at the longest fitting stretch, {run_max} samples"
     effect_set = set(EFFECT_TABLE) if effects is None else set(effects)
     excluded = {e: why for e, why in CLOSED_LOOP_EXCLUDED.items() if e in effect_set} if closed else {}
     effect_set -= set(excluded)

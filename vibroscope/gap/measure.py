@@ -24,7 +24,7 @@ from vibroscope.signals import true_runs
 from vibroscope.spectral.estimators import FewAveragesWarning, csd_matrix
 
 __all__ = ["nrmse", "nested_gain", "Split", "make_split", "input_levels", "NoiseFloor", "noise_floor",
-           "locate_bands", "masked_csd", "regime_gaps"]
+           "locate_bands", "masked_csd", "regime_gaps", "uncovered_share"]
 
 
 #: Input autospectrum, relative to its strongest line, below which a line counts as not excited
@@ -192,7 +192,8 @@ class Split:
         Per log, the samples that must be simulated to evaluate the fit residual (a
         contiguous fitting part needs only its prefix).
     screen_prefix : list of int
-        Per log, a shorter prefix (all levels present) for the fast screening fits.
+        Per log, a shorter prefix (all levels present, the input's spectrum covered:
+        :data:`BAND_UNCOVERED`) for the fast screening fits.
     description : str
     levels : list of int
         Number of excitation levels found per log.
@@ -208,6 +209,14 @@ class Split:
 
 #: several logs count as one level when their input RMS values lie within this factor
 LOG_LEVEL_RATIO = 1.5
+#: a part of a record (the held-out part, a screening prefix) covers the input's spectrum when
+#: less than this share of the reference part's input energy lies in frequency lines where the
+#: part's own (each normalised to unit energy) is more than 10 dB lower
+BAND_UNCOVERED = 0.2
+#: block length of the spectral coverage test and of the interleaved split, s
+SPLIT_BLOCK_S = 2.0
+#: a swept input's interleaved split cuts the record into this many blocks (at least 2 s each)
+SWEEP_BLOCKS = 9
 
 
 def make_split(us: list, fs: float, *, skip: list | None = None, validation_fraction: float = 1 / 3,
@@ -215,8 +224,12 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     """The fit/validation split.
 
     One log: the last `validation_fraction` of the record is held out when every input level
-    occurs on both sides (levels: :func:`input_levels`); otherwise blocks of 2 s alternate
-    (two fitting, one held out) so that every level is on both sides. Several logs at one
+    occurs on both sides (levels: :func:`input_levels`) and the fitting part's input spectrum
+    covers the held-out part's (:func:`uncovered_share` at most :data:`BAND_UNCOVERED`, on 2 s
+    blocks); otherwise blocks of 2 s alternate (two fitting, one held out) so that every level,
+    and every part of a sine sweep's band, is on both sides (the last third of a sweep is a band
+    the fit never saw: a held-out test of extrapolation in frequency). The screening prefix is
+    extended until its input spectrum covers the fitting part's (a sweep's: most of it). Several logs at one
     input level (RMS within :data:`LOG_LEVEL_RATIO`): the last log is held out, the others
     fit. Several logs at different levels: each log is split in time as one log is, so that
     every level is on both sides - a held-out log at a level the fit never saw would test an
@@ -260,7 +273,7 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
             parts = [_one_log_split(u, fs, sk, validation_fraction, max(4.0, 2 * screen_s / n_logs))
                      for u, sk in zip(us, skip)]
             held = sum(int(p[1].sum()) for p in parts) / fs
-            kinds = {p[5].split(":")[0] for p in parts}
+            kinds = {p[5].split(":")[0] + (" of a sweep" if "a sweep" in p[5] else "") for p in parts}
             desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}), each split in "
                     f"time ({' / '.join(sorted(kinds))}; {held:.1f} s held out in all), so every level is fitted "
                     f"and validated")
@@ -278,7 +291,9 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
                 fit.append(m)
                 val.append(np.zeros(n, bool))
                 fpre.append(n)
-                spre.append(_screen_prefix(labels, n, fs, screen_s, skip[i]))
+                pre = _screen_prefix(labels, n, fs, screen_s, skip[i])
+                spec, b = _block_spectra(np.asarray(u[0], float), fs)
+                spre.append(max(pre, _band_prefix(spec, b, pre, n)))  # a sweep's: most of it
             else:
                 fit.append(np.zeros(n, bool))
                 val.append(m)
@@ -293,6 +308,56 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
                  description=desc, levels=[nlev])
 
 
+def _block_spectra(u: np.ndarray, fs: float) -> tuple[np.ndarray, int]:
+    """Hann-windowed power spectra of the input's consecutive :data:`SPLIT_BLOCK_S` blocks:
+    ``(spectra of shape (n_blocks, n_lines), block length in samples)``."""
+    b = max(8, int(round(SPLIT_BLOCK_S * fs)))
+    nb = u.size // b
+    if nb == 0:
+        return np.zeros((0, b // 2 + 1)), b
+    x = u[: nb * b].reshape(nb, b)
+    x = x - x.mean(axis=1, keepdims=True)
+    return np.abs(np.fft.rfft(x * np.hanning(b), axis=1)) ** 2, b
+
+
+def uncovered_share(have: np.ndarray, ref: np.ndarray) -> float:
+    """Share of the reference spectrum's energy in lines where `have` is more than 10 dB lower,
+    each normalised to unit energy (0 when either is empty or silent): how much of what the
+    reference part of a record excites the other part does not (a sine sweep's later part
+    against its earlier part: nearly all of it; a stationary random or periodic input: none).
+
+    Parameters
+    ----------
+    have, ref : ndarray, shape (n_lines,)
+        Power spectra on one frequency grid (any scaling).
+
+    Returns
+    -------
+    float in [0, 1]
+    """
+    sh, sr = float(np.sum(have)), float(np.sum(ref))
+    if not (sh > 0 and sr > 0):
+        return 0.0
+    p, q = have / sh, ref / sr
+    return float(np.sum(q[p < 0.1 * q]))
+
+
+def _band_prefix(spec: np.ndarray, b: int, start: int, stop: int) -> int:
+    """The shortest prefix of at least `start` samples (at most `stop`) whose input spectrum
+    covers that of the first `stop` samples (:func:`uncovered_share` at most
+    :data:`BAND_UNCOVERED`): a stationary input's first blocks do, a sine sweep's only near its
+    end."""
+    nb = min(spec.shape[0], stop // b)
+    if nb == 0:
+        return start
+    whole = spec[:nb].sum(axis=0)
+    cum = np.cumsum(spec[:nb], axis=0)
+    for k in range(max(1, start // b), nb + 1):
+        if uncovered_share(cum[k - 1], whole) <= BAND_UNCOVERED:
+            return min(stop, max(start, k * b))
+    return stop
+
+
 def _one_log_split(u, fs, skip, validation_fraction, screen_s):
     """One log's split: ``(fit mask, held-out mask, fit prefix, screening prefix, n_levels,
     description)`` (see :func:`make_split`)."""
@@ -304,27 +369,42 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s):
     m_val = np.zeros(n, bool)
     m_val[cut:] = True
     ok = all(np.any(labels[m_fit] == k) and np.any(labels[m_val] == k) for k in range(len(lv)))
-    if ok:
+    # every excited frequency on both sides too: the held-out part of a sine sweep is a band the
+    # fit never saw, a test of extrapolation in frequency (and the screening prefix its start)
+    spec, b = _block_spectra(np.asarray(u[0], float), fs)
+    k0, k1 = -(-skip // b), cut // b  # whole blocks inside the fitting part, then the held-out part
+    swept = 0.0
+    if k1 > k0 and spec.shape[0] > k1:
+        swept = uncovered_share(spec[k0:k1].sum(axis=0), spec[k1:].sum(axis=0))
+    if ok and swept <= BAND_UNCOVERED:
         desc = (f"time split: samples {skip}..{cut - 1} fit, the last {n - cut} samples "
                 f"({(n - cut) / fs:.1f} s) held out; {len(lv)} input level(s), each on both sides")
-        return m_fit, m_val, cut, _screen_prefix(labels, cut, fs, screen_s, skip), len(lv), desc
-    # blocks of 2 s; within each level's blocks (in time order) every third is held out
-    b = int(round(2.0 * fs))
-    nb = int(np.ceil(n / b))
-    blk_level = [int(np.bincount(labels[i * b:(i + 1) * b].clip(0)).argmax()) for i in range(nb)]
+        pre = _screen_prefix(labels, cut, fs, screen_s, skip)
+        return m_fit, m_val, cut, max(pre, _band_prefix(spec, b, pre, cut)), len(lv), desc
+    # blocks of 2 s; within each level's blocks (in time order) every third is held out; a sweep's
+    # blocks are a ninth of the record (a lightly damped mode's FRF needs long fitting stretches),
+    # the middle one of each three held out (interior bands: the last block is a band's end)
+    swept_now = swept > BAND_UNCOVERED
+    bl = max(b, int(math.ceil((n - skip) / SWEEP_BLOCKS))) if swept_now else b
+    nb = int(np.ceil(n / bl))
+    blk_level = [int(np.bincount(labels[i * bl:(i + 1) * bl].clip(0)).argmax()) for i in range(nb)]
     held = np.zeros(nb, bool)
     for k in set(blk_level):
         idx = [i for i, lv_ in enumerate(blk_level) if lv_ == k]
-        pick = idx[2::3] if len(idx) >= 3 else idx[-1:] if len(idx) == 2 else []
+        pick = (idx[1::3] if swept_now else idx[2::3]) if len(idx) >= 3 else idx[-1:] if len(idx) == 2 else []
         held[pick] = True
-    blk = np.repeat(held, b)[:n]
+    blk = np.repeat(held, bl)[:n]
     m_val = blk.copy()
     m_fit = ~blk
     m_fit[:skip] = False
     m_val[:skip] = False
-    desc = (f"interleaved time split: 2 s blocks, every third block of each level held out ({m_val.sum() / fs:.1f} s); "
-            f"{len(lv)} input level(s), each on both sides")
-    return m_fit, m_val, n, min(n, max(int(screen_s * fs), 3 * b)), len(lv), desc
+    why = (f"the input's spectrum changes over the record ({100 * swept:.0f} % of the last part's input energy in "
+           f"lines the rest barely excites: a sweep), so bands across the whole sweep are held out, not its end"
+           if swept_now else f"{len(lv)} input level(s), each on both sides")
+    desc = (f"interleaved time split: {bl / fs:.3g} s blocks, the {'middle' if swept_now else 'third'} block of "
+            f"every three of each level held out ({m_val.sum() / fs:.1f} s); {why}")
+    pre = min(n, max(int(screen_s * fs), 3 * b))
+    return m_fit, m_val, n, max(pre, _band_prefix(spec, b, pre, n)), len(lv), desc
 
 
 def _screen_prefix(labels, n_fit, fs, screen_s, skip):
