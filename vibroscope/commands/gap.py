@@ -6,7 +6,8 @@ disagree, which unmodelled effect explains it, and how far the gap shrinks once 
 
 The model's ``[[input]]`` channels are read from each log as the command applied to the
 system, its ``[[output]]`` channels as the measured responses. With one log the fit and the
-held-out validation are a time split; with several, the last log is held out.
+held-out validation are a time split (blocks across a sine sweep, not its end); with several at
+one level, the last log is held out; at different levels, each is split so (see --holdout).
 """
 
 from __future__ import annotations

@@ -21,7 +21,9 @@ Procedure
 1. **Split** (:func:`~vibroscope.gap.measure.make_split`): one log: a time split that keeps
    every excitation level on both sides; several logs at one level: the last one is held
    out; several logs at different levels: each is split in time (every level is fitted and
-   held out: a held-out level the fit never saw would test an extrapolation).
+   held out: a held-out level the fit never saw would test an extrapolation). A sine sweep
+   (an input whose spectrum changes over the record) is split in blocks across it, not at
+   its end, where the held-out part would be a band the fit never saw.
 2. **Nominal**: simulate the model with the logged input (band-limited reconstruction,
    output sample k aligned with input sample k); gap = held-out nrmse (each channel
    normalised by its own energy, :func:`~vibroscope.gap.measure.nrmse`).
