@@ -226,10 +226,12 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     One log: the last `validation_fraction` of the record is held out when every input level
     occurs on both sides (levels: :func:`input_levels`) and the fitting part's input spectrum
     covers the held-out part's (:func:`uncovered_share` at most :data:`BAND_UNCOVERED`, on 2 s
-    blocks); otherwise blocks of 2 s alternate (two fitting, one held out) so that every level,
-    and every part of a sine sweep's band, is on both sides (the last third of a sweep is a band
-    the fit never saw: a held-out test of extrapolation in frequency). The screening prefix is
-    extended until its input spectrum covers the fitting part's (a sweep's: most of it). Several logs at one
+    blocks); otherwise the record is cut in blocks, one of each three held out, so that every
+    level is on both sides (blocks of 2 s, the third of each three held out), and a sine sweep's
+    held-out bands lie across it (:data:`SWEEP_BLOCKS` blocks, the middle of each three held
+    out; its last third would be a band the fit never saw: a test of extrapolation in
+    frequency). The screening prefix is extended until its input spectrum covers the fitting
+    part's (a sweep's: most of it). Several logs at one
     input level (RMS within :data:`LOG_LEVEL_RATIO`): the last log is held out, the others
     fit. Several logs at different levels: each log is split in time as one log is, so that
     every level is on both sides - a held-out log at a level the fit never saw would test an
