@@ -275,7 +275,7 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
             parts = [_one_log_split(u, fs, sk, validation_fraction, max(4.0, 2 * screen_s / n_logs))
                      for u, sk in zip(us, skip)]
             held = sum(int(p[1].sum()) for p in parts) / fs
-            kinds = {p[5].split(":")[0] + (" of a sweep" if "a sweep" in p[5] else "") for p in parts}
+            kinds = {p[5].split(":")[0] for p in parts}
             desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}), each split in "
                     f"time ({' / '.join(sorted(kinds))}; {held:.1f} s held out in all), so every level is fitted "
                     f"and validated")
@@ -311,15 +311,14 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
 
 
 def _block_spectra(u: np.ndarray, fs: float) -> tuple[np.ndarray, int]:
-    """Hann-windowed power spectra of the input's consecutive :data:`SPLIT_BLOCK_S` blocks:
-    ``(spectra of shape (n_blocks, n_lines), block length in samples)``."""
+    """Power spectra of the input's consecutive :data:`SPLIT_BLOCK_S` blocks (Hann, no overlap,
+    mean removed: :func:`scipy.signal.spectrogram`): ``(spectra of shape (n_blocks, n_lines),
+    block length in samples)``."""
     b = max(8, int(round(SPLIT_BLOCK_S * fs)))
-    nb = u.size // b
-    if nb == 0:
+    if u.size < b:
         return np.zeros((0, b // 2 + 1)), b
-    x = u[: nb * b].reshape(nb, b)
-    x = x - x.mean(axis=1, keepdims=True)
-    return np.abs(np.fft.rfft(x * np.hanning(b), axis=1)) ** 2, b
+    _, _, sxx = signal.spectrogram(u, fs, window="hann", nperseg=b, noverlap=0, detrend="constant")
+    return sxx.T, b
 
 
 def uncovered_share(have: np.ndarray, ref: np.ndarray) -> float:
@@ -403,7 +402,7 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s):
     why = (f"the input's spectrum changes over the record ({100 * swept:.0f} % of the last part's input energy in "
            f"lines the rest barely excites: a sweep), so bands across the whole sweep are held out, not its end"
            if swept_now else f"{len(lv)} input level(s), each on both sides")
-    desc = (f"interleaved time split: {bl / fs:.3g} s blocks, the {'middle' if swept_now else 'third'} block of "
+    desc = (f"interleaved time split{' of a sweep' if swept_now else ''}: {bl / fs:.3g} s blocks, the {'middle' if swept_now else 'third'} block of "
             f"every three of each level held out ({m_val.sum() / fs:.1f} s); {why}")
     pre = min(n, max(int(screen_s * fs), 3 * b))
     return m_fit, m_val, n, max(pre, _band_prefix(spec, b, pre, n)), len(lv), desc
