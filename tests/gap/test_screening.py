@@ -53,3 +53,41 @@ def test_nothing_better_keeps_the_start(monkeypatch):
                            lower=np.array([-18.6]), upper=np.array([-7.8]))
     p, g = cand.bracketed_search(None, lambda p: float(p[0]), spec, -11.7, 0.0)
     assert p[0] == -11.7 and g == 0.0
+
+
+def test_each_joint_form_is_refined_where_the_other_form_refined_best(monkeypatch):
+    """The Jenkins and the Iwan joint are screened at four links; each form's N_LOCATIONS best
+    probed links are refined. The Jenkins joint refines best at link c, where the Iwan joint
+    probed fourth: the Iwan joint must be refined at c too (and win there), and nowhere else
+    beyond its three; a class of one form gains nothing."""
+    links = ["a", "b", "c", "d"]
+    probe_gap = {("jenkins", "a"): 0.30, ("jenkins", "b"): 0.31, ("jenkins", "c"): 0.32, ("jenkins", "d"): 0.40,
+                 ("iwan", "a"): 0.20, ("iwan", "b"): 0.21, ("iwan", "d"): 0.22, ("iwan", "c"): 0.25,
+                 (None, "a"): 0.5, (None, "b"): 0.6, (None, "c"): 0.7, (None, "d"): 0.8}
+    refined_gap = {("jenkins", "a"): 0.10, ("jenkins", "b"): 0.12, ("jenkins", "c"): 0.05,
+                   ("iwan", "a"): 0.09, ("iwan", "b"): 0.11, ("iwan", "d"): 0.13, ("iwan", "c"): 0.02}
+
+    def spec(effect, form, link):
+        where = {"between": [link, "ground"]} | ({"form": form} if form else {})
+        return SimpleNamespace(effect=effect, where=where, lifts_from=None, form=form, link=link)
+
+    specs = ([spec("joint_friction", f, x) for f in ("jenkins", "iwan") for x in links]
+             + [spec("cubic_stiffness", None, x) for x in links])
+    refined = []
+    monkeypatch.setattr(cand, "probe", lambda run, other, s: (s, np.zeros(1), probe_gap[(s.form, s.link)], None))
+
+    def refine(run, other, item):
+        s = item[0]
+        refined.append((s.effect, s.form, s.link))
+        return (s, item[1], refined_gap.get((s.form, s.link), item[2] / 2), None)
+
+    monkeypatch.setattr(cand, "refine_on_either_base", refine)
+    bar = SimpleNamespace(update=lambda n: None)
+    out = cand.screen_nonlinear(None, specs, bar, workers=1)
+    assert ("joint_friction", "iwan", "c") in refined
+    assert len([r for r in refined if r[1] == "iwan"]) == cand.N_LOCATIONS + 1
+    assert len([r for r in refined if r[0] == "cubic_stiffness"]) == cand.N_LOCATIONS
+    assert len(refined) == len(set(refined))
+    best = min(out, key=lambda r: r[2])
+    assert (best[0].form, best[0].link, best[2]) == ("iwan", "c", 0.02)
+    assert len(out) == len(specs)

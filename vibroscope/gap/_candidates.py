@@ -257,6 +257,15 @@ def screen_nonlinear(run: Run, nl_specs: list, bar, workers) -> list:
             to_refine += items[:N_LOCATIONS]
             kept += items[N_LOCATIONS:]
         screened = list(ex.map(partial(refine_on_either_base, run, other_base), to_refine)) + kept
+        # the forms of one class share their best location: each form is refined also where
+        # another form of its class refined best (the GVT sweeps: the Jenkins joint refined best
+        # at the true wing-payload link, where the Iwan joint's starts had not probed among its
+        # N_LOCATIONS best and were never refined; the Iwan joint won at a link beside it)
+        shared = shared_locations(screened[:len(to_refine)], kept)
+        if shared:
+            done = list(ex.map(partial(refine_on_either_base, run, other_base), [kept[i] for i in shared]))
+            at_k = {id(kept[i]): r for i, r in zip(shared, done)}
+            screened = [at_k.get(id(it), it) for it in screened]
         # a family never fits worse than a member it contains: where the member (Coulomb friction)
         # fits a location better than the family (asymmetric friction), the family is refined again
         # from the member's solution there
@@ -473,6 +482,31 @@ def bracketed_search(run: Run, build, s, x0: float, g0: float) -> tuple[np.ndarr
         minimize_scalar(f, bounds=(a, b), method="bounded",
                         options={"maxiter": BRACKET_EVALS, "xatol": 1e-3 * (b - a)})
     return best[0], float(best[1])
+
+
+def shared_locations(refined: list, kept: list) -> list[int]:
+    """Indices into `kept` (probed, not refined) of the items to refine because another form of
+    their class (the Jenkins and the Iwan joint) refined best at their location; `refined`
+    holds the refined items. A class of one form gives none."""
+    def form_key(it):
+        return it[0].effect, it[0].where.get("form")
+
+    best: dict[tuple, tuple] = {}
+    done: set = set()
+    for it in refined:
+        done.add(form_key(it) + (where_key(it[0].where),))
+        if form_key(it) not in best or it[2] < best[form_key(it)][2]:
+            best[form_key(it)] = it
+    out = []
+    for i, it in enumerate(kept):
+        eff, form = form_key(it)
+        loc = where_key(it[0].where)
+        if (eff, form, loc) in done:
+            continue
+        if any(e == eff and f != form and where_key(b[0].where) == loc for (e, f), b in best.items()):
+            out.append(i)
+            done.add((eff, form, loc))
+    return out
 
 
 def refine_on_either_base(run: Run, other_base: dict, item):
