@@ -234,8 +234,9 @@ def screen_nonlinear(run: Run, nl_specs: list, bar, workers) -> list:
     """The nonlinear effects screened at every location with the linear parameters at the refit
     (and the nominal): each location's best start (:func:`probe`), the :data:`N_LOCATIONS` best
     locations of each class refined (:func:`refine_on_either_base`, the others keep their best
-    start), and a family refined again from its member's solution where the member fits a
-    location better. Returns the screened items ``(spec, p, fitting gap, base)``."""
+    start), each form of a class refined also where another form of it refined best
+    (:func:`shared_locations`), and a family refined again from its member's solution where the
+    member fits a location better. Returns the screened items ``(spec, p, fitting gap, base)``."""
     other_base: dict[int, tuple] = {}  # id(best start) -> the best start on the other linear base
     with ThreadPoolExecutor(max(1, workers)) as ex:
         probed = []
