@@ -263,10 +263,8 @@ def screen_nonlinear(run: Run, nl_specs: list, bar, workers) -> list:
         # at the true wing-payload link, where the Iwan joint's starts had not probed among its
         # N_LOCATIONS best and were never refined; the Iwan joint won at a link beside it)
         shared = shared_locations(screened[:len(to_refine)], kept)
-        if shared:
-            done = list(ex.map(partial(refine_on_either_base, run, other_base), [kept[i] for i in shared]))
-            at_k = {id(kept[i]): r for i, r in zip(shared, done)}
-            screened = [at_k.get(id(it), it) for it in screened]
+        for i, res in zip(shared, ex.map(partial(refine_on_either_base, run, other_base), [kept[i] for i in shared])):
+            screened[len(to_refine) + i] = res
         # a family never fits worse than a member it contains: where the member (Coulomb friction)
         # fits a location better than the family (asymmetric friction), the family is refined again
         # from the member's solution there
@@ -489,25 +487,16 @@ def shared_locations(refined: list, kept: list) -> list[int]:
     """Indices into `kept` (probed, not refined) of the items to refine because another form of
     their class (the Jenkins and the Iwan joint) refined best at their location; `refined`
     holds the refined items. A class of one form gives none."""
-    def form_key(it):
-        return it[0].effect, it[0].where.get("form")
-
-    best: dict[tuple, tuple] = {}
-    done: set = set()
+    best: dict[tuple, tuple] = {}  # (effect, form) -> its best refined item
     for it in refined:
-        done.add(form_key(it) + (where_key(it[0].where),))
-        if form_key(it) not in best or it[2] < best[form_key(it)][2]:
-            best[form_key(it)] = it
-    out = []
-    for i, it in enumerate(kept):
-        eff, form = form_key(it)
-        loc = where_key(it[0].where)
-        if (eff, form, loc) in done:
-            continue
-        if any(e == eff and f != form and where_key(b[0].where) == loc for (e, f), b in best.items()):
-            out.append(i)
-            done.add((eff, form, loc))
-    return out
+        key = (it[0].effect, it[0].where.get("form"))
+        if key not in best or it[2] < best[key][2]:
+            best[key] = it
+    # a kept item is never refined already: its form refined only its N_LOCATIONS best
+    at = {(e, f, where_key(b[0].where)) for (e, f), b in best.items()}
+    return [i for i, it in enumerate(kept)
+            if any(e == it[0].effect and f != it[0].where.get("form") and loc == where_key(it[0].where)
+                   for e, f, loc in at)]
 
 
 def refine_on_either_base(run: Run, other_base: dict, item):

@@ -227,7 +227,7 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     occurs on both sides (levels: :func:`input_levels`) and the fitting part's input spectrum
     covers the held-out part's (:func:`uncovered_share` at most :data:`BAND_UNCOVERED`, on 2 s
     blocks); otherwise the record is cut in blocks, one of each three held out, so that every
-    level is on both sides (blocks of 2 s, the third of each three held out), and a sine sweep's
+    level is on both sides (blocks of 2 s, the third of each three held out) and a sine sweep's
     held-out bands lie across it (:data:`SWEEP_BLOCKS` blocks, the middle of each three held
     out; its last third would be a band the fit never saw: a test of extrapolation in
     frequency). The screening prefix is extended until its input spectrum covers the fitting
