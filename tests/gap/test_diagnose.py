@@ -123,6 +123,35 @@ def test_split_of_a_sine_sweep_holds_out_every_band_not_its_end(u20):
     assert stationary.screen_prefix[0] == 8 * FS  # as before: its first 8 s cover its spectrum
 
 
+def test_sweeps_at_several_levels_fit_and_hold_out_every_band():
+    """The sine sweep of a ground vibration test at three levels (2-15 Hz, 120 s, 400 Hz): were
+    the same blocks held out at every level, the band of one of them (the 12-13.6 Hz block, with
+    a mode at 13.2 Hz) would never be fitted, and its held-out gap would measure an
+    extrapolation in frequency. Each block is fitted at two levels and held out at the third,
+    the same whichever order the logs are given in."""
+    from vibroscope.models.excitation import sine_sweep
+
+    fs, nb = 400.0, 9
+    us = [np.asarray(sine_sweep(fs, duration=120.0, f0=2.0, f1=15.0, amplitude=a), float).reshape(1, -1)
+          for a in (0.14, 0.7, 1.4)]
+    n = us[0].shape[1]
+    bl = -(-n // nb)
+
+    def held(split):  # per log, which of the nine blocks are held out
+        return np.array([[v[i * bl:(i + 1) * bl].mean() > 0.5 for i in range(nb)] for v in split.validation])
+
+    sp = make_split(us, fs)
+    h = held(sp)
+    assert "sweep" in sp.description, sp.description
+    assert h.sum(axis=0).tolist() == [1] * nb  # each block held out at exactly one level
+    for v, f in zip(sp.validation, sp.fit):
+        assert not np.any(v & f)
+        assert 0.3 < v.mean() < 0.37
+    assert h[0].tolist() == [i % 3 == 1 for i in range(nb)]  # the lowest level: the middle of each three
+    h2 = held(make_split([us[2], us[0], us[1]], fs))
+    assert h2.tolist() == h[[2, 0, 1]].tolist()
+
+
 def test_noise_floor_recovers_the_added_noise(u20):
     for noise in (0.01, 0.03):
         sig = log_of(nominal(), u20, noise=noise)

@@ -238,6 +238,10 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     extrapolation, on which a level-dependent effect cannot be identified from the fitting
     data (validation data inside the range of the estimation data: Schoukens & Ljung,
     "Nonlinear system identification: a user-oriented road map", IEEE CSM 39(6), 2019).
+    Sine sweeps at several levels take the held-out block of each three in turn, the lowest
+    level the middle one, the next the last, the next the first (and so on): held out at every
+    level alike, a band (one mode's passage) would never be fitted, and the held-out gap there
+    would measure an extrapolation in frequency again.
 
     Parameters
     ----------
@@ -272,8 +276,13 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     if n_logs >= 2:
         rms = [float(np.sqrt(np.mean(np.atleast_2d(u)[0, sk:] ** 2))) for u, sk in zip(us, skip)]
         if holdout == "auto" and max(rms) > LOG_LEVEL_RATIO * max(min(rms), 1e-300):
-            parts = [_one_log_split(u, fs, sk, validation_fraction, max(4.0, 2 * screen_s / n_logs))
-                     for u, sk in zip(us, skip)]
+            # sine sweeps: the held-out block of each three taken in turn by the levels (lowest
+            # first), so that each band is fitted at some level and held out at another
+            rank = np.empty(n_logs, int)
+            rank[np.argsort(rms, kind="stable")] = np.arange(n_logs)
+            parts = [_one_log_split(u, fs, sk, validation_fraction, max(4.0, 2 * screen_s / n_logs),
+                                    sweep_phase=(1 + int(r)) % 3)
+                     for u, sk, r in zip(us, skip, rank)]
             held = sum(int(p[1].sum()) for p in parts) / fs
             kinds = {p[5].split(":")[0] for p in parts}
             desc = (f"{n_logs} logs at different input levels (RMS {min(rms):.3g} to {max(rms):.3g}), each split in "
@@ -359,9 +368,10 @@ def _band_prefix(spec: np.ndarray, b: int, start: int, stop: int) -> int:
     return stop
 
 
-def _one_log_split(u, fs, skip, validation_fraction, screen_s):
+def _one_log_split(u, fs, skip, validation_fraction, screen_s, sweep_phase: int = 1):
     """One log's split: ``(fit mask, held-out mask, fit prefix, screening prefix, n_levels,
-    description)`` (see :func:`make_split`)."""
+    description)`` (see :func:`make_split`); a sweep's held-out blocks are those at
+    `sweep_phase` (0, 1 or 2) of each three."""
     n = u.shape[1]
     labels, lv = input_levels(u, fs)
     cut = int(round(n * (1 - validation_fraction)))
@@ -392,7 +402,7 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s):
     held = np.zeros(nb, bool)
     for k in set(blk_level):
         idx = [i for i, lv_ in enumerate(blk_level) if lv_ == k]
-        pick = (idx[1::3] if swept_now else idx[2::3]) if len(idx) >= 3 else idx[-1:] if len(idx) == 2 else []
+        pick = (idx[sweep_phase::3] if swept_now else idx[2::3]) if len(idx) >= 3 else idx[-1:] if len(idx) == 2 else []
         held[pick] = True
     blk = np.repeat(held, bl)[:n]
     m_val = blk.copy()
@@ -402,7 +412,8 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s):
     why = (f"the input's spectrum changes over the record ({100 * swept:.0f} % of the last part's input energy in "
            f"lines the rest barely excites: a sweep), so bands across the whole sweep are held out, not its end"
            if swept_now else f"{len(lv)} input level(s), each on both sides")
-    desc = (f"interleaved time split{' of a sweep' if swept_now else ''}: {bl / fs:.3g} s blocks, the {'middle' if swept_now else 'third'} block of "
+    which = ("first", "middle", "last")[sweep_phase] if swept_now else "third"
+    desc = (f"interleaved time split{' of a sweep' if swept_now else ''}: {bl / fs:.3g} s blocks, the {which} block of "
             f"every three of each level held out ({m_val.sum() / fs:.1f} s); {why}")
     pre = min(n, max(int(screen_s * fs), 3 * b))
     return m_fit, m_val, n, max(pre, _band_prefix(spec, b, pre, n)), len(lv), desc
