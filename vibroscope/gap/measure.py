@@ -240,7 +240,7 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     "Nonlinear system identification: a user-oriented road map", IEEE CSM 39(6), 2019).
     Sine sweeps at several levels take the held-out block of each three in turn, the lowest
     level the middle one, the next the last, the next the first (and so on): held out at every
-    level alike, a band (one mode's passage) would never be fitted, and the held-out gap there
+    level alike, a band (a mode's passage, or its ring-down) would never be fitted, and the held-out gap there
     would measure an extrapolation in frequency again.
 
     Parameters
