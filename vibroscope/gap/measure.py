@@ -193,7 +193,7 @@ class Split:
         contiguous fitting part needs only its prefix).
     screen_prefix : list of int
         Per log, a shorter prefix (all levels present, the input's spectrum covered:
-        :data:`BAND_UNCOVERED`) for the fast screening fits.
+        :data:`BAND_UNCOVERED`; a sine sweep's: the whole record) for the fast screening fits.
     description : str
     levels : list of int
         Number of excitation levels found per log.
@@ -230,8 +230,8 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     level is on both sides (blocks of 2 s, the third of each three held out) and a sine sweep's
     held-out bands lie across it (:data:`SWEEP_BLOCKS` blocks, the middle of each three held
     out; its last third would be a band the fit never saw: a test of extrapolation in
-    frequency). The screening prefix is extended until its input spectrum covers the fitting
-    part's (a sweep's: most of it). Several logs at one
+    frequency). The screening prefix is the first `screen_s` when its input spectrum covers the
+    fitting part's, else (a sweep) the whole record. Several logs at one
     input level (RMS within :data:`LOG_LEVEL_RATIO`): the last log is held out, the others
     fit. Several logs at different levels: each log is split in time as one log is, so that
     every level is on both sides - a held-out log at a level the fit never saw would test an
@@ -304,7 +304,7 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
                 fpre.append(n)
                 pre = _screen_prefix(labels, n, fs, screen_s, skip[i])
                 spec, b = _block_spectra(np.asarray(u[0], float), fs)
-                spre.append(max(pre, _band_prefix(spec, b, pre, n)))  # a sweep's: most of it
+                spre.append(max(pre, _band_prefix(spec, b, pre, n)))  # a sweep's: the whole
             else:
                 fit.append(np.zeros(n, bool))
                 val.append(m)
@@ -353,18 +353,19 @@ def uncovered_share(have: np.ndarray, ref: np.ndarray) -> float:
 
 
 def _band_prefix(spec: np.ndarray, b: int, start: int, stop: int) -> int:
-    """The shortest prefix of at least `start` samples (at most `stop`) whose input spectrum
-    covers that of the first `stop` samples (:func:`uncovered_share` at most
-    :data:`BAND_UNCOVERED`): a stationary input's first blocks do, a sine sweep's only near its
-    end."""
+    """The screening prefix of a record whose first `start` samples (at most `stop`) are the
+    shortest prefix asked for: `start` when those samples' input spectrum covers that of the
+    first `stop` samples (:func:`uncovered_share` at most :data:`BAND_UNCOVERED`: a stationary
+    random or periodic input), else `stop`, the whole (a sine sweep: a band its prefix left
+    out, however little of the input energy it holds, can hold a mode's resonance passage, which
+    no candidate would then be fitted on and every candidate extrapolated to on held-out data)."""
     nb = min(spec.shape[0], stop // b)
     if nb == 0:
         return start
     whole = spec[:nb].sum(axis=0)
-    cum = np.cumsum(spec[:nb], axis=0)
-    for k in range(max(1, start // b), nb + 1):
-        if uncovered_share(cum[k - 1], whole) <= BAND_UNCOVERED:
-            return min(stop, max(start, k * b))
+    k = max(1, start // b)
+    if k >= nb or uncovered_share(spec[:k].sum(axis=0), whole) <= BAND_UNCOVERED:
+        return min(stop, start)
     return stop
 
 
