@@ -304,7 +304,7 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
                 fpre.append(n)
                 pre = _screen_prefix(labels, n, fs, screen_s, skip[i])
                 spec, b = _block_spectra(np.asarray(u[0], float), fs)
-                spre.append(max(pre, _band_prefix(spec, b, pre, n)))  # a sweep's: the whole
+                spre.append(_band_prefix(spec, b, pre, n))  # a sweep's: the whole
             else:
                 fit.append(np.zeros(n, bool))
                 val.append(m)
@@ -392,7 +392,7 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s, sweep_phase: int 
         desc = (f"time split: samples {skip}..{cut - 1} fit, the last {n - cut} samples "
                 f"({(n - cut) / fs:.1f} s) held out; {len(lv)} input level(s), each on both sides")
         pre = _screen_prefix(labels, cut, fs, screen_s, skip)
-        return m_fit, m_val, cut, max(pre, _band_prefix(spec, b, pre, cut)), len(lv), desc
+        return m_fit, m_val, cut, _band_prefix(spec, b, pre, cut), len(lv), desc
     # blocks of 2 s; within each level's blocks (in time order) every third is held out; a sweep's
     # blocks are a ninth of the record (a lightly damped mode's FRF needs long fitting stretches),
     # the middle one of each three held out (interior bands: the last block is a band's end)
@@ -417,7 +417,7 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s, sweep_phase: int 
     desc = (f"interleaved time split{' of a sweep' if swept_now else ''}: {bl / fs:.3g} s blocks, the {which} block of "
             f"every three of each level held out ({m_val.sum() / fs:.1f} s); {why}")
     pre = min(n, max(int(screen_s * fs), 3 * b))
-    return m_fit, m_val, n, max(pre, _band_prefix(spec, b, pre, n)), len(lv), desc
+    return m_fit, m_val, n, _band_prefix(spec, b, pre, n), len(lv), desc
 
 
 def _screen_prefix(labels, n_fit, fs, screen_s, skip):
