@@ -51,12 +51,23 @@ def one_blas_thread(fn):
 
     @functools.wraps(fn)
     def bounded(*args, **kwargs):
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(limits=1, user_api="blas"):
+        with _blas_controller().limit(limits=1, user_api="blas"):
             return fn(*args, **kwargs)
 
     return bounded
+
+
+@functools.lru_cache(maxsize=1)
+def _blas_controller():
+    """One :class:`threadpoolctl.ThreadpoolController` for the process: making one scans every
+    loaded library (``threadpool_limits`` makes one per call), and the gap diagnosis enters
+    :func:`one_blas_thread` for each of its thousands of probes. scipy.linalg is imported first
+    so that its BLAS (scipy's own in its wheels) is among the libraries the controller limits."""
+    import scipy.linalg  # noqa: F401 - load scipy's BLAS before the scan
+    from threadpoolctl import ThreadpoolController
+
+    return ThreadpoolController()
+
 
 __all__ = ["Identification", "modes_document", "positive_power_spectra", "polymax_oma", "auto_ssi", "auto_lscf", "reference_channels", "ssi_lags"]
 

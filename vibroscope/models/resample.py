@@ -33,6 +33,8 @@ References
 
 from __future__ import annotations
 
+import functools
+
 from typing import Literal
 
 import numpy as np
@@ -119,6 +121,15 @@ def upsample(
     raise ValueError(f"{method=} must be 'fft', 'poly' or 'linear'")
 
 
+@functools.lru_cache(maxsize=64)
+def _fir1(order: int, r: int) -> np.ndarray:
+    """``fir1(order, 1/r)`` (:func:`scipy.signal.firwin`), designed once per (order, r): the
+    gap diagnosis decimates every simulation, thousands per run. Read-only."""
+    b = signal.firwin(order + 1, 1.0 / r)
+    b.flags.writeable = False
+    return b
+
+
 def decimate_fir(x: np.ndarray, factor: int, *, order: int = 30, periodic: bool = False) -> np.ndarray:
     """Low-pass and downsample by `factor` in prime stages, like MATLAB ``decimate(x, r, 'fir')``.
 
@@ -150,7 +161,7 @@ def decimate_fir(x: np.ndarray, factor: int, *, order: int = 30, periodic: bool 
     if int(factor) < 1:
         raise ValueError(f"{factor=} must be >= 1")
     for r in _prime_factors(int(factor)):
-        b = signal.firwin(order + 1, 1.0 / r)
+        b = _fir1(int(order), int(r))
         half = order // 2
         n = x.shape[-1]
         if periodic:
