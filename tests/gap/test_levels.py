@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from vibroscope.gap.levels import detect_period, frf_segment_length, level_blas
+from vibroscope.gap.levels import detect_period, frf_segment_length, level_blas, steady_state_start
 from vibroscope.models.elements import CubicSpring, Damper, Spring
 from vibroscope.models.lumped import Dof, Input, LumpedModel, Output
 from vibroscope.models.simulate import simulate
@@ -103,6 +103,34 @@ def test_detect_period_of_a_repeated_multisine_and_not_of_noise():
     assert detect_period(rng.standard_normal(5 * 8192), 400.0) is None
     b, a = signal.butter(4, 0.2)
     assert detect_period(signal.lfilter(b, a, rng.standard_normal(5 * 8192)), 400.0) is None
+
+
+def test_steady_state_start_tells_a_log_cut_from_steady_state_from_one_recorded_from_rest():
+    """A mildly hardening Duffing model (10 Hz, 2 %: time constant 0.8 s) under a 10 s multisine
+    of 10 N RMS, simulated from rest for 6 periods: the first period holds the transient (its
+    difference from the second is 0.18 of the output RMS over its first quarter), the last three
+    do not (differences below 1e-4)."""
+    per = int(10 * FS)
+    u = np.tile(multisine(per, FS, 2.0, 40.0), 6) * 10.0
+    y = np.asarray(simulate(duffing(1e6), u[None], FS).data[1:])
+    rng = np.random.default_rng(6)
+    noisy = y + 0.02 * np.std(y) * rng.standard_normal(y.shape)
+    assert steady_state_start(u, noisy, FS) is None  # from rest: the data have the transient too
+    # the last three periods: steady from the first sample, noise or not
+    assert steady_state_start(u[3 * per:], y[:, 3 * per:], FS) == per
+    assert steady_state_start(u[3 * per:], noisy[:, 3 * per:], FS) == per
+    assert steady_state_start(u[3 * per:], noisy[:, 3 * per:], FS, period=per) == per
+    # steady states at two levels, a step between the first two periods: not one steady state
+    y2 = np.asarray(simulate(duffing(1e6), 2 * u[None], FS).data[1:])
+    u_step = np.concatenate([u[3 * per: 4 * per], 2 * u[3 * per: 5 * per]])
+    y_step = np.concatenate([y[:, 3 * per: 4 * per], y2[:, 3 * per: 5 * per]], axis=1)
+    assert detect_period(u_step, FS) == per
+    assert steady_state_start(u_step, y_step, FS) is None
+    # a random input has no period
+    r = rng.standard_normal(u.size)
+    assert steady_state_start(r, noisy, FS) is None
+    with pytest.raises(ValueError, match="lengths differ"):
+        steady_state_start(u, y[:, :-1], FS)
 
 
 def test_segment_length_resolves_a_narrow_mode_or_takes_the_period():

@@ -285,6 +285,8 @@ class Run:
     #: (:func:`~vibroscope.gap._candidates.choose_output_sampling`), what was chosen and why
     output_sampling: str = "auto"
     sampling_choice: dict | None = None
+    #: why each log's start is left out (diagnosis._skip_samples), one line per log
+    skip_reasons: list | None = None
     # the nominal model and the noise floor (_simulate_nominal)
     y_nom: list | None = None
     gap_before: float | None = None

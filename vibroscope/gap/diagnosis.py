@@ -133,7 +133,7 @@ from vibroscope.gap._selection import select_further_effects
 from vibroscope.gap.closed_loop import CLOSED_LOOP_EXCLUDED, is_closed_loop, log_channels
 from vibroscope.gap.effects import EFFECT_TABLE, LinearParams
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
-from vibroscope.gap.levels import frf_segment_length
+from vibroscope.gap.levels import frf_segment_length, steady_state_start
 from vibroscope.gap.measure import input_levels, locate_bands, make_split, masked_csd, noise_floor, nrmse, regime_gaps
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.models.lumped import LumpedModel
@@ -227,15 +227,29 @@ def _split_channels(model: LumpedModel, sig: Signals):
     return u, y
 
 
-def _skip_samples(model: LumpedModel, fs: float, n: int, transient_s) -> int:
+def _skip_samples(model: LumpedModel, fs: float, u: np.ndarray, y: np.ndarray, transient_s) -> tuple[int, str]:
+    """Samples at the start of one log left out of every metric, and why (one line).
+
+    Given `transient_s`: that. A periodic input whose log is in steady state from its first
+    sample (:func:`~vibroscope.gap.levels.steady_state_start`): one period, since the
+    simulation from rest has a transient there that the data lack. Otherwise three time
+    constants ``1 / (zeta omega_n)`` of the nominal model's slowest mode, at most 5 % of the
+    record."""
+    n = u.shape[1]
     if transient_s is not None:
-        return int(round(float(transient_s) * fs))
+        k = int(round(float(transient_s) * fs))
+        return k, f"given: {float(transient_s):g} s"
     try:
         md = model.modes()
         tau = float(np.max(1.0 / np.maximum(md.damping_ratios * 2 * np.pi * md.natural_frequencies, 1e-9)))
     except Exception:  # noqa: BLE001
         tau = 0.0
-    return int(min(3 * tau * fs, 0.05 * n))
+    k = int(min(3 * tau * fs, 0.05 * n))
+    T = steady_state_start(u, y, fs)
+    if T is not None and T > k:
+        return T, (f"one period ({T} samples, {T / fs:.4g} s): the log is in periodic steady state from its start, "
+                   "the simulation from rest is not")
+    return k, f"three time constants of the nominal model's slowest mode ({3 * tau:.3g} s), at most 5 % of the record"
 
 
 def fit_linear_model(model, signals, *, nperseg: int | None = None, time_polish: bool = True) -> LumpedModel:
@@ -326,8 +340,11 @@ def diagnose(
     effects : sequence of str, optional
         Restrict the candidates (default: the whole vocabulary).
     transient_s : float, optional
-        Seconds at the start of each log left out of every metric (default: three time
-        constants of the slowest mode, at most 5 % of the record).
+        Seconds at the start of each log left out of every metric. Default: one period for a
+        log of a periodic input that is in steady state from its first sample
+        (:func:`~vibroscope.gap.levels.steady_state_start`: the simulation from rest is not),
+        else three time constants of the nominal model's slowest mode, at most 5 % of the
+        record; the report's ``meta["transient_reasons"]`` says which, per log.
     nperseg : int, optional
         Welch segment length (samples) for FRFs and spectra. Default
         (:func:`~vibroscope.gap.levels.frf_segment_length`): one period of a periodic input
@@ -459,7 +476,8 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
     units = [sigs[0].units[list(sigs[0].channels).index(c)] if sigs[0].units else "" for c in out_ch]
     in_ch0 = log_channels(model)[0][0]
     in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
-    skips = [_skip_samples(model, fs, u.shape[1], transient_s) for u in us]
+    skip_why = [_skip_samples(model, fs, u, y, transient_s) for u, y in zip(us, ys)]
+    skips = [k for k, _ in skip_why]
     split = make_split(us, fs, skip=skips, holdout=holdout)
     sims = [LogSimulator(u, fs) for u in us]
     n_min = min(u.shape[1] for u in us)
@@ -487,7 +505,8 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
     excluded = {e: why for e, why in CLOSED_LOOP_EXCLUDED.items() if e in effect_set} if closed else {}
     effect_set -= set(excluded)
     return Run(t_start=t_start, timings=timings, model=model, sigs=sigs, fs=fs, us=us, ys=ys, out_ch=out_ch,
-                closed=closed, units=units, in_unit=in_unit, skips=skips, split=split, sims=sims, nps=nps,
+                closed=closed, units=units, in_unit=in_unit, skips=skips, skip_reasons=[w for _, w in skip_why], split=split,
+                sims=sims, nps=nps,
                 nps_reason=nps_reason, window=window, effect_set=effect_set, excluded=excluded)
 
 
@@ -785,7 +804,7 @@ def _build_report(run: Run) -> GapReport:
         timings=timings,
         level_evidence=level_ev,
         meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "output_sampling": run.sampling_choice, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
-              "transient_samples": skips, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
+              "transient_samples": skips, "transient_reasons": run.skip_reasons, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "noise_floor_ranking": {"nrmse": floor_rank, "method": floor_rank_method},
               "nested_tests": {"t": dict(run.nested_t), "threshold": NESTED_T},
               "selection": {"method": "forward selection, one entry per round: the additions tried on the current "

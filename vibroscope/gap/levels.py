@@ -35,7 +35,7 @@ import scipy.signal
 from vibroscope.gap.measure import UNEXCITED, excited_band, input_levels
 from vibroscope.spectral import csd_matrix
 
-__all__ = ["detect_period", "frf_segment_length", "level_blas", "fit_mode", "window_kernel", "LevelBLA", "ModeTrend",
+__all__ = ["detect_period", "steady_state_start", "frf_segment_length", "level_blas", "fit_mode", "window_kernel", "LevelBLA", "ModeTrend",
            "LevelEvidence"]
 
 #: relative change beyond which a level dependence counts (with |z| > :data:`Z_SIGNIFICANT`)
@@ -156,6 +156,95 @@ def detect_period(u, fs: float, *, min_periods: int = 2, tol: float = 0.05,
         good = ok & (rel < tol)
         if good.sum() >= max(min_periods - 1, 1) and good.sum() >= 0.5 * (m - 1):
             return T
+    return None
+
+
+#: a log starts in periodic steady state when the first two periods differ at their start by
+#: at most this factor times their difference at their end (the noise)
+STEADY_START_RATIO = 2.0
+#: ... and their difference at the end is at most this share of the output's RMS (one level)
+STEADY_START_LEVEL = 0.2
+
+
+def steady_state_start(u, y, fs: float, *, period: int | None = None) -> int | None:
+    """Period in samples when a log of a periodic input is in periodic steady state from its
+    first sample (a recording made after the transient, or periods cut from one), else None.
+
+    A model simulated from rest on such a log has a transient of its slowest modes that the
+    data do not: the first period is not comparable, however well the model fits. A log
+    recorded from rest has the same transient in the data and in the simulation, and a random
+    input has no period: both give None.
+
+    Parameters
+    ----------
+    u : array_like, shape (n_samples,) or (n_inputs, n_samples)
+        The logged input (N); the period is detected on the first
+        (:func:`detect_period`), unless `period` is given.
+    y : array_like, shape (n_samples,) or (n_outputs, n_samples)
+        The logged outputs, in their units.
+    fs : float
+        Sampling frequency in Hz.
+    period : int, optional
+        The input's period in samples, if known.
+
+    Returns
+    -------
+    int or None
+        The period ``T`` if the record holds at least two periods and its first two are alike
+        from their start; None otherwise.
+
+    Raises
+    ------
+    ValueError
+        If `fs` is not positive, or `u` and `y` have different lengths.
+
+    Notes
+    -----
+    With ``d = y[:, :T] - y[:, T:2T]`` (each output channel divided by its RMS over the second
+    period) and ``q = T // 4``: steady from the start when ``rms(d[:, :q]) <=``
+    :data:`STEADY_START_RATIO` ``* rms(d[:, -q:])`` and ``rms(d[:, -q:]) <=``
+    :data:`STEADY_START_LEVEL` (the same level in both periods). A record from rest differs
+    most at its start, where the transient is (it decays as ``exp(-t / tau)``); in steady
+    state the difference is the noise, alike at both ends. A transient slower than about a
+    period, or one over within a few samples, also passes: leaving the first period out then
+    costs data, not correctness. The periodic-excitation practice of discarding the transient
+    periods: Pintelon & Schoukens [2]_, sec. 2.4; the Bouc-Wen benchmark's validation multisine
+    is one steady-state period (Noël & Schoukens, Workshop on Nonlinear System Identification
+    Benchmarks, 2016).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.signal import lfilter
+    >>> one = np.random.default_rng(0).standard_normal(1000)
+    >>> u = np.tile(one, 4)
+    >>> y = lfilter([1.0], [1.0, -0.99], u)          # from rest: a transient of ~100 samples
+    >>> steady_state_start(u, y, 1000.0) is None
+    True
+    >>> steady_state_start(u, np.tile(y[-1000:], 4), 1000.0)   # steady-state periods, repeated
+    1000
+    """
+    fs = float(fs)
+    if not np.isfinite(fs) or fs <= 0:
+        raise ValueError(f"{fs=} must be a positive sampling frequency in Hz")
+    u2 = np.atleast_2d(np.asarray(u, dtype=float))
+    y2 = np.atleast_2d(np.asarray(y, dtype=float))
+    if u2.shape[1] != y2.shape[1]:
+        raise ValueError(f"input and output lengths differ: {u2.shape[1]} and {y2.shape[1]} samples")
+    T = detect_period(u2, fs) if period is None else int(period)
+    if T is None or T < 8 or y2.shape[1] < 2 * T or not np.all(np.isfinite(y2[:, : 2 * T])):
+        return None
+    a, b = y2[:, :T], y2[:, T: 2 * T]
+    scale = np.sqrt(np.mean(b**2, axis=1))
+    ok = scale > 0
+    if not np.any(ok):
+        return None
+    d = (a[ok] - b[ok]) / scale[ok, None]
+    q = T // 4
+    d_start = float(np.sqrt(np.mean(d[:, :q] ** 2)))
+    d_end = float(np.sqrt(np.mean(d[:, -q:] ** 2)))
+    if d_end <= STEADY_START_LEVEL and d_start <= STEADY_START_RATIO * d_end + 1e-9:
+        return T
     return None
 
 
