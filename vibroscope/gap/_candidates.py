@@ -383,19 +383,26 @@ def gaps_by_sampling(run: Run, m) -> dict | None:
 
 def probe(run: Run, other_base: dict, s):
     """The best start of `s` on the screening prefix, from the refitted and from the nominal
-    linear parameters (a nonlinearity shifts the BLA, so the refit can be the wrong base);
+    linear parameters (a nonlinearity shifts the BLA, so the refit can be the wrong base), each
+    also relieved of the element's small-motion stiffness where it has one
+    (:meth:`~vibroscope.gap.effects.EffectSpec.relieved`: the start's base is then that);
     the best start on the other base is kept aside in `other_base` (by the id of the best)."""
     per_base = {}
     for base in ((run.refit, run.model) if run.theta.any() else (run.refit,)):
         for p0 in s.starts:
-            try:
-                m0 = s.apply(base, p0)
-            except ValueError:
-                continue
-            g = prefix_gap(run, m0)
-            g = g if np.isfinite(g) else 1e9
-            if id(base) not in per_base or g < per_base[id(base)][2]:
-                per_base[id(base)] = (s, np.asarray(p0, float), g, base)
+            # the start on the base, and (an element with a small-motion stiffness) on the base
+            # relieved of it, the element taking part of the spring (EffectSpec.relieved)
+            for b in (base, s.relieved(base, p0)):
+                if b is None:
+                    continue
+                try:
+                    m0 = s.apply(b, p0)
+                except ValueError:
+                    continue
+                g = prefix_gap(run, m0)
+                g = g if np.isfinite(g) else 1e9
+                if id(base) not in per_base or g < per_base[id(base)][2]:
+                    per_base[id(base)] = (s, np.asarray(p0, float), g, b)
     if not per_base:
         return None
     best, *alt = sorted(per_base.values(), key=lambda r: r[2])
@@ -522,7 +529,8 @@ def refine_on_either_base(run: Run, other_base: dict, item):
 
 def fit_best_classes_jointly(run: Run, screened: list, results: list, bar, workers, n_full) -> tuple[dict, set]:
     """The best location of each class, and the `n_full` best classes fitted jointly with the
-    linear parameters (:func:`fit_joint`); where a member's joint fit is better than its
+    linear parameters (:func:`fit_joint`), a class whose screened fit vanishes
+    (:meth:`~vibroscope.gap.effects.EffectSpec.vanishes`) fitted too but not counted; where a member's joint fit is better than its
     family's (or the family had none), the family is fitted jointly again from the member's
     joint solution. Appends to `results` (and replaces a family's fit there); returns
     ``(per_class, ids of the results to keep)``."""
@@ -532,7 +540,17 @@ def fit_best_classes_jointly(run: Run, screened: list, results: list, bar, worke
         if s.effect not in per_class or g < per_class[s.effect][2]:
             per_class[s.effect] = (s, p, g, base)
     ranked = sorted(per_class.values(), key=lambda r: r[2])
-    full = ranked[:n_full]
+    # a class whose screened fit vanishes (a clearance far below the deflection: a linear
+    # stand-in) is fitted jointly too, but does not take one of the n_full places
+    full, real = [], 0
+    for r in ranked:
+        if real >= n_full:
+            break
+        full.append(r)
+        real += r[0].vanishes(r[1]) is None
+    if len(full) > min(n_full, len(ranked)) and bar is not None:
+        bar.total += len(full) - min(n_full, len(ranked))
+        bar.refresh()
     joint_n = [min(n, max(s_, int(20 * run.fs))) if n else 0 for n, s_ in zip(run.ns_fit, run.split.screen_prefix)]
     keep_ids = {id(r) for r in results}  # the linear fits
     with ThreadPoolExecutor(max(1, workers)) as ex:
@@ -572,8 +590,12 @@ def fit_joint(run: Run, joint_n: list, item, x_lin=None):
     def build(x, s=s):
         return s.apply(lin.apply(model, x[:nl]), x[nl:])
 
-    x0 = np.concatenate([x_lin if x_lin is not None else (run.theta if base is run.refit else np.zeros(nl)), p])
     lo = np.concatenate([run.lo_l, s.lower])
     hi = np.concatenate([run.hi_l, s.upper])
+    if x_lin is None:
+        # the refit's, the nominal's, or those of a base relieved of the element's stiffness
+        x_lin = (run.theta if base is run.refit else np.zeros(nl) if base is model
+                 else np.clip(lin.theta_between(model, base), run.lo_l + 1e-9, run.hi_l - 1e-9))
+    x0 = np.concatenate([x_lin, p])
     x, g, _ = fit_time_domain(build, x0, lo, hi, run.sims, run.ys, run.split.fit, joint_n, fast=True, max_nfev=6)
     return s, build(x), x[nl:], g, lin.apply(model, x[:nl])
