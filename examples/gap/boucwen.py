@@ -3,8 +3,9 @@
 Writes, from ``../shared/data/boucwen``:
 
 * ``OUT/boucwen_multisine.mcap``: three periods of the validation multisine (the output is
-  the published steady-state period, repeated; diagnose with ``--transient`` of one period,
-  10.92 s, so that the simulation's start from rest is not compared),
+  the published steady-state period, repeated; ``vibroscope gap`` sees that the log is in
+  steady state from its first sample and leaves its first period out by default, so that the
+  simulation's start from rest is not compared),
 * ``OUT/boucwen_sinesweep.mcap``: the validation sine sweep (from rest),
 * ``OUT/boucwen_linear.toml``: the nominal model, the benchmark's linear part with the
   Bouc-Wen force replaced by its small-motion stiffness: m = 2 kg, c = 10 N s/m,
@@ -13,7 +14,10 @@ Writes, from ``../shared/data/boucwen``:
 Channels: force ``/shaker/force.wrench.force.x`` (N), displacement ``/shaker/mass.x`` (m).
 
     python examples/gap/boucwen.py [--data ../shared/data/boucwen] [--out boucwen]
-    vibroscope gap boucwen/boucwen_linear.toml boucwen/boucwen_multisine.mcap boucwen/boucwen_sinesweep.mcap --transient 10.92 --holdout last --json boucwen/report.json
+    vibroscope gap boucwen/boucwen_linear.toml boucwen/boucwen_multisine.mcap boucwen/boucwen_sinesweep.mcap --json boucwen/report.json
+
+(``--holdout last`` gives the benchmark's protocol: fitted on the multisine, validated on the
+sine sweep.)
 """
 
 from __future__ import annotations

@@ -277,6 +277,30 @@ def test_a_hysteresis_yielding_far_below_the_rms_deflection_responds_as_its_coul
     assert err[0.005] < 0.1 < err[0.3]  # 0.068 and 0.47 measured
 
 
+def test_a_hysteresis_relieved_base_keeps_the_small_amplitude_stiffness():
+    """``EffectSpec.relieved``: the base with the connection's spring reduced by the Bouc-Wen
+    element's alpha, so that spring + element keep the nominal's small-amplitude stiffness (the
+    Bouc-Wen benchmark's nominal is k_L + alpha); none where alpha would take 90 % of the spring
+    or more, and none for an effect without a small-motion stiffness."""
+    model = chain()
+    specs = candidate_specs(model, scales(model))
+    s = next(s for s in specs if s.effect == "hysteresis" and s.where["between"] == ["m1", "ground"])
+    p = np.array([math.log(0.3), 0.0, -0.9])
+    alpha = s.apply(model, p).elements[-1].alpha
+    b = s.relieved(model, p)
+    spring = next(e for e in b.elements if isinstance(e, Spring) and set(e.between) == {"m1", "ground"})
+    other = next(e for e in b.elements if isinstance(e, Spring) and set(e.between) == {"m2", "m1"})
+    assert spring.k == pytest.approx(4e4 - alpha) and 0 < alpha < 4e4
+    assert other.k == 3e4 and model.elements[0].k == 4e4  # the rest, and the nominal, untouched
+    aug = s.apply(b, p)
+    # small amplitude (z = 0): the Bouc-Wen force grows as alpha x, so the tangent stiffness is the nominal's
+    assert sum(e.k for e in aug.elements if isinstance(e, Spring) and set(e.between) == {"m1", "ground"}) \
+        + aug.elements[-1].alpha == pytest.approx(4e4)
+    assert s.relieved(model, np.array([0.0, 0.0, 0.0])) is None  # alpha = k_loc: nothing left of the spring
+    assert all(c.relieved(model, c.starts[0]) is None for c in specs if c.effect != "hysteresis")
+    assert any(st[2] < -0.5 and st[1] > 0.5 for st in s.starts)  # a start for a loop that stiffens as it yields
+
+
 def test_a_hysteresis_slides_at_a_bounded_force_for_any_positive_gamma_plus_delta():
     """``tends_to`` projects a Bouc-Wen element to a Coulomb friction of force ``alpha / (beta
     (gamma + delta))`` wherever ``gamma + delta`` is positive, however small (fresh seed 5801
