@@ -47,7 +47,10 @@ def add_parser(sub) -> None:
                         "of the nominal model's narrowest half-power bandwidth per line)")
     p.add_argument("--workers", type=int, default=2, metavar="N",
                    help="parallel candidate fits (default 2)")
-    p.add_argument("--transient", type=float, metavar="S", help="seconds left out at the start of each log")
+    p.add_argument("--transient", type=float, metavar="S",
+                   help="seconds left out at the start of each log (default: one period for a log of a periodic "
+                        "input in steady state from its first sample, else three time constants of the nominal's "
+                        "slowest mode, at most 5 %% of the record)")
     p.add_argument("--holdout", choices=("auto", "last"), default="auto",
                    help="several logs: 'auto' holds out the last log when all are at one input level, else the "
                         "end of each log (every level fitted and validated); 'last' always holds out the last log")
