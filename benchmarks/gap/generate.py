@@ -1025,6 +1025,24 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
 
         return build, (0.01, 5.0), _always
 
+    if effect == "hysteresis" and ref.get("hysteresis_in_stiffness"):
+        # a loop that stiffens as it yields (gamma + delta in [-0.5, -0.1]), in the nominal's stiffness
+        gamma = float(rng.uniform(0.5, 0.9))
+        delta = -gamma - float(rng.uniform(0.1, 0.5))
+        b_d = float(rng.uniform(1.0, 5.0))  # beta * rms deflection
+        beta = b_d / d_rms
+        k_spring = next(e.k for e in nominal.elements if isinstance(e, Spring) and e.between == ends)
+
+        def build(a_rel, base):
+            alpha = a_rel * k_spring
+            truth = _with_elements(base, replace_spring=ends, new_spring=Spring(ends, k=k_spring - alpha),
+                                   add=(BoucWen(ends, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=1.0),))
+            params = {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": 1.0}
+            return truth, where_el, params, {"alpha_over_k": a_rel, "beta_times_rms_deflection": b_d,
+                                             "form": "in the nominal's stiffness"}
+
+        return build, (0.05, 0.85), _always
+
     if effect == "hysteresis":
         gamma = float(rng.uniform(0.3, 0.9))
         delta = 1.0 - gamma + float(rng.uniform(-0.2, 0.2))
@@ -1191,7 +1209,8 @@ def _log_uniform(rng, lo, hi) -> float:
 
 
 def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, integrator: str = "lsoda",
-              multi_log: bool = False, weak_end: bool = True, offset_max: float = OFFSET_MAX) -> Case:
+              multi_log: bool = False, weak_end: bool = True, offset_max: float = OFFSET_MAX,
+              hysteresis_in_stiffness: bool = False) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
@@ -1199,6 +1218,10 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     the levels. `weak_end` False: the strength ranges before session 39 (:func:`_calibrate`).
     `offset_max`: the largest input offset as a share of the input's RMS force
     (:data:`OFFSET_MAX`; :data:`OFFSET_MAX_BEFORE_43` regenerates the seeds run before).
+    `hysteresis_in_stiffness`: the hysteresis class draws a Bouc-Wen loop that stiffens as it
+    yields (gamma + delta < 0, as the real Bouc-Wen benchmark's) taking part of the spring, so
+    that the nominal holds its small-amplitude stiffness ``k - alpha + alpha``; default False
+    (a sliding loop, gamma + delta about 1, added to the spring).
     """
     cls = effect
     if effect.startswith("closed_loop_"):
@@ -1250,7 +1273,8 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         nom_cal = [r.outputs[:, :n_cal] for r in nom]
         u_all = np.concatenate([uu.coarse for uu in us])
         ref = {"states": np.vstack([r.states[:n_cal] for r in nom]), "u": us,
-               "u_rms": float(np.sqrt(np.mean(u_all**2))), "offset_max": offset_max}
+               "u_rms": float(np.sqrt(np.mean(u_all**2))), "offset_max": offset_max,
+               "hysteresis_in_stiffness": hysteresis_in_stiffness}
         base0 = TruthModel(nominal)
 
         def gap_of(tm):
@@ -1800,10 +1824,10 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 
 def _one(job):
-    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max = job
+    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k = job
     tic = time.perf_counter()
     case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
-                     weak_end=weak_end, offset_max=offset_max)
+                     weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1822,13 +1846,15 @@ def _line(r) -> str:
 
 def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration: float = 60.0, jobs: int = 1,
              verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0,
-             weak_end: bool = True, offset_max: float = OFFSET_MAX) -> list[tuple]:
+             weak_end: bool = True, offset_max: float = OFFSET_MAX,
+             hysteresis_in_stiffness: bool = False) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
     before session 39 (:func:`_calibrate`); `offset_max` is the largest input offset as a share of
-    the input's RMS force (:data:`OFFSET_MAX`). Returns (name, class, gap, s, integrator, multi-log)."""
+    the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`: see :func:`make_case`.
+    Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
@@ -1838,14 +1864,16 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
     (out / "generate.json").write_text(json.dumps({"per_class": per_class, "classes": classes, "seed": seed,
                                                    "duration": duration, "integrator": integrator,
                                                    "multi_log": multi_log, "weak_end": weak_end,
-                                                   "offset_max": offset_max}, indent=2) + "\n")
+                                                   "offset_max": offset_max,
+                                                   "hysteresis_in_stiffness": hysteresis_in_stiffness}, indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
         for c in classes:
             k = len(jobs_list)
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
             multi = multi_log_drawn(seed, c, j, multi_log)
-            jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max))
+            jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max,
+                              hysteresis_in_stiffness))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -1891,10 +1919,14 @@ def main(argv=None) -> int:
     p.add_argument("--offset-max", type=float, default=OFFSET_MAX, metavar="SHARE",
                    help=f"largest input offset as a share of the input's RMS force (default {OFFSET_MAX}; "
                    f"{OFFSET_MAX_BEFORE_43} regenerates the offset cases of the seeds run before session 43)")
+    p.add_argument("--hysteresis-in-stiffness", action="store_true",
+                   help="hysteresis cases draw a loop that stiffens as it yields (gamma + delta < 0, as the real "
+                   "Bouc-Wen benchmark's) in the nominal's stiffness, instead of a sliding loop added to the spring")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
-                   multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max)
+                   multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max,
+                   hysteresis_in_stiffness=a.hysteresis_in_stiffness)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")
