@@ -1031,11 +1031,10 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
         delta = -gamma - float(rng.uniform(0.1, 0.5))
         b_d = float(rng.uniform(1.0, 5.0))  # beta * rms deflection
         beta = b_d / d_rms
-        k_spring = next(e.k for e in nominal.elements if isinstance(e, Spring) and e.between == ends)
 
         def build(a_rel, base):
-            alpha = a_rel * k_spring
-            truth = _with_elements(base, replace_spring=ends, new_spring=Spring(ends, k=k_spring - alpha),
+            alpha = a_rel * k_c
+            truth = _with_elements(base, replace_spring=ends, new_spring=Spring(ends, k=k_c - alpha),
                                    add=(BoucWen(ends, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=1.0),))
             params = {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": 1.0}
             return truth, where_el, params, {"alpha_over_k": a_rel, "beta_times_rms_deflection": b_d,

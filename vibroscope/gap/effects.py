@@ -893,7 +893,7 @@ def _hysteresis(model, scales):
             starts=[np.clip(np.array([math.log(max(a, 1e-300)), math.log(b), s]), lo_h + 1e-6, hi_h - 1e-6)
                     for a, b, s in grid],
             lower=lo_h, upper=hi_h, build=build, describe=desc, tends_to=("coulomb_friction", slip_limit),
-            stiffness=lambda p, k_loc=k_loc: k_loc * math.exp(p[0]),
+            stiffness=lambda p, bw_coeffs=bw_coeffs: bw_coeffs(p)[0],
         ))
     return specs
 
