@@ -851,6 +851,13 @@ _FRESH_TWO_EFFECTS = [
     pytest.param(5801, 3, {"hysteresis", "coulomb_friction"},
                  [("coulomb_friction", "Fc_N", 0.05), ("hysteresis", "alpha_N_per_m", 0.05)],
                  id="5801-003-a-near-slider-hysteresis-retried-from-the-friction", marks=_EXTENDED),
+    # a weak Coulomb friction (0.44 N) beside an input saturation: added as an asymmetric
+    # friction it is fitted jointly to 0.443/0.435 N, held-out at the floor, and vanishes into
+    # the Coulomb member, which is evaluated in its place instead of the addition being
+    # dropped (before: saturation alone, 2.3x the floor; 40 s, LSODA, one log, ~50 s)
+    pytest.param(6904, 0, {"saturation", "coulomb_friction"},
+                 [("coulomb_friction", "Fc_N", 0.05), ("saturation", "limit_N", 0.05)],
+                 id="6904-000-an-asymmetric-addition-reduced-to-coulomb"),
 ]
 #: cases generated with other settings than the default here (30 s, lsoda/RK4 by case number, a
 #: quarter multi-log, offsets up to 0.2 of the input's RMS force)
@@ -864,7 +871,8 @@ _FRESH_SETTINGS = {5858: dict(duration=40.0, integrator="rk4", multi_share=0.5),
                    9393: dict(integrator="lsoda", offset_max=gen.OFFSET_MAX, weak_end=False),
                    5701: dict(duration=60.0, offset_max=gen.OFFSET_MAX),
                    5706: dict(duration=30.0, integrator="lsoda", multi_share=0.8, offset_max=0.5),
-                   5801: dict(duration=60.0, offset_max=gen.OFFSET_MAX)}
+                   5801: dict(duration=60.0, offset_max=gen.OFFSET_MAX),
+                   6904: dict(duration=40.0, integrator="lsoda", multi_share=0.5, offset_max=gen.OFFSET_MAX)}
 
 
 @pytest.mark.slow  # one 30 s case generated and diagnosed (1-3 DOF, 1 or 3 logs), ~20-180 s each

@@ -813,7 +813,9 @@ def _build_report(run: Run) -> GapReport:
                                       "an entry with 'stopped' says why a selection ended without trying "
                                       "(within the noise floor, three effects, no class left, an "
                                       "unpredictable model, a linear refit far above the floor: unexplained); "
-                                      "a held-clearance trial, kept when significantly better",
+                                      "an addition that vanishes into the simpler member of its family "
+                                      "(an asymmetric friction with equal forces) is tried as that member "
+                                      "('reduced'); a held-clearance trial, kept when significantly better",
                             "rounds": list(run.selection)},
               "predictability": {
                   "method": "held-out nrmse between the model's outputs at its default and at twice its "
