@@ -7,7 +7,7 @@ outputs. What the hidden effect is, where, and how strong, is written apart, in 
 
     python benchmarks/gap/generate.py --out DIR [--per-class 10] [--classes ...] [--seed 0]
                                       [--duration 60] [--jobs 1] [--integrator {lsoda,rk4}]
-                                      [--multi-log 0.25]
+                                      [--multi-log 0.25] [--input-kind sweep]
 
     DIR/cases/case_NNN/nominal.toml     the nominal model (vibroscope model file)
     DIR/cases/case_NNN/log.mcap         input (WrenchStamped) + outputs (Imu; displacement as
@@ -259,6 +259,15 @@ def _brickwall(x: np.ndarray, fs: float, f_lo: float | None, f_hi: float) -> np.
     return np.fft.irfft(X, x.size)
 
 
+def _log_sweep(n: int, fs: float, f0: float, f1: float) -> np.ndarray:
+    """An exponential sine sweep from `f0` to `f1` (Hz) over `n` samples at `fs` (Hz):
+    ``sin(2 pi f0 T / ln(f1/f0) (exp(t ln(f1/f0) / T) - 1))``, ``T = n / fs`` [Farina 2000]."""
+    t = np.arange(n) / fs
+    T = n / fs
+    r = math.log(f1 / f0)
+    return np.sin(2 * np.pi * f0 * T / r * np.expm1(t * r / T))
+
+
 def make_input(
     rng: np.random.Generator,
     duration: float,
@@ -274,11 +283,16 @@ def make_input(
     """A unit-RMS band-limited force on ``round(duration * fs)`` log samples.
 
     kind "random": Gaussian noise band-passed to [2 Hz, f_hi); "multisine": a random-phase
-    multisine with lines every 1/period_s Hz in [2 Hz, f_hi) (periodic in `period_s`).
-    With `levels`, the force is scaled in blocks of 2-4 s cycling over the three levels
+    multisine with lines every 1/period_s Hz in [2 Hz, f_hi) (periodic in `period_s`);
+    "sweep": an exponential (logarithmic) sine sweep from 2 Hz up to f_hi over the record
+    [Farina 2000, "Simultaneous measurement of impulse response and distortion with a
+    swept-sine technique", AES 108th Convention], as a stepped-level ground vibration test
+    runs it. With `levels`, the force is scaled in blocks of 2-4 s cycling over the three levels
     1 : 2.5 : 6 (each cycle a random order), with 0.1 s raised-cosine transitions and a
-    0.2 s fade-in and fade-out; the result is low-passed below 300 Hz on the fine grid
-    (periodic brick wall), so it is exactly band-limited. Without `levels` the level is
+    0.2 s fade-in and fade-out (a sweep instead: three sweeps of a third of the record each,
+    one per level in a random order, each faded in and out over 0.2 s); the result is
+    low-passed below 300 Hz on the fine grid (periodic brick wall), so it is exactly
+    band-limited. Without `levels` the level is
     constant; it is tapered (0.2 s fade-in and fade-out, then low-passed the same way) only
     with `fade` (the single-level logs of multi-log cases), not otherwise (a steady multisine,
     for tests).
@@ -296,13 +310,31 @@ def make_input(
         spec[lines] = np.exp(2j * np.pi * rng.random(lines.sum()))
         one = np.fft.irfft(spec, npf)
         base = np.tile(one, nf // npf + 1)[:nf]
+    elif kind == "sweep":
+        nseg = len(LEVELS) if levels else 1
+        edges = np.linspace(0, nf, nseg + 1).round().astype(int)
+        base = np.concatenate([_log_sweep(b - a, fsf, F_LO, f_hi) for a, b in zip(edges[:-1], edges[1:])])
     else:
-        raise ValueError(f"kind={kind!r} must be 'random' or 'multisine'")
+        raise ValueError(f"kind={kind!r} must be 'random', 'multisine' or 'sweep'")
     base /= np.sqrt(np.mean(base**2))
     info = {"kind": kind, "f_lo_hz": F_LO, "f_hi_hz": float(f_hi), "band_edge_hz": F_BAND_EDGE}
     if kind == "multisine":
         info["period_s"] = float(period_s)
-    if levels:
+    if levels and kind == "sweep":
+        order = list(rng.permutation(len(LEVELS)))
+        env = np.empty(nf)
+        nfade = int(0.2 * fsf)
+        blocks = []
+        for a, b, lvl in zip(edges[:-1], edges[1:], order):
+            seg = np.full(b - a, LEVELS[lvl])
+            seg[:nfade] *= _raised_cosine(nfade)
+            seg[len(seg) - nfade:] *= _raised_cosine(nfade)[::-1]
+            env[a:b] = seg
+            blocks.append({"t_start_s": a / fsf, "duration_s": (b - a) / fsf, "level": LEVELS[lvl]})
+        x = _brickwall(base * env, fsf, None, F_BAND_EDGE)
+        info["levels"] = list(LEVELS)
+        info["blocks"] = blocks
+    elif levels:
         env = np.empty(nf)
         blocks = []
         t, pos = 0.0, 0
@@ -1209,7 +1241,7 @@ def _log_uniform(rng, lo, hi) -> float:
 
 def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, integrator: str = "lsoda",
               multi_log: bool = False, weak_end: bool = True, offset_max: float = OFFSET_MAX,
-              hysteresis_in_stiffness: bool = False) -> Case:
+              hysteresis_in_stiffness: bool = False, input_kind: str | None = None) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
@@ -1220,8 +1252,13 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     `hysteresis_in_stiffness`: the hysteresis class draws a Bouc-Wen loop that stiffens as it
     yields (gamma + delta < 0, as the real Bouc-Wen benchmark's) taking part of the spring, so
     that the nominal holds its small-amplitude stiffness ``k - alpha + alpha``; default False
-    (a sliding loop, gamma + delta about 1, added to the spring).
+    (a sliding loop, gamma + delta about 1, added to the spring). `input_kind`: None (default)
+    draws a random or a multisine force per case; "sweep" drives every case with logarithmic
+    sine sweeps (:func:`make_input`), the strength calibrated on the whole record (a sweep's
+    first seconds hold only its lowest frequencies).
     """
+    if input_kind not in (None, "sweep"):
+        raise ValueError(f"input_kind={input_kind!r} must be None or 'sweep'")
     cls = effect
     if effect.startswith("closed_loop_"):
         return make_closed_loop_case(effect, rng, duration, multi_log=multi_log)
@@ -1249,6 +1286,9 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
             nominal = random_chain_model(rng, displacement=True if OBSERVED_BY_DISPLACEMENT & set(pair) else None)
         f_max = float(nominal.modes().natural_frequencies.max())
         kind = str(rng.choice(["random", "multisine"]))
+        if input_kind is not None:  # drawn all the same: the later draws keep their order
+            kind = input_kind
+        n_cal = n if kind == "sweep" else min(n, int(round(CAL_SECONDS / nlog * FS)))
         f_hi = float(rng.uniform(max(150.0, 1.25 * f_max), 280.0))
         if multi_log:
             us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, levels=False, fade=True).scaled(lv) for lv in LEVELS]
@@ -1823,10 +1863,10 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 
 def _one(job):
-    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k = job
+    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k, input_kind = job
     tic = time.perf_counter()
     case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
-                     weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k)
+                     weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k, input_kind=input_kind)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1846,14 +1886,14 @@ def _line(r) -> str:
 def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration: float = 60.0, jobs: int = 1,
              verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0,
              weak_end: bool = True, offset_max: float = OFFSET_MAX,
-             hysteresis_in_stiffness: bool = False) -> list[tuple]:
+             hysteresis_in_stiffness: bool = False, input_kind: str | None = None) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
     before session 39 (:func:`_calibrate`); `offset_max` is the largest input offset as a share of
-    the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`: see :func:`make_case`.
-    Returns (name, class, gap, s, integrator, multi-log)."""
+    the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`, `input_kind`: see
+    :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
@@ -1864,7 +1904,8 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
                                                    "duration": duration, "integrator": integrator,
                                                    "multi_log": multi_log, "weak_end": weak_end,
                                                    "offset_max": offset_max,
-                                                   "hysteresis_in_stiffness": hysteresis_in_stiffness}, indent=2) + "\n")
+                                                   "hysteresis_in_stiffness": hysteresis_in_stiffness,
+                                                   "input_kind": input_kind}, indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
         for c in classes:
@@ -1872,7 +1913,7 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
             multi = multi_log_drawn(seed, c, j, multi_log)
             jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max,
-                              hysteresis_in_stiffness))
+                              hysteresis_in_stiffness, input_kind))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -1921,11 +1962,15 @@ def main(argv=None) -> int:
     p.add_argument("--hysteresis-in-stiffness", action="store_true",
                    help="hysteresis cases draw a loop that stiffens as it yields (gamma + delta < 0, as the real "
                    "Bouc-Wen benchmark's) in the nominal's stiffness, instead of a sliding loop added to the spring")
+    p.add_argument("--input-kind", choices=("sweep",), default=None,
+                   help="sweep: every open-loop case driven by logarithmic sine sweeps from 2 Hz (three, one per "
+                   "level, in a one-log case; one per log in a multi-log case) instead of a random or a "
+                   "multisine force drawn per case (the default)")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
                    multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max,
-                   hysteresis_in_stiffness=a.hysteresis_in_stiffness)
+                   hysteresis_in_stiffness=a.hysteresis_in_stiffness, input_kind=a.input_kind)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")

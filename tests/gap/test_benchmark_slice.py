@@ -80,9 +80,10 @@ def test_truth_integrator_matches_analytic_linear_response(case):
     assert err < 1e-4, err
 
 
-def test_input_is_band_limited_and_exactly_sampled():
+@pytest.mark.parametrize("kind", ["random", "sweep"])
+def test_input_is_band_limited_and_exactly_sampled(kind):
     rng = np.random.default_rng(2)
-    u = gen.make_input(rng, 20.0, kind="random", f_hi=200.0)
+    u = gen.make_input(rng, 20.0, kind=kind, f_hi=200.0)
     # no content at or above 300 Hz on the fine grid
     X = np.abs(np.fft.rfft(u.fine))
     f = np.fft.rfftfreq(u.fine.size, 1.0 / u.fs_fine)
@@ -92,6 +93,19 @@ def test_input_is_band_limited_and_exactly_sampled():
     np.testing.assert_allclose(u(t), u.coarse, rtol=0, atol=1e-12 * np.abs(u.coarse).max())
     # three levels 1 : 2.5 : 6
     assert sorted({b["level"] for b in u.info["blocks"]}) == [1.0, 2.5, 6.0]
+    if kind == "sweep":
+        # three sweeps of a third each, one per level, each from 2 Hz up to f_hi: the
+        # instantaneous frequency (zero crossings) of a block's first and last 10 % of its span
+        for b in u.info["blocks"]:
+            i0, i1 = int(round(b["t_start_s"] * u.fs)), int(round((b["t_start_s"] + b["duration_s"]) * u.fs))
+            seg = u.fine[i0 * u.oversample:i1 * u.oversample]
+            m = seg.size // 10
+            late = seg[-2 * m:-m]  # short of the fade-out
+            f_late = np.count_nonzero(np.diff(np.signbit(late))) / 2 / (m / u.fs_fine)
+            peak = np.abs(seg[m:-m]).max()
+            assert peak == pytest.approx(b["level"] * np.abs(u.fine).max() / 6.0, rel=0.05)
+            # the log sweep's frequency 80-90 % of the way: 2 Hz * 100^0.8..0.9 = 79-126 Hz
+            assert 2.0 * 100 ** 0.8 * 0.95 < f_late < 2.0 * 100 ** 0.9 * 1.05, f_late
 
 
 def test_random_chain_model_ranges():
