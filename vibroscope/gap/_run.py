@@ -287,6 +287,9 @@ class Run:
     sampling_choice: dict | None = None
     #: why each log's start is left out (diagnosis._skip_samples), one line per log
     skip_reasons: list | None = None
+    #: the mean removed from each acceleration output of each log (diagnosis._remove_acceleration_means):
+    #: ``{channel: [mean per log]}``, output units
+    accel_means: dict | None = None
     # the nominal model and the noise floor (_simulate_nominal)
     y_nom: list | None = None
     gap_before: float | None = None
