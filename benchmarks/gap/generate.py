@@ -7,7 +7,7 @@ outputs. What the hidden effect is, where, and how strong, is written apart, in 
 
     python benchmarks/gap/generate.py --out DIR [--per-class 10] [--classes ...] [--seed 0]
                                       [--duration 60] [--jobs 1] [--integrator {lsoda,rk4}]
-                                      [--multi-log 0.25] [--input-kind sweep]
+                                      [--multi-log 0.25] [--input-kind sweep] [--band-edge HZ]
 
     DIR/cases/case_NNN/nominal.toml     the nominal model (vibroscope model file)
     DIR/cases/case_NNN/log.mcap         input (WrenchStamped) + outputs (Imu; displacement as
@@ -277,6 +277,7 @@ def make_input(
     levels: bool = True,
     period_s: float = 2.0,
     fade: bool = False,
+    band_edge: float = F_BAND_EDGE,
     fs: float = FS,
     oversample: int = OVERSAMPLE,
 ) -> ContinuousInput:
@@ -292,7 +293,7 @@ def make_input(
     0.2 s fade-in and fade-out (a sweep instead: three sweeps of a third of the record each,
     one per level in a random order, each faded in and out over 0.2 s); the result is
     low-passed below 300 Hz on the fine grid (periodic brick wall), so it is exactly
-    band-limited. Without `levels` the level is
+    band-limited (`band_edge`: below that frequency instead, Hz). Without `levels` the level is
     constant; it is tapered (0.2 s fade-in and fade-out, then low-passed the same way) only
     with `fade` (the single-level logs of multi-log cases), not otherwise (a steady multisine,
     for tests).
@@ -317,7 +318,7 @@ def make_input(
     else:
         raise ValueError(f"kind={kind!r} must be 'random', 'multisine' or 'sweep'")
     base /= np.sqrt(np.mean(base**2))
-    info = {"kind": kind, "f_lo_hz": F_LO, "f_hi_hz": float(f_hi), "band_edge_hz": F_BAND_EDGE}
+    info = {"kind": kind, "f_lo_hz": F_LO, "f_hi_hz": float(f_hi), "band_edge_hz": float(band_edge)}
     if kind == "multisine":
         info["period_s"] = float(period_s)
     if levels and kind == "sweep":
@@ -331,7 +332,7 @@ def make_input(
             seg[len(seg) - nfade:] *= _raised_cosine(nfade)[::-1]
             env[a:b] = seg
             blocks.append({"t_start_s": a / fsf, "duration_s": (b - a) / fsf, "level": LEVELS[lvl]})
-        x = _brickwall(base * env, fsf, None, F_BAND_EDGE)
+        x = _brickwall(base * env, fsf, None, band_edge)
         info["levels"] = list(LEVELS)
         info["blocks"] = blocks
     elif levels:
@@ -357,7 +358,7 @@ def make_input(
         nfade = int(0.2 * fsf)
         env[:nfade] *= _raised_cosine(nfade)
         env[nf - nfade :] *= _raised_cosine(nfade)[::-1]
-        x = _brickwall(base * env, fsf, None, F_BAND_EDGE)
+        x = _brickwall(base * env, fsf, None, band_edge)
         info["levels"] = list(LEVELS)
         info["blocks"] = blocks
     elif fade:
@@ -365,7 +366,7 @@ def make_input(
         nfade = int(0.2 * fsf)
         env[:nfade] *= _raised_cosine(nfade)
         env[nf - nfade :] *= _raised_cosine(nfade)[::-1]
-        x = _brickwall(base * env, fsf, None, F_BAND_EDGE)
+        x = _brickwall(base * env, fsf, None, band_edge)
     else:
         x = base
     return ContinuousInput(x, fs, oversample, info)
@@ -1241,7 +1242,8 @@ def _log_uniform(rng, lo, hi) -> float:
 
 def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, integrator: str = "lsoda",
               multi_log: bool = False, weak_end: bool = True, offset_max: float = OFFSET_MAX,
-              hysteresis_in_stiffness: bool = False, input_kind: str | None = None) -> Case:
+              hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
+              band_edge: float | None = None) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
@@ -1255,8 +1257,14 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     (a sliding loop, gamma + delta about 1, added to the spring). `input_kind`: None (default)
     draws a random or a multisine force per case; "sweep" drives every case with logarithmic
     sine sweeps (:func:`make_input`), the strength calibrated on the whole record (a sweep's
-    first seconds hold only its lowest frequencies).
+    first seconds hold only its lowest frequencies). `band_edge`: None (default) keeps the
+    force below :data:`F_BAND_EDGE` (300 Hz, the upper band edge f_hi drawn up to 280 Hz, so
+    that the band beyond it up to Nyquist holds only noise); a frequency (Hz, below Nyquist)
+    moves the band edge there and draws f_hi up to 20 Hz below it (480 Hz: a force that excites
+    the whole band, no line beyond it to measure the noise on).
     """
+    if band_edge is not None and not 0 < band_edge < FS / 2:
+        raise ValueError(f"band_edge={band_edge!r} must lie in (0, {FS / 2}) Hz")
     if input_kind not in (None, "sweep"):
         raise ValueError(f"input_kind={input_kind!r} must be None or 'sweep'")
     cls = effect
@@ -1289,13 +1297,15 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         if input_kind is not None:  # drawn all the same: the later draws keep their order
             kind = input_kind
         n_cal = n if kind == "sweep" else min(n, int(round(CAL_SECONDS / nlog * FS)))
-        f_hi = float(rng.uniform(max(150.0, 1.25 * f_max), 280.0))
+        f_hi = float(rng.uniform(max(150.0, 1.25 * f_max), 280.0 if band_edge is None else band_edge - 20.0))
+        edge = F_BAND_EDGE if band_edge is None else float(band_edge)
         if multi_log:
-            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, levels=False, fade=True).scaled(lv) for lv in LEVELS]
+            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, levels=False, fade=True, band_edge=edge).scaled(lv)
+                  for lv in LEVELS]
             for uu, lv in zip(us, LEVELS):
                 uu.info["level"] = lv
         else:
-            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi)]
+            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, band_edge=edge)]
         # scale the force so that the pooled acceleration RMS of the sensed DOFs is 5-20 m/s^2
         acc_probe = replace(nominal, outputs=tuple(Output(o.dof, "acceleration") for o in nominal.outputs))
         H = acc_probe.frf(np.fft.rfftfreq(n, 1 / FS))[:, :, 0]
@@ -1863,10 +1873,11 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 
 def _one(job):
-    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k, input_kind = job
+    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k, input_kind, edge = job
     tic = time.perf_counter()
     case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
-                     weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k, input_kind=input_kind)
+                     weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k, input_kind=input_kind,
+                     band_edge=edge)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1886,13 +1897,14 @@ def _line(r) -> str:
 def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration: float = 60.0, jobs: int = 1,
              verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0,
              weak_end: bool = True, offset_max: float = OFFSET_MAX,
-             hysteresis_in_stiffness: bool = False, input_kind: str | None = None) -> list[tuple]:
+             hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
+             band_edge: float | None = None) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
     before session 39 (:func:`_calibrate`); `offset_max` is the largest input offset as a share of
-    the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`, `input_kind`: see
+    the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`, `input_kind`, `band_edge`: see
     :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
@@ -1905,7 +1917,7 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
                                                    "multi_log": multi_log, "weak_end": weak_end,
                                                    "offset_max": offset_max,
                                                    "hysteresis_in_stiffness": hysteresis_in_stiffness,
-                                                   "input_kind": input_kind}, indent=2) + "\n")
+                                                   "input_kind": input_kind, "band_edge": band_edge}, indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
         for c in classes:
@@ -1913,7 +1925,7 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
             multi = multi_log_drawn(seed, c, j, multi_log)
             jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max,
-                              hysteresis_in_stiffness, input_kind))
+                              hysteresis_in_stiffness, input_kind, band_edge))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -1966,11 +1978,16 @@ def main(argv=None) -> int:
                    help="sweep: every open-loop case driven by logarithmic sine sweeps from 2 Hz (three, one per "
                    "level, in a one-log case; one per log in a multi-log case) instead of a random or a "
                    "multisine force drawn per case (the default)")
+    p.add_argument("--band-edge", type=float, default=None, metavar="HZ",
+                   help=f"open-loop cases: the force's band edge (default {F_BAND_EDGE:g} Hz, the upper band edge "
+                   "drawn up to 280 Hz); e.g. 480 for a force that excites the whole band up to Nyquist, with no "
+                   "line beyond it that holds only noise")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
                    multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max,
-                   hysteresis_in_stiffness=a.hysteresis_in_stiffness, input_kind=a.input_kind)
+                   hysteresis_in_stiffness=a.hysteresis_in_stiffness, input_kind=a.input_kind,
+                   band_edge=a.band_edge)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")
