@@ -358,6 +358,25 @@ def test_gravity_and_a_bias_on_the_accelerometers_are_removed_before_the_diagnos
     assert means[nominal().output_channels()[1]][0] == pytest.approx(-0.35, abs=0.05)
 
 
+def test_only_a_grounded_models_acceleration_means_are_removed():
+    """A free body (a rigid-body mode) accelerates on average under a constant force: its
+    acceleration outputs keep their means; a grounded model's lose them, displacements never."""
+    from vibroscope.gap.diagnosis import _remove_acceleration_means
+
+    free = LumpedModel(dofs=(Dof("m1", 1.0), Dof("m2", 0.5)),
+                       elements=(Spring(("m2", "m1"), k=3e4), Damper(("m2", "m1"), c=4.0)),
+                       inputs=(Input(dof="m1", channel=IN),),
+                       outputs=(Output("m1", "acceleration", "/a1.x"), Output("m2", "displacement", "/d2.x")))
+    grounded = replace(free, elements=free.elements + (Spring(("m1", "ground"), k=1e4),))
+    y = np.vstack([np.full(50, 2.0), np.full(50, 0.5)]) + np.sin(np.arange(50))[None]
+    out, means = _remove_acceleration_means(free, ["/a1.x", "/d2.x"], [y])
+    assert means == {} and np.array_equal(out[0], y)
+    out, means = _remove_acceleration_means(grounded, ["/a1.x", "/d2.x"], [y])
+    assert means["/a1.x"] == [pytest.approx(np.mean(y[0]))] and list(means) == ["/a1.x"]
+    assert np.mean(out[0][0]) == pytest.approx(0.0, abs=1e-12)
+    np.testing.assert_array_equal(out[0][1], y[1])
+
+
 def test_a_stiffness_two_percent_off_is_a_parameter_mismatch_not_a_vanished_one(u20):
     """A spring 2 % stiffer moves the lightly damped first mode by 1 %, a held-out gap several
     times the noise floor that the linear refit closes: whether a parameter change vanishes is

@@ -522,9 +522,14 @@ def _remove_acceleration_means(model: LumpedModel, out_ch: list, ys: list) -> tu
     counts as a gap no model can close (gravity on one and 0.35 m/s^2 on the other
     accelerometer of a 2-DOF chain with a hidden friction: the friction named, but the
     augmented model left 0.197 held-out against a floor of 0.021). Displacement and velocity outputs keep their means (a force
-    offset or a drive's travel shows there)."""
+    offset or a drive's travel shows there), and so do all outputs of a model with a rigid-body
+    mode (a zero eigenvalue of its state matrix), which a constant force accelerates on
+    average."""
     rows = [i for i, o in enumerate(model.outputs) if o.quantity == "acceleration"]  # out_ch starts with them
-    if not rows:
+    if not rows or is_closed_loop(model):
+        return ys, {}
+    lam = np.abs(np.linalg.eigvals(model.state_matrices()[0]))
+    if np.any(lam <= 1e-9 * max(float(lam.max(initial=0.0)), 1.0)):  # a free body: its acceleration can have a mean
         return ys, {}
     out, means = [], {out_ch[i]: [] for i in rows}
     for y in ys:
