@@ -524,7 +524,7 @@ def _remove_acceleration_means(model: LumpedModel, out_ch: list, ys: list) -> tu
     augmented model left 0.197 held-out against a floor of 0.021). Displacement and velocity outputs keep their means (a force
     offset or a drive's travel shows there), and so do all outputs of a model with a rigid-body
     mode (a zero eigenvalue of its state matrix), which a constant force accelerates on
-    average."""
+    average, and of a closed loop (left as they are; its plant is usually such a body)."""
     rows = [i for i, o in enumerate(model.outputs) if o.quantity == "acceleration"]  # out_ch starts with them
     if not rows or is_closed_loop(model):
         return ys, {}
