@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import lru_cache
 
 import numpy as np
@@ -129,6 +130,16 @@ def test_steady_state_start_tells_a_log_cut_from_steady_state_from_one_recorded_
     # a random input has no period
     r = rng.standard_normal(u.size)
     assert steady_state_start(r, noisy, FS) is None
+    # three 30 s log sweeps 2-60 Hz at levels 1, 2.5, 6 from rest (a stepped-level test): periodic
+    # to detect_period, which allows the level change, but not one steady state (before the input
+    # test: its first sweep left out as a transient, seed 7002 case 010 with --input-kind sweep)
+    t = np.arange(3 * per) / FS
+    sweep = np.sin(2 * np.pi * 2.0 * 30.0 / np.log(30.0) * np.expm1(t * np.log(30.0) / 30.0))
+    u_sw = np.concatenate([lv * 10.0 * sweep for lv in (1.0, 2.5, 6.0)])
+    vel = replace(duffing(1e6), outputs=(Output("m", "velocity", "/v.x"),))  # rolls off on both sides of 10 Hz
+    y_sw = np.asarray(simulate(vel, u_sw[None], FS).data[1:])
+    assert detect_period(u_sw, FS) == 3 * per
+    assert steady_state_start(u_sw, y_sw, FS) is None
     with pytest.raises(ValueError, match="lengths differ"):
         steady_state_start(u, y[:, :-1], FS)
 

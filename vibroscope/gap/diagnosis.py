@@ -501,6 +501,17 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
         run_max = max((int(np.max(b - a)) for m in split.fit for a, b in [true_runs(m)] if len(a)), default=nps)
         if nps > run_max >= 64:
             nps, nps_reason = run_max, nps_reason + f"; capped at the longest fitting stretch, {run_max} samples"
+            if window == "boxcar":  # no longer whole periods: a rectangular window would leak
+                window, nps_reason = "hann", nps_reason + ", Hann window"
+        # Welch segments (placed as masked_csd places them) wholly inside the fitting stretches: one
+        # whole period at least, else MIN_WELCH_SEGMENTS (fitting stretches cut in blocks by the
+        # split can hold none of a length the record as a whole allows)
+        n0, k0 = nps, _welch_segments(split.fit, nps, window)
+        while nps > 64 and _welch_segments(split.fit, nps, window) < (1 if window == "boxcar" else MIN_WELCH_SEGMENTS):
+            nps, window = max(64, nps // 2), "hann"  # half a period is not whole periods
+        if nps < n0:
+            nps_reason += (f"; halved to {nps} samples ({_welch_segments(split.fit, nps, window)} segments): "
+                           f"{k0} of {n0} lie wholly inside the fitting stretches at the Welch positions")
     effect_set = set(EFFECT_TABLE) if effects is None else set(effects)
     excluded = {e: why for e, why in CLOSED_LOOP_EXCLUDED.items() if e in effect_set} if closed else {}
     effect_set -= set(excluded)
@@ -509,6 +520,18 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
                 sims=sims, nps=nps,
                 nps_reason=nps_reason, window=window, effect_set=effect_set, excluded=excluded,
                 accel_means=accel_means)
+
+
+#: the fewest Hann-windowed Welch segments inside the fitting stretches before the segment length is halved
+MIN_WELCH_SEGMENTS = 4
+
+
+def _welch_segments(masks: list, nperseg: int, window: str) -> int:
+    """Welch segments of `nperseg` samples wholly inside `masks` (one mask per log), at the
+    positions :func:`~vibroscope.gap.measure.masked_csd` uses (a step of half a segment, a whole
+    one for 'boxcar')."""
+    step = nperseg if window == "boxcar" else nperseg // 2
+    return sum(1 for m in masks for s in range(0, m.size - nperseg + 1, step) if m[s: s + nperseg].all())
 
 
 def _remove_acceleration_means(model: LumpedModel, out_ch: list, ys: list) -> tuple[list, dict]:

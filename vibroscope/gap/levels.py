@@ -164,6 +164,9 @@ def detect_period(u, fs: float, *, min_periods: int = 2, tol: float = 0.05,
 STEADY_START_RATIO = 2.0
 #: ... and their difference at the end is at most this share of the output's RMS (one level)
 STEADY_START_LEVEL = 0.2
+#: ... and the input's first two periods differ by at most this share of the second's RMS (one
+#: level: :func:`detect_period` takes a period at another level as a period)
+STEADY_START_INPUT = 0.05
 
 
 def steady_state_start(u, y, fs: float, *, period: int | None = None) -> int | None:
@@ -203,7 +206,10 @@ def steady_state_start(u, y, fs: float, *, period: int | None = None) -> int | N
     With ``d = y[:, :T] - y[:, T:2T]`` (each output channel divided by its RMS over the second
     period) and ``q = T // 4``: steady from the start when ``rms(d[:, :q]) <=``
     :data:`STEADY_START_RATIO` ``* rms(d[:, -q:])`` and ``rms(d[:, -q:]) <=``
-    :data:`STEADY_START_LEVEL` (the same level in both periods). A record from rest differs
+    :data:`STEADY_START_LEVEL`, and the input's first two periods are one level: their
+    difference at most :data:`STEADY_START_INPUT` of the second's RMS (three sine sweeps at
+    levels 1, 2.5 and 6 are periodic to :func:`detect_period`, which allows a level change,
+    and their outputs differ little at both ends of a period, below and above the resonances). A record from rest differs
     most at its start, where the transient is (it decays as ``exp(-t / tau)``); in steady
     state the difference is the noise, alike at both ends. A transient slower than about a
     period, or one over within a few samples, also passes: leaving the first period out then
@@ -233,6 +239,9 @@ def steady_state_start(u, y, fs: float, *, period: int | None = None) -> int | N
         raise ValueError(f"input and output lengths differ: {u2.shape[1]} and {y2.shape[1]} samples")
     T = detect_period(u2, fs) if period is None else int(period)
     if T is None or T < 8 or y2.shape[1] < 2 * T or not np.all(np.isfinite(y2[:, : 2 * T])):
+        return None
+    u1, u_2 = u2[0, :T], u2[0, T: 2 * T]
+    if np.sqrt(np.mean((u1 - u_2) ** 2)) > STEADY_START_INPUT * np.sqrt(np.mean(u_2**2)):
         return None
     a, b = y2[:, :T], y2[:, T: 2 * T]
     scale = np.sqrt(np.mean(b**2, axis=1))
