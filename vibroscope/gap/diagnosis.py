@@ -548,10 +548,11 @@ def _remove_acceleration_means(model: LumpedModel, out_ch: list, ys: list) -> tu
     sensor's axis (``sensor_msgs/msg/Imu``'s ``linear_acceleration`` holds it). Left in, it
     counts as a gap no model can close (gravity on one and 0.35 m/s^2 on the other
     accelerometer of a 2-DOF chain with a hidden friction: the friction named, but the
-    augmented model left 0.197 held-out against a floor of 0.021). Displacement and velocity outputs keep their means (a force
-    offset or a drive's travel shows there), and so do all outputs of a model with a rigid-body
-    mode (a zero eigenvalue of its state matrix), which a constant force accelerates on
-    average, and of a closed loop (left as they are; its plant is usually such a body)."""
+    augmented model left 0.197 held-out against a floor of 0.021). Displacement and velocity
+    outputs keep their means (a force offset or a drive's travel shows there), and so do all
+    outputs of a model with a rigid-body mode (a zero eigenvalue of its state matrix), which a
+    constant force accelerates on average, and of a closed loop (left as they are; its plant is
+    usually such a body)."""
     rows = [i for i, o in enumerate(model.outputs) if o.quantity == "acceleration"]  # out_ch starts with them
     if not rows or is_closed_loop(model):
         return ys, {}
@@ -867,7 +868,8 @@ def _build_report(run: Run) -> GapReport:
               "acceleration_means_removed": {"method": "each log's mean of each acceleration output, removed "
                                              "before any comparison (a sensor bias or gravity: a model's "
                                              "acceleration has no mean over a record from rest or in steady "
-                                             "state), m/s^2 per log", "means": run.accel_means or {}}, "levels": split.levels, "excited_band_hz": list(nf.excited_band),
+                                             "state), m/s^2 per log", "means": run.accel_means or {}},
+              "levels": split.levels, "excited_band_hz": list(nf.excited_band),
               "noise_floor_ranking": {"nrmse": floor_rank, "method": floor_rank_method},
               "nested_tests": {"t": dict(run.nested_t), "threshold": NESTED_T},
               "selection": {"method": "forward selection, one entry per round: the additions tried on the current "
