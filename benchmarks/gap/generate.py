@@ -1280,7 +1280,6 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     tic = time.perf_counter()
     nlog = 3 if multi_log else 1
     n = int(round(duration / nlog * FS))
-    n_cal = min(n, int(round(CAL_SECONDS / nlog * FS)))
     for attempt in range(10):
         if effect == "two_effects":
             pair = [PAIR_EFFECTS[i] for i in rng.choice(len(PAIR_EFFECTS), 2, replace=False)]

@@ -134,7 +134,7 @@ from vibroscope.gap.closed_loop import CLOSED_LOOP_EXCLUDED, is_closed_loop, log
 from vibroscope.gap.effects import EFFECT_TABLE, LinearParams
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
 from vibroscope.gap.levels import frf_segment_length, steady_state_start
-from vibroscope.gap.measure import input_levels, locate_bands, make_split, masked_csd, noise_floor, nrmse, regime_gaps
+from vibroscope.gap.measure import input_levels, locate_bands, make_split, masked_csd, noise_floor, nrmse, regime_gaps, welch_starts
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.models.lumped import LumpedModel
 from vibroscope.signals import Signals, true_runs
@@ -532,10 +532,9 @@ MIN_WELCH_SEGMENTS = 2
 
 def _welch_segments(masks: list, nperseg: int, window: str) -> int:
     """Welch segments of `nperseg` samples wholly inside `masks` (one mask per log), at the
-    positions :func:`~vibroscope.gap.measure.masked_csd` uses (a step of half a segment, a whole
-    one for 'boxcar')."""
-    step = nperseg if window == "boxcar" else nperseg // 2
-    return sum(1 for m in masks for s in range(0, m.size - nperseg + 1, step) if m[s: s + nperseg].all())
+    positions :func:`~vibroscope.gap.measure.masked_csd` uses
+    (:func:`~vibroscope.gap.measure.welch_starts`)."""
+    return sum(len(welch_starts(m, nperseg, window)) for m in masks)
 
 
 def _remove_acceleration_means(model: LumpedModel, out_ch: list, ys: list) -> tuple[list, dict]:

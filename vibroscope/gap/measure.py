@@ -434,6 +434,26 @@ def _screen_prefix(labels, n_fit, fs, screen_s, skip):
     return n_fit
 
 
+def welch_starts(mask: np.ndarray, nperseg: int, window: str = "hann") -> list[int]:
+    """Start samples of the Welch segments of :func:`masked_csd`: a step of half a segment (a
+    whole one for 'boxcar', whole periods), each segment wholly inside `mask`.
+
+    Parameters
+    ----------
+    mask : ndarray of bool, shape (n_samples,)
+    nperseg : int
+        Segment length in samples.
+    window : str, optional
+        'boxcar' or any other (default 'hann').
+
+    Returns
+    -------
+    list of int
+    """
+    step = nperseg if window == "boxcar" else nperseg // 2
+    return [s for s in range(0, mask.size - nperseg + 1, step) if mask[s: s + nperseg].all()]
+
+
 def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int, window: str = "hann"):
     """Welch auto/cross spectra over the segments that lie wholly inside `mask`.
 
@@ -466,8 +486,7 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int, window:
     """
     x = np.asarray(x, dtype=float)
     n = x.shape[1]
-    step = nperseg if window == "boxcar" else nperseg // 2
-    starts = [s for s in range(0, n - nperseg + 1, step) if mask[s : s + nperseg].all()]
+    starts = welch_starts(mask, nperseg, window)
     f = np.fft.rfftfreq(nperseg, 1 / fs)
     if not starts:  # no segment: zeros, not csd_matrix's error (the callers skip such a log)
         return f, np.zeros((f.size, x.shape[0], x.shape[0]), complex), 0
@@ -481,7 +500,8 @@ def masked_csd(x: np.ndarray, mask: np.ndarray, fs: float, nperseg: int, window:
     if good.any():
         with warnings.catch_warnings():  # few averages are the caller's to judge (it gets n_avg)
             warnings.simplefilter("ignore", FewAveragesWarning)
-            c = csd_matrix(np.where(mask, x[good], np.nan), fs, nperseg=nperseg, noverlap=nperseg - step,
+            noverlap = 0 if window == "boxcar" else nperseg - nperseg // 2  # welch_starts' step
+            c = csd_matrix(np.where(mask, x[good], np.nan), fs, nperseg=nperseg, noverlap=noverlap,
                            window=window)
         G[:, good[:, None] & good[None, :]] = c.G.reshape(f.size, -1)
     return f, G, len(starts)
