@@ -8,6 +8,7 @@ outputs. What the hidden effect is, where, and how strong, is written apart, in 
     python benchmarks/gap/generate.py --out DIR [--per-class 10] [--classes ...] [--seed 0]
                                       [--duration 60] [--jobs 1] [--integrator {lsoda,rk4}]
                                       [--multi-log 0.25] [--input-kind sweep] [--band-edge HZ]
+                                      [--disturbance SHARE] [--noise-lowpass FRAC]
 
     DIR/cases/case_NNN/nominal.toml     the nominal model (vibroscope model file)
     DIR/cases/case_NNN/log.mcap         input (WrenchStamped) + outputs (Imu; displacement as
@@ -56,6 +57,7 @@ import numba
 import numpy as np
 from scipy.integrate import odeint
 from scipy.interpolate import CubicSpline
+from scipy.signal import butter, lfilter
 
 from vibroscope.models.elements import (
     GROUND,
@@ -1243,7 +1245,8 @@ def _log_uniform(rng, lo, hi) -> float:
 def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, integrator: str = "lsoda",
               multi_log: bool = False, weak_end: bool = True, offset_max: float = OFFSET_MAX,
               hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
-              band_edge: float | None = None) -> Case:
+              band_edge: float | None = None, disturbance: float | None = None,
+              noise_lowpass: float | None = None) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
@@ -1261,7 +1264,19 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     force below :data:`F_BAND_EDGE` (300 Hz, the upper band edge f_hi drawn up to 280 Hz, so
     that the band beyond it up to Nyquist holds only noise); a frequency (Hz, below Nyquist)
     moves the band edge there and draws f_hi up to 20 Hz below it (480 Hz: a force that excites
-    the whole band, no line beyond it to measure the noise on).
+    the whole band, no line beyond it to measure the noise on). `disturbance`: None (default) or
+    the largest RMS of an unlogged force added to the logged one at the input DOF, as a share of
+    the logged force's RMS (its share drawn log-uniform from a third of it up to it; band-limited
+    random over the logged force's band, so that it lies in the excited band and is not coherent
+    with the logged force): the force a shaker's load cell misses, or an ambient disturbance at
+    the drive point; the truth is driven by both, the log holds only the logged one. The
+    noise-free gap stays the effect's (without the disturbance); ``truth["disturbance"]`` holds
+    its share and the nrmse it adds to the outputs. `noise_lowpass`: None (default, white
+    noise) or a cut-off as a fraction of Nyquist: the sensor noise passed through a 4th-order
+    Butterworth low-pass there (a sensor's anti-aliasing or digital low-pass filter), at the same
+    RMS, so that the band beyond the cut-off holds less noise than the band below it. Both are
+    drawn from a generator seeded from `rng` after every other draw, and only when asked, so
+    the default cases are unchanged.
     """
     if band_edge is not None and not 0 < band_edge < FS / 2:
         raise ValueError(f"band_edge={band_edge!r} must lie in (0, {FS / 2}) Hz")
@@ -1405,6 +1420,34 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         rms = np.sqrt(np.mean(c**2, axis=1))
         noisy.append(c + noise_rel * rms[:, None] * rng.standard_normal(c.shape))
         sigmas.append([float(s) for s in noise_rel * rms])
+    extra = {}
+    if disturbance is not None or noise_lowpass is not None:
+        # drawn after every other draw, from a generator of its own: the default cases are unchanged
+        xrng = np.random.default_rng(int(rng.integers(2**63)))
+        logged = clean
+        if disturbance is not None:
+            share = float(np.exp(xrng.uniform(np.log(disturbance / 3.0), np.log(disturbance))))
+            logged = []
+            for uu, sc in zip(us, scales):
+                d = _brickwall(xrng.standard_normal(uu.fine.size), uu.fs_fine, F_LO, uu.info["f_hi_hz"])
+                d *= share * np.sqrt(np.mean(uu.coarse**2)) / np.sqrt(np.mean(d**2))
+                ud = ContinuousInput(uu.fine + d, fs=uu.fs, oversample=uu.oversample, info=dict(uu.info))
+                logged.append(simulate_truth(tm, ud, n, scales=_scales_for(tm, sc), integrator=integrator).outputs)
+            extra["disturbance"] = {"share_of_input_rms": share, "dof": nominal.inputs[0].dof,
+                                    "band_hz": [F_LO, us[0].info["f_hi_hz"]],
+                                    "gap_it_adds_noise_free": gap(logged, clean)}
+        noisy, sigmas = [], []
+        for c in logged:
+            rms = np.sqrt(np.mean(c**2, axis=1))
+            e = xrng.standard_normal(c.shape)
+            if noise_lowpass is not None:
+                b_lp, a_lp = butter(4, noise_lowpass)
+                e = lfilter(b_lp, a_lp, e, axis=1)
+                e /= np.std(e, axis=1, keepdims=True)
+            noisy.append(c + noise_rel * rms[:, None] * e)
+            sigmas.append([float(s) for s in noise_rel * rms])
+        if noise_lowpass is not None:
+            extra["noise_lowpass"] = {"cutoff_hz": noise_lowpass * FS / 2, "order": 4, "filter": "Butterworth"}
     single = len(pair) == 1
     pick = (lambda xs: xs[0]) if single else (lambda xs: list(xs))
     toml = dumps_model(tm.model) if tm.expressible else None
@@ -1422,6 +1465,7 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         "truth_model": toml,
         "true_model_toml": toml,
         "noise": {"relative_rms": noise_rel, "sigma": sigmas[0] if nlog == 1 else sigmas},
+        **extra,
         "input": _jsonable(us[0].info) if nlog == 1 else [_jsonable(uu.info) for uu in us],
         "logs": logs,
         "multi_log": bool(multi_log),
@@ -1872,11 +1916,12 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 
 def _one(job):
-    out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k, input_kind, edge = job
+    (out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k, input_kind, edge,
+     dist, lowpass) = job
     tic = time.perf_counter()
     case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
                      weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k, input_kind=input_kind,
-                     band_edge=edge)
+                     band_edge=edge, disturbance=dist, noise_lowpass=lowpass)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1897,14 +1942,15 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
              verbose: bool = False, *, integrator: str | None = None, multi_log: float = 0.0,
              weak_end: bool = True, offset_max: float = OFFSET_MAX,
              hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
-             band_edge: float | None = None) -> list[tuple]:
+             band_edge: float | None = None, disturbance: float | None = None,
+             noise_lowpass: float | None = None) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
     before session 39 (:func:`_calibrate`); `offset_max` is the largest input offset as a share of
-    the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`, `input_kind`, `band_edge`: see
-    :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
+    the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`, `input_kind`, `band_edge`,
+    `disturbance`, `noise_lowpass`: see :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
@@ -1916,7 +1962,9 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
                                                    "multi_log": multi_log, "weak_end": weak_end,
                                                    "offset_max": offset_max,
                                                    "hysteresis_in_stiffness": hysteresis_in_stiffness,
-                                                   "input_kind": input_kind, "band_edge": band_edge}, indent=2) + "\n")
+                                                   "input_kind": input_kind, "band_edge": band_edge,
+                                                   "disturbance": disturbance, "noise_lowpass": noise_lowpass},
+                                                  indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
         for c in classes:
@@ -1924,7 +1972,7 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
             multi = multi_log_drawn(seed, c, j, multi_log)
             jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max,
-                              hysteresis_in_stiffness, input_kind, band_edge))
+                              hysteresis_in_stiffness, input_kind, band_edge, disturbance, noise_lowpass))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -1981,12 +2029,19 @@ def main(argv=None) -> int:
                    help=f"open-loop cases: the force's band edge (default {F_BAND_EDGE:g} Hz, the upper band edge "
                    "drawn up to 280 Hz); e.g. 480 for a force that excites the whole band up to Nyquist, with no "
                    "line beyond it that holds only noise")
+    p.add_argument("--disturbance", type=float, default=None, metavar="SHARE",
+                   help="open-loop cases: an unlogged force at the input DOF, band-limited random over the logged "
+                   "force's band, its RMS drawn log-uniform from SHARE/3 to SHARE of the logged force's (default: "
+                   "none); the truth is driven by both, the log holds the logged force only")
+    p.add_argument("--noise-lowpass", type=float, default=None, metavar="FRAC",
+                   help="open-loop cases: the sensor noise low-passed (4th-order Butterworth at FRAC x Nyquist, the "
+                   "same RMS), as a sensor's anti-aliasing filter shapes it (default: white)")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
                    multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max,
                    hysteresis_in_stiffness=a.hysteresis_in_stiffness, input_kind=a.input_kind,
-                   band_edge=a.band_edge)
+                   band_edge=a.band_edge, disturbance=a.disturbance, noise_lowpass=a.noise_lowpass)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")

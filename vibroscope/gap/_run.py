@@ -56,6 +56,11 @@ UNEXPLAINED_SCORE = 0.3
 #: a richer candidate moves ahead of one it nests when the t statistic of its held-out gain
 #: (batch means, see :func:`~vibroscope.gap.measure.nested_gain`) exceeds this
 NESTED_T = 4.0
+#: an unexplained gap is called coloured noise or a disturbance (diagnosis._check_incoherent) only
+#: when the residual's power at the highest input level is at most this multiple of its power at
+#: the lowest (:func:`~vibroscope.gap.measure.residual_growth`; a level's mean square over some
+#: tens of a lightly damped residual's correlation times scatters by about a third)
+RESIDUAL_GROWTH = 2.0
 #: a family member lifted in a combination (Coulomb to asymmetric friction) whose held-out gain is
 #: positive but not significant is fitted jointly again with at most this many evaluations
 FAMILY_REFINE_NFEV = 10
@@ -296,6 +301,9 @@ class Run:
     all_masks: list | None = None
     #: a modal model's upper-residual pseudo-mode placed from the data (diagnosis._place_upper_residual)
     upper_placement: dict | None = None
+    #: the nominal's and the refit's residuals split into coherent and incoherent parts, and the verdict
+    #: change they made (diagnosis._check_incoherent)
+    incoherent: dict | None = None
     nf: object = None
     floor: float | None = None
     # the FRF of the fitting data and the linear refit (_refit_linear)
