@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from vibroscope.gap.measure import coherent_gap, excited_band, masked_csd, nested_gain, nrmse
+from vibroscope.gap.measure import coherent_gap, excited_band, masked_csd, nested_gain, nrmse, residual_growth
 from vibroscope.modal.selection import excited_band as modal_excited_band
 from vibroscope.spectral import csd_matrix
 
@@ -239,3 +239,27 @@ def test_coherent_gap_of_logs_at_three_levels_with_relative_noise_is_within_its_
     cg = coherent_gap(ys, yh, us, ms, fs, 1024)
     assert cg.coherent ** 2 <= 3 * cg.spread, cg
     assert cg.spread < 0.05 * cg.incoherent ** 2
+
+
+def test_residual_growth_tells_noise_from_a_distortion_that_outgrows_the_signal():
+    """Three logs at input levels 1 : 2.5 : 6. Noise relative to each log's signal keeps the
+    residual's share (growth about 1); absolute noise lowers it (about 1 / 36); a cubic
+    distortion (residual proportional to the output cubed) raises it with the level squared
+    (about 36 / 1 for the output's power ratio)."""
+    fs, n = 1000.0, 8000
+    rng = np.random.default_rng(7)
+    us, ys, rel, ab, cub, ms = [], [], [], [], [], []
+    for lv in (1.0, 2.5, 6.0):
+        u = lv * _band_noise(rng, n, fs, 2.0, 300.0)
+        y = lv * _band_noise(rng, n, fs, 2.0, 300.0)
+        us.append(u[None]), ys.append(y[None]), ms.append(np.ones(n, bool))
+        rel.append((y - 0.05 * lv * rng.standard_normal(n))[None])
+        ab.append((y - 0.05 * rng.standard_normal(n))[None])
+        cub.append((y - 0.01 * y ** 3)[None])
+    g_rel, ratio = residual_growth(ys, rel, us, ms, fs)
+    assert ratio == pytest.approx(6.0, rel=0.05)
+    assert g_rel == pytest.approx(1.0, rel=0.15)
+    assert residual_growth(ys, ab, us, ms, fs)[0] == pytest.approx(1 / 36, rel=0.15)
+    assert residual_growth(ys, cub, us, ms, fs)[0] > 20
+    # one level: no evidence
+    assert np.isnan(residual_growth(ys[:1], rel[:1], us[:1], ms[:1], fs)[0])

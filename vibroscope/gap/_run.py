@@ -57,9 +57,10 @@ UNEXPLAINED_SCORE = 0.3
 #: (batch means, see :func:`~vibroscope.gap.measure.nested_gain`) exceeds this
 NESTED_T = 4.0
 #: an unexplained gap is called coloured noise or a disturbance (diagnosis._check_incoherent) only
-#: when the residual's power at the highest input level is at most this multiple of its power at
-#: the lowest (:func:`~vibroscope.gap.measure.residual_growth`; a level's mean square over some
-#: tens of a lightly damped residual's correlation times scatters by about a third)
+#: when the residual's share of the measured power at the highest input level is at most this
+#: multiple of its share at the lowest (:func:`~vibroscope.gap.measure.residual_growth`; a level's
+#: mean square over some tens of a lightly damped residual's correlation times scatters by about
+#: a third)
 RESIDUAL_GROWTH = 2.0
 #: a family member lifted in a combination (Coulomb to asymmetric friction) whose held-out gain is
 #: positive but not significant is fitted jointly again with at most this many evaluations

@@ -799,10 +799,11 @@ def _check_incoherent(run: Run) -> None:
     fresh seed 7102 case 004). Else, when the refit's own residual is so (on the held-out
     samples; the nominal's is not, or the refit is significantly better) and the BLA does not
     change with the excitation level, the verdict is ``parameter_mismatch``. Neither ``none``
-    nor ``parameter_mismatch`` is given so when the residual's power grows with the input level
-    by more than :data:`RESIDUAL_GROWTH` over levels at least :data:`~vibroscope.gap.measure.LOG_LEVEL_RATIO` apart
-    (:func:`~vibroscope.gap.measure.residual_growth`): noise and a disturbance do not grow, a
-    nonlinearity's distortion mostly does. A nonlinearity whose BLA is the
+    nor ``parameter_mismatch`` is given so when the residual's share of the measured power grows
+    with the input level by more than :data:`RESIDUAL_GROWTH` over levels at least
+    :data:`~vibroscope.gap.measure.LOG_LEVEL_RATIO` apart
+    (:func:`~vibroscope.gap.measure.residual_growth`): noise and a disturbance grow at most like
+    the signal, a hardening spring's or a clipped force's distortion faster. A nonlinearity whose BLA is the
     nominal's, and that no candidate fits, is called ``none`` by this rule.
     """
     fs, nps, window = run.fs, run.nps, run.window

@@ -790,15 +790,16 @@ def coherent_gap(measured: list, simulated: list, us: list, masks: list, fs: flo
 
 
 def residual_growth(measured: list, simulated: list, us: list, masks: list, fs: float) -> tuple[float, float]:
-    """How a residual's power grows with the excitation level.
+    """How a residual's share of the measured power grows with the excitation level.
 
     The samples inside `masks` are grouped by log and by input level within a log
-    (:func:`input_levels`); each group's mean of ``sum_c r_c^2 / E_c`` (``r = measured -
-    simulated``, ``E_c`` channel c's mean square over all groups: the weighting of
-    :func:`nrmse`) is compared between the group of the highest input RMS and that of the
-    lowest. A sensor's noise and an unlogged disturbance do not grow with the logged input; a
-    nonlinearity's distortion mostly does (a hardening spring's with the cube of the level, a
-    clipped force's from the limit on; a friction's or a clearance's hardly).
+    (:func:`input_levels`); each group's ``sum_c mean(r_c^2) / mean(y_c^2)`` (``r = measured -
+    simulated``: the residual's share of each channel's power in the group) is compared between
+    the group of the highest input RMS and that of the lowest. A sensor's noise and an unlogged
+    disturbance grow at most like the signal (absolute noise not at all; noise relative to the
+    signal as it does, the law of :func:`noise_floor`); a nonlinearity's distortion that grows
+    faster than the signal (a hardening spring's, a clipped force's) raises the share. A
+    friction's or a clearance's distortion, which grows more slowly, does not.
 
     Parameters
     ----------
@@ -812,30 +813,28 @@ def residual_growth(measured: list, simulated: list, us: list, masks: list, fs: 
     Returns
     -------
     growth, input_ratio : float
-        The residual-power ratio (highest level over lowest) and the input-RMS ratio of the two
-        groups; ``(nan, 1.0)`` with fewer than two groups of 1 s or more.
+        The ratio of the residual's share (highest level over lowest) and the input-RMS ratio of
+        the two groups; ``(nan, 1.0)`` with fewer than two groups of 1 s or more.
     """
-    groups = []  # (input rms, residual per sample weighted later, channel sums)
-    tot = None
+    groups = []  # (input rms, residual share summed over the channels)
     for y, yh, u, m in zip(measured, simulated, us, masks):
         y = np.atleast_2d(y)
         r2 = (y - np.atleast_2d(yh)) ** 2
         lab, _ = input_levels(u, fs)
         u0 = np.atleast_2d(u)[0]
-        for k in np.unique(lab[m]) if m.any() else []:
+        for k in (np.unique(lab[m]) if m.any() else []):
             g = m & (lab == k)
             if g.sum() < fs:
                 continue
-            groups.append((float(np.sqrt(np.mean(u0[g] ** 2))), np.mean(r2[:, g], axis=1)))
-        e = np.sum(y[:, m] ** 2, axis=1)
-        tot = (e, int(m.sum())) if tot is None else (tot[0] + e, tot[1] + int(m.sum()))
-    if len(groups) < 2 or tot is None or tot[1] == 0 or not np.all(tot[0] > 0):
+            ms = np.mean(y[:, g] ** 2, axis=1)
+            if not np.all(ms > 0):
+                continue
+            groups.append((float(np.sqrt(np.mean(u0[g] ** 2))), float(np.sum(np.mean(r2[:, g], axis=1) / ms))))
+    if len(groups) < 2:
         return float("nan"), 1.0
-    ms = tot[0] / tot[1]
     groups.sort(key=lambda g: g[0])
     lo, hi = groups[0], groups[-1]
-    p_lo, p_hi = float(np.sum(lo[1] / ms)), float(np.sum(hi[1] / ms))
-    return (p_hi / p_lo if p_lo > 0 else float("inf")), (hi[0] / lo[0] if lo[0] > 0 else float("inf"))
+    return (hi[1] / lo[1] if lo[1] > 0 else float("inf")), (hi[0] / lo[0] if lo[0] > 0 else float("inf"))
 
 
 def locate_bands(frequencies: np.ndarray, residual_psd: np.ndarray, noise_psd: np.ndarray, *, energy: float = 0.8,

@@ -461,6 +461,9 @@ class GapReport:
                 lines.append(f"{label} is not predictable: its own outputs at twice the integration sub-steps {by} "
                              f"(noise floor {pr['noise_floor']:.4f}); the gap it leaves is not searched for further "
                              "effects")
+        changed = ((self.meta or {}).get("incoherent_gap") or {}).get("changed")
+        if changed:
+            lines.append(f"not coherent with the input: {changed}")
         if self.bands:
             lines.append("bands: " + ", ".join(f"{b.fmin:.1f}-{b.fmax:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
         n_named = len(named) if len(named) > 1 else 1
