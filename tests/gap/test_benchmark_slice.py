@@ -919,3 +919,40 @@ def test_a_fresh_seeds_two_effects_are_named_at_their_links(seed, index, effects
         if "between" in c.where:
             assert score._same_pair(c.where["between"], w_true[eff]["between"]), (eff, c.where, w_true[eff])
     assert rep.gap_after < 1.5 * rep.noise_floor, rep.summary()
+
+
+# fresh seed 7102 drawn with an unlogged force at the drive point (``--disturbance 0.2``), 60 s:
+# (class, case number in the benchmark, the truth's parameter checked, tolerance). Before session
+# 71: none -> unexplained (nominal 0.24 against a white floor of 0.012), parameter_mismatch ->
+# joint_friction (a low level's noise split a mode into two peaks: a +1.8 % "shift" barred the
+# refit), coulomb_friction -> unexplained (the friction fitted to 0.057 N, truth 0.056 N, lost
+# to the refit on the parameter penalty)
+_DISTURBED = [
+    pytest.param("none", 0, None, None, id="7102-000-none"),
+    pytest.param("parameter_mismatch", 1, "k:m2-ground", 0.02, id="7102-001-parameter-mismatch"),
+    pytest.param("coulomb_friction", 4, "Fc_N", 0.1, id="7102-004-coulomb-friction"),
+]
+
+
+@pytest.mark.slow  # the full diagnosis of a 60 s case, 30-210 s each on the 2-core box
+@pytest.mark.parametrize("cls, number, par, tol", _DISTURBED)
+def test_an_unlogged_disturbance_leaves_the_true_verdict(cls, number, par, tol):
+    """The truth driven by the logged force and an unlogged one (8-11 % of its RMS, in its band):
+    what no model of the logged force can explain is not coherent with it, and the verdict is
+    the truth's, its parameter within the tolerance; the gap left is that disturbance, far above
+    the white floor."""
+    from vibroscope.gap import diagnose
+
+    multi = gen.multi_log_drawn(7102, cls, 0, 0.25)
+    case = gen.make_case(cls, gen.case_rng(7102, cls, 0), 60.0, integrator=gen.INTEGRATORS[number % 2],
+                         multi_log=multi, disturbance=0.2)
+    t = case.truth
+    assert t["disturbance"]["gap_it_adds_noise_free"] > 0.08
+    rep = diagnose(case.nominal, case.signals_list() if multi else case.signals(0))
+    assert rep.verdict == cls and list(rep.verdicts) == [cls], rep.summary()
+    assert rep.meta["incoherent_gap"]["changed"], rep.summary()
+    assert rep.gap_after > 3 * rep.noise_floor, rep.summary()
+    if par is not None:
+        c = rep.candidates[0]
+        assert c.effect == cls
+        assert c.parameters[par] == pytest.approx(t["parameters"][par], rel=tol), (c.parameters, t["parameters"])
