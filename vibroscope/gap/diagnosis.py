@@ -949,9 +949,22 @@ def _build_report(run: Run) -> GapReport:
     # H1 is a ratio of residues (+250 dB beyond a multisine's band edge)
     dead = ~np.any(fdt[2] > 0, axis=1)
     fdt, fdn, fda = ((d[0], np.where(dead[:, None], np.nan, d[1])) + tuple(d[2:]) for d in (fdt, fdn, fda))
+    # the nominal residual's part coherent with the input(s), per line (the figure's evidence for
+    # a gap that is not a linear function of the input: _check_incoherent)
+    m_in = us[tr].shape[0]
+    _, Gc, _ = masked_csd(np.vstack([us[tr], ys[tr] - y_nom[tr]]), all_masks[tr], fs, nps)
+    pu = np.real(np.einsum("fii->f", Gc[:, :m_in, :m_in]))
+    live = pu >= 1e-3 * pu.max() if pu.max() > 0 else np.zeros(pu.size, bool)
+    Pc = np.full((nc, fr.size), np.nan)
+    if live.any():
+        inv = np.linalg.pinv(Gc[live, :m_in, :m_in])
+        for c in range(nc):
+            g = Gc[live, :m_in, m_in + c]
+            Pc[c, live] = np.real(np.einsum("fi,fij,fj->f", g.conj(), inv, g))
     spectrum = GapSpectrum(frequencies=fr, measured=Pm, residual_before=Pb, residual_refit=Pr,
                            residual_after=Pa, noise=noise_psd, frf_frequencies=fdt[0], frf_measured=fdt[1],
-                           frf_nominal=fdn[1], frf_augmented=fda[1], coherence=fdt[2])
+                           frf_nominal=fdn[1], frf_augmented=fda[1], coherence=fdt[2],
+                           residual_before_coherent=Pc)
     traces = GapTraces(fs=fs, t0=float(sigs[tr].t0), channels=tuple(out_ch), units=tuple(units),
                        measured=ys[tr], nominal=y_nom[tr], refit=y_ref[tr], augmented=y_aug_full,
                        validation=vmask, input=us[tr][0],

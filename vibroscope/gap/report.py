@@ -319,6 +319,11 @@ class GapSpectrum:
         H1 estimate from the log and the models' simulated H1 (first input); NaN at the lines
         that carry no input (more than 30 dB below the input's strongest line).
     coherence : ndarray, shape (n_ff, n_outputs)
+    residual_before_coherent : ndarray, shape (n_outputs, n_f), optional
+        The part of ``residual_before`` coherent with the logged input(s), ``G_ru G_uu^-1 G_ur``
+        (NaN where the input carries nothing): what a linear model of the input could still
+        remove; the rest is noise, an unlogged disturbance or a nonlinearity's distortion.
+        None when not computed.
     """
 
     frequencies: np.ndarray
@@ -332,10 +337,12 @@ class GapSpectrum:
     frf_nominal: np.ndarray
     frf_augmented: np.ndarray
     coherence: np.ndarray
+    residual_before_coherent: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         for f in self.__dataclass_fields__:
-            object.__setattr__(self, f, _ro(getattr(self, f)))
+            if getattr(self, f) is not None:
+                object.__setattr__(self, f, _ro(getattr(self, f)))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -479,6 +479,11 @@ def plot_gap_spectrum(report, *, fig=None):
               ("residual refit (linear)", sp.residual_refit, COLORS["refit"], "--", 1.0),
               (f"residual after (augmented: {_verdict_words(report)})", sp.residual_after, COLORS["augmented"], "-", 1.0),
               ("noise floor", sp.noise, COLORS["noise"], ":", 1.4))
+    if getattr(sp, "residual_before_coherent", None) is not None:
+        # the nominal residual's part coherent with the input: a gap far above it is not a linear
+        # function of the input (noise of any colour, an unlogged disturbance, a distortion)
+        curves = curves + (("residual before, coherent with the input", sp.residual_before_coherent,
+                            COLORS["nominal"], "-.", 0.8),)
     for c, ax in enumerate(axes):
         for k, b in enumerate(report.bands):
             ax.axvspan(b.fmin, b.fmax, color=BAND, alpha=0.14, lw=0, zorder=0,
