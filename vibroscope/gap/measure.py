@@ -683,7 +683,13 @@ class CoherentGap:
     n_averages: int
 
     def to_dict(self) -> dict:
-        """JSON-ready dict."""
+        """The fields as a dict.
+
+        Returns
+        -------
+        dict
+            JSON-ready: ``total``, ``coherent``, ``incoherent``, ``spread``, ``n_averages``.
+        """
         return {"total": self.total, "coherent": self.coherent, "incoherent": self.incoherent,
                 "spread": self.spread, "n_averages": self.n_averages}
 
