@@ -70,6 +70,12 @@ Procedure
    that nothing joined and that still leaves more than :data:`PM_UNEXPLAINED` times the noise
    floor becomes ``unexplained`` (a refit of every linear parameter reaches the noise where the
    truth is linear; the refit stays first among the candidates).
+9. **An unexplained gap not coherent with the input** (:func:`_check_incoherent`): the floor
+   assumes white noise; coloured sensor noise or an unlogged disturbance leaves a gap no model
+   of the logged input can close. An ``unexplained`` verdict becomes ``none``, the candidate
+   that leaves no part coherent with the input, or ``parameter_mismatch``, when the residuals
+   say so (:func:`~vibroscope.gap.measure.coherent_gap`), with the reason in
+   ``meta["incoherent_gap"]``.
 
 References
 ----------
@@ -112,7 +118,6 @@ from vibroscope.gap._run import (  # the tuning constants live with the run stat
     LINEAR_STOP_FACTOR,
     NESTED_FAMILIES,
     NESTED_T,
-    RESIDUAL_GROWTH,
     NL_MARGIN,
     NONE_FACTOR,
     N_LOCATIONS,
@@ -125,6 +130,7 @@ from vibroscope.gap._run import (  # the tuning constants live with the run stat
     POLISH_S,
     PREDICT_SHARE,
     REFINE_FACTOR,
+    RESIDUAL_GROWTH,
     STAND_IN_FACTOR,
     TREND_MARGIN,
     TREND_SHARE,
@@ -135,7 +141,8 @@ from vibroscope.gap.closed_loop import CLOSED_LOOP_EXCLUDED, is_closed_loop, log
 from vibroscope.gap.effects import EFFECT_TABLE, LinearParams
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
 from vibroscope.gap.levels import frf_segment_length, steady_state_start
-from vibroscope.gap.measure import LOG_LEVEL_RATIO, coherent_gap, input_levels, residual_growth, locate_bands, make_split, masked_csd, nested_gain, noise_floor, nrmse, regime_gaps, welch_starts
+from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, input_levels, locate_bands, make_split, masked_csd,
+                                    nested_gain, noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.models.lumped import LumpedModel
 from vibroscope.signals import Signals, true_runs
