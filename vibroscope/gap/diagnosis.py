@@ -795,15 +795,14 @@ def _check_incoherent(run: Run) -> None:
     (:func:`~vibroscope.gap.measure.coherent_gap`, every non-transient sample). When the verdict
     is ``unexplained`` and the coherent part is within :data:`NONE_FACTOR` times the noise floor
     (plus three times the estimate's own scatter), the nominal is the best linear approximation
-    of the data and no candidate explained the rest on held-out data: unless the linear refit is
-    significantly better than the nominal on held-out data (batch-means t of
+    of the data. First, the admissible candidate with the lowest held-out gap whose own
+    residual's coherent part is so, significantly better than the nominal and explaining more
+    than the linear refit, is the verdict (:func:`_best_beyond_refit`: it explains what a model
+    can; a friction fitted to its true force under a disturbance 8 % of the input's RMS lost to
+    the refit on the parameter penalty, fresh seed 7102 case 004). Else, unless the linear refit
+    is significantly better than the nominal on held-out data (batch-means t of
     :func:`~vibroscope.gap.measure.nested_gain` at least :data:`NESTED_T`), the verdict is
-    ``none`` and the report says what the gap is (``meta["incoherent_gap"]``). Else the
-    admissible candidate with the lowest held-out gap whose own residual's coherent part is so,
-    and that explains more than the linear refit, is the verdict (:func:`_best_beyond_refit`:
-    it explains what a model can; a friction fitted to its true
-    force under a disturbance 8 % of the input's RMS lost to the refit on the parameter penalty,
-    fresh seed 7102 case 004). Else, when the refit's own residual is so (on the held-out
+    ``none`` and the report says what the gap is (``meta["incoherent_gap"]``). Else, when the refit's own residual is so (on the held-out
     samples; the nominal's is not, or the refit is significantly better) and the BLA does not
     change with the excitation level, the verdict is ``parameter_mismatch``. Neither ``none``
     nor ``parameter_mismatch`` is given so when the residual's share of the measured power grows
@@ -839,18 +838,7 @@ def _check_incoherent(run: Run) -> None:
         # the refit's held-out gain over the nominal, significant or not (batch means)
         t_ref = nested_gain(run.ys, run.y_nom, run.y_ref, run.split.validation, fs)
         info["refit_gain_t"], info["threshold_t"] = t_ref, NESTED_T
-        if within(cg_nom) and t_ref < NESTED_T and steady(run.y_nom, run.all_masks):
-            none_c = next(c for c in run.ordered if c[0].effect == "none")
-            run.ordered = [none_c] + [c for c in run.ordered if c is not none_c]
-            run.chosen, run.shares, run.verdict = [], [], "none"
-            info["changed"] = (f"unexplained -> none: the nominal's gap {cg_nom.total:.4g} is {cg_nom.incoherent:.4g} "
-                               f"not coherent with the input and {cg_nom.coherent:.4g} coherent, within "
-                               f"{NONE_FACTOR:g} x the noise floor {run.floor:.4g} (white noise assumed beyond the "
-                               f"band), and the linear refit is not significantly better on held-out data (t "
-                               f"{t_ref:.3g} < {NESTED_T:g}): the model is the data's best linear approximation; the "
-                               "rest is coloured noise or an unlogged disturbance that no candidate explained on "
-                               "held-out data")
-        elif (best := _best_beyond_refit(run, within, within(cg_ref))) is not None:
+        if (best := _best_beyond_refit(run, within, within(cg_ref))) is not None:
             b, cg_b, t_b = best
             run.ordered = [b] + [c for c in run.ordered if c is not b]
             run.chosen, run.shares, run.verdict = [b], [1.0], b[0].effect
@@ -862,6 +850,17 @@ def _check_incoherent(run: Run) -> None:
                                f"coherent part is {cg_ref.coherent:.4g}; held-out gain t {t_b:.3g}, {NESTED_T:g} asked "
                                "when that is within): it explains what a model can, the rest is coloured noise or an "
                                "unlogged disturbance")
+        elif within(cg_nom) and t_ref < NESTED_T and steady(run.y_nom, run.all_masks):
+            none_c = next(c for c in run.ordered if c[0].effect == "none")
+            run.ordered = [none_c] + [c for c in run.ordered if c is not none_c]
+            run.chosen, run.shares, run.verdict = [], [], "none"
+            info["changed"] = (f"unexplained -> none: the nominal's gap {cg_nom.total:.4g} is {cg_nom.incoherent:.4g} "
+                               f"not coherent with the input and {cg_nom.coherent:.4g} coherent, within "
+                               f"{NONE_FACTOR:g} x the noise floor {run.floor:.4g} (white noise assumed beyond the "
+                               f"band), and the linear refit is not significantly better on held-out data (t "
+                               f"{t_ref:.3g} < {NESTED_T:g}): the model is the data's best linear approximation; the "
+                               "rest is coloured noise or an unlogged disturbance that no candidate explained on "
+                               "held-out data")
         elif (pm is not None and not level_flagged and not pm[0].vanished and within(cg_ref)
               and steady(run.y_ref, run.split.validation)):
             run.ordered = [pm] + [c for c in run.ordered if c is not pm]
@@ -877,16 +876,18 @@ def _check_incoherent(run: Run) -> None:
 
 def _best_beyond_refit(run: Run, cg_thr, refit_within: bool):
     """For :func:`_check_incoherent`: the admissible candidate (an effect of the vocabulary other
-    than the linear refit, not vanished, its score at least :data:`UNEXPLAINED_SCORE`) of the
-    lowest held-out gap below the refit's whose held-out residual's coherent part passes
-    `cg_thr` and that explains more than the refit: the refit's own coherent part does not pass
-    (`refit_within` False: it lacks a linear term the candidate has, an extra mode) or the
-    candidate's held-out gain over it is significant (batch-means t of
-    :func:`~vibroscope.gap.measure.nested_gain` at least :data:`NESTED_T`: a nonlinear term).
-    Returns ``(candidate, its CoherentGap, t)`` or None (of the ten best at most)."""
+    than the linear refit, not vanished) of the lowest held-out gap below the refit's and the
+    nominal's whose held-out residual's coherent part passes `cg_thr`, whose held-out gain over
+    the nominal is significant (batch-means t of :func:`~vibroscope.gap.measure.nested_gain` at
+    least :data:`NESTED_T`; not its score, which is measured against the white floor) and that
+    explains more than the refit: the refit's own coherent part does not pass (`refit_within`
+    False: it lacks a linear term the candidate has, an extra mode) or the candidate's held-out
+    gain over it is significant too (a nonlinear term, or a constant force: an input offset's
+    response is not coherent with a zero-mean input, fresh seed 7105 case 005).
+    Returns ``(candidate, its CoherentGap, t over the refit)`` or None (of the ten best at most)."""
     adm = sorted((c for c in run.ordered if c[0].effect not in ("none", "parameter_mismatch") and c[3] is not None
-                  and not c[0].vanished and c[0].score >= UNEXPLAINED_SCORE and isinstance(c[2], dict)
-                  and c[0].gap_after < run.gap_refit), key=lambda c: c[0].gap_after)
+                  and not c[0].vanished and isinstance(c[2], dict)
+                  and c[0].gap_after < min(run.gap_refit, run.gap_before)), key=lambda c: c[0].gap_after)
     for b in adm[:10]:
         logs = [i for i in run.val_logs if i in b[2]]
         if not logs:
@@ -896,6 +897,8 @@ def _best_beyond_refit(run: Run, cg_thr, refit_within: bool):
         cg_b = coherent_gap(ys, yb, [run.us[i] for i in logs], masks, run.fs, run.nps, window=run.window)
         if not cg_thr(cg_b):
             continue
+        if nested_gain(ys, [run.y_nom[i] for i in logs], yb, masks, run.fs) < NESTED_T:
+            continue  # not significantly better than the nominal itself
         t_b = nested_gain(ys, [run.y_ref[i] for i in logs], yb, masks, run.fs)
         if not refit_within or t_b >= NESTED_T:
             return b, cg_b, t_b
