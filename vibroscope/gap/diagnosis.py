@@ -141,7 +141,7 @@ from vibroscope.gap.closed_loop import CLOSED_LOOP_EXCLUDED, is_closed_loop, log
 from vibroscope.gap.effects import EFFECT_TABLE, LinearParams
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
 from vibroscope.gap.levels import frf_segment_length, steady_state_start
-from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, input_levels, locate_bands, make_split, masked_csd,
+from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, coherent_power, input_levels, locate_bands, make_split, masked_csd,
                                     nested_gain, noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.models.lumped import LumpedModel
@@ -940,10 +940,12 @@ def _build_report(run: Run) -> GapReport:
                    unit=units[c])
         for c, ch in enumerate(out_ch))
     # bands: residual of the nominal on every (non-transient) sample of every log, normalised per channel
-    fr, Gm, _ = masked_csd(np.vstack([ys[tr], ys[tr] - y_nom[tr], ys[tr] - y_ref[tr], ys[tr] - y_aug_full]),
+    # the inputs first: the nominal residual's part coherent with them is read from the same spectra
+    m_in = us[tr].shape[0]
+    fr, Gm, _ = masked_csd(np.vstack([us[tr], ys[tr], ys[tr] - y_nom[tr], ys[tr] - y_ref[tr], ys[tr] - y_aug_full]),
                            all_masks[tr], fs, nps)
     nc = len(out_ch)
-    P = np.real(np.einsum("fii->if", Gm))
+    P = np.real(np.einsum("fii->if", Gm))[m_in:]
     Pm, Pb, Pr, Pa = P[:nc], P[nc:2 * nc], P[2 * nc:3 * nc], P[3 * nc:]
     var = np.maximum(np.array([np.mean(ys[tr][c, all_masks[tr]] ** 2) for c in range(nc)]), 1e-300)
     noise_psd = np.repeat(nf.psd_level[:, None], fr.size, axis=1)
@@ -961,16 +963,8 @@ def _build_report(run: Run) -> GapReport:
     fdt, fdn, fda = ((d[0], np.where(dead[:, None], np.nan, d[1])) + tuple(d[2:]) for d in (fdt, fdn, fda))
     # the nominal residual's part coherent with the input(s), per line (the figure's evidence for
     # a gap that is not a linear function of the input: _check_incoherent)
-    m_in = us[tr].shape[0]
-    _, Gc, _ = masked_csd(np.vstack([us[tr], ys[tr] - y_nom[tr]]), all_masks[tr], fs, nps)
-    pu = np.real(np.einsum("fii->f", Gc[:, :m_in, :m_in]))
-    live = pu >= 1e-3 * pu.max() if pu.max() > 0 else np.zeros(pu.size, bool)
-    Pc = np.full((nc, fr.size), np.nan)
-    if live.any():
-        inv = np.linalg.pinv(Gc[live, :m_in, :m_in])
-        for c in range(nc):
-            g = Gc[live, :m_in, m_in + c]
-            Pc[c, live] = np.real(np.einsum("fi,fij,fj->f", g.conj(), inv, g))
+    sub = np.r_[np.arange(m_in), m_in + nc + np.arange(nc)]
+    Pc = coherent_power(Gm[:, sub][:, :, sub], m_in)[2]
     spectrum = GapSpectrum(frequencies=fr, measured=Pm, residual_before=Pb, residual_refit=Pr,
                            residual_after=Pa, noise=noise_psd, frf_frequencies=fdt[0], frf_measured=fdt[1],
                            frf_nominal=fdn[1], frf_augmented=fda[1], coherence=fdt[2],

@@ -24,7 +24,7 @@ from vibroscope.signals import true_runs
 from vibroscope.spectral.estimators import FewAveragesWarning, csd_matrix
 
 __all__ = ["nrmse", "nested_gain", "Split", "make_split", "input_levels", "NoiseFloor", "noise_floor",
-           "locate_bands", "masked_csd", "regime_gaps", "uncovered_share", "CoherentGap", "coherent_gap",
+           "locate_bands", "masked_csd", "regime_gaps", "uncovered_share", "CoherentGap", "coherent_gap", "coherent_power",
            "residual_growth"]
 
 
@@ -694,6 +694,37 @@ class CoherentGap:
                 "spread": self.spread, "n_averages": self.n_averages}
 
 
+def coherent_power(G: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per line, each output's power coherent with the inputs, ``G_yu G_uu^-1 G_uy``.
+
+    Parameters
+    ----------
+    G : ndarray of complex, shape (n_f, m + n_out, m + n_out)
+        Auto/cross spectra of the `m` inputs followed by the outputs (:func:`masked_csd`).
+    m : int
+        Number of inputs.
+
+    Returns
+    -------
+    excited : ndarray of bool, shape (n_f,)
+        The lines where the inputs' summed autospectrum is within :data:`UNEXCITED` of its
+        strongest line (the others carry no input).
+    Guu_inv : ndarray of complex, shape (n_excited, m, m)
+        The pseudo-inverse of the inputs' spectral matrix on those lines.
+    power : ndarray, shape (n_out, n_f)
+        The coherent power (units of ``G``), NaN on the lines that carry no input.
+    """
+    pu = np.real(np.einsum("fii->f", G[:, :m, :m]))
+    exc = pu >= UNEXCITED * pu.max() if pu.max() > 0 else np.zeros(pu.size, bool)
+    inv = np.linalg.pinv(G[exc, :m, :m])
+    n_out = G.shape[1] - m
+    power = np.full((n_out, G.shape[0]), np.nan)
+    for c in range(n_out):
+        g = G[exc, :m, m + c]
+        power[c, exc] = np.real(np.einsum("fi,fij,fj->f", g.conj(), inv, g))
+    return exc, inv, power
+
+
 def coherent_gap(measured: list, simulated: list, us: list, masks: list, fs: float, nperseg: int, *,
                  window: str = "hann") -> CoherentGap:
     """Split a model's residual into the part coherent with the logged input(s) and the rest.
@@ -759,11 +790,8 @@ def coherent_gap(measured: list, simulated: list, us: list, masks: list, fs: flo
         return CoherentGap(nan, nan, nan, nan, 0)
     n_tot = sum(n for _, n in parts)
     G = sum(Gi * n for Gi, n in parts) / n_tot
-    Guu = G[:, :m, :m]
-    pu = np.real(np.einsum("fii->f", Guu))
-    exc = pu >= UNEXCITED * pu.max() if pu.max() > 0 else np.zeros(pu.size, bool)
+    exc, Guu_inv, coh_all = coherent_power(G, m)
     fac = 1.04 if window != "boxcar" else 1.0
-    Guu_inv = np.linalg.pinv(Guu[exc])
     # the independent residual's expected coherent power per line, sum_i n_i Grr_i tr(Guu^-1 Guu_i) / N^2
     # over the logs i: m Grr / N when the logs are alike, more when a log's input and residual
     # are both stronger (logs at several levels, each with noise relative to its own signal)
@@ -774,8 +802,7 @@ def coherent_gap(measured: list, simulated: list, us: list, masks: list, fs: flo
         tot = float(np.sum(Grr))
         if tot <= 0 or not exc.any():
             continue
-        Gur = G[exc, :m, m + c]
-        coh_p = np.real(np.einsum("fi,fij,fj->f", Gur.conj(), Guu_inv, Gur))
+        coh_p = coh_all[c, exc]
         bias_p = fac * sum(n * Gi[exc, m + c, m + c].real * t for (Gi, n), t in zip(parts, tr_i)) / n_tot ** 2
         p_exc = float(np.sum(Grr[exc]))
         b_share = min(float(np.sum(bias_p)) / p_exc, 1.0) if p_exc > 0 else 1.0
