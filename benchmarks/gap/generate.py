@@ -9,6 +9,7 @@ outputs. What the hidden effect is, where, and how strong, is written apart, in 
                                       [--duration 60] [--jobs 1] [--integrator {lsoda,rk4}]
                                       [--multi-log 0.25] [--input-kind sweep] [--band-edge HZ]
                                       [--disturbance SHARE] [--noise-lowpass FRAC]
+                                      [--input-noise REL] [--forms {ours,other}] [--dofs LO HI]
 
     DIR/cases/case_NNN/nominal.toml     the nominal model (vibroscope model file)
     DIR/cases/case_NNN/log.mcap         input (WrenchStamped) + outputs (Imu; displacement as
@@ -408,10 +409,12 @@ class TruthModel:
     model: LumpedModel
     extra: tuple = ()
     offset: float = 0.0
+    #: the input saturation is smooth, ``limit * tanh(u / limit)``, instead of a hard clip
+    soft_saturation: bool = False
 
     @property
     def expressible(self) -> bool:
-        return not self.extra and self.offset == 0.0
+        return not self.extra and self.offset == 0.0 and not self.soft_saturation
 
 
 def _tm(m) -> TruthModel:
@@ -448,6 +451,8 @@ def _forces(y, t, C, P, F, dz):
             u = sat
         elif u < -sat:
             u = -sat
+    elif sat < 0.0:  # a smooth saturation (TruthModel.soft_saturation): limit * tanh(u / limit)
+        u = -sat * math.tanh(u / -sat)
     for i in range(ndof):
         F[i] = 0.0
     F[in_dof] += u
@@ -602,7 +607,8 @@ def _compile(tm: TruthModel):
         raise ValueError("the truth integrator supports exactly one force input")
     inp = model.inputs[0]
     E = np.array(rows, float).reshape(-1, _EW)
-    P = np.concatenate([[0.0, float(inp.delay), float(inp.saturation or 0.0), idx[inp.dof], model.n_dofs,
+    sat = float(inp.saturation or 0.0) * (-1.0 if tm.soft_saturation else 1.0)
+    P = np.concatenate([[0.0, float(inp.delay), sat, idx[inp.dof], model.n_dofs,
                          E.shape[0], nz, float(tm.offset)], 1.0 / np.array([d.mass for d in model.dofs]),
                         E.ravel()])
     return P, nz
@@ -640,7 +646,10 @@ def _rk4_substeps(tm: TruthModel, scales: np.ndarray) -> int:
         elif isinstance(e, AsymFriction):
             rate = max(rate, max(e.fp, e.fn) / e.v_eps * wm)
         elif isinstance(e, BoucWen):
-            rate = max(rate, e.beta * (abs(e.gamma) + abs(e.delta)) * vmax)
+            zu = 1.0
+            if e.nu != 1.0:  # |z| stays below its ultimate value (alpha / (beta (gamma + delta)))^(1/nu)
+                zu = (e.alpha / (e.beta * max(e.gamma + e.delta, 1e-3))) ** ((e.nu - 1.0) / e.nu)
+            rate = max(rate, e.beta * (abs(e.gamma) + abs(e.delta)) * vmax * zu)
         elif isinstance(e, IwanJoint):
             rate = max(rate, max(JENKINS_EXP * kj * vmax / fs for kj, fs in zip(e.k, e.fs)))
     h = 1.0 / RK4_HZ
@@ -824,13 +833,13 @@ def _random_outputs(rng: np.random.Generator, names: list[str], displacement: bo
 
 
 def random_chain_model(rng: np.random.Generator, n_dofs: int | None = None, name: str = "",
-                       displacement: bool | None = None) -> LumpedModel:
-    """A random network of 1-3 DOFs (see :func:`_random_connections`): masses 0.5-5 kg, modes
+                       displacement: bool | None = None, dofs: tuple = (1, 3)) -> LumpedModel:
+    """A random network of 1-3 DOFs (`dofs`: the fewest and the most) (see :func:`_random_connections`): masses 0.5-5 kg, modes
     in 8-120 Hz at least 15 % apart, modal damping 1-4 % (dampers solved for drawn modal
     targets), the force input on a random DOF, sensors by :func:`_random_outputs`."""
     from scipy.optimize import nnls
 
-    n = int(rng.integers(1, 4)) if n_dofs is None else int(n_dofs)
+    n = int(rng.integers(dofs[0], dofs[1] + 1)) if n_dofs is None else int(n_dofs)
     for _ in range(1000):
         masses = rng.uniform(0.5, 5.0, n)
         conns = _random_connections(rng, n)
@@ -992,10 +1001,14 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
         pk = a[1:-1][(a[1:-1] >= a[:-2]) & (a[1:-1] > a[2:])]
         pk = np.sort(pk)[::-1]
 
+        soft = ref.get("forms") == "other"
+
         def build(p, base):
             limit = float(pk[max(int(round(p * pk.size)) - 1, 0)])
-            return (_with_input(base, saturation=limit), {"side": "input"}, {"limit_N": limit},
-                    {"clipped_peak_fraction": p, "input_peak_N": float(pk[0])})
+            truth = replace(_with_input(base, saturation=limit), soft_saturation=soft)
+            return (truth, {"side": "input"}, {"limit_N": limit},
+                    {"clipped_peak_fraction": p, "input_peak_N": float(pk[0]),
+                     "form": "limit * tanh(u / limit)" if soft else "clip"})
 
         return build, (0.02, 0.8), _always
 
@@ -1009,11 +1022,13 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
         return build, (0.02, ref["offset_max"]), _always
 
     if effect == "coulomb_friction":
+        # --forms other: the regularisation velocity drawn log-uniform over 1e-4 .. 1e-2 m/s
+        v_eps = float(np.exp(rng.uniform(np.log(1e-4), np.log(1e-2)))) if ref.get("forms") == "other" else V_EPS
 
         def build(fc_rel, base):
             fc = fc_rel * f_conn
-            truth = _with_elements(base, add=(Friction(ends, force_=fc, v_eps=V_EPS),))
-            return truth, where_el, {"Fc_N": fc, "v_eps_m_per_s": V_EPS}, {"Fc_over_rms_connection_force": fc_rel}
+            truth = _with_elements(base, add=(Friction(ends, force_=fc, v_eps=v_eps),))
+            return truth, where_el, {"Fc_N": fc, "v_eps_m_per_s": v_eps}, {"Fc_over_rms_connection_force": fc_rel}
 
         return build, (0.003, 2.0), _always
 
@@ -1081,12 +1096,17 @@ def _effect_builder(effect: str, nominal: LumpedModel, rng: np.random.Generator,
         gamma = float(rng.uniform(0.3, 0.9))
         delta = 1.0 - gamma + float(rng.uniform(-0.2, 0.2))
         c_y = float(rng.uniform(0.2, 1.0))  # yield displacement / rms deflection
-        beta = 1.0 / ((gamma + delta) * c_y * d_rms)
+        nu = 2.0 if ref.get("forms") == "other" else 1.0  # --forms other: a sharper knee (Bouc-Wen n = 2)
 
         def build(a_rel, base):
             alpha = a_rel * k_c
-            truth = _with_elements(base, add=(BoucWen(ends, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=1.0),))
-            params = {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": 1.0}
+            # the ultimate force (alpha / (beta (gamma + delta)))^(1/nu) = alpha * c_y * rms deflection
+            if nu == 1.0:
+                beta = 1.0 / ((gamma + delta) * c_y * d_rms)
+            else:
+                beta = alpha / ((gamma + delta) * (alpha * c_y * d_rms) ** nu)
+            truth = _with_elements(base, add=(BoucWen(ends, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=nu),))
+            params = {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": nu}
             return truth, where_el, params, {"alpha_over_k": a_rel, "yield_over_rms_deflection": c_y}
 
         return build, (0.01, 3.0), _always
@@ -1215,13 +1235,15 @@ class Case:
     nominal_text: str | None = None  # the nominal file's text when it is not dumps_model(nominal) (modal)
     log_channels: list | None = None  # closed loop: [reference] + outputs + [command]
     log_units: list | None = None
+    u_logged: list | None = None  # the logged force per log when it differs from the driving one (input noise)
 
     def signals(self, i: int = 0):
         """The `i`-th log as Signals (input channel first, then the outputs)."""
         from vibroscope.signals import Signals
 
         u, y = (self.u, self.outputs) if not self.logs else (self.logs[i][0], self.logs[i][1])
-        data = np.vstack([u.coarse[None, : y.shape[1]], y])
+        uc = u.coarse if self.u_logged is None else self.u_logged[i]
+        data = np.vstack([uc[None, : y.shape[1]], y])
         if self.log_channels is not None:
             return Signals(data=data, fs=u.fs, channels=list(self.log_channels), units=list(self.log_units), t0=T0_LOG)
         chans = self.nominal.input_channels() + self.nominal.output_channels()
@@ -1246,7 +1268,8 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
               multi_log: bool = False, weak_end: bool = True, offset_max: float = OFFSET_MAX,
               hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
               band_edge: float | None = None, disturbance: float | None = None,
-              noise_lowpass: float | None = None) -> Case:
+              noise_lowpass: float | None = None, input_noise: float | None = None,
+              forms: str = "ours", dofs: tuple = (1, 3)) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
@@ -1276,8 +1299,18 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     Butterworth low-pass there (a sensor's anti-aliasing or digital low-pass filter), at the same
     RMS, so that the band beyond the cut-off holds less noise than the band below it. Both are
     drawn from a generator seeded from `rng` after every other draw, and only when asked, so
-    the default cases are unchanged.
+    the default cases are unchanged. `input_noise`: None (default: the logged force is the force
+    that drives the truth) or the largest relative RMS of white noise on the logged force (a load
+    cell's noise; drawn uniform from a third of it up to it, from the same generator as the
+    disturbance; the truth is driven by the clean force). `forms`: "ours" (default) or "other":
+    effect laws other than the diagnoser's candidates, to disagree with them: the saturation
+    smooth (``limit * tanh(u / limit)``, not a clip), the Coulomb friction's regularisation
+    velocity drawn log-uniform over 1e-4 .. 1e-2 m/s (not 1e-3), the added hysteresis loop a
+    Bouc-Wen element of exponent n = 2 (not 1). `dofs`: the fewest and the most DOFs of the
+    nominal network (default (1, 3); :func:`random_chain_model`).
     """
+    if forms not in ("ours", "other"):
+        raise ValueError(f"forms={forms!r} must be 'ours' or 'other'")
     if band_edge is not None and not 0 < band_edge < FS / 2:
         raise ValueError(f"band_edge={band_edge!r} must lie in (0, {FS / 2}) Hz")
     if input_kind not in (None, "sweep"):
@@ -1303,9 +1336,11 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         else:
             pair = [effect]
         if modal:
-            nominal = random_modal_truth(rng, displacement=True if OBSERVED_BY_DISPLACEMENT & set(pair) else None)
+            nominal = random_modal_truth(rng, displacement=True if OBSERVED_BY_DISPLACEMENT & set(pair) else None,
+                                         dofs=dofs)
         else:
-            nominal = random_chain_model(rng, displacement=True if OBSERVED_BY_DISPLACEMENT & set(pair) else None)
+            nominal = random_chain_model(rng, displacement=True if OBSERVED_BY_DISPLACEMENT & set(pair) else None,
+                                         dofs=dofs)
         f_max = float(nominal.modes().natural_frequencies.max())
         kind = str(rng.choice(["random", "multisine"]))
         if input_kind is not None:  # drawn all the same: the later draws keep their order
@@ -1335,7 +1370,7 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
             continue
         nom_cal = [r.outputs[:, :n_cal] for r in nom]
         u_all = np.concatenate([uu.coarse for uu in us])
-        ref = {"states": np.vstack([r.states[:n_cal] for r in nom]), "u": us,
+        ref = {"states": np.vstack([r.states[:n_cal] for r in nom]), "u": us, "forms": forms,
                "u_rms": float(np.sqrt(np.mean(u_all**2))), "offset_max": offset_max,
                "hysteresis_in_stiffness": hysteresis_in_stiffness}
         base0 = TruthModel(nominal)
@@ -1421,7 +1456,8 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         noisy.append(c + noise_rel * rms[:, None] * rng.standard_normal(c.shape))
         sigmas.append([float(s) for s in noise_rel * rms])
     extra = {}
-    if disturbance is not None or noise_lowpass is not None:
+    u_logged = None
+    if disturbance is not None or noise_lowpass is not None or input_noise is not None:
         # drawn after every other draw, from a generator of its own: the default cases are unchanged
         xrng = np.random.default_rng(int(rng.integers(2**63)))
         logged = clean
@@ -1448,6 +1484,16 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
             sigmas.append([float(s) for s in noise_rel * rms])
         if noise_lowpass is not None:
             extra["noise_lowpass"] = {"cutoff_hz": noise_lowpass * FS / 2, "order": 4, "filter": "Butterworth"}
+        if input_noise is not None:
+            rel_in = float(xrng.uniform(input_noise / 3.0, input_noise))
+            u_logged = []
+            for uu, y in zip(us, noisy):
+                uc = uu.coarse[: y.shape[1]]
+                u_logged.append(uc + rel_in * np.sqrt(np.mean(uc**2)) * xrng.standard_normal(uc.shape))
+            extra["input_noise"] = {"relative_rms": rel_in, "white": True,
+                                    "note": "on the logged force only; the truth is driven by the clean force"}
+    if forms != "ours":
+        extra["forms"] = forms
     single = len(pair) == 1
     pick = (lambda xs: xs[0]) if single else (lambda xs: list(xs))
     toml = dumps_model(tm.model) if tm.expressible else None
@@ -1494,20 +1540,20 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     if modal:
         text = dumps_model(exact_pole_residue(nominal))
         truth["nominal_lumped_toml"] = dumps_model(nominal)
-    return Case(nominal, tm, us[0], noisy[0], clean[0], truth, logs_data, nominal_text=text)
+    return Case(nominal, tm, us[0], noisy[0], clean[0], truth, logs_data, nominal_text=text, u_logged=u_logged)
 
 
 # ---------------------------------------------------------------------------------------------
 # modal kind: the nominal as the exact pole-residue model of the truth without its effect
 # ---------------------------------------------------------------------------------------------
-def random_modal_truth(rng: np.random.Generator, displacement: bool | None = None) -> LumpedModel:
+def random_modal_truth(rng: np.random.Generator, displacement: bool | None = None, dofs: tuple = (1, 3)) -> LumpedModel:
     """A :func:`random_chain_model` network made modally exact: the dampers of each connection
     replaced by ``beta k`` (stiffness-proportional damping, real modes; ``beta`` drawn so the
     lowest mode has 1-4 % and the highest at most 4 %, which needs modes within a factor 4),
     an acceleration sensor on every DOF (so the input DOF is a driving point and every effect
     sits between measured points), plus a displacement sensor as :func:`_random_outputs`."""
     for _ in range(500):
-        m = random_chain_model(rng, displacement=False)
+        m = random_chain_model(rng, displacement=False, dofs=dofs)
         f = m.modes().natural_frequencies
         if f.max() / f.min() > 4.0:
             continue
@@ -1917,11 +1963,12 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 def _one(job):
     (out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k, input_kind, edge,
-     dist, lowpass) = job
+     dist, lowpass, in_noise, forms, dofs) = job
     tic = time.perf_counter()
     case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
                      weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k, input_kind=input_kind,
-                     band_edge=edge, disturbance=dist, noise_lowpass=lowpass)
+                     band_edge=edge, disturbance=dist, noise_lowpass=lowpass, input_noise=in_noise, forms=forms,
+                     dofs=dofs)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1943,14 +1990,15 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
              weak_end: bool = True, offset_max: float = OFFSET_MAX,
              hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
              band_edge: float | None = None, disturbance: float | None = None,
-             noise_lowpass: float | None = None) -> list[tuple]:
+             noise_lowpass: float | None = None, input_noise: float | None = None,
+             forms: str = "ours", dofs: tuple = (1, 3)) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
     before session 39 (:func:`_calibrate`); `offset_max` is the largest input offset as a share of
     the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`, `input_kind`, `band_edge`,
-    `disturbance`, `noise_lowpass`: see :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
+    `disturbance`, `noise_lowpass`, `input_noise`, `forms`, `dofs`: see :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
@@ -1963,7 +2011,9 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
                                                    "offset_max": offset_max,
                                                    "hysteresis_in_stiffness": hysteresis_in_stiffness,
                                                    "input_kind": input_kind, "band_edge": band_edge,
-                                                   "disturbance": disturbance, "noise_lowpass": noise_lowpass},
+                                                   "disturbance": disturbance, "noise_lowpass": noise_lowpass,
+                                                   "input_noise": input_noise, "forms": forms,
+                                                   "dofs": list(dofs)},
                                                   indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
@@ -1972,7 +2022,8 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
             integ = "rk4" if c in CLOSED_LOOP_CLASSES else (integrator or INTEGRATORS[k % 2])
             multi = multi_log_drawn(seed, c, j, multi_log)
             jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max,
-                              hysteresis_in_stiffness, input_kind, band_edge, disturbance, noise_lowpass))
+                              hysteresis_in_stiffness, input_kind, band_edge, disturbance, noise_lowpass,
+                              input_noise, forms, tuple(dofs)))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -2036,12 +2087,21 @@ def main(argv=None) -> int:
     p.add_argument("--noise-lowpass", type=float, default=None, metavar="FRAC",
                    help="open-loop cases: the sensor noise low-passed (4th-order Butterworth at FRAC x Nyquist, the "
                    "same RMS), as a sensor's anti-aliasing filter shapes it (default: white)")
+    p.add_argument("--input-noise", type=float, default=None, metavar="REL",
+                   help="open-loop cases: white noise on the logged force (a load cell's), its relative RMS drawn "
+                   "uniform from REL/3 to REL; the truth is driven by the clean force (default: none)")
+    p.add_argument("--forms", choices=("ours", "other"), default="ours",
+                   help="other: effect laws unlike the diagnoser's candidates (a smooth tanh saturation, a friction "
+                   "regularisation velocity from 1e-4 to 1e-2 m/s, a Bouc-Wen loop of exponent 2); default ours")
+    p.add_argument("--dofs", type=int, nargs=2, default=(1, 3), metavar=("LO", "HI"),
+                   help="open-loop and modal cases: the nominal network has LO to HI DOFs (default 1 3)")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
                    multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max,
                    hysteresis_in_stiffness=a.hysteresis_in_stiffness, input_kind=a.input_kind,
-                   band_edge=a.band_edge, disturbance=a.disturbance, noise_lowpass=a.noise_lowpass)
+                   band_edge=a.band_edge, disturbance=a.disturbance, noise_lowpass=a.noise_lowpass,
+                   input_noise=a.input_noise, forms=a.forms, dofs=tuple(a.dofs))
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")

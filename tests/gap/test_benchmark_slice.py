@@ -123,6 +123,61 @@ def test_random_chain_model_ranges():
         assert 1 <= sum(o.quantity == "acceleration" for o in m.outputs) <= m.n_dofs
 
 
+def test_random_chain_model_draws_the_dof_range_it_is_given():
+    ns = set()
+    for i in range(12):
+        m = gen.random_chain_model(np.random.default_rng(100 + i), dofs=(4, 5))
+        modes = m.modes()
+        ns.add(m.n_dofs)
+        assert len(modes) == m.n_dofs
+        assert np.all((modes.natural_frequencies >= 8) & (modes.natural_frequencies <= 120))
+    assert ns == {4, 5}
+
+
+def test_a_smooth_saturation_truth_is_the_linear_model_driven_by_the_tanh_of_the_force():
+    """``--forms other``: the truth's saturation is ``L tanh(u / L)``, not a clip at L."""
+    from dataclasses import replace
+
+    model = _one_dof()
+    u = gen.make_input(np.random.default_rng(5), 3.0, kind="random", f_hi=100.0).scaled(50.0)
+    lim = 0.6 * float(np.abs(u.fine).max())
+    sat = replace(model, inputs=(replace(model.inputs[0], saturation=lim),))
+    soft = gen.simulate_truth(gen.TruthModel(sat, soft_saturation=True), u, integrator="rk4")
+    hard = gen.simulate_truth(sat, u, integrator="rk4")
+    lin = gen.simulate_truth(model, gen.ContinuousInput(lim * np.tanh(u.fine / lim)), integrator="rk4")
+    assert gen.nrmse(lin.outputs, soft.outputs) < 2e-3
+    assert gen.nrmse(lin.outputs, hard.outputs) > 0.05
+    assert not gen.TruthModel(sat, soft_saturation=True).expressible
+
+
+def test_other_forms_and_input_noise_are_what_the_truth_says():
+    """``--forms other --input-noise``: the logged force is the driving force plus white noise
+    of the stated relative RMS; the friction's regularisation velocity and the hysteresis
+    exponent are not the diagnoser's; the default case is unchanged by the new options' code."""
+    case = gen.make_case("saturation", gen.case_rng(11, "saturation", 0), 12.0, integrator="rk4",
+                         forms="other", input_noise=0.03)
+    t = case.truth
+    assert t["forms"] == "other" and t["details"]["form"].startswith("limit * tanh") and t["truth_model"] is None
+    rel = t["input_noise"]["relative_rms"]
+    assert 0.01 <= rel <= 0.03
+    logged = case.signals(0).data[0]
+    clean = case.u.coarse[: logged.size]
+    assert np.std(logged - clean) / np.sqrt(np.mean(clean**2)) == pytest.approx(rel, rel=0.05)
+    fr = gen.make_case("coulomb_friction", gen.case_rng(11, "coulomb_friction", 0), 12.0, integrator="rk4",
+                       forms="other")
+    assert 1e-4 <= fr.truth["parameters"]["v_eps_m_per_s"] <= 1e-2 and fr.truth["parameters"]["v_eps_m_per_s"] != gen.V_EPS
+    assert "input_noise" not in fr.truth and np.array_equal(fr.signals(0).data[0], fr.u.coarse[: fr.outputs.shape[1]])
+    hy = gen.make_case("hysteresis", gen.case_rng(11, "hysteresis", 0), 12.0, integrator="lsoda", forms="other")
+    p = hy.truth["parameters"]
+    assert p["nu"] == 2.0 and hy.truth["gap_nominal_noise_free"] >= gen.GAP_MIN
+    # the loop's ultimate force (alpha / (beta (gamma + delta)))^(1/nu) is alpha times the yield
+    # displacement, as for nu = 1
+    zu = (p["alpha_N_per_m"] / (p["beta_per_m"] * (p["gamma"] + p["delta"]))) ** 0.5
+    assert 0.0 < zu / p["alpha_N_per_m"] < 1.0
+    default = gen.make_case("hysteresis", gen.case_rng(11, "hysteresis", 0), 12.0, integrator="lsoda")
+    assert default.truth["parameters"]["nu"] == 1.0 and "forms" not in default.truth
+
+
 def test_rk4_and_lsoda_truths_agree_on_a_linear_case():
     rng = np.random.default_rng(4)
     model = gen.random_chain_model(rng, 3)
