@@ -140,7 +140,7 @@ from vibroscope.gap._selection import select_further_effects
 from vibroscope.gap.closed_loop import CLOSED_LOOP_EXCLUDED, is_closed_loop, log_channels
 from vibroscope.gap.effects import EFFECT_TABLE, LinearParams
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
-from vibroscope.gap.levels import frf_segment_length, steady_state_start
+from vibroscope.gap.levels import frf_segment_length, period_floor, steady_state_start
 from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, coherent_power, input_levels, locate_bands, make_split, masked_csd,
                                     nested_gain, noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
@@ -811,6 +811,11 @@ def _check_incoherent(run: Run) -> None:
     (:func:`~vibroscope.gap.measure.residual_growth`): noise and a disturbance grow at most like
     the signal, a hardening spring's or a clipped force's distortion faster. A nonlinearity whose BLA is the
     nominal's, and that no candidate fits, is called ``none`` by this rule.
+
+    Every verdict: ``meta["incoherent_gap"]["period_floor"]`` holds the floor a periodic input
+    measures in the band (:func:`~vibroscope.gap.levels.period_floor`, the outputs' variation
+    from period to period; None without enough alike periods) beside the white floor, as
+    evidence only: no verdict reads it.
     """
     fs, nps, window = run.fs, run.nps, run.window
     cg_nom = coherent_gap(run.ys, run.y_nom, run.us, run.all_masks, fs, nps, window=window)
@@ -825,6 +830,13 @@ def _check_incoherent(run: Run) -> None:
                        "the linear refit's on the held-out samples"),
             "nominal": cg_nom.to_dict(), "refit": cg_ref.to_dict(),
             "threshold_coherent": float(NONE_FACTOR * run.floor), "changed": None}
+    # evidence only (no verdict reads it yet): the in-band floor a periodic input measures, the
+    # outputs' variation from period to period, beside the white floor seen beyond the band
+    pf = period_floor(run.ys, run.us, run.all_masks, fs)
+    info["period_floor"] = (None if pf is None else
+                            pf.to_dict() | {"white_floor": float(run.floor),
+                                            "ratio_to_white_floor": float(pf.nrmse / run.floor) if run.floor > 0
+                                            else None})
     if run.verdict == "unexplained" and run.gap_before > NONE_FACTOR * run.floor:
         level_flagged = bool(run.level.get("flagged")) if isinstance(run.level, dict) else False
 

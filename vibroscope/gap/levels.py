@@ -35,7 +35,7 @@ import scipy.signal
 from vibroscope.gap.measure import UNEXCITED, excited_band, input_levels
 from vibroscope.spectral import csd_matrix
 
-__all__ = ["detect_period", "steady_state_start", "frf_segment_length", "level_blas", "fit_mode", "window_kernel", "LevelBLA", "ModeTrend",
+__all__ = ["detect_period", "steady_state_start", "period_floor", "PeriodFloor", "frf_segment_length", "level_blas", "fit_mode", "window_kernel", "LevelBLA", "ModeTrend",
            "LevelEvidence"]
 
 #: relative change beyond which a level dependence counts (with |z| > :data:`Z_SIGNIFICANT`)
@@ -260,6 +260,145 @@ def steady_state_start(u, y, fs: float, *, period: int | None = None) -> int | N
 # --------------------------------------------------------------------------------------------
 # segment length
 # --------------------------------------------------------------------------------------------
+
+#: consecutive periods whose inputs differ by more than this share of their RMS are different
+#: runs (a level step); white noise of relative RMS e on the logged input gives about sqrt(2) e
+PERIOD_INPUT_TOL = 0.1
+#: periods dropped at the start of each run of alike periods (the transient of the level step
+#: or of the start from rest)
+PERIOD_SETTLE = 2
+#: fewest alike periods a run must keep after :data:`PERIOD_SETTLE` to be used
+PERIOD_MIN = 3
+
+
+@dataclass(frozen=True)
+class PeriodFloor:
+    """The outputs' part that is not periodic with a periodic input, as a gap (nrmse).
+
+    Attributes
+    ----------
+    nrmse : float
+        ``sqrt(mean_c (s2_c / p_c))`` over the output channels: ``s2_c`` the period-to-period
+        variance of channel c (its samples minus their mean over the alike periods of their run,
+        pooled with ``P - 1`` degrees of freedom per sample), ``p_c`` its mean square over the same
+        samples: the nrmse a model that matches the periodic response exactly would leave.
+    per_channel : tuple of float
+        Each channel's ``sqrt(s2_c / p_c)``.
+    n_periods : int
+        Periods used, every log together.
+    period_samples : tuple of int
+        The period of each log used, samples.
+    logs : tuple of int
+        The logs used (indices into the lists given).
+    """
+
+    nrmse: float
+    per_channel: tuple
+    n_periods: int
+    period_samples: tuple
+    logs: tuple
+
+    def to_dict(self) -> dict:
+        """The fields as a dict.
+
+        Returns
+        -------
+        dict
+            JSON-ready: ``nrmse``, ``per_channel``, ``n_periods``, ``period_samples``, ``logs``.
+        """
+        return {"nrmse": self.nrmse, "per_channel": list(self.per_channel), "n_periods": self.n_periods,
+                "period_samples": list(self.period_samples), "logs": list(self.logs)}
+
+
+def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | None:
+    """The noise floor measured in the band: the outputs' variation from period to period.
+
+    With a periodic input (:func:`detect_period`), the steady-state response of a time-invariant
+    system, linear or not (unless it is chaotic or subharmonic), repeats with the input; what
+    changes from one period to the next is measurement noise of any colour and the response to
+    anything the log does not hold (an unlogged disturbance) -- what no model of the logged input
+    can explain, in the band as well as beyond it (the white floor of :func:`~vibroscope.gap.measure.noise_floor`
+    sees only beyond it). Each log is cut into whole periods from its first sample; consecutive
+    periods whose inputs agree within :data:`PERIOD_INPUT_TOL` (relative RMS) form a run, its
+    first :data:`PERIOD_SETTLE` periods are dropped (the transient), a period with a sample
+    outside the log's mask splits it, and each piece of at least :data:`PERIOD_MIN` periods gives each channel's
+    sample variance about the run's mean period (Pintelon & Schoukens [1]_, sec. 2.4 and 4.3:
+    the sample noise variance from repeated periods).
+
+    Parameters
+    ----------
+    ys : list of ndarray, shape (n_outputs, n_samples)
+        Measured outputs per log, in their units.
+    us : list of ndarray, shape (n_inputs, n_samples) or (n_samples,)
+        Logged inputs per log; the first sets the period.
+    masks : list of ndarray of bool, shape (n_samples,)
+        Samples that may be used (not a transient left out of every metric).
+    fs : float
+        Sampling frequency in Hz.
+
+    Returns
+    -------
+    PeriodFloor or None
+        None when no log holds a run of enough alike periods (a random input, a sweep, too
+        short a record).
+
+    References
+    ----------
+    .. [1] R. Pintelon, J. Schoukens, *System Identification: A Frequency Domain Approach*,
+       2nd ed., Wiley-IEEE, 2012.
+    """
+    ss = pw = None
+    dof = n_used = 0
+    n_periods, periods, logs = 0, [], []
+    for i, (y, u, m) in enumerate(zip(ys, us, masks)):
+        y = np.atleast_2d(np.asarray(y, float))
+        u0 = np.atleast_2d(np.asarray(u, float))[0]
+        T = detect_period(u0, fs)
+        if T is None:
+            continue
+        nb = u0.size // T
+        if nb < PERIOD_SETTLE + PERIOD_MIN:
+            continue
+        ub = u0[: nb * T].reshape(nb, T)
+        yb = y[:, : nb * T].reshape(y.shape[0], nb, T)
+        ok = np.asarray(m[: nb * T]).reshape(nb, T).all(axis=1) & np.all(np.isfinite(yb), axis=(0, 2))
+        # runs of alike periods: each period's input against its predecessor's
+        rms = np.sqrt(np.mean(ub**2, axis=1))
+        alike = np.r_[False, np.sqrt(np.mean(np.diff(ub, axis=0) ** 2, axis=1))
+                      <= PERIOD_INPUT_TOL * np.maximum(rms[1:], 1e-300)]
+        used_here = 0
+        k = 0
+        while k < nb:
+            j = k + 1
+            while j < nb and alike[j]:
+                j += 1
+            kept = [q for q in range(k + PERIOD_SETTLE, j) if ok[q]]
+            # a masked period splits the run into consecutive pieces (the system's own response
+            # goes on: no settling again)
+            pieces = np.split(np.asarray(kept, int), np.flatnonzero(np.diff(kept) != 1) + 1) if kept else []
+            for run in pieces:
+                if len(run) < PERIOD_MIN:
+                    continue
+                Y = yb[:, run, :]
+                r = Y - Y.mean(axis=1, keepdims=True)
+                a = np.sum(r**2, axis=(1, 2))
+                b = np.sum(Y**2, axis=(1, 2))
+                ss = a if ss is None else ss + a
+                pw = b if pw is None else pw + b
+                dof += (len(run) - 1) * T
+                n_used += len(run) * T
+                used_here += len(run)
+            k = j
+        if used_here:
+            n_periods += used_here
+            periods.append(int(T))
+            logs.append(i)
+    if ss is None or dof == 0 or not np.all(pw > 0):
+        return None
+    per = np.sqrt((ss / dof) / (pw / n_used))
+    return PeriodFloor(nrmse=float(np.sqrt(np.mean(per**2))), per_channel=tuple(float(x) for x in per),
+                       n_periods=int(n_periods), period_samples=tuple(periods), logs=tuple(logs))
+
 
 def _pow2_default(fs: float, n: int) -> int:
     """Today's default of :func:`vibroscope.gap.diagnose`: a power of two about 4 s, at most n / 8."""

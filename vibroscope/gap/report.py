@@ -36,6 +36,9 @@ __all__ = [
 
 #: the effect vocabulary, read from its one table (:data:`vibroscope.gap.effects.EFFECT_TABLE`)
 EFFECTS = tuple(EFFECT_TABLE)
+#: the summary says what the period-to-period variation of a periodic input's outputs measures
+#: when it exceeds the white noise floor by more than this factor
+PERIOD_FLOOR_NOTE = 2.0
 
 
 def _num(x):
@@ -468,6 +471,12 @@ class GapReport:
                 lines.append(f"{label} is not predictable: its own outputs at twice the integration sub-steps {by} "
                              f"(noise floor {pr['noise_floor']:.4f}); the gap it leaves is not searched for further "
                              "effects")
+        pfl = ((self.meta or {}).get("incoherent_gap") or {}).get("period_floor")
+        if pfl and pfl.get("ratio_to_white_floor") and pfl["ratio_to_white_floor"] > PERIOD_FLOOR_NOTE:
+            lines.append(f"the outputs vary from period to period by nrmse {pfl['nrmse']:.4f} over {pfl['n_periods']} "
+                         f"periods, {pfl['ratio_to_white_floor']:.3g} x the white noise floor: noise in the band or "
+                         "an unlogged disturbance (or a response that does not repeat) that no model of the logged "
+                         "input can explain")
         changed = ((self.meta or {}).get("incoherent_gap") or {}).get("changed")
         if changed:
             lines.append(f"not coherent with the input: {changed}")
