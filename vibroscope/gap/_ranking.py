@@ -36,7 +36,7 @@ from vibroscope.gap._run import (
 )
 from vibroscope.gap.effects import EFFECT_TABLE
 from vibroscope.gap.fit import fit_time_domain
-from vibroscope.gap.levels import level_blas
+from vibroscope.gap.levels import level_blas, period_floor
 from vibroscope.gap.measure import nested_gain, noise_floor, nrmse
 from vibroscope.gap.report import Candidate
 
@@ -93,8 +93,10 @@ def evaluate_candidates(run: Run, results: list, workers) -> list:
     ``floor_rank_method``; returns the evaluated items."""
     with ThreadPoolExecutor(max(1, workers)) as ex:
         evaluated = list(ex.map(partial(evaluate, run), results))
+    if run.period is False:
+        run.period = period_floor(run.ys, run.us, run.all_masks, run.fs)
     run.floor_rank, run.floor_rank_method = ranking_floor(run.floor, run.nf, evaluated, run.ys, run.us, run.split,
-                                                           run.val_logs, run.fs, run.nps)
+                                                           run.val_logs, run.fs, run.nps, period=run.period)
     return evaluated
 
 
@@ -323,7 +325,12 @@ def nested_order(cands: list, ys, split, val_logs, fs) -> dict:
     return out
 
 
-def ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best: int = 3):
+#: the period-to-period floor replaces the ranking floor when it exceeds the data's this many times
+PERIOD_RANK_FACTOR = 2.0
+USE_PERIOD_FLOOR = True
+
+
+def ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best: int = 3, period=None):
     """The noise floor the candidates are ranked against, and how it was found.
 
     The data's out-of-band output level (:func:`~vibroscope.gap.measure.noise_floor`) bounds
@@ -331,9 +338,18 @@ def ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best
     clearance) raise it, and every candidate then looks as good as the noise. The held-out
     residual of a candidate, measured minus simulated, holds the noise plus that model's own
     error: its out-of-band level is another upper bound. The lowest of the data's and the
-    `n_best` best candidates' (by held-out gap) is returned; it is never above the data's.
+    `n_best` best candidates' (by held-out gap) is returned; it is never above the data's, unless
+    `period` (a :class:`~vibroscope.gap.levels.PeriodFloor`: the outputs' variation from period to
+    period under a periodic input) exceeds it :data:`PERIOD_RANK_FACTOR` times: then the noise in
+    the band is not white (a sensor's filter, an unlogged disturbance), no model of the logged
+    input can come below that variation, and it is the floor the candidates are ranked against.
     Evaluated items are ``(spec, model, p, gap_fit, gap_held_out, outputs, contrib, base)``.
     """
+    if (USE_PERIOD_FLOOR and period is not None and np.isfinite(floor)
+            and period.nrmse > PERIOD_RANK_FACTOR * floor):
+        return float(period.nrmse), (f"the outputs' variation from period to period ({period.n_periods} periods of "
+                                     f"the periodic input), {period.nrmse / floor:.3g} x the data's out-of-band floor "
+                                     f"{floor:.3g}: noise in the band that is not white, or an unlogged disturbance")
     if not (np.isfinite(floor) and nf.method.startswith("out-of-band") and val_logs):
         return floor, "the data's floor"
     best, how = floor, "the data's floor (no candidate's held-out residual is lower out of band)"

@@ -814,8 +814,9 @@ def _check_incoherent(run: Run) -> None:
 
     Every verdict: ``meta["incoherent_gap"]["period_floor"]`` holds the floor a periodic input
     measures in the band (:func:`~vibroscope.gap.levels.period_floor`, the outputs' variation
-    from period to period; None without enough alike periods) beside the white floor, as
-    evidence only: no verdict reads it.
+    from period to period; None without enough alike periods) beside the white floor (the
+    candidates were ranked against it when it is the larger by
+    :data:`~vibroscope.gap._ranking.PERIOD_RANK_FACTOR`: :func:`~vibroscope.gap._ranking.ranking_floor`).
     """
     fs, nps, window = run.fs, run.nps, run.window
     cg_nom = coherent_gap(run.ys, run.y_nom, run.us, run.all_masks, fs, nps, window=window)
@@ -830,9 +831,9 @@ def _check_incoherent(run: Run) -> None:
                        "the linear refit's on the held-out samples"),
             "nominal": cg_nom.to_dict(), "refit": cg_ref.to_dict(),
             "threshold_coherent": float(NONE_FACTOR * run.floor), "changed": None}
-    # evidence only (no verdict reads it yet): the in-band floor a periodic input measures, the
-    # outputs' variation from period to period, beside the white floor seen beyond the band
-    pf = period_floor(run.ys, run.us, run.all_masks, fs)
+    # the in-band floor a periodic input measures, the outputs' variation from period to period,
+    # beside the white floor seen beyond the band (the ranking's, ranking_floor)
+    pf = run.period if run.period is not False else period_floor(run.ys, run.us, run.all_masks, fs)
     info["period_floor"] = (None if pf is None else
                             pf.to_dict() | {"white_floor": float(run.floor),
                                             "ratio_to_white_floor": float(pf.nrmse / run.floor) if run.floor > 0
