@@ -36,7 +36,7 @@ from vibroscope.gap._run import (
 )
 from vibroscope.gap.effects import EFFECT_TABLE
 from vibroscope.gap.fit import fit_time_domain
-from vibroscope.gap.levels import level_blas, period_floor
+from vibroscope.gap.levels import level_blas
 from vibroscope.gap.measure import nested_gain, noise_floor, nrmse
 from vibroscope.gap.report import Candidate
 
@@ -93,8 +93,6 @@ def evaluate_candidates(run: Run, results: list, workers) -> list:
     ``floor_rank_method``; returns the evaluated items."""
     with ThreadPoolExecutor(max(1, workers)) as ex:
         evaluated = list(ex.map(partial(evaluate, run), results))
-    if run.period is False:
-        run.period = period_floor(run.ys, run.us, run.all_masks, run.fs)
     run.floor_rank, run.floor_rank_method = ranking_floor(run.floor, run.nf, evaluated, run.ys, run.us, run.split,
                                                            run.val_logs, run.fs, run.nps, period=run.period)
     return evaluated
@@ -327,7 +325,6 @@ def nested_order(cands: list, ys, split, val_logs, fs) -> dict:
 
 #: the period-to-period floor replaces the ranking floor when it exceeds the data's this many times
 PERIOD_RANK_FACTOR = 2.0
-USE_PERIOD_FLOOR = True
 
 
 def ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best: int = 3, period=None):
@@ -345,7 +342,7 @@ def ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best
     input can come below that variation, and it is the floor the candidates are ranked against.
     Evaluated items are ``(spec, model, p, gap_fit, gap_held_out, outputs, contrib, base)``.
     """
-    if (USE_PERIOD_FLOOR and period is not None and np.isfinite(floor)
+    if (period is not None and np.isfinite(floor)
             and period.nrmse > PERIOD_RANK_FACTOR * floor):
         return float(period.nrmse), (f"the outputs' variation from period to period ({period.n_periods} periods of "
                                      f"the periodic input), {period.nrmse / floor:.3g} x the data's out-of-band floor "

@@ -355,8 +355,8 @@ class Run:
     # held-out evaluation and ranking (rank_candidates)
     floor_rank: float | None = None
     floor_rank_method: str | None = None
-    # the in-band floor a periodic input measures (levels.period_floor), computed once; False: not yet
-    period: object = False
+    # the in-band floor a periodic input measures (levels.period_floor; None without alike periods)
+    period: object = None
     k_before: float | None = None
     cands: list | None = None
     best_i: int | None = None

@@ -681,8 +681,9 @@ def _place_upper_residual(run: Run) -> None:
 
 def _simulate_nominal(run: Run) -> None:
     """Stage 1: the nominal model simulated on every log, its held-out gap, the non-transient
-    sample masks and the noise floor. Sets ``y_nom``, ``gap_before``, ``all_masks``, ``nf``,
-    ``floor``."""
+    sample masks, the noise floor beyond the band and the floor a periodic input measures in it
+    (:func:`~vibroscope.gap.levels.period_floor`). Sets ``y_nom``, ``gap_before``, ``all_masks``,
+    ``nf``, ``floor``, ``period``."""
     model, sims, ys, us, split, fs, nps = run.model, run.sims, run.ys, run.us, run.split, run.fs, run.nps
     t = time.perf_counter()
     y_nom = [sim.run(model) for sim in sims]
@@ -697,6 +698,7 @@ def _simulate_nominal(run: Run) -> None:
     floor = nf.nrmse
     run.timings["nominal"] = time.perf_counter() - t
     run.y_nom, run.gap_before, run.all_masks, run.nf, run.floor = y_nom, gap_before, all_masks, nf, floor
+    run.period = period_floor(ys, us, all_masks, fs)
 
 
 def _refit_linear(run: Run) -> None:
@@ -833,7 +835,7 @@ def _check_incoherent(run: Run) -> None:
             "threshold_coherent": float(NONE_FACTOR * run.floor), "changed": None}
     # the in-band floor a periodic input measures, the outputs' variation from period to period,
     # beside the white floor seen beyond the band (the ranking's, ranking_floor)
-    pf = run.period if run.period is not False else period_floor(run.ys, run.us, run.all_masks, fs)
+    pf = run.period
     info["period_floor"] = (None if pf is None else
                             pf.to_dict() | {"white_floor": float(run.floor),
                                             "ratio_to_white_floor": float(pf.nrmse / run.floor) if run.floor > 0

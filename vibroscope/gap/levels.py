@@ -33,6 +33,7 @@ import scipy.optimize
 import scipy.signal
 
 from vibroscope.gap.measure import UNEXCITED, excited_band, input_levels
+from vibroscope.signals import true_runs
 from vibroscope.spectral import csd_matrix
 
 __all__ = ["detect_period", "steady_state_start", "period_floor", "PeriodFloor", "frf_segment_length", "level_blas", "fit_mode", "window_kernel", "LevelBLA", "ModeTrend",
@@ -366,29 +367,24 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
         rms = np.sqrt(np.mean(ub**2, axis=1))
         alike = np.r_[False, np.sqrt(np.mean(np.diff(ub, axis=0) ** 2, axis=1))
                       <= PERIOD_INPUT_TOL * np.maximum(rms[1:], 1e-300)]
+        # a run's first periods settle; a masked period splits a run into consecutive pieces (the
+        # system's own response goes on: no settling again)
+        settled = np.zeros(nb, bool)
+        starts = np.r_[np.flatnonzero(~alike), nb]
+        for k, j in zip(starts[:-1], starts[1:]):
+            settled[k + PERIOD_SETTLE:j] = True
         used_here = 0
-        k = 0
-        while k < nb:
-            j = k + 1
-            while j < nb and alike[j]:
-                j += 1
-            kept = [q for q in range(k + PERIOD_SETTLE, j) if ok[q]]
-            # a masked period splits the run into consecutive pieces (the system's own response
-            # goes on: no settling again)
-            pieces = np.split(np.asarray(kept, int), np.flatnonzero(np.diff(kept) != 1) + 1) if kept else []
-            for run in pieces:
-                if len(run) < PERIOD_MIN:
-                    continue
-                Y = yb[:, run, :]
-                r = Y - Y.mean(axis=1, keepdims=True)
-                a = np.sum(r**2, axis=(1, 2))
-                b = np.sum(Y**2, axis=(1, 2))
-                ss = a if ss is None else ss + a
-                pw = b if pw is None else pw + b
-                dof += (len(run) - 1) * T
-                n_used += len(run) * T
-                used_here += len(run)
-            k = j
+        for a0, b0 in zip(*true_runs(settled & ok)):
+            if b0 - a0 < PERIOD_MIN:
+                continue
+            Y = yb[:, a0:b0, :]
+            r = Y - Y.mean(axis=1, keepdims=True)
+            a, b = np.sum(r**2, axis=(1, 2)), np.sum(Y**2, axis=(1, 2))
+            ss = a if ss is None else ss + a
+            pw = b if pw is None else pw + b
+            dof += (b0 - a0 - 1) * T
+            n_used += (b0 - a0) * T
+            used_here += b0 - a0
         if used_here:
             n_periods += used_here
             periods.append(int(T))
