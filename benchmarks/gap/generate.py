@@ -280,6 +280,7 @@ def make_input(
     levels: bool = True,
     period_s: float = 2.0,
     fade: bool = False,
+    level_blocks: bool = False,
     band_edge: float = F_BAND_EDGE,
     fs: float = FS,
     oversample: int = OVERSAMPLE,
@@ -292,7 +293,9 @@ def make_input(
     [Farina 2000, "Simultaneous measurement of impulse response and distortion with a
     swept-sine technique", AES 108th Convention], as a stepped-level ground vibration test
     runs it. With `levels`, the force is scaled in blocks of 2-4 s cycling over the three levels
-    1 : 2.5 : 6 (each cycle a random order), with 0.1 s raised-cosine transitions and a
+    1 : 2.5 : 6 (each cycle a random order; with `level_blocks` instead three blocks of a third of
+    the record each, one per level in a random order, a multisine's block edges on whole periods,
+    as a stepped-level test runs them), with 0.1 s raised-cosine transitions and a
     0.2 s fade-in and fade-out (a sweep instead: three sweeps of a third of the record each,
     one per level in a random order, each faded in and out over 0.2 s); the result is
     low-passed below 300 Hz on the fine grid (periodic brick wall), so it is exactly
@@ -343,11 +346,17 @@ def make_input(
         blocks = []
         t, pos = 0.0, 0
         order: list[int] = []
+        if level_blocks:
+            unit = int(round(period_s * fsf)) if kind == "multisine" else 1
+            per = max(nf // len(LEVELS) // unit, 1) * unit
+            lengths = [per] * (len(LEVELS) - 1) + [nf - per * (len(LEVELS) - 1)]
+            order = list(rng.permutation(len(LEVELS)))
+            info["level_blocks"] = True
         while pos < nf:
             if not order:
                 order = list(rng.permutation(len(LEVELS)))
             lvl = order.pop(0)
-            length = int(round(rng.uniform(2.0, 4.0) * fsf))
+            length = lengths.pop(0) if level_blocks else int(round(rng.uniform(2.0, 4.0) * fsf))
             env[pos : pos + length] = LEVELS[lvl]
             blocks.append({"t_start_s": pos / fsf, "duration_s": min(length, nf - pos) / fsf, "level": LEVELS[lvl]})
             pos += length
@@ -1269,7 +1278,8 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
               hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
               band_edge: float | None = None, disturbance: float | None = None,
               noise_lowpass: float | None = None, input_noise: float | None = None,
-              forms: str = "ours", dofs: tuple = (1, 3)) -> Case:
+              forms: str = "ours", dofs: tuple = (1, 3), period: tuple | None = None,
+              level_blocks: bool = False) -> Case:
     """Draw one case of class `effect` (one of :data:`CLASSES`; see the module docstring).
 
     `integrator`: the truth integrator ("lsoda" or "rk4"). `multi_log`: three logs of
@@ -1307,8 +1317,14 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
     smooth (``limit * tanh(u / limit)``, not a clip), the Coulomb friction's regularisation
     velocity drawn log-uniform over 1e-4 .. 1e-2 m/s (not 1e-3), the added hysteresis loop a
     Bouc-Wen element of exponent n = 2 (not 1). `dofs`: the fewest and the most DOFs of the
-    nominal network (default (1, 3); :func:`random_chain_model`).
+    nominal network (default (1, 3); :func:`random_chain_model`). `period`: None (default: a
+    multisine repeats every 2 s) or (lo, hi): a multisine's period drawn log-uniform from lo to hi
+    seconds (whole log samples). `level_blocks`: a one-log case steps its three levels once, in
+    three blocks of a third of the record each (a multisine's on whole periods), instead of
+    cycling them in blocks of 2-4 s (:func:`make_input`); default False.
     """
+    if period is not None and not (0 < period[0] <= period[1]):
+        raise ValueError(f"period={period!r} must be (lo, hi) seconds with 0 < lo <= hi")
     if forms not in ("ours", "other"):
         raise ValueError(f"forms={forms!r} must be 'ours' or 'other'")
     if band_edge is not None and not 0 < band_edge < FS / 2:
@@ -1345,16 +1361,21 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         kind = str(rng.choice(["random", "multisine"]))
         if input_kind is not None:  # drawn all the same: the later draws keep their order
             kind = input_kind
+        period_s = 2.0
+        if kind == "multisine" and period is not None:  # drawn only when asked: the default cases are unchanged
+            period_s = max(round(_log_uniform(rng, *period) * FS), 2) / FS
         n_cal = n if kind == "sweep" else min(n, int(round(CAL_SECONDS / nlog * FS)))
         f_hi = float(rng.uniform(max(150.0, 1.25 * f_max), 280.0 if band_edge is None else band_edge - 20.0))
         edge = F_BAND_EDGE if band_edge is None else float(band_edge)
         if multi_log:
-            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, levels=False, fade=True, band_edge=edge).scaled(lv)
+            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, levels=False, fade=True, band_edge=edge,
+                             period_s=period_s).scaled(lv)
                   for lv in LEVELS]
             for uu, lv in zip(us, LEVELS):
                 uu.info["level"] = lv
         else:
-            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, band_edge=edge)]
+            us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, band_edge=edge, period_s=period_s,
+                             level_blocks=level_blocks)]
         # scale the force so that the pooled acceleration RMS of the sensed DOFs is 5-20 m/s^2
         acc_probe = replace(nominal, outputs=tuple(Output(o.dof, "acceleration") for o in nominal.outputs))
         H = acc_probe.frf(np.fft.rfftfreq(n, 1 / FS))[:, :, 0]
@@ -1963,12 +1984,12 @@ def write_case(out: Path, name: str, case: Case) -> None:
 
 def _one(job):
     (out, name, effect, seed, index, duration, integrator, multi, weak_end, offset_max, hys_k, input_kind, edge,
-     dist, lowpass, in_noise, forms, dofs) = job
+     dist, lowpass, in_noise, forms, dofs, period, blocks) = job
     tic = time.perf_counter()
     case = make_case(effect, case_rng(seed, effect, index), duration, integrator=integrator, multi_log=multi,
                      weak_end=weak_end, offset_max=offset_max, hysteresis_in_stiffness=hys_k, input_kind=input_kind,
                      band_edge=edge, disturbance=dist, noise_lowpass=lowpass, input_noise=in_noise, forms=forms,
-                     dofs=dofs)
+                     dofs=dofs, period=period, level_blocks=blocks)
     case.truth["seed"] = {"seed": seed, "class_index": index}
     write_case(Path(out), name, case)
     return name, effect, case.truth["gap_nominal_noise_free"], time.perf_counter() - tic, integrator, multi
@@ -1991,14 +2012,15 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
              hysteresis_in_stiffness: bool = False, input_kind: str | None = None,
              band_edge: float | None = None, disturbance: float | None = None,
              noise_lowpass: float | None = None, input_noise: float | None = None,
-             forms: str = "ours", dofs: tuple = (1, 3)) -> list[tuple]:
+             forms: str = "ours", dofs: tuple = (1, 3), period: tuple | None = None,
+             level_blocks: bool = False) -> list[tuple]:
     """Generate ``per_class`` cases of every class into `out`; cases are interleaved by class
     (case_000 = first class, case_001 = second class, ...). `integrator` None alternates
     lsoda / rk4 by case number; `multi_log` is the share of three-log cases (drawn per case
     from (seed, class, index)); `weak_end` False keeps the strength ranges of the seeds run
     before session 39 (:func:`_calibrate`); `offset_max` is the largest input offset as a share of
     the input's RMS force (:data:`OFFSET_MAX`); `hysteresis_in_stiffness`, `input_kind`, `band_edge`,
-    `disturbance`, `noise_lowpass`, `input_noise`, `forms`, `dofs`: see :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
+    `disturbance`, `noise_lowpass`, `input_noise`, `forms`, `dofs`, `period`, `level_blocks`: see :func:`make_case` (closed-loop cases keep their own reference). Returns (name, class, gap, s, integrator, multi-log)."""
     out = Path(out)
     classes = list(classes)
     for c in classes:
@@ -2013,7 +2035,9 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
                                                    "input_kind": input_kind, "band_edge": band_edge,
                                                    "disturbance": disturbance, "noise_lowpass": noise_lowpass,
                                                    "input_noise": input_noise, "forms": forms,
-                                                   "dofs": list(dofs)},
+                                                   "dofs": list(dofs),
+                                                   "period": None if period is None else list(period),
+                                                   "level_blocks": level_blocks},
                                                   indent=2) + "\n")
     jobs_list = []
     for j in range(per_class):
@@ -2023,7 +2047,8 @@ def generate(out, per_class: int = 10, classes=CLASSES, seed: int = 0, duration:
             multi = multi_log_drawn(seed, c, j, multi_log)
             jobs_list.append((str(out), f"case_{k:03d}", c, seed, j, duration, integ, multi, weak_end, offset_max,
                               hysteresis_in_stiffness, input_kind, band_edge, disturbance, noise_lowpass,
-                              input_noise, forms, tuple(dofs)))
+                              input_noise, forms, tuple(dofs), None if period is None else tuple(period),
+                              level_blocks))
     results = []
     if jobs > 1:
         import multiprocessing as mp
@@ -2095,13 +2120,19 @@ def main(argv=None) -> int:
                    "regularisation velocity from 1e-4 to 1e-2 m/s, a Bouc-Wen loop of exponent 2); default ours")
     p.add_argument("--dofs", type=int, nargs=2, default=(1, 3), metavar=("LO", "HI"),
                    help="open-loop and modal cases: the nominal network has LO to HI DOFs (default 1 3)")
+    p.add_argument("--period", type=float, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="open-loop cases: a multisine's period drawn log-uniform from LO to HI s (default: 2 s)")
+    p.add_argument("--level-blocks", action="store_true",
+                   help="one-log open-loop cases step the three levels once, a third of the record each (a "
+                   "multisine's blocks on whole periods), instead of cycling them in blocks of 2-4 s")
     a = p.parse_args(argv)
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
                    multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max,
                    hysteresis_in_stiffness=a.hysteresis_in_stiffness, input_kind=a.input_kind,
                    band_edge=a.band_edge, disturbance=a.disturbance, noise_lowpass=a.noise_lowpass,
-                   input_noise=a.input_noise, forms=a.forms, dofs=tuple(a.dofs))
+                   input_noise=a.input_noise, forms=a.forms, dofs=tuple(a.dofs),
+                   period=None if a.period is None else tuple(a.period), level_blocks=a.level_blocks)
     times = [r[3] for r in res]
     print(f"{len(res)} cases in {time.perf_counter() - tic:.1f} s "
           f"(per case: median {np.median(times):.1f} s, max {np.max(times):.1f} s) -> {a.out}")

@@ -338,6 +338,34 @@ def test_period_floor_is_what_no_model_of_the_logged_input_can_explain(k3, distu
     assert pf.nrmse == pytest.approx(left, rel=0.15 if k3 else 0.06), (pf.nrmse, left)
     if disturbance:
         assert pf.nrmse > 3 * 0.02
+    # noise relative to each log's level, a disturbance too: the relative variation does not grow
+    assert not pf.grows_with_level and len(pf.run_nrmse) == 2
+
+
+def test_a_variation_that_grows_with_the_level_is_the_responses_own_not_a_floor():
+    """Outputs that stop repeating at the higher level only (as a chaotic or subharmonic response
+    does) are flagged; a fixed-size noise, whose relative part falls with level, is not."""
+    from vibroscope.gap.levels import period_floor
+
+    us, ys, _ = _periodic_logs(0.0, 10, 0.0, 0.0, levels=(10.0, 40.0))
+    rng = np.random.default_rng(11)
+    ones = [np.ones(y.shape[1], bool) for y in ys]
+    fixed = 0.02 * np.std(ys[0])  # the low level's 2 %, the high level's 0.5 %
+    noisy = [y + fixed * rng.standard_normal(y.shape) for y in ys]
+    pf = period_floor(noisy, us, ones, FS)
+    assert pf.run_nrmse[1] == pytest.approx(pf.run_nrmse[0] / 4, rel=0.2) and not pf.grows_with_level
+    # the high level's outputs 10 % non-repeating besides that noise
+    grown = [noisy[0], noisy[1] + 0.1 * np.std(ys[1]) * rng.standard_normal(ys[1].shape)]
+    pf = period_floor(grown, us, ones, FS)
+    assert pf.run_levels[1] == pytest.approx(4 * pf.run_levels[0])
+    assert pf.run_nrmse[1] > 4 * pf.run_nrmse[0] and pf.grows_with_level
+    # a ranking floor is not taken from it
+    from types import SimpleNamespace
+
+    from vibroscope.gap._ranking import ranking_floor
+
+    f, why = ranking_floor(0.005, SimpleNamespace(method="given"), [], None, None, None, [], FS, 400, period=pf)
+    assert f == 0.005 and "period" not in why
 
 
 def test_period_floor_needs_alike_periods():

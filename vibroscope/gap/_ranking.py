@@ -339,10 +339,13 @@ def ranking_floor(floor, nf, evaluated, ys, us, split, val_logs, fs, nps, n_best
     `period` (a :class:`~vibroscope.gap.levels.PeriodFloor`: the outputs' variation from period to
     period under a periodic input) exceeds it :data:`PERIOD_RANK_FACTOR` times: then the noise in
     the band is not white (a sensor's filter, an unlogged disturbance), no model of the logged
-    input can come below that variation, and it is the floor the candidates are ranked against.
+    input can come below that variation, and it is the floor the candidates are ranked against --
+    unless it grows with the excitation level (``period.grows_with_level``: the response itself
+    stops repeating, chaos or a subharmonic of a strong nonlinearity, which the right model
+    reproduces in kind; ranking against it would hide the nonlinearity).
     Evaluated items are ``(spec, model, p, gap_fit, gap_held_out, outputs, contrib, base)``.
     """
-    if (period is not None and np.isfinite(floor)
+    if (period is not None and np.isfinite(floor) and not period.grows_with_level
             and period.nrmse > PERIOD_RANK_FACTOR * floor):
         return float(period.nrmse), (f"the outputs' variation from period to period ({period.n_periods} periods of "
                                      f"the periodic input), {period.nrmse / floor:.3g} x the data's out-of-band floor "

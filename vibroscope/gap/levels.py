@@ -270,6 +270,16 @@ PERIOD_INPUT_TOL = 0.1
 PERIOD_SETTLE = 2
 #: fewest alike periods a run must keep after :data:`PERIOD_SETTLE` to be used
 PERIOD_MIN = 3
+#: a period whose input departs from its run's mean period by more than this many times the run's
+#: median departure is dropped (a level transition or a fade inside a period that still passed
+#: :data:`PERIOD_INPUT_TOL`): its outputs differ from the others' by the response to that change
+PERIOD_INPUT_OUTLIER = 2.0
+#: stretches per period over which a period's departure is measured (its largest RMS)
+PERIOD_WINDOWS = 16
+#: the variation grows with level when the run of the highest input level varies this many times
+#: (relative) the run of the lowest, their input levels at least :data:`PERIOD_LEVEL_APART` apart
+PERIOD_LEVEL_GROWTH = 2.0
+PERIOD_LEVEL_APART = 1.5
 
 
 @dataclass(frozen=True)
@@ -291,6 +301,17 @@ class PeriodFloor:
         The period of each log used, samples.
     logs : tuple of int
         The logs used (indices into the lists given).
+    run_levels : tuple of float
+        Each run's input RMS (input unit, N), in the order found.
+    run_nrmse : tuple of float
+        Each run's own ``sqrt(mean_c (s2_c / p_c))``.
+    grows_with_level : bool
+        The run of the highest input level varies (relative) more than :data:`PERIOD_LEVEL_GROWTH`
+        times the run of the lowest (their levels at least :data:`PERIOD_LEVEL_APART` apart). Noise
+        and a disturbance do not: of fixed size, their relative part falls with level; relative to
+        the level, it stays. A response that stops repeating as the level rises (chaos, a
+        subharmonic of a strong nonlinearity) does: then the variation is the system's own, not a
+        floor (:func:`vibroscope.gap._ranking.ranking_floor` does not rank against it).
     """
 
     nrmse: float
@@ -298,6 +319,9 @@ class PeriodFloor:
     n_periods: int
     period_samples: tuple
     logs: tuple
+    run_levels: tuple = ()
+    run_nrmse: tuple = ()
+    grows_with_level: bool = False
 
     def to_dict(self) -> dict:
         """The fields as a dict.
@@ -305,10 +329,13 @@ class PeriodFloor:
         Returns
         -------
         dict
-            JSON-ready: ``nrmse``, ``per_channel``, ``n_periods``, ``period_samples``, ``logs``.
+            JSON-ready: ``nrmse``, ``per_channel``, ``n_periods``, ``period_samples``, ``logs``,
+            ``run_levels``, ``run_nrmse``, ``grows_with_level``.
         """
         return {"nrmse": self.nrmse, "per_channel": list(self.per_channel), "n_periods": self.n_periods,
-                "period_samples": list(self.period_samples), "logs": list(self.logs)}
+                "period_samples": list(self.period_samples), "logs": list(self.logs),
+                "run_levels": list(self.run_levels), "run_nrmse": list(self.run_nrmse),
+                "grows_with_level": self.grows_with_level}
 
 
 def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | None:
@@ -322,7 +349,10 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
     sees only beyond it). Each log is cut into whole periods from its first sample; consecutive
     periods whose inputs agree within :data:`PERIOD_INPUT_TOL` (relative RMS) form a run, its
     first :data:`PERIOD_SETTLE` periods are dropped (the transient), a period with a sample
-    outside the log's mask splits it, and each piece of at least :data:`PERIOD_MIN` periods gives each channel's
+    outside the log's mask splits it, a period whose input departs from the piece's mean period
+    more than :data:`PERIOD_INPUT_OUTLIER` times the piece's median departure is dropped (a level
+    transition or a fade that only part of the period holds: the input noise of a load cell spreads
+    every period's departure alike), and each piece of at least :data:`PERIOD_MIN` periods gives each channel's
     sample variance about the run's mean period (Pintelon & Schoukens [1]_, sec. 2.4 and 4.3:
     the sample noise variance from repeated periods).
 
@@ -351,6 +381,7 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
     ss = pw = None
     dof = n_used = 0
     n_periods, periods, logs = 0, [], []
+    run_levels, run_nrmse = [], []
     for i, (y, u, m) in enumerate(zip(ys, us, masks)):
         y = np.atleast_2d(np.asarray(y, float))
         u0 = np.atleast_2d(np.asarray(u, float))[0]
@@ -377,14 +408,20 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
         for a0, b0 in zip(*true_runs(settled & ok)):
             if b0 - a0 < PERIOD_MIN:
                 continue
-            Y = yb[:, a0:b0, :]
+            keep = _steady_periods(ub[a0:b0])
+            if keep.sum() < PERIOD_MIN:
+                continue
+            Y = yb[:, a0:b0, :][:, keep, :]
             r = Y - Y.mean(axis=1, keepdims=True)
             a, b = np.sum(r**2, axis=(1, 2)), np.sum(Y**2, axis=(1, 2))
             ss = a if ss is None else ss + a
             pw = b if pw is None else pw + b
-            dof += (b0 - a0 - 1) * T
-            n_used += (b0 - a0) * T
-            used_here += b0 - a0
+            k_used = int(keep.sum())
+            run_levels.append(float(np.sqrt(np.mean(ub[a0:b0][keep] ** 2))))
+            run_nrmse.append(float(np.sqrt(np.mean(a / ((k_used - 1) * T) / np.maximum(b / (k_used * T), 1e-300)))))
+            dof += (k_used - 1) * T
+            n_used += k_used * T
+            used_here += k_used
         if used_here:
             n_periods += used_here
             periods.append(int(T))
@@ -392,8 +429,31 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
     if ss is None or dof == 0 or not np.all(pw > 0):
         return None
     per = np.sqrt((ss / dof) / (pw / n_used))
+    lo, hi = int(np.argmin(run_levels)), int(np.argmax(run_levels))
+    grows = bool(run_levels[hi] >= PERIOD_LEVEL_APART * run_levels[lo]
+                 and run_nrmse[hi] > PERIOD_LEVEL_GROWTH * run_nrmse[lo])
     return PeriodFloor(nrmse=float(np.sqrt(np.mean(per**2))), per_channel=tuple(float(x) for x in per),
-                       n_periods=int(n_periods), period_samples=tuple(periods), logs=tuple(logs))
+                       n_periods=int(n_periods), period_samples=tuple(periods), logs=tuple(logs),
+                       run_levels=tuple(run_levels), run_nrmse=tuple(run_nrmse), grows_with_level=grows)
+
+
+def _steady_periods(ub: np.ndarray) -> np.ndarray:
+    """Which periods (rows of `ub`, one run's inputs) keep: those whose departure from the run's
+    period (the largest RMS over :data:`PERIOD_WINDOWS` stretches of the period: a transition is
+    short) is within :data:`PERIOD_INPUT_OUTLIER` times the median departure (the period taken
+    first as the sample-wise median of the periods, an outlier's pull left out, then as the mean of
+    those kept)."""
+    keep = np.ones(ub.shape[0], bool)
+    scale = 1e-6 * np.sqrt(np.mean(ub**2))
+    nw = min(PERIOD_WINDOWS, max(ub.shape[1] // 8, 1))
+    w = ub.shape[1] // nw
+    for centre in (np.median(ub, axis=0), None):
+        ref = ub[keep].mean(axis=0) if centre is None else centre
+        dev = np.sqrt(np.mean(((ub - ref)[:, : nw * w] ** 2).reshape(ub.shape[0], nw, w), axis=2)).max(axis=1)
+        keep = dev <= PERIOD_INPUT_OUTLIER * np.median(dev[keep]) + scale
+        if keep.sum() < PERIOD_MIN:
+            break
+    return keep
 
 
 def _pow2_default(fs: float, n: int) -> int:
