@@ -282,7 +282,7 @@ PERIOD_LEVEL_GROWTH = 2.0
 PERIOD_LEVEL_APART = 1.5
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PeriodFloor:
     """The outputs' part that is not periodic with a periodic input, as a gap (nrmse).
 
