@@ -25,6 +25,8 @@ from vibroscope.gap._run import (
     PM_NAME_TOL,
     POLISH_FLOOR_FACTOR,
     POLISH_GAIN,
+    POLISH_RIVAL_FIT,
+    POLISH_RIVALS,
     POLISH_ROUNDS,
     POLISH_S,
     Run,
@@ -55,7 +57,7 @@ def rank_candidates(run: Run, *, workers) -> None:
     bla_cache: dict[int, list | None] = {}
     best_i = admissible_best(run, cands, bla_cache)
     best_i, trend_shifts = best_reproducing_trend(run, cands, best_i, bla_cache)
-    polish = polish_winner(run, cands, best_i)
+    polish, best_i = polish_winner(run, cands, best_i, bla_cache, workers=workers)
     verdict, ordered, chosen = verdict_of(run, cands, best_i)
     run.timings["validation"] = time.perf_counter() - t
     run.cands, run.best_i = cands, best_i
@@ -253,15 +255,53 @@ def best_reproducing_trend(run: Run, cands: list, best_i, cache: dict) -> tuple[
     return best_i, trend_shifts
 
 
-def polish_winner(run: Run, cands: list, best_i) -> dict:
-    """A nonlinear best polished at full accuracy (:func:`polish_candidate`), replaced in `cands`; returns
-    the polishing arguments (used again for a combination)."""
+def polish_rivals(run: Run, cands: list, best_i: int) -> list[int]:
+    """Indices of the nonlinear candidates polished beside a nonlinear winner: of each other class
+    its best by fitting gap, not vanished, fitted within :data:`POLISH_RIVAL_FIT` times the
+    winner's fitting gap; the :data:`POLISH_RIVALS` closest."""
+    w = cands[best_i][0]
+    if not np.isfinite(w.gap_fit):
+        return []
+    best: dict[str, int] = {}
+    for i, c in enumerate(cands):
+        s_ = c[3]
+        if (i == best_i or s_ is None or s_.linear or c[0].effect == w.effect or c[0].vanished
+                or EFFECT_TABLE[c[0].effect].kind != "nonlinear"
+                or not (np.isfinite(c[0].gap_fit) and c[0].gap_fit <= POLISH_RIVAL_FIT * w.gap_fit)):
+            continue
+        if c[0].effect not in best or c[0].gap_fit < cands[best[c[0].effect]][0].gap_fit:
+            best[c[0].effect] = i
+    return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:POLISH_RIVALS]
+
+
+def polish_winner(run: Run, cands: list, best_i, cache: dict | None = None, *, workers: int = 1):
+    """A nonlinear best polished at full accuracy (:func:`polish_candidate`), replaced in `cands`,
+    and beside it its close rivals (:func:`polish_rivals`): a rival that is admissible, reproduces
+    the measured level trend (when there is one) and ranks ahead of the polished winner becomes the
+    best. Returns ``(the polishing arguments (used again for a combination), the best's index)``."""
     polish = dict(model=run.model, lin=run.lin, lo_l=run.lo_l, hi_l=run.hi_l, sims=run.sims, ys=run.ys,
                   split=run.split, fs=run.fs, held_out=run.held_out, key=run.key, k_before=run.k_before,
                   floor=run.floor_rank)
-    if best_i is not None and cands[best_i][3] is not None and not cands[best_i][3].linear:
-        cands[best_i] = polish_candidate(cands[best_i], [(cands[best_i][3], cands[best_i][4])], **polish)
-    return polish
+    if best_i is None or cands[best_i][3] is None or cands[best_i][3].linear:
+        return polish, best_i
+    todo = [best_i] + polish_rivals(run, cands, best_i)
+    with ThreadPoolExecutor(max(1, min(workers, len(todo)))) as ex:
+        done = list(ex.map(lambda i: polish_candidate(cands[i], [(cands[i][3], cands[i][4])], **polish), todo))
+    for i, c in zip(todo, done):
+        cands[i] = c
+    cache = {} if cache is None else cache
+    key = run.key
+
+    def rank(i):
+        return key(cands[i][0].gap_after, cands[i][0].n_parameters)
+
+    trend = run.level.get("trend") in ("hardening", "softening")
+    for j in sorted(todo[1:], key=rank):
+        if rank(j) < rank(best_i) and admissible(run, cache, cands[j]) and (
+                not trend or reproduces_trend(run, cache, {}, cands[j])):
+            best_i = j
+            break
+    return polish, best_i
 
 
 def verdict_of(run: Run, cands: list, best_i) -> tuple[str, list, list]:

@@ -186,6 +186,13 @@ POLISH_S = 30.0
 POLISH_ROUNDS = 5
 POLISH_GAIN = 0.02
 POLISH_FLOOR_FACTOR = 1.5
+#: nonlinear candidates of other classes polished beside the winner: at most this many, each its
+#: class's best whose (joint) fitting gap is within :data:`POLISH_RIVAL_FIT` times the winner's. The
+#: joint fit takes a few steps; a loop shape's valley is long: fresh seed 7307 case 006, a Bouc-Wen
+#: hysteresis fitted jointly to 0.108 (held out 0.283) lost to an Iwan joint fitted to 0.102 and
+#: polished to 0.0325, where the hysteresis polished reaches 0.0273 (floor 0.023)
+POLISH_RIVALS = 2
+POLISH_RIVAL_FIT = 1.25
 #: function evaluations of a linear effect's FRF fit per start (its best start is then polished in
 #: time; on a 3-DOF parameter-mismatch case the median fit took 20, a few ran to the old limit of 200)
 LIN_EFFECT_NFEV = 60
