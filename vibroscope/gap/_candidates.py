@@ -30,6 +30,12 @@ from vibroscope.models.simulate import simulate
 #: and decimate them ('filtered', the default) when that fits the best screened candidate better by
 #: more than this fraction of its fitting gap
 SAMPLING_MARGIN = 0.01
+#: a linear effect's other locations whose FRF fit costs at most this factor of its best location's
+#: are polished in time too (at most :data:`LIN_TIED_LOCATIONS` more), and the held-out data chooses:
+#: an extra mode at the one sensed DOF and at the DOF sprung to it fit the FRF within 0.2 % (fresh
+#: seed 7308 case 011: m2 55.29, m3 55.38, m1 56.56; the true mode at m3 was named at m2)
+LIN_TIED_COST = 1.05
+LIN_TIED_LOCATIONS = 2
 
 
 def fit_candidates(run: Run, *, workers, n_full, progress) -> None:
@@ -117,8 +123,10 @@ def specs_to_fit(run: Run) -> tuple[list, list]:
 def fit_linear_effects(run: Run, lin_specs: list, bar, workers) -> list:
     """The linear effects fitted on the FRF jointly with the linear parameters (closed loop: the
     best start on the screening prefix), from the refit and, where the refit closes less than half
-    of the nominal's fitting gap, from the nominal too; the best per effect polished in time
-    (:func:`polish_linear_effect`). Returns the results ``(spec, model, p, gap_fit, base)``."""
+    of the nominal's fitting gap, from the nominal too; the best location per effect polished in
+    time (:func:`polish_linear_effect`), and up to :data:`LIN_TIED_LOCATIONS` other locations whose
+    FRF fit costs within :data:`LIN_TIED_COST` of it. Returns the results ``(spec, model, p, gap_fit,
+    base)``."""
     model, refit, lin, sims, ys, split = run.model, run.refit, run.lin, run.sims, run.ys, run.split
     best_lin: dict[str, tuple] = {}
     sp = split.screen_prefix
@@ -145,11 +153,22 @@ def fit_linear_effects(run: Run, lin_specs: list, bar, workers) -> list:
             else:
                 m_s, th_s, p_s, cost = fit_linear_frf(b_, lin, run.f_s, run.H_s, run.w[run.sel], spec=s,
                                                       p_starts=s.starts, max_nfev=LIN_EFFECT_NFEV)
-            if s.effect not in best_lin or cost < best_lin[s.effect][3]:
-                best_lin[s.effect] = (s, th_s, p_s, cost, b_)
+            k = (s.effect, where_key(s.where))
+            if k not in best_lin or cost < best_lin[k][3]:
+                best_lin[k] = (s, th_s, p_s, cost, b_)
         bar.update(1)
+    # the best location of each effect, and the locations whose FRF fit is nearly as good
+    by_effect: dict[str, list] = {}
+    for item in best_lin.values():
+        by_effect.setdefault(item[0].effect, []).append(item)
+    todo = []
+    for items in by_effect.values():
+        items.sort(key=lambda it: it[3])
+        c0 = items[0][3]
+        todo += items[:1] + [it for it in items[1:1 + LIN_TIED_LOCATIONS]
+                             if np.isfinite(c0) and c0 > 0 and it[3] <= LIN_TIED_COST * c0]
     with ThreadPoolExecutor(max(1, workers)) as ex:
-        return list(ex.map(partial(polish_linear_effect, run), best_lin.values()))
+        return list(ex.map(partial(polish_linear_effect, run), todo))
 
 
 def polish_linear_effect(run: Run, item):
