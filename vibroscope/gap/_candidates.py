@@ -128,7 +128,7 @@ def fit_linear_effects(run: Run, lin_specs: list, bar, workers) -> list:
     FRF fit costs within :data:`LIN_TIED_COST` of it. Returns the results ``(spec, model, p, gap_fit,
     base)``."""
     model, refit, lin, sims, ys, split = run.model, run.refit, run.lin, run.sims, run.ys, run.split
-    best_lin: dict[str, tuple] = {}
+    best_lin: dict[tuple, tuple] = {}  # (effect, location) -> its best FRF fit
     sp = split.screen_prefix
     # when the refit closes less than half of the nominal's fitting gap, the refit has bent the
     # linear parameters towards something they cannot express (a long delay): the linear effects

@@ -265,7 +265,7 @@ def polish_rivals(run: Run, cands: list, best_i: int) -> list[int]:
     best: dict[str, int] = {}
     for i, c in enumerate(cands):
         s_ = c[3]
-        if (i == best_i or s_ is None or s_.linear or c[0].effect == w.effect or c[0].vanished
+        if (i == best_i or s_ is None or c[0].effect == w.effect or c[0].vanished
                 or EFFECT_TABLE[c[0].effect].kind != "nonlinear"
                 or not (np.isfinite(c[0].gap_fit) and c[0].gap_fit <= POLISH_RIVAL_FIT * w.gap_fit)):
             continue
@@ -274,7 +274,7 @@ def polish_rivals(run: Run, cands: list, best_i: int) -> list[int]:
     return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:POLISH_RIVALS]
 
 
-def polish_winner(run: Run, cands: list, best_i, cache: dict | None = None, *, workers: int = 1):
+def polish_winner(run: Run, cands: list, best_i, cache: dict, *, workers: int = 1):
     """A nonlinear best polished at full accuracy (:func:`polish_candidate`), replaced in `cands`,
     and beside it its close rivals (:func:`polish_rivals`): a rival that is admissible, reproduces
     the measured level trend (when there is one) and ranks ahead of the polished winner becomes the
@@ -289,7 +289,6 @@ def polish_winner(run: Run, cands: list, best_i, cache: dict | None = None, *, w
         done = list(ex.map(lambda i: polish_candidate(cands[i], [(cands[i][3], cands[i][4])], **polish), todo))
     for i, c in zip(todo, done):
         cands[i] = c
-    cache = {} if cache is None else cache
     key = run.key
 
     def rank(i):

@@ -409,14 +409,14 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
             if b0 - a0 < PERIOD_MIN:
                 continue
             keep = _steady_periods(ub[a0:b0])
-            if keep.sum() < PERIOD_MIN:
+            k_used = int(keep.sum())
+            if k_used < PERIOD_MIN:
                 continue
             Y = yb[:, a0:b0, :][:, keep, :]
             r = Y - Y.mean(axis=1, keepdims=True)
             a, b = np.sum(r**2, axis=(1, 2)), np.sum(Y**2, axis=(1, 2))
             ss = a if ss is None else ss + a
             pw = b if pw is None else pw + b
-            k_used = int(keep.sum())
             run_levels.append(float(np.sqrt(np.mean(ub[a0:b0][keep] ** 2))))
             run_nrmse.append(float(np.sqrt(np.mean(a / ((k_used - 1) * T) / np.maximum(b / (k_used * T), 1e-300)))))
             dof += (k_used - 1) * T

@@ -472,17 +472,14 @@ class GapReport:
                              f"(noise floor {pr['noise_floor']:.4f}); the gap it leaves is not searched for further "
                              "effects")
         pfl = ((self.meta or {}).get("incoherent_gap") or {}).get("period_floor")
-        if pfl and pfl.get("grows_with_level") and pfl.get("ratio_to_white_floor") and \
-                pfl["ratio_to_white_floor"] > PERIOD_FLOOR_NOTE:
-            lines.append(f"the outputs vary from period to period by nrmse {pfl['nrmse']:.4f} over {pfl['n_periods']} "
-                         f"periods, growing with the input level (relative {min(pfl['run_nrmse']):.4f} to "
-                         f"{max(pfl['run_nrmse']):.4f}): the response itself stops repeating (chaos or a "
-                         "subharmonic), not a noise floor")
-        elif pfl and pfl.get("ratio_to_white_floor") and pfl["ratio_to_white_floor"] > PERIOD_FLOOR_NOTE:
-            lines.append(f"the outputs vary from period to period by nrmse {pfl['nrmse']:.4f} over {pfl['n_periods']} "
-                         f"periods, {pfl['ratio_to_white_floor']:.3g} x the white noise floor: noise in the band or "
-                         "an unlogged disturbance (or a response that does not repeat) that no model of the logged "
-                         "input can explain")
+        if pfl and pfl.get("ratio_to_white_floor") and pfl["ratio_to_white_floor"] > PERIOD_FLOOR_NOTE:
+            why = (f"growing with the input level (relative {min(pfl['run_nrmse']):.4f} to "
+                   f"{max(pfl['run_nrmse']):.4f}): the response itself stops repeating (chaos or a subharmonic), "
+                   "not a noise floor" if pfl.get("grows_with_level") else
+                   f"{pfl['ratio_to_white_floor']:.3g} x the white noise floor: noise in the band or an unlogged "
+                   "disturbance (or a response that does not repeat) that no model of the logged input can explain")
+            lines.append(f"the outputs vary from period to period by nrmse {pfl['nrmse']:.4f} over "
+                         f"{pfl['n_periods']} periods, {why}")
         changed = ((self.meta or {}).get("incoherent_gap") or {}).get("changed")
         if changed:
             lines.append(f"not coherent with the input: {changed}")
