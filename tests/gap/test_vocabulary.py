@@ -394,3 +394,43 @@ def test_a_held_clearance_is_fitted_at_the_chosen_connections_and_the_best_scree
     assert trace["connections"] == ["ground-m3", "m1-m2", "m2-m3"]
     held_clearances(run, 1, holders=(), trace=trace)
     assert trace["connections"] == ["m1-m2", "m2-m3"]
+
+
+def test_a_coulomb_frictions_law_with_its_shape_free_recovers_another_regularisation_velocity():
+    """A Coulomb friction of another law than the screening's (``v_eps`` 4 mm/s against the fixed
+    1 mm/s): fitted with the law fixed it leaves a gap beyond the noise-free truth's; its law
+    variant (``EffectSpec.law``, lifted from the fixed-law fit) recovers the regularisation
+    velocity and the force, and closes that gap. The backward elimination offers the variant in
+    place of a partner (:func:`vibroscope.gap._selection.without`)."""
+    from scipy import signal
+
+    from vibroscope.gap._selection import without
+    from vibroscope.gap.fit import fit_time_domain
+
+    model = chain()
+    truth = model.replace(elements=model.elements + (Friction(("m1", "ground"), force_=3.0, v_eps=4e-3),))
+    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
+    u = signal.lfilter(b, a, np.random.default_rng(5).standard_normal((1, 6000)), axis=1)
+    u *= 40.0 / np.std(u)
+    sim = LogSimulator(u, FS)
+    y = sim.run(truth)
+    v_rms = float(np.std(np.diff(sim.run(model.replace(outputs=(Output("m1", "displacement", "/d1.x"),)))[0]) * FS))
+    spec = next(s for s in candidate_specs(model, scales(model) | {"v_rms": {"m1-ground": v_rms, "m2-m1": v_rms}})
+                if s.effect == "coulomb_friction" and s.where["between"] == ["m1", "ground"])
+    mask, n = [np.ones(u.shape[1], bool)], [u.shape[1]]
+    p1, g1, _ = fit_time_domain(lambda p: spec.apply(model, p), np.array([math.log(2.0)]), spec.lower, spec.upper,
+                                [sim], [y], mask, n, fast=False, max_nfev=20)
+    law, lift = spec.law
+    assert law.effect == "coulomb_friction" and law.shape_free and law.n == spec.n + 1
+    p2, g2, _ = fit_time_domain(lambda p: law.apply(model, p), lift(p1), law.lower, law.upper,
+                                [sim], [y], mask, n, fast=False, max_nfev=20)
+    got = law.describe(p2)
+    assert got["v_eps_m_per_s"] == pytest.approx(4e-3, rel=0.15) and got["Fc_N"] == pytest.approx(3.0, rel=0.1)
+    assert g2 < 0.3 * g1 and law.vanishes(p2) is None
+    # a viscous law (v_eps far beyond the sliding velocities) is no friction
+    assert law.vanishes(np.array([p2[0], math.log(v_rms)])) is not None
+    # the elimination offers the law beside the plain drop
+    other = next(s for s in candidate_specs(model, scales(model)) if s.effect == "time_delay")
+    offered = without([(spec, p1), (other, np.array([1e-3]))], 1)
+    assert [len(r) for r, _ in offered] == [1, 1] and offered[1][0][0][0] is law
+    assert offered[1][0][0][1][1] == pytest.approx(math.log(1e-3))

@@ -112,6 +112,9 @@ GENERIC_JOINT_ABOVE = 1.3
 #: evaluations of the joint fit of the other chosen effects without one, in backward elimination
 #: (:func:`~vibroscope.gap._selection.eliminated`)
 ELIMINATE_NFEV = 4
+#: evaluations of a backward-elimination fit with an effect's law's shape free (it starts where the
+#: screening fixed it: ``v_eps`` = 1 mm/s for a Coulomb friction)
+LAW_NFEV = 10
 #: evaluations of the fit of the chosen effects' and an addition's parameters on the nominal
 #: linear base, the linear parameters held: made for every addition while the current model is
 #: above ``GENERIC_JOINT_ABOVE`` times the floor, a measure by which the additions are ranked for

@@ -394,6 +394,17 @@ class EffectSpec:
         spring there reduced by it (:meth:`relieved`): the element replacing part of the
         spring, as in a nominal whose stiffness was identified at small amplitude (the
         Bouc-Wen benchmark's ``k = k_L + alpha``), where an element added on top stiffens it.
+    law : tuple of (EffectSpec, callable p -> p_law), optional
+        The same effect with its law's shape free (Coulomb friction: the regularisation
+        velocity ``v_eps`` of ``tanh(v / v_eps)``, fixed at :data:`FRICTION_V_EPS` in the
+        screening), and the map of this spec's parameters to it. A law other than the fixed one
+        leaves a gap that a second effect at the connection can close in its place (fresh seed
+        7310 case 004: a Coulomb friction of ``v_eps`` 2.2 mm/s fitted with 1 mm/s, and a
+        hysteresis added beside it for 3 % of the shrink); the backward elimination tests the
+        law's shape as that effect's stand-in (:func:`vibroscope.gap._selection.eliminated`).
+    shape_free : bool
+        True on a :attr:`law` variant: a spec whose parameter vector is not the family's
+        (:attr:`lifts_from`, :attr:`tends_to` do not apply to it).
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -416,6 +427,8 @@ class EffectSpec:
     tends_to: tuple | None = None
     narrow: tuple = ()
     stiffness: Callable | None = None
+    law: tuple | None = None
+    shape_free: bool = False
     meta: dict = field(default_factory=dict)
 
     def relieved(self, model: LumpedModel, p) -> LumpedModel | None:
@@ -671,8 +684,40 @@ def _coulomb_friction(model, scales):
             effect="coulomb_friction", where={"between": [pair[0], pair[1]]}, n=1, starts=_starts_1d(vals, lo, hi),
             lower=np.array([lo]), upper=np.array([hi]),
             build=build, describe=lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": FRICTION_V_EPS},
+            law=(_coulomb_law(pair, lo, hi, v_rms), lambda p: np.array([p[0], math.log(FRICTION_V_EPS)])),
         ))
     return specs
+
+
+#: the range of a Coulomb friction's regularisation velocity when its law's shape is free (m/s),
+#: and the share of the rms relative velocity from which it is a viscous damper (vanishes)
+LAW_V_EPS = (1e-5, 0.1)
+LAW_V_EPS_VISCOUS = 0.5
+
+
+def _coulomb_law(pair, lo, hi, v_rms):
+    """Coulomb friction at `pair` with its regularisation velocity free, ``p = (log Fc,
+    log v_eps)`` (:attr:`EffectSpec.law`): ``F tanh(v / v_eps)`` tends to the sign law as
+    ``v_eps -> 0`` and to a viscous damper ``F / v_eps`` once ``v_eps`` is beyond the sliding
+    velocities (it then vanishes: :data:`LAW_V_EPS_VISCOUS` times the rms relative velocity)."""
+    v_lo = math.log(LAW_V_EPS[0])
+    v_hi = math.log(max(min(LAW_V_EPS[1], v_rms), 10 * LAW_V_EPS[0]))
+
+    def build(m, p):
+        return replace(m, elements=m.elements + (
+            Friction(pair, force_=float(math.exp(p[0])), v_eps=float(math.exp(p[1]))),))
+
+    def vanish(p):
+        v = math.exp(p[1])
+        return (f"the regularisation velocity {v:.3g} m/s is beyond {LAW_V_EPS_VISCOUS:g} x the rms relative "
+                f"velocity {v_rms:.3g} m/s: a viscous damper, not friction") if v > LAW_V_EPS_VISCOUS * v_rms else None
+
+    return EffectSpec(
+        effect="coulomb_friction", where={"between": [pair[0], pair[1]]}, n=2,
+        starts=[np.array([0.5 * (lo + hi), math.log(FRICTION_V_EPS)])],
+        lower=np.array([lo, v_lo]), upper=np.array([hi, v_hi]), build=build, vanish=vanish,
+        describe=lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": float(math.exp(p[1]))},
+        shape_free=True)
 
 
 def _asymmetric_friction(model, scales):
