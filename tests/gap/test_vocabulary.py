@@ -434,3 +434,38 @@ def test_a_coulomb_frictions_law_with_its_shape_free_recovers_another_regularisa
     offered = without([(spec, p1), (other, np.array([1e-3]))], 1)
     assert [len(r) for r, _ in offered] == [1, 1] and offered[1][0][0][0] is law
     assert offered[1][0][0][1][1] == pytest.approx(math.log(1e-3))
+
+
+def test_a_smooth_saturation_is_fitted_by_the_saturations_other_law():
+    """A saturation of the smooth law ``L tanh(u / L)`` (L = 60 N on a force of 40 N rms): the
+    screening's clip leaves a gap; the saturation's other law (``EffectSpec.law``, the same limit
+    parameter) recovers the limit and closes it. Not offered in a closed loop, whose driven input
+    clips."""
+    from dataclasses import replace
+
+    from scipy import signal
+
+    from vibroscope.gap.fit import fit_time_domain
+
+    model = chain()
+    truth = model.replace(inputs=tuple(replace(i, saturation=60.0, saturation_law="tanh") for i in model.inputs))
+    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
+    u = signal.lfilter(b, a, np.random.default_rng(6).standard_normal((1, 6000)), axis=1)
+    u *= 40.0 / np.std(u)
+    sim = LogSimulator(u, FS)
+    y = sim.run(truth)
+    au = np.sort(np.abs(u[0]))
+    sc = scales(model) | {"u_rms": 40.0, "u_max": float(au[-1]), "u_abs_sorted": au,
+                          "u_quantiles": [float(np.quantile(au, q)) for q in (0.99, 0.9)]}
+    spec = next(s for s in candidate_specs(model, sc) if s.effect == "saturation")
+    mask, n = [np.ones(u.shape[1], bool)], [u.shape[1]]
+    p1, g1, _ = fit_time_domain(lambda p: spec.apply(model, p), spec.starts[0], spec.lower, spec.upper,
+                                [sim], [y], mask, n, fast=False, max_nfev=20)
+    law, lift = spec.law
+    assert law.effect == "saturation" and law.shape_free and law.n == spec.n
+    p2, g2, _ = fit_time_domain(lambda p: law.apply(model, p), lift(p1), law.lower, law.upper,
+                                [sim], [y], mask, n, fast=False, max_nfev=20)
+    assert law.describe(p2)["limit_N"] == pytest.approx(60.0, rel=0.05)
+    assert g2 < 0.1 * g1 and law.vanishes(p2) is None and law.qualifiers(p2) == {"law": "limit tanh(u / limit)"}
+    # a limit far above the force takes nothing off it: no effect
+    assert law.vanishes(np.array([math.log(3 * au[-1])])) is not None

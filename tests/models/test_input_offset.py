@@ -114,3 +114,24 @@ def test_offset_model_file_round_trip():
     bad = text.replace("offset = -2.5", 'offset = "a lot"')
     with pytest.raises(ModelFileError, match="'offset'"):
         loads_model(bad)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+@pytest.mark.parametrize("u0", [3.0, -12.0, 40.0])
+def test_a_smooth_saturation_is_its_limit_times_tanh(name, u0):
+    """``saturation_law = "tanh"``: the applied force is ``L tanh((u + offset) / L)`` (analytic:
+    u0 + 4 at L = 5), the static deflection that force over k; the law round-trips through the
+    model file, a default (clip) file does not mention it, and an unknown law is refused."""
+    model = MODELS[name](offset=4.0, saturation=5.0, saturation_law="tanh")
+    n = int(round(20 * TAU * FS)) + 200
+    s = simulate(model, np.full(n, u0), FS)
+    expected = 5.0 * np.tanh((u0 + 4.0) / 5.0)
+    np.testing.assert_allclose(s.data[0], expected, rtol=1e-12)
+    assert s.data[1, -200] == pytest.approx(expected / K, rel=1e-6)
+    text = dumps_model(model)
+    assert 'saturation_law = "tanh"' in text and loads_model(text) == model
+    assert "saturation_law" not in dumps_model(MODELS[name](saturation=5.0))
+    with pytest.raises(ModelFileError, match="saturation_law"):
+        loads_model(text.replace('"tanh"', '"cubic"'))
+    with pytest.raises(ValueError, match="saturation_law"):
+        Input(dof="m1", saturation=5.0, saturation_law="soft")

@@ -774,15 +774,15 @@ def without(chain: list, i: int) -> list:
 
 
 def law_member(run: Run, chosen: list) -> list:
-    """`chosen` with each effect whose law's shape the screening fixed (``EffectSpec.law``: a
-    Coulomb friction's regularisation velocity) replaced by the same effect with that shape free,
-    fitted jointly with the others and the linear parameters (:func:`member_fit`,
-    :data:`LAW_NFEV` evaluations), where the held-out gain is significant: the nested test of a
-    family (:func:`~vibroscope.gap.measure.nested_gain` above :data:`NESTED_T`; the fixed law is
-    the free one's special case). Made before further effects are tried, for which the fixed law's
-    misfit would otherwise leave room (fresh seed 7310 case 004: a Coulomb friction of ``v_eps``
-    2.2 mm/s, fitted with 1 mm/s at 1.7x the noise floor, completed by a hysteresis at its link).
-    Each test's ``t`` is added to ``run.nested_t``."""
+    """`chosen` with each effect whose law the screening fixed (``EffectSpec.law``: a Coulomb
+    friction's regularisation velocity, a saturation's clip) replaced by the same effect under its
+    free law (the velocity free; the smooth ``limit tanh(u / limit)``), fitted jointly with the
+    others and the linear parameters (:func:`member_fit`, :data:`LAW_NFEV` evaluations), where the
+    held-out gain is significant: the test of a family's richer member
+    (:func:`~vibroscope.gap.measure.nested_gain` above :data:`NESTED_T`). Made before further
+    effects are tried, for which the fixed law's misfit would otherwise leave room (fresh seed 7310
+    case 004: a Coulomb friction of ``v_eps`` 2.2 mm/s, fitted with 1 mm/s at 1.7x the noise floor,
+    completed by a hysteresis at its link). Each test's ``t`` is added to ``run.nested_t``."""
     if not run.val_logs or not len(run.lin):
         return chosen
     for i in range(len(chosen)):
@@ -796,7 +796,7 @@ def law_member(run: Run, chosen: list) -> list:
         if rich is None:
             continue
         t = held_out_t(run, chosen[-1][2], rich[5])
-        run.nested_t[f"{law.effect}@{where_key(law.where)} with its law's shape free over the fixed law"] = float(t)
+        run.nested_t[f"{law.effect}@{where_key(law.where)} under its free law over the screening's"] = float(t)
         if t > NESTED_T and rich[4] < chosen[-1][0].gap_after:
             chosen = cumulative(run, rich[0], rich[3], chosen, i, (rich[2], rich[4], rich[5], rich[1]))
     return chosen

@@ -397,7 +397,9 @@ class EffectSpec:
     law : tuple of (EffectSpec, callable p -> p_law), optional
         The same effect with its law's shape free (Coulomb friction: the regularisation
         velocity ``v_eps`` of ``tanh(v / v_eps)``, fixed at :data:`FRICTION_V_EPS` in the
-        screening), and the map of this spec's parameters to it. A law other than the fixed one
+        screening), or under another law of the same parameters (saturation: the smooth
+        ``limit tanh(u / limit)`` for the screening's clip), and the map of this spec's
+        parameters to it. A law other than the fixed one
         leaves a gap that a second effect at the connection can close in its place (fresh seed
         7310 case 004: a Coulomb friction of ``v_eps`` 2.2 mm/s fitted with 1 mm/s, and a
         hysteresis added beside it for 3 % of the shrink); the backward elimination tests the
@@ -647,11 +649,31 @@ def _saturation(model, scales):
         return f"the limit {lim:.4g} N clips {100 * frac:.2g} % of the input samples" if frac < 1e-3 else None
 
     qs = scales.get("u_quantiles", [u_max * f for f in (0.9, 0.7, 0.5, 0.35)])
+    lower, upper = np.array([math.log(0.02 * u_max)]), np.array([math.log(1.2 * u_max)])
+
+    def build_tanh(m, p):
+        lim = float(math.exp(p[0]))
+        return replace(m, inputs=tuple(replace(i, saturation=lim, saturation_law="tanh") for i in m.inputs))
+
+    def vanish_tanh(p):
+        # the smooth law takes 7.6 % off a force of half its limit
+        lim = math.exp(p[0])
+        if au is None or au.size == 0:
+            return None
+        frac = 1.0 - np.searchsorted(au, 0.5 * lim) / au.size
+        return (f"the smooth limit {lim:.4g} N takes more than 7.6 % off {100 * frac:.2g} % of the input samples"
+                if frac < 1e-3 else None)
+
+    # the smooth law (a limit reached asymptotically): the same parameter, another law; not in a
+    # closed loop, whose driven input clips
+    law = None if is_closed_loop(model) else (EffectSpec(
+        effect="saturation", where={"side": "input"}, n=1, starts=[], lower=lower, upper=upper, build=build_tanh,
+        describe=lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish_tanh,
+        character=lambda p: {"law": "limit tanh(u / limit)"}, shape_free=True), lambda p: np.asarray(p, float))
     return [EffectSpec(
         effect="saturation", where={"side": "input"}, n=1,
-        starts=[np.array([math.log(q)]) for q in qs if q > 0],
-        lower=np.array([math.log(0.02 * u_max)]), upper=np.array([math.log(1.2 * u_max)]),
-        build=build, describe=lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish,
+        starts=[np.array([math.log(q)]) for q in qs if q > 0], lower=lower, upper=upper,
+        build=build, describe=lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish, law=law,
     )]
 
 

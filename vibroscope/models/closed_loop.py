@@ -155,7 +155,7 @@ def _hold_rows(model: LumpedModel, u: np.ndarray, m: int, rate: float):
             row = np.concatenate([np.zeros(min(s, Nt)), row[: max(Nt - s, 0)]])
         row = row + inp.offset
         if inp.saturation is not None:
-            row = np.clip(row, -inp.saturation, inp.saturation)
+            row = inp.saturate(row)
         Uol[j] = row
     return Ref, FF, Uol
 
@@ -281,6 +281,11 @@ def simulate_closed_loop(
     taps = np.zeros((n_c, maxt))
     for c, ctl in enumerate(ctls):
         taps[c, : len(ctl.taps)] = ctl.taps
+    for c in ctls:
+        inp = model.inputs[model.driven_input(c)]
+        if inp.saturation is not None and inp.saturation_law != "clip":
+            raise ValueError(f"input {model.driven_input(c)} (driven by controller {c.name!r}): saturation_law="
+                             f"{inp.saturation_law!r}; a closed loop's driven input clips (saturation_law = 'clip')")
     in_sat = np.array([i.saturation if i.saturation is not None else np.inf for i in model.inputs])
     in_off = np.array([i.offset for i in model.inputs], dtype=float)
     # a driven input's delay acts on the command (in controller ticks, fractional: linear

@@ -86,12 +86,18 @@ class Input:
         input: the applied force is ``clip(u(t - delay) + offset, -saturation, saturation)``.
         A constant, so it leaves :meth:`LumpedModel.frf` unchanged and keeps a linear
         model linear (affine): the time response adds the static deflection to it.
+    saturation_law : {"clip", "tanh"}
+        The limit's law: ``"clip"`` (default, a hard limit) or ``"tanh"``, the smooth
+        ``saturation * tanh(u / saturation)`` (a limit reached asymptotically, as by an
+        amplifier that compresses before it clips). Open-loop inputs only: a closed loop's
+        driven input clips.
 
     Raises
     ------
     ValueError
         If `quantity` is not ``"force"``, `saturation` is not a positive finite force,
-        `delay` is negative or not finite, or `offset` is not finite.
+        `saturation_law` is not ``"clip"`` or ``"tanh"``, `delay` is negative or not finite,
+        or `offset` is not finite.
     """
 
     dof: str
@@ -100,10 +106,13 @@ class Input:
     saturation: float | None = None
     delay: float = 0.0
     offset: float = 0.0
+    saturation_law: str = "clip"
 
     def __post_init__(self) -> None:
         if self.quantity != "force":
             raise ValueError(f"quantity={self.quantity!r} must be 'force'")
+        if self.saturation_law not in ("clip", "tanh"):
+            raise ValueError(f"saturation_law={self.saturation_law!r} must be 'clip' or 'tanh'")
         if self.saturation is not None:
             s = float(self.saturation)
             if not np.isfinite(s) or s <= 0:
@@ -117,6 +126,33 @@ class Input:
         if not np.isfinite(o):
             raise ValueError(f"offset={o} must be a finite force in N")
         object.__setattr__(self, "offset", o)
+
+    def saturate(self, x: np.ndarray) -> np.ndarray:
+        """A force limited at this input's saturation, by its law.
+
+        Parameters
+        ----------
+        x : ndarray
+            Force samples (N), any shape.
+
+        Returns
+        -------
+        ndarray
+            ``clip(x, -saturation, saturation)`` (``saturation_law = "clip"``) or
+            ``saturation * tanh(x / saturation)`` (``"tanh"``), a new array of `x`'s shape;
+            `x` itself (as an array) when the input has no saturation.
+
+        References
+        ----------
+        .. [1] K. J. Astrom, R. M. Murray, *Feedback Systems*, 2008, sec. 3.2 (actuator
+           saturation; ``tanh`` as its smooth form).
+        """
+        x = np.asarray(x, dtype=float)
+        if self.saturation is None:
+            return x
+        if self.saturation_law == "tanh":
+            return self.saturation * np.tanh(x / self.saturation)
+        return np.clip(x, -self.saturation, self.saturation)
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ Schema (fixed)::
     channel = "/actuator/force_cmd.wrench.force.x"
     dof = "m1"
     quantity = "force"              # N; optional: saturation = N, delay = s, offset = N
+                                    # saturation_law = "clip" (default) | "tanh": saturation tanh(u / saturation)
     [[output]]
     channel = "/imu/m1.linear_acceleration.x"
     dof = "m1"
@@ -321,7 +322,7 @@ _POSITIVE = {"v_eps", "nu", "n"}
 def _parse_io(ctx, doc, dof_names):
     inputs, outputs = [], []
     for i, t in enumerate(_tables(ctx, doc, "input")):
-        _unknown(ctx, t, "input", i, {"channel", "dof", "quantity", "saturation", "delay", "offset"})
+        _unknown(ctx, t, "input", i, {"channel", "dof", "quantity", "saturation", "saturation_law", "delay", "offset"})
         ch = _string(ctx, t, "input", i, "channel")
         dof = _string(ctx, t, "input", i, "dof", required=dof_names is not None, default="u")
         if dof_names is not None and dof not in dof_names:
@@ -330,9 +331,13 @@ def _parse_io(ctx, doc, dof_names):
         if q != "force":
             raise ctx.error(f"quantity={q!r} must be 'force'", "input", i, "quantity")
         sat = _number(ctx, t, "input", i, "saturation", positive=True, required=False)
+        law = _string(ctx, t, "input", i, "saturation_law", required=False, default="clip")
+        if law not in ("clip", "tanh"):
+            raise ctx.error(f"saturation_law={law!r} must be 'clip' or 'tanh'", "input", i, "saturation_law")
         delay = _number(ctx, t, "input", i, "delay", nonneg=True, required=False, default=0.0)
         offset = _number(ctx, t, "input", i, "offset", required=False, default=0.0)
-        inputs.append(Input(dof=dof, quantity=q, channel=ch, saturation=sat, delay=delay, offset=offset))
+        inputs.append(Input(dof=dof, quantity=q, channel=ch, saturation=sat, delay=delay, offset=offset,
+                            saturation_law=law))
     for i, t in enumerate(_tables(ctx, doc, "output")):
         _unknown(ctx, t, "output", i, {"channel", "dof", "quantity"})
         ch = _string(ctx, t, "output", i, "channel")
@@ -748,6 +753,8 @@ def _io_lines(inputs, outputs, with_dof=True) -> list[str]:
         out.append(f"quantity = {_fmt(i.quantity)}")
         if i.saturation is not None:
             out.append(f"saturation = {_fmt(i.saturation)}")
+            if i.saturation_law != "clip":
+                out.append(f"saturation_law = {_fmt(i.saturation_law)}")
         if i.delay:
             out.append(f"delay = {_fmt(i.delay)}")
         if i.offset:

@@ -194,8 +194,8 @@ def _apply_input_physics(
 ) -> np.ndarray:
     """The applied force on the fine grid: each input's reconstruction delayed by its
     ``delay`` (pure time shift, zero before the start; circular if `periodic`), plus its
-    ``offset``, then clipped at its ``saturation``. Returns `U` itself when no input has
-    any of the three, else a new array."""
+    ``offset``, then limited at its ``saturation`` (:meth:`Input.saturate`). Returns `U` itself when
+    no input has any of the three, else a new array."""
     if not any(i.delay or i.offset or i.saturation is not None for i in model.inputs):
         return U
     U = np.array(U, dtype=float)
@@ -206,7 +206,7 @@ def _apply_input_physics(
         if inp.offset:
             U[j] += inp.offset
         if inp.saturation is not None:
-            np.clip(U[j], -inp.saturation, inp.saturation, out=U[j])
+            U[j] = inp.saturate(U[j])
     return U
 
 
@@ -232,7 +232,7 @@ def _applied_samples(model: LumpedModel, u: np.ndarray, U_app: np.ndarray, fs: f
         if inp.offset:
             out[j] += inp.offset
         if inp.saturation is not None:
-            np.clip(out[j], -inp.saturation, inp.saturation, out=out[j])
+            out[j] = inp.saturate(out[j])
     return out
 
 
