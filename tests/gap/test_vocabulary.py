@@ -469,3 +469,37 @@ def test_a_smooth_saturation_is_fitted_by_the_saturations_other_law():
     assert g2 < 0.1 * g1 and law.vanishes(p2) is None and law.qualifiers(p2) == {"law": "limit tanh(u / limit)"}
     # a limit far above the force takes nothing off it: no effect
     assert law.vanishes(np.array([math.log(3 * au[-1])])) is not None
+
+
+def test_a_bouc_wen_loop_of_another_exponent_is_fitted_by_the_hysteresis_law():
+    """A Bouc-Wen hysteresis of exponent nu = 2 (the screening fixes 1): its law variant
+    (``EffectSpec.law``, lifted from the nu = 1 fit at nu = 1) recovers the exponent and closes
+    the gap the fixed exponent leaves."""
+    from scipy import signal
+
+    from vibroscope.gap.fit import fit_time_domain
+    from vibroscope.models.elements import BoucWen
+
+    model = chain()
+    truth = model.replace(elements=model.elements + (
+        BoucWen(("m1", "ground"), alpha=1.2e4, beta=750.0, gamma=0.6, delta=0.4, nu=2.0),))
+    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
+    u = signal.lfilter(b, a, np.random.default_rng(7).standard_normal((1, 6000)), axis=1)
+    u *= 40.0 / np.std(u)
+    sim = LogSimulator(u, FS)
+    y = sim.run(truth)
+    d_rms = float(np.std(sim.run(model.replace(outputs=(Output("m1", "displacement", "/d1.x"),)))[0]))
+    sc = scales(model) | {"d_rms": {"m1-ground": d_rms, "m2-m1": d_rms}}
+    spec = next(s for s in candidate_specs(model, sc)
+                if s.effect == "hysteresis" and s.where["between"] == ["m1", "ground"])
+    mask, n = [np.ones(u.shape[1], bool)], [u.shape[1]]
+    fits = [fit_time_domain(lambda p: spec.apply(model, p), s0, spec.lower, spec.upper, [sim], [y], mask, n,
+                            fast=False, max_nfev=30) for s0 in spec.starts[:2]]
+    p1, g1, _ = min(fits, key=lambda f: f[1])
+    law, lift = spec.law
+    assert law.shape_free and law.n == spec.n + 1 and law.describe(lift(p1))["nu"] == pytest.approx(1.0)
+    assert law.describe(lift(p1))["beta_per_m"] == pytest.approx(spec.describe(p1)["beta_per_m"])
+    p2, g2, _ = fit_time_domain(lambda p: law.apply(model, p), lift(p1), law.lower, law.upper, [sim], [y], mask, n,
+                                fast=False, max_nfev=40)
+    got = law.describe(p2)
+    assert got["nu"] == pytest.approx(2.0, rel=0.15) and g2 < 0.3 * g1

@@ -29,11 +29,14 @@ from vibroscope.gap._run import (
     POLISH_RIVALS,
     POLISH_ROUNDS,
     POLISH_S,
+    LAW_RIVAL_FIT,
+    LAW_RIVALS,
     Run,
     TREND_MARGIN,
     TREND_SHARE,
     UNEXPLAINED_SCORE,
     dumps,
+    excess,
     where_key,
 )
 from vibroscope.gap.effects import EFFECT_TABLE
@@ -274,11 +277,46 @@ def polish_rivals(run: Run, cands: list, best_i: int) -> list[int]:
     return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:POLISH_RIVALS]
 
 
+def law_rivals(run: Run, cands: list, best_i: int) -> list[int]:
+    """Indices of the candidates whose free law (``EffectSpec.law``) is polished beside a
+    nonlinear winner (:func:`law_candidate`): of each class with such a law, its best by fitting
+    gap, not vanished, within :data:`LAW_RIVAL_FIT` times the winner's fitting gap (the winner's
+    own class included); the :data:`LAW_RIVALS` closest. A law other than the screening's moves a
+    class's fit further than a polish does (fresh seed 7311 case 010: a Bouc-Wen loop of exponent
+    2, fitted with the screening's 1 at 1.56x the fitting gap of an Iwan joint at its link)."""
+    w = cands[best_i][0]
+    if not np.isfinite(w.gap_fit):
+        return []
+    best: dict[str, int] = {}
+    for i, c in enumerate(cands):
+        s_ = c[3]
+        if (s_ is None or s_.law is None or c[0].vanished
+                or not (np.isfinite(c[0].gap_fit) and c[0].gap_fit <= LAW_RIVAL_FIT * w.gap_fit)):
+            continue
+        if c[0].effect not in best or c[0].gap_fit < cands[best[c[0].effect]][0].gap_fit:
+            best[c[0].effect] = i
+    return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:LAW_RIVALS]
+
+
+def law_candidate(run: Run, cand):
+    """Candidate tuple `cand` under its spec's free law (``EffectSpec.law``), at the parameters
+    lifted from its own, on its linear base (to be polished: :func:`polish_candidate`)."""
+    c, _, yh, s_, p_, base = cand
+    law, lift = s_.law
+    q = np.clip(lift(np.asarray(p_, float)), law.lower + 1e-9, law.upper - 1e-9)
+    m = law.apply(base, q)
+    c_law = Candidate(effect=c.effect, where=dict(law.where) | law.qualifiers(q), parameters=law.describe(q),
+                      gap_after=c.gap_after, score=c.score, gap_fit=c.gap_fit, n_parameters=law.n,
+                      model_toml=dumps(m))
+    return (c_law, m, yh, law, q, base)
+
+
 def polish_winner(run: Run, cands: list, best_i, cache: dict, *, workers: int = 1):
     """A nonlinear best polished at full accuracy (:func:`polish_candidate`), replaced in `cands`,
-    and beside it its close rivals (:func:`polish_rivals`): a rival that is admissible, reproduces
-    the measured level trend (when there is one) and ranks ahead of the polished winner becomes the
-    best. Returns ``(the polishing arguments (used again for a combination), the best's index)``."""
+    and beside it its close rivals (:func:`polish_rivals`) and, where the polished best is beyond
+    the floor, the free laws of it and its rivals (:func:`law_rivals`, added to `cands`): a rival
+    that is admissible, reproduces the measured level trend (when there is one) and ranks ahead of
+    the polished winner becomes the best. Returns ``(the polishing arguments (used again for a combination), the best's index)``."""
     polish = dict(model=run.model, lin=run.lin, lo_l=run.lo_l, hi_l=run.hi_l, sims=run.sims, ys=run.ys,
                   split=run.split, fs=run.fs, held_out=run.held_out, key=run.key, k_before=run.k_before,
                   floor=run.floor_rank)
@@ -289,6 +327,14 @@ def polish_winner(run: Run, cands: list, best_i, cache: dict, *, workers: int = 
         done = list(ex.map(lambda i: polish_candidate(cands[i], [(cands[i][3], cands[i][4])], **polish), todo))
     for i, c in zip(todo, done):
         cands[i] = c
+    if excess(cands[best_i][0].gap_after, run.floor_rank) > 0.5 * run.floor_rank:
+        # beyond the floor: the laws of the winner and its close rivals, polished too, as candidates
+        # of their own beside the screening's law
+        laws = [law_candidate(run, cands[i]) for i in law_rivals(run, cands, best_i)]
+        with ThreadPoolExecutor(max(1, min(workers, len(laws)))) as ex:
+            laws = list(ex.map(lambda c: polish_candidate(c, [(c[3], c[4])], **polish), laws))
+        todo += list(range(len(cands), len(cands) + len(laws)))
+        cands += laws
     key = run.key
 
     def rank(i):

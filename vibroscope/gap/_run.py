@@ -196,6 +196,11 @@ POLISH_FLOOR_FACTOR = 1.5
 #: polished to 0.0325, where the hysteresis polished reaches 0.0273 (floor 0.023)
 POLISH_RIVALS = 2
 POLISH_RIVAL_FIT = 1.25
+#: the free laws polished beside a winner beyond the floor (:func:`~vibroscope.gap._ranking.law_rivals`):
+#: of each class with one, its best fitted within LAW_RIVAL_FIT times the winner's fitting gap; at
+#: most LAW_RIVALS
+LAW_RIVALS = 2
+LAW_RIVAL_FIT = 2.0
 #: function evaluations of a linear effect's FRF fit per start (its best start is then polished in
 #: time; on a 3-DOF parameter-mismatch case the median fit took 20, a few ran to the old limit of 200)
 LIN_EFFECT_NFEV = 60

@@ -397,9 +397,9 @@ class EffectSpec:
     law : tuple of (EffectSpec, callable p -> p_law), optional
         The same effect with its law's shape free (Coulomb friction: the regularisation
         velocity ``v_eps`` of ``tanh(v / v_eps)``, fixed at :data:`FRICTION_V_EPS` in the
-        screening), or under another law of the same parameters (saturation: the smooth
-        ``limit tanh(u / limit)`` for the screening's clip), and the map of this spec's
-        parameters to it. A law other than the fixed one
+        screening; a Bouc-Wen hysteresis: its exponent ``nu``, fixed at 1), or under another
+        law of the same parameters (saturation: the smooth ``limit tanh(u / limit)`` for the
+        screening's clip), and the map of this spec's parameters to it. A law other than the fixed one
         leaves a gap that a second effect at the connection can close in its place (fresh seed
         7310 case 004: a Coulomb friction of ``v_eps`` 2.2 mm/s fitted with 1 mm/s, and a
         hysteresis added beside it for 3 % of the shrink); the backward elimination tests the
@@ -961,8 +961,42 @@ def _hysteresis(model, scales):
                     for a, b, s in grid],
             lower=lo_h, upper=hi_h, build=build, describe=desc, tends_to=("coulomb_friction", slip_limit),
             stiffness=lambda p, bw_coeffs=bw_coeffs: bw_coeffs(p)[0],
+            law=(_hysteresis_law(pair, k_loc, d_rms, lo_h, hi_h), lambda p: np.append(np.asarray(p, float), 0.0)),
         ))
     return specs
+
+
+#: the range of a Bouc-Wen hysteresis's exponent ``nu`` when its law's shape is free (the
+#: screening fixes 1; 2 is a common choice, a sharper knee)
+LAW_NU = (0.5, 6.0)
+
+
+def _hysteresis_law(pair, k_loc, d_rms, lo_h, hi_h):
+    """Bouc-Wen hysteresis at `pair` with its exponent free (:attr:`EffectSpec.law`): ``p = (log
+    (alpha / k), log(beta d_rms f^(nu - 1)), phi, log nu)`` with ``f = alpha d_rms``, so that the
+    loop's ultimate force ``(alpha / (beta (gamma + delta)))^(1/nu) = f (e^-p1 / (gamma +
+    delta))^(1/nu)`` keeps its scale as ``nu`` moves; the screening's parameters at ``nu = 1``
+    (Ismail, Ikhouane & Rodellar, "The hysteresis Bouc-Wen model, a survey", Arch. Comput. Methods
+    Eng. 16, 2009: ``nu`` sets the sharpness of the transition from the elastic to the plastic
+    part of the loop)."""
+    def coeffs(p):
+        nu = math.exp(p[3])
+        phi = float(np.clip(p[2], -1.45, 1.45))
+        alpha = k_loc * math.exp(p[0])
+        return alpha, math.exp(p[1]) / (d_rms * (alpha * d_rms) ** (nu - 1.0)), math.cos(phi), math.sin(phi), nu
+
+    def build(m, p):
+        alpha, beta, gamma, delta, nu = coeffs(p)
+        return replace(m, elements=m.elements + (BoucWen(pair, alpha=alpha, beta=beta, gamma=gamma, delta=delta, nu=nu),))
+
+    def desc(p):
+        alpha, beta, gamma, delta, nu = coeffs(p)
+        return {"alpha_N_per_m": alpha, "beta_per_m": beta, "gamma": gamma, "delta": delta, "nu": nu}
+
+    return EffectSpec(
+        effect="hysteresis", where={"between": [pair[0], pair[1]]}, n=4, starts=[],
+        lower=np.append(lo_h, math.log(LAW_NU[0])), upper=np.append(hi_h, math.log(LAW_NU[1])),
+        build=build, describe=desc, stiffness=lambda p: coeffs(p)[0], shape_free=True)
 
 
 #: sliders of the Iwan form of a joint (slip forces uniform on (0, F_max], Iwan 1966)
