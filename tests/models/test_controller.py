@@ -356,3 +356,17 @@ def test_a_controller_rate_that_does_not_divide_the_fastest_is_refused():
     b = Controller(name="b", law="P", gains={"kp": 1e3}, rate_hz=300.0, dof="m2", drives=1, reference="/r2.x")
     with pytest.raises(ValueError, match="'b'.*rate_hz=300"):
         simulate(m.replace(controllers=(a, b)), np.zeros((2, 100)), 1000.0)
+
+
+def test_a_driven_input_with_a_smooth_saturation_is_refused():
+    """A loop's driven input clips in the compiled kernel: ``saturation_law = "tanh"`` there is a
+    clear error naming the input and the controller, not a silent clip."""
+    from dataclasses import replace
+
+    m = LumpedModel.chain([1.0], [1e4], [20.0], output_quantity="displacement")
+    c = Controller(name="c", law="P", gains={"kp": 3e3}, rate_hz=1000.0, dof="m1", drives=0, reference="/r.x")
+    mc = m.replace(controllers=(c,), inputs=(replace(m.inputs[0], saturation=5.0, saturation_law="tanh"),))
+    with pytest.raises(ValueError, match="saturation_law='tanh'.*controller 'c'|controller 'c'.*saturation_law"):
+        simulate(mc, np.ones(100) * 1e-3, 1000.0)
+    clipped = mc.replace(inputs=(replace(m.inputs[0], saturation=5.0),))
+    assert np.abs(simulate(clipped, np.ones(100), 1000.0).data[2]).max() > 5.0  # the command itself is not limited
