@@ -625,3 +625,19 @@ def test_noise_the_white_floor_cannot_see_is_not_a_model_gap(kind):
     assert inc["changed"].startswith("unexplained -> none")
     assert inc["nominal"]["coherent"] < 1.3 * r.noise_floor
     assert inc["nominal"]["incoherent"] > 0.9 * inc["nominal"]["total"]
+
+
+@pytest.mark.slow  # the full diagnosis of a 2-DOF case and the free law's polish, ~30-90 s wall
+def test_a_coulomb_friction_of_another_regularisation_velocity_is_named_alone_with_it(u20):
+    """A Coulomb friction of 2.4 N at m1 whose law is ``tanh(v / 6 mm/s)``, where the screening
+    fixes 1 mm/s: the friction alone is named (no partner stands in for the law's difference),
+    with the regularisation velocity and the force recovered by its free law (``EffectSpec.law``),
+    the held-out gap at the noise floor."""
+    truth = replace(nominal(), elements=nominal().elements + (Friction(("m1", "ground"), force_=2.4, v_eps=6e-3),))
+    r = diagnose(nominal(), log_of(truth, u20), effects=["coulomb_friction", "hysteresis", "cubic_stiffness"])
+    assert r.verdict == "coulomb_friction" and len(r.verdicts) <= 1, r.summary()
+    best = r.candidates[0]
+    assert set(best.where["between"]) == {"m1", "ground"}
+    assert best.parameters["v_eps_m_per_s"] == pytest.approx(6e-3, rel=0.2), best.parameters
+    assert best.parameters["Fc_N"] == pytest.approx(2.4, rel=0.1), best.parameters
+    assert r.gap_after < 1.3 * r.noise_floor, r.summary()
