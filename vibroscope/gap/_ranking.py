@@ -298,7 +298,7 @@ def law_rivals(run: Run, cands: list, best_i: int) -> list[int]:
     return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:LAW_RIVALS]
 
 
-def law_candidate(run: Run, cand):
+def law_candidate(cand):
     """Candidate tuple `cand` under its spec's free law (``EffectSpec.law``), at the parameters
     lifted from its own, on its linear base (to be polished: :func:`polish_candidate`)."""
     c, _, yh, s_, p_, base = cand
@@ -330,7 +330,7 @@ def polish_winner(run: Run, cands: list, best_i, cache: dict, *, workers: int = 
     if excess(cands[best_i][0].gap_after, run.floor_rank) > 0.5 * run.floor_rank:
         # beyond the floor: the laws of the winner and its close rivals, polished too, as candidates
         # of their own beside the screening's law
-        laws = [law_candidate(run, cands[i]) for i in law_rivals(run, cands, best_i)]
+        laws = [law_candidate(cands[i]) for i in law_rivals(run, cands, best_i)]
         with ThreadPoolExecutor(max(1, min(workers, len(laws)))) as ex:
             laws = list(ex.map(lambda c: polish_candidate(c, [(c[3], c[4])], **polish), laws))
         todo += list(range(len(cands), len(cands) + len(laws)))
