@@ -263,18 +263,25 @@ def polish_rivals(run: Run, cands: list, best_i: int) -> list[int]:
     its best by fitting gap, not vanished, fitted within :data:`POLISH_RIVAL_FIT` times the
     winner's fitting gap; the :data:`POLISH_RIVALS` closest."""
     w = cands[best_i][0]
-    if not np.isfinite(w.gap_fit):
+    return class_bests(cands, best_i, POLISH_RIVAL_FIT, POLISH_RIVALS, lambda i, c: (
+        i != best_i and c[0].effect != w.effect and EFFECT_TABLE[c[0].effect].kind == "nonlinear"))
+
+
+def class_bests(cands: list, best_i: int, fit_factor: float, n: int, eligible) -> list[int]:
+    """Of each class, the index of its best candidate by fitting gap among those with a spec, not
+    vanished, ``eligible(i, cand)`` and fitted within `fit_factor` times the fitting gap of
+    ``cands[best_i]``; the `n` best of them by fitting gap (none when that gap is not finite)."""
+    g_w = cands[best_i][0].gap_fit
+    if not np.isfinite(g_w):
         return []
     best: dict[str, int] = {}
     for i, c in enumerate(cands):
-        s_ = c[3]
-        if (i == best_i or s_ is None or c[0].effect == w.effect or c[0].vanished
-                or EFFECT_TABLE[c[0].effect].kind != "nonlinear"
-                or not (np.isfinite(c[0].gap_fit) and c[0].gap_fit <= POLISH_RIVAL_FIT * w.gap_fit)):
+        if (c[3] is None or c[0].vanished or not eligible(i, c)
+                or not (np.isfinite(c[0].gap_fit) and c[0].gap_fit <= fit_factor * g_w)):
             continue
         if c[0].effect not in best or c[0].gap_fit < cands[best[c[0].effect]][0].gap_fit:
             best[c[0].effect] = i
-    return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:POLISH_RIVALS]
+    return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:n]
 
 
 def law_rivals(run: Run, cands: list, best_i: int) -> list[int]:
@@ -284,18 +291,7 @@ def law_rivals(run: Run, cands: list, best_i: int) -> list[int]:
     own class included); the :data:`LAW_RIVALS` closest. A law other than the screening's moves a
     class's fit further than a polish does (fresh seed 7311 case 010: a Bouc-Wen loop of exponent
     2, fitted with the screening's 1 at 1.56x the fitting gap of an Iwan joint at its link)."""
-    w = cands[best_i][0]
-    if not np.isfinite(w.gap_fit):
-        return []
-    best: dict[str, int] = {}
-    for i, c in enumerate(cands):
-        s_ = c[3]
-        if (s_ is None or s_.law is None or c[0].vanished
-                or not (np.isfinite(c[0].gap_fit) and c[0].gap_fit <= LAW_RIVAL_FIT * w.gap_fit)):
-            continue
-        if c[0].effect not in best or c[0].gap_fit < cands[best[c[0].effect]][0].gap_fit:
-            best[c[0].effect] = i
-    return sorted(best.values(), key=lambda i: cands[i][0].gap_fit)[:LAW_RIVALS]
+    return class_bests(cands, best_i, LAW_RIVAL_FIT, LAW_RIVALS, lambda i, c: c[3].law is not None)
 
 
 def law_candidate(cand):
