@@ -298,8 +298,7 @@ def law_candidate(cand):
     """Candidate tuple `cand` under its spec's free law (``EffectSpec.law``), at the parameters
     lifted from its own, on its linear base (to be polished: :func:`polish_candidate`)."""
     c, _, yh, s_, p_, base = cand
-    law, lift = s_.law
-    q = np.clip(lift(np.asarray(p_, float)), law.lower + 1e-9, law.upper - 1e-9)
+    law, q = s_.law_start(p_)
     m = law.apply(base, q)
     c_law = Candidate(effect=c.effect, where=dict(law.where) | law.qualifiers(q), parameters=law.describe(q),
                       gap_after=c.gap_after, score=c.score, gap_fit=c.gap_fit, n_parameters=law.n,

@@ -767,9 +767,7 @@ def without(chain: list, i: int) -> list:
     out = [(rest, ELIMINATE_NFEV)]
     for k, (s_, q) in enumerate(rest):
         if s_.law is not None:
-            v, lift = s_.law
-            q_v = np.clip(lift(np.asarray(q, float)), v.lower + 1e-9, v.upper - 1e-9)
-            out.append((rest[:k] + [(v, q_v)] + rest[k + 1:], LAW_NFEV))
+            out.append((rest[:k] + [s_.law_start(q)] + rest[k + 1:], LAW_NFEV))
     return out
 
 
@@ -789,10 +787,10 @@ def law_member(run: Run, chosen: list) -> list:
         s_, p_ = chosen[i][3], chosen[i][4]
         if s_ is None or s_.law is None:
             continue
-        law, lift = s_.law
+        law, q = s_.law_start(p_)
         chain = [(c[3], c[4]) for c in chosen]
         theta = run.lin.theta_between(run.model, chosen[-1][5])
-        rich = member_fit(run, theta, chain, i, law, lift(np.asarray(p_, float)), LAW_NFEV)
+        rich = member_fit(run, theta, chain, i, law, q, LAW_NFEV)
         if rich is None:
             continue
         t = held_out_t(run, chosen[-1][2], rich[5])

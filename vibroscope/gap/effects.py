@@ -475,6 +475,30 @@ class EffectSpec:
         """
         return self.build(model, np.asarray(p, float))
 
+    def law_start(self, p) -> tuple:
+        """This effect's free law (:attr:`law`) and the start of its fit, lifted from `p` and
+        held inside the law's bounds.
+
+        Parameters
+        ----------
+        p : array_like, shape (n,)
+            This spec's fitted parameters.
+
+        Returns
+        -------
+        (EffectSpec, ndarray)
+            The law's spec and its parameters, shape ``(law.n,)``.
+
+        Raises
+        ------
+        ValueError
+            If the spec has no free law.
+        """
+        if self.law is None:
+            raise ValueError(f"{self.effect} at {self.where} has no free law")
+        law, lift = self.law
+        return law, np.clip(lift(np.asarray(p, float)), law.lower + 1e-9, law.upper - 1e-9)
+
     def vanishes(self, p) -> str | None:
         """Why the parameters `p` make the effect vanish, or None (see :attr:`vanish`).
 
@@ -637,37 +661,35 @@ def _saturation(model, scales):
     u_max = scales["u_max"]
     au = scales.get("u_abs_sorted")
 
-    def build(m, p):
+    def build(m, p, law="clip"):
         lim = float(math.exp(p[0]))
-        return replace(m, inputs=tuple(replace(i, saturation=lim) for i in m.inputs))
+        return replace(m, inputs=tuple(replace(i, saturation=lim, saturation_law=law) for i in m.inputs))
 
-    def vanish(p):
-        lim = math.exp(p[0])
+    def beyond(p, share):
+        """The share of the input samples beyond `share` times the limit (None: no samples known)."""
         if au is None or au.size == 0:
             return None
-        frac = 1.0 - np.searchsorted(au, lim) / au.size
-        return f"the limit {lim:.4g} N clips {100 * frac:.2g} % of the input samples" if frac < 1e-3 else None
+        return 1.0 - np.searchsorted(au, share * math.exp(p[0])) / au.size
+
+    def vanish(p):
+        frac = beyond(p, 1.0)
+        return (f"the limit {math.exp(p[0]):.4g} N clips {100 * frac:.2g} % of the input samples"
+                if frac is not None and frac < 1e-3 else None)
+
+    def vanish_tanh(p):
+        # the smooth law takes 7.6 % off a force of half its limit
+        frac = beyond(p, 0.5)
+        return (f"the smooth limit {math.exp(p[0]):.4g} N takes more than 7.6 % off {100 * frac:.2g} % of the input "
+                f"samples" if frac is not None and frac < 1e-3 else None)
 
     qs = scales.get("u_quantiles", [u_max * f for f in (0.9, 0.7, 0.5, 0.35)])
     lower, upper = np.array([math.log(0.02 * u_max)]), np.array([math.log(1.2 * u_max)])
 
-    def build_tanh(m, p):
-        lim = float(math.exp(p[0]))
-        return replace(m, inputs=tuple(replace(i, saturation=lim, saturation_law="tanh") for i in m.inputs))
-
-    def vanish_tanh(p):
-        # the smooth law takes 7.6 % off a force of half its limit
-        lim = math.exp(p[0])
-        if au is None or au.size == 0:
-            return None
-        frac = 1.0 - np.searchsorted(au, 0.5 * lim) / au.size
-        return (f"the smooth limit {lim:.4g} N takes more than 7.6 % off {100 * frac:.2g} % of the input samples"
-                if frac < 1e-3 else None)
-
     # the smooth law (a limit reached asymptotically): the same parameter, another law; not in a
     # closed loop, whose driven input clips
     law = None if is_closed_loop(model) else (EffectSpec(
-        effect="saturation", where={"side": "input"}, n=1, starts=[], lower=lower, upper=upper, build=build_tanh,
+        effect="saturation", where={"side": "input"}, n=1, starts=[], lower=lower, upper=upper,
+        build=lambda m, p: build(m, p, law="tanh"),
         describe=lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish_tanh,
         character=lambda p: {"law": "limit tanh(u / limit)"}, shape_free=True), lambda p: np.asarray(p, float))
     return [EffectSpec(
@@ -736,7 +758,7 @@ def _coulomb_law(pair, lo, hi, v_rms):
 
     return EffectSpec(
         effect="coulomb_friction", where={"between": [pair[0], pair[1]]}, n=2,
-        starts=[np.array([0.5 * (lo + hi), math.log(FRICTION_V_EPS)])],
+        starts=[],  # a free law starts from the fixed one's fit (EffectSpec.law_start)
         lower=np.array([lo, v_lo]), upper=np.array([hi, v_hi]), build=build, vanish=vanish,
         describe=lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": float(math.exp(p[1]))},
         shape_free=True)
