@@ -761,7 +761,7 @@ def _coulomb_law(pair, lo, hi, v_rms):
         starts=[],  # a free law starts from the fixed one's fit (EffectSpec.law_start)
         lower=np.array([lo, v_lo]), upper=np.array([hi, v_hi]), build=build, vanish=vanish,
         describe=lambda p: {"Fc_N": float(math.exp(p[0])), "v_eps_m_per_s": float(math.exp(p[1]))},
-        shape_free=True)
+        character=lambda p: {"law": "v_eps fitted"}, shape_free=True)
 
 
 def _asymmetric_friction(model, scales):
@@ -1018,7 +1018,8 @@ def _hysteresis_law(pair, k_loc, d_rms, lo_h, hi_h):
     return EffectSpec(
         effect="hysteresis", where={"between": [pair[0], pair[1]]}, n=4, starts=[],
         lower=np.append(lo_h, math.log(LAW_NU[0])), upper=np.append(hi_h, math.log(LAW_NU[1])),
-        build=build, describe=desc, stiffness=lambda p: coeffs(p)[0], shape_free=True)
+        build=build, describe=desc, stiffness=lambda p: coeffs(p)[0], character=lambda p: {"law": "nu fitted"},
+        shape_free=True)
 
 
 #: sliders of the Iwan form of a joint (slip forces uniform on (0, F_max], Iwan 1966)
