@@ -161,6 +161,8 @@ FS = 1000.0  # log rate, Hz
 OVERSAMPLE = 16  # fine grid of the continuous input: 16 kHz
 F_BAND_EDGE = 300.0  # the force has no content at or above this frequency, Hz
 F_LO = 2.0  # lower band edge of the random part, Hz
+F_HI_MIN = 150.0  # the random part's upper band edge is drawn from here (or 1.25x the highest mode, <= 120 Hz)
+F_EDGE_MARGIN = 20.0  # the upper band edge stays this far below the force's band edge, Hz
 LEVELS = (1.0, 2.5, 6.0)  # RMS ratios of the three excitation levels
 T0_LOG = 1.7e9  # first header stamp of the logs, s
 RTOL = 1e-9  # LSODA tolerance (relative; absolute is RTOL times each state's scale)
@@ -1327,8 +1329,10 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         raise ValueError(f"period={period!r} must be (lo, hi) seconds with 0 < lo <= hi")
     if forms not in ("ours", "other"):
         raise ValueError(f"forms={forms!r} must be 'ours' or 'other'")
-    if band_edge is not None and not 0 < band_edge < FS / 2:
-        raise ValueError(f"band_edge={band_edge!r} must lie in (0, {FS / 2}) Hz")
+    if band_edge is not None and not F_HI_MIN + F_EDGE_MARGIN <= band_edge < FS / 2:
+        raise ValueError(f"band_edge={band_edge!r} must lie in [{F_HI_MIN + F_EDGE_MARGIN:g}, {FS / 2:g}) Hz: the "
+                         f"force's upper band edge is drawn from {F_HI_MIN:g} Hz (the chains' modes reach 120 Hz) "
+                         f"and stays {F_EDGE_MARGIN:g} Hz below the band edge")
     if input_kind not in (None, "sweep"):
         raise ValueError(f"input_kind={input_kind!r} must be None or 'sweep'")
     cls = effect
@@ -1365,7 +1369,8 @@ def make_case(effect: str, rng: np.random.Generator, duration: float = 60.0, *, 
         if kind == "multisine" and period is not None:  # drawn only when asked: the default cases are unchanged
             period_s = max(round(_log_uniform(rng, *period) * FS), 2) / FS
         n_cal = n if kind == "sweep" else min(n, int(round(CAL_SECONDS / nlog * FS)))
-        f_hi = float(rng.uniform(max(150.0, 1.25 * f_max), 280.0 if band_edge is None else band_edge - 20.0))
+        f_hi = float(rng.uniform(max(F_HI_MIN, 1.25 * f_max),
+                                 280.0 if band_edge is None else band_edge - F_EDGE_MARGIN))
         edge = F_BAND_EDGE if band_edge is None else float(band_edge)
         if multi_log:
             us = [make_input(rng, n / FS, kind=kind, f_hi=f_hi, levels=False, fade=True, band_edge=edge,
@@ -2103,7 +2108,7 @@ def main(argv=None) -> int:
                    "multisine force drawn per case (the default)")
     p.add_argument("--band-edge", type=float, default=None, metavar="HZ",
                    help=f"open-loop cases: the force's band edge (default {F_BAND_EDGE:g} Hz, the upper band edge "
-                   "drawn up to 280 Hz); e.g. 480 for a force that excites the whole band up to Nyquist, with no "
+                   "drawn up to 280 Hz; at least 170 Hz); e.g. 480 for a force that excites the whole band up to Nyquist, with no "
                    "line beyond it that holds only noise")
     p.add_argument("--disturbance", type=float, default=None, metavar="SHARE",
                    help="open-loop cases: an unlogged force at the input DOF, band-limited random over the logged "
@@ -2126,6 +2131,9 @@ def main(argv=None) -> int:
                    help="one-log open-loop cases step the three levels once, a third of the record each (a "
                    "multisine's blocks on whole periods), instead of cycling them in blocks of 2-4 s")
     a = p.parse_args(argv)
+    if a.band_edge is not None and not F_HI_MIN + F_EDGE_MARGIN <= a.band_edge < FS / 2:
+        p.error(f"--band-edge {a.band_edge:g}: must lie in [{F_HI_MIN + F_EDGE_MARGIN:g}, {FS / 2:g}) Hz (the "
+                f"force's upper band edge is drawn from {F_HI_MIN:g} Hz and stays {F_EDGE_MARGIN:g} Hz below it)")
     tic = time.perf_counter()
     res = generate(a.out, a.per_class, a.classes or list(KINDS[a.kind]), a.seed, a.duration, a.jobs, verbose=True, integrator=a.integrator,
                    multi_log=a.multi_log, weak_end=not a.without_weak_end, offset_max=a.offset_max,

@@ -280,6 +280,18 @@ def test_generated_case_reads_back(tmp_path):
     assert truth["gap_nominal_noisy"] == pytest.approx(truth["gap_nominal_noise_free"], abs=0.04)
 
 
+def test_a_band_edge_below_the_drawn_upper_edge_is_refused_by_name_and_the_lowest_allowed_one_works():
+    with pytest.raises(ValueError, match=r"band_edge=150.0 must lie in \[170, 500\) Hz"):
+        gen.make_case("none", gen.case_rng(0, "none", 0), duration=4.0, band_edge=150.0)
+    with pytest.raises(SystemExit):
+        gen.main(["--out", "unused", "--band-edge", "160"])
+    case = gen.make_case("none", gen.case_rng(0, "none", 0), duration=4.0, band_edge=170.0)
+    x = case.signals().data[0]
+    spec = np.abs(np.fft.rfft(x - x.mean())) ** 2
+    f = np.fft.rfftfreq(x.size, 1.0 / gen.FS)
+    assert spec[f >= 175.0].sum() < 1e-6 * spec.sum()  # nothing at or beyond the band edge
+
+
 @pytest.mark.parametrize("effect", [e for e in gen.CLASSES if e != "none"])
 def test_every_effect_has_a_gap_and_a_consistent_truth_model(effect):
     integrator = gen.INTEGRATORS[gen.CLASSES.index(effect) % 2]
