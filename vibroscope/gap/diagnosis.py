@@ -1050,7 +1050,8 @@ def _build_report(run: Run) -> GapReport:
                                        for k, v in scales.get("regress_nominal", {}).items()},
               "not_tried": not_tried,
               "closed_loop": ({"inputs": log_channels(model)[0], "outputs": out_ch,
-                               "excluded_effects": excluded} if closed else None),
+                               "excluded_effects": excluded,
+                               "delay_from_command_s": scales.get("delay0_loop")} if closed else None),
               "localisation": "bands, channels and regimes of the nominal model on the last log's held-out samples "
                               "(the nominal model is fitted on nothing)"},
     )

@@ -634,6 +634,11 @@ def _time_delay(model, scales):
         # delay fitted 3.2 ms from the 2 ms start, and the bracket 8-100 ms above the 8 ms one was
         # too wide for its eight evaluations)
         grid = [0.001, 0.002, 0.004, 0.008, 0.016, 0.032]
+        # and the delay read from the logged command's FRF (where the loop is unstable for most
+        # delays around the true one, the grid's starts miss its valley: fresh seed 7315 case 009)
+        d_loop = scales.get("delay0_loop")
+        if d_loop is not None and d_loop >= 0.5 / fs:
+            grid = sorted(grid + [float(d_loop)])
     return [EffectSpec(
         effect="time_delay", where={"side": "input"}, n=1,
         starts=[np.array([max(d0, 1e-4)])] + [np.array([g]) for g in grid],
@@ -1275,7 +1280,8 @@ def candidate_specs(model: LumpedModel, scales: dict, effects=None) -> list[Effe
         ``u_max`` (N), ``u_quantiles`` (N, start limits of a saturation), ``u_abs_sorted``,
         ``d_rms[pair]`` (m), ``v_rms[pair]`` (m/s), ``d_quantiles[pair]`` (m) per connection,
         ``f_extra`` (start frequencies in Hz of extra modes), ``f_band`` (the excited band, Hz: an
-        extra mode resonating outside it vanishes), ``delay0`` (start delay, s),
+        extra mode resonating outside it vanishes), ``delay0`` (start delay, s), ``delay0_loop``
+        (a closed loop's actuator delay read from its logged command, s, or None),
         ``regress`` (data-derived start values by ``(effect, pair)``), ``level_trend``.
     effects : iterable of str, optional
         Restrict to these effects (default: all).
