@@ -74,9 +74,10 @@ def _command_delay(model: LumpedModel, us, ys, masks, fs: float, nperseg: int, w
     wgt = np.where(ok[:, None] & (c >= LOOP_DELAY_COH), c / (1 - c), 0.0)
     if not np.any(wgt > 0):
         return None
-    R = H / np.where(np.abs(G) > 0, G, 1.0)
-    Z = wgt * R / np.maximum(np.abs(R), 1e-300)
-    score = np.real(np.exp(2j * np.pi * np.multiply.outer(LOOP_DELAY_GRID, f)) @ Z).sum(axis=1)
+    used = np.any(wgt > 0, axis=1)  # the coherent lines only
+    R = H[used] / G[used]
+    Z = wgt[used] * R / np.maximum(np.abs(R), 1e-300)
+    score = np.real(np.exp(2j * np.pi * np.multiply.outer(LOOP_DELAY_GRID, f[used])) @ Z).sum(axis=1)
     return float(LOOP_DELAY_GRID[int(np.argmax(score))])
 
 
