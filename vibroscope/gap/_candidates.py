@@ -296,6 +296,15 @@ def screen_nonlinear(run: Run, nl_specs: list, bar, workers) -> list:
                 lifts.append((i, (s, p0, mem[2], mem[3])))
         for (i, _), res in zip(lifts, ex.map(partial(refine, run), [x[1] for x in lifts])):
             screened[i] = res
+    # an effect probed on the peak-extended prefix: its screened gap on the usual one, as the
+    # other classes' (they are compared by it)
+    for i, (s, p, g, base) in enumerate(screened):
+        if screen_of(run, s) is not None:
+            try:
+                g_std = prefix_gap(run, s.apply(base, p))
+            except ValueError:
+                g_std = 1e9
+            screened[i] = (s, p, g_std if np.isfinite(g_std) else 1e9, base)
     return screened
 
 
@@ -407,6 +416,8 @@ def probe(run: Run, other_base: dict, s):
     (:meth:`~vibroscope.gap.effects.EffectSpec.relieved`: the start's base is then that);
     the best start on the other base is kept aside in `other_base` (by the id of the best)."""
     per_base = {}
+    seen: dict[int, dict] = {}  # id(unrelieved base) -> {start (one-parameter effect): gap}
+    sp = screen_of(run, s)
     for base in ((run.refit, run.model) if run.theta.any() else (run.refit,)):
         for p0 in s.starts:
             # the start on the base, and (an element with a small-motion stiffness) on the base
@@ -418,13 +429,18 @@ def probe(run: Run, other_base: dict, s):
                     m0 = s.apply(b, p0)
                 except ValueError:
                     continue
-                g = prefix_gap(run, m0)
+                g = prefix_gap(run, m0, sp)
                 g = g if np.isfinite(g) else 1e9
+                if b is base and s.n == 1:
+                    seen.setdefault(id(base), {})[float(np.asarray(p0).ravel()[0])] = g
                 if id(base) not in per_base or g < per_base[id(base)][2]:
                     per_base[id(base)] = (s, np.asarray(p0, float), g, b)
     if not per_base:
         return None
     best, *alt = sorted(per_base.values(), key=lambda r: r[2])
+    for it in [best] + alt[:1]:
+        if id(it[3]) in seen:
+            run.start_gaps[id(it)] = seen[id(it[3])]
     if alt:
         other_base[id(best)] = alt[0]
     return best
@@ -444,16 +460,28 @@ def refine(run: Run, item):
     def build(p, s=s, base=base):
         return s.apply(base, p)
 
+    sp = screen_of(run, s)
     if s.n == 1 and any(np.allclose(p0, q) for q in s.starts):
-        p, g = bracketed_search(run, build, s, float(np.asarray(p0).ravel()[0]), g0)
+        p, g = bracketed_search(run, build, s, float(np.asarray(p0).ravel()[0]), g0, run.start_gaps.get(id(item)),
+                                prefix=sp)
     else:
         p, g, _ = fit_time_domain(build, p0, s.lower, s.upper, run.sims, run.ys, run.split.fit,
-                                  run.split.screen_prefix, fast=True, max_nfev=4 + 2 * s.n)
+                                  run.split.screen_prefix if sp is None else sp, fast=True, max_nfev=4 + 2 * s.n)
     return (s, p, g, base) if g <= g0 else item
 
 
-def bracketed_search(run: Run, build, s, x0: float, g0: float) -> tuple[np.ndarray, float]:
-    """Bounded Brent search of a one-parameter effect between the starts next to `x0`.
+def screen_of(run: Run, s) -> list | None:
+    """The screening prefix `s` is probed and searched on: ``run.peak_prefix`` for an effect
+    that acts at the input's peaks (:attr:`~vibroscope.gap.effects.EffectSpec.peak_prefix`),
+    else None (the usual one)."""
+    return run.peak_prefix if getattr(s, "peak_prefix", False) else None
+
+
+def bracketed_search(run: Run, build, s, x0: float, g0: float, gaps: dict | None = None, *,
+                     prefix: list | None = None) -> tuple[np.ndarray, float]:
+    """Bounded Brent search of a one-parameter effect between the starts next to `x0`, or, where
+    `x0` lies on a plateau (its neighbouring starts fit exactly as well: the effect does not act
+    there, a limit above every force), between the plateau's edge and the next start beyond it.
 
     Parameters
     ----------
@@ -466,6 +494,11 @@ def bracketed_search(run: Run, build, s, x0: float, g0: float) -> tuple[np.ndarr
         The best probed start (in the spec's parameter units, e.g. the log of a clearance).
     g0 : float
         Its screening gap (nrmse on the screening prefix).
+    gaps : dict, optional
+        The probe's screening gap at each start (:func:`probe`, on the same base); default None
+        (no plateau is sought).
+    prefix : list of int, optional
+        The screening prefix per log (:func:`screen_of`); default None, the split's.
 
     Returns
     -------
@@ -489,13 +522,15 @@ def bracketed_search(run: Run, build, s, x0: float, g0: float) -> tuple[np.ndarr
     xs = sorted({float(np.asarray(q).ravel()[0]) for q in s.starts})
     below = [x for x in xs if x < x0 - 1e-12]
     above = [x for x in xs if x > x0 + 1e-12]
-    a = below[-1] if below else lo
-    b = above[0] if above else hi
+    brackets = [(below[-1] if below else lo, above[0] if above else hi)]
+    plateau = plateau_brackets(xs, x0, g0, gaps) if gaps else None
+    if plateau is not None:
+        brackets = plateau
     best = [np.array([x0]), g0]
 
     def f(x):
         try:
-            g = prefix_gap(run, build(np.array([x])))
+            g = prefix_gap(run, build(np.array([x])), prefix)
         except ValueError:
             return 1e9
         g = g if np.isfinite(g) else 1e9
@@ -503,10 +538,64 @@ def bracketed_search(run: Run, build, s, x0: float, g0: float) -> tuple[np.ndarr
             best[0], best[1] = np.array([x]), g
         return g
 
-    if b - a > 1e-9:
-        minimize_scalar(f, bounds=(a, b), method="bounded",
-                        options={"maxiter": BRACKET_EVALS, "xatol": 1e-3 * (b - a)})
+    for a, b in brackets:
+        if b - a > 1e-9:
+            minimize_scalar(f, bounds=(a, b), method="bounded",
+                            options={"maxiter": BRACKET_EVALS, "xatol": 1e-3 * (b - a)})
     return best[0], float(best[1])
+
+
+#: two screening gaps within this relative difference are the same: the effect does not act
+PLATEAU_RTOL = 1e-9
+
+
+def plateau_brackets(xs: list, x0: float, g0: float, gaps: dict) -> list | None:
+    """Where the best start `x0` of a one-parameter effect lies on a plateau, the brackets
+    between the plateau's edges and the starts beyond them; None when it does not.
+
+    Parameters
+    ----------
+    xs : list of float
+        The effect's starts, sorted.
+    x0, g0 : float
+        The best start and its screening gap.
+    gaps : dict
+        ``{start: screening gap}`` from the probe.
+
+    Returns
+    -------
+    list of (float, float) or None
+
+    Notes
+    -----
+    Starts whose gaps equal the best one's to :data:`PLATEAU_RTOL` are where the effect does not
+    act (a saturation limit above every force the screening sees, a friction force far below the
+    others). The best start is then one of them only because nothing acted better, and a search
+    between its neighbours stays on the plateau; a valley, if any, lies between the plateau's
+    edge and the next start, which fits worse because it acts too much. Fresh closed-loop seed
+    7316 case 010: an actuator limit of 42 N, whose starts 78-254 N fit alike (0.1259) and 32.5 N
+    fits worse (0.849); the search between 78 and 254 N left the limit at 200 N, unexplained.
+    """
+    def tie(x):
+        return x in gaps and abs(gaps[x] - g0) <= PLATEAU_RTOL * max(abs(g0), 1e-300)
+
+    k = next((i for i, x in enumerate(xs) if abs(x - x0) <= 1e-12 * max(abs(x0), 1.0)), None)
+    if k is None:
+        return None
+    lo_k = k
+    while lo_k > 0 and tie(xs[lo_k - 1]):
+        lo_k -= 1
+    hi_k = k
+    while hi_k < len(xs) - 1 and tie(xs[hi_k + 1]):
+        hi_k += 1
+    if lo_k == hi_k:
+        return None
+    out = []
+    if lo_k > 0:
+        out.append((xs[lo_k - 1], xs[lo_k]))
+    if hi_k < len(xs) - 1:
+        out.append((xs[hi_k], xs[hi_k + 1]))
+    return out or None
 
 
 def shared_locations(refined: list, kept: list) -> list[int]:

@@ -127,6 +127,55 @@ def loop_delay_start(model: LumpedModel, us, ys, y_nom, masks, fs: float, nperse
     return max(t_meas - t_nom, 0.0)
 
 
+#: a peak-extended screening prefix ends this long after the peak, s
+PEAK_MARGIN_S = 0.5
+
+
+def peak_prefix(u_force, fit, fit_prefix, screen_prefix, fs: float) -> list | None:
+    """The screening prefix of each log extended to its largest input force among its fitting
+    samples, where that force is beyond every force the screening prefixes hold (plus
+    :data:`PEAK_MARGIN_S`; at most the log's fitting prefix): where an effect that acts only at
+    the input's peaks is probed (:attr:`~vibroscope.gap.effects.EffectSpec.peak_prefix`).
+
+    Parameters
+    ----------
+    u_force : sequence of ndarray, shape (n_samples,) each
+        The force at the plant's first actuated input per log, N
+        (:func:`~vibroscope.gap.closed_loop.actuator_force`).
+    fit : sequence of ndarray of bool
+        The fitting samples of each log.
+    fit_prefix, screen_prefix : sequence of int
+        Each log's fitting and screening prefix, samples.
+    fs : float
+        Sampling frequency, Hz.
+
+    Returns
+    -------
+    list of int or None
+        None where no log is extended (the screening prefixes hold the largest force).
+
+    Notes
+    -----
+    Fresh closed-loop seed 7316 case 022: an actuator limit of 145 N that the first 8 s of a
+    slow reference never reach (the nominal fits the screening prefix at the noise floor), while
+    the later blocks clip at up to 680 N; every start of the limit fitted the prefix alike.
+    """
+    def peak(u, m, n):
+        a = np.abs(np.asarray(u[:n], float)) * m[:n]
+        return (float(a.max()), int(np.argmax(a))) if a.size else (0.0, 0)
+
+    in_prefix = max((peak(u, m, n)[0] for u, m, n in zip(u_force, fit, screen_prefix) if n), default=0.0)
+    out, changed = [], False
+    for u, m, n_fit, n_scr in zip(u_force, fit, fit_prefix, screen_prefix):
+        top, k = peak(u, m, n_fit) if n_fit else (0.0, 0)
+        if n_fit and top > in_prefix and k >= n_scr:
+            out.append(int(min(n_fit, k + int(PEAK_MARGIN_S * fs))))
+            changed = True
+        else:
+            out.append(n_scr)
+    return out if changed else None
+
+
 def pair_force_model(model: LumpedModel, pair) -> LumpedModel:
     """`model` with its inputs replaced by a force pair at the ends of `pair`: ``-f`` on the
     first end, ``+f`` on the second (an element's force); ground ends are left out."""
@@ -265,6 +314,7 @@ def gather_evidence(run: Run) -> None:
     # the input-side scales are forces (closed loop: the actuator's, gain x command)
     u_force = [actuator_force(model, u, y, fs) for u, y in zip(us, ys)]
     u_fit = u_force[fit_log][:n_sc]
+    run.peak_prefix = peak_prefix(u_force, split.fit, ns_fit, split.screen_prefix, fs)
     # the input's distribution over every fitting sample of every log (several logs at different
     # levels: a limit is sought among all the levels the fit sees)
     au = np.abs(np.concatenate([uf[m_[:uf.size]] for uf, m_ in zip(u_force, split.fit) if m_.any()]))

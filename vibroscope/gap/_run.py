@@ -364,6 +364,13 @@ class Run:
     # a location's non-vanishing fit on the other linear base where the better one vanishes
     # (refine_on_either_base), evaluated as a candidate of its own
     screened_alt: list = field(default_factory=list)
+    # id(probed item) -> the probe's screening gap at each start of a one-parameter effect on the
+    # item's base (a plateau where the effect does not act: _candidates.plateau_brackets)
+    start_gaps: dict = field(default_factory=dict)
+    # the screening prefix (samples per log) extended to the largest input force of each log's
+    # fitting samples: where a peak-acting effect (EffectSpec.peak_prefix) is probed; None when
+    # it is the screening prefix
+    peak_prefix: list | None = None
     # ids of those candidates' models (their `where` names the linear base they were fitted on)
     alt_models: set = field(default_factory=set)
     nested_t: dict = field(default_factory=dict)
@@ -422,10 +429,11 @@ class Run:
 
 
 @one_blas_thread  # the fits run in a thread pool: a BLAS pool per thread only spins against it
-def prefix_gap(run: Run, m) -> float:
+def prefix_gap(run: Run, m, prefix: list | None = None) -> float:
     """nrmse of model `m` on the screening prefix of the fitting data (coarse integration):
-    the measure every start is probed by. May be non-finite."""
-    sp = run.split.screen_prefix
+    the measure every start is probed by; `prefix` (samples per log) in its place, e.g.
+    ``run.peak_prefix``. May be non-finite."""
+    sp = run.split.screen_prefix if prefix is None else prefix
     yh = [sim.run(m, n, fast=True) if n else None for sim, n in zip(run.sims, sp)]
     return nrmse([y[:, :n] for y, n in zip(run.ys, sp) if n], [h for h in yh if h is not None],
                  [mk[:n] for mk, n in zip(run.split.fit, sp) if n])

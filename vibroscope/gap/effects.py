@@ -407,6 +407,11 @@ class EffectSpec:
     shape_free : bool
         True on a :attr:`law` variant: a spec whose parameter vector is not the family's
         (:attr:`lifts_from`, :attr:`tends_to` do not apply to it).
+    peak_prefix : bool
+        True where the effect acts only at the input's peaks (a saturation): its starts are
+        probed and searched on a screening prefix that reaches the largest input force of the
+        fitting data (``Run.peak_prefix``), and its screened gap is then measured on the usual
+        prefix, as every other effect's. Default False.
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -431,6 +436,7 @@ class EffectSpec:
     stiffness: Callable | None = None
     law: tuple | None = None
     shape_free: bool = False
+    peak_prefix: bool = False
     meta: dict = field(default_factory=dict)
 
     def relieved(self, model: LumpedModel, p) -> LumpedModel | None:
@@ -701,6 +707,7 @@ def _saturation(model, scales):
         effect="saturation", where={"side": "input"}, n=1,
         starts=[np.array([math.log(q)]) for q in qs if q > 0], lower=lower, upper=upper,
         build=build, describe=lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish, law=law,
+        peak_prefix=True,
     )]
 
 
