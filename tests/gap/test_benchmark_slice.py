@@ -827,6 +827,37 @@ def test_a_closed_loop_delay_whose_loop_diverges_around_it_is_read_from_the_logg
     assert rep.gap_after < 1.1 * rep.noise_floor, rep.summary()
 
 
+@pytest.mark.parametrize("index, limit, before", [(1, 42.016, 0.2), (3, 145.43, 0.14)])
+def test_an_actuator_limit_beyond_the_screening_prefix_or_beside_a_plateau_is_found(index, limit, before):
+    """Fresh closed-loop seed 7316's saturation cases 010 and 022 (``--kind closed_loop
+    --per-class 5``), both ``unexplained`` before. Case 010: limits of 78-254 N fit the screening
+    prefix alike (the limit does not act) and 32.5 N fits worse; the search between 78 and 254 N
+    left 200 N. Case 022: the first 8 s of a slow reference never reach the 145 N limit, so every
+    start fitted the screening prefix alike; probed on a prefix that reaches the largest force."""
+    from vibroscope.gap import diagnose
+
+    effect = "closed_loop_saturation"
+    case = gen.make_case(effect, gen.case_rng(7316, effect, index), 60.0, integrator="rk4", multi_log=False)
+    assert case.truth["parameters"]["limit_N"] == pytest.approx(limit, rel=1e-4)
+    rep = diagnose(case.nominal, case.signals(0))
+    assert list(rep.verdicts) == ["saturation"], rep.summary()
+    assert rep.candidates[0].parameters["limit_N"] == pytest.approx(limit, rel=0.01), rep.summary()
+    assert rep.gap_after < 1.1 * rep.noise_floor and rep.gap_before > before, rep.summary()
+
+
+def test_a_plateau_of_starts_is_searched_beyond_its_edges():
+    from vibroscope.gap._candidates import plateau_brackets
+
+    xs = [1.0, 2.0, 3.0, 4.0, 5.0]
+    flat = {1.0: 0.9, 2.0: 0.5, 3.0: 0.3, 4.0: 0.3, 5.0: 0.3}
+    assert plateau_brackets(xs, 3.0, 0.3, flat) == [(2.0, 3.0)]  # the valley lies below the plateau
+    assert plateau_brackets(xs, 2.0, 0.3, {**flat, 2.0: 0.3, 1.0: 0.3, 3.0: 0.3, 4.0: 0.35}) == [(3.0, 4.0)]
+    both = {1.0: 0.9, 2.0: 0.3, 3.0: 0.3, 4.0: 0.8, 5.0: 0.9}
+    assert plateau_brackets(xs, 2.0, 0.3, both) == [(1.0, 2.0), (3.0, 4.0)]
+    assert plateau_brackets(xs, 3.0, 0.3, {1.0: 0.9, 2.0: 0.5, 3.0: 0.3, 4.0: 0.31, 5.0: 0.4}) is None  # a valley
+    assert plateau_brackets(xs, 3.0, 0.3, {x: 0.3 for x in xs}) is None  # flat everywhere: nothing beyond
+
+
 @pytest.mark.parametrize("two_dof", [False, True])
 def test_closed_loop_truth_matches_vibroscope_without_effect(two_dof):
     """The generator's own closed loop (RK4 between controller ticks) and vibroscope's
