@@ -858,6 +858,33 @@ def test_a_plateau_of_starts_is_searched_beyond_its_edges():
     assert plateau_brackets(xs, 3.0, 0.3, {x: 0.3 for x in xs}) is None  # flat everywhere: nothing beyond
 
 
+def test_a_closed_loop_truth_with_a_stiff_friction_at_a_light_load_is_integrated_within_rk4s_stability():
+    """Fresh closed-loop seed 7316's case 025 as first drawn: 14.2 N of friction (v_eps 1 mm/s)
+    between a 2.26 kg drive and a 0.55 kg load, integrated at the 10 kHz the probe friction at the
+    drive set (h F / v_eps (1/m1 + 1/m2) = 3.2, beyond RK4's 2.78): its accelerations were numerical
+    chatter (1.25 and 3.3 nrmse from the converged run), and vibroscope's correct simulation of
+    the truth model could not fit them. The truth's own law now sets the sub-steps."""
+    from vibroscope.models.elements import Friction
+
+    m1, m2 = 2.263680442765756, 0.5477699308151411
+    model = LumpedModel(
+        dofs=(Dof("m1", m1), Dof("m2", m2)),
+        elements=(Damper(("m1", "ground"), 15.82557243014655), Spring(("m2", "m1"), 10067.782326854856),
+                  Damper(("m2", "m1"), 4.937728025447414), Friction(("m2", "m1"), force_=14.228336462099763, v_eps=1e-3)),
+        inputs=(Input(dof="m1", quantity="force", channel=gen.CL_FORCE_CHANNEL),),
+        outputs=(Output("m1", "displacement"), Output("m1", "acceleration"), Output("m2", "acceleration")),
+    )
+    ctl = gen.DriveController(kp=15.253250961281976, kv=11.409020639372017, gain=15.145146142789972)
+    ref = gen.make_reference(np.random.default_rng(3), 10000)[0].coarse
+    sub = gen.CL_SUB * gen._rk4_substeps(gen._tm(model), np.full(4, 0.01))
+    assert sub >= 20
+    converged = gen.simulate_closed_loop_truth(model, ctl, ref, substeps=200).outputs
+    for k, agree in ((sub, True), (gen.CL_SUB, False)):
+        out = gen.simulate_closed_loop_truth(model, ctl, ref, substeps=k).outputs
+        err = np.sqrt(np.mean((out - converged) ** 2, axis=1) / np.mean(converged**2, axis=1))
+        assert (err.max() < 1e-3) == agree, (k, err)
+
+
 @pytest.mark.parametrize("two_dof", [False, True])
 def test_closed_loop_truth_matches_vibroscope_without_effect(two_dof):
     """The generator's own closed loop (RK4 between controller ticks) and vibroscope's
