@@ -25,7 +25,7 @@ def test_a_narrow_valley_between_two_starts_is_found(monkeypatch, x_true):
     width of its bottom, in at most BRACKET_EVALS simulations, never outside the bracket."""
     gap = _valley(x_true, 0.2)
     calls = []
-    monkeypatch.setattr(cand, "prefix_gap", lambda run, m: (calls.append(m), gap(m))[1])
+    monkeypatch.setattr(cand, "prefix_gap", lambda run, m, prefix=None: (calls.append(m), gap(m))[1])
     spec = SimpleNamespace(n=1, starts=[np.array([v]) for v in (-13.3, -11.7, -9.3, -8.6)],
                            lower=np.array([-18.6]), upper=np.array([-7.8]))
     p, g = cand.bracketed_search(None, lambda p: float(p[0]), spec, -11.7, gap(-11.7))
@@ -38,7 +38,7 @@ def test_a_narrow_valley_between_two_starts_is_found(monkeypatch, x_true):
 def test_the_bracket_runs_to_the_bound_beyond_the_last_start(monkeypatch):
     """The best start is the largest: the bracket runs from the start below it to the upper bound."""
     gap = _valley(-8.2, 0.15)
-    monkeypatch.setattr(cand, "prefix_gap", lambda run, m: gap(m))
+    monkeypatch.setattr(cand, "prefix_gap", lambda run, m, prefix=None: gap(m))
     spec = SimpleNamespace(n=1, starts=[np.array([v]) for v in (-13.3, -11.7, -8.6)],
                            lower=np.array([-18.6]), upper=np.array([-7.8]))
     p, g = cand.bracketed_search(None, lambda p: float(p[0]), spec, -8.6, gap(-8.6))
@@ -48,7 +48,7 @@ def test_the_bracket_runs_to_the_bound_beyond_the_last_start(monkeypatch):
 def test_nothing_better_keeps_the_start(monkeypatch):
     """A start at the bottom of its valley is returned unchanged with its own gap."""
     gap = _valley(-11.7, 0.5)
-    monkeypatch.setattr(cand, "prefix_gap", lambda run, m: gap(m) if abs(m + 11.7) > 1e-12 else 0.0)
+    monkeypatch.setattr(cand, "prefix_gap", lambda run, m, prefix=None: gap(m) if abs(m + 11.7) > 1e-12 else 0.0)
     spec = SimpleNamespace(n=1, starts=[np.array([v]) for v in (-13.3, -11.7, -9.3)],
                            lower=np.array([-18.6]), upper=np.array([-7.8]))
     p, g = cand.bracketed_search(None, lambda p: float(p[0]), spec, -11.7, 0.0)

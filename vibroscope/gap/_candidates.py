@@ -429,7 +429,7 @@ def probe(run: Run, other_base: dict, s):
                     m0 = s.apply(b, p0)
                 except ValueError:
                     continue
-                g = prefix_gap(run, m0) if sp is None else prefix_gap(run, m0, sp)
+                g = prefix_gap(run, m0, sp)
                 g = g if np.isfinite(g) else 1e9
                 if b is base and s.n == 1:
                     seen.setdefault(id(base), {})[float(np.asarray(p0).ravel()[0])] = g
@@ -530,8 +530,7 @@ def bracketed_search(run: Run, build, s, x0: float, g0: float, gaps: dict | None
 
     def f(x):
         try:
-            m = build(np.array([x]))
-            g = prefix_gap(run, m) if prefix is None else prefix_gap(run, m, prefix)
+            g = prefix_gap(run, build(np.array([x])), prefix)
         except ValueError:
             return 1e9
         g = g if np.isfinite(g) else 1e9
