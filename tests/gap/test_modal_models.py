@@ -96,9 +96,10 @@ def test_a_changed_physical_spring_is_a_linear_parameter_of_a_modal_model():
     np.testing.assert_allclose(lin.values(m2)["dk:m1-m2"], dk, rtol=1e-12)
     np.testing.assert_allclose(lin.theta_between(m, m2), theta, atol=1e-12)
     assert lin.changed(theta) == ["dk:m1-m2"]
-    # a second change adds to the first, in the same block of six springs and six dampers
+    # a second change adds to the first, in the same block of six springs, six dampers and
+    # three point masses
     m3 = lin.apply(m2, theta)
-    assert len(m3.elements) == len(m2.elements) == len(m.elements) + 12
+    assert len(m3.elements) == len(m2.elements) == len(m.elements) + 15
     np.testing.assert_allclose(lin.values(m3)["dk:m1-m2"], 2 * dk, rtol=1e-12)
 
 
@@ -148,6 +149,61 @@ def test_a_changed_physical_damper_is_a_linear_parameter_of_a_modal_model():
     assert err_pm > 100 * max(err, 1e-12)
 
 
+def test_a_changed_physical_mass_is_a_linear_parameter_of_a_modal_model():
+    """A mass that differs from the one the modes were identified with couples the modes
+    through the mass matrix (``Phi^T dM Phi``): the ``dm:`` point mass reproduces it exactly
+    (all DOFs measured), in the FRF and in time (linear and with a nonlinear element, the
+    compiled kernel's mass inverse), per-mode factors with every physical stiffness and damping
+    change do not, and it is written and read back."""
+    from scipy.optimize import least_squares
+
+    from vibroscope.gap.effects import LinearParams
+    from vibroscope.models.elements import SignedMass
+
+    truth = chain()
+    m = as_lumped(loads_model(dumps_model(exact_modal(truth)), "chain_modal.toml"))
+    lin = LinearParams(m, physical=True)
+    dm = -0.3  # kg: m2 1.5 -> 1.2 kg
+    changed = truth.replace(dofs=(truth.dofs[0], type(truth.dofs[1])("m2", 1.2), truth.dofs[2]))
+    theta = np.zeros(len(lin))
+    i = lin.names.index("dm:m2")
+    theta[i] = 1.0
+    m_unit = lin.values(lin.apply(m, theta))["dm:m2"]  # kg per unit of theta
+    np.testing.assert_allclose(m_unit, 0.3 * 1.5, rtol=1e-9)  # DM_SCALE times the mass at m2
+    theta[i] = dm / m_unit
+    m2 = lin.apply(m, theta)
+    assert sum(isinstance(e, SignedMass) for e in m2.elements) == 3
+    f = np.linspace(0.5, 150.0, 600)
+    H = changed.frf(f)
+    err = np.max(np.abs(m2.frf(f, quantity=None) - H)) / np.max(np.abs(H))
+    assert err < 1e-10
+    assert np.max(np.abs(m.frf(f, quantity=None) - H)) / np.max(np.abs(H)) > 0.1  # the nominal is far off
+    np.testing.assert_allclose(lin.values(m2)["dm:m2"], dm, rtol=1e-12)
+    np.testing.assert_allclose(lin.theta_between(m, m2), theta, atol=1e-12)
+    assert lin.changed(theta) == ["dm:m2"]
+    assert loads_model(dumps_model(m2)) == m2
+    # in time: linear, and with a cubic spring between two measured points (the nonlinear path)
+    rng = np.random.default_rng(1)
+    u = 20 * rng.standard_normal((1, 4000))
+    for extra in ((), (CubicSpring(("m3", "m2"), k3=1e9, k=0.0),)):
+        a = simulate(changed.replace(elements=changed.elements + extra), u, FS).data
+        b = simulate(m2.replace(elements=m2.elements + extra), u, FS).data
+        assert np.max(np.abs(a - b)) / np.max(np.abs(a)) < 1e-8
+    # per-mode factors with every physical stiffness and damping change, fitted to the changed
+    # FRF, leave a far larger error
+    no_mass = [n for n in lin.names if not n.startswith("dm:")]
+    kc = LinearParams(m, no_mass, physical=True)
+    assert len(kc) == len(lin) - 3
+
+    def res(x):
+        d = kc.apply(m, x).frf(f, quantity=None) - H
+        return np.concatenate([d.real.ravel(), d.imag.ravel()]) / np.max(np.abs(H))
+
+    best = least_squares(res, np.zeros(len(kc)))
+    err_kc = np.max(np.abs(kc.apply(m, best.x).frf(f, quantity=None) - H)) / np.max(np.abs(H))
+    assert err_kc > 100 * max(err, 1e-12)
+
+
 def test_effects_act_at_the_measured_points():
     from vibroscope.gap.effects import LinearParams, connections, EFFECT_TABLE
 
@@ -161,7 +217,8 @@ def test_effects_act_at_the_measured_points():
     # with physical=True, a stiffness change per connection, then a damping change per
     # connection (the parameter-mismatch refit)
     assert LinearParams(m, physical=True).names[9:] == ([f"dk:{a}-{b}" for a, b in pairs]
-                                                        + [f"dc:{a}-{b}" for a, b in pairs])
+                                                        + [f"dc:{a}-{b}" for a, b in pairs]
+                                                        + ["dm:m1", "dm:m2", "dm:m3"])
     # a log factor of 2 ln 1.1 on k:mode2 moves mode 2 up by 10 %
     th = np.zeros(len(lin))
     th[lin.names.index("k:mode2-ground")] = 2 * np.log(1.1)

@@ -57,8 +57,10 @@ from vibroscope.models.elements import (
     BoucWen,
     CubicSpring,
     Damper,
+    GROUND,
     Friction,
     SignedDamper,
+    SignedMass,
     SignedSpring,
     Spring,
 )
@@ -80,8 +82,14 @@ DK_SCALE = 0.3
 #: ``DC_SCALE * c_ref * theta`` (``c_ref`` the damping the modes give across it): up to 75 %
 #: of it either way
 DC_SCALE = 0.3
+#: a modal-coordinates model's physical mass change at a measured point is
+#: ``DM_SCALE * m_ref * theta`` (``m_ref`` the mass the point carries): up to 75 % of it either way
+DM_SCALE = 0.3
 #: the physical changes' kinds and their scales
-_PHYS_SCALE = {"dk": DK_SCALE, "dc": DC_SCALE}
+_PHYS_SCALE = {"dk": DK_SCALE, "dc": DC_SCALE, "dm": DM_SCALE}
+#: the physical changes' element classes and the attribute each one's change is in
+_PHYS_ELEMENT = {"dk": SignedSpring, "dc": SignedDamper, "dm": SignedMass}
+_PHYS_ATTR = {"dk": "k", "dc": "c", "dm": "m"}
 #: name of the DOF an extra_mode candidate adds
 EXTRA_DOF = "extra"
 
@@ -136,11 +144,14 @@ class LinearParams:
     ``DK_SCALE * k_ref * theta_i`` between the points, ``k_ref`` the static stiffness the
     nominal has across the connection; then one physical damping change per connection
     (``dc:<a>-<b>``): a :class:`~vibroscope.models.SignedDamper` of coefficient
-    ``DC_SCALE * c_ref * theta_i``, ``c_ref`` the damping the nominal's modes give across it.
+    ``DC_SCALE * c_ref * theta_i``, ``c_ref`` the damping the nominal's modes give across it;
+    then one physical mass change per point (``dm:<point>``): a
+    :class:`~vibroscope.models.SignedMass` of ``DM_SCALE * m_ref * theta_i`` to ground,
+    ``m_ref`` the mass the point carries (``1 / (v^T M^-1 v)``, ``v`` its shape).
     Acting through the mode shapes, these couple the modes and change the shapes, which
-    per-mode factors cannot: a physical spring or damper that differs from the one the modes
-    were identified with is ``Phi^T dK Phi`` (``Phi^T dC Phi``) in modal coordinates, not
-    diagonal [1]_.
+    per-mode factors cannot: a physical spring, damper or mass that differs from the one the
+    modes were identified with is ``Phi^T dK Phi`` (``Phi^T dC Phi``, ``Phi^T dM Phi``) in
+    modal coordinates, not diagonal [1]_.
 
     Parameters
     ----------
@@ -153,16 +164,17 @@ class LinearParams:
         otherwise the names to keep (e.g. ``["k:m1-ground", "c:m1-ground"]``); unknown names
         are ignored.
     physical : bool, optional
-        Add the ``dk:`` physical stiffness and ``dc:`` damping changes of a model with
-        measured points (default False: the per-mode factors only).
+        Add the ``dk:`` physical stiffness, ``dc:`` damping and ``dm:`` mass changes of a
+        model with measured points (default False: the per-mode factors only).
 
     Attributes
     ----------
     names : list of str
         The parameter names, the order of ``theta``.
     refs : list of tuple of (str, int)
-        For each name, its kind (``"m"``, ``"k"``, ``"c"``, ``"dk"``, ``"dc"``) and the index of
-        its DOF or element in `model` (for ``"dk"`` and ``"dc"``, of its physical change).
+        For each name, its kind (``"m"``, ``"k"``, ``"c"``, ``"dk"``, ``"dc"``, ``"dm"``) and the
+        index of its DOF or element in `model` (for ``"dk"``, ``"dc"`` and ``"dm"``, of its
+        physical change).
 
     References
     ----------
@@ -183,15 +195,16 @@ class LinearParams:
                 names.append(f"c:{pair_name(e.between)}")
                 refs.append(("c", j))
         # a model with points: a signed physical stiffness change at each connection, then a
-        # signed damping change at each
+        # signed damping change at each, then a signed mass change at each point
         self._n_el = len(model.elements)
         self._phys: list[tuple[str, tuple[str, str], float]] = []  # (kind, between, scale)
         if physical and model.point_names():
             pairs = [tuple(b) for b in connections(model)]
             self._phys = ([("dk", b, DK_SCALE * _k_at(model, b)) for b in pairs]
-                          + [("dc", b, DC_SCALE * _c_at(model, b)) for b in pairs])
+                          + [("dc", b, DC_SCALE * _c_at(model, b)) for b in pairs]
+                          + [("dm", (p, GROUND), DM_SCALE * _mass_at(model, p)) for p in model.point_names()])
             for j, (kind, between, _) in enumerate(self._phys):
-                names.append(f"{kind}:{pair_name(between)}")
+                names.append(f"dm:{between[0]}" if kind == "dm" else f"{kind}:{pair_name(between)}")
                 refs.append((kind, j))
         if which == "kc":
             keep = [i for i, n in enumerate(names) if not n.startswith("m:")]
@@ -241,26 +254,25 @@ class LinearParams:
             if self._has_phys_block(els):  # changes add to the ones `model` already has
                 for j, ((kind, _, _), d) in enumerate(zip(self._phys, delta)):
                     e = els[self._n_el + j]
-                    els[self._n_el + j] = replace(e, k=e.k + float(d)) if kind == "dk" else replace(e, c=e.c + float(d))
-            else:  # the block of stiffness and damping changes, after the nominal's own elements
-                block = [SignedSpring(b, k=float(d)) if kind == "dk" else SignedDamper(b, c=float(d))
+                    attr = _PHYS_ATTR[kind]
+                    els[self._n_el + j] = replace(e, **{attr: getattr(e, attr) + float(d)})
+            else:  # the block of stiffness, damping and mass changes, after the nominal's own elements
+                block = [_PHYS_ELEMENT[kind](b, **{_PHYS_ATTR[kind]: float(d)})
                          for (kind, b, _), d in zip(self._phys, delta)]
                 els = els[: self._n_el] + block + els[self._n_el:]
         return replace(model, dofs=tuple(dofs), elements=tuple(els))
 
     def _has_phys_block(self, els) -> bool:
         n0, nd = self._n_el, len(self._phys)
-        kinds = {"dk": SignedSpring, "dc": SignedDamper}
         return nd > 0 and len(els) >= n0 + nd and all(
-            isinstance(e, kinds[kind]) and tuple(e.between) == b
+            isinstance(e, _PHYS_ELEMENT[kind]) and tuple(e.between) == b
             for e, (kind, b, _) in zip(els[n0:n0 + nd], self._phys))
 
     def _phys_values(self, model) -> np.ndarray:
         els = list(model.elements)
         if not self._has_phys_block(els):
             return np.zeros(len(self._phys))
-        return np.array([els[self._n_el + j].k if kind == "dk" else els[self._n_el + j].c
-                         for j, (kind, _, _) in enumerate(self._phys)])
+        return np.array([getattr(els[self._n_el + j], _PHYS_ATTR[kind]) for j, (kind, _, _) in enumerate(self._phys)])
 
     def changed(self, theta, tol: float = 0.03) -> list[str]:
         """Names of the parameters whose factor differs from 1 by more than `tol`.
@@ -292,8 +304,8 @@ class LinearParams:
         -------
         dict of str to float
             Name -> mass (kg), stiffness (N/m) or damping coefficient (N s/m); for ``dk:``
-            (``dc:``) names the physical stiffness (damping) change, N/m (N s/m), `model` has
-            at the connection (0 when it has none).
+            (``dc:``, ``dm:``) names the physical stiffness (damping, mass) change, N/m (N s/m,
+            kg), `model` has at the connection (0 when it has none).
         """
         out = {}
         phys = self._phys_values(model) if self._phys else None
@@ -316,8 +328,8 @@ class LinearParams:
         -------
         ndarray, shape (len(self),)
             ``log(other_i / model_i)``; 0 where either value is not positive; for ``dk:``
-            (``dc:``) names the difference of the changes over ``DK_SCALE * k_ref``
-            (``DC_SCALE * c_ref``).
+            (``dc:``, ``dm:``) names the difference of the changes over ``DK_SCALE * k_ref``
+            (``DC_SCALE * c_ref``, ``DM_SCALE * m_ref``).
         """
         v0, v1 = self.values(model), self.values(other)
         out = []
@@ -588,7 +600,7 @@ def _mass_at(model, name) -> float:
     if name in model.dof_names:
         return model.dofs[model.dof_index(name)].mass
     v = model.point_vector(name)
-    return float(1.0 / np.sum(v**2 / np.diag(model.M)))
+    return float(1.0 / (v @ np.asarray(model.M_inv) @ v))
 
 
 def _regressed(scales, key) -> list:

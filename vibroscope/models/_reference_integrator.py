@@ -42,9 +42,9 @@ class _Integrator:
         A, Bq, _, _ = model.state_matrices()
         self.els = model.nonlinear_elements
         self.L = np.array([model.element_vector(e) for e in self.els]).reshape(len(self.els), n)
-        Minv = 1.0 / np.diag(model.M)
+        Minv = np.asarray(model.M_inv)
         Bf = np.zeros((2 * n, len(self.els)))
-        Bf[n:] = -(Minv[:, None] * self.L.T)
+        Bf[n:] = -(Minv @ self.L.T)
         N = np.eye(2 * n) - 0.5 * dt * A
         self.P = np.linalg.solve(N, np.eye(2 * n) + 0.5 * dt * A)
         self.Gu = np.linalg.solve(N, 0.5 * dt * Bq)
@@ -292,7 +292,7 @@ def _outputs_from_states(model: LumpedModel, Q, G, U):
     """Configured outputs from fine-grid states Q (2n, N), nonlinear forces G, inputs U."""
     n = model.n_dofs
     X, V = Q[:n], Q[n:]
-    minv = 1.0 / np.diag(model.M)
+    Minv = np.asarray(model.M_inv)
     acc = None
     rows = []
     for o in model.outputs:
@@ -307,7 +307,7 @@ def _outputs_from_states(model: LumpedModel, Q, G, U):
                 if G.shape[0]:
                     L = np.array([model.element_vector(e) for e in model.nonlinear_elements])
                     F = F - L.T @ G
-                acc = minv[:, None] * F
+                acc = Minv @ F
             rows.append(acc[k])
     return np.array(rows).reshape(len(model.outputs), -1)
 

@@ -37,6 +37,7 @@ __all__ = [
     "Element",
     "Spring",
     "SignedDamper",
+    "SignedMass",
     "SignedSpring",
     "Damper",
     "CubicSpring",
@@ -114,6 +115,12 @@ class Element:
     @property
     def linear_damping(self) -> float:
         """Damping (N s/m) this element adds to the model's linear ``C``."""
+        return 0.0
+
+    @property
+    def linear_mass(self) -> float:
+        """Mass (kg) this element adds to the model's ``M`` across its ends (0 but for
+        :class:`SignedMass`)."""
         return 0.0
 
     def force(self, d: float, v: float, state=None) -> float:
@@ -346,6 +353,71 @@ class SignedDamper(Element):
     # the same law as a damper's, c v: its linear part and its force
     linear_damping = Damper.linear_damping
     force = Damper.force
+
+
+@dataclass(frozen=True)
+class SignedMass(Element):
+    """A mass of either sign across its ends: ``m`` (kg) times ``l l^T`` in the mass matrix.
+
+    To ground, a point mass added to (``m > 0``) or taken out of (``m < 0``) a measured point of a
+    model whose masses are spread over its modes: a modal-coordinates model, where a physical
+    mass that differs from the one the modes were identified with is ``Phi^T dM Phi`` in modal
+    coordinates, coupling the modes [1]_; between two ends, an inerter (force ``m`` times the
+    relative acceleration [2]_). It acts through the mass matrix only: its force is no function
+    of the relative displacement and velocity, and :meth:`force` returns 0. The model's mass
+    matrix must stay positive definite; this element does not check that.
+
+    Parameters
+    ----------
+    between : tuple of (str, str)
+        The two ends: two DOF or point names, or one and ``"ground"``.
+    m : float, optional
+        Mass (kg), finite, any sign; default 0.
+
+    Raises
+    ------
+    ValueError
+        If `between` is invalid (see :class:`Element`) or `m` is not finite.
+
+    References
+    ----------
+    .. [1] D. J. Ewins, *Modal Testing: Theory, Practice and Application*, 2nd ed., Research
+       Studies Press, 2000, sec. 6.2 (structural modification through the mode shapes).
+    .. [2] M. C. Smith, "Synthesis of mechanical networks: the inerter", IEEE Trans. Automatic
+       Control 47(10):1648-1662, 2002.
+    """
+
+    m: float = 0.0
+    type: ClassVar[str] = "signed_mass"
+    is_linear: ClassVar[bool] = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        object.__setattr__(self, "m", _finite("m", self.m))
+
+    @property
+    def linear_mass(self) -> float:
+        return self.m
+
+    def force(self, d, v, state=None):
+        """0: the element acts through the mass matrix (``linear_mass``), not as a force of
+        `d` (m) and `v` (m/s).
+
+        Parameters
+        ----------
+        d : float
+            Relative displacement ``x_a - x_b`` (m), unused.
+        v : float
+            Relative velocity ``xdot_a - xdot_b`` (m/s), unused.
+        state : sequence of float, optional
+            Unused (no internal state).
+
+        Returns
+        -------
+        float
+            0.0 (N).
+        """
+        return 0.0
 
 
 @dataclass(frozen=True)
@@ -865,6 +937,7 @@ ELEMENT_TYPES: dict[str, tuple[type, dict[str, str], tuple[str, ...]]] = {
     "signed_spring": (SignedSpring, {"k": "k"}, ("k",)),
     "damper": (Damper, {"c": "c"}, ("c",)),
     "signed_damper": (SignedDamper, {"c": "c"}, ("c",)),
+    "signed_mass": (SignedMass, {"m": "m"}, ("m",)),
     "cubic_spring": (CubicSpring, {"k": "k", "k3": "k3"}, ("k3",)),
     "backlash": (Backlash, {"k": "k", "gap": "gap"}, ("k", "gap")),
     "friction": (Friction, {"force": "force_", "v_eps": "v_eps", "force_neg": "force_neg"}, ("force",)),
@@ -887,7 +960,7 @@ def make_element(type: str, between, **params) -> Element:
     Parameters
     ----------
     type : str
-        A key of :data:`ELEMENT_TYPES`: ``'spring'``, ``'signed_spring'``, ``'damper'``, ``'signed_damper'``,
+        A key of :data:`ELEMENT_TYPES`: ``'spring'``, ``'signed_spring'``, ``'damper'``, ``'signed_damper'``, ``'signed_mass'``,
         ``'cubic_spring'``, ``'backlash'``, ``'friction'``, ``'bouc_wen'`` or ``'mr_damper'``.
     between : tuple of (str, str)
         The two ends: two DOF names, or a DOF name and ``"ground"``.

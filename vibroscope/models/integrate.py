@@ -200,9 +200,9 @@ def flatten_model(model: LumpedModel, dt: float, scheme: str = "trapezoid") -> F
     n_e = len(els)
     A, Bq, Cq, Dq = model.state_matrices()
     L = np.array([model.element_vector(e) for e in els]).reshape(n_e, n)
-    minv = 1.0 / np.diag(model.M)
+    Minv = np.asarray(model.M_inv)
     Bf = np.zeros((2 * n, n_e))
-    Bf[n:] = -(minv[:, None] * L.T)
+    Bf[n:] = -(Minv @ L.T)
     if scheme == "trapezoid":
         N = np.eye(2 * n) - 0.5 * dt * A
         P = np.linalg.solve(N, np.eye(2 * n) + 0.5 * dt * A)
@@ -235,7 +235,7 @@ def flatten_model(model: LumpedModel, dt: float, scheme: str = "trapezoid") -> F
     Hy = np.zeros((len(model.outputs), n_e))
     for r, o in enumerate(model.outputs):
         if o.quantity == "acceleration":
-            Hy[r] = -(model.point_vector(o.dof) * minv) @ L.T
+            Hy[r] = -(model.point_vector(o.dof) @ Minv) @ L.T
     c = np.ascontiguousarray
     return FlatModel(
         dt=dt,

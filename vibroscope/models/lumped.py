@@ -451,8 +451,30 @@ class LumpedModel:
     # -- linear matrices -----------------------------------------------------------------------
     @property
     def M(self) -> np.ndarray:
-        """Mass matrix (kg), shape (n_dofs, n_dofs), diagonal."""
-        return _ro(np.diag([d.mass for d in self.dofs]))
+        """Mass matrix (kg), shape (n_dofs, n_dofs): the DOFs' masses on the diagonal, plus each
+        :class:`~vibroscope.models.SignedMass` element's ``m l l^T`` (``l`` its
+        :meth:`element_vector`)."""
+        M = np.diag([d.mass for d in self.dofs])
+        for e in self.elements:
+            if e.linear_mass:
+                lv = self.element_vector(e)
+                M += e.linear_mass * np.outer(lv, lv)
+        return _ro(M)
+
+    @property
+    def M_inv(self) -> np.ndarray:
+        """Inverse of the mass matrix (1/kg), shape (n_dofs, n_dofs): ``diag(1 / m)`` for a
+        diagonal :attr:`M`, else its matrix inverse.
+
+        Raises
+        ------
+        numpy.linalg.LinAlgError
+            If :attr:`M` is singular.
+        """
+        M = np.asarray(self.M)
+        if not any(e.linear_mass for e in self.elements):
+            return _ro(np.diag(1.0 / np.diag(M)))
+        return _ro(np.linalg.inv(M))
 
     @property
     def K(self) -> np.ndarray:
@@ -495,7 +517,7 @@ class LumpedModel:
         D : ndarray, shape (n_outputs, n_inputs)
         """
         n = self.n_dofs
-        Minv = np.diag(1.0 / np.diag(self.M))
+        Minv = np.asarray(self.M_inv)
         A = np.zeros((2 * n, 2 * n))
         A[:n, n:] = np.eye(n)
         A[n:, :n] = -Minv @ self.K

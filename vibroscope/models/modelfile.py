@@ -7,7 +7,7 @@ Schema (fixed)::
     name = "m1"
     mass = 2.0                      # kg
     [[element]]
-    type = "spring"                 # spring | signed_spring | damper | signed_damper | cubic_spring | backlash | friction | bouc_wen | mr_damper
+    type = "spring"                 # spring | signed_spring | damper | signed_damper | signed_mass | cubic_spring | backlash | friction | bouc_wen | mr_damper
     between = ["m1", "ground"]      # two DOF names, or a DOF and "ground"
     k = 5.0e4                       # N/m
     [[input]]
@@ -46,7 +46,9 @@ drives.
 
 Element parameters: spring ``k`` (>= 0); signed_spring ``k`` (any sign: a stiffness taken out of
 a connection that has no spring of its own, as in a modal-coordinates model); damper ``c``;
-signed_damper ``c`` (any sign: a damping change where there is no damper of its own); cubic_spring ``k3`` (``k`` optional);
+signed_damper ``c`` (any sign: a damping change where there is no damper of its own); signed_mass
+``m`` (kg, any sign: a point mass added to or taken out of a measured point of a modal-coordinates
+model, to ground; between two ends an inerter); cubic_spring ``k3`` (``k`` optional);
 backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional; ``force_neg``, the sliding
 force for negative velocity, optional, default ``force``); bouc_wen ``alpha``, ``beta``,
 ``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A) and optionally
@@ -315,7 +317,7 @@ def _tables(ctx, doc, table):
 
 _NONNEG = {"k", "c", "gap", "force", "force_neg", "k0", "k1"}
 #: element types whose parameters may take either sign
-_SIGNED = frozenset({"signed_spring", "signed_damper"})
+_SIGNED = frozenset({"signed_spring", "signed_damper", "signed_mass"})
 _POSITIVE = {"v_eps", "nu", "n"}
 
 
