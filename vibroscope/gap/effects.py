@@ -847,6 +847,12 @@ MODAL_SHARE_MIN = 1e-3
 JOINT_SLIP_MIN = 0.005
 #: ... and a clearance wider than this many RMS deflections never closes: the same (vanishes)
 CLEARANCE_OPEN_MAX = 4.0
+#: a modal joint is also started at the share of the connection's stiffness the measured FRF
+#: says the nominal lost (:func:`vibroscope.gap._evidence.stiffness_lost`) when that share lies in
+#: ``[K_LOST_MIN, K_LOST_MAX]``, its slip force these multiples of its elastic force at the RMS
+#: deflection
+K_LOST_MIN, K_LOST_MAX = 0.02, 0.95
+K_LOST_SLIPS = (1.0, 0.1, 0.01)
 
 
 def _modal_backlash(pair, key, d_rms, k_loc, scales):
@@ -1108,10 +1114,16 @@ def _joint_friction(model, scales):
         # a start that slips everywhere at the true connection can probe worse than a start at a
         # connection where the joint does little, so the range of c matters)
         f_el = k_loc * d_rms if k_loc > 0 else u_ref
+        # a modal connection: also the share of its stiffness the measured FRF says the nominal
+        # lost there (scales["k_lost"], N/m, _evidence.stiffness_lost; the share of this model's
+        # stiffness, which a refit has moved), a joint slipping through the whole record (slip
+        # forces from 1 down to 1/100 of its elastic force at the RMS deflection)
+        r_lost = scales.get("k_lost", {}).get(key, 0.0) / k_loc if modal else 0.0
         rs = [(r, c * r * f_el / u_ref) for r, c in ((0.3, 1.0), (0.3, 0.25), (0.3, 4.0), (0.5, 1.0))
               # a modal connection's stiffness (all of it, across the two points) holds more than the
               # joint's, and its elastic force at the RMS deflection is that of the softened joint
-              + (((0.1, 1.0), (0.5, 0.05)) if modal else ())]
+              + (((0.1, 1.0), (0.5, 0.05)) if modal else ())
+              + (tuple((r_lost, c) for c in K_LOST_SLIPS) if K_LOST_MIN <= r_lost <= K_LOST_MAX else ())]
         starts = [np.clip(np.array([math.log(r / (1 - r)), math.log(max(s, 1e-300))]), lo + 1e-6, hi - 1e-6)
                   for r, s in rs]
 
