@@ -423,7 +423,7 @@ def test_the_upper_residual_pseudo_mode_is_placed_from_the_lowest_level_data():
     mode's within 3 % and the static flexibility across out2-out3 the truth's within 5 % (18.54 Hz
     and 0.7 % measured; the convention's flexibility is 1.37 times the truth's)."""
     from vibroscope.gap.diagnosis import _place_upper_residual, _prepare_logs
-    from vibroscope.gap.effects import _k_at
+    from vibroscope.gap.effects import connection_stiffness
     from vibroscope.models.excitation import multisine
 
     fs = 400.0
@@ -451,8 +451,8 @@ def test_the_upper_residual_pseudo_mode_is_placed_from_the_lowest_level_data():
     assert info["convention_hz"] == pytest.approx(4 * w[1] / (2 * np.pi))
     assert info["frequency_hz"] == pytest.approx(w[2] / (2 * np.pi), rel=0.03), info
     flex_true = float(np.sum((sl.eigh(truth.K, truth.M)[1][2] - sl.eigh(truth.K, truth.M)[1][1]) ** 2 / w2))
-    assert 1 / _k_at(run.model, ("out2", "out3")) == pytest.approx(flex_true, rel=0.05)
-    assert 1 / _k_at(before, ("out2", "out3")) > 1.2 * flex_true  # the convention's: too flexible
+    assert 1 / connection_stiffness(run.model, ("out2", "out3")) == pytest.approx(flex_true, rel=0.05)
+    assert 1 / connection_stiffness(before, ("out2", "out3")) > 1.2 * flex_true  # the convention's: too flexible
 
 def excitation(n: int, seed: int = 1) -> np.ndarray:
     from scipy import signal

@@ -19,7 +19,7 @@ from scipy import signal as sps
 from vibroscope.gap._level_evidence import bla_levels, level_groups, level_test, modal_level_test
 from vibroscope.gap._run import Run, frf_data, pow2
 from vibroscope.gap.closed_loop import actuator_force, basis_model, basis_rows, is_closed_loop, measured_rows
-from vibroscope.gap.effects import FRICTION_V_EPS, LinearParams, _k_at, connections, pair_name
+from vibroscope.gap.effects import FRICTION_V_EPS, LinearParams, connection_stiffness, connections, pair_name
 from vibroscope.gap.fit import frf_residual
 from vibroscope.gap.levels import level_blas
 from vibroscope.gap.measure import masked_csd
@@ -472,7 +472,7 @@ def stiffness_lost(model: LumpedModel, f, H, w) -> dict[str, float]:
     for pair in connections(model):
         name = f"dk:{pair_name(pair)}"
         lin = LinearParams(model, [name], physical=True)
-        k_ref = _k_at(model, pair)
+        k_ref = connection_stiffness(model, pair)
         if len(lin) != 1 or not k_ref > 0:
             continue
         k_unit = lin.values(lin.apply(model, [1.0]))[name]  # N/m per unit of theta

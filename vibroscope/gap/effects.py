@@ -66,7 +66,7 @@ from vibroscope.models.elements import (
 )
 from vibroscope.models.lumped import Dof, LumpedModel
 
-__all__ = ["LinearParams", "EffectSpec", "EffectDef", "EFFECT_TABLE", "VERDICT_WORDS", "connections",
+__all__ = ["LinearParams", "EffectSpec", "EffectDef", "EFFECT_TABLE", "VERDICT_WORDS", "connections", "connection_stiffness",
            "candidate_specs", "FRICTION_V_EPS"]
 
 #: regularisation velocity of fitted friction elements (m/s)
@@ -200,7 +200,7 @@ class LinearParams:
         self._phys: list[tuple[str, tuple[str, str], float]] = []  # (kind, between, scale)
         if physical and model.point_names():
             pairs = [tuple(b) for b in connections(model)]
-            self._phys = ([("dk", b, DK_SCALE * _k_at(model, b)) for b in pairs]
+            self._phys = ([("dk", b, DK_SCALE * connection_stiffness(model, b)) for b in pairs]
                           + [("dc", b, DC_SCALE * _c_at(model, b)) for b in pairs]
                           + [("dm", (p, GROUND), DM_SCALE * _mass_at(model, p)) for p in model.point_names()])
             for j, (kind, between, _) in enumerate(self._phys):
@@ -581,9 +581,22 @@ def _across(model, between, A: np.ndarray) -> float:
     return float(np.max(np.diag(A)))
 
 
-def _k_at(model, between) -> float:
+def connection_stiffness(model: LumpedModel, between) -> float:
     """The stiffness (N/m) across a connection: its spring's, else the static stiffness seen
-    across it (:func:`_across`)."""
+    across it (:func:`_across`; a modal-coordinates model's connection between measured points).
+
+    Parameters
+    ----------
+    model : LumpedModel
+        The model.
+    between : tuple of (str, str)
+        The connection's ends (DOF or point names, or one and ``"ground"``).
+
+    Returns
+    -------
+    float
+        Stiffness in N/m.
+    """
     j, e = _spring_at(model, between)
     return e.k if e is not None else _across(model, between, model.K)
 
@@ -727,7 +740,7 @@ def _pair_scales(model, scales, pair):
     key = pair_name(pair)
     d_rms = max(scales["d_rms"].get(key, 1e-6), 1e-12)
     v_rms = max(scales.get("v_rms", {}).get(key, 1e-6), 1e-12)
-    return key, d_rms, v_rms, _k_at(model, pair)
+    return key, d_rms, v_rms, connection_stiffness(model, pair)
 
 
 def _force_ref(scales, f_spring: float) -> float:
