@@ -204,6 +204,27 @@ def test_a_changed_physical_mass_is_a_linear_parameter_of_a_modal_model():
     assert err_kc > 100 * max(err, 1e-12)
 
 
+def test_the_stiffness_a_connection_lost_is_read_from_the_frf():
+    """A spring weakened by 40 % between two measured points: the one-parameter scan of
+    :func:`~vibroscope.gap._evidence.stiffness_lost` takes exactly that stiffness out there
+    (noise-free FRF), from a nominal whose resonances lie far from the measured ones."""
+    from dataclasses import replace
+
+    from vibroscope.gap._evidence import stiffness_lost
+
+    truth = chain()
+    m = as_lumped(loads_model(dumps_model(exact_modal(truth)), "chain_modal.toml"))
+    dk = -0.4 * 8e4  # the m1-m2 spring 40 % softer
+    changed = truth.replace(elements=tuple(replace(e, k=e.k + dk) if i == 2 else e
+                                           for i, e in enumerate(truth.elements)))
+    assert set(changed.elements[2].between) == {"m1", "m2"}
+    f = np.linspace(0.5, 150.0, 600)
+    H = changed.frf(f)[:, :, 0]
+    lost = stiffness_lost(m, f, H, np.ones(H.shape))
+    assert lost["m1-m2"] == pytest.approx(-dk, rel=1e-3)
+    assert set(lost) == {"m1-ground", "m2-ground", "m3-ground", "m1-m2", "m1-m3", "m2-m3"}
+
+
 def test_effects_act_at_the_measured_points():
     from vibroscope.gap.effects import LinearParams, connections, EFFECT_TABLE
 
