@@ -454,12 +454,7 @@ class LumpedModel:
         """Mass matrix (kg), shape (n_dofs, n_dofs): the DOFs' masses on the diagonal, plus each
         :class:`~vibroscope.models.SignedMass` element's ``m l l^T`` (``l`` its
         :meth:`element_vector`)."""
-        M = np.diag([d.mass for d in self.dofs])
-        for e in self.elements:
-            if e.linear_mass:
-                lv = self.element_vector(e)
-                M += e.linear_mass * np.outer(lv, lv)
-        return _ro(M)
+        return _ro(self._assembled("linear_mass", np.diag([d.mass for d in self.dofs])))
 
     @property
     def M_inv(self) -> np.ndarray:
@@ -479,22 +474,22 @@ class LumpedModel:
     @property
     def K(self) -> np.ndarray:
         """Stiffness matrix (N/m) of the elements' linear parts, shape (n_dofs, n_dofs)."""
-        K = np.zeros((self.n_dofs, self.n_dofs))
-        for e in self.elements:
-            if e.linear_stiffness:
-                lv = self.element_vector(e)
-                K += e.linear_stiffness * np.outer(lv, lv)
-        return _ro(K)
+        return _ro(self._assembled("linear_stiffness"))
 
     @property
     def C(self) -> np.ndarray:
         """Damping matrix (N s/m) of the elements' linear parts, shape (n_dofs, n_dofs)."""
-        C = np.zeros((self.n_dofs, self.n_dofs))
+        return _ro(self._assembled("linear_damping"))
+
+    def _assembled(self, attr: str, start: np.ndarray | None = None) -> np.ndarray:
+        """`start` (default zeros) plus each element's ``getattr(e, attr) l l^T``."""
+        A = np.zeros((self.n_dofs, self.n_dofs)) if start is None else start
         for e in self.elements:
-            if e.linear_damping:
+            v = getattr(e, attr)
+            if v:
                 lv = self.element_vector(e)
-                C += e.linear_damping * np.outer(lv, lv)
-        return _ro(C)
+                A += v * np.outer(lv, lv)
+        return A
 
     @property
     def B(self) -> np.ndarray:
