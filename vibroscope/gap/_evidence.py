@@ -19,7 +19,7 @@ from scipy import signal as sps
 from vibroscope.gap._level_evidence import bla_levels, level_groups, level_test, modal_level_test
 from vibroscope.gap._run import Run, frf_data, pow2
 from vibroscope.gap.closed_loop import actuator_force, basis_model, basis_rows, is_closed_loop, measured_rows
-from vibroscope.gap.effects import FRICTION_V_EPS, LinearParams, connection_stiffness, connections, pair_name
+from vibroscope.gap.effects import DK_SCALE, FRICTION_V_EPS, LinearParams, connection_stiffness, connections, pair_name
 from vibroscope.gap.fit import frf_residual
 from vibroscope.gap.levels import level_blas
 from vibroscope.gap.measure import masked_csd
@@ -475,11 +475,10 @@ def stiffness_lost(model: LumpedModel, f, H, w) -> dict[str, float]:
         k_ref = connection_stiffness(model, pair)
         if len(lin) != 1 or not k_ref > 0:
             continue
-        k_unit = lin.values(lin.apply(model, [1.0]))[name]  # N/m per unit of theta
 
-        def cost(r, lin=lin, k_unit=k_unit, k_ref=k_ref):
+        def cost(r, lin=lin):  # the dk: change is DK_SCALE * k_ref * theta
             try:
-                res = frf_residual(lin.apply(model, [-r * k_ref / k_unit]), f, H, w)
+                res = frf_residual(lin.apply(model, [-r / DK_SCALE]), f, H, w)
             except (ValueError, np.linalg.LinAlgError, FloatingPointError):
                 return np.inf
             c = float(res @ res)

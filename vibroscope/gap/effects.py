@@ -85,11 +85,8 @@ DC_SCALE = 0.3
 #: a modal-coordinates model's physical mass change at a measured point is
 #: ``DM_SCALE * m_ref * theta`` (``m_ref`` the mass the point carries): up to 75 % of it either way
 DM_SCALE = 0.3
-#: the physical changes' kinds and their scales
-_PHYS_SCALE = {"dk": DK_SCALE, "dc": DC_SCALE, "dm": DM_SCALE}
-#: the physical changes' element classes and the attribute each one's change is in
-_PHYS_ELEMENT = {"dk": SignedSpring, "dc": SignedDamper, "dm": SignedMass}
-_PHYS_ATTR = {"dk": "k", "dc": "c", "dm": "m"}
+#: the physical changes' kinds: (scale, element class, the attribute the change is in)
+_PHYS = {"dk": (DK_SCALE, SignedSpring, "k"), "dc": (DC_SCALE, SignedDamper, "c"), "dm": (DM_SCALE, SignedMass, "m")}
 #: name of the DOF an extra_mode candidate adds
 EXTRA_DOF = "extra"
 
@@ -240,7 +237,7 @@ class LinearParams:
         els = list(model.elements)
         delta = np.zeros(len(self._phys))
         for (kind, i), t in zip(self.refs, theta):
-            if kind in _PHYS_SCALE:
+            if kind in _PHYS:
                 delta[i] = self._phys[i][2] * float(t)
                 continue
             f = math.exp(float(t))
@@ -254,10 +251,10 @@ class LinearParams:
             if self._has_phys_block(els):  # changes add to the ones `model` already has
                 for j, ((kind, _, _), d) in enumerate(zip(self._phys, delta)):
                     e = els[self._n_el + j]
-                    attr = _PHYS_ATTR[kind]
+                    attr = _PHYS[kind][2]
                     els[self._n_el + j] = replace(e, **{attr: getattr(e, attr) + float(d)})
             else:  # the block of stiffness, damping and mass changes, after the nominal's own elements
-                block = [_PHYS_ELEMENT[kind](b, **{_PHYS_ATTR[kind]: float(d)})
+                block = [_PHYS[kind][1](b, **{_PHYS[kind][2]: float(d)})
                          for (kind, b, _), d in zip(self._phys, delta)]
                 els = els[: self._n_el] + block + els[self._n_el:]
         return replace(model, dofs=tuple(dofs), elements=tuple(els))
@@ -265,14 +262,14 @@ class LinearParams:
     def _has_phys_block(self, els) -> bool:
         n0, nd = self._n_el, len(self._phys)
         return nd > 0 and len(els) >= n0 + nd and all(
-            isinstance(e, _PHYS_ELEMENT[kind]) and tuple(e.between) == b
+            isinstance(e, _PHYS[kind][1]) and tuple(e.between) == b
             for e, (kind, b, _) in zip(els[n0:n0 + nd], self._phys))
 
     def _phys_values(self, model) -> np.ndarray:
         els = list(model.elements)
         if not self._has_phys_block(els):
             return np.zeros(len(self._phys))
-        return np.array([getattr(els[self._n_el + j], _PHYS_ATTR[kind]) for j, (kind, _, _) in enumerate(self._phys)])
+        return np.array([getattr(els[self._n_el + j], _PHYS[kind][2]) for j, (kind, _, _) in enumerate(self._phys)])
 
     def changed(self, theta, tol: float = 0.03) -> list[str]:
         """Names of the parameters whose factor differs from 1 by more than `tol`.
@@ -290,7 +287,7 @@ class LinearParams:
         list of str
         """
         return [n for n, (kind, _), t in zip(self.names, self.refs, np.asarray(theta, float))
-                if abs(_PHYS_SCALE[kind] * t if kind in _PHYS_SCALE else math.expm1(t)) > tol]
+                if abs(_PHYS[kind][0] * t if kind in _PHYS else math.expm1(t)) > tol]
 
     def values(self, model: LumpedModel) -> dict[str, float]:
         """Current values (kg, N/m, N s/m) of the parameters in `model`.
@@ -310,7 +307,7 @@ class LinearParams:
         out = {}
         phys = self._phys_values(model) if self._phys else None
         for n, (kind, i) in zip(self.names, self.refs):
-            if kind in _PHYS_SCALE:
+            if kind in _PHYS:
                 out[n] = float(phys[i])
             else:
                 out[n] = model.dofs[i].mass if kind == "m" else (model.elements[i].k if kind == "k" else model.elements[i].c)
@@ -334,7 +331,7 @@ class LinearParams:
         v0, v1 = self.values(model), self.values(other)
         out = []
         for n, (kind, i) in zip(self.names, self.refs):
-            if kind in _PHYS_SCALE:
+            if kind in _PHYS:
                 sc = self._phys[i][2]
                 out.append((v1[n] - v0[n]) / sc if sc > 0 else 0.0)
             else:
