@@ -344,6 +344,22 @@ def polish_winner(run: Run, cands: list, best_i, cache: dict, *, workers: int = 
     return polish, best_i
 
 
+def held_out_gain(ys, simple: dict, rich: dict, split, logs, fs: float) -> float:
+    """The nested test's t of `rich` over `simple` (outputs per log, keyed like `ys`) on the
+    held-out samples of `logs` (``split.validation``): the batch-means t statistic of
+    :func:`~vibroscope.gap.measure.nested_gain` [Schmeiser 1982]. The one place the
+    held-out nested test is formed (the ranking's nested order and polish, the selection's
+    family and floor tests)."""
+    logs = list(logs)
+    return nested_gain([ys[k] for k in logs], [simple[k] for k in logs], [rich[k] for k in logs],
+                       [split.validation[k] for k in logs], fs)
+
+
+def held_out_t(run: Run, simple: dict, rich: dict, logs=None) -> float:
+    """:func:`held_out_gain` on `run`'s measured outputs over its held-out logs (or `logs`)."""
+    return held_out_gain(run.ys, simple, rich, run.split, run.val_logs if logs is None else logs, run.fs)
+
+
 def nested_holds(run: Run, cands: list, best_i: int, j: int) -> bool:
     """Whether the polished best keeps its place before a rival it nests (:func:`nests`: the
     rival is its simpler member at the same place) that ranks ahead of it on the penalty: its
@@ -356,8 +372,7 @@ def nested_holds(run: Run, cands: list, best_i: int, j: int) -> bool:
     vl = run.val_logs
     if not nests(rich, simple) or not set(vl) <= set(rich[2]) or not set(vl) <= set(simple[2]):
         return False
-    t = nested_gain([run.ys[k] for k in vl], [simple[2][k] for k in vl], [rich[2][k] for k in vl],
-                    [run.split.validation[k] for k in vl], run.fs)
+    t = held_out_gain(run.ys, simple[2], rich[2], run.split, vl, run.fs)
     run.nested_t[f"{rich[0].effect}@{where_key(rich[0].where)} over {simple[0].effect}@{where_key(simple[0].where)}"
                  " after the polish"] = float(t)
     return t > NESTED_T
@@ -413,8 +428,7 @@ def nested_order(cands: list, ys, split, val_logs, fs) -> dict:
             s_ = cands[j]
             if not nests(r, s_) or not set(val_logs) <= set(r[2]) or not set(val_logs) <= set(s_[2]):
                 continue
-            t = nested_gain([ys[k] for k in val_logs], [s_[2][k] for k in val_logs], [r[2][k] for k in val_logs],
-                            [split.validation[k] for k in val_logs], fs)
+            t = held_out_gain(ys, s_[2], r[2], split, val_logs, fs)
             out[f"{r[0].effect}@{where_key(r[0].where)} over {s_[0].effect}@{where_key(s_[0].where)}"] = t
             if t > NESTED_T:
                 cands.insert(j, cands.pop(i))

@@ -25,7 +25,7 @@ from functools import partial
 
 import numpy as np
 
-from vibroscope.gap._ranking import polish_candidate
+from vibroscope.gap._ranking import held_out_t, polish_candidate
 from vibroscope.gap._run import (
     ADD_FACTOR,
     CONN_JOINT_GAIN,
@@ -63,7 +63,7 @@ from vibroscope.gap._run import (
 from vibroscope.gap.effects import EFFECT_TABLE
 from vibroscope.gap.closed_loop import is_closed_loop
 from vibroscope.gap.fit import best_start, fit_time_domain, oversample_for
-from vibroscope.gap.measure import nested_gain, nrmse
+from vibroscope.gap.measure import nrmse
 from vibroscope.gap.report import Candidate
 
 
@@ -443,8 +443,7 @@ def reaches_floor(run: Run, combined, base, trace: dict | None = None) -> bool:
     vl = [k for k in run.val_logs if k in combined[2] and k in base[2]]
     if not vl:
         return False
-    t = nested_gain([run.ys[k] for k in vl], [base[2][k] for k in vl], [combined[2][k] for k in vl],
-                    [run.split.validation[k] for k in vl], run.fs)
+    t = held_out_t(run, base[2], combined[2], vl)
     if trace is not None:
         trace["floor_reach_t"] = float(t)
     return bool(t > FLOOR_REACH_T)
@@ -857,14 +856,6 @@ def family_of(run: Run, s):
     rich = next((x for x in run.specs if x.lifts_from is not None and x.lifts_from[0] == s.effect
                  and where_key(x.where) == where_key(s.where)), None)
     return (rich, s, rich.lifts_from[1], rich.lifts_from[2]) if rich is not None else None
-
-
-def held_out_t(run: Run, simple: dict, rich: dict) -> float:
-    """The nested test's t of `rich` over `simple` (held-out outputs per log) on the held-out
-    samples (:func:`~vibroscope.gap.measure.nested_gain`)."""
-    vl = run.val_logs
-    return nested_gain([run.ys[k] for k in vl], [simple[k] for k in vl], [rich[k] for k in vl],
-                       [run.split.validation[k] for k in vl], run.fs)
 
 
 def member_test(run: Run, chosen: list, i: int, rel: tuple) -> list | None:
