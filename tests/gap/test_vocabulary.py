@@ -128,8 +128,10 @@ def test_an_extra_mode_resonating_outside_the_excited_band_vanishes():
     assert "acts as a spring" in em.vanishes(p(1.5))
     for f in (2.5, 80.0, 170.0, 172.0):  # 172 Hz at 2 %: its half-power band reaches 168.6 Hz
         assert em.vanishes(p(f)) is None, f
-    assert "0.1 %" in em.vanishes(p(80.0, mass_share=1e-3))
-    # no band given (a closed loop, or a caller's own scales): only the mass rule
+    # a tiny mass is no reason by itself (a 0.1 % absorber beside its host mode splits it): the
+    # ranking's output test decides
+    assert em.vanishes(p(80.0, mass_share=1e-3)) is None
+    # no band given (a closed loop, or a caller's own scales): no band rule
     em_free = next(s for s in candidate_specs(model, scales(model), ["extra_mode"]))
     assert em_free.vanishes(p(226.9, 0.002)) is None
 

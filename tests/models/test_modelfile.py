@@ -83,6 +83,7 @@ def test_load_good_file(tmp_path):
                 MRDamper(("m1", "ground"), current=0.5),
             ),
         ),
+        LumpedModel.chain([1.0], [1e4], [1.0], nonlinear=(CubicSpring(("m1", "ground"), k3=2e9, k5=-3e14),)),
     ],
 )
 def test_roundtrip(tmp_path, model):

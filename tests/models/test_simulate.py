@@ -206,6 +206,34 @@ def test_trapezoidal_converges_with_second_order(integrator):
     np.testing.assert_allclose(ratios, 4.0, rtol=0.1)
 
 
+@pytest.mark.parametrize("integrator", ["compiled", "reference"])
+def test_a_quintic_spring_term_converges_to_the_ode_solution(integrator):
+    """The cubic spring's quintic term ``k5 d^5`` (force and tangent stiffness in the kernel):
+    the trapezoidal solution converges with order 2 to a DOP853 solution of the same ODE, and
+    differs from the model without it by far more than its own error."""
+    model = LumpedModel(
+        dofs=(Dof("m1", 1.0),),
+        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
+                  CubicSpring(("m1", "ground"), k3=1e9, k5=1e15)),
+        inputs=(Input(dof="m1"),), outputs=(Output("m1", "displacement"),),
+    )
+    uf = lambda t: 30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 47 * t)  # noqa: E731
+    T = 0.4
+    t_ref = np.linspace(0, T, 41)
+    ref = _duffing_reference(model, t_ref, uf)[0]
+    assert 1e15 * np.max(np.abs(ref)) ** 5 > 5.0  # the quintic force, N: a strong term
+    errs = []
+    for nsub in (100, 200, 400):
+        n = 40 * nsub + 1
+        t = np.linspace(0, T, n)
+        Q = _fine_states(integrator, model, uf(t)[None], T / (n - 1))
+        errs.append(np.max(np.abs(Q[0, ::nsub] - ref)))
+    np.testing.assert_allclose(np.array(errs[:-1]) / np.array(errs[1:]), 4.0, rtol=0.1)
+    cubic = model.replace(elements=model.elements[:2] + (CubicSpring(("m1", "ground"), k3=1e9),))
+    without = _duffing_reference(cubic, t_ref, uf)[0]
+    assert np.max(np.abs(without - ref)) > 100 * errs[-1]
+
+
 def test_bouc_wen_converges_and_the_integrators_agree():
     """The non-smooth Bouc-Wen element (|v|, |z|): the error against a 4x finer step still falls
     about 4x per halving, and the compiled kernel and both paths of the reference integrator

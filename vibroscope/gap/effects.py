@@ -961,8 +961,39 @@ def _cubic_stiffness(model, scales):
             build=build,
             describe=lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
             character=lambda p: {"character": "hardening" if p[0] >= 0 else "softening"},
+            law=(_cubic_law(pair, k_loc, d_rms), lambda p: np.array([p[0], 0.0])),
         ))
     return specs
+
+
+#: bounds of the quintic share ``k5 d_rms^4 / k`` of a polynomial spring's free law (those of the
+#: cubic share ``k3 d_rms^2 / k`` of the screening)
+LAW_Q5 = (-0.5, 300.0)
+
+
+def _cubic_law(pair, k_loc, d_rms):
+    """The cubic spring at `pair` with a quintic term free (:attr:`EffectSpec.law`): ``f = k3 d^3
+    + k5 d^5``, ``p = (k3 d_rms^2 / k, k5 d_rms^4 / k)``, the screening's at ``k5 = 0``. The odd
+    polynomial restoring force one order beyond Duffing's (Kerschen et al., "Past, present and
+    future of nonlinear system identification in structural dynamics", MSSP 20, 2006): a spring
+    that stiffens faster than cubically at large deflection (the blind suite's harder variant,
+    seed 11 case 003: a cubic + quintic spring, the quintic 0.7 of the cubic at the RMS
+    deflection, named a Bouc-Wen hysteresis of exponent 1.28 at 4.5x the floor, the cubic
+    alone at 6.5x). Hardening or softening by the sign of the tangent stiffness's change at the
+    RMS deflection, ``3 k3 d_rms^2 + 5 k5 d_rms^4``."""
+    def build(m, p):
+        return replace(m, elements=m.elements + (CubicSpring(pair, k3=float(p[0] * k_loc / d_rms**2), k=0.0,
+                                                             k5=float(p[1] * k_loc / d_rms**4)),))
+
+    def desc(p):
+        return {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2), "k5_N_per_m5": float(p[1] * k_loc / d_rms**4)}
+
+    return EffectSpec(
+        effect="cubic_stiffness", where={"between": [pair[0], pair[1]]}, n=2, starts=[],
+        lower=np.array([-0.5, LAW_Q5[0]]), upper=np.array([300.0, LAW_Q5[1]]), build=build, describe=desc,
+        character=lambda p: {"character": "hardening" if 3.0 * p[0] + 5.0 * p[1] >= 0 else "softening",
+                             "law": "quintic fitted"},
+        shape_free=True)
 
 
 #: a Bouc-Wen hysteresis tends to a Coulomb slider of force ``alpha / (beta (gamma + delta))``
@@ -1172,13 +1203,14 @@ def _extra_mode(model, scales):
     f_lo, f_hi = scales.get("f_band", (0.0, math.inf))
 
     def vanish(p):
-        """An extra mass below 0.2 % of its DOF's, or a resonance outside the excited band by more
-        than its half-power bandwidth: within the band such a mode acts as a mass (above the band)
-        or a spring (below it) at its DOF, a parameter change (fresh modal seed 5603 case 001: a
-        1.6 % heavier m2 taken by a 0.024 kg mode at 226.9 Hz, its bounds, the band ending at
-        170.8 Hz)."""
-        if p[0] < math.log(2e-3):
-            return f"the extra mass is {100 * math.exp(p[0]):.2g} % of its DOF's"
+        """A resonance outside the excited band by more than its half-power bandwidth: within the
+        band such a mode acts as a mass (above the band) or a spring (below it) at its DOF, a
+        parameter change (fresh modal seed 5603 case 001: a 1.6 % heavier m2 taken by a 0.024 kg
+        mode at 226.9 Hz, its bounds, the band ending at 170.8 Hz). The size of its mass says
+        nothing by itself: a lightly damped absorber of 0.1 % of its DOF's mass beside the host's
+        mode splits it (the blind suite's harder variant, seed 11 case 024: 0.096 % at 18.4 Hz
+        beside 17.0 Hz, fitted at the truth, the refit's held-out gap nearly halved); whether the
+        mode is seen is the output test every effect gets (the ranking's ``within_floor``)."""
         f = math.exp(p[1])
         half = 2.0 * math.exp(p[2]) * f  # the half-power bandwidth, Hz
         if f - half > f_hi or f + half < f_lo:

@@ -422,9 +422,13 @@ class SignedMass(Element):
 
 @dataclass(frozen=True)
 class CubicSpring(Element):
-    """Hardening (``k3 > 0``) or softening (``k3 < 0``) spring ``f = k d + k3 d^3``.
+    """Hardening (``k3 > 0``) or softening (``k3 < 0``) spring ``f = k d + k3 d^3 + k5 d^5``.
 
-    `k` in N/m (its linear part, may be 0), `k3` in N/m^3.
+    `k` in N/m (its linear part, may be 0), `k3` in N/m^3, `k5` in N/m^5 (optional: the odd
+    polynomial restoring force of a Duffing oscillator carried one order further, as in the
+    polynomial stiffness of nonlinear normal-mode and harmonic-balance work; Kerschen, Worden,
+    Vakakis & Golinval, "Past, present and future of nonlinear system identification in
+    structural dynamics", Mech. Syst. Signal Process. 20, 2006).
 
     Parameters
     ----------
@@ -435,29 +439,35 @@ class CubicSpring(Element):
     k : float, optional
         Linear stiffness (N/m), finite and >= 0; default 0. It is the part the element adds
         to the model's linear ``K``.
+    k5 : float or None, optional
+        Quintic stiffness (N/m^5), finite, either sign; default None (no quintic term, and
+        none written to the model file).
 
     Raises
     ------
     ValueError
         If `between` is invalid (see :class:`Element`), `k` is negative or not finite, or
-        `k3` is not finite.
+        `k3` or `k5` is not finite.
     """
 
     k3: float = 0.0
     k: float = 0.0
+    k5: float | None = None
     type: ClassVar[str] = "cubic_spring"
 
     def __post_init__(self) -> None:
         super().__post_init__()
         object.__setattr__(self, "k", _nonneg("k", self.k))
         object.__setattr__(self, "k3", _finite("k3", self.k3))
+        if self.k5 is not None:
+            object.__setattr__(self, "k5", _finite("k5", self.k5))
 
     @property
     def linear_stiffness(self) -> float:
         return self.k
 
     def force(self, d, v, state=None):
-        """Element force (N) ``k d + k3 d^3``.
+        """Element force (N) ``k d + k3 d^3 + k5 d^5``.
 
         Parameters
         ----------
@@ -473,7 +483,8 @@ class CubicSpring(Element):
         float
             The force ``f`` (N); it acts as ``-f`` on the first end and ``+f`` on the second.
         """
-        return self.k * d + self.k3 * d * d * d
+        k5 = self.k5 or 0.0
+        return self.k * d + self.k3 * d * d * d + k5 * d**5
 
 
 @dataclass(frozen=True)
@@ -938,7 +949,7 @@ ELEMENT_TYPES: dict[str, tuple[type, dict[str, str], tuple[str, ...]]] = {
     "damper": (Damper, {"c": "c"}, ("c",)),
     "signed_damper": (SignedDamper, {"c": "c"}, ("c",)),
     "signed_mass": (SignedMass, {"m": "m"}, ("m",)),
-    "cubic_spring": (CubicSpring, {"k": "k", "k3": "k3"}, ("k3",)),
+    "cubic_spring": (CubicSpring, {"k": "k", "k3": "k3", "k5": "k5"}, ("k3",)),
     "backlash": (Backlash, {"k": "k", "gap": "gap"}, ("k", "gap")),
     "friction": (Friction, {"force": "force_", "v_eps": "v_eps", "force_neg": "force_neg"}, ("force",)),
     "bouc_wen": (

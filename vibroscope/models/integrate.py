@@ -141,7 +141,7 @@ def _mr_damper_row(e: MRDamper) -> tuple:
 #: The kernel's element types, the one table of them: type name -> (the integer code that
 #: :func:`_element` switches on, the element's parameter row ``prm[i]`` in the order read there).
 KERNEL_ELEMENTS = {
-    CubicSpring.type: (0, lambda e: (e.k, e.k3)),
+    CubicSpring.type: (0, lambda e: (e.k, e.k3, e.k5 or 0.0)),
     Backlash.type: (1, lambda e: (e.k, e.gap)),
     Friction.type: (2, lambda e: (e.force_, e.v_eps, e.force_negative)),
     BoucWen.type: (3, lambda e: (e.alpha, e.beta, e.gamma, e.delta, e.nu)),
@@ -307,10 +307,11 @@ def _element(code, prm, i, kl, cl, d, v, s0, s1):
     r = rd = rv = rs0 = rs1 = 0.0
     h0 = h0d = h0v = h0s0 = h0s1 = 0.0
     h1 = h1d = h1v = h1s0 = h1s1 = 0.0
-    if code == 0:  # cubic spring: k d + k3 d^3
-        k, k3 = prm[i, 0], prm[i, 1]
-        r = k * d + k3 * d * d * d - kl * d - cl * v
-        rd = k + 3.0 * k3 * d * d - kl
+    if code == 0:  # cubic spring: k d + k3 d^3 + k5 d^5
+        k, k3, k5 = prm[i, 0], prm[i, 1], prm[i, 2]
+        d2 = d * d
+        r = k * d + (k3 + k5 * d2) * d2 * d - kl * d - cl * v
+        rd = k + (3.0 * k3 + 5.0 * k5 * d2) * d2 - kl
         rv = -cl
     elif code == 1:  # backlash
         k, gap = prm[i, 0], prm[i, 1]

@@ -48,7 +48,7 @@ Element parameters: spring ``k`` (>= 0); signed_spring ``k`` (any sign: a stiffn
 a connection that has no spring of its own, as in a modal-coordinates model); damper ``c``;
 signed_damper ``c`` (any sign: a damping change where there is no damper of its own); signed_mass
 ``m`` (kg, any sign: a point mass added to or taken out of a measured point of a modal-coordinates
-model, to ground; between two ends an inerter); cubic_spring ``k3`` (``k`` optional);
+model, to ground; between two ends an inerter); cubic_spring ``k3`` (``k`` and the quintic ``k5`` optional);
 backlash ``k``, ``gap``; friction ``force`` (``v_eps`` optional; ``force_neg``, the sliding
 force for negative velocity, optional, default ``force``); bouc_wen ``alpha``, ``beta``,
 ``gamma``, ``delta`` (``nu`` optional, default 1); mr_damper ``i`` (current, A) and optionally
