@@ -72,3 +72,22 @@ def test_a_light_absorber_beside_its_host_mode_is_named_an_extra_mode(tmp_path):
     assert c["where"]["dof"] == "m1" and not c.get("vanished")
     assert c["parameters"]["frequency_hz"] == pytest.approx(ef["f_absorber_hz"], rel=0.02)
     assert c["parameters"]["mass_kg"] == pytest.approx(ef["absorber_mass_kg"], rel=0.3)
+
+
+def test_a_residual_that_repeats_with_the_period_is_not_called_none(tmp_path):
+    """Seed 12 case 007: a clearance replacing the m1-ground spring (half-clearance 0.095 of the
+    RMS deflection, contact stiffness 1.08x the spring's, m1 free inside it), a stepped multisine
+    at three levels, 500 Hz. Nothing fits (the clearance at m1 is not reached); the nominal's
+    residual, 13x the white floor, is nearly all incoherent with the input, and a rule meant for
+    unlogged disturbances called that ``none`` (ebaaedd). But it is 2.9x the outputs' variation
+    from period to period: it repeats with the input, the system's own response. ``none`` means
+    the model is fine; this is ``unexplained``."""
+    d, truth = _case(tmp_path, 12, 7)
+    assert truth["cls"] == "backlash"
+    rep = _gap(d, truth, tmp_path, "backlash")
+    inc = rep["meta"]["incoherent_gap"]
+    assert rep["gap_before"] > 10 * rep["noise_floor"]
+    assert inc["nominal"]["incoherent"] > 0.9 * inc["nominal"]["total"]
+    assert inc["nominal"]["incoherent"] > 2.5 * inc["period_floor"]["nrmse"]
+    assert rep["verdict"] == "unexplained", (rep["verdict"], inc.get("changed"))
+    assert "repeats with the input's period" in inc["repeats"]

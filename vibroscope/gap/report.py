@@ -480,9 +480,11 @@ class GapReport:
                    "disturbance (or a response that does not repeat) that no model of the logged input can explain")
             lines.append(f"the outputs vary from period to period by nrmse {pfl['nrmse']:.4f} over "
                          f"{pfl['n_periods']} periods, {why}")
-        changed = ((self.meta or {}).get("incoherent_gap") or {}).get("changed")
-        if changed:
-            lines.append(f"not coherent with the input: {changed}")
+        inc = (self.meta or {}).get("incoherent_gap") or {}
+        if inc.get("changed"):
+            lines.append(f"not coherent with the input: {inc['changed']}")
+        elif inc.get("repeats"):
+            lines.append(f"not coherent with the input, {inc['repeats']}")
         if self.bands:
             lines.append("bands: " + ", ".join(f"{b.fmin:.1f}-{b.fmax:.1f} Hz ({100 * b.share:.0f} %)" for b in self.bands))
         n_named = len(named) if len(named) > 1 else 1
