@@ -182,28 +182,31 @@ def _fine_states(integrator, model, U, dt):
     return Q
 
 
-@pytest.mark.parametrize("integrator", ["compiled", "reference"])
-def test_trapezoidal_converges_with_second_order(integrator):
-    """Error vs step size of the nonlinear integrator on a hardening Duffing oscillator with a
-    smooth input: halving the step divides the error by 4 (order 2, Newmark 1959)."""
-    model = LumpedModel(
-        dofs=(Dof("m1", 1.0),),
-        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0), CubicSpring(("m1", "ground"), k3=4e9)),
-        inputs=(Input(dof="m1"),), outputs=(Output("m1", "displacement"),),
-    )
-    uf = lambda t: 30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 47 * t)  # noqa: E731
-    T = 0.4
+def _two_tone(t):
+    return 30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 47 * t)
+
+
+def _errors_against_dop853(integrator, model, T=0.4):
+    """The DOP853 solution of `model` under :func:`_two_tone` on 41 points of ``[0, T]`` and the
+    max error of the trapezoidal solution there at 100, 200 and 400 steps per interval."""
     t_ref = np.linspace(0, T, 41)
-    ref = _duffing_reference(model, t_ref, uf)[0]
-    assert np.max(np.abs(ref)) > 2e-3  # cubic force 4e9 x^3 ~ 30 N: strongly nonlinear
+    ref = _duffing_reference(model, t_ref, _two_tone)[0]
     errs = []
     for nsub in (100, 200, 400):
         n = 40 * nsub + 1
         t = np.linspace(0, T, n)
-        Q = _fine_states(integrator, model, uf(t)[None], T / (n - 1))
+        Q = _fine_states(integrator, model, _two_tone(t)[None], T / (n - 1))
         errs.append(np.max(np.abs(Q[0, ::nsub] - ref)))
-    ratios = np.array(errs[:-1]) / np.array(errs[1:])
-    np.testing.assert_allclose(ratios, 4.0, rtol=0.1)
+    return ref, np.array(errs)
+
+
+@pytest.mark.parametrize("integrator", ["compiled", "reference"])
+def test_trapezoidal_converges_with_second_order(integrator):
+    """Error vs step size of the nonlinear integrator on a hardening Duffing oscillator with a
+    smooth input: halving the step divides the error by 4 (order 2, Newmark 1959)."""
+    ref, errs = _errors_against_dop853(integrator, _sdof_with(CubicSpring(("m1", "ground"), k3=4e9)))
+    assert np.max(np.abs(ref)) > 2e-3  # cubic force 4e9 x^3 ~ 30 N: strongly nonlinear
+    np.testing.assert_allclose(errs[:-1] / errs[1:], 4.0, rtol=0.1)
 
 
 @pytest.mark.parametrize("integrator", ["compiled", "reference"])
@@ -211,26 +214,11 @@ def test_a_quintic_spring_term_converges_to_the_ode_solution(integrator):
     """The cubic spring's quintic term ``k5 d^5`` (force and tangent stiffness in the kernel):
     the trapezoidal solution converges with order 2 to a DOP853 solution of the same ODE, and
     differs from the model without it by far more than its own error."""
-    model = LumpedModel(
-        dofs=(Dof("m1", 1.0),),
-        elements=(Spring(("m1", "ground"), k=4e4), Damper(("m1", "ground"), c=8.0),
-                  CubicSpring(("m1", "ground"), k3=1e9, k5=1e15)),
-        inputs=(Input(dof="m1"),), outputs=(Output("m1", "displacement"),),
-    )
-    uf = lambda t: 30 * np.sin(2 * np.pi * 25 * t) + 20 * np.sin(2 * np.pi * 47 * t)  # noqa: E731
-    T = 0.4
-    t_ref = np.linspace(0, T, 41)
-    ref = _duffing_reference(model, t_ref, uf)[0]
+    ref, errs = _errors_against_dop853(integrator, _sdof_with(CubicSpring(("m1", "ground"), k3=1e9, k5=1e15)))
     assert 1e15 * np.max(np.abs(ref)) ** 5 > 5.0  # the quintic force, N: a strong term
-    errs = []
-    for nsub in (100, 200, 400):
-        n = 40 * nsub + 1
-        t = np.linspace(0, T, n)
-        Q = _fine_states(integrator, model, uf(t)[None], T / (n - 1))
-        errs.append(np.max(np.abs(Q[0, ::nsub] - ref)))
-    np.testing.assert_allclose(np.array(errs[:-1]) / np.array(errs[1:]), 4.0, rtol=0.1)
-    cubic = model.replace(elements=model.elements[:2] + (CubicSpring(("m1", "ground"), k3=1e9),))
-    without = _duffing_reference(cubic, t_ref, uf)[0]
+    np.testing.assert_allclose(errs[:-1] / errs[1:], 4.0, rtol=0.1)
+    without = _duffing_reference(_sdof_with(CubicSpring(("m1", "ground"), k3=1e9)), np.linspace(0, 0.4, 41),
+                                 _two_tone)[0]
     assert np.max(np.abs(without - ref)) > 100 * errs[-1]
 
 
