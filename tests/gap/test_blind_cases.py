@@ -37,6 +37,7 @@ def _gap(d: Path, truth: dict, tmp_path, effects: str) -> dict:
     return json.loads(rep.read_text())
 
 
+@pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
 def test_a_cubic_and_quintic_spring_is_named_cubic_with_its_quintic_term(tmp_path):
     """Seed 11 case 003: a hardening spring ``k3 d^3 + k5 d^5`` at m1-ground, the quintic 0.71 of
     the cubic at the RMS deflection, three logs at three levels (500 Hz, FIR decimation). With
@@ -52,11 +53,16 @@ def test_a_cubic_and_quintic_spring_is_named_cubic_with_its_quintic_term(tmp_pat
     assert c["where"]["character"] == "hardening"
     k3, k5 = law["k3_N_per_m3"], law["k5_N_per_m5"]
     assert c["parameters"]["k5_N_per_m5"] == pytest.approx(k5, rel=0.3)
-    assert c["parameters"]["k3_N_per_m3"] == pytest.approx(k3, rel=1.0)  # the two trade off
+    # the two terms trade off (k3 1.07e9 against the truth's 6.6e8): the spring's force at twice
+    # the nominal's RMS deflection, where the top level's peaks reach, is what the data fix
+    d = 2.0 * law["d_rel_rms_nominal"]
+    force = c["parameters"]["k3_N_per_m3"] * d**3 + c["parameters"]["k5_N_per_m5"] * d**5
+    assert force == pytest.approx(k3 * d**3 + k5 * d**5, rel=0.2)
     assert rep["gap_after"] < 2.5 * rep["noise_floor"], (rep["gap_after"], rep["noise_floor"])
 
 
 
+@pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
 def test_a_light_absorber_beside_its_host_mode_is_named_an_extra_mode(tmp_path):
     """Seed 11 case 024: an absorber of 0.096 % of the host's mass at 18.4 Hz (damping ratio
     0.0064) beside the 17.0 Hz mode, 500 Hz, a random-walk accelerometer bias. The extra mode
@@ -74,6 +80,7 @@ def test_a_light_absorber_beside_its_host_mode_is_named_an_extra_mode(tmp_path):
     assert c["parameters"]["mass_kg"] == pytest.approx(ef["absorber_mass_kg"], rel=0.3)
 
 
+@pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
 def test_a_residual_that_repeats_with_the_period_is_not_called_none(tmp_path):
     """Seed 12 case 007: a clearance replacing the m1-ground spring (half-clearance 0.095 of the
     RMS deflection, contact stiffness 1.08x the spring's, m1 free inside it), a stepped multisine
@@ -93,6 +100,7 @@ def test_a_residual_that_repeats_with_the_period_is_not_called_none(tmp_path):
     assert "repeats with the input's period" in inc["repeats"]
 
 
+@pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
 def test_a_refit_within_the_ranking_floor_is_not_outranked_by_a_nested_extra_mode(tmp_path):
     """Seed 12 case 008: a parameter mismatch (k +1.9 %, m -2 %, c +1.2 %) on a 2-DOF chain,
     three multisine logs at three levels, 1 kHz, IIR decimation. The refit leaves 0.0159, within

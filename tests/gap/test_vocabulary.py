@@ -505,3 +505,43 @@ def test_a_bouc_wen_loop_of_another_exponent_is_fitted_by_the_hysteresis_law():
                                 fast=False, max_nfev=40)
     got = law.describe(p2)
     assert got["nu"] == pytest.approx(2.0, rel=0.15) and g2 < 0.3 * g1
+
+
+def test_a_quintic_spring_is_fitted_by_the_cubic_springs_law():
+    """A spring ``k3 d^3 + k5 d^5`` whose quintic part dominates at the peaks: the cubic spring's
+    law variant (``EffectSpec.law``, lifted from the cubic fit at ``k5 = 0``, where it builds the
+    same model) recovers both terms and closes the gap the cubic term alone leaves; its
+    character is read from the tangent stiffness at the RMS deflection."""
+    from scipy import signal
+
+    from vibroscope.gap.fit import fit_time_domain
+    from vibroscope.models.elements import CubicSpring
+
+    model = chain()
+    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
+    u = signal.lfilter(b, a, np.random.default_rng(11).standard_normal((1, 6000)), axis=1)
+    u *= 40.0 / np.std(u)
+    sim0 = LogSimulator(u, FS)
+    d_rms = float(np.std(sim0.run(model.replace(outputs=(Output("m1", "displacement", "/d1.x"),)))[0]))
+    k3, k5 = 0.02 * 3e4 / d_rms**2, 0.05 * 3e4 / d_rms**4
+    truth = model.replace(elements=model.elements + (CubicSpring(("m1", "ground"), k3=k3, k5=k5),))
+    y = sim0.run(truth)
+    sc = scales(model) | {"d_rms": {"m1-ground": d_rms, "m2-m1": d_rms}}
+    spec = next(s for s in candidate_specs(model, sc)
+                if s.effect == "cubic_stiffness" and s.where["between"] == ["m1", "ground"])
+    mask, n = [np.ones(u.shape[1], bool)], [u.shape[1]]
+    fits = [fit_time_domain(lambda p: spec.apply(model, p), s0, spec.lower, spec.upper, [sim0], [y], mask, n,
+                            fast=False, max_nfev=30) for s0 in spec.starts[:4]]
+    p1, g1, _ = min(fits, key=lambda f: f[1])
+    law, lift = spec.law
+    q = lift(p1)
+    assert law.shape_free and law.n == 2 and law.describe(q)["k5_N_per_m5"] == 0.0
+    assert law.describe(q)["k3_N_per_m3"] == pytest.approx(spec.describe(p1)["k3_N_per_m3"])
+    np.testing.assert_allclose(sim0.run(law.apply(model, q)), sim0.run(spec.apply(model, p1)), rtol=0, atol=1e-12)
+    p2, g2, _ = fit_time_domain(lambda p: law.apply(model, p), q, law.lower, law.upper, [sim0], [y], mask, n,
+                                fast=False, max_nfev=40)
+    got = law.describe(p2)
+    assert got["k5_N_per_m5"] == pytest.approx(k5, rel=0.15) and got["k3_N_per_m3"] == pytest.approx(k3, rel=0.3)
+    assert g2 < 0.3 * g1
+    assert law.qualifiers(p2) == {"character": "hardening", "law": "quintic fitted"}
+    assert law.qualifiers(np.array([0.1, -0.1]))["character"] == "softening"  # 3 q3 + 5 q5 < 0

@@ -347,9 +347,9 @@ def polish_winner(run: Run, cands: list, best_i, cache: dict, *, workers: int = 
 def held_out_gain(ys, simple: dict, rich: dict, split, logs, fs: float) -> float:
     """The nested test's t of `rich` over `simple` (outputs per log, keyed like `ys`) on the
     held-out samples of `logs` (``split.validation``): the batch-means t statistic of
-    :func:`~vibroscope.gap.measure.nested_gain` [Schmeiser 1982]. The one place the
-    held-out nested test is formed (the ranking's nested order and polish, the selection's
-    family and floor tests)."""
+    :func:`~vibroscope.gap.measure.nested_gain` [Schmeiser 1982], as the ranking's nested
+    order and polish and the selection's family and floor tests form it (the incoherence
+    rule of :mod:`~vibroscope.gap.diagnosis` forms its own over every log)."""
     logs = list(logs)
     return nested_gain([ys[k] for k in logs], [simple[k] for k in logs], [rich[k] for k in logs],
                        [split.validation[k] for k in logs], fs)
@@ -372,11 +372,13 @@ def nested_holds(run: Run, cands: list, best_i: int, j: int) -> bool:
     vl = run.val_logs
     if not nests(rich, simple) or not set(vl) <= set(rich[2]) or not set(vl) <= set(simple[2]):
         return False
-    if np.isfinite(run.floor_rank) and simple[0].gap_after <= run.floor_rank:
-        return False  # the simpler one within the ranking floor: as in nested_order
     t = held_out_gain(run.ys, simple[2], rich[2], run.split, vl, run.fs)
-    run.nested_t[f"{rich[0].effect}@{where_key(rich[0].where)} over {simple[0].effect}@{where_key(simple[0].where)}"
-                 " after the polish"] = float(t)
+    name = f"{rich[0].effect}@{where_key(rich[0].where)} over {simple[0].effect}@{where_key(simple[0].where)}"
+    if run.floor_rank is not None and np.isfinite(run.floor_rank) and simple[0].gap_after <= run.floor_rank:
+        # the simpler one within the ranking floor: as in nested_order
+        run.nested_t[f"{name} after the polish (not applied: {simple[0].effect} within the ranking floor)"] = float(t)
+        return False
+    run.nested_t[f"{name} after the polish"] = float(t)
     return t > NESTED_T
 
 

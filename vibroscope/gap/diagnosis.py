@@ -806,8 +806,11 @@ def _check_incoherent(run: Run) -> None:
     :func:`~vibroscope.gap.measure.nested_gain` at least :data:`NESTED_T`), the verdict is
     ``none`` and the report says what the gap is (``meta["incoherent_gap"]``); not where the input
     is periodic and the residual's incoherent part exceeds :data:`PERIOD_NONE_FACTOR` times the
-    outputs' variation from period to period (it repeats with the period: a distortion, not
-    noise; ``meta["incoherent_gap"]["repeats"]`` says so). Else, when the refit's own residual is so (on the held-out
+    larger of the outputs' variation from period to period and the white floor (it repeats with
+    the period: a distortion, not noise; ``meta["incoherent_gap"]["repeats"]`` says so; not
+    applied when that variation grows with the level, :attr:`PeriodFloor.grows_with_level
+    <vibroscope.gap.levels.PeriodFloor.grows_with_level>`: then the response itself stops
+    repeating and the variation is no floor to compare with). Else, when the refit's own residual is so (on the held-out
     samples; the nominal's is not, or the refit is significantly better) and the BLA does not
     change with the excitation level, the verdict is ``parameter_mismatch``. Neither ``none``
     nor ``parameter_mismatch`` is given so when the residual repeats with a periodic input's
@@ -845,12 +848,19 @@ def _check_incoherent(run: Run) -> None:
                             pf.to_dict() | {"white_floor": float(run.floor),
                                             "ratio_to_white_floor": float(pf.nrmse / run.floor) if run.floor > 0
                                             else None})
-    def repeats(cg) -> bool:
+    vetoed = {}
+
+    def repeats(cg, which: str) -> bool:
         # a residual whose incoherent part is far beyond the period-to-period variation repeats
         # with the input's period: the response of the system to the input, not noise or a
         # disturbance (a distortion is incoherent with the input, not with its period)
-        return bool(pf is not None and not pf.grows_with_level and np.isfinite(cg.incoherent)
-                    and cg.incoherent > PERIOD_NONE_FACTOR * max(pf.nrmse, run.floor))
+        if pf is None or pf.grows_with_level or not np.isfinite(cg.incoherent):
+            return False
+        thr = PERIOD_NONE_FACTOR * max(pf.nrmse, run.floor)
+        if cg.incoherent > thr:
+            vetoed.setdefault(which, (cg.incoherent, thr))
+            return True
+        return False
 
     if run.verdict == "unexplained" and run.gap_before > NONE_FACTOR * run.floor:
         level_flagged = bool(run.level.get("flagged")) if isinstance(run.level, dict) else False
@@ -877,7 +887,7 @@ def _check_incoherent(run: Run) -> None:
                                f"coherent part is {cg_ref.coherent:.4g}; held-out gain t {t_b:.3g}, {NESTED_T:g} asked "
                                "when that is within): it explains what a model can, the rest is coloured noise or an "
                                "unlogged disturbance")
-        elif within(cg_nom) and t_ref < NESTED_T and steady(run.y_nom, run.all_masks) and not repeats(cg_nom):
+        elif within(cg_nom) and t_ref < NESTED_T and steady(run.y_nom, run.all_masks) and not repeats(cg_nom, "none"):
             none_c = next(c for c in run.ordered if c[0].effect == "none")
             run.ordered = [none_c] + [c for c in run.ordered if c is not none_c]
             run.chosen, run.shares, run.verdict = [], [], "none"
@@ -889,7 +899,7 @@ def _check_incoherent(run: Run) -> None:
                                "rest is coloured noise or an unlogged disturbance that no candidate explained on "
                                "held-out data")
         elif (pm is not None and not level_flagged and not pm[0].vanished and within(cg_ref)
-              and steady(run.y_ref, run.split.validation) and not repeats(cg_ref)):
+              and steady(run.y_ref, run.split.validation) and not repeats(cg_ref, "parameter_mismatch")):
             run.ordered = [pm] + [c for c in run.ordered if c is not pm]
             run.chosen, run.shares, run.verdict = [pm], [1.0], "parameter_mismatch"
             info["changed"] = (f"unexplained -> parameter_mismatch: the refit's held-out gap {cg_ref.total:.4g} is "
@@ -898,11 +908,13 @@ def _check_incoherent(run: Run) -> None:
                                f"coherent part {cg_nom.coherent:.4g} is not (or the refit is significantly better "
                                f"on held-out data: t {t_ref:.3g}), no other candidate explains more, and the BLA does "
                                "not change with the level: the rest is coloured noise or an unlogged disturbance")
-    if run.verdict == "unexplained" and info["changed"] is None and (repeats(cg_nom) or repeats(cg_ref)):
-        info["repeats"] = (f"not none: the nominal's residual is {cg_nom.incoherent:.4g} not coherent with the input, "
-                           f"more than {PERIOD_NONE_FACTOR:g} x the outputs' variation from period to period "
-                           f"({pf.nrmse:.4g}): it repeats with the input's period, a response to the input that no "
-                           "candidate explained, not noise or a disturbance")
+    if run.verdict == "unexplained" and info["changed"] is None and vetoed:
+        which, (inc, thr) = next(iter(vetoed.items()))
+        whose = {"none": "the nominal's", "parameter_mismatch": "the refit's"}[which]
+        info["repeats"] = (f"not {which}: {whose} residual is {inc:.4g} not coherent with the input, more than {thr:.4g} "
+                           f"({PERIOD_NONE_FACTOR:g} x the larger of the outputs' variation from period to period, "
+                           f"{pf.nrmse:.4g}, and the white floor): it repeats with the input's period, a response to "
+                           "the input that no candidate explained, not noise or a disturbance")
     run.incoherent = info
 
 

@@ -422,7 +422,8 @@ class SignedMass(Element):
 
 @dataclass(frozen=True)
 class CubicSpring(Element):
-    """Hardening (``k3 > 0``) or softening (``k3 < 0``) spring ``f = k d + k3 d^3 + k5 d^5``.
+    """Hardening or softening spring ``f = k d + k3 d^3 + k5 d^5`` (with ``k5`` unset: hardening
+    for ``k3 > 0``, softening for ``k3 < 0``).
 
     `k` in N/m (its linear part, may be 0), `k3` in N/m^3, `k5` in N/m^5 (optional: the odd
     polynomial restoring force of a Duffing oscillator carried one order further, as in the

@@ -91,7 +91,7 @@ class FlatModel:
     codes : ndarray of int64, shape (n_e,)
         Element types, :data:`ELEMENT_CODES`.
     params : ndarray, shape (n_e, 9)
-        Parameter rows (SI): cubic ``k, k3``; backlash ``k, gap``; friction ``force,
+        Parameter rows (SI): cubic ``k, k3, k5``; backlash ``k, gap``; friction ``force,
         v_eps, force_neg`` (``force_neg = force`` when symmetric); Bouc-Wen ``alpha, beta, gamma, delta, nu``; MR damper ``alpha, c0, c1,
         k0, k1, gamma, beta, A, n`` (at the element's current). Unused entries are 0.
     k_lin, c_lin : ndarray, shape (n_e,)
