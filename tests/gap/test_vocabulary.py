@@ -473,31 +473,45 @@ def test_a_smooth_saturation_is_fitted_by_the_saturations_other_law():
     assert law.vanishes(np.array([math.log(3 * au[-1])])) is not None
 
 
+def _law_bench(seed: int):
+    """A band-limited random force (5-150 Hz, 40 N RMS, 6 s) on :func:`chain`: the model, its
+    simulator, the RMS deflection at m1-ground and the scales holding it."""
+    from scipy import signal
+
+    model = chain()
+    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
+    u = signal.lfilter(b, a, np.random.default_rng(seed).standard_normal((1, 6000)), axis=1)
+    u *= 40.0 / np.std(u)
+    sim = LogSimulator(u, FS)
+    d_rms = float(np.std(sim.run(model.replace(outputs=(Output("m1", "displacement", "/d1.x"),)))[0]))
+    return model, sim, d_rms, scales(model) | {"d_rms": {"m1-ground": d_rms, "m2-m1": d_rms}}
+
+
+def _screening_fit(model, sim, y, sc, effect: str, n_starts: int):
+    """The `effect` at m1-ground fitted from its first `n_starts` starts on the whole record:
+    ``(spec, p, gap, mask, n)``."""
+    from vibroscope.gap.fit import fit_time_domain
+
+    spec = next(s for s in candidate_specs(model, sc) if s.effect == effect and s.where["between"] == ["m1", "ground"])
+    mask, n = [np.ones(y.shape[1], bool)], [y.shape[1]]
+    fits = [fit_time_domain(lambda p: spec.apply(model, p), s0, spec.lower, spec.upper, [sim], [y], mask, n,
+                            fast=False, max_nfev=30) for s0 in spec.starts[:n_starts]]
+    p1, g1, _ = min(fits, key=lambda f: f[1])
+    return spec, p1, g1, mask, n
+
+
 def test_a_bouc_wen_loop_of_another_exponent_is_fitted_by_the_hysteresis_law():
     """A Bouc-Wen hysteresis of exponent nu = 2 (the screening fixes 1): its law variant
     (``EffectSpec.law``, lifted from the nu = 1 fit at nu = 1) recovers the exponent and closes
     the gap the fixed exponent leaves."""
-    from scipy import signal
-
     from vibroscope.gap.fit import fit_time_domain
     from vibroscope.models.elements import BoucWen
 
-    model = chain()
+    model, sim, d_rms, sc = _law_bench(7)
     truth = model.replace(elements=model.elements + (
         BoucWen(("m1", "ground"), alpha=1.2e4, beta=750.0, gamma=0.6, delta=0.4, nu=2.0),))
-    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
-    u = signal.lfilter(b, a, np.random.default_rng(7).standard_normal((1, 6000)), axis=1)
-    u *= 40.0 / np.std(u)
-    sim = LogSimulator(u, FS)
     y = sim.run(truth)
-    d_rms = float(np.std(sim.run(model.replace(outputs=(Output("m1", "displacement", "/d1.x"),)))[0]))
-    sc = scales(model) | {"d_rms": {"m1-ground": d_rms, "m2-m1": d_rms}}
-    spec = next(s for s in candidate_specs(model, sc)
-                if s.effect == "hysteresis" and s.where["between"] == ["m1", "ground"])
-    mask, n = [np.ones(u.shape[1], bool)], [u.shape[1]]
-    fits = [fit_time_domain(lambda p: spec.apply(model, p), s0, spec.lower, spec.upper, [sim], [y], mask, n,
-                            fast=False, max_nfev=30) for s0 in spec.starts[:2]]
-    p1, g1, _ = min(fits, key=lambda f: f[1])
+    spec, p1, g1, mask, n = _screening_fit(model, sim, y, sc, "hysteresis", 2)
     law, lift = spec.law
     assert law.shape_free and law.n == spec.n + 1 and law.describe(lift(p1))["nu"] == pytest.approx(1.0)
     assert law.describe(lift(p1))["beta_per_m"] == pytest.approx(spec.describe(p1)["beta_per_m"])
@@ -512,27 +526,14 @@ def test_a_quintic_spring_is_fitted_by_the_cubic_springs_law():
     law variant (``EffectSpec.law``, lifted from the cubic fit at ``k5 = 0``, where it builds the
     same model) recovers both terms and closes the gap the cubic term alone leaves; its
     character is read from the tangent stiffness at the RMS deflection."""
-    from scipy import signal
-
     from vibroscope.gap.fit import fit_time_domain
     from vibroscope.models.elements import CubicSpring
 
-    model = chain()
-    b, a = signal.butter(4, [5 / 500, 150 / 500], "band")
-    u = signal.lfilter(b, a, np.random.default_rng(11).standard_normal((1, 6000)), axis=1)
-    u *= 40.0 / np.std(u)
-    sim0 = LogSimulator(u, FS)
-    d_rms = float(np.std(sim0.run(model.replace(outputs=(Output("m1", "displacement", "/d1.x"),)))[0]))
+    model, sim0, d_rms, sc = _law_bench(11)
     k3, k5 = 0.02 * 3e4 / d_rms**2, 0.05 * 3e4 / d_rms**4
     truth = model.replace(elements=model.elements + (CubicSpring(("m1", "ground"), k3=k3, k5=k5),))
     y = sim0.run(truth)
-    sc = scales(model) | {"d_rms": {"m1-ground": d_rms, "m2-m1": d_rms}}
-    spec = next(s for s in candidate_specs(model, sc)
-                if s.effect == "cubic_stiffness" and s.where["between"] == ["m1", "ground"])
-    mask, n = [np.ones(u.shape[1], bool)], [u.shape[1]]
-    fits = [fit_time_domain(lambda p: spec.apply(model, p), s0, spec.lower, spec.upper, [sim0], [y], mask, n,
-                            fast=False, max_nfev=30) for s0 in spec.starts[:4]]
-    p1, g1, _ = min(fits, key=lambda f: f[1])
+    spec, p1, g1, mask, n = _screening_fit(model, sim0, y, sc, "cubic_stiffness", 4)
     law, lift = spec.law
     q = lift(p1)
     assert law.shape_free and law.n == 2 and law.describe(q)["k5_N_per_m5"] == 0.0
