@@ -369,17 +369,29 @@ def nested_holds(run: Run, cands: list, best_i: int, j: int) -> bool:
     the noise (seed 7326 modal case 009: an asymmetric friction of 0.34/1.10 N, t 7.4 before the
     polish, named Coulomb friction after it)."""
     rich, simple = cands[best_i], cands[j]
-    vl = run.val_logs
-    if not nests(rich, simple) or not set(vl) <= set(rich[2]) or not set(vl) <= set(simple[2]):
+    if not nested_pair(rich, simple, run.val_logs):
         return False
-    t = held_out_gain(run.ys, simple[2], rich[2], run.split, vl, run.fs)
-    name = f"{rich[0].effect}@{where_key(rich[0].where)} over {simple[0].effect}@{where_key(simple[0].where)}"
-    if run.floor_rank is not None and np.isfinite(run.floor_rank) and simple[0].gap_after <= run.floor_rank:
-        # the simpler one within the ranking floor: as in nested_order
-        run.nested_t[f"{name} after the polish (not applied: {simple[0].effect} within the ranking floor)"] = float(t)
-        return False
-    run.nested_t[f"{name} after the polish"] = float(t)
-    return t > NESTED_T
+    t = held_out_gain(run.ys, simple[2], rich[2], run.split, run.val_logs, run.fs)
+    applied = not within_rank_floor(simple, run.floor_rank)
+    run.nested_t[nested_key(rich, simple, " after the polish", applied)] = float(t)
+    return applied and t > NESTED_T
+
+
+def nested_pair(rich, simple, logs) -> bool:
+    """Whether candidate `rich` nests `simple` (:func:`nests`) and both hold outputs of `logs`."""
+    return nests(rich, simple) and set(logs) <= set(rich[2]) and set(logs) <= set(simple[2])
+
+
+def within_rank_floor(simple, floor) -> bool:
+    """Whether candidate `simple`'s held-out gap is within the ranking `floor` (then no richer
+    member it nests is ranked before it: :func:`nested_order`)."""
+    return floor is not None and bool(np.isfinite(floor)) and simple[0].gap_after <= floor
+
+
+def nested_key(rich, simple, suffix: str = "", applied: bool = True) -> str:
+    """The report's name of the nested test of `rich` over `simple`."""
+    name = f"{rich[0].effect}@{where_key(rich[0].where)} over {simple[0].effect}@{where_key(simple[0].where)}{suffix}"
+    return name if applied else f"{name} (not applied: {simple[0].effect} within the ranking floor)"
 
 
 def verdict_of(run: Run, cands: list, best_i) -> tuple[str, list, list]:
@@ -436,16 +448,13 @@ def nested_order(cands: list, ys, split, val_logs, fs, *, floor: float | None = 
         i = next(k for k, c in enumerate(cands) if c is r)  # by identity: the tuples hold arrays
         for j in range(i):
             s_ = cands[j]
-            if not nests(r, s_) or not set(val_logs) <= set(r[2]) or not set(val_logs) <= set(s_[2]):
+            if not nested_pair(r, s_, val_logs):
                 continue
             t = held_out_gain(ys, s_[2], r[2], split, val_logs, fs)
-            name = f"{r[0].effect}@{where_key(r[0].where)} over {s_[0].effect}@{where_key(s_[0].where)}"
-            if floor is not None and np.isfinite(floor) and s_[0].gap_after <= floor:
-                out[f"{name} (not applied: {s_[0].effect} within the ranking floor)"] = t
-            else:
-                out[name] = t
-                if t > NESTED_T:
-                    cands.insert(j, cands.pop(i))
+            applied = not within_rank_floor(s_, floor)
+            out[nested_key(r, s_, applied=applied)] = t
+            if applied and t > NESTED_T:
+                cands.insert(j, cands.pop(i))
             break
     return out
 

@@ -957,7 +957,8 @@ def _cubic_stiffness(model, scales):
         q_est = [e * d_rms**2 / k_loc for e in ests if e is not None]
         specs.append(EffectSpec(
             effect="cubic_stiffness", where={"between": [pair[0], pair[1]]}, n=1,
-            starts=_starts_1d(q_est + grid, -0.5, 300.0, relative=True), lower=np.array([-0.5]), upper=np.array([300.0]),
+            starts=_starts_1d(q_est + grid, *CUBIC_Q, relative=True), lower=np.array([CUBIC_Q[0]]),
+            upper=np.array([CUBIC_Q[1]]),
             build=build,
             describe=lambda p, k_loc=k_loc, d_rms=d_rms: {"k3_N_per_m3": float(p[0] * k_loc / d_rms**2)},
             character=lambda p: {"character": "hardening" if p[0] >= 0 else "softening"},
@@ -966,9 +967,9 @@ def _cubic_stiffness(model, scales):
     return specs
 
 
-#: bounds of the quintic share ``k5 d_rms^4 / k`` of a polynomial spring's free law (those of the
-#: cubic share ``k3 d_rms^2 / k`` of the screening)
-LAW_Q5 = (-0.5, 300.0)
+#: bounds of the cubic share ``k3 d_rms^2 / k`` of a cubic spring, and of the quintic share
+#: ``k5 d_rms^4 / k`` of its free law
+CUBIC_Q = (-0.5, 300.0)
 
 
 def _cubic_law(pair, k_loc, d_rms):
@@ -990,7 +991,7 @@ def _cubic_law(pair, k_loc, d_rms):
 
     return EffectSpec(
         effect="cubic_stiffness", where={"between": [pair[0], pair[1]]}, n=2, starts=[],
-        lower=np.array([-0.5, LAW_Q5[0]]), upper=np.array([300.0, LAW_Q5[1]]), build=build, describe=desc,
+        lower=np.array([CUBIC_Q[0]] * 2), upper=np.array([CUBIC_Q[1]] * 2), build=build, describe=desc,
         character=lambda p: {"character": "hardening" if 3.0 * p[0] + 5.0 * p[1] >= 0 else "softening",
                              "law": "quintic fitted"},
         shape_free=True)
