@@ -385,7 +385,10 @@ def test_a_held_clearance_is_fitted_at_the_chosen_connections_and_the_best_scree
                         outputs=(Output("m1", "acceleration", "/y1.x"),), name="three")
     sc = scales(model) | {"d_rms": {"-".join(c): 1e-4 for c in conns}, "v_rms": {"-".join(c): 0.02 for c in conns}}
     specs = [s for s in candidate_specs(model, sc) if s.effect == "backlash"]
-    assert len(specs) == 4
+    # two laws of contact stiffness at each connection: the spring's own and the one matched to it
+    assert len(specs) == 8
+    assert [s.qualifiers(s.starts[0]) for s in specs[:2]] == [{}, {"contact": "matched"}]
+    specs = specs[::2]
     gaps = {("m1", "ground"): 0.3, ("m2", "m1"): 0.1, ("m3", "m2"): 0.2, ("m3", "ground"): 0.4}
     screened = [(s, s.starts[0], gaps[tuple(s.where["between"])], model) for s in specs]
     run = SimpleNamespace(specs=specs, screened=screened, model=model, refit=model, sims=[], ys=[], split=None)

@@ -295,7 +295,9 @@ def held_clearances(run: Run, workers, holders: tuple = CLEARANCE_HOLDERS, at: t
     by_pair: dict[frozenset, dict] = {}
     for s in run.specs:
         if s.effect in holders + ("backlash",) and "between" in s.where:
-            by_pair.setdefault(frozenset(s.where["between"]), {})[s.effect] = s
+            # the first spec of a class at a connection (a clearance at the base's own contact
+            # stiffness, not the one matched to it: the holder takes the small-motion stiffness)
+            by_pair.setdefault(frozenset(s.where["between"]), {}).setdefault(s.effect, s)
     # the connections: a chosen effect's, and the best others by the screening of the clearance
     # and the holders alone (fresh seed 5701 case 007: the true link second of two, 0.0921 against
     # 0.0879, all three classes within 8 % of each other there)
