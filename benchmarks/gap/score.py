@@ -200,7 +200,7 @@ _VANISH = {  # effect -> parameters that make it vanish
     "coulomb_friction": lambda p: float(p.get("Fc_N", 1.0)) == 0.0,
     "asymmetric_friction": lambda p: float(p.get("Fp_N", 1.0)) == 0.0 and float(p.get("Fn_N", 1.0)) == 0.0,
     "backlash": lambda p: float(p.get("gap_m", 1.0)) <= 0.0,
-    "cubic_stiffness": lambda p: float(p.get("k3_N_per_m3", 1.0)) == 0.0,
+    "cubic_stiffness": lambda p: float(p.get("k3_N_per_m3", 1.0)) == 0.0 and float(p.get("k5_N_per_m5", 0.0)) == 0.0,
     "hysteresis": lambda p: float(p.get("alpha_N_per_m", 1.0)) == 0.0,
     "offset": lambda p: float(p.get("offset_N", p.get("F0_N", 1.0))) == 0.0,
 }

@@ -114,3 +114,27 @@ def test_a_refit_within_the_ranking_floor_is_not_outranked_by_a_nested_extra_mod
     assert rep["verdict"] == "parameter_mismatch", [(c["effect"], c["gap_after"]) for c in rep["candidates"][:4]]
     assert rep["gap_after"] <= rep["meta"]["noise_floor_ranking"]["nrmse"]
     assert any(k.endswith("within the ranking floor)") for k in rep["meta"]["nested_tests"]["t"])
+
+
+@pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
+def test_a_clearance_of_another_contact_stiffness_is_named_with_its_width(tmp_path):
+    """Seed 12 case 021: the m2-ground spring replaced by a dead zone of half-width 5.5e-4 m (0.053
+    of the RMS deflection) and contact stiffness 0.51x the spring's, a 2-DOF chain, one multisine
+    log, 500 Hz. The refit's spring there takes the small-motion gain (0.49x); a clearance opened
+    at that stiffness softens the connection further, and its width was fitted to 4e-6 m
+    (vanished): named a hardening cubic spring (2dae2b8). With the contact stiffness matched to
+    the base's gain (``effects.matched_contact``) the clearance is found at its width."""
+    d, truth = _case(tmp_path, 12, 21)
+    ef = truth["effect"]
+    assert truth["cls"] == "backlash" and ef["k_contact_over_k"] == pytest.approx(0.507, abs=0.01)
+    rep = _gap(d, truth, tmp_path, "parameter_mismatch,backlash,cubic_stiffness")
+    assert rep["verdict"] == "backlash", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
+    c = rep["candidates"][0]
+    assert sorted(c["where"]["between"]) == sorted(ef["location"])
+    assert c["parameters"]["gap_m"] == pytest.approx(ef["half_clearance_m"], rel=0.1)
+    # the contact stiffness of the chosen model's clearance, against the truth's
+    from vibroscope.models.elements import Backlash
+    from vibroscope.models.modelfile import loads_model
+    kc = [e.k for e in loads_model(c["model_toml"]).elements if isinstance(e, Backlash)]
+    assert kc == [pytest.approx(ef["k_contact"], rel=0.05)]
+    assert rep["gap_after"] < 1.5 * rep["noise_floor"], (rep["gap_after"], rep["noise_floor"])

@@ -23,7 +23,9 @@ asymmetric_friction  a ``friction`` element with ``force_neg`` (``Fc_pos_N``, ``
 joint_friction       a share of the connection's spring replaced by a smooth Jenkins element
                      (``bouc_wen`` with gamma = delta = 1/2; ``joint_share``, ``slip_force_N``)
                      or by an Iwan element of 4 of them (slip forces uniform up to ``slip_force_N``)
-backlash             the connection's spring replaced by a ``backlash`` element (``gap_m``)
+backlash             the connection's spring replaced by a ``backlash`` element (``gap_m``), its
+                     contact stiffness the spring's or matched to it (``contact = matched``,
+                     ``k_contact_over_k_base``: :func:`matched_contact`); under its free law fitted
 hysteresis           a ``bouc_wen`` element at a connection (``alpha_N_per_m``, ``beta_per_m``,
                      ``gamma``, ``delta``; nu = 1)
 cubic_stiffness      a ``cubic_spring`` (k = 0) at a connection (``k3_N_per_m3``; hardening or
@@ -1382,9 +1384,11 @@ EFFECT_TABLE: dict[str, EffectDef] = {d.name: d for d in (
                           "and more damped with amplitude (in a modal model: a share k of the connection's "
                           "stiffness)", factory=_joint_friction),
     EffectDef(name="backlash", kind="nonlinear", where="connection",
-              parameters=(("gap_m", "m"), ("k_N_per_m", "N/m")), level_dependent=True, trend="either",
-              description="a clearance in a connection's spring (in a modal model: in a share k of the "
-                          "connection's stiffness)",
+              parameters=(("gap_m", "m"), ("k_contact_over_k_base", "1"), ("k_N_per_m", "N/m")),
+              level_dependent=True, trend="either",
+              description="a clearance in a connection's spring, its contact stiffness the spring's, matched to "
+                          "the spring's small-motion gain or (free law) fitted (in a modal model: in a share k of "
+                          "the connection's stiffness)",
               factory=_backlash),
     EffectDef(name="hysteresis", kind="nonlinear", where="connection",
               parameters=(("alpha_N_per_m", "N/m"), ("beta_per_m", "1/m"), ("gamma", "1"), ("delta", "1"), ("nu", "1")),
