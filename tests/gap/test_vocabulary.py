@@ -549,3 +549,22 @@ def test_a_quintic_spring_is_fitted_by_the_cubic_springs_law():
     assert g2 < 0.3 * g1
     assert law.qualifiers(p2) == {"character": "hardening", "law": "quintic fitted"}
     assert law.qualifiers(np.array([0.1, -0.1]))["character"] == "softening"  # 3 q3 + 5 q5 < 0
+
+
+def test_a_matched_clearance_keeps_its_springs_equivalent_gain_under_gaussian_motion():
+    """``effects.matched_contact``: a dead zone of half-width g whose contact stiffness is the
+    matched multiple of a spring's k has that spring's equivalent linear gain under a Gaussian
+    deflection, ``E[d f(d)] / E[d^2] = k`` (Bussgang's theorem), checked against samples; the
+    multiple is 1 at no clearance and capped where the clearance is rarely closed."""
+    from vibroscope.gap.effects import MATCHED_CONTACT_MAX, matched_contact
+
+    rng = np.random.default_rng(79)
+    sigma, k = 2e-3, 5e4
+    d = rng.normal(0.0, sigma, 2_000_000)
+    for g_rel in (0.05, 0.3, 1.0):
+        g = g_rel * sigma
+        kc = k * matched_contact(g, sigma)
+        f = np.where(np.abs(d) > g, kc * (d - g * np.sign(d)), 0.0)
+        assert np.mean(d * f) / np.mean(d * d) == pytest.approx(k, rel=5e-3), g_rel
+    assert matched_contact(0.0, sigma) == 1.0
+    assert matched_contact(5 * sigma, sigma) == MATCHED_CONTACT_MAX
