@@ -945,22 +945,18 @@ def _backlash(model, scales):
         vals = ([math.log(d_rms * r) for r in (0.02, 0.1)] + [math.log(q) for q in dq if q > 0]
                 + [math.log(d_rms * 2.0)])
         law = _backlash_law(pair, lo, hi, vanish)
+        starts = _starts_1d(vals, lo, hi)[:6]
         for matched in (False, True):
             def contact(g, matched=matched, d_rms=d_rms):
                 return matched_contact(g, d_rms) if matched else 1.0
 
             def build(m, p, pair=pair, contact=contact):
-                jj, sp = _spring_at(m, pair)
-                if sp is None:  # another effect took the spring: no clearance to open
-                    raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
-                els = list(m.elements)
-                g = float(math.exp(p[0]))
-                els[jj] = Backlash(sp.between, k=sp.k * contact(g), gap=g)
-                return replace(m, elements=tuple(els))
+                g = math.exp(p[0])
+                return _open_clearance(m, pair, g, contact(g))
 
             specs.append(EffectSpec(
                 effect="backlash", where={"between": [pair[0], pair[1]]}, n=1,
-                starts=_starts_1d(vals, lo, hi)[:6], lower=np.array([lo]), upper=np.array([hi]), build=build,
+                starts=starts, lower=np.array([lo]), upper=np.array([hi]), build=build,
                 describe=lambda p, contact=contact, matched=matched: {"gap_m": float(math.exp(p[0]))} | (
                     {"k_contact_over_k_base": contact(math.exp(p[0]))} if matched else {}),
                 vanish=vanish, narrow=(0,),
@@ -968,6 +964,17 @@ def _backlash(model, scales):
                 law=(law, lambda p, contact=contact: np.array([p[0], math.log(contact(math.exp(p[0])))])),
             ))
     return specs
+
+
+def _open_clearance(m, pair, gap: float, factor: float):
+    """Model `m` with its spring at `pair` replaced by a clearance of half-width `gap` (m) and
+    contact stiffness `factor` times that spring's."""
+    jj, sp = _spring_at(m, pair)
+    if sp is None:  # another effect took the spring: no clearance to open
+        raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
+    els = list(m.elements)
+    els[jj] = Backlash(sp.between, k=sp.k * float(factor), gap=float(gap))
+    return replace(m, elements=tuple(els))
 
 
 def _backlash_law(pair, lo, hi, vanish):
@@ -979,12 +986,7 @@ def _backlash_law(pair, lo, hi, vanish):
     the closer (the blind suite's harder variant, seed 12 cases 018 and 021: contact stiffnesses
     of 0.57 and 0.51 times the nominal spring, named cubic springs)."""
     def build(m, p):
-        jj, sp = _spring_at(m, pair)
-        if sp is None:
-            raise ValueError(f"no spring left between {pair[0]} and {pair[1]}")
-        els = list(m.elements)
-        els[jj] = Backlash(sp.between, k=sp.k * math.exp(p[1]), gap=float(math.exp(p[0])))
-        return replace(m, elements=tuple(els))
+        return _open_clearance(m, pair, math.exp(p[0]), math.exp(p[1]))
 
     lk = math.log(CONTACT_FACTOR)
     return EffectSpec(
