@@ -164,9 +164,10 @@ def test_an_absorber_below_its_host_mode_is_found_on_the_lines_of_a_wide_band(tm
     """Seed 13 case 020: an absorber of 3.2 % of the host's mass at 3.87 Hz (damping ratio
     0.0065) below the 7.08 Hz host mode, a log chirp over 1-742 Hz at three levels, 2 kHz. The
     FRF fits took every 13th line of 0.1 Hz (1.3 Hz apart), no extra-mode start fell below the
-    host and the case was called ``parameter_mismatch`` (62dceb8). On lines thinned to a log and
-    a uniform grid (``diagnosis.thin_lines``) the residual's peak at the absorber is a start and
-    the mode is fitted at the truth."""
+    host and the case was called ``parameter_mismatch`` (62dceb8). The starts are now sought on
+    every line of the band and an extra mode's FRF fit adds every line near its start
+    (``_candidates.frf_lines``): the residual's peak at the absorber is a start and the mode is
+    fitted at the truth."""
     d, truth = _case(tmp_path, 13, 20)
     ef = truth["effect"]
     rep = _gap(d, truth, tmp_path, "parameter_mismatch,extra_mode")

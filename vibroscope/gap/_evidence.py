@@ -333,12 +333,13 @@ def gather_evidence(run: Run) -> None:
     })
     f_s, H_s, coh_s = f[sel], H[sel], coh[sel]
 
-    def model_frf(m_, y_m):
-        """The model's FRF to the first input: the open plant's, or (closed loop) the H1 of its
-        simulation `y_m` under the logged references on the fitting samples."""
+    def model_frf(m_, y_m, lines=sel):
+        """The model's FRF to the first input on `lines` (a mask of ``f``): the open plant's, or
+        (closed loop) the H1 of its simulation `y_m` under the logged references on the fitting
+        samples."""
         if closed:
-            return frf_data(us, y_m, split.fit, fs, nps, window)[1][sel]
-        return m_.frf(f_s, quantity=None)[:, :, 0]
+            return frf_data(us, y_m, split.fit, fs, nps, window)[1][lines]
+        return m_.frf(f[lines], quantity=None)[:, :, 0]
 
     H_refit = model_frf(refit, y_ref)
     # start frequencies of an extra mode: first where the refit's residual holds the most power
@@ -347,16 +348,18 @@ def gather_evidence(run: Run) -> None:
     # then where measured / model deviates most significantly (deviation in dB times the
     # coherence weight), against the refitted and the nominal model; the dB measure alone is led
     # by lines of small response (a displacement at 200 Hz) where its noise is largest
+    # (both on every line of the band, not the fits' thinned ones: a narrow mode falls between those)
     resid = ys[fit_log][:, :n_sc] - y_ref[fit_log][:, :n_sc]  # the refit's residual (also the signatures')
-    starts: list[float] = residual_peaks(resid, mfit0, fs, nps, window, sel, nf.psd_level)
+    dense = sel if run.sel_dense is None else run.sel_dense
+    starts: list[float] = residual_peaks(resid, mfit0, fs, nps, window, dense, nf.psd_level)
     for ref_m, y_m in ((refit, y_ref), (model, y_nom)):
-        Hr = model_frf(ref_m, y_m)
-        rt = H_s / np.where(np.abs(Hr) > 0, Hr, 1)
-        dev = np.mean(np.abs(20 * np.log10(np.maximum(np.abs(rt), 1e-300))) * w[sel], axis=1)
+        Hr = model_frf(ref_m, y_m, dense)
+        rt = H[dense] / np.where(np.abs(Hr) > 0, Hr, 1)
+        dev = np.mean(np.abs(20 * np.log10(np.maximum(np.abs(rt), 1e-300))) * w[dense], axis=1)
         pk, props = sps.find_peaks(dev, prominence=0.05 * max(float(dev.max()), 1e-12))
         order = np.argsort(props["prominences"])[::-1] if pk.size else []
         for i in order[:3]:
-            fc = float(f_s[pk[i]])
+            fc = float(f[dense][pk[i]])
             if all(abs(fc - o) > 0.03 * o for o in starts):
                 starts.append(fc)
     scales["f_extra"] = starts

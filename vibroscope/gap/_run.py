@@ -327,6 +327,8 @@ class Run:
     # the FRF of the fitting data and the linear refit (_refit_linear)
     fd: tuple | None = None
     sel: np.ndarray | None = None
+    #: the FRF lines before thinning (``sel`` is at most 600 of them): where narrow features are sought
+    sel_dense: np.ndarray | None = None
     w: np.ndarray | None = None
     lin: LinearParams | None = None
     #: the parameter-mismatch refit with physical stiffness and damping changes, when kept (_refit_physical)
