@@ -37,6 +37,18 @@ def _gap(d: Path, truth: dict, tmp_path, effects: str) -> dict:
     return json.loads(rep.read_text())
 
 
+def _assert_absorber_found(d: Path, truth: dict, tmp_path) -> None:
+    """``gap`` with a mismatch and an extra mode in its vocabulary names the extra mode at m1,
+    the absorber's frequency within 2 % and its mass within 30 %."""
+    ef = truth["effect"]
+    rep = _gap(d, truth, tmp_path, "parameter_mismatch,extra_mode")
+    assert rep["verdict"] == "extra_mode", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
+    c = rep["candidates"][0]
+    assert c["where"]["dof"] == "m1" and not c.get("vanished")
+    assert c["parameters"]["frequency_hz"] == pytest.approx(ef["f_absorber_hz"], rel=0.02)
+    assert c["parameters"]["mass_kg"] == pytest.approx(ef["absorber_mass_kg"], rel=0.3)
+
+
 @pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
 def test_a_cubic_and_quintic_spring_is_named_cubic_with_its_quintic_term(tmp_path):
     """Seed 11 case 003: a hardening spring ``k3 d^3 + k5 d^5`` at m1-ground, the quintic 0.71 of
@@ -71,13 +83,7 @@ def test_a_light_absorber_beside_its_host_mode_is_named_an_extra_mode(tmp_path):
     A light, lightly damped absorber splits its host's mode: whether a mode is seen is the
     output test every effect gets."""
     d, truth = _case(tmp_path, 11, 24)
-    ef = truth["effect"]
-    rep = _gap(d, truth, tmp_path, "parameter_mismatch,extra_mode")
-    assert rep["verdict"] == "extra_mode", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
-    c = rep["candidates"][0]
-    assert c["where"]["dof"] == "m1" and not c.get("vanished")
-    assert c["parameters"]["frequency_hz"] == pytest.approx(ef["f_absorber_hz"], rel=0.02)
-    assert c["parameters"]["mass_kg"] == pytest.approx(ef["absorber_mass_kg"], rel=0.3)
+    _assert_absorber_found(d, truth, tmp_path)
 
 
 @pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
@@ -169,10 +175,4 @@ def test_an_absorber_below_its_host_mode_is_found_on_the_lines_of_a_wide_band(tm
     (``_candidates.frf_lines``): the residual's peak at the absorber is a start and the mode is
     fitted at the truth."""
     d, truth = _case(tmp_path, 13, 20)
-    ef = truth["effect"]
-    rep = _gap(d, truth, tmp_path, "parameter_mismatch,extra_mode")
-    assert rep["verdict"] == "extra_mode", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
-    c = rep["candidates"][0]
-    assert c["where"]["dof"] == "m1" and not c.get("vanished")
-    assert c["parameters"]["frequency_hz"] == pytest.approx(ef["f_absorber_hz"], rel=0.02)
-    assert c["parameters"]["mass_kg"] == pytest.approx(ef["absorber_mass_kg"], rel=0.3)
+    _assert_absorber_found(d, truth, tmp_path)
