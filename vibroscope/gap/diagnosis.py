@@ -315,12 +315,17 @@ def _frf_weights(f, coh, us, fs, nps, thin: bool = True):
     w = np.sqrt(c / (1 - c))
     w = np.minimum(w, 10.0) * (c > 0.3)
     sel = inb & np.any(w > 0, axis=1)
+    return (_thinned(sel) if thin else sel), w
+
+
+def _thinned(sel):
+    """Every n-th line of mask `sel`, at most 600 of them (for the fits' speed)."""
     idx = np.nonzero(sel)[0]
-    if thin and idx.size > 600:  # thin the lines for speed
-        keep = np.zeros_like(sel)
-        keep[idx[:: int(math.ceil(idx.size / 600))]] = True
-        sel = keep
-    return sel, w
+    if idx.size <= 600:
+        return sel
+    keep = np.zeros_like(sel)
+    keep[idx[:: int(math.ceil(idx.size / 600))]] = True
+    return keep
 
 
 def diagnose(
@@ -717,7 +722,8 @@ def _refit_linear(run: Run) -> None:
     if fd is None:
         raise ValueError(f"too little fitting data for nperseg={nps}")
     f, H, coh, _, _ = fd
-    sel, w = _frf_weights(f, coh, us, fs, nps)
+    dense, w = _frf_weights(f, coh, us, fs, nps, thin=False)
+    sel = _thinned(dense)
     lin = LinearParams(model)
     # closed loop: the open plant's FRF is not the loop's (reference to outputs): time domain only
     theta0 = None if closed else fit_linear_frf(model, lin, f[sel], H[sel], w[sel])[1]
@@ -749,7 +755,7 @@ def _refit_linear(run: Run) -> None:
     # every line, for the searches of narrow features (the extra-mode starts): thinned to every
     # 13th line of 0.1 Hz, a 3.87 Hz absorber below a 7.08 Hz host fell between lines (the blind
     # suite's harder variant, seed 13 case 020)
-    run.sel_dense = _frf_weights(f, coh, us, fs, nps, thin=False)[0]
+    run.sel_dense = dense
     run.ns_fit, run.lo_l, run.hi_l, run.ns_pol = ns_fit, lo_l, hi_l, ns_pol
     run.g_nom_fit, run.g_ref_fit, run.theta, run.refit_note = g_nom_fit, g_ref_fit, theta, refit_note
     run.refit, run.y_ref, run.gap_refit = refit, y_ref, gap_refit
