@@ -102,3 +102,33 @@ def test_the_frf_fit_jacobian_agrees_with_central_differences():
         assert np.all(np.max(np.abs(Jn), axis=0) > 0), name  # every column moves the FRF
         seen.add(name)
     assert seen == {"time_delay", "extra_mode", "modal"}
+
+
+def test_a_lead_in_of_whole_periods_starts_the_simulation_in_periodic_steady_state():
+    """A log of a periodic input in steady state from its first sample, of a mode whose time
+    constant (1 / (zeta omega_n) = 3.2 s) outlasts the 1 s period: simulated from rest, the
+    model's transient is in the log's first periods; with a lead-in of whole periods (the
+    input's periodic continuation) the simulation matches the steady state the log holds."""
+    from vibroscope.gap.diagnosis import _skip_samples
+
+    m = LumpedModel(dofs=(Dof("m1", 1.0),),
+                    elements=(Spring(("m1", "ground"), k=(2 * np.pi * 5.0) ** 2), Damper(("m1", "ground"), c=0.625)),
+                    inputs=(Input(dof="m1", channel="f"),), outputs=(Output("m1", "acceleration", "a1"),))
+    T = 1000  # one period at 1 kHz
+    rng = np.random.default_rng(7)
+    period = np.fft.irfft(np.r_[0, np.exp(2j * np.pi * rng.random(40)), np.zeros(T // 2 - 40)], T)[None] * 30
+    u = np.tile(period, 12)
+    # the truth: 30 periods (over nine time constants) simulated before the log
+    y_ss = LogSimulator(u, FS, period=T, lead_periods=30).run(m)
+    y_rest = LogSimulator(u, FS).run(m)
+    skip, why, T_found, lead = _skip_samples(m, FS, u, y_ss, None)
+    assert (skip, T_found) == (T, T) and lead == 9  # three time constants (9.6 s) less the 1 s period skipped
+    assert "start 9 period(s)" in why
+    y_lead = LogSimulator(u, FS, period=T, lead_periods=lead).run(m)
+
+    def err(y):
+        return float(np.sqrt(np.mean((y - y_ss)[:, skip:] ** 2) / np.mean(y_ss[:, skip:] ** 2)))
+
+    assert err(y_rest) > 0.2  # from rest: the transient past the skipped period
+    assert err(y_lead) < 0.1 * err(y_rest)  # three time constants: e^-3 of it left where the log begins
+    assert y_lead.shape == u.shape

@@ -133,7 +133,26 @@ def test_an_extra_mode_resonating_outside_the_excited_band_vanishes():
     assert em.vanishes(p(80.0, mass_share=1e-3)) is None
     # no band given (a closed loop, or a caller's own scales): no band rule
     em_free = next(s for s in candidate_specs(model, scales(model), ["extra_mode"]))
-    assert em_free.vanishes(p(226.9, 0.002)) is None
+    assert em_free.vanishes(p(226.9)) is None
+
+
+def test_an_extra_mode_whose_damping_is_pressed_against_a_bound_vanishes():
+    """A fitted damping ratio at a bound of the fit's range (0.002-0.2) is the fit asking for
+    a spike sharper or a bump broader than a mode (seed 13 case 016 of the blind suite's harder
+    variant: a parameter mismatch named an extra mode at 110 Hz damped 0.00215). Those named
+    rightly in the blind suites were fitted at 0.0059-0.047, and are kept."""
+    model = chain()
+    em = next(s for s in candidate_specs(model, dict(scales(model), f_band=(2.0, 170.8)), ["extra_mode"]))
+    lo, hi = (math.exp(em.lower[2]), math.exp(em.upper[2]))
+    assert (lo, hi) == pytest.approx((0.002, 0.2))
+
+    def p(zeta, f=110.0):
+        return [math.log(0.003), math.log(f), math.log(zeta)]
+
+    assert "lower bound" in em.vanishes(p(0.00215))
+    assert "upper bound" in em.vanishes(p(0.195))
+    for zeta in (0.0059, 0.0065, 0.047, 0.1):
+        assert em.vanishes(p(zeta)) is None, zeta
 
 
 def test_joint_friction_softens_a_connection_and_keeps_its_small_amplitude_stiffness():

@@ -422,9 +422,9 @@ def gaps_by_sampling(run: Run, m) -> dict | None:
             if not n:
                 continue
             try:
-                out = simulate(m, sim.u[:, :n], run.fs, method="nonlinear", fine_input=sim.fine_input(R, n),
+                out = simulate(m, sim.input(n), run.fs, method="nonlinear", fine_input=sim.fine_input(R, n),
                                scheme=SCHEME, output_sampling=mode)
-                yh_.append(np.asarray(out.data[len(m.inputs):]))
+                yh_.append(sim.trim(out.data[len(m.inputs):]))
             except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
                 return None
             ys_.append(y[:, :n])

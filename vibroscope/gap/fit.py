@@ -67,16 +67,58 @@ class LogSimulator:
         How nonlinear simulations are brought back to `fs`
         (:func:`~vibroscope.models.simulate.simulate`); the diagnosis chooses it from the data
         (:func:`~vibroscope.gap._candidates.choose_output_sampling`). Default 'filtered'.
+    period : int, optional
+        Samples of one period of a periodic input whose log is in periodic steady state from
+        its first sample (:func:`~vibroscope.gap.levels.steady_state_start`); with
+        `lead_periods` the simulations start that many periods before the log.
+    lead_periods : int, optional
+        Whole periods of the input (its periodic continuation, ``u[:, :period]`` repeated)
+        simulated before the log and dropped from every output, so that a model's transient
+        from rest has decayed where the log begins, as the logged system's had; default 0.
     """
 
-    def __init__(self, u: np.ndarray, fs: float, output_sampling: str = "filtered"):
+    def __init__(self, u: np.ndarray, fs: float, output_sampling: str = "filtered", *,
+                 period: int | None = None, lead_periods: int = 0):
         self.u = np.ascontiguousarray(u, float)
         self.fs = float(fs)
         self.output_sampling = output_sampling
+        self.lead = int(period) * int(lead_periods) if period and lead_periods > 0 else 0
+        self._u_sim = (np.ascontiguousarray(np.concatenate([np.tile(self.u[:, :int(period)], int(lead_periods)), self.u],
+                                                           axis=1)) if self.lead else self.u)
         self._fine: dict[tuple[int, int], np.ndarray] = {}
 
+    def input(self, n: int) -> np.ndarray:
+        """The input the simulations of the first `n` samples of the log take.
+
+        Parameters
+        ----------
+        n : int
+            Samples of the log.
+
+        Returns
+        -------
+        ndarray, shape (n_inputs, lead + n)
+            The lead-in periods (``lead`` samples), then ``u[:, :n]`` (N).
+        """
+        return self._u_sim[:, :self.lead + int(n)]
+
+    def trim(self, y: np.ndarray) -> np.ndarray:
+        """Outputs simulated on :meth:`input` without the lead-in.
+
+        Parameters
+        ----------
+        y : array_like, shape (n_outputs, lead + n)
+            Simulated outputs.
+
+        Returns
+        -------
+        ndarray, shape (n_outputs, n)
+            `y` from the log's first sample on.
+        """
+        return np.asarray(y)[:, self.lead:] if self.lead else np.asarray(y)
+
     def fine_input(self, R: int, n: int) -> np.ndarray:
-        """The first `n` samples of the input reconstructed at `R` times the rate (cached).
+        """:meth:`input` of the first `n` samples reconstructed at `R` times the rate (cached).
 
         Parameters
         ----------
@@ -87,12 +129,12 @@ class LogSimulator:
 
         Returns
         -------
-        ndarray, shape (n_inputs, R * n)
-            :func:`~vibroscope.models.simulate.reconstruct_input` of ``u[:, :n]`` (N).
+        ndarray, shape (n_inputs, R * (lead + n))
+            :func:`~vibroscope.models.simulate.reconstruct_input` of ``input(n)`` (N).
         """
         key = (int(R), int(n))
         if key not in self._fine:
-            self._fine[key] = reconstruct_input(self.u[:, :n], self.fs, R)
+            self._fine[key] = reconstruct_input(self.input(n), self.fs, R)
         return self._fine[key]
 
     def run(self, model: LumpedModel, n: int | None = None, *, fast: bool = False,
@@ -127,13 +169,13 @@ class LogSimulator:
             at the controllers' rate (`fast` is not used).
         """
         n = self.u.shape[1] if n is None else int(n)
-        u = self.u[:, :n]
+        u = self.input(n)
         if is_closed_loop(model):
             # the loop runs at the controllers' ticks (ZOH): no band-limited reconstruction
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    y = measured_rows(model, _sim(model, u, self.fs))
+                    y = self.trim(measured_rows(model, _sim(model, u, self.fs)))
             except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
                 y = np.full((len(log_channels(model)[1]), n), np.nan)
             return y if np.all(np.isfinite(y)) else np.full_like(y, np.nan)
@@ -146,7 +188,7 @@ class LogSimulator:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 s = _sim(model, u, self.fs, scheme=SCHEME, output_sampling=self.output_sampling, **kw)
-            y = np.asarray(s.data[len(model.inputs):])
+            y = self.trim(s.data[len(model.inputs):])
         except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
             y = np.full((len(model.outputs), n), np.nan)
         if not np.all(np.isfinite(y)):

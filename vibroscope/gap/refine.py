@@ -118,17 +118,18 @@ def simulate_with_offsets(sim: LogSimulator, model: LumpedModel, n: int | None =
         y = sim.run(model, n, fast=fast)
     else:
         R = _r_for(model, sim.fs, fast)
-        key = (R, n)
+        u_ = sim.input(n)
+        key = (R, u_.shape[1])
         ones = _ones if _ones is not None else {}
         if key not in ones:
-            ones[key] = reconstruct_input(np.ones((1, n)), sim.fs, R)
+            ones[key] = reconstruct_input(np.ones((1, u_.shape[1])), sim.fs, R)
         U = sim.fine_input(R, n) - u0 * ones[key]
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                s = _sim(model, sim.u[:, :n] - u0, sim.fs, fine_input=U, scheme=SCHEME,
+                s = _sim(model, u_ - u0, sim.fs, fine_input=U, scheme=SCHEME,
                          output_sampling=sim.output_sampling)
-            y = np.asarray(s.data[len(model.inputs):])
+            y = sim.trim(s.data[len(model.inputs):])
         except (ValueError, FloatingPointError, ZeroDivisionError, OverflowError):
             y = np.full((len(model.outputs), n), np.nan)
         if not np.all(np.isfinite(y)):
