@@ -138,7 +138,8 @@ def test_a_refit_within_the_ranking_floor_is_not_outranked_by_a_nested_extra_mod
     rep = _gap(d, truth, tmp_path, "parameter_mismatch,extra_mode")
     assert rep["verdict"] == "parameter_mismatch", [(c["effect"], c["gap_after"]) for c in rep["candidates"][:4]]
     assert rep["gap_after"] <= rep["meta"]["noise_floor_ranking"]["nrmse"]
-    assert any(k.endswith("within the ranking floor)") for k in rep["meta"]["nested_tests"]["t"])
+    # the refit's own floor is 1.05x the ranking floor (what right models leave: _ranking.floor_factor)
+    assert any(k.endswith("within 1.05x the ranking floor)") for k in rep["meta"]["nested_tests"]["t"])
 
 
 @pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
