@@ -235,9 +235,10 @@ def _split_channels(model: LumpedModel, sig: Signals):
     return u, y
 
 
-def _skip_samples(model: LumpedModel, fs: float, u: np.ndarray, y: np.ndarray, transient_s) -> tuple[int, str, int, int]:
+def _skip_samples(model: LumpedModel, fs: float, u: np.ndarray, y: np.ndarray, transient_s) -> tuple[int, str, int]:
     """Samples at the start of one log left out of every metric, why (one line), and the
-    simulations' lead-in: ``(skip, reason, period, lead_periods)``.
+    simulations' lead-in in whole periods: ``(skip, reason, lead_periods)`` (with a lead-in the
+    skip is one period).
 
     Given `transient_s`: that, no lead-in. A periodic input whose log is in steady state from
     its first sample (:func:`~vibroscope.gap.levels.steady_state_start`): one period, since the
@@ -252,7 +253,7 @@ def _skip_samples(model: LumpedModel, fs: float, u: np.ndarray, y: np.ndarray, t
     n = u.shape[1]
     if transient_s is not None:
         k = int(round(float(transient_s) * fs))
-        return k, f"given: {float(transient_s):g} s", 0, 0
+        return k, f"given: {float(transient_s):g} s", 0
     try:
         md = model.modes()
         tau = float(np.max(1.0 / np.maximum(md.damping_ratios * 2 * np.pi * md.natural_frequencies, 1e-9)))
@@ -267,8 +268,8 @@ def _skip_samples(model: LumpedModel, fs: float, u: np.ndarray, y: np.ndarray, t
         if lead > 0:
             why += (f"; the simulations start {lead} period(s) ({lead * T / fs:.4g} s) before the log, so that three "
                     f"time constants of the nominal model's slowest mode ({3 * tau:.3g} s) have passed where it begins")
-        return T, why, T, lead
-    return k, f"three time constants of the nominal model's slowest mode ({3 * tau:.3g} s), at most 5 % of the record", 0, 0
+        return T, why, lead
+    return k, f"three time constants of the nominal model's slowest mode ({3 * tau:.3g} s), at most 5 % of the record", 0
 
 
 def fit_linear_model(model, signals, *, nperseg: int | None = None, time_polish: bool = True) -> LumpedModel:
@@ -505,9 +506,9 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
     in_ch0 = log_channels(model)[0][0]
     in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
     skip_why = [_skip_samples(model, fs, u, y, transient_s) for u, y in zip(us, ys)]
-    skips = [k for k, *_ in skip_why]
+    skips = [k for k, _, _ in skip_why]
     split = make_split(us, fs, skip=skips, holdout=holdout)
-    sims = [LogSimulator(u, fs, period=T, lead_periods=lead) for u, (_, _, T, lead) in zip(us, skip_why)]
+    sims = [LogSimulator(u, fs, period=k, lead_periods=lead) for u, (k, _, lead) in zip(us, skip_why)]
     n_min = min(u.shape[1] for u in us)
     window = "hann"
     if nperseg:
@@ -544,7 +545,7 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
     excluded = {e: why for e, why in CLOSED_LOOP_EXCLUDED.items() if e in effect_set} if closed else {}
     effect_set -= set(excluded)
     return Run(t_start=t_start, timings=timings, model=model, sigs=sigs, fs=fs, us=us, ys=ys, out_ch=out_ch,
-                closed=closed, units=units, in_unit=in_unit, skips=skips, skip_reasons=[w for _, w, *_ in skip_why], split=split,
+                closed=closed, units=units, in_unit=in_unit, skips=skips, skip_reasons=[w for _, w, _ in skip_why], split=split,
                 sims=sims, nps=nps,
                 nps_reason=nps_reason, window=window, effect_set=effect_set, excluded=excluded,
                 accel_means=accel_means)
