@@ -76,10 +76,15 @@ def test_every_candidate_builds_a_model_that_simulates_and_round_trips():
         assert set(s.describe(s.starts[0])) <= keys, (s.effect, set(s.describe(s.starts[0])), keys)
         # the augmented model is a model file
         assert loads_model(dumps_model(m)).n_dofs == m.n_dofs
-    # element effects sit at every connection
-    for eff in ("coulomb_friction", "backlash", "cubic_stiffness", "joint_friction", "asymmetric_friction"):
+    # element effects sit at every connection; a friction also between each DOF and ground
+    # where the model has no element (a mass sliding on a guide: here m2)
+    for eff in ("backlash", "cubic_stiffness", "joint_friction"):
         where = sorted({tuple(s.where["between"]) for s in specs if s.effect == eff})
         assert where == sorted(tuple(c) for c in connections(model))
+    assert ("m2", "ground") not in connections(model)
+    for eff in ("coulomb_friction", "asymmetric_friction"):
+        where = sorted({tuple(s.where["between"]) for s in specs if s.effect == eff})
+        assert where == sorted([tuple(c) for c in connections(model)] + [("m2", "ground")])
 
 
 def test_vanishing_parameters_are_named():

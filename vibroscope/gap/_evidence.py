@@ -19,7 +19,8 @@ from scipy import signal as sps
 from vibroscope.gap._level_evidence import bla_levels, level_groups, level_test, modal_level_test
 from vibroscope.gap._run import Run, frf_data, pow2
 from vibroscope.gap.closed_loop import actuator_force, basis_model, basis_rows, is_closed_loop, measured_rows
-from vibroscope.gap.effects import DK_SCALE, FRICTION_V_EPS, LinearParams, connection_stiffness, connections, pair_name
+from vibroscope.gap.effects import (DK_SCALE, FRICTION_V_EPS, LinearParams, connection_stiffness, connections, pair_name,
+                                    sliding_connections)
 from vibroscope.gap.fit import frf_residual
 from vibroscope.gap.levels import level_blas
 from vibroscope.gap.measure import masked_csd
@@ -35,11 +36,11 @@ def states_model(model: LumpedModel) -> LumpedModel:
     return replace(model, outputs=outs)
 
 
-def relative(model: LumpedModel, X: np.ndarray, V: np.ndarray) -> dict:
-    """Each connection's relative displacement and velocity from the states `X`, `V`:
-    ``{pair name: (d, v)}``."""
+def relative(model: LumpedModel, X: np.ndarray, V: np.ndarray, pairs=None) -> dict:
+    """Each connection's (or each of `pairs`') relative displacement and velocity from the
+    states `X`, `V`: ``{pair name: (d, v)}``."""
     out = {}
-    for pair in connections(model):
+    for pair in (connections(model) if pairs is None else pairs):
         lv = model.element_vector(Spring(pair, k=0.0))
         out[pair_name(pair)] = (lv @ X, lv @ V)
     return out
@@ -210,7 +211,7 @@ def regression_starts(refit, rel, ys, y_ref, fit_log, n, fs, effects):
         sol, *_ = np.linalg.lstsq(A, r, rcond=None)
         return sol
 
-    for pair in connections(refit):
+    for pair in sliding_connections(refit):
         key = pair_name(pair)
         if key not in rel:
             continue
@@ -310,7 +311,8 @@ def gather_evidence(run: Run) -> None:
     for base in (refit, model):
         st = sims[fit_log].run(states_model(base), n_sc)
         nd = base.n_dofs
-        rels.append(relative(base, st[:nd], st[nd:2 * nd]))
+        # where a friction can act (:func:`~vibroscope.gap.effects.sliding_connections`): its scales
+        rels.append(relative(base, st[:nd], st[nd:2 * nd], pairs=sliding_connections(base)))
     rel = rels[0]
     # the input-side scales are forces (closed loop: the actuator's, gain x command)
     u_force = [actuator_force(model, u, y, fs) for u, y in zip(us, ys)]
@@ -413,7 +415,8 @@ def gather_evidence(run: Run) -> None:
     lv_rms = [b[0] for b in blas]
     # coherence that the noise floor alone would leave (output PSDs of the fitting data, fd[3])
     noise_coh = np.clip(1 - nf.psd_level[None, :] / np.maximum(fd[3][sel], 1e-300), 0, 1)
-    rel_fit = {k: (d[mfit0], v[mfit0]) for k, (d, v) in rel.items()}
+    at_elements = {pair_name(p) for p in connections(model)}  # the signatures read the model's connections
+    rel_fit = {k: (d[mfit0], v[mfit0]) for k, (d, v) in rel.items() if k in at_elements}
     sigs_tests = run_signatures(
         frequencies=f_s, H_levels=H_lv if len(H_lv) >= 2 else [], level_rms=lv_rms, H_meas=H_s, H_refit=H_refit, coh=coh_s,
         noise_coh=noise_coh, resid=resid[:, mfit0], u=u_fit[mfit0], states={"relative": rel_fit}, fs=fs,

@@ -307,7 +307,9 @@ def held_clearances(run: Run, workers, holders: tuple = CLEARANCE_HOLDERS, at: t
             c = frozenset(s.where["between"])
             screened[c] = min(screened.get(c, np.inf), float(g))
     chosen_at = {frozenset(b) for b in at}
-    others = [c for c in sorted(screened, key=screened.get) if c not in chosen_at]
+    # (only where a clearance can be fitted: a friction can also sit where the model has no
+    # spring, effects.sliding_connections)
+    others = [c for c in sorted(screened, key=screened.get) if c not in chosen_at and "backlash" in by_pair.get(c, {})]
     keep = chosen_at | set(others[:HELD_CLEARANCE_CONNECTIONS])
     by_pair = {c: d for c, d in by_pair.items() if c in keep}
     if trace is not None:
