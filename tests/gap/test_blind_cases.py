@@ -194,3 +194,21 @@ def test_a_steady_state_log_is_simulated_from_a_lead_in_of_whole_periods(tmp_pat
     assert "start 6 period(s)" in rep["meta"]["transient_reasons"][0], rep["meta"]["transient_reasons"]
     assert rep["verdict"] == "parameter_mismatch", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
     assert rep["gap_refit"] < 1.3 * rep["noise_floor"], (rep["gap_refit"], rep["noise_floor"])
+
+
+@pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
+def test_a_friction_where_the_model_has_no_element_is_found(tmp_path):
+    """Seed 14 case 006: a Stribeck friction (Fc 0.0238 N, 7 % of the force's rms) between m2
+    and ground on a 3-DOF chain whose m2 hangs between springs to m3 only; the model has no
+    element from m2 to ground. With the friction candidates only at the model's elements it
+    was named ``parameter_mismatch`` (e10c703); a friction also sits between each DOF and ground
+    where the model has none (``effects.sliding_connections``), and there it is found."""
+    d, truth = _case(tmp_path, 14, 6)
+    ef = truth["effect"]
+    assert truth["cls"] == "coulomb_friction" and sorted(ef["location"]) == ["ground", "m2"]
+    rep = _gap(d, truth, tmp_path, "parameter_mismatch,coulomb_friction")
+    assert rep["verdict"] == "coulomb_friction", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
+    c = rep["candidates"][0]
+    assert sorted(c["where"]["between"]) == ["ground", "m2"]
+    assert c["parameters"]["Fc_N"] == pytest.approx(ef["Fc_N"], rel=0.25)
+    assert rep["gap_after"] < 0.3 * rep["gap_before"]
