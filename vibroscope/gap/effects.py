@@ -150,8 +150,10 @@ def sliding_connections(model: LumpedModel) -> list[tuple[str, str]]:
         ground (a modal-coordinates model's points all have one already).
     """
     out = connections(model)
+    if model.point_names():  # a modal-coordinates model: every point has its link to ground
+        return out
     grounded = {a for a, b in out if b == GROUND} | {b for a, b in out if a == GROUND}
-    return out + [(d.name, GROUND) for d in model.dofs if d.name not in grounded and not model.point_names()]
+    return out + [(d.name, GROUND) for d in model.dofs if d.name not in grounded]
 
 
 class LinearParams:
