@@ -10,7 +10,7 @@ from vibroscope.models.excitation import band_limited_random, multisine
 from vibroscope.models.integrate import integrate as integrate_model
 from vibroscope.models.lumped import Dof, Input, LumpedModel, Output, demo_model
 from vibroscope.models._reference_integrator import _Integrator
-from vibroscope.models.simulate import decimate_fir, simulate, simulate_periodic, upsample
+from vibroscope.models.simulate import decimate_fir, decimate_sharp, simulate, simulate_periodic, upsample
 
 
 def sdof(m=1.0, k=4e4, c=8.0, quantity="displacement", **kw):
@@ -269,6 +269,31 @@ def test_upsample_and_decimate_roundtrip():
     y2 = decimate_fir(xf, 5)
     assert y2.shape == (1000,)
     np.testing.assert_allclose(y2[20:-20], x[20:-20], atol=1e-3)
+
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_decimate_sharp_is_flat_in_band_and_removes_what_would_alias(periodic):
+    """A tone at 0.44 fs comes through at the sample instants within 1e-4 (decimate_fir loses
+    a third of it); a tone at 0.6 fs, which would alias to 0.4 fs, is gone (below 1e-4)."""
+    fs, R, n = 500.0, 10, 4000
+    i = np.arange(n * R)
+    for f_rel, keep in ((0.44, True), (0.6, False)):
+        cycles = round(f_rel * n)  # whole cycles per record: exact for the periodic filter
+        x = np.sin(2 * np.pi * cycles * i / (n * R))
+        y = decimate_sharp(x, R, periodic=periodic)
+        assert y.shape == (n,)
+        mid = slice(None) if periodic else slice(100, -100)
+        if keep:
+            np.testing.assert_allclose(y[mid], x[::R][mid], atol=1e-4)
+            assert np.abs(decimate_fir(x, R, periodic=periodic)[mid]).max() < 0.7
+        else:
+            assert np.abs(y[mid]).max() < 1e-4
+    # a ramp survives the ends (point reflection), a constant exactly
+    np.testing.assert_allclose(decimate_sharp(np.linspace(0.0, 1.0, 2000), 4), np.linspace(0.0, 1.0, 2000)[::4], atol=1e-9)
+    with pytest.raises(ValueError, match="factor"):
+        decimate_sharp(x, 0)
+    with pytest.raises(ValueError, match="divisible"):
+        decimate_sharp(np.zeros(101), 4, periodic=True)
 
 
 def test_bad_arguments():

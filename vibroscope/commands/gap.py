@@ -54,10 +54,11 @@ def add_parser(sub) -> None:
     p.add_argument("--holdout", choices=("auto", "last"), default="auto",
                    help="several logs: 'auto' holds out the last log when all are at one input level, else the "
                         "end of each log (every level fitted and validated); 'last' always holds out the last log")
-    p.add_argument("--output-sampling", choices=("auto", "filtered", "point"), default="auto",
-                   help="how nonlinear simulations meet the log's rate: 'filtered' (anti-aliased, decimated), "
+    p.add_argument("--output-sampling", choices=("auto", "filtered", "sharp", "point"), default="auto",
+                   help="how nonlinear simulations meet the log's rate: 'filtered' (decimated by MATLAB's FIR "
+                        "stages), 'sharp' (anti-aliased flat to 0.46 fs: a sigma-delta converter), "
                         "'point' (taken at the sample instants: a sensor without an anti-aliasing filter) or "
-                        "'auto' (default: the one that fits the best screened candidate better)")
+                        "'auto' (default: the one that fits the best screened candidate best)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 

@@ -390,12 +390,14 @@ def diagnose(
         Several logs: ``'auto'`` (default) holds out the last log when every log is at one
         input level, else the end of each log; ``'last'`` always holds out the last log (a
         validation log the user has chosen, such as a benchmark's test part).
-    output_sampling : {'auto', 'filtered', 'point'}, optional
+    output_sampling : {'auto', 'filtered', 'sharp', 'point'}, optional
         How the nonlinear simulations bring their outputs to the log's rate
-        (:func:`~vibroscope.models.simulate.simulate`): low-passed and decimated ('filtered': a
-        sensor with an anti-aliasing filter) or taken at the sample instants ('point': a sampling
-        ADC without one, where a nonlinearity's harmonics above ``fs / 2`` alias). ``'auto'``
-        (default) chooses the one that fits the best screened nonlinear candidate better
+        (:func:`~vibroscope.models.simulate.simulate`): low-passed and decimated by MATLAB's FIR
+        stages ('filtered': a digitally decimated record), by a filter flat to 0.46 fs ('sharp':
+        a sigma-delta converter's anti-aliasing filter) or taken at the sample instants
+        ('point': a sampling ADC without one, where a nonlinearity's harmonics above ``fs / 2``
+        alias). ``'auto'`` (default) chooses the one that fits the best screened nonlinear
+        candidate best
         (:func:`~vibroscope.gap._candidates.choose_output_sampling`); the report's
         ``meta["output_sampling"]`` says which and why.
 
@@ -464,8 +466,8 @@ def diagnose(
 
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout,
               output_sampling) -> GapReport:
-    if output_sampling not in ("auto", "filtered", "point"):
-        raise ValueError(f"{output_sampling=} must be 'auto', 'filtered' or 'point'")
+    if output_sampling not in ("auto", "filtered", "sharp", "point"):
+        raise ValueError(f"{output_sampling=} must be 'auto', 'filtered', 'sharp' or 'point'")
     run = _prepare_logs(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg, holdout=holdout)
     run.output_sampling = output_sampling
     _place_upper_residual(run)

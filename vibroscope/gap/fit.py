@@ -63,7 +63,7 @@ class LogSimulator:
         :func:`~vibroscope.models.closed_loop.loop_inputs` (references first).
     fs : float
         Hz.
-    output_sampling : {'filtered', 'point'}, optional
+    output_sampling : {'filtered', 'sharp', 'point'}, optional
         How nonlinear simulations are brought back to `fs`
         (:func:`~vibroscope.models.simulate.simulate`); the diagnosis chooses it from the data
         (:func:`~vibroscope.gap._candidates.choose_output_sampling`). Default 'filtered'.

@@ -41,7 +41,7 @@ from scipy import signal
 from vibroscope.models.integrate import integrate
 from vibroscope.models.linear_sim import dlsim_modal, foh_equivalent, triangle_hold_compensation
 from vibroscope.models.lumped import UNITS, LumpedModel
-from vibroscope.models.resample import decimate_fir, upsample
+from vibroscope.models.resample import decimate_fir, decimate_sharp, upsample
 from vibroscope.signals import Signals
 
 __all__ = [
@@ -51,6 +51,7 @@ __all__ = [
     "default_oversample",
     "upsample",
     "decimate_fir",
+    "decimate_sharp",
 ]
 
 #: linear path's default oversampling factor
@@ -247,6 +248,17 @@ def _wrap(model, u, y, fs, t0, noise, seed, meta):
                    meta=meta)
 
 
+def _bring_back(y: np.ndarray, R: int, output_sampling: str) -> np.ndarray:
+    """Fine-grid outputs ``(n_out, n R)`` brought back to the sample rate by `output_sampling`
+    ('point': every `R`-th sample; 'sharp': :func:`decimate_sharp`; 'filtered':
+    :func:`decimate_fir`)."""
+    if output_sampling == "point":
+        return np.ascontiguousarray(y[:, ::R])
+    if output_sampling == "sharp":
+        return decimate_sharp(y, R)
+    return decimate_fir(y, R)
+
+
 def _is_linear(model: LumpedModel) -> bool:
     return all(e.is_linear for e in model.elements)
 
@@ -267,7 +279,7 @@ def simulate(
     seed: int | None = None,
     fine_input=None,
     scheme: Literal["trapezoid", "exponential"] = "trapezoid",
-    output_sampling: Literal["filtered", "point"] = "filtered",
+    output_sampling: Literal["filtered", "sharp", "point"] = "filtered",
 ) -> Signals:
     """Simulate `model` driven by the sampled inputs `u`, from rest.
 
@@ -315,11 +327,12 @@ def simulate(
         Saturated and delayed inputs use this path too: the FOH recursion runs on the
         clipped / shifted fine-grid force (the clipped force is not band-limited; the FOH
         treats it as linear between fine samples, without pre-emphasis correction of its
-        corners beyond the ``[-1/12, 7/6, -1/12]`` filter). Outputs are the responses
-        *sampled* at the sample instants: an acceleration output of a driven DOF contains
-        the feedthrough ``M^-1 B u`` of the clipped force, whose harmonics above ``fs / 2``
-        alias (the nonlinear path low-passes them instead; the two paths then differ by
-        about 1 % RMS on that channel for heavy clipping, and agree to ~2e-4 elsewhere).
+        corners beyond the ``[-1/12, 7/6, -1/12]`` filter). Outputs are the responses at
+        the sample instants, except for a saturated input with `output_sampling`
+        'filtered' or 'sharp': an acceleration output of a driven DOF contains the
+        feedthrough ``M^-1 B u`` of the clipped force, whose harmonics above ``fs / 2``
+        would alias, so the fine-grid outputs are brought back to `fs` as on the nonlinear
+        path (the two paths then agree to ~2e-4).
         ``"nonlinear"``: the compiled trapezoidal rule (Newmark average acceleration,
         ``a = 1/2``, ``b = 1/4``, internal states ``c = 1/2``; second order, A-stable) [1]_
         (:func:`vibroscope.models.integrate.integrate`) at ``fs * oversample`` on the applied
@@ -348,15 +361,18 @@ def simulate(
         (:func:`vibroscope.models.integrate.flatten_model`): 'trapezoid' (default) or
         'exponential' (exact linear free response: no frequency warping, so fewer sub-steps
         reach the same accuracy). Not used on the linear path or in closed loop.
-    output_sampling : {'filtered', 'point'}, optional
+    output_sampling : {'filtered', 'sharp', 'point'}, optional
         How the nonlinear path brings its fine-grid outputs back to `fs`: 'filtered'
-        (default) low-passes and decimates them (:func:`decimate_fir`), as a sensor with an
-        anti-aliasing filter (or a digitally decimated record, such as the Bouc-Wen
-        benchmark's) would; 'point' takes them at the sample instants, as a sampling ADC with
-        no anti-aliasing filter (and a reference integrator sampled at the log's times)
-        would, so a nonlinearity's harmonics above ``fs / 2`` alias into the band as they do
-        there. The linear path always samples at the instants (its outputs have no content
-        above ``fs / 2`` but for a clipped input's harmonics). Not used in closed loop.
+        (default) low-passes and decimates them (:func:`decimate_fir`, MATLAB's order-30
+        stages, which roll off from about 0.3 `fs`), as a digitally decimated record such as
+        the Bouc-Wen benchmark's was made; 'sharp' low-passes them flat to about 0.46 `fs`
+        and decimates (:func:`decimate_sharp`), as a sigma-delta converter's or a
+        recorder's sharp anti-aliasing filter does; 'point' takes them at the sample
+        instants, as a sampling ADC with no anti-aliasing filter (and a reference integrator
+        sampled at the log's times) would, so a nonlinearity's harmonics above ``fs / 2``
+        alias into the band as they do there. The linear path samples at the instants (its
+        outputs have no content above ``fs / 2``) but for a saturated input, whose clipped
+        force's harmonics it treats the same way. Not used in closed loop.
 
     Returns
     -------
@@ -377,7 +393,7 @@ def simulate(
         ``method="linear"`` is asked for a nonlinear model, ``method="nonlinear"`` for a
         model that is not a :class:`LumpedModel`, `oversample` < 1, or
         `fine_input` has the wrong shape, non-finite values or disagrees with `oversample`,
-        or `output_sampling` is not 'filtered' or 'point'.
+        or `output_sampling` is not 'filtered', 'sharp' or 'point'.
 
     Warns
     -----
@@ -402,8 +418,8 @@ def simulate(
     fs = float(fs)
     if not np.isfinite(fs) or fs <= 0:
         raise ValueError(f"{fs=} must be positive")
-    if output_sampling not in ("filtered", "point"):
-        raise ValueError(f"{output_sampling=} must be 'filtered' or 'point'")
+    if output_sampling not in ("filtered", "sharp", "point"):
+        raise ValueError(f"{output_sampling=} must be 'filtered', 'sharp' or 'point'")
     if getattr(model, "controllers", ()):
         if fine_input is not None:
             raise ValueError("fine_input is not used in a closed-loop simulation (the model has controllers)")
@@ -447,17 +463,23 @@ def simulate(
     if method == "linear":
         A, B, C, D = model.state_matrices()
         Uc = triangle_hold_compensation(U_app) if R > 1 and upsampling != "linear" else U_app
-        y = dlsim_modal(*foh_equivalent(A, B, C, D, 1.0 / (fs * R)), Uc, D, U_app[:, ::R], R)
+        clipped = R > 1 and output_sampling != "point" and any(i.saturation is not None for i in model.inputs)
+        if clipped:
+            # a clipped force carries harmonics above fs / 2: filter the fine-grid outputs
+            y = dlsim_modal(*foh_equivalent(A, B, C, D, 1.0 / (fs * R)), Uc, D, U_app, 1)
+            y = _bring_back(y, R, output_sampling)[:, :n]
+        else:
+            y = dlsim_modal(*foh_equivalent(A, B, C, D, 1.0 / (fs * R)), Uc, D, U_app[:, ::R], R)
         meta = {"simulator": "foh-exact", "oversample": R, "upsampling": upsampling, "model": model.name}
+        if clipped:
+            meta["output_sampling"] = output_sampling
     else:
         res = integrate(model, U_app, 1.0 / (fs * R), warn=False, scheme=scheme)
         _warn_newton(res.newton_failures, U_app.shape[1] - 1)
         if R == 1:
             y = res.y
-        elif output_sampling == "point":
-            y = np.ascontiguousarray(res.y[:, ::R][:, :n])
         else:
-            y = decimate_fir(res.y, R)
+            y = _bring_back(res.y, R, output_sampling)[:, :n]
         meta = {
             "simulator": "trapezoidal" if scheme == "trapezoid" else "exponential-trapezoidal",
             "oversample": R,
