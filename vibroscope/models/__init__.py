@@ -55,7 +55,7 @@ __all__ = [
 #: names loaded on first use (simulation, excitations, model files), by the module that defines them
 _LAZY = {
     "simulate_periodic": "simulate", "reconstruct_input": "simulate", "default_oversample": "simulate",
-    "upsample": "resample", "decimate_fir": "resample",
+    "upsample": "resample", "decimate_fir": "resample", "decimate_sharp": "resample",
     "boucwen_benchmark_model": "boucwen_benchmark", "simulate_boucwen_benchmark": "boucwen_benchmark",
     "band_limited_random": "excitation", "multisine": "excitation", "sine_sweep": "excitation",
     "impact": "excitation", "step": "excitation", "Excitation": "excitation", "parse_excitation": "excitation",
