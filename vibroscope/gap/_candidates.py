@@ -24,14 +24,12 @@ from vibroscope.gap.effects import EFFECT_TABLE, candidate_specs
 from vibroscope.gap.fit import SCHEME, best_start, fit_linear_frf, fit_time_domain, oversample_for
 from vibroscope.gap.measure import nrmse
 from vibroscope.models.lumped import LumpedModel
-from vibroscope.models.simulate import simulate
+from vibroscope.models.simulate import OUTPUT_SAMPLINGS, simulate
 
 #: the nonlinear simulations sample their outputs at the instants ('point') or low-pass them flat
 #: to 0.46 fs ('sharp') rather than with MATLAB's FIR stages ('filtered', the default) when that fits
 #: the best screened candidate better by more than this fraction of its fitting gap
 SAMPLING_MARGIN = 0.01
-#: the output samplings of the nonlinear simulations, the default first
-SAMPLINGS = ("filtered", "sharp", "point")
 #: a linear effect's other locations whose FRF fit costs at most this factor of its best location's
 #: are polished in time too (at most :data:`LIN_TIED_LOCATIONS` more), and the held-out data chooses:
 #: an extra mode at the one sensed DOF and at the DOF sprung to it fit the FRF within 0.2 % (fresh
@@ -364,7 +362,7 @@ def choose_output_sampling(run: Run, screened: list) -> None:
     choice = {"chosen": "filtered", "by": "default (no nonlinear candidate simulated)"}
     if run.closed:
         choice["by"] = "not used: a closed loop's outputs are taken at the controllers' ticks"
-    elif run.output_sampling in SAMPLINGS:
+    elif run.output_sampling in OUTPUT_SAMPLINGS:
         choice = {"chosen": run.output_sampling, "by": "given"}
     elif screened:
         s, p, g, base = min(screened, key=lambda r: r[2])
@@ -428,7 +426,7 @@ def gaps_by_sampling(run: Run, m) -> dict | None:
         return None
     R = oversample_for(m, run.fs, False)
     gaps = {}
-    for mode in SAMPLINGS:
+    for mode in OUTPUT_SAMPLINGS:
         ys_, yh_, mk_ = [], [], []
         for sim, y, mk, n in zip(run.sims, run.ys, run.split.fit, run.split.fit_prefix):
             if not n:

@@ -145,6 +145,7 @@ from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, coherent_powe
                                     nested_gain, noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.models.lumped import LumpedModel
+from vibroscope.models.simulate import OUTPUT_SAMPLINGS
 from vibroscope.signals import Signals, true_runs
 
 __all__ = ["diagnose", "fit_linear_model", "as_lumped"]
@@ -466,7 +467,7 @@ def diagnose(
 
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout,
               output_sampling) -> GapReport:
-    if output_sampling not in ("auto", "filtered", "sharp", "point"):
+    if output_sampling not in ("auto", *OUTPUT_SAMPLINGS):
         raise ValueError(f"{output_sampling=} must be 'auto', 'filtered', 'sharp' or 'point'")
     run = _prepare_logs(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg, holdout=holdout)
     run.output_sampling = output_sampling

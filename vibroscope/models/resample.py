@@ -102,7 +102,7 @@ def upsample(
         return np.fft.irfft(Z, N, axis=-1) * factor
     if method == "poly":
         half = 40 * factor
-        h = signal.firwin(2 * half + 1, 1.0 / factor, window=("kaiser", 10.0)) * factor
+        h = _kaiser_lowpass(factor) * factor
         if periodic:
             ext = np.concatenate([u[..., -(half // factor + 2):], u, u[..., : half // factor + 2]], axis=-1)
             pre = (half // factor + 2) * factor
@@ -186,7 +186,6 @@ def decimate_fir(x: np.ndarray, factor: int, *, order: int = 30, periodic: bool 
     return x
 
 
-
 @functools.lru_cache(maxsize=64)
 def _kaiser_lowpass(r: int) -> np.ndarray:
     """The Kaiser-window (beta 10) low-pass of :func:`upsample`'s ``"poly"`` reconstruction,
@@ -246,9 +245,7 @@ def decimate_sharp(x: np.ndarray, factor: int, *, periodic: bool = False) -> np.
     if periodic:
         if n % r:
             raise ValueError(f"periodic decimation needs a length {n=} divisible by {r}")
-        reps = half // n + 1
-        ext = np.concatenate([x[..., -half:] if half <= n else np.tile(x, reps)[..., -half:], x,
-                              x[..., :half] if half <= n else np.tile(x, reps)[..., :half]], axis=-1)
+        ext = np.take(x, np.arange(-half, n + half) % n, axis=-1)  # circular extension
     else:
         m = min(half, n - 1)
         pre = 2 * x[..., :1] - x[..., m:0:-1]

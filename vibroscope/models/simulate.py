@@ -54,6 +54,8 @@ __all__ = [
     "decimate_sharp",
 ]
 
+#: the ways the nonlinear path brings its fine-grid outputs back to the sample rate, the default first
+OUTPUT_SAMPLINGS = ("filtered", "sharp", "point")
 #: linear path's default oversampling factor
 LINEAR_OVERSAMPLE = 8
 #: half-length (taps each side) and Kaiser beta of the fine-grid fractional-delay filter
@@ -418,7 +420,7 @@ def simulate(
     fs = float(fs)
     if not np.isfinite(fs) or fs <= 0:
         raise ValueError(f"{fs=} must be positive")
-    if output_sampling not in ("filtered", "sharp", "point"):
+    if output_sampling not in OUTPUT_SAMPLINGS:
         raise ValueError(f"{output_sampling=} must be 'filtered', 'sharp' or 'point'")
     if getattr(model, "controllers", ()):
         if fine_input is not None:
@@ -463,13 +465,13 @@ def simulate(
     if method == "linear":
         A, B, C, D = model.state_matrices()
         Uc = triangle_hold_compensation(U_app) if R > 1 and upsampling != "linear" else U_app
+        disc = foh_equivalent(A, B, C, D, 1.0 / (fs * R))
         clipped = R > 1 and output_sampling != "point" and any(i.saturation is not None for i in model.inputs)
         if clipped:
             # a clipped force carries harmonics above fs / 2: filter the fine-grid outputs
-            y = dlsim_modal(*foh_equivalent(A, B, C, D, 1.0 / (fs * R)), Uc, D, U_app, 1)
-            y = _bring_back(y, R, output_sampling)[:, :n]
+            y = _bring_back(dlsim_modal(*disc, Uc, D, U_app, 1), R, output_sampling)[:, :n]
         else:
-            y = dlsim_modal(*foh_equivalent(A, B, C, D, 1.0 / (fs * R)), Uc, D, U_app[:, ::R], R)
+            y = dlsim_modal(*disc, Uc, D, U_app[:, ::R], R)
         meta = {"simulator": "foh-exact", "oversample": R, "upsampling": upsampling, "model": model.name}
         if clipped:
             meta["output_sampling"] = output_sampling
