@@ -329,7 +329,9 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
         A linear effect to fit jointly.
     p_starts : list of array_like, optional
         Start vectors for `spec`'s parameters, one fit per start, the best kept; default
-        ``spec.starts[0]`` only (none without `spec`).
+        ``spec.starts[0]`` only (none without `spec`). A one-parameter `spec` with a
+        :attr:`~vibroscope.gap.effects.EffectSpec.profile` adds the best value of its grid, the
+        linear parameters at the base.
     prior : float
         Weight of a small pull of the log-factors towards 0 (keeps unidentifiable
         parameters at their nominal values).
@@ -374,6 +376,13 @@ def fit_linear_frf(model: LumpedModel, lin, frequencies, H, w, *, spec=None, p_s
     if jacobian not in ("analytic", "2-point"):
         raise ValueError(f"jacobian={jacobian!r} must be 'analytic' or '2-point'")
     starts = p_starts if p_starts is not None else ([spec.starts[0]] if spec is not None else [np.zeros(0)])
+    if spec is not None and spec.n == 1 and spec.profile is not None:
+        # the FRF cost profiled over the effect's parameter with the linear ones at the base: its
+        # best value is a further start (a delay's cost has a valley every period of the top line)
+        grid = np.clip(np.asarray(spec.profile(f), float), spec.lower[0], spec.upper[0])
+        if grid.size:
+            costs = [float(np.sum(res(np.concatenate([np.zeros(nl), [g]]))[:2 * w.size] ** 2)) for g in grid]
+            starts = list(starts) + [np.array([grid[int(np.argmin(costs))]])]
     best = None
     for p0 in starts:
         x0 = np.concatenate([np.zeros(nl), np.asarray(p0, float)])
