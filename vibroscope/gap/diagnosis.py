@@ -967,7 +967,8 @@ def _best_beyond_refit(run: Run, cg_thr, refit_within: bool, steady=None):
     False: it lacks a linear term the candidate has, an extra mode) or the candidate's held-out
     gain over it is significant too (a nonlinear term, or a constant force: an input offset's
     response is not coherent with a zero-mean input, fresh seed 7105 case 005). With `steady`
-    (``steady(outputs, masks) -> bool``, the residual-growth test of :func:`_check_incoherent`),
+    (``steady(outputs, masks, logs) -> bool``, the residual-growth test of :func:`_check_incoherent`
+    on the logs `logs` of the held-out outputs),
     a candidate whose residual's share of the measured power grows with the input level is not
     taken: what it leaves is a distortion, not noise or a disturbance (the blind suite's harder
     variant, seed 16 case 000: a hardening cubic + quintic spring whose true model is chaotic
