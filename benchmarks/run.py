@@ -22,6 +22,10 @@ simulate_nonlinear
                 (compiled numba kernel, compilation excluded) vs today's pure-Python
                 integrator (``_reference_integrator``), the latter run on a shorter record
                 and scaled linearly to 60 s (it is O(n))
+blas_threads    the gap diagnosis's linear simulations (the exact path's modal recursion, 3-DOF chain,
+                40 s at 1 kHz, oversample 8) on two worker threads at once, as its candidate fits
+                run: every BLAS pool limited to one thread (what ``diagnose`` sets, session 85) vs
+                the pools' default threads
 closed_loop     60 s of a 1-DOF drive with viscous + Coulomb friction and an offset in a cascade
                 position loop at 1 kHz (the closed-loop kernel; target >= 100x real time on an idle
                 machine) vs the same loop without friction on the exact ZOH path
@@ -177,6 +181,45 @@ def bench_simulate(seconds: float = 60.0, ref_seconds: float = 6.0) -> list[dict
     return rows
 
 
+def bench_blas_threads(seconds: float = 40.0, calls: int = 20) -> list[dict]:
+    """The gap diagnosis's linear simulations from two worker threads at once (``calls`` each),
+    with every BLAS pool at one thread against the pools' default threads, in the same run."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from vibroscope.models.excitation import band_limited_random
+    from vibroscope.models.linear_sim import dlsim_modal, foh_equivalent, triangle_hold_compensation
+    from vibroscope.models.lumped import LumpedModel
+    from vibroscope.models.simulate import reconstruct_input
+
+    fs, R = 1000.0, 8
+    u = band_limited_random(fs, int(seconds * fs), fmin=1, fmax=200, rms=20, seed=0)
+    model = LumpedModel.chain(masses=[2.0, 1.5, 1.0], springs=[1.0e5, 8.0e4, 5.0e4], dampers=[20.0, 12.0, 8.0],
+                              input_dof=2)
+    A, B, C, D = model.state_matrices()
+    U = reconstruct_input(u[None], fs, R)
+    Uc = triangle_hold_compensation(U)
+    disc = foh_equivalent(A, B, C, D, 1.0 / (fs * R))
+
+    def worker(_):
+        for _ in range(calls):
+            dlsim_modal(*disc, Uc, D, U[:, ::R], R)
+
+    def two_workers():
+        with ThreadPoolExecutor(2) as ex:
+            list(ex.map(worker, range(2)))
+
+    default = max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=1)
+    t_default = best(two_workers, 3)
+    with threadpool_limits(1, user_api="blas"):
+        t_one = best(two_workers, 3)
+    return [dict(case="blas_threads", size=f"3-DOF chain, {seconds:g} s at 1 kHz, oversample {R}, "
+                 f"2 x {calls} simulations on two threads", ours_s=t_one, baseline_s=t_default,
+                 speedup=t_default / t_one,
+                 baseline=f"the BLAS pools' default threads ({default})")]
+
+
 def bench_closed_loop(seconds: float = 60.0) -> list[dict]:
     """A 1-DOF drive (EMPS-like: 95 kg, viscous + Coulomb friction + offset) in a cascade
     position loop with a two-tap velocity filter at 1 kHz: the nonlinear closed-loop kernel
@@ -226,6 +269,7 @@ def main(argv=None) -> int:
         return 0
     rows += bench_mcap(100_000 if a.quick else 1_000_000)
     rows += bench_simulate(60.0, 2.0 if a.quick else 6.0)
+    rows += bench_blas_threads(40.0)
     rows += bench_closed_loop(60.0)
     _print(rows, a.json)
     return 0

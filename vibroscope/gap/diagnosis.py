@@ -144,6 +144,7 @@ from vibroscope.gap.levels import frf_segment_length, period_floor, steady_state
 from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, coherent_power, input_levels, locate_bands, make_split, masked_csd,
                                     nested_gain, noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
+from vibroscope.modal.automatic import one_blas_thread
 from vibroscope.models.lumped import LumpedModel
 from vibroscope.models.simulate import OUTPUT_SAMPLINGS
 from vibroscope.signals import Signals, true_runs
@@ -381,7 +382,9 @@ def diagnose(
         model's narrowest half-power bandwidth ``2 zeta f_n`` (at least 8 averages), else
         about 4 s; the report's ``meta["nperseg_reason"]`` says which.
     workers : int
-        Threads for the candidate fits (the simulation kernel releases the GIL).
+        Threads for the candidate fits (the simulation kernel releases the GIL). The whole
+        diagnosis runs with every BLAS pool limited to one thread (threadpoolctl): the
+        parallelism is these threads, and a BLAS pool beside them only spins against them.
     n_full : int
         Number of nonlinear effect classes fitted jointly with the linear parameters after
         screening.
@@ -460,9 +463,15 @@ def diagnose(
         # a trial step of a far-off candidate can overflow least_squares' reduction ratio; the
         # optimiser rejects that step by itself
         warnings.filterwarnings("ignore", category=RuntimeWarning, module=r"scipy\.optimize")
-        return _diagnose(model, signals, effects=effects, transient_s=transient_s, nperseg=nperseg,
-                         workers=workers, n_full=n_full, progress=progress, holdout=holdout,
-                         output_sampling=output_sampling)
+        # one BLAS thread for the whole diagnosis, not per probe: the linear simulations' modal
+        # recursion ran 2.7x slower with OpenBLAS's two threads than with one (42.6 against 15.8 ms
+        # a call, seed 16 case 001 of the harder blind variant), and that case's diagnosis took
+        # 105.9 s against 76.6 s with the same report; the per-probe limit (prefix_gap) left the
+        # time-domain fits' simulations at two threads, and it restored two threads on leaving
+        # while the other worker was still inside it
+        return one_blas_thread(_diagnose)(model, signals, effects=effects, transient_s=transient_s,
+                                          nperseg=nperseg, workers=workers, n_full=n_full, progress=progress,
+                                          holdout=holdout, output_sampling=output_sampling)
 
 
 def _diagnose(model, signals, *, effects, transient_s, nperseg, workers, n_full, progress, holdout,
