@@ -76,9 +76,15 @@ def select_further_effects(run: Run, *, workers) -> None:
     delay, the selection is run once more from the delay fitted alone, with the nonlinear
     candidates screened again on it
     (:func:`delay_first`, :func:`screen_on`), and the combination that explains more is kept.
-    A selection (or an unexplained gap) still above :data:`~vibroscope.gap._run.PM_FURTHER` times
-    the floor is tested against a friction-held clearance (:func:`held_clearance_trial`), kept
-    when significantly better (:func:`beyond`).
+    A first effect that may stand in for another class at its connection (a selection beyond
+    :data:`~vibroscope.gap._run.PM_FURTHER` times the floor, or a stand-in that tends to a simpler
+    effect) is retried from the best other nonlinear class there, kept when significantly better
+    (:func:`beyond`) or, one effect against one, simpler and better beyond the noise
+    (:func:`simpler_and_better`); the retry is traced in ``run.selection``.
+    A selection (or an unexplained gap: the nominal's held-out gap) still above
+    :data:`~vibroscope.gap._run.PM_FURTHER` times the floor is tested against a friction-held
+    clearance (:func:`held_clearance_trial`), kept when significantly better (:func:`beyond`);
+    within it, ``run.selection`` says why it was not tried.
     Updates ``chosen``, ``verdict``, ``ordered``; sets ``shares``."""
     per_class, polish = run.per_class, run.polish
     chosen, cands, best_i, verdict, ordered = run.chosen, run.cands, run.best_i, run.verdict, run.ordered
