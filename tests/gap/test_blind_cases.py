@@ -301,3 +301,23 @@ def test_a_distortion_that_grows_with_the_level_is_not_called_noise_beside_a_can
     assert rep["verdict"] == "unexplained", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
     growth = rep["meta"]["incoherent_gap"].get("residual_growth", [])
     assert all(g["growth"] > 2.0 and g["input_ratio"] > 5.0 for g in growth), growth
+
+
+@pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it
+def test_a_refit_far_beyond_the_floor_is_not_a_mismatch_on_the_scatter_of_few_averages(tmp_path):
+    """Seed 17 case 007: a dead-zone spring at m1-ground (1 DOF, 5 Hz; the half clearance 1.69x
+    the rms deflection, so the mass floats inside it), one log. No clearance fit reached it and
+    the linear refit left 7.4x the floor: `unexplained` by the rule for refits beyond 3x the
+    floor, then `parameter_mismatch` by the rule for a residual not coherent with the input,
+    whose coherent part 0.164 (3.7x the floor) passed on the scatter of its estimate over three
+    averages (416040d). A coherent part beyond PM_UNEXPLAINED x the floor is never within it:
+    the verdict stays `unexplained`."""
+    from vibroscope.gap.diagnosis import PM_UNEXPLAINED
+
+    d, truth = _case(tmp_path, 17, 7, per_class=1)
+    assert truth["cls"] == "backlash" and len(truth["logs"]) == 1
+    rep = _gap(d, truth, tmp_path, "parameter_mismatch,backlash,coulomb_friction")
+    assert rep["verdict"] == "unexplained", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
+    ig = rep["meta"]["incoherent_gap"]
+    assert ig["changed"] is None
+    assert ig["refit"]["coherent"] > PM_UNEXPLAINED * rep["noise_floor"]
