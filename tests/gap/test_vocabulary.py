@@ -631,3 +631,8 @@ def test_a_simpler_stand_in_retry_better_beyond_the_noise_replaces_the_chosen_ef
     assert not simpler_and_better(run, [trifle], [hysteresis], trace) and trace["simpler_gain_t"] < 4.0
     # a combination on either side: not this test
     assert not simpler_and_better(run, [cubic, cubic], [hysteresis])
+    # what the elimination left at another connection, or the chosen effect's own class: not this test
+    elsewhere = cand("cubic_stiffness", 1, 0.93, 0.026, y + 0.3 * distortion)
+    elsewhere[0].where["between"] = ["m2", "ground"]
+    assert not simpler_and_better(run, [elsewhere], [hysteresis])
+    assert not simpler_and_better(run, [cand("hysteresis", 1, 0.93, 0.026, y + 0.3 * distortion)], [hysteresis])

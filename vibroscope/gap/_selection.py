@@ -246,7 +246,7 @@ def select_further_effects(run: Run, *, workers) -> None:
     # 16 case 001 (no effect, 1.31x): 21 s of 74 s, no pair; both were then called `none`
     current_gap = chosen[-1][0].gap_after if chosen else run.gap_before
     if (run.val_logs and len(run.lin) and not run.closed and holders
-            and not (chosen and unpredictable(run, chosen[-1])) and current_gap <= PM_FURTHER * run.floor):
+            and not (chosen and unpredictable(run, chosen[-1])) and not current_gap > PM_FURTHER * run.floor):
         run.selection.append({"start": "held clearance (" + ", ".join(holders) + ")", "stopped": (
             f"not tried: {'the selection' if chosen else 'the nominal model'} leaves {current_gap / run.floor:.3g} x "
             f"the noise floor (at most {PM_FURTHER:g} x)")})
@@ -473,6 +473,8 @@ def simpler_and_better(run: Run, trial: list, chosen: list, trace: dict | None =
     if len(trial) != 1 or len(chosen) != 1:
         return False
     t_c, c_c = trial[0][0], chosen[0][0]
+    if t_c.effect == c_c.effect or frozenset(t_c.where.get("between") or ()) != frozenset(c_c.where.get("between") or ("-",)):
+        return False  # what the backward elimination left is another class at the same connection only
     if not (t_c.n_parameters < c_c.n_parameters and t_c.score > c_c.score and t_c.gap_after < c_c.gap_after):
         return False
     vl = [k for k in run.val_logs if k in trial[0][2] and k in chosen[0][2]]

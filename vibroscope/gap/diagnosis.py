@@ -123,6 +123,7 @@ from vibroscope.gap._run import (  # the tuning constants live with the run stat
     N_LOCATIONS,
     OTHER_BASE_FACTOR,
     PENALTY,
+    PM_FURTHER,
     PM_UNEXPLAINED,
     POLISH_FLOOR_FACTOR,
     POLISH_GAIN,
@@ -384,7 +385,9 @@ def diagnose(
     workers : int
         Threads for the candidate fits (the simulation kernel releases the GIL). The whole
         diagnosis runs with every BLAS pool limited to one thread (threadpoolctl): the
-        parallelism is these threads, and a BLAS pool beside them only spins against them.
+        parallelism is these threads, and a BLAS pool beside them only spins against them. The
+        limit is the process's: diagnoses run at once on threads of one process share it, and
+        the first to finish restores the pools' threads.
     n_full : int
         Number of nonlinear effect classes fitted jointly with the linear parameters after
         screening.
@@ -884,7 +887,8 @@ def _check_incoherent(run: Run) -> None:
                        "disturbance, a nonlinearity's distortion); the nominal's on every non-transient sample, "
                        "the linear refit's on the held-out samples"),
             "nominal": cg_nom.to_dict(), "refit": cg_ref.to_dict(),
-            "threshold_coherent": float(NONE_FACTOR * run.floor), "changed": None}
+            "threshold_coherent": float(NONE_FACTOR * run.floor),
+            "cap_coherent": float(PM_UNEXPLAINED * run.floor), "changed": None}
     # the in-band floor a periodic input measures, the outputs' variation from period to period,
     # beside the white floor seen beyond the band (the ranking's, ranking_floor)
     pf = run.period
@@ -1125,7 +1129,12 @@ def _build_report(run: Run) -> GapReport:
                                       "unpredictable model, a linear refit far above the floor: unexplained); "
                                       "an addition that vanishes into the simpler member of its family "
                                       "(an asymmetric friction with equal forces) is tried as that member "
-                                      "('reduced'); a held-clearance trial, kept when significantly better",
+                                      "('reduced'); a held-clearance trial, kept when significantly better "
+                                      f"(not tried, 'stopped', where the current model leaves at most {PM_FURTHER:g} "
+                                      "x the noise floor); a stand-in retry from another class at the chosen "
+                                      "effect's connection ('trial', 'trial_gap'), kept when significantly better "
+                                      "or, one effect against one, simpler with a held-out gain beyond the noise "
+                                      "('simpler_gain_t')",
                             "rounds": list(run.selection)},
               "predictability": {
                   "method": "held-out nrmse between the model's outputs at its default and at twice its "
