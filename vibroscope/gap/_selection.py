@@ -227,9 +227,9 @@ def select_further_effects(run: Run, *, workers) -> None:
         if alt is not None:
             trial, trial_shares = select_from(alt)
             entry = {"start": f"stand-in retry from {_label(alt[0].effect, alt[0].where)}",
-                     "current": " + ".join(_label(c[0].effect, c[0].where) for c in chosen),
+                     "current": _chain_label(chosen),
                      "current_gap": chosen[-1][0].gap_after,
-                     "trial": " + ".join(_label(c[0].effect, c[0].where) for c in trial),
+                     "trial": _chain_label(trial),
                      "trial_gap": trial[-1][0].gap_after}
             if trial[-1][0].score >= UNEXPLAINED_SCORE and (beyond(trial[-1][0], chosen[-1][0])
                                                             or simpler_and_better(run, trial, chosen, entry)):
@@ -245,15 +245,12 @@ def select_further_effects(run: Run, *, workers) -> None:
     # input, the nominal at 1.67x the floor): the trial took 75 s of 318 s and found no pair; seed
     # 16 case 001 (no effect, 1.31x): 21 s of 74 s, no pair; both were then called `none`
     current_gap = chosen[-1][0].gap_after if chosen else run.gap_before
-    if (run.val_logs and len(run.lin) and not run.closed and holders
-            and not (chosen and unpredictable(run, chosen[-1])) and not current_gap > PM_FURTHER * run.floor):
+    pair_possible = bool(run.val_logs and len(run.lin) and not run.closed and holders)
+    if pair_possible and not current_gap > PM_FURTHER * run.floor:
         run.selection.append({"start": "held clearance (" + ", ".join(holders) + ")", "stopped": (
             f"not tried: {'the selection' if chosen else 'the nominal model'} leaves {current_gap / run.floor:.3g} x "
             f"the noise floor (at most {PM_FURTHER:g} x)")})
-    if (run.val_logs and len(run.lin) and not run.closed
-            and current_gap > PM_FURTHER * run.floor
-            and not (chosen and unpredictable(run, chosen[-1]))
-            and holders):
+    elif pair_possible and not (chosen and unpredictable(run, chosen[-1])):  # (its check simulates: last)
         # a Coulomb friction and a clearance at one connection, each of which alone can vanish (the
         # friction holds the clearance's DOF; without it the DOF would float in the clearance, and
         # without the clearance the stiff spring leaves the friction nothing to do): fitted as a
@@ -271,9 +268,9 @@ def select_further_effects(run: Run, *, workers) -> None:
         ref = chosen[-1][0] if chosen else None
         take = bool(pair is not None and pair[-1][0].score >= UNEXPLAINED_SCORE
                     and (ref is None or beyond(pair[-1][0], ref) or reaches_floor(run, pair[-1], chosen[-1], entry)))
-        entry.update({"current": " + ".join(_label(c[0].effect, c[0].where) for c in chosen) or verdict,
+        entry.update({"current": _chain_label(chosen) or verdict,
                       "current_gap": ref.gap_after if ref is not None else None,
-                      "pair": (" + ".join(_label(c[0].effect, c[0].where) for c in pair)
+                      "pair": (_chain_label(pair)
                                if pair is not None else None),
                       "pair_gap": pair[-1][0].gap_after if pair is not None else None,
                       "kept": take})
@@ -473,7 +470,8 @@ def simpler_and_better(run: Run, trial: list, chosen: list, trace: dict | None =
     if len(trial) != 1 or len(chosen) != 1:
         return False
     t_c, c_c = trial[0][0], chosen[0][0]
-    if t_c.effect == c_c.effect or frozenset(t_c.where.get("between") or ()) != frozenset(c_c.where.get("between") or ("-",)):
+    at_t, at_c = t_c.where.get("between"), c_c.where.get("between")
+    if t_c.effect == c_c.effect or not at_t or not at_c or set(at_t) != set(at_c):
         return False  # what the backward elimination left is another class at the same connection only
     if not (t_c.n_parameters < c_c.n_parameters and t_c.score > c_c.score and t_c.gap_after < c_c.gap_after):
         return False
@@ -651,7 +649,7 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
         lin_alone.setdefault(s_.effect, (s_, p_, b_))
     also += list(lin_alone.values())
     def stop(reason):
-        run.selection.append({"start": start, "current": " + ".join(_label(c[0].effect, c[0].where) for c in chosen),
+        run.selection.append({"start": start, "current": _chain_label(chosen),
                               "current_gap": cur_c.gap_after, "stopped": reason})
 
     while True:
@@ -688,7 +686,7 @@ def forward_selection(run: Run, first, per_class: dict, screened: list, workers)
                      for i, (o, a) in enumerate(zip(own, at_conn))]
             tries = list(ex.map(lambda o, j: finish_addition(run, chosen, chain, o, joint=j), own, joint))
         tries, reduced = reduced_tries(run, tries, chain)
-        entry = {"start": start, "current": " + ".join(_label(c[0].effect, c[0].where) for c in chosen),
+        entry = {"start": start, "current": _chain_label(chosen),
                  "current_gap": cur_c.gap_after,
                  "vanished": [_label(r[0].effect, r[0].where) for r in tries if r[0].vanishes(r[1]) is not None]}
         if reduced:
@@ -1432,6 +1430,11 @@ def accepted_addition(run: Run, tries: list, chain: list, cur_c, n_par: int, tra
 def _label(effect: str, where: dict) -> str:
     """``effect@location`` (the report's ``meta["selection"]`` and ``meta["nested_tests"]`` form)."""
     return f"{effect}@{where_key(where)}"
+
+
+def _chain_label(chain: list) -> str:
+    """The candidates of `chain` (candidate tuples) as ``effect@location + ...``."""
+    return " + ".join(_label(c[0].effect, c[0].where) for c in chain)
 
 
 def chain_vanishes(before, after) -> bool:
