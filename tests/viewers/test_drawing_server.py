@@ -65,6 +65,22 @@ def test_only_a_main_module_known_to_be_importable_again_gets_the_server(monkeyp
 
 
 @linux
+def test_the_preload_keeps_a_process_exit_status_outside_the_server():
+    """The preload ends the server with ``os._exit(0)`` at exit; imported anywhere else (the
+    docstring test imports every module into the pytest process) that replaced the process's
+    exit status, and a failing CI run exited 0. Outside the server the status stands; inside
+    (the import called from ``multiprocessing.forkserver.main``, rebuilt here) the fast exit is
+    registered."""
+    plain = "import sys, vibroscope.viewers.drawing_preload; sys.exit(3)"
+    served = ("import os, sys, multiprocessing\n"
+              "path = os.path.join(os.path.dirname(multiprocessing.__file__), 'forkserver.py')\n"
+              "exec(compile('def main():\\n    import vibroscope.viewers.drawing_preload', path, 'exec'))\n"
+              "main(); sys.exit(3)\n")
+    rc = [subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=120).returncode
+          for code in (plain, served)]
+    assert rc == [3, 0]
+
+
 def test_server_workers_draw_the_figures_drawn_here(tmp_path, server):
     psd, csd, frf, sv = syn.spectra()
     kw = dict(signals=syn.signals(), psd=psd, frf=frf, modal=syn.modal(), sv=sv, coords=syn.coords(),
