@@ -109,12 +109,7 @@ def select_further_effects(run: Run, *, workers) -> None:
                 sh = shares_of(run, ch)
         return ch, sh
 
-    def polished(ch):
-        """The combination `ch` (cumulative) with its last candidate polished jointly, every
-        effect stated with its polished parameters."""
-        ps: list = []
-        last = polish_candidate(ch[-1], [(c[3], c[4]) for c in ch], chain_out=ps, **polish)
-        return restated(ch[:-1], ps[:-1]) + [last]
+    polished = partial(polished_chain, run)  # a combination polished jointly
 
     def or_from_delay(trial, trial_shares, alone_ok=False, significant=False):
         """`trial`, or the selection from the delay fitted alone when that explains more: tried
@@ -405,6 +400,15 @@ def held_clearance_trial(run: Run, workers, polish, holders: tuple = CLEARANCE_H
     if len(trial) < 2 or any(c[3].vanishes(c[4]) is not None for c in trial):
         return None
     return trial
+
+
+def polished_chain(run: Run, ch: list) -> list:
+    """The combination `ch` (cumulative) with its last candidate polished jointly
+    (:func:`~vibroscope.gap._ranking.polish_candidate` with ``run.polish``), every effect stated
+    with its polished parameters (:func:`restated`)."""
+    ps: list = []
+    last = polish_candidate(ch[-1], [(c[3], c[4]) for c in ch], chain_out=ps, **run.polish)
+    return restated(ch[:-1], ps[:-1]) + [last]
 
 
 def restated(chosen: list, ps: list) -> list:
@@ -755,9 +759,7 @@ def refit_without(run: Run, chosen: list, without: list, cur_c, n_par: int) -> l
         ch = cumulative(run, chain, base_wo, [], 0, (m_wo, g_wo, yh_wo, prefix_gap(run, m_wo)))
     except (ValueError, TypeError):
         return None
-    ps: list = []
-    last = polish_candidate(ch[-1], [(c[3], c[4]) for c in ch], chain_out=ps, **run.polish)
-    ch = restated(ch[:-1], ps[:-1]) + [last]
+    ch = polished_chain(run, ch)
     if not key(ch[-1][0].gap_after, n_par) < ADD_FACTOR * k_cur or any(c[3].vanishes(c[4]) is not None for c in ch):
         return None
     return ch
