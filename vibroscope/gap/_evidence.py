@@ -404,7 +404,13 @@ def gather_evidence(run: Run) -> None:
                                           input_unit=in_unit)
             except (ValueError, np.linalg.LinAlgError):  # the report keeps the measured evidence
                 pass
-    modal_level = modal_level_test(level_ev, level_ev_ref)
+    f_model = None  # the refit's own resonances, where its evidence resolves none (open loop)
+    if not closed:
+        try:
+            f_model = np.asarray(refit.modes().natural_frequencies, float)
+        except (AttributeError, ValueError, np.linalg.LinAlgError):
+            f_model = None
+    modal_level = modal_level_test(level_ev, level_ev_ref, f_model)
     if modal_level is not None:
         level["modal"] = modal_level
         if not level["flagged"] or level["trend"] == "none":
