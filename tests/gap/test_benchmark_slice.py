@@ -518,6 +518,9 @@ def test_a_delay_alone_is_not_named_with_a_nonlinear_effect_that_adds_nothing_to
 #: a regenerated case's truth parameter against the value recorded when it was first read: the
 #: generator's LSODA calibration of the strength agrees to about 2e-4 between machines
 TRUTH_REL = 2e-3
+#: the same for a chaotic true model, whose calibration follows the machine's rounding
+#: (test_a_chaotic_clearance_model_is_not_searched_for_further_effects)
+CHAOTIC_TRUTH_REL = 0.05
 
 
 def _named_alone_at_its_link(effect: str, seed: int, integrator: str, param: str, value: float,
@@ -558,7 +561,11 @@ def test_a_chaotic_clearance_model_is_not_searched_for_further_effects():
     case = gen.make_case("backlash", gen.case_rng(5301, "backlash", 1), 60.0, integrator="lsoda",
                          offset_max=gen.OFFSET_MAX)
     t = case.truth
-    assert t["parameters"]["gap_m"] == pytest.approx(1.1304748e-4, rel=TRUTH_REL)
+    # the model is chaotic, so its LSODA calibration of the clearance is not reproducible to
+    # TRUTH_REL across machines: 1.1305e-4 m where it was recorded, 1.1581e-4 m (+2.4 %) on an AMD
+    # EPYC with scipy 1.17.1 and numpy 2.4.6 (session 89). The strengths drawn for other backlash
+    # cases span 0.01-5 times the rms deflection, so 5 % still pins this case
+    assert t["parameters"]["gap_m"] == pytest.approx(1.1304748e-4, rel=CHAOTIC_TRUTH_REL)
     rep = diagnose(case.nominal, case.signals(0))
     assert rep.verdicts == ("backlash",), rep.summary()
     best = rep.candidates[0]
