@@ -513,6 +513,7 @@ def gap_example(stem: str):
 
 
 @pytest.mark.slow  # a modal identification and one full diagnosis (about 3-5 min on the 2-core box)
+@pytest.mark.extended  # session 89: 326 s in the rehearsal of 48515c4 (CI's time limit); the F-16 test below takes the same path
 def test_a_joint_behind_a_modal_test_is_named_between_its_sensors(tmp_path):
     """The path of a ground vibration test: LSCF + LSFD identify the modes at a low level,
     ``modal --export-model`` writes them, ``gap`` takes that model and three logs at higher
