@@ -882,6 +882,9 @@ def _check_incoherent(run: Run) -> None:
         return bool(np.isfinite(cg.coherent) and cg.coherent ** 2 <= (NONE_FACTOR * run.floor) ** 2 + 3 * cg.spread
                     and cg.coherent <= PM_UNEXPLAINED * run.floor)
 
+    def strictly_within(cg):
+        return bool(np.isfinite(cg.coherent) and cg.coherent <= NONE_FACTOR * run.floor)
+
     info = {"method": ("each model's residual split into its part coherent with the logged input(s) (multiple "
                        "coherence, its estimate's bias removed) and the rest (noise of any colour, an unlogged "
                        "disturbance, a nonlinearity's distortion); the nominal's on every non-transient sample, "
@@ -929,7 +932,16 @@ def _check_incoherent(run: Run) -> None:
         # test stops `none` first, so that the report says so (seed 12 case 007: its coherent part
         # beyond PM_UNEXPLAINED x the floor now stops `none` before this test is reached)
         nom_repeats = repeats(cg_nom, "none")
-        if (best := _best_beyond_refit(run, within, within(cg_ref), steady)) is not None:
+        # a refit whose coherent part passes only on the scatter allowance is not known to explain
+        # all a linear model can: a candidate whose own coherent part is within NONE_FACTOR x the
+        # floor without that allowance explains more (seed 7353 case 002, an extra mode of 16 Hz
+        # under a disturbance: the refit's coherent part 0.029 over 4 averages, the extra mode's
+        # 0.012, floor 0.016)
+        ref_strict = strictly_within(cg_ref)
+        cand_thr = within if ref_strict or not within(cg_ref) else strictly_within
+        info["refit_within"], info["refit_strictly_within"] = within(cg_ref), ref_strict
+        ref_flag = True if ref_strict else (None if within(cg_ref) else False)
+        if (best := _best_beyond_refit(run, cand_thr, ref_flag, steady)) is not None:
             b, cg_b, t_b = best
             run.ordered = [b] + [c for c in run.ordered if c is not b]
             run.chosen, run.shares, run.verdict = [b], [1.0], b[0].effect
@@ -981,7 +993,7 @@ def _check_incoherent(run: Run) -> None:
 PERIOD_NONE_FACTOR = 2.0
 
 
-def _best_beyond_refit(run: Run, cg_thr, refit_within: bool, steady=None):
+def _best_beyond_refit(run: Run, cg_thr, refit_within: bool | None, steady=None):
     """For :func:`_check_incoherent`: the admissible candidate (an effect of the vocabulary other
     than the linear refit, not vanished) of the lowest held-out gap below the refit's and the
     nominal's whose held-out residual's coherent part passes `cg_thr`, whose held-out gain over
@@ -990,7 +1002,14 @@ def _best_beyond_refit(run: Run, cg_thr, refit_within: bool, steady=None):
     explains more than the refit: the refit's own coherent part does not pass (`refit_within`
     False: it lacks a linear term the candidate has, an extra mode) or the candidate's held-out
     gain over it is significant too (a nonlinear term, or a constant force: an input offset's
-    response is not coherent with a zero-mean input, fresh seed 7105 case 005). With `steady`
+    response is not coherent with a zero-mean input, fresh seed 7105 case 005). `refit_within`
+    None: the refit's coherent part passes only on the scatter allowance of few averages, and
+    `cg_thr` is then the strict bound (NONE_FACTOR x the floor, no allowance); a linear candidate
+    (an extra mode, a delay) passing it explains more than the refit without a t over it, a
+    nonlinear one still needs that t (``benchmarks/gap`` seed 7353 case 002 and seed 7355 case 011,
+    extra modes under an unlogged disturbance with t 3.63 and 3.12 over the refit, were named
+    ``parameter_mismatch``; seed 7353 case 009, a mismatch whose refit passes the same way, would
+    have been named ``backlash`` with a nonlinear candidate let through at t 0.49). With `steady`
     (``steady(outputs, masks, logs) -> bool``, the residual-growth test of :func:`_check_incoherent`
     on the logs `logs` of the held-out outputs),
     a candidate whose residual's share of the measured power grows with the input level is not
@@ -1015,7 +1034,10 @@ def _best_beyond_refit(run: Run, cg_thr, refit_within: bool, steady=None):
         if nested_gain(ys, [run.y_nom[i] for i in logs], yb, masks, run.fs) < NESTED_T:
             continue  # not significantly better than the nominal itself
         t_b = nested_gain(ys, [run.y_ref[i] for i in logs], yb, masks, run.fs)
-        if not refit_within or t_b >= NESTED_T:
+        # a refit within only on the scatter allowance (refit_within None) yields to a linear
+        # candidate strictly within; a nonlinear one must still be significantly better than it
+        lin = EFFECT_TABLE[b[0].effect].kind == "linear"
+        if refit_within is False or (refit_within is None and lin) or t_b >= NESTED_T:
             if steady is not None and not steady(yb, masks, logs):
                 continue
             return b, cg_b, t_b
