@@ -44,7 +44,7 @@ def test_silverbox_names_cubic_stiffness(shared_data):
 
 
 # extended (session 89): 994 s alone on the 2-core box (92 % of it in the Newton-trapezoid kernel of
-# the fitted simulations); with it CI's run of 48515c4 passed 5400 s. `python -m pytest -m extended
+# the fitted simulations); with it CI's run of 48515c4 overran its 5400 s. `python -m pytest -m extended
 # tests/gap/test_real_data.py` runs it
 @pytest.mark.slow
 @pytest.mark.extended

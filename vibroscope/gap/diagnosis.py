@@ -937,11 +937,11 @@ def _check_incoherent(run: Run) -> None:
         # floor without that allowance explains more (seed 7353 case 002, an extra mode of 16 Hz
         # under a disturbance: the refit's coherent part 0.029 over 4 averages, the extra mode's
         # 0.012, floor 0.016)
-        ref_strict = strictly_within(cg_ref)
-        cand_thr = within if ref_strict or not within(cg_ref) else strictly_within
-        info["refit_within"], info["refit_strictly_within"] = within(cg_ref), ref_strict
-        ref_flag = True if ref_strict else (None if within(cg_ref) else False)
-        if (best := _best_beyond_refit(run, cand_thr, ref_flag, steady)) is not None:
+        ref_within, ref_strict = within(cg_ref), strictly_within(cg_ref)
+        info["refit_within"], info["refit_strictly_within"] = ref_within, ref_strict
+        on_allowance = ref_within and not ref_strict
+        if (best := _best_beyond_refit(run, strictly_within if on_allowance else within, ref_within, steady,
+                                       linear_yields=on_allowance)) is not None:
             b, cg_b, t_b = best
             run.ordered = [b] + [c for c in run.ordered if c is not b]
             run.chosen, run.shares, run.verdict = [b], [1.0], b[0].effect
@@ -993,7 +993,7 @@ def _check_incoherent(run: Run) -> None:
 PERIOD_NONE_FACTOR = 2.0
 
 
-def _best_beyond_refit(run: Run, cg_thr, refit_within: bool | None, steady=None):
+def _best_beyond_refit(run: Run, cg_thr, refit_within: bool, steady=None, *, linear_yields: bool = False):
     """For :func:`_check_incoherent`: the admissible candidate (an effect of the vocabulary other
     than the linear refit, not vanished) of the lowest held-out gap below the refit's and the
     nominal's whose held-out residual's coherent part passes `cg_thr`, whose held-out gain over
@@ -1002,8 +1002,8 @@ def _best_beyond_refit(run: Run, cg_thr, refit_within: bool | None, steady=None)
     explains more than the refit: the refit's own coherent part does not pass (`refit_within`
     False: it lacks a linear term the candidate has, an extra mode) or the candidate's held-out
     gain over it is significant too (a nonlinear term, or a constant force: an input offset's
-    response is not coherent with a zero-mean input, fresh seed 7105 case 005). `refit_within`
-    None: the refit's coherent part passes only on the scatter allowance of few averages, and
+    response is not coherent with a zero-mean input, fresh seed 7105 case 005). `linear_yields`
+    True: the refit's coherent part passes only on the scatter allowance of few averages, and
     `cg_thr` is then the strict bound (NONE_FACTOR x the floor, no allowance); a linear candidate
     (an extra mode, a delay) passing it explains more than the refit without a t over it, a
     nonlinear one still needs that t (``benchmarks/gap`` seed 7353 case 002 and seed 7355 case 011,
@@ -1034,10 +1034,10 @@ def _best_beyond_refit(run: Run, cg_thr, refit_within: bool | None, steady=None)
         if nested_gain(ys, [run.y_nom[i] for i in logs], yb, masks, run.fs) < NESTED_T:
             continue  # not significantly better than the nominal itself
         t_b = nested_gain(ys, [run.y_ref[i] for i in logs], yb, masks, run.fs)
-        # a refit within only on the scatter allowance (refit_within None) yields to a linear
+        # a refit within only on the scatter allowance (linear_yields) yields to a linear
         # candidate strictly within; a nonlinear one must still be significantly better than it
         lin = EFFECT_TABLE[b[0].effect].kind == "linear"
-        if refit_within is False or (refit_within is None and lin) or t_b >= NESTED_T:
+        if not refit_within or (linear_yields and lin) or t_b >= NESTED_T:
             if steady is not None and not steady(yb, masks, logs):
                 continue
             return b, cg_b, t_b
