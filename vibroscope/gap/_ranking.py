@@ -200,14 +200,12 @@ def admissible(run: Run, cache: dict, c) -> bool:
 def admissible_best(run: Run, cands: list, cache: dict) -> int | None:
     """The index of the first admissible candidate (:func:`admissible`); without level evidence
     a nonlinear effect must beat the best admissible linear explanation by :data:`NL_MARGIN`,
-    else that one is the best - unless that linear explanation leaves more than
-    :data:`~vibroscope.gap._run.STAND_IN_FACTOR` times the ranking floor, the nonlinear effect
-    nears the floor and its held-out gain over it is significant (:func:`margin_beaten`): the
-    margin judges a gain by its size against the signal, the test by its size against the
-    noise [Schmeiser 1982] (the blind suite's harder variant, seed 18
-    case 004: a Stribeck friction of 0.080 N, its Coulomb candidate 0.855 of the refit's penalised
-    excess, the refit at 2x the floor, named ``parameter_mismatch``). None when no candidate is
-    admissible."""
+    else that one is the best, unless the nonlinear effect's held-out gain over it is significant
+    (:func:`margin_beaten`): the margin judges a gain by its size against the signal, that test
+    by its size against the noise [Schmeiser 1982] (the blind suite's harder variant, seed 18
+    case 004: a Stribeck friction of 0.080 N, its Coulomb candidate 0.855 of the refit's
+    penalised excess, the refit at 2x the floor, named ``parameter_mismatch``). None when no
+    candidate is admissible."""
     key = run.key
     best_i = next((i for i, c in enumerate(cands) if admissible(run, cache, c)), None)
     if best_i is not None and not run.level["flagged"] and EFFECT_TABLE[cands[best_i][0].effect].kind == "nonlinear":
@@ -230,16 +228,13 @@ def margin_beaten(run: Run, nl, lin) -> bool:
     disturbance's residual is left to :func:`~vibroscope.gap.diagnosis._check_incoherent`), and
     the held-out gain of `nl` over `lin` has a t above :data:`NESTED_T` (recorded in
     ``run.nested_t``)."""
-    logs = run.val_logs
-    if not (set(logs) <= set(nl[2]) and set(logs) <= set(lin[2])):
-        return False
     fr = run.floor_rank
-    if not (fr is not None and np.isfinite(fr) and lin[0].gap_after > STAND_IN_FACTOR * fr
+    if not (holds_outputs(nl, run.val_logs) and holds_outputs(lin, run.val_logs)
+            and fr is not None and np.isfinite(fr) and lin[0].gap_after > STAND_IN_FACTOR * fr
             and nl[0].gap_after <= PM_UNEXPLAINED * run.floor):
         return False
-    t = held_out_gain(run.ys, lin[2], nl[2], run.split, logs, run.fs)
-    run.nested_t[f"{nl[0].effect}@{where_key(nl[0].where)} over {lin[0].effect}@{where_key(lin[0].where)}"
-                 f" (within the nonlinear margin)"] = float(t)
+    t = held_out_t(run, lin[2], nl[2])
+    run.nested_t[nested_key(nl, lin, " (within the nonlinear margin)")] = float(t)
     return bool(t > NESTED_T)
 
 
@@ -415,9 +410,14 @@ def nested_holds(run: Run, cands: list, best_i: int, j: int) -> bool:
     return applied and t > NESTED_T
 
 
+def holds_outputs(c, logs) -> bool:
+    """Whether candidate `c` holds simulated outputs of every log of `logs`."""
+    return set(logs) <= set(c[2])
+
+
 def nested_pair(rich, simple, logs) -> bool:
     """Whether candidate `rich` nests `simple` (:func:`nests`) and both hold outputs of `logs`."""
-    return nests(rich, simple) and set(logs) <= set(rich[2]) and set(logs) <= set(simple[2])
+    return nests(rich, simple) and holds_outputs(rich, logs) and holds_outputs(simple, logs)
 
 
 def floor_factor(simple) -> float:
