@@ -153,6 +153,30 @@ def test_sweeps_at_several_levels_fit_and_hold_out_every_band():
     assert h2.tolist() == h[[2, 0, 1]].tolist()
 
 
+def test_a_periodic_chirp_is_screened_on_whole_periods_not_the_whole_record():
+    """A log chirp 4-400 Hz repeated every 5 s (the harder blind seed 19's case 016: three logs of
+    80 s at three levels) is no sweep: its spectrum is the same in every period. The screening
+    prefix is the shortest whole number of 2 s blocks holding a period (6 s), where it was the
+    whole fitting part (the 4 s prefix missed part of the band, and 2 s blocks without overlap
+    weighed the instants at their edges by nearly nothing), and every screening fit integrated
+    all of it. The same chirp swept once over the record stays a sweep, screened whole."""
+    fs, period = 1000.0, 5.0
+    t = np.arange(int(period * fs)) / fs
+    one = signal.chirp(t, 4.0, period, 400.0, method="logarithmic")
+    reps = int(80 / period)
+    us = [a * np.tile(one, reps)[None] for a in (1.0, 3.2, 6.3)]
+    n = us[0].shape[1]
+    sp = make_split(us, fs)
+    assert "different input levels" in sp.description, sp.description
+    assert sp.screen_prefix == [6000] * 3  # three 2 s blocks: the first that hold a whole period
+    assert sp.fit_prefix == [int(round(n * 2 / 3))] * 3  # the fits themselves still take all of it
+    single = make_split([us[0]], fs)
+    assert single.description.startswith("time split") and single.screen_prefix == [8000]
+    swept = signal.chirp(np.arange(n) / fs, 4.0, n / fs, 400.0, method="logarithmic")[None]
+    once = make_split([swept], fs)
+    assert "sweep" in once.description and once.screen_prefix == [n]
+
+
 def test_noise_floor_recovers_the_added_noise(u20):
     for noise in (0.01, 0.03):
         sig = log_of(nominal(), u20, noise=noise)
