@@ -633,19 +633,29 @@ def plateau_brackets(xs: list, x0: float, g0: float, gaps: dict) -> list | None:
 
 
 def shared_locations(refined: list, kept: list) -> list[int]:
-    """Indices into `kept` (probed, not refined) of the items to refine because another form of
-    their class (the Jenkins and the Iwan joint) refined best at their location; `refined`
-    holds the refined items. A class of one form gives none."""
-    best: dict[tuple, tuple] = {}  # (effect, form) -> its best refined item
+    """Indices into `kept` (probed, not refined) of the items to refine because another form or
+    variant of their class (the Jenkins and the Iwan joint; a clearance's two contact laws:
+    :attr:`~vibroscope.gap.effects.EffectSpec.variant`) refined best at their location;
+    `refined` holds the refined items. A class of one form and one variant gives none.
+
+    The variants share a class and so its :data:`N_LOCATIONS` refinements: on fresh seed 7357's
+    case 003 (a clearance of 5.8e-5 m at m2-ground, 0.34 of the rms deflection) the matched
+    contact took all of them, and the clearance at the base's own stiffness stayed at its best
+    probed start on the refit (4.3e-6 m, 0.49 held out) although from the nominal its valley
+    lies at the truth."""
+    def form(it):
+        return it[0].where.get("form"), getattr(it[0], "variant", None)
+
+    best: dict[tuple, tuple] = {}  # (effect, form, variant) -> its best refined item
     for it in refined:
-        key = (it[0].effect, it[0].where.get("form"))
+        key = (it[0].effect, *form(it))
         if key not in best or it[2] < best[key][2]:
             best[key] = it
     # a kept item is never refined already: its form refined only its N_LOCATIONS best
-    at = {(e, f, where_key(b[0].where)) for (e, f), b in best.items()}
+    at = {(e, f, v, where_key(b[0].where)) for (e, f, v), b in best.items()}
     return [i for i, it in enumerate(kept)
-            if any(e == it[0].effect and f != it[0].where.get("form") and loc == where_key(it[0].where)
-                   for e, f, loc in at)]
+            if any(e == it[0].effect and (f, v) != form(it) and loc == where_key(it[0].where)
+                   for e, f, v, loc in at)]
 
 
 def refine_on_either_base(run: Run, other_base: dict, item):

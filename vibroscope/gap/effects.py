@@ -465,6 +465,11 @@ class EffectSpec:
         (Hz), the grid of parameter values on which the FRF cost is profiled with the linear
         parameters held at their base; the best becomes a further start of the joint fit
         (:func:`~vibroscope.gap.fit.fit_linear_frf`). Default None.
+    variant : str, optional
+        The fixed law that tells this spec from the others of its effect at its location (a
+        clearance's contact stiffness matched to its base, ``'matched'``, beside the base's own,
+        None). The screening refines a variant also where another variant or form of its
+        class refined best (:func:`~vibroscope.gap._candidates.shared_locations`). Default None.
     meta : dict
         Free-form extra information; default empty (vibroscope itself neither sets nor
         reads it).
@@ -491,6 +496,7 @@ class EffectSpec:
     shape_free: bool = False
     peak_prefix: bool = False
     profile: Callable | None = None
+    variant: str | None = None
     meta: dict = field(default_factory=dict)
 
     def relieved(self, model: LumpedModel, p) -> LumpedModel | None:
@@ -1029,6 +1035,7 @@ def _backlash(model, scales):
                     {"k_contact_over_k_base": contact(math.exp(p[0]))} if matched else {}),
                 vanish=vanish, narrow=(0,),
                 character=(lambda p: {"contact": "matched"}) if matched else None,
+                variant="matched" if matched else None,
                 law=(law, lambda p, contact=contact: np.array([p[0], math.log(contact(math.exp(p[0])))])),
             ))
     return specs
