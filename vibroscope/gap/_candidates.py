@@ -644,7 +644,7 @@ def shared_locations(refined: list, kept: list) -> list[int]:
     probed start on the refit (4.3e-6 m, 0.49 held out) although from the nominal its valley
     lies at the truth."""
     def form(it):
-        return it[0].where.get("form"), getattr(it[0], "variant", None)
+        return it[0].where.get("form"), it[0].variant
 
     best: dict[tuple, tuple] = {}  # (effect, form, variant) -> its best refined item
     for it in refined:

@@ -377,13 +377,13 @@ def _band_prefix(u: np.ndarray, fs: float, start: int, stop: int) -> int:
     k = max(1, start // b)
     if k >= nb:
         return min(stop, start)
-    _, whole = signal.welch(u[:nb * b], fs, window="hann", nperseg=b, noverlap=b // 2, detrend="constant")
-    k_first = k
-    while k < nb and (k == k_first or 2 * k * b <= stop):
-        _, have = signal.welch(u[:k * b], fs, window="hann", nperseg=b, noverlap=b // 2, detrend="constant")
-        if uncovered_share(have, whole) <= BAND_UNCOVERED:
-            return min(stop, max(start, k * b))
-        k += 1
+    # the Welch average of the first k blocks is the mean of the first 2k - 1 half-overlapping
+    # segments' periodograms: one spectrogram, summed cumulatively (the share is scale-free)
+    _, _, sxx = signal.spectrogram(u[:nb * b], fs, window="hann", nperseg=b, noverlap=b // 2, detrend="constant")
+    csum = np.cumsum(sxx, axis=1)
+    for kk in range(k, min(nb, max(k, stop // (2 * b)) + 1)):
+        if uncovered_share(csum[:, 2 * kk - 2], csum[:, -1]) <= BAND_UNCOVERED:
+            return min(stop, max(start, kk * b))
     return stop
 
 
