@@ -69,7 +69,8 @@ def test_each_joint_form_is_refined_where_the_other_form_refined_best(monkeypatc
 
     def spec(effect, form, link):
         where = {"between": [link, "ground"]} | ({"form": form} if form else {})
-        return SimpleNamespace(effect=effect, where=where, lifts_from=None, form=form, link=link)
+        return SimpleNamespace(effect=effect, where=where, lifts_from=None, form=form, link=link,
+                               variant=None)
 
     specs = ([spec("joint_friction", f, x) for f in ("jenkins", "iwan") for x in links]
              + [spec("cubic_stiffness", None, x) for x in links])
