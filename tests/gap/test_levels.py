@@ -374,6 +374,36 @@ def test_a_variation_that_grows_with_the_level_is_the_responses_own_not_a_floor(
     assert f == 0.005 and "period" not in why
 
 
+def test_a_log_that_stops_repeating_at_a_higher_level_is_left_out_and_no_other():
+    """Three levels of a repeated multisine with 2 % noise: every log repeats. The highest
+    level's outputs 10 % non-repeating besides it (a chaotic or subharmonic response) is that log
+    alone; the lowest level's (an unlogged disturbance there) is none (it is not the level that
+    makes it); a random input has no period, so none."""
+    from vibroscope.gap.levels import APERIODIC_GROWTH, aperiodic_logs
+
+    us, ys, _ = _periodic_logs(0.0, 6, 0.02, 0.0, levels=(10.0, 20.0, 40.0))
+    rng = np.random.default_rng(5)
+    masks = [np.arange(y.shape[1]) >= 400 for y in ys]  # the first period: the start from rest
+    assert aperiodic_logs(ys, us, masks, FS) is None
+    top = [ys[0], ys[1], ys[2] + 0.1 * np.std(ys[2]) * rng.standard_normal(ys[2].shape)]
+    a = aperiodic_logs(top, us, masks, FS)
+    assert a is not None and a.logs == (2,) and a.period_samples == (400, 400, 400)
+    # 2 % noise on each sample of two periods: their difference is 2 % of the signal; 10 % more
+    # gives sqrt(0.02^2 + 0.1^2) on the top level
+    assert a.variation[0] == pytest.approx(0.02, rel=0.15) and a.variation[1] == pytest.approx(0.02, rel=0.15)
+    assert a.variation[2] == pytest.approx(np.hypot(0.02, 0.1), rel=0.15)
+    assert a.variation[2] > APERIODIC_GROWTH * max(a.variation[:2])
+    assert a.levels[2] == pytest.approx(4 * a.levels[0], rel=1e-6)
+    assert "log 3" in a.describe()
+    low = [ys[0] + 0.1 * np.std(ys[0]) * rng.standard_normal(ys[0].shape), ys[1], ys[2]]
+    assert aperiodic_logs(low, us, masks, FS) is None
+    # logs at one level: the level does not make it
+    one = [us[0], us[1] * 0.75, us[2] * 0.45]  # RMS 10, 15, 18
+    assert aperiodic_logs(top, one, masks, FS) is None
+    noise_in = [rng.standard_normal(u.shape) for u in us]
+    assert aperiodic_logs(top, noise_in, masks, FS) is None
+
+
 def test_period_floor_needs_alike_periods():
     """A random input has no period; a level step every period leaves no run of alike periods; a
     masked period splits a run."""

@@ -308,6 +308,9 @@ class Run:
     #: (:func:`~vibroscope.gap._candidates.choose_output_sampling`), what was chosen and why
     output_sampling: str = "auto"
     sampling_choice: dict | None = None
+    #: the logs left out, whose response stops repeating with a periodic input as the level rises
+    #: (:func:`~vibroscope.gap.levels.aperiodic_logs`; indices into the logs given)
+    aperiodic: object = None
     #: why each log's start is left out (diagnosis._skip_samples), one line per log
     skip_reasons: list | None = None
     #: the mean removed from each acceleration output of each log (diagnosis._remove_acceleration_means):

@@ -141,7 +141,7 @@ from vibroscope.gap._selection import select_further_effects
 from vibroscope.gap.closed_loop import CLOSED_LOOP_EXCLUDED, is_closed_loop, log_channels
 from vibroscope.gap.effects import EFFECT_TABLE, LinearParams
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
-from vibroscope.gap.levels import frf_segment_length, period_floor, steady_state_start
+from vibroscope.gap.levels import aperiodic_logs, frf_segment_length, period_floor, steady_state_start
 from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, coherent_power, input_levels, locate_bands, make_split, masked_csd,
                                     nested_gain, noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
@@ -368,6 +368,10 @@ def diagnose(
         with ``read_mcap(path, channels=model.input_channels() + model.output_channels())``).
         With several logs at one input level the last is held out for validation; logs at
         different levels are each split in time (:func:`~vibroscope.gap.measure.make_split`).
+        A log of a periodic input whose response stops repeating with it at a higher level
+        than the others (chaos, a subharmonic: :func:`~vibroscope.gap.levels.aperiodic_logs`)
+        is left out; ``meta["aperiodic_logs"]`` and the report's validation line say which and
+        why.
     effects : sequence of str, optional
         Restrict the candidates (default: the whole vocabulary).
     transient_s : float, optional
@@ -521,6 +525,14 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
     in_ch0 = log_channels(model)[0][0]
     in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
     skip_why = [_skip_samples(model, fs, u, y, transient_s) for u, y in zip(us, ys)]
+    # a log at a higher level whose response no longer repeats with its periodic input (chaos, a
+    # subharmonic) is a trajectory no model reproduces sample by sample: left out
+    aper = aperiodic_logs(ys, us, [np.arange(u.shape[1]) >= k for u, (k, _, _) in zip(us, skip_why)], fs)
+    if aper is not None:
+        keep = [i for i in range(len(sigs)) if i not in aper.logs]
+        sigs, pairs, skip_why = [sigs[i] for i in keep], [pairs[i] for i in keep], [skip_why[i] for i in keep]
+        us = [p[0] for p in pairs]
+        ys, accel_means = _remove_acceleration_means(model, out_ch, [p[1] for p in pairs])
     skips = [k for k, _, _ in skip_why]
     split = make_split(us, fs, skip=skips, holdout=holdout)
     sims = [LogSimulator(u, fs, period=k, lead_periods=lead) for u, (k, _, lead) in zip(us, skip_why)]
@@ -561,7 +573,7 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
     effect_set -= set(excluded)
     return Run(t_start=t_start, timings=timings, model=model, sigs=sigs, fs=fs, us=us, ys=ys, out_ch=out_ch,
                 closed=closed, units=units, in_unit=in_unit, skips=skips, skip_reasons=[w for _, w, _ in skip_why], split=split,
-                sims=sims, nps=nps,
+                sims=sims, nps=nps, aperiodic=aper,
                 nps_reason=nps_reason, window=window, effect_set=effect_set, excluded=excluded,
                 accel_means=accel_means)
 
@@ -1117,7 +1129,9 @@ def _build_report(run: Run) -> GapReport:
     shrink = 1.0 - gap_after / gap_before if gap_before > 0 else 0.0
     return GapReport(
         metric="nrmse",
-        validation=split.description,
+        validation=split.description + ("" if run.aperiodic is None else
+                                        f"; {len(run.aperiodic.logs)} of {len(sigs) + len(run.aperiodic.logs)} logs "
+                                        f"left out: {run.aperiodic.describe()}"),
         noise_floor=floor,
         noise_floor_method=nf.method,
         gap_before=gap_before,
@@ -1139,6 +1153,7 @@ def _build_report(run: Run) -> GapReport:
         timings=timings,
         level_evidence=level_ev,
         meta={"fs_hz": fs, "input_unit": in_unit, "nperseg": nps, "nperseg_reason": nps_reason, "output_sampling": run.sampling_choice, "window": window, "extra_mode_starts_hz": scales.get("f_extra", []), "n_logs": len(sigs),
+              "aperiodic_logs": None if run.aperiodic is None else run.aperiodic.to_dict() | {"why": run.aperiodic.describe()},
               "transient_samples": skips, "transient_reasons": run.skip_reasons,
               "acceleration_means_removed": {"method": "each log's mean of each acceleration output, removed "
                                              "before any comparison (a sensor bias or gravity: a model's "

@@ -32,11 +32,11 @@ import scipy.fft
 import scipy.optimize
 import scipy.signal
 
-from vibroscope.gap.measure import UNEXCITED, excited_band, input_levels
+from vibroscope.gap.measure import LOG_LEVEL_RATIO, UNEXCITED, excited_band, input_levels
 from vibroscope.signals import true_runs
 from vibroscope.spectral import csd_matrix
 
-__all__ = ["detect_period", "steady_state_start", "period_floor", "PeriodFloor", "frf_segment_length", "level_blas", "fit_mode", "window_kernel", "LevelBLA", "ModeTrend",
+__all__ = ["detect_period", "steady_state_start", "period_floor", "PeriodFloor", "aperiodic_logs", "AperiodicLogs", "frf_segment_length", "level_blas", "fit_mode", "window_kernel", "LevelBLA", "ModeTrend",
            "LevelEvidence"]
 
 #: relative change beyond which a level dependence counts (with |z| > :data:`Z_SIGNIFICANT`)
@@ -435,6 +435,145 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
     return PeriodFloor(nrmse=float(np.sqrt(np.mean(per**2))), per_channel=tuple(float(x) for x in per),
                        n_periods=int(n_periods), period_samples=tuple(periods), logs=tuple(logs),
                        run_levels=tuple(run_levels), run_nrmse=tuple(run_nrmse), grows_with_level=grows)
+
+
+#: a log at a higher input level whose response changes from period to period more than this many
+#: times (relative) the quietest log's, whose input repeats, no longer repeats with its input
+APERIODIC_GROWTH = 3.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class AperiodicLogs:
+    """Logs of a periodic input whose response stops repeating with it as the level rises.
+
+    Attributes
+    ----------
+    logs : tuple of int
+        The aperiodic logs (indices into the logs given), left out of the diagnosis
+        (:func:`vibroscope.gap.diagnose`).
+    variation : tuple of float
+        Each log's period-to-period variation, ``sqrt(mean_c (median over pairs of
+        ||y_{j+1} - y_j||^2 / (2 ||y_j||^2)))`` over the output channels c and the pairs of
+        consecutive whole periods whose inputs repeat (nan: no such pair).
+    levels : tuple of float
+        Each log's input RMS over those periods (input unit, N; nan: no such pair).
+    period_samples : tuple of int
+        Each log's input period, samples (0: not periodic).
+    """
+
+    logs: tuple
+    variation: tuple
+    levels: tuple
+    period_samples: tuple
+
+    def to_dict(self) -> dict:
+        """The fields as a dict.
+
+        Returns
+        -------
+        dict
+            JSON-ready: ``logs``, ``variation``, ``levels``, ``period_samples`` (nan as None).
+        """
+        def fin(v):
+            return [float(x) if np.isfinite(x) else None for x in v]
+
+        return {"logs": list(self.logs), "variation": fin(self.variation), "levels": fin(self.levels),
+                "period_samples": list(self.period_samples)}
+
+    def describe(self) -> str:
+        """One line: which logs and why.
+
+        Returns
+        -------
+        str
+        """
+        quiet = int(np.nanargmin(np.where(np.isin(np.arange(len(self.variation)), self.logs), np.nan,
+                                          self.variation)))
+        each = ", ".join(f"log {i + 1} (input RMS {self.levels[i]:.3g}, {self.variation[i]:.3g})" for i in self.logs)
+        return (f"the response stops repeating with the periodic input as the level rises: {each} against "
+                f"{self.variation[quiet]:.3g} at log {quiet + 1} (input RMS {self.levels[quiet]:.3g}), "
+                f"period-to-period nrmse; chaotic or subharmonic, which no model predicts sample by sample: "
+                f"left out of the diagnosis")
+
+
+def aperiodic_logs(ys: list, us: list, masks: list, fs: float) -> AperiodicLogs | None:
+    """The logs whose response no longer repeats with a periodic input at a higher level.
+
+    A periodic input drives a time-invariant system, linear or not, to a periodic steady state
+    unless the system is chaotic or responds subharmonically -- which a strong nonlinearity does
+    beyond some level (the Duffing oscillator's route to chaos: Kovacic & Brennan [1]_, ch. 6;
+    Worden & Tomlinson [2]_, ch. 3). Each log is cut into whole periods of its input
+    (:func:`detect_period`) from its first sample; each pair of consecutive periods wholly inside
+    the log's mask whose inputs agree within :data:`PERIOD_INPUT_TOL` (a fade, a level step or the
+    start is not such a pair) gives each output channel's relative change, and the log's variation
+    is its median over the pairs (Pintelon & Schoukens [3]_, sec. 2.4: the variation of repeated
+    periods). Measurement noise and an unlogged disturbance vary alike at every level, or less
+    (relative) at a higher one; a log varying more than :data:`APERIODIC_GROWTH` times the
+    quietest log, at an input level above :data:`~vibroscope.gap.measure.LOG_LEVEL_RATIO` times
+    every log that does not (logs at one level are not told apart by level), has stopped repeating. Its
+    samples are a trajectory no deterministic model reproduces: the truth itself would leave a
+    gap there (fresh seed 7359's case 003, a hardening cubic spring of share 0.30: at the
+    highest of three levels the truth simulated with 32 and 64 sub-steps differs by nrmse 0.42).
+
+    Parameters
+    ----------
+    ys : list of ndarray, shape (n_outputs, n_samples)
+        Measured outputs per log, in their units.
+    us : list of ndarray, shape (n_inputs, n_samples) or (n_samples,)
+        Logged inputs per log; the first sets the period.
+    masks : list of ndarray of bool, shape (n_samples,)
+        Samples that may be used (not a transient).
+    fs : float
+        Sampling frequency in Hz.
+
+    Returns
+    -------
+    AperiodicLogs or None
+        None when fewer than two logs have a periodic input with a repeating pair of periods,
+        or none is aperiodic.
+
+    References
+    ----------
+    .. [1] I. Kovacic, M. J. Brennan (eds.), *The Duffing Equation: Nonlinear Oscillators and
+       their Behaviour*, Wiley, 2011.
+    .. [2] K. Worden, G. R. Tomlinson, *Nonlinearity in Structural Dynamics*, IOP, 2001.
+    .. [3] R. Pintelon, J. Schoukens, *System Identification: A Frequency Domain Approach*, 2nd ed.,
+       Wiley-IEEE, 2012.
+    """
+    n = len(ys)
+    var, lev, per = np.full(n, np.nan), np.full(n, np.nan), [0] * n
+    for i, (y, u, m) in enumerate(zip(ys, us, masks)):
+        y = np.atleast_2d(np.asarray(y, float))
+        u0 = np.atleast_2d(np.asarray(u, float))[0]
+        T = detect_period(u0, fs)
+        if T is None:
+            continue
+        per[i] = int(T)
+        nb = u0.size // T
+        ub = u0[: nb * T].reshape(nb, T)
+        yb = y[:, : nb * T].reshape(y.shape[0], nb, T)
+        yb = yb - np.nanmean(yb, axis=(1, 2), keepdims=True)
+        ok = np.asarray(m[: nb * T]).reshape(nb, T).all(axis=1) & np.all(np.isfinite(yb), axis=(0, 2))
+        rms = np.sqrt(np.mean(ub**2, axis=1))
+        alike = (np.sqrt(np.mean(np.diff(ub, axis=0) ** 2, axis=1)) <= PERIOD_INPUT_TOL * np.maximum(rms[1:], 1e-300)) \
+            & ok[1:] & ok[:-1]
+        j = np.flatnonzero(alike)
+        if not j.size:
+            continue
+        d2 = np.sum((yb[:, j + 1] - yb[:, j]) ** 2, axis=2) / np.maximum(2 * np.sum(yb[:, j] ** 2, axis=2), 1e-300)
+        var[i] = float(np.sqrt(np.mean(np.median(d2, axis=1))))
+        lev[i] = float(np.sqrt(np.mean(ub[np.r_[j, j + 1]] ** 2)))
+    seen = np.flatnonzero(np.isfinite(var))
+    if seen.size < 2:
+        return None
+    quiet = float(np.min(var[seen]))
+    repeats = [i for i in seen if var[i] <= APERIODIC_GROWTH * quiet]
+    top = max(lev[i] for i in repeats)
+    out = tuple(int(i) for i in seen if var[i] > APERIODIC_GROWTH * quiet and lev[i] > LOG_LEVEL_RATIO * top)
+    if not out:
+        return None
+    return AperiodicLogs(logs=out, variation=tuple(float(v) for v in var), levels=tuple(float(v) for v in lev),
+                         period_samples=tuple(per))
 
 
 def _steady_periods(ub: np.ndarray) -> np.ndarray:
