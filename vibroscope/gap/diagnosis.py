@@ -370,8 +370,8 @@ def diagnose(
         different levels are each split in time (:func:`~vibroscope.gap.measure.make_split`).
         A log of a periodic input whose response stops repeating with it at a higher level
         than the others (chaos, a subharmonic: :func:`~vibroscope.gap.levels.aperiodic_logs`)
-        is left out; ``meta["aperiodic_logs"]`` and the report's validation line say which and
-        why.
+        is left out (with ``holdout='auto'``); ``meta["aperiodic_logs"]`` and the report's
+        validation line say which and why.
     effects : sequence of str, optional
         Restrict the candidates (default: the whole vocabulary).
     transient_s : float, optional
@@ -526,8 +526,10 @@ def _prepare_logs(model, signals, *, effects, transient_s, nperseg, holdout) -> 
     in_unit = (sigs[0].units[list(sigs[0].channels).index(in_ch0)] if sigs[0].units else "") or "N"
     skip_why = [_skip_samples(model, fs, u, y, transient_s) for u, y in zip(us, ys)]
     # a log at a higher level whose response no longer repeats with its periodic input (chaos, a
-    # subharmonic) is a trajectory no model reproduces sample by sample: left out
-    aper = aperiodic_logs(ys, us, [np.arange(u.shape[1]) >= k for u, (k, _, _) in zip(us, skip_why)], fs)
+    # subharmonic) is a trajectory no model reproduces sample by sample: left out (not with
+    # holdout="last": the user's validation log is kept as given)
+    aper = (aperiodic_logs(ys, us, [np.arange(u.shape[1]) >= k for u, (k, _, _) in zip(us, skip_why)], fs)
+            if holdout == "auto" else None)
     if aper is not None:
         keep = [i for i in range(len(sigs)) if i not in aper.logs]
         sigs, pairs, skip_why = [sigs[i] for i in keep], [pairs[i] for i in keep], [skip_why[i] for i in keep]
