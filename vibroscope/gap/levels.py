@@ -338,6 +338,26 @@ class PeriodFloor:
                 "grows_with_level": self.grows_with_level}
 
 
+def _period_blocks(y, u, m, fs: float):
+    """One log cut into whole periods of its input (:func:`detect_period`) from its first sample:
+    ``(T, ub, yb, ok, same)`` with the period `T` (samples), the input's periods ``ub`` (shape
+    ``(nb, T)``), the outputs' ``yb`` (``(n_outputs, nb, T)``), ``ok`` (each period wholly inside
+    the mask `m`, its outputs finite) and ``same`` (shape ``(nb - 1,)``: each period's input
+    within :data:`PERIOD_INPUT_TOL` of its predecessor's, relative RMS); None without a period."""
+    y = np.atleast_2d(np.asarray(y, float))
+    u0 = np.atleast_2d(np.asarray(u, float))[0]
+    T = detect_period(u0, fs)
+    if T is None:
+        return None
+    nb = u0.size // T
+    ub = u0[: nb * T].reshape(nb, T)
+    yb = y[:, : nb * T].reshape(y.shape[0], nb, T)
+    ok = np.asarray(m[: nb * T]).reshape(nb, T).all(axis=1) & np.all(np.isfinite(yb), axis=(0, 2))
+    rms = np.sqrt(np.mean(ub**2, axis=1))
+    same = np.sqrt(np.mean(np.diff(ub, axis=0) ** 2, axis=1)) <= PERIOD_INPUT_TOL * np.maximum(rms[1:], 1e-300)
+    return T, ub, yb, ok, same
+
+
 def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | None:
     """The noise floor measured in the band: the outputs' variation from period to period.
 
@@ -383,21 +403,15 @@ def period_floor(ys: list, us: list, masks: list, fs: float) -> PeriodFloor | No
     n_periods, periods, logs = 0, [], []
     run_levels, run_nrmse = [], []
     for i, (y, u, m) in enumerate(zip(ys, us, masks)):
-        y = np.atleast_2d(np.asarray(y, float))
-        u0 = np.atleast_2d(np.asarray(u, float))[0]
-        T = detect_period(u0, fs)
-        if T is None:
+        blocks = _period_blocks(y, u, m, fs)
+        if blocks is None:
             continue
-        nb = u0.size // T
+        T, ub, yb, ok, same = blocks
+        nb = ub.shape[0]
         if nb < PERIOD_SETTLE + PERIOD_MIN:
             continue
-        ub = u0[: nb * T].reshape(nb, T)
-        yb = y[:, : nb * T].reshape(y.shape[0], nb, T)
-        ok = np.asarray(m[: nb * T]).reshape(nb, T).all(axis=1) & np.all(np.isfinite(yb), axis=(0, 2))
         # runs of alike periods: each period's input against its predecessor's
-        rms = np.sqrt(np.mean(ub**2, axis=1))
-        alike = np.r_[False, np.sqrt(np.mean(np.diff(ub, axis=0) ** 2, axis=1))
-                      <= PERIOD_INPUT_TOL * np.maximum(rms[1:], 1e-300)]
+        alike = np.r_[False, same]
         # a run's first periods settle; a masked period splits a run into consecutive pieces (the
         # system's own response goes on: no settling again)
         settled = np.zeros(nb, bool)
@@ -543,21 +557,13 @@ def aperiodic_logs(ys: list, us: list, masks: list, fs: float) -> AperiodicLogs 
     n = len(ys)
     var, lev, per = np.full(n, np.nan), np.full(n, np.nan), [0] * n
     for i, (y, u, m) in enumerate(zip(ys, us, masks)):
-        y = np.atleast_2d(np.asarray(y, float))
-        u0 = np.atleast_2d(np.asarray(u, float))[0]
-        T = detect_period(u0, fs)
-        if T is None:
+        blocks = _period_blocks(y, u, m, fs)
+        if blocks is None:
             continue
+        T, ub, yb, ok, same = blocks
         per[i] = int(T)
-        nb = u0.size // T
-        ub = u0[: nb * T].reshape(nb, T)
-        yb = y[:, : nb * T].reshape(y.shape[0], nb, T)
         yb = yb - np.nanmean(yb, axis=(1, 2), keepdims=True)
-        ok = np.asarray(m[: nb * T]).reshape(nb, T).all(axis=1) & np.all(np.isfinite(yb), axis=(0, 2))
-        rms = np.sqrt(np.mean(ub**2, axis=1))
-        alike = (np.sqrt(np.mean(np.diff(ub, axis=0) ** 2, axis=1)) <= PERIOD_INPUT_TOL * np.maximum(rms[1:], 1e-300)) \
-            & ok[1:] & ok[:-1]
-        j = np.flatnonzero(alike)
+        j = np.flatnonzero(same & ok[1:] & ok[:-1])
         if not j.size:
             continue
         d2 = np.sum((yb[:, j + 1] - yb[:, j]) ** 2, axis=2) / np.maximum(2 * np.sum(yb[:, j] ** 2, axis=2), 1e-300)
