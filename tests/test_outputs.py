@@ -146,6 +146,23 @@ def test_figures_folder_swapped_whole_or_merged_when_it_holds_other_files(tmp_pa
     assert log.read_bytes() == b"input" and not _temps(tmp_path)
 
 
+def test_ctrl_c_right_after_the_temporary_folder_is_made_leaves_no_temporary(tmp_path, monkeypatch):
+    """The race CI met once under load: SIGINT between ``mkdir`` of the figures temporary and its
+    being listed for removal left ``.NAME.tmp-PID`` behind."""
+    real_mkdir = Path.mkdir
+
+    def mkdir_then_ctrl_c(self, *a, **k):
+        real_mkdir(self, *a, **k)
+        if TEMP_MARK in self.name:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(Path, "mkdir", mkdir_then_ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        with AtomicOutputs() as tx:
+            tx.directory(tmp_path / "figs")
+    assert not _temps(tmp_path) and not (tmp_path / "figs").exists()
+
+
 # ---------------------------------------------------------------- where the outputs go
 
 def test_analyse_writes_in_the_current_directory_named_after_log_and_command(tiny_log, tmp_path, monkeypatch,

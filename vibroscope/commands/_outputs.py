@@ -456,8 +456,8 @@ class AtomicOutputs:
         tmp = final.parent / f".{final.name}{TEMP_MARK}{os.getpid()}"
         if tmp.exists():
             shutil.rmtree(tmp)
+        self._dirs.append((tmp, final))  # listed before it exists: a Ctrl-C right after mkdir still removes it
         tmp.mkdir()
-        self._dirs.append((tmp, final))
         return tmp
 
     def final(self, temp_path: str | os.PathLike) -> Path:
