@@ -385,7 +385,14 @@ def held_out_gain(ys, simple: dict, rich: dict, split, logs, fs: float) -> float
     rule of :mod:`~vibroscope.gap.diagnosis` forms its own over every log)."""
     logs = list(logs)
     return nested_gain([ys[k] for k in logs], [simple[k] for k in logs], [rich[k] for k in logs],
-                       [split.validation[k] for k in logs], fs)
+                       [split.validation[k] for k in logs], fs, strata=level_strata(split, logs))
+
+
+def level_strata(split, logs) -> list | None:
+    """The excitation level of each sample of `logs` (``split.level_labels``), the strata of
+    :func:`~vibroscope.gap.measure.nested_gain`; None when the split does not know them."""
+    labels = getattr(split, "level_labels", None)
+    return None if labels is None else [labels[k] for k in logs]
 
 
 def held_out_t(run: Run, simple: dict, rich: dict, logs=None) -> float:
