@@ -317,8 +317,8 @@ def _periodic_logs(k3: float, n_periods: int, noise: float, disturbance: float, 
         d = signal.lfilter(b, a, rng.standard_normal(u.size))
         d *= disturbance * np.std(u) / np.std(d)
         m = duffing(k3)
-        clean = simulate(m, u, FS).data[0]
-        truth = simulate(m, u + d, FS).data[0]
+        clean = simulate(m, u, FS).data[1]  # [0] is the input
+        truth = simulate(m, u + d, FS).data[1]
         y = truth + noise * np.std(truth) * rng.standard_normal(u.size)
         us.append(u[None, :])
         ys.append(y[None, :])
@@ -326,7 +326,7 @@ def _periodic_logs(k3: float, n_periods: int, noise: float, disturbance: float, 
     return us, ys, extra
 
 
-@pytest.mark.parametrize("k3, disturbance", [(0.0, 0.0), (0.0, 0.15), (2e6, 0.1)])
+@pytest.mark.parametrize("k3, disturbance", [(0.0, 0.0), (0.0, 0.15), (1e5, 0.1)])
 def test_period_floor_is_what_no_model_of_the_logged_input_can_explain(k3, disturbance):
     """The outputs' variation from period to period is the white noise plus the response to an
     unlogged force, whatever the model (linear or a hardening spring): the nrmse the truth
