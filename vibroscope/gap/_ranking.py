@@ -381,8 +381,9 @@ def held_out_gain(ys, simple: dict, rich: dict, split, logs, fs: float) -> float
     """The nested test's t of `rich` over `simple` (outputs per log, keyed like `ys`) on the
     held-out samples of `logs` (``split.validation``): the batch-means t statistic of
     :func:`~vibroscope.gap.measure.nested_gain` [Schmeiser 1982], as the ranking's nested
-    order and polish and the selection's family and floor tests form it (the incoherence
-    rule of :mod:`~vibroscope.gap.diagnosis` forms its own over every log)."""
+    order and polish, the selection's family and floor tests and the incoherence rule of
+    :mod:`~vibroscope.gap.diagnosis` form it), stratified by log and input level
+    (:func:`level_strata`)."""
     logs = list(logs)
     return nested_gain([ys[k] for k in logs], [simple[k] for k in logs], [rich[k] for k in logs],
                        [split.validation[k] for k in logs], fs, strata=level_strata(split, logs))

@@ -99,7 +99,7 @@ import numpy as np
 from vibroscope.errors import ChannelError
 from vibroscope.gap._candidates import fit_candidates, recheck_output_sampling
 from vibroscope.gap._evidence import gather_evidence, states_model
-from vibroscope.gap._ranking import level_strata, rank_candidates
+from vibroscope.gap._ranking import held_out_gain, rank_candidates
 from vibroscope.gap._run import MismatchFit, Run, frf_data, pow2
 from vibroscope.gap._run import (  # the tuning constants live with the run state; exposed here too
     ADD_FACTOR,
@@ -143,7 +143,7 @@ from vibroscope.gap.effects import EFFECT_TABLE, LinearParams
 from vibroscope.gap.fit import LogSimulator, fit_linear_frf, fit_time_domain
 from vibroscope.gap.levels import aperiodic_logs, frf_segment_length, period_floor, steady_state_start
 from vibroscope.gap.measure import (LOG_LEVEL_RATIO, coherent_gap, coherent_power, input_levels, locate_bands, make_split, masked_csd,
-                                    nested_gain, noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
+                                    noise_floor, nrmse, regime_gaps, residual_growth, welch_starts)
 from vibroscope.gap.report import ChannelGap, GapReport, GapSpectrum, GapTraces
 from vibroscope.modal.automatic import one_blas_thread
 from vibroscope.models.lumped import LumpedModel
@@ -940,8 +940,7 @@ def _check_incoherent(run: Run) -> None:
 
         pm = next((c for c in run.ordered if c[0].effect == "parameter_mismatch"), None)
         # the refit's held-out gain over the nominal, significant or not (batch means)
-        t_ref = nested_gain(run.ys, run.y_nom, run.y_ref, run.split.validation, fs,
-                           strata=level_strata(run.split, range(len(run.ys))))
+        t_ref = held_out_gain(run.ys, run.y_nom, run.y_ref, run.split, range(len(run.ys)), fs)
         info["refit_gain_t"], info["threshold_t"] = t_ref, NESTED_T
         # whether the nominal's residual repeats with a periodic input's period, read whichever
         # test stops `none` first, so that the report says so (seed 12 case 007: its coherent part
@@ -1046,9 +1045,9 @@ def _best_beyond_refit(run: Run, cg_thr, refit_within: bool, steady=None, *, lin
         cg_b = coherent_gap(ys, yb, [run.us[i] for i in logs], masks, run.fs, run.nps, window=run.window)
         if not cg_thr(cg_b):
             continue
-        if nested_gain(ys, [run.y_nom[i] for i in logs], yb, masks, run.fs, strata=level_strata(run.split, logs)) < NESTED_T:
+        if held_out_gain(run.ys, run.y_nom, b[2], run.split, logs, run.fs) < NESTED_T:
             continue  # not significantly better than the nominal itself
-        t_b = nested_gain(ys, [run.y_ref[i] for i in logs], yb, masks, run.fs, strata=level_strata(run.split, logs))
+        t_b = held_out_gain(run.ys, run.y_ref, b[2], run.split, logs, run.fs)
         # a refit within only on the scatter allowance (linear_yields) yields to a linear
         # candidate strictly within; a nonlinear one must still be significantly better than it
         lin = EFFECT_TABLE[b[0].effect].kind == "linear"
