@@ -140,14 +140,20 @@ def test_a_refit_within_the_ranking_floor_is_not_outranked_by_a_nested_extra_mod
     the period-to-period floor the candidates are ranked against (0.0264); an extra mode at
     220 Hz damped 12 % took 0.2 % more of the gap, significantly (t 5.9 > 4), and the nested test
     put it first: named ``extra_mode`` (c74de96). A simpler candidate within the ranking floor
-    leaves nothing to explain."""
+    leaves nothing to explain. Its logs start with a transient that the period floor now waits
+    for (0.0179 rather than 0.0264), so the candidates are ranked against the white floor; the
+    refit within the outputs' own period-to-period variation stands all the same
+    (:func:`vibroscope.gap._ranking.within_rank_floor`)."""
     d, truth = _case(tmp_path, 12, 8)
     assert truth["cls"] == "parameter_mismatch"
     rep = _gap(d, truth, tmp_path, "parameter_mismatch,extra_mode")
     assert rep["verdict"] == "parameter_mismatch", [(c["effect"], c["gap_after"]) for c in rep["candidates"][:4]]
-    assert rep["gap_after"] <= rep["meta"]["noise_floor_ranking"]["nrmse"]
-    # the refit's own floor is 1.05x the ranking floor (what right models leave: _ranking.floor_factor)
-    assert any(k.endswith("within 1.05x the ranking floor)") for k in rep["meta"]["nested_tests"]["t"])
+    pf = rep["meta"]["incoherent_gap"]["period_floor"]["nrmse"]
+    assert rep["gap_after"] <= max(1.05 * rep["meta"]["noise_floor_ranking"]["nrmse"], pf)
+    # the refit's own floor: 1.05x the ranking floor (what right models leave: _ranking.floor_factor)
+    # or the period-to-period floor
+    assert any(k.endswith("within 1.05x the ranking floor or the period-to-period floor)")
+               for k in rep["meta"]["nested_tests"]["t"])
 
 
 @pytest.mark.slow  # a case of gen_hard.py generated (its RK4 at 10 kHz) and the CLI run on it

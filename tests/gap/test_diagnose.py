@@ -734,7 +734,14 @@ def test_a_refit_within_what_right_models_leave_ranks_before_the_extra_modes_tha
     cands = [cand("extra_mode", 0.0203, 0.0203), cand("parameter_mismatch", 0.0205, 0.0205)]
     out = nested_order(cands, [y], split, [0], 1000.0, floor=0.02)
     assert list(out) == ["extra_mode@m2 over parameter_mismatch@model (not applied: parameter_mismatch within "
-                         "1.05x the ranking floor)"]
+                         "1.05x the ranking floor or the period-to-period floor)"]
+    # a refit within the outputs' period-to-period variation stands too, unless that variation
+    # grows with the level (the response's own, not a floor)
+    for grows, first in ((False, "parameter_mismatch"), (True, "extra_mode")):
+        period = SimpleNamespace(nrmse=0.024, grows_with_level=grows)
+        cands = [cand("extra_mode", 0.0203, 0.0203), cand("parameter_mismatch", 0.0232, 0.0232)]
+        nested_order(cands, [y], split, [0], 1000.0, floor=0.02, period=period)
+        assert cands[0][0].effect == first, grows
 
 
 def test_no_held_clearance_pair_is_tried_where_the_nominal_leaves_little_beyond_the_floor(u20, monkeypatch):
