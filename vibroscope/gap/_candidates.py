@@ -167,7 +167,7 @@ def fit_linear_effects(run: Run, lin_specs: list, bar, workers) -> list:
     # an absorber at 11.17 Hz, 9 % of m1's mass, fitted from the 11.3 Hz start at 11.11 Hz, 9.3 %,
     # damping 0.0207 against the truth's 0.0204, FRF cost 915; a spike at 130.6 Hz, damping 0.002,
     # cost 878, was polished alone and the refit named)
-    f_first = (run.scales.get("f_extra") or [None])[0] if isinstance(run.scales, dict) else None
+    f_first = ((run.scales or {}).get("f_extra") or [None])[0]
     first_peak = None
     for s in lin_specs:
         for b_ in lin_bases:

@@ -300,6 +300,8 @@ def _settling_periods(Y: np.ndarray) -> int:
     while n < c.size // 2 and not c[n] <= PERIOD_TRANSIENT[1] * ref:
         n += 1
     return n
+
+
 #: a period whose input departs from its run's mean period by more than this many times the run's
 #: median departure is dropped (a level transition or a fade inside a period that still passed
 #: :data:`PERIOD_INPUT_TOL`): its outputs differ from the others' by the response to that change
