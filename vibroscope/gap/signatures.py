@@ -106,12 +106,16 @@ def run_signatures(*, frequencies, H_levels, level_rms, H_meas, H_refit, coh, no
         w = np.clip(np.mean(coh, axis=1), 0, 1)
         ratio_db = 20 * np.log10(np.maximum(np.abs(hi), 1e-300) / np.maximum(np.abs(lo), 1e-300))
         rd = np.sum(w[:, None] * np.abs(ratio_db), axis=0) / max(np.sum(w), 1e-12)
-        val = float(np.max(rd))
+        j = int(np.argmax(rd))  # the output of the largest change: the statistic's and the plot's
+        val = float(rd[j])
+        many = ratio_db.shape[1] > 1
         tests.append(SignatureTest(
             name="level_dependence", value=val, threshold=0.5, flagged=val > 0.5, points_to=_NONLIN,
-            detail=f"mean |H(level {len(H_levels)}) / H(level 1)| = {val:.2f} dB (input RMS {level_rms[0]:.3g} -> "
-                   f"{level_rms[-1]:.3g} {input_unit})",
-            x=f, y=np.mean(ratio_db, axis=1), x_label="frequency [Hz]", y_label="H1 high / low level [dB]"))
+            detail=f"mean |H(level {len(H_levels)}) / H(level 1)| = {val:.2f} dB "
+                   + (f"at {out_channels[j]} (the largest of {ratio_db.shape[1]} outputs) " if many else "")
+                   + f"(input RMS {level_rms[0]:.3g} -> {level_rms[-1]:.3g} {input_unit})",
+            x=f, y=ratio_db[:, j], x_label="frequency [Hz]",
+            y_label=f"H1 high / low level [dB]{f', {out_channels[j]}' if many else ''}"))
     # 2. coherence drop beyond the noise
     drop = float(np.mean(np.clip(noise_coh - coh, 0, 1)))
     tests.append(SignatureTest(
