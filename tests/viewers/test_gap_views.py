@@ -240,6 +240,19 @@ def test_spectrum_figure_shades_each_band(report):
     assert "noise floor" in _labels(fig.axes[0]) and "Hz" in fig.axes[-1].get_xlabel()
 
 
+def test_spectrum_figure_y_range_is_the_shown_bands(report):
+    """A measured PSD that falls to 1e-33 far above the located bands (EMPS: a position beyond
+    its 0.5 Hz band) does not stretch the axis 20 decades below every curve in view."""
+    sp = report.spectrum
+    meas = np.array(sp.measured, dtype=float)
+    meas[:, -1] = 1e-33  # the last line, at Nyquist, outside the shown band
+    fig = gap_figures.plot_gap_spectrum(dataclasses.replace(report, spectrum=dataclasses.replace(sp, measured=meas)))
+    lo, hi = gap_figures.focus_band(report, np.asarray(sp.frequencies))
+    assert hi < float(np.asarray(sp.frequencies)[-1])
+    for ax in fig.axes:
+        assert ax.get_ylim()[0] > 1e-15  # the noise floor (1e-13) and the curves in view set it
+
+
 def test_evidence_figure_one_panel_per_curve_flagged_highlighted(report):
     fig = gap_figures.plot_gap_evidence(report)
     axes = [a for a in fig.axes if a.get_visible()]

@@ -484,6 +484,10 @@ def plot_gap_spectrum(report, *, fig=None):
         # function of the input (noise of any colour, an unlogged disturbance, a distortion)
         curves = curves + (("residual before, coherent with the input", sp.residual_before_coherent,
                             COLORS["nominal"], "-.", 0.8),)
+    f_lo, f_hi = focus_band(report, f)
+    shown = (f >= f_lo) & (f <= f_hi)  # the y range is the shown band's (EMPS: 7e-33 m^2/Hz at 480 Hz)
+    if not shown.any():
+        shown = np.ones(f.size, bool)
     for c, ax in enumerate(axes):
         for k, b in enumerate(report.bands):
             ax.axvspan(b.fmin, b.fmax, color=BAND, alpha=0.14, lw=0, zorder=0,
@@ -495,7 +499,7 @@ def plot_gap_spectrum(report, *, fig=None):
         for label, v, col, ls, lw in curves:
             y = _positive(np.atleast_2d(v)[c])
             ax.semilogy(f, y, color=col, ls=ls, lw=lw, label=label)
-        finite = np.concatenate([_positive(np.atleast_2d(v)[c]) for _, v, *_ in curves])
+        finite = np.concatenate([_positive(np.atleast_2d(v)[c])[shown] for _, v, *_ in curves])
         finite = finite[np.isfinite(finite)]
         if finite.size and report.bands:  # headroom for the band labels above the curves
             lo, hi = float(finite.min()), float(finite.max())
@@ -507,7 +511,7 @@ def plot_gap_spectrum(report, *, fig=None):
         ax.set_title(f"{short_label(names[c], 48)}{gap}", fontsize=9, loc="left")
         ax.grid(True, which="major", alpha=0.35)
         ax.grid(True, which="minor", alpha=0.1)
-        ax.set_xlim(*focus_band(report, f))
+        ax.set_xlim(f_lo, f_hi)
     fig.legend(*axes[0].get_legend_handles_labels(), fontsize=8, ncol=3, loc="outside lower center", frameon=False)
     axes[-1].set_xlabel("frequency [Hz]")
     bands = ", ".join(f"{b.fmin:.3g}–{b.fmax:.3g} Hz" for b in report.bands) or "none located"
