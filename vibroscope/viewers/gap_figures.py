@@ -777,7 +777,10 @@ def plot_level_evidence(evidence, ax=None, *, out_path: str | Path | None = None
     a0.set_ylabel(f"|H1| output {o + 1} [dB]")
     a0.grid(True, alpha=0.3)
     a0.legend(fontsize=8, loc="best")
-    verdict = (f"level dependent: {evidence.trend}" if evidence.level_dependent else "no level dependence")
+    # the resonance-wise test (natural frequency and damping per level against their scatter), not
+    # the line-wise one of the evidence figure, which can flag what this does not
+    verdict = (f"resonances level dependent: {evidence.trend}" if evidence.level_dependent
+               else "no resonance changes beyond its uncertainty")
     if evidence.damping_rises:
         verdict += ", damping rises"
     a0.set_title(f"BLA per excitation level ({evidence.window}, nperseg {evidence.nperseg}, "
