@@ -123,7 +123,7 @@ def level_test(frequencies, blas, blas_model=None):
     # the peaks on the lines well excited at both levels: a level's H1 where its own input has no
     # power is noise (the real Bouc-Wen benchmark: the sine sweep's H1 beyond its 60 Hz band took
     # the low level's peak to 119.8 Hz, a 'softening' of 28.8 %, where the mode is at 40.5 Hz)
-    valid = ok.any(axis=1) if ok.ndim == 2 else np.asarray(ok, bool)
+    valid = ok.any(axis=1)
     if not valid.any():
         valid = np.ones(H0.shape[0], bool)
     a0 = np.where(valid, np.sum(np.abs(H0), axis=1), 0.0)

@@ -496,10 +496,10 @@ def plot_gap_spectrum(report, *, fig=None):
             ax.text(0.5 * (b.fmin + b.fmax), 0.985, f"{100 * b.share:.0f} %", transform=tr, ha="center",
                     va="top", fontsize=8, color=BAND, fontweight="bold", clip_on=True, zorder=5,
                     bbox=dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="none", alpha=0.8))
-        for label, v, col, ls, lw in curves:
-            y = _positive(np.atleast_2d(v)[c])
+        ys = [_positive(np.atleast_2d(v)[c]) for _, v, *_ in curves]
+        for (label, _, col, ls, lw), y in zip(curves, ys):
             ax.semilogy(f, y, color=col, ls=ls, lw=lw, label=label)
-        finite = np.concatenate([_positive(np.atleast_2d(v)[c])[shown] for _, v, *_ in curves])
+        finite = np.concatenate([y[shown] for y in ys])
         finite = finite[np.isfinite(finite)]
         if finite.size and report.bands:  # headroom for the band labels above the curves
             lo, hi = float(finite.min()), float(finite.max())
