@@ -284,7 +284,9 @@ def make_split(us: list, fs: float, *, skip: list | None = None, validation_frac
     occurs on both sides (levels: :func:`input_levels`) and the fitting part's input spectrum
     covers the held-out part's (:func:`uncovered_share` at most :data:`BAND_UNCOVERED`, on 2 s
     blocks); otherwise the record is cut in blocks, one of each three held out, so that every
-    level is on both sides (blocks of 2 s, the third of each three held out) and a sine sweep's
+    level is on both sides (blocks of 2 s, of each three the third held out at the lowest level,
+    the first at the next, the second at the next, and so on, so that an input repeated at each
+    level is held out at every phase at some level) and a sine sweep's
     held-out bands lie across it (:data:`SWEEP_BLOCKS` blocks, the middle of each three held
     out; its last third would be a band the fit never saw: a test of extrapolation in
     frequency). The screening prefix is the first `screen_s` when its input spectrum covers the
@@ -468,9 +470,14 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s, sweep_phase: int 
                 f"({(n - cut) / fs:.1f} s) held out; {len(lv)} input level(s), each on both sides")
         pre = _screen_prefix(labels, cut, fs, screen_s, skip)
         return m_fit, m_val, cut, _band_prefix(np.asarray(u[0], float), fs, pre, cut), len(lv), desc, labels
-    # blocks of 2 s; within each level's blocks (in time order) every third is held out; a sweep's
-    # blocks are a ninth of the record (a lightly damped mode's FRF needs long fitting stretches),
-    # the middle one of each three held out (interior bands: the last block is a band's end)
+    # blocks of 2 s; within each level's blocks (in time order) every third is held out, the lowest
+    # level the third of each three, the next the first, the next the second (and so on): a
+    # periodic input repeated at each level (a sine sweep restarted at every step) held out at the
+    # same phase at every level would leave a mode's passage unvalidated at all of them (fresh
+    # seed 7366's case 015: a hysteresis whose 12.9 Hz mode the 20 s sweeps passed 6.8 s into each
+    # level, held out 4-6 s, 10-12 s, 16-18 s into each); a sweep's blocks are a ninth of the
+    # record (a lightly damped mode's FRF needs long fitting stretches), the middle one of each
+    # three held out (interior bands: the last block is a band's end)
     swept_now = swept > BAND_UNCOVERED
     bl = max(b, int(math.ceil((n - skip) / SWEEP_BLOCKS))) if swept_now else b
     nb = int(np.ceil(n / bl))
@@ -478,7 +485,7 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s, sweep_phase: int 
     held = np.zeros(nb, bool)
     for k in set(blk_level):
         idx = [i for i, lv_ in enumerate(blk_level) if lv_ == k]
-        pick = (idx[sweep_phase::3] if swept_now else idx[2::3]) if len(idx) >= 3 else idx[-1:] if len(idx) == 2 else []
+        pick = (idx[sweep_phase::3] if swept_now else idx[(2 + k) % 3::3]) if len(idx) >= 3 else idx[-1:] if len(idx) == 2 else []
         held[pick] = True
     blk = np.repeat(held, bl)[:n]
     m_val = blk.copy()
@@ -488,7 +495,8 @@ def _one_log_split(u, fs, skip, validation_fraction, screen_s, sweep_phase: int 
     why = (f"the input's spectrum changes over the record ({100 * swept:.0f} % of the last part's input energy in "
            f"lines the rest barely excites: a sweep), so bands across the whole sweep are held out, not its end"
            if swept_now else f"{len(lv)} input level(s), each on both sides")
-    which = ("first", "middle", "last")[sweep_phase] if swept_now else "third"
+    which = (("first", "middle", "last")[sweep_phase] if swept_now else
+             "third" if len(set(blk_level)) == 1 else "third, first or second (by level)")
     desc = (f"interleaved time split{' of a sweep' if swept_now else ''}: {bl / fs:.3g} s blocks, the {which} block of "
             f"every three of each level held out ({m_val.sum() / fs:.1f} s); {why}")
     pre = min(n, max(int(screen_s * fs), 3 * b))
