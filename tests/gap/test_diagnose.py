@@ -158,7 +158,7 @@ def test_a_sweep_restarted_at_each_level_of_one_log_is_held_out_at_every_phase()
     015, a hysteresis whose 12.9 Hz mode each sweep passes 6.8 s into its block). Each block's
     spectrum is the whole sweep's, so the record is no sweep and is cut in 2 s blocks; held out
     at the same phase at every level (4-6 s, 10-12 s, 16-18 s into each), the mode's passage
-    was never validated and the nominal's held-out gap read 0.066 against 0.120 over the
+    was never validated and the nominal's held-out gap read 0.066 against 0.167 over the whole
     record. The levels now hold out the third, the first and the second block of each three:
     every 2 s of the sweep is held out at exactly one level, and every level is on both sides."""
     fs, dur = 1000.0, 20.0
