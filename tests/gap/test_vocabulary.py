@@ -117,6 +117,25 @@ def test_vanishing_parameters_are_named():
     assert by["cubic_stiffness"].qualifiers([0.1]) == {"character": "hardening"}
 
 
+def test_a_delay_below_half_a_sample_that_lags_the_bands_top_is_an_effect():
+    """A log sampled slowly for its band (the harder blind variant's seed 24 case 008: 500 Hz, a
+    force to 250 Hz, a delay of 0.32 samples that lags the top line by 1.0 rad and leaves 0.24
+    held out, 0.031 with it) holds a delay below half a sample that is no linear refit by another
+    name; one that lags the band's top by less than DELAY_VANISH_PHASE still vanishes."""
+    from vibroscope.gap.effects import DELAY_VANISH_PHASE
+
+    model = chain()
+    f_top = 250.0
+    sc = scales(model) | {"f_band": (0.5, f_top)}
+    d = next(s for s in candidate_specs(model, sc) if s.effect == "time_delay")
+    assert d.vanishes([0.32 / FS]) is None  # 2 pi 250 Hz 0.32 ms = 0.50 rad
+    small = 0.9 * DELAY_VANISH_PHASE / (2 * math.pi * f_top)
+    assert small < 0.5 / FS and "half a sample" in d.vanishes([small])
+    # without a known band (a closed loop) the half-sample rule alone
+    d0 = next(s for s in candidate_specs(model, scales(model)) if s.effect == "time_delay")
+    assert "half a sample" in d0.vanishes([0.32 / FS])
+
+
 def test_an_extra_mode_resonating_outside_the_excited_band_vanishes():
     """Within the band, a mode far above it moves with its DOF (a mass) and one far below it
     stands still (a spring): a parameter change, not an extra mode (fresh modal seed 5603 case
