@@ -712,9 +712,6 @@ def _fill_log_gaps(starts: list, max_ratio: float) -> list:
 CLEARANCE_START_RATIO = 3.0
 
 
-# ---------------------------------------------------------------------------------------------
-# one factory per effect: (model, scales) -> list of EffectSpec
-# ---------------------------------------------------------------------------------------------
 #: The phase lag (rad) at the top of the excited band from which a delay below half a sample is
 #: still an effect: a log sampled slowly for its band (the harder blind variant's seed 24 case 008,
 #: 500 Hz, a force to 250 Hz) holds a delay of 0.32 samples that lags its top lines by 1.0 rad and
@@ -723,6 +720,9 @@ CLEARANCE_START_RATIO = 3.0
 DELAY_VANISH_PHASE = 0.2
 
 
+# ---------------------------------------------------------------------------------------------
+# one factory per effect: (model, scales) -> list of EffectSpec
+# ---------------------------------------------------------------------------------------------
 def _time_delay(model, scales):
     fs = scales.get("fs", 1000.0)
 
@@ -856,13 +856,9 @@ def _saturation(model, scales):
         # peak is 3.56 N; the clip at 3.40 N left 0.159 held out, the true law 0.029). Its
         # limits reach 2x the peak, where it still takes 4 % off the peak.
         t_up = math.log(SATURATION_TANH_UPPER * u_max)
-        specs.append(EffectSpec(
-            effect="saturation", where={"side": "input"}, n=1,
-            starts=_starts_1d([math.log(q) for q in qs[:4] if q > 0] + [math.log(1.5 * u_max)], lower[0], t_up),
-            lower=lower, upper=np.array([t_up]),
-            build=lambda m, p: build(m, p, law="tanh"),
-            describe=lambda p: {"limit_N": float(math.exp(p[0]))}, vanish=vanish_tanh,
-            character=lambda p: {"law": "limit tanh(u / limit)"}, variant="tanh", peak_prefix=True))
+        specs.append(replace(
+            law[0], starts=_starts_1d([math.log(q) for q in qs[:4] if q > 0] + [math.log(1.5 * u_max)], lower[0], t_up),
+            upper=np.array([t_up]), shape_free=False, variant="tanh", peak_prefix=True))
     return specs
 
 
