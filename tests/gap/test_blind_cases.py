@@ -34,10 +34,16 @@ def _gen_hard():
     return _load("blind_gen_hard", "gen_hard.py")
 
 
-def _case(tmp_path, seed: int, index: int, per_class: int = 3):
-    """Case `index` of ``gen_hard.py --seed seed --per-class per_class``: (its folder, truth)."""
+def _gen_plain():
+    """``gen.py`` (the blind suite's first generator) as the module ``blind_gen`` (:func:`_load`)."""
+    return _load("blind_gen", "gen.py")
+
+
+def _case(tmp_path, seed: int, index: int, per_class: int = 3, gen=_gen_hard):
+    """Case `index` of ``gen_hard.py --seed seed --per-class per_class`` (or of the generator
+    `gen` loads, e.g. :func:`_gen_plain`): (its folder, truth)."""
     out = tmp_path / "cases"
-    _gen_hard().main(["--seed", str(seed), "--per-class", str(per_class), "--only", str(index), "--out", str(out)])
+    gen().main(["--seed", str(seed), "--per-class", str(per_class), "--only", str(index), "--out", str(out)])
     d = out / f"case_{index:03d}"
     return d, json.loads((d / "truth.json").read_text())
 
@@ -356,11 +362,6 @@ def test_a_friction_within_the_nonlinear_margin_but_significant_on_held_out_data
     assert t and max(t.values()) > NESTED_T, rep["meta"]["nested_tests"]
 
 
-def _gen_plain():
-    """``gen.py`` (the blind suite's first generator) as the module ``blind_gen`` (:func:`_load`)."""
-    return _load("blind_gen", "gen.py")
-
-
 @pytest.mark.slow  # a case of gen.py generated (its RK4 at 10 kHz) and the CLI run on it
 def test_a_weak_hysteresis_that_yields_early_is_started_from_the_friction_level(tmp_path):
     """Seed 3 case 025 of ``gen.py``: a Bouc-Wen loop of exponent 2.1 at the only link of a
@@ -371,10 +372,7 @@ def test_a_weak_hysteresis_that_yields_early_is_started_from_the_friction_level(
     a Coulomb friction of 0.037 N won at 1.9x the floor (f385ff9). Started also from the friction
     level regressed on the residual, as the loop's ultimate force yielding at a tenth or a third of
     the RMS deflection (``effects.HYSTERESIS_YIELD_SHARES``), it is fitted near the truth."""
-    out = tmp_path / "cases"
-    _gen_plain().main(["--seed", "3", "--per-class", "3", "--only", "25", "--out", str(out)])
-    d = out / "case_025"
-    truth = json.loads((d / "truth.json").read_text())
+    d, truth = _case(tmp_path, 3, 25, gen=_gen_plain)
     ef = truth["effect"]
     assert truth["cls"] == "hysteresis" and ef["location"] == ["m1", "ground"]
     rep = _gap(d, truth, tmp_path, "coulomb_friction,hysteresis")

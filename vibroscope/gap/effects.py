@@ -1250,7 +1250,7 @@ def _hysteresis(model, scales):
         # stiffness, far from the starts above (the blind suite's seed 3 case 025: alpha 2.5 % of
         # k, yielding at 0.09 of the RMS deflection, named `coulomb_friction`)
         grid += [(fe / (y * d_rms * max(k_loc, 1e-300)), 1.0 / y, 0.0)
-                 for fe in _regressed(scales, ("coulomb_friction", key)) if fe and fe > 0
+                 for fe in _regressed(scales, ("coulomb_friction", key)) if fe > 0
                  for y in HYSTERESIS_YIELD_SHARES]
         specs.append(EffectSpec(
             effect="hysteresis", where={"between": [pair[0], pair[1]]}, n=3,
